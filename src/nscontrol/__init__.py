@@ -1,0 +1,48 @@
+"""nscontrol — control and observer design for non-smooth systems.
+
+Layers (a lower layer never imports a higher one)::
+
+    errors -> numerics -> laws -> systems -> simulate -> design -> analysis -> examples
+
+(``numerics`` sits below ``laws`` because the multi-contact impact law solves LCPs, while the
+solvers only ever see matrices.)
+
+The public surface most users need is re-exported here lazily, so that ``import nscontrol``
+stays fast (numba, cvxpy and matplotlib load only when a function needs them).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from . import errors
+from .errors import (
+    DimensionError,
+    InadmissibleStateError,
+    InfeasibleDesignError,
+    ModelError,
+    NscontrolError,
+    SolverError,
+    ZenoError,
+)
+
+__version__ = "0.1.0"
+
+_SUBPACKAGES = ("laws", "numerics", "systems", "simulate", "design", "analysis", "testing",
+                "examples", "sweep")
+_LAZY = {"simulate": ("nscontrol.simulate", "simulate"),
+         "Trajectory": ("nscontrol.simulate.trajectory", "Trajectory"),
+         "solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp")}
+
+__all__ = ["errors", "NscontrolError", "ModelError", "DimensionError", "InadmissibleStateError",
+           "InfeasibleDesignError", "SolverError", "ZenoError", *_LAZY, *_SUBPACKAGES]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        module, attr = _LAZY[name]
+        return getattr(importlib.import_module(module), attr)
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f"nscontrol.{name}")
+    raise AttributeError(f"module 'nscontrol' has no attribute {name!r}")

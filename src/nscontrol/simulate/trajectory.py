@@ -1,0 +1,423 @@
+"""The one result type of every integrator: :class:`Trajectory`.
+
+Arrays are **time-major**: ``x[k]`` is the state at ``t[k]``, so ``x`` has shape
+``(n_times, n_states)`` and every signal has ``n_times`` rows. Events (impacts, mode switches,
+sliding starts and exits) live apart from the samples, in :attr:`Trajectory.events`, each with
+its exact time and the state just before and just after.
+
+Integrators fill a :class:`Recorder` (which grows its buffers geometrically, keeps every k-th
+step or selected signals only) and call :meth:`Recorder.finish` to obtain the frozen result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DimensionError
+
+__all__ = ["Event", "Trajectory", "Recorder", "STATUS_MESSAGES"]
+
+FloatArray = NDArray[np.float64]
+
+#: Meaning of :attr:`Trajectory.status`, as in scipy's ``solve_ivp``.
+STATUS_MESSAGES = {
+    0: "the end of the time span was reached",
+    1: "a terminal event stopped the run",
+    -1: "the run failed; the trajectory holds what was computed before the failure",
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Event:
+    """One discrete event of a run.
+
+    Attributes
+    ----------
+    time
+        Exact event time.
+    kind
+        ``"impact"``, ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"grazing"``,
+        ``"contact_start"``, ``"contact_end"``, ``"accumulation"``, ``"switch"``... The
+        integrator documents the kinds it emits.
+    index
+        The contact (mechanics) or switching surface (switched systems) concerned, ``-1`` when
+        not applicable.
+    pre, post
+        The state just before and just after the event.
+    mode_from, mode_to
+        Discrete modes before and after (switched systems), ``-1`` when not applicable.
+    """
+
+    time: float
+    kind: str
+    index: int
+    pre: FloatArray
+    post: FloatArray
+    mode_from: int = -1
+    mode_to: int = -1
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Result of :func:`nscontrol.simulate`.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n_times,)
+        Sample times (increasing; an event time may appear twice, for the pre- and post-event
+        samples).
+    x : ndarray, shape (n_times, n_states)
+        States, time-major.
+    signals : dict of str to ndarray
+        Named signals with ``n_times`` rows (``"y"``, ``"u"``, ``"lambda"``, ``"gap"``,
+        ``"impulse"``, ``"energy"``, ``"xhat"``, ``"error"``...).
+    events : tuple of Event
+        Discrete events in time order.
+    stats : dict
+        Solver statistics (steps, LCP solves, iterations, function evaluations...).
+    status : int
+        0: end of the time span reached; 1: a terminal event stopped the run; -1: failure.
+    message : str
+        Human-readable reason the run stopped.
+    method : str
+        The integrator that produced it.
+    state_names : tuple of str
+        One name per state component (``"q1"``, ``"v1"``...); may be empty.
+    """
+
+    t: FloatArray
+    x: FloatArray
+    signals: dict[str, np.ndarray] = field(default_factory=dict)
+    events: tuple[Event, ...] = ()
+    stats: dict[str, Any] = field(default_factory=dict)
+    status: int = 0
+    message: str = STATUS_MESSAGES[0]
+    method: str = ""
+    state_names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=np.float64)
+        x = np.asarray(self.x, dtype=np.float64)
+        if x.ndim == 1:
+            x = x.reshape(-1, 1)
+        if t.ndim != 1 or x.shape[0] != t.shape[0]:
+            raise DimensionError(f"Trajectory: t has shape {t.shape} but x has shape "
+                                 f"{x.shape}; x must be time-major (n_times, n_states)")
+        for name, sig in self.signals.items():
+            if np.shape(sig)[0] != t.shape[0]:
+                raise DimensionError(f"Trajectory: signal {name!r} has {np.shape(sig)[0]} rows, "
+                                     f"expected {t.shape[0]} (one per sample)")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "x", x)
+
+    # -- views --------------------------------------------------------------------------
+    @property
+    def success(self) -> bool:
+        """True unless the run failed (``status >= 0``)."""
+        return self.status >= 0
+
+    @property
+    def n_states(self) -> int:
+        return int(self.x.shape[1])
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def event_times(self, kind: str | None = None) -> FloatArray:
+        """Times of the events, optionally only those of one ``kind``."""
+        return np.array([e.time for e in self.events if kind is None or e.kind == kind],
+                        dtype=np.float64)
+
+    def events_of(self, kind: str) -> tuple[Event, ...]:
+        """The events of one ``kind``."""
+        return tuple(e for e in self.events if e.kind == kind)
+
+    def signal(self, name: str) -> np.ndarray:
+        """A named signal, with a clear error listing the available ones."""
+        try:
+            return self.signals[name]
+        except KeyError:
+            raise KeyError(f"no signal {name!r} in this trajectory; available: "
+                           f"{sorted(self.signals)}") from None
+
+    def state(self, name_or_index: str | int) -> FloatArray:
+        """One state component over time, by name or index."""
+        if isinstance(name_or_index, str):
+            if name_or_index not in self.state_names:
+                raise KeyError(f"no state {name_or_index!r}; states are {self.state_names}")
+            return self.x[:, self.state_names.index(name_or_index)]
+        return self.x[:, name_or_index]
+
+    def slice(self, t0: float | None = None, t1: float | None = None) -> Trajectory:
+        """The part of the trajectory with ``t0 <= t <= t1`` (events included likewise)."""
+        lo = -np.inf if t0 is None else t0
+        hi = np.inf if t1 is None else t1
+        keep = (self.t >= lo) & (self.t <= hi)
+        return replace(
+            self,
+            t=self.t[keep],
+            x=self.x[keep],
+            signals={k: np.asarray(v)[keep] for k, v in self.signals.items()},
+            events=tuple(e for e in self.events if lo <= e.time <= hi),
+        )
+
+    def at(self, t: float | FloatArray) -> FloatArray:
+        """States linearly interpolated at time(s) ``t`` (right-continuous at events)."""
+        tq = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        idx = np.clip(np.searchsorted(self.t, tq, side="right") - 1, 0, len(self.t) - 2)
+        t_a, t_b = self.t[idx], self.t[idx + 1]
+        span = np.where(t_b > t_a, t_b - t_a, 1.0)
+        w = np.clip((tq - t_a) / span, 0.0, 1.0)[:, None]
+        out = (1.0 - w) * self.x[idx] + w * self.x[idx + 1]
+        return out[0] if np.ndim(t) == 0 else out
+
+    # -- persistence ----------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        """Write the trajectory to an HDF5 file (lossless: :meth:`load` returns an equal one)."""
+        import h5py
+
+        with h5py.File(path, "w") as f:
+            f.attrs["format"] = "nscontrol.Trajectory/1"
+            f.attrs["status"] = self.status
+            f.attrs["message"] = self.message
+            f.attrs["method"] = self.method
+            f.attrs["state_names"] = list(self.state_names)
+            f.create_dataset("t", data=self.t)
+            f.create_dataset("x", data=self.x)
+            sig = f.create_group("signals")
+            for name, value in self.signals.items():
+                sig.create_dataset(name, data=np.asarray(value))
+            ev = f.create_group("events")
+            n = self.n_states
+            ev.create_dataset("time", data=np.array([e.time for e in self.events], float))
+            ev.create_dataset("kind", data=np.array([e.kind for e in self.events], dtype="S"))
+            for key in ("index", "mode_from", "mode_to"):
+                ev.create_dataset(key, data=np.array([getattr(e, key) for e in self.events],
+                                                     dtype=np.int64))
+            for key in ("pre", "post"):
+                data = [np.asarray(getattr(e, key), float) for e in self.events]
+                width = max((d.size for d in data), default=n)
+                arr = np.full((len(data), width), np.nan)
+                sizes = np.array([d.size for d in data], dtype=np.int64)
+                for i, d in enumerate(data):
+                    arr[i, : d.size] = d
+                ev.create_dataset(key, data=arr)
+                ev.create_dataset(key + "_size", data=sizes)
+            st = f.create_group("stats")
+            for key, value in self.stats.items():
+                st.attrs[key] = value
+
+    @classmethod
+    def load(cls, path: str | Path) -> Trajectory:
+        """Read a trajectory written by :meth:`save`."""
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != "nscontrol.Trajectory/1":
+                raise ValueError(f"{path}: not an nscontrol trajectory file")
+            ev = f["events"]
+            pre, post = ev["pre"][...], ev["post"][...]
+            pre_n, post_n = ev["pre_size"][...], ev["post_size"][...]
+            events = tuple(
+                Event(time=float(ev["time"][i]), kind=ev["kind"][i].decode(),
+                      index=int(ev["index"][i]), pre=pre[i, : pre_n[i]].copy(),
+                      post=post[i, : post_n[i]].copy(), mode_from=int(ev["mode_from"][i]),
+                      mode_to=int(ev["mode_to"][i]))
+                for i in range(ev["time"].shape[0]))
+            stats = {k: (v.item() if isinstance(v, np.generic) else v)
+                     for k, v in f["stats"].attrs.items()}
+            return cls(
+                t=f["t"][...], x=f["x"][...],
+                signals={k: v[...] for k, v in f["signals"].items()},
+                events=events, stats=stats, status=int(f.attrs["status"]),
+                message=str(f.attrs["message"]), method=str(f.attrs["method"]),
+                state_names=tuple(str(s) for s in f.attrs["state_names"]),
+            )
+
+    def to_dataframe(self) -> Any:
+        """Samples as a pandas DataFrame indexed by ``t`` (states, then flattened signals)."""
+        import pandas as pd
+
+        names = self.state_names or tuple(f"x{i}" for i in range(self.n_states))
+        cols: dict[str, np.ndarray] = {n: self.x[:, i] for i, n in enumerate(names)}
+        for key, value in self.signals.items():
+            arr = np.asarray(value).reshape(len(self.t), -1)
+            if arr.shape[1] == 1:
+                cols[key] = arr[:, 0]
+            else:
+                cols.update({f"{key}[{j}]": arr[:, j] for j in range(arr.shape[1])})
+        return pd.DataFrame(cols, index=pd.Index(self.t, name="t"))
+
+    def events_dataframe(self) -> Any:
+        """The event table as a pandas DataFrame (one row per event)."""
+        import pandas as pd
+
+        return pd.DataFrame({
+            "time": [e.time for e in self.events], "kind": [e.kind for e in self.events],
+            "index": [e.index for e in self.events],
+            "mode_from": [e.mode_from for e in self.events],
+            "mode_to": [e.mode_to for e in self.events],
+        })
+
+    # -- plotting --------------------------------------------------------------------------
+    def plot(self, states: Sequence[str | int] | None = None,
+             signals: Iterable[str] = (), *, mark_events: bool | str = True,
+             ax: Any = None) -> Any:
+        """Plot states (and signals, one panel each) against time; returns the figure.
+
+        Parameters
+        ----------
+        states
+            Names or indices of the states to draw (default: all, up to 8).
+        signals
+            Names of signals to draw in extra panels below the states.
+        mark_events
+            Draw a vertical line at every event (or only at events of this kind).
+        ax
+            An existing matplotlib axes for the states panel; signals then go nowhere.
+        """
+        import matplotlib.pyplot as plt
+
+        signals = list(signals)
+        if ax is None:
+            fig, axes = plt.subplots(1 + len(signals), 1, sharex=True, squeeze=False,
+                                     figsize=(7, 2.6 * (1 + len(signals))))
+            axes = axes[:, 0]
+        else:
+            fig, axes = ax.figure, [ax]
+        picks = list(range(min(self.n_states, 8))) if states is None else list(states)
+        for p in picks:
+            label = p if isinstance(p, str) else (self.state_names[p] if self.state_names
+                                                   else f"x{p}")
+            axes[0].plot(self.t, self.state(p), label=str(label))
+        axes[0].legend(loc="best", fontsize="small")
+        for a, name in zip(axes[1:], signals, strict=False):
+            a.plot(self.t, self.signal(name))
+            a.set_ylabel(name)
+        if mark_events:
+            kind = mark_events if isinstance(mark_events, str) else None
+            for te in self.event_times(kind)[:500]:
+                for a in axes:
+                    a.axvline(te, color="0.7", lw=0.5, zorder=0)
+        axes[-1].set_xlabel("t [s]")
+        return fig
+
+
+class Recorder:
+    """Growing buffers an integrator writes samples and events into.
+
+    Parameters
+    ----------
+    n_states
+        State dimension.
+    every
+        Keep every ``every``-th call to :meth:`sample` (events are always kept, and
+        :meth:`sample` with ``force=True`` always records, e.g. for the final state).
+    signals
+        Names of the signals to keep; ``None`` keeps all that the integrator offers.
+    capacity
+        Initial buffer length (buffers double when full).
+    """
+
+    def __init__(self, n_states: int, *, every: int = 1, signals: Iterable[str] | None = None,
+                 capacity: int = 1024) -> None:
+        if int(every) < 1:
+            raise ValueError(f"record_every: expected an integer >= 1, got {every!r}")
+        self.n_states = int(n_states)
+        self.every = int(every)
+        self.keep = None if signals is None else set(signals)
+        self._t = np.empty(capacity)
+        self._x = np.empty((capacity, self.n_states))
+        self._sig: dict[str, np.ndarray] = {}
+        self._n = 0
+        self._calls = 0
+        self.events: list[Event] = []
+
+    def wants(self, name: str) -> bool:
+        """Whether signal ``name`` is to be recorded (integrators may skip computing it)."""
+        return self.keep is None or name in self.keep
+
+    def _grow(self) -> None:
+        cap = 2 * self._t.shape[0]
+        self._t = np.resize(self._t, cap)
+        self._x = np.resize(self._x, (cap, self.n_states))
+        for k, v in self._sig.items():
+            self._sig[k] = np.resize(v, (cap,) + v.shape[1:])
+
+    def sample(self, t: float, x: np.ndarray, force: bool = False,
+               **signals: Any) -> None:
+        """Record the state (and signals) at ``t``, subject to ``every``."""
+        self._calls += 1
+        if not force and (self._calls - 1) % self.every:
+            return
+        if self._n == self._t.shape[0]:
+            self._grow()
+        i = self._n
+        self._t[i] = t
+        self._x[i] = x
+        for name, value in signals.items():
+            if not self.wants(name):
+                continue
+            val = np.asarray(value, dtype=np.float64)
+            buf = self._sig.get(name)
+            if buf is None:
+                buf = np.full((self._t.shape[0],) + val.shape, np.nan)
+                self._sig[name] = buf
+            buf[i] = val
+        self._n += 1
+
+    def extend(self, t: np.ndarray, x: np.ndarray, **signals: np.ndarray) -> None:
+        """Record a block of samples at once (as produced by a compiled kernel).
+
+        ``every`` is applied to the block as if each row had been passed to :meth:`sample`.
+        """
+        t = np.asarray(t, float)
+        k = t.shape[0]
+        offset = (-self._calls) % self.every
+        sel = np.arange(offset, k, self.every)
+        self._calls += k
+        while self._n + sel.size > self._t.shape[0]:
+            self._grow()
+        i0, i1 = self._n, self._n + sel.size
+        self._t[i0:i1] = t[sel]
+        self._x[i0:i1] = np.asarray(x, float)[sel]
+        for name, value in signals.items():
+            if not self.wants(name):
+                continue
+            val = np.asarray(value, float)
+            buf = self._sig.get(name)
+            if buf is None:
+                buf = np.full((self._t.shape[0],) + val.shape[1:], np.nan)
+                self._sig[name] = buf
+            buf[i0:i1] = val[sel]
+        self._n = i1
+
+    def event(self, time: float, kind: str, index: int = -1, pre: Any = (), post: Any = (),
+              mode_from: int = -1, mode_to: int = -1) -> None:
+        """Record one event."""
+        self.events.append(Event(float(time), kind, int(index), np.array(pre, float).copy(),
+                                 np.array(post, float).copy(), int(mode_from), int(mode_to)))
+
+    @property
+    def last_time(self) -> float:
+        return float(self._t[self._n - 1]) if self._n else -np.inf
+
+    def finish(self, *, status: int = 0, message: str | None = None, method: str = "",
+               stats: Mapping[str, Any] | None = None,
+               state_names: Sequence[str] = ()) -> Trajectory:
+        """Freeze the buffers into a :class:`Trajectory`."""
+        n = self._n
+        return Trajectory(
+            t=self._t[:n].copy(), x=self._x[:n].copy(),
+            signals={k: v[:n].copy() for k, v in self._sig.items()},
+            events=tuple(sorted(self.events, key=lambda e: e.time)),
+            stats=dict(stats or {}), status=status,
+            message=STATUS_MESSAGES[status] if message is None else message,
+            method=method, state_names=tuple(state_names),
+        )
