@@ -27,16 +27,17 @@ from .errors import (
     ZenoError,
 )
 
+from .simulate import Trajectory, simulate  # noqa: E402  (the verb shadows its subpackage)
+
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("laws", "numerics", "systems", "simulate", "design", "analysis", "testing",
+_SUBPACKAGES = ("laws", "numerics", "systems", "design", "analysis", "testing",
                 "examples", "sweep")
-_LAZY = {"simulate": ("nscontrol.simulate", "simulate"),
-         "Trajectory": ("nscontrol.simulate.trajectory", "Trajectory"),
-         "solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp")}
+_LAZY = {"solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp")}
 
 __all__ = ["errors", "NscontrolError", "ModelError", "DimensionError", "InadmissibleStateError",
-           "InfeasibleDesignError", "SolverError", "ZenoError", *_LAZY, *_SUBPACKAGES]
+           "InfeasibleDesignError", "SolverError", "ZenoError", "simulate", "Trajectory", *_LAZY,
+           *_SUBPACKAGES]
 
 
 def __getattr__(name: str) -> Any:

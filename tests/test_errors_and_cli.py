@@ -1,0 +1,97 @@
+"""The exception family, boundary validation, and the command-line shell."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from nscontrol import _validation as v
+from nscontrol import errors
+from nscontrol.cli import main
+
+
+@pytest.mark.parametrize("cls, builtin", [
+    (errors.ModelError, ValueError), (errors.DimensionError, ValueError),
+    (errors.InadmissibleStateError, ValueError), (errors.InfeasibleDesignError, RuntimeError),
+    (errors.SolverError, RuntimeError), (errors.ZenoError, RuntimeError),
+])
+def test_every_error_is_also_the_obvious_builtin(cls, builtin):
+    assert issubclass(cls, errors.NscontrolError) and issubclass(cls, builtin)
+
+
+def test_errors_carry_partial_trajectory():
+    err = errors.ZenoError("accumulation at t=1", time=1.0, trajectory="partial")
+    assert err.trajectory == "partial" and err.time == 1.0
+
+
+def test_validation_messages_name_the_argument():
+    with pytest.raises(errors.DimensionError, match=r"M: expected a square matrix, got shape"):
+        v.as_square("M", np.zeros((2, 3)))
+    with pytest.raises(errors.ModelError, match=r"q: expected finite entries, got 1 NaN"):
+        v.as_vector("q", [1.0, np.nan])
+    with pytest.raises(errors.ModelError, match="mass_matrix: expected a symmetric"):
+        v.check_symmetric("mass_matrix", np.array([[1.0, 2.0], [0.0, 1.0]]))
+    with pytest.raises(errors.ModelError, match="positive definite"):
+        v.check_positive_definite("M", np.diag([1.0, -1.0]))
+    with pytest.raises(errors.ModelError, match=r"e: expected a value in \[0.0, 1.0\]"):
+        v.check_in_interval("e", 1.5, 0.0, 1.0)
+    with pytest.raises(errors.ModelError, match="t_span"):
+        v.check_t_span((1.0, 0.0))
+    with pytest.raises(errors.DimensionError, match="reshape vectors explicitly"):
+        v.as_matrix("B", [1.0, 2.0])
+
+
+def test_simulate_rejects_unknown_method():
+    import nscontrol as nsc
+
+    with pytest.raises(errors.ModelError, match="method: expected one of"):
+        nsc.simulate(object(), [0.0], (0.0, 1.0), method="rk4")
+    with pytest.raises(errors.ModelError, match="no default_method"):
+        nsc.simulate(object(), [0.0], (0.0, 1.0))
+
+
+def test_cli_list_and_unknown_names():
+    runner = CliRunner()
+    result = runner.invoke(main, ["list"])
+    assert result.exit_code == 0
+    result = runner.invoke(main, ["run", "no-such-example"])
+    assert result.exit_code != 0 and "no example 'no-such-example'" in result.output
+    result = runner.invoke(main, ["bench", "no-such-bench"])
+    assert result.exit_code != 0 and "no benchmark 'no-such-bench'" in result.output
+
+
+def test_every_listed_example_has_a_unique_name_and_a_runner():
+    from nscontrol.examples import all_examples
+
+    names = [e.name for e in all_examples()]
+    assert len(names) == len(set(names))
+    assert all(callable(e.run) for e in all_examples())
+
+
+def test_check_json_shape():
+    from nscontrol.examples import ExampleResult, check
+
+    res = ExampleResult("demo", metrics={"a": np.float64(1.5), "b": np.arange(3)},
+                        checks=[check("small", 1e-12, 1e-10), check("big", 2.0, 3.0, ">=")])
+    data = json.loads(json.dumps(res.to_json()))
+    assert data["metrics"] == {"a": 1.5, "b": [0, 1, 2]}
+    assert [c["passed"] for c in data["checks"]] == [True, False]
+    assert not res.passed
+
+
+def test_import_is_light():
+    import subprocess
+    import sys
+
+    code = ("import sys, nscontrol; heavy = [m for m in ('numba', 'cvxpy', 'matplotlib', 'dask',"
+            " 'h5py', 'scipy') if m in sys.modules]; print(','.join(heavy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+def test_simulate_verb_survives_submodule_imports():
+    import nscontrol
+    import nscontrol.simulate.trajectory  # noqa: F401  (would rebind a lazily bound name)
+
+    assert callable(nscontrol.simulate) and nscontrol.Trajectory.__name__ == "Trajectory"
