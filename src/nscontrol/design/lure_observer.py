@@ -1,0 +1,857 @@
+"""Passivity-based observers for Lur'e systems with maximal monotone maps (chapter 8).
+
+The plant is ``x' = A x + G w + B u``, ``z = H x + D w + g(t)``, ``w ∈ -φ(z)``, ``y = C x``
+with ``φ`` maximal monotone. The observer copies it, with output injection ``L`` in the flow
+and (extended variant) ``K`` inside the set-valued map::
+
+    xhat' = (A - L C) xhat + G what + B u + L y
+    zhat  = (H - K C) xhat + K y + D what + g(t),      what ∈ -φ(zhat)
+
+The basic variant is ``K = 0``. The gains come from the LMIs of spec §2.3 in ``(P, Y = P L,
+K)``; the equality ``Gᵀ P = H - K C`` is enforced exactly by parametrising its affine solution
+set (so the returned certificate satisfies it to round-off, whatever the SDP solver's accuracy).
+The closed loop "plant + observer" is one :class:`~nscontrol.systems.lure.LureSystem` with the
+stacked state ``[x; xhat]`` and a product law, so implicit Euler steps both on the same step and
+resolves the observer's inclusion exactly; then ``V_k = e_kᵀ P e_k`` obeys
+``V_{k+1} <= V_k / (1 + 2 α h)`` (spec §3.2).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validation import as_matrix, check_positive
+from ..errors import DimensionError, InfeasibleDesignError, ModelError
+
+__all__ = [
+    "LureObserverCertificate",
+    "LureObserverDesign",
+    "structural_infeasibility",
+    "lure_observer_lmi",
+    "max_decay_rate",
+    "design_lure_observer",
+    "lure_from_statespace",
+]
+
+FloatArray = NDArray[np.float64]
+Variant = Literal["basic", "extended"]
+
+#: Relative tolerance of the exact-equality post-check (spec §2.3).
+EQUALITY_RTOL = 1e-7
+#: Largest decay rate the bisection tries before declaring the rate unbounded.
+ALPHA_CAP = 1e4
+
+
+# -- plant matrices --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Matrices:
+    """The linear part ``(A, G, H, C, D)`` checked for shapes; ``D`` is ``m x m``."""
+
+    A: FloatArray
+    G: FloatArray
+    H: FloatArray
+    C: FloatArray
+    D: FloatArray
+
+    @property
+    def n(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def m(self) -> int:
+        return int(self.G.shape[1])
+
+    @property
+    def p(self) -> int:
+        return int(self.C.shape[0])
+
+
+def _matrices(A: Any, G: Any, H: Any, C: Any, D: Any = None) -> _Matrices:
+    A = as_matrix("A", A)
+    n = A.shape[0]
+    if A.shape[1] != n:
+        raise DimensionError(f"A: expected a square matrix, got shape {A.shape}")
+    G = as_matrix("G", G, rows=n)
+    m = G.shape[1]
+    H = as_matrix("H", H, rows=m, cols=n)
+    C = as_matrix("C", C, cols=n)
+    D = np.zeros((m, m)) if D is None else as_matrix("D", D, rows=m, cols=m)
+    sym_min = float(np.linalg.eigvalsh(D + D.T)[0]) if m else 0.0
+    if sym_min < -1e-12 * max(1.0, float(np.abs(D).max(initial=0.0))):
+        raise ModelError(f"D: expected D + D^T positive semidefinite (feedthrough of a monotone "
+                         f"loop), got smallest eigenvalue {sym_min:.3g}; the observer's error "
+                         f"dynamics are not dissipative with this D")
+    return _Matrices(A, G, H, C, D)
+
+
+def _check_variant(variant: str) -> None:
+    if variant not in ("basic", "extended"):
+        raise ModelError(f"variant: expected 'basic' (K = 0) or 'extended' (output injection "
+                         f"into the set-valued map), got {variant!r}")
+
+
+# -- structural pre-check --------------------------------------------------------------------
+def _equality_space(mat: _Matrices, variant: str
+                    ) -> tuple[FloatArray, FloatArray, list[FloatArray], list[FloatArray], float]:
+    """Affine solution set of ``Gᵀ P + K C = H`` over symmetric ``P`` (and ``K``).
+
+    Returns ``(P0, K0, P_basis, K_basis, residual)``: every solution is ``P0 + Σ θ_i P_i``,
+    ``K0 + Σ θ_i K_i``; ``residual`` is the least-squares residual of the particular solution
+    (non-zero: the equality has no solution at all).
+    """
+    n, m, p = mat.n, mat.m, mat.p
+    columns: list[tuple[FloatArray, FloatArray]] = []
+    for i in range(n):
+        for j in range(i, n):
+            E = np.zeros((n, n))
+            E[i, j] = E[j, i] = 1.0
+            columns.append((E, np.zeros((m, p))))
+    if variant == "extended":
+        for i in range(m):
+            for j in range(p):
+                E = np.zeros((m, p))
+                E[i, j] = 1.0
+                columns.append((np.zeros((n, n)), E))
+    F = np.column_stack([(mat.G.T @ Pe + Ke @ mat.C).ravel() for Pe, Ke in columns])
+    rhs = mat.H.ravel()
+    sol, *_ = np.linalg.lstsq(F, rhs, rcond=None)
+    residual = float(np.linalg.norm(F @ sol - rhs))
+    _, s, Vt = np.linalg.svd(F)
+    rank = int(np.sum(s > 1e-12 * max(1.0, s[0] if s.size else 0.0)))
+    null = Vt[rank:]
+
+    def unpack(u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        P = sum((ui * Pe for ui, (Pe, _) in zip(u, columns, strict=True)), np.zeros((n, n)))
+        K = sum((ui * Ke for ui, (_, Ke) in zip(u, columns, strict=True)), np.zeros((m, p)))
+        return P, K
+
+    P0, K0 = unpack(sol)
+    basis = [unpack(v) for v in null]
+    return P0, K0, [b[0] for b in basis], [b[1] for b in basis], residual
+
+
+def _undetectable_mode(mat: _Matrices) -> complex | None:
+    """An eigenvalue of ``A`` with ``Re >= 0`` that ``C`` does not see (PBH test), or None."""
+    n = mat.n
+    for lam in np.linalg.eigvals(mat.A):
+        if lam.real < -1e-12:
+            continue
+        pbh = np.vstack([mat.A - lam * np.eye(n), mat.C.astype(complex)])
+        if np.linalg.matrix_rank(pbh, tol=1e-9 * max(1.0, np.abs(pbh).max())) < n:
+            return complex(lam)
+    return None
+
+
+def _restricted_sym(M: FloatArray, basis: FloatArray) -> FloatArray:
+    """``sym(M)`` restricted to the subspace spanned by the columns of ``basis``."""
+    S = 0.5 * (M + M.T)
+    return basis.T @ S @ basis
+
+
+def _null_space(M: FloatArray, k: int) -> FloatArray:
+    """Orthonormal basis (columns) of the null space of ``M`` (``k`` columns of the domain)."""
+    if M.size == 0:
+        return np.eye(k)
+    _, s, Vt = np.linalg.svd(M)
+    rank = int(np.sum(s > 1e-10 * max(1.0, s[0] if s.size else 0.0)))
+    return Vt[rank:].T
+
+
+def _structural_reason(mat: _Matrices, variant: str) -> str | None:
+    scale = max(1.0, float(np.linalg.norm(mat.H)))
+    *_, residual = _equality_space(mat, variant)
+    if residual > 1e-9 * scale:
+        return (f"the equality G^T P = H - K C has no solution (least-squares residual "
+                f"{residual:.3g}) for any symmetric P" + (" and any K" if variant == "extended"
+                                                           else " with K = 0"))
+    lam = _undetectable_mode(mat)
+    if lam is not None:
+        return (f"(A, C) is not detectable: the mode {lam:.4g} of A is invisible in y = C x, "
+                f"so A - L C is not Hurwitz for any L")
+    HG = mat.H @ mat.G
+    full_rank = np.linalg.matrix_rank(mat.G) == mat.m
+    # (H - K C) G = G^T P G must be symmetric PSD (PD for full column rank G); on ker(C G)
+    # K has no influence, so H G restricted there must already be.
+    ker_cg = _null_space(mat.C @ mat.G, mat.m) if variant == "extended" else np.eye(mat.m)
+    if ker_cg.shape[1]:
+        restricted = ker_cg.T @ HG @ ker_cg
+        asym = float(np.abs(restricted - restricted.T).max())
+        if asym > 1e-9 * scale * max(1.0, float(np.abs(HG).max())):
+            return (f"H G = {np.array2string(HG, precision=4)} is not symmetric"
+                    + ("" if variant == "basic" else " on ker(C G)") +
+                    ", but the equality forces (H - K C) G = G^T P G (symmetric)")
+        eig = np.linalg.eigvalsh(0.5 * (restricted + restricted.T))
+        bad = eig[0] <= 1e-12 * scale if full_rank else eig[0] < -1e-12 * scale
+        if bad:
+            where = "" if variant == "basic" else " on ker(C G), where K has no effect,"
+            kind = "definite" if full_rank else "semidefinite"
+            return (f"H G{where} must be symmetric positive {kind} (it equals G^T P G); its "
+                    f"smallest eigenvalue is {eig[0]:.4g}: the system is not passifiable by "
+                    f"output injection")
+    # On v = G s with C G s = 0 (and C A G s = 0 for the extended observer) the Lyapunov
+    # inequality reads 2 sᵀ H A G s < 0 whatever L and K are.
+    constraint = mat.C @ mat.G
+    if variant == "extended":
+        constraint = np.vstack([constraint, mat.C @ mat.A @ mat.G])
+    S = _null_space(constraint, mat.m)
+    if S.shape[1]:
+        S = S[:, np.linalg.norm(mat.G @ S, axis=0) > 1e-12] if full_rank else S
+    if S.shape[1]:
+        worst = float(np.linalg.eigvalsh(_restricted_sym(mat.H @ mat.A @ mat.G, S))[-1])
+        if worst >= -1e-12 * scale:
+            return ("along directions v = G s invisible to the output (C G s = 0"
+                    + (", C A G s = 0" if variant == "extended" else "") +
+                    f") the Lyapunov inequality needs sym(H A G) < 0 there, but its largest "
+                    f"eigenvalue is {worst:.4g}: no L" + (", K" if variant == "extended" else "")
+                    + " can make the error dynamics strictly passive")
+    return None
+
+
+def structural_infeasibility(A: Any, G: Any, H: Any, C: Any, *,
+                             variant: Variant = "extended") -> str | None:
+    """A certain reason why the observer LMIs have no solution, found without an SDP solver.
+
+    Parameters
+    ----------
+    A, G, H, C : array_like
+        Plant matrices (``n x n``, ``n x m``, ``m x n``, ``p x n``).
+    variant : {"extended", "basic"}
+        With or without the injection gain ``K`` in the set-valued map.
+
+    Returns
+    -------
+    str or None
+        The reason, or ``None`` when no structural obstruction was found (the LMI may still be
+        infeasible).
+
+    Notes
+    -----
+    Checks, each a necessary condition of (1)–(2) of spec §2.2:
+
+    * ``Gᵀ P + K C = H`` has a solution with ``P`` symmetric (``K = 0`` for the basic variant);
+    * ``(A, C)`` is detectable (PBH test), else ``A - L C`` is never Hurwitz;
+    * ``H G`` restricted to ``ker(C G)`` (all of ``R^m`` for the basic variant) is symmetric
+      positive definite, since ``(H - K C) G = Gᵀ P G``; e.g. ``C G = 0`` with ``H G <= 0``
+      ("not passifiable") or relative degree two or more (``H G = 0``);
+    * on ``v = G s`` with ``C G s = 0`` (and ``C A G s = 0`` for the extended variant),
+      ``vᵀ(A_Lᵀ P + P A_L) v = 2 sᵀ H A G s`` does not depend on ``L, K``; it must be negative.
+      This is why the basic observer of an undamped Coulomb oscillator is infeasible.
+
+    Examples
+    --------
+    >>> structural_infeasibility([[0, 1], [0, 0]], [[0], [1]], [[0, -1]], [[1, 0]]) is not None
+    True
+    """
+    _check_variant(variant)
+    return _structural_reason(_matrices(A, G, H, C), variant)
+
+
+# -- certificate and design object ----------------------------------------------------------
+@dataclass(frozen=True)
+class LureObserverCertificate:
+    """The numerical re-check of a solution of the observer LMIs (computed in NumPy).
+
+    Attributes
+    ----------
+    equality_residual
+        ``||Gᵀ P - (H - K C)||_F`` (round-off: the equality is parametrised exactly).
+    lmi_max_eig
+        Largest eigenvalue of ``sym(A_Lᵀ P + P A_L) + 2 α P``, ``A_L = A - L C``; negative.
+    P_min_eig, P_cond
+        Smallest eigenvalue and condition number of ``P``.
+    hurwitz_abscissa
+        Largest real part of the eigenvalues of ``A - L C``; negative.
+    gain_norm
+        ``||Y||_2 = ||P L||_2`` (bounded by ``kappa`` when one was given).
+    solver, solver_status
+        The SDP solver that produced the point and its status.
+    """
+
+    equality_residual: float
+    lmi_max_eig: float
+    P_min_eig: float
+    P_cond: float
+    hurwitz_abscissa: float
+    gain_norm: float
+    solver: str
+    solver_status: str
+
+
+@dataclass(frozen=True, eq=False)
+class LureObserverDesign:
+    """Gains of a passivity-based Lur'e observer with their re-checked certificate.
+
+    Attributes
+    ----------
+    variant : {"basic", "extended"}
+        ``K = 0`` or output injection into the set-valued map.
+    L, K, P : ndarray
+        Output-injection gain (``n x p``), map-injection gain (``m x p``; zero for the basic
+        variant) and the storage matrix of ``V(e) = eᵀ P e``.
+    alpha : float
+        Guaranteed decay rate: ``V(t) <= exp(-2 α t) V(0)``.
+    alpha_max : float or None
+        Largest certified rate found by bisection (when the design maximised it).
+    kappa : float or None
+        Bound on ``||P L||_2`` imposed in the synthesis.
+    eps, eps_P : float
+        Strictness margins of the Lyapunov inequality and of ``P > 0``.
+    certificate : LureObserverCertificate
+        The NumPy re-check of the solution.
+    A, G, H, C, D : ndarray
+        The (possibly loop-transformed) linear part the design was made for.
+    loop_sigma : float
+        Loop-transformation slope ``σ`` used for a non-monotone law (0 when none).
+    status : str
+        ``"feasible"`` (infeasible designs raise :class:`InfeasibleDesignError`).
+    """
+
+    variant: str
+    L: FloatArray
+    K: FloatArray
+    P: FloatArray
+    alpha: float
+    alpha_max: float | None
+    kappa: float | None
+    eps: float
+    eps_P: float
+    certificate: LureObserverCertificate
+    A: FloatArray
+    G: FloatArray
+    H: FloatArray
+    C: FloatArray
+    D: FloatArray
+    loop_sigma: float = 0.0
+    status: str = "feasible"
+
+    @property
+    def A_L(self) -> FloatArray:
+        """The observer's linear part ``A - L C``."""
+        return self.A - self.L @ self.C
+
+    def lyapunov(self, error: Any) -> FloatArray:
+        """``V = eᵀ P e`` for one error vector or a time-major array of them."""
+        e = np.asarray(error, dtype=np.float64)
+        if e.shape[-1] != self.P.shape[0]:
+            raise DimensionError(f"error: expected last dimension {self.P.shape[0]}, got "
+                                 f"shape {e.shape}")
+        return np.einsum("...i,ij,...j->...", e, self.P, e)
+
+    def continuous_bound(self, t: Any, V0: float) -> FloatArray:
+        """The guaranteed ``V(t) <= exp(-2 α t) V(0)`` of the theorem (spec §2.5)."""
+        return V0 * np.exp(-2.0 * self.alpha * np.asarray(t, dtype=np.float64))
+
+    def discrete_bound(self, k: Any, h: float, V0: float) -> FloatArray:
+        """The implicit-Euler guarantee ``V_k <= V_0 / (1 + 2 α h)^k`` (spec §3.2)."""
+        return V0 * (1.0 + 2.0 * self.alpha * h) ** (-np.asarray(k, dtype=np.float64))
+
+    def error_bound(self, t: Any, e0_norm: float) -> FloatArray:
+        """``|e(t)| <= sqrt(cond P) exp(-α t) |e(0)|``."""
+        return (np.sqrt(self.certificate.P_cond) * e0_norm
+                * np.exp(-self.alpha * np.asarray(t, dtype=np.float64)))
+
+    def closed_loop(self, plant: Any) -> Any:
+        """The plant and this observer as ONE :class:`~nscontrol.systems.lure.LureSystem`.
+
+        The state is ``[x; xhat]`` (``2 n``), the law the product ``φ × φ`` of the plant's law
+        with itself, ``z_cl = [z; zhat]``, and the output is the estimation error
+        ``y_cl = x - xhat``. Implicit Euler on this system steps plant and observer on the same
+        grid with the same ``u(t_{k+1})``, ``g(t_{k+1})`` and ``y_{k+1} = C x_{k+1}``, and
+        solves both inclusions exactly (spec §3.1).
+
+        Parameters
+        ----------
+        plant : LureSystem
+            The plant the design was made for (same ``A, G, H, C, D``; for a non-monotone law
+            the loop-transformed plant, see :func:`design_lure_observer`).
+        """
+        return _closed_loop(self, plant)
+
+
+# -- the LMIs (cvxpy) -------------------------------------------------------------------------
+def _default_margin(mat: _Matrices) -> float:
+    return 1e-6 * max(1.0, float(np.linalg.norm(mat.H)) / max(float(np.linalg.norm(mat.G)),
+                                                                1e-300))
+
+
+class _ObserverLMI:
+    """The observer LMIs compiled once, with the decay rate as a CVXPY parameter."""
+
+    def __init__(self, mat: _Matrices, variant: str, kappa: float | None, eps: float,
+                 eps_P: float, solver: str | None) -> None:
+        import cvxpy as cp
+
+        self.mat, self.variant, self.kappa = mat, variant, kappa
+        self.eps, self.eps_P, self.solver = eps, eps_P, solver
+        n, p = mat.n, mat.p
+        P0, K0, P_basis, K_basis, _ = _equality_space(mat, variant)
+        self._P0, self._K0 = P0, K0
+        self._P_basis, self._K_basis = np.array(P_basis), np.array(K_basis)
+        r = len(P_basis)
+        self.theta = cp.Variable(r) if r else None
+        P = cp.Constant(P0)
+        if r:
+            basis = np.column_stack([Pb.ravel() for Pb in P_basis])
+            P = P + cp.reshape(basis @ self.theta, (n, n), order="C")
+        self.Y = cp.Variable((n, p))
+        self.alpha = cp.Parameter(nonneg=True)
+        A, C = mat.A, mat.C
+        lyap = A.T @ P + P @ A - C.T @ self.Y.T - self.Y @ C + 2.0 * self.alpha * P
+        constraints = [0.5 * (lyap + lyap.T) << -eps * np.eye(n),
+                       0.5 * (P + P.T) >> eps_P * np.eye(n)]
+        if kappa is not None:
+            constraints.append(cp.bmat([[kappa * np.eye(n), self.Y],
+                                        [self.Y.T, kappa * np.eye(p)]]) >> 0)
+        self.problem = cp.Problem(cp.Minimize(0), constraints)
+
+    def _solvers(self) -> list[str]:
+        return [self.solver] if self.solver else ["CLARABEL", "SCS"]
+
+    def solve(self, alpha: float) -> tuple[LureObserverCertificate | None, dict[str, Any], str]:
+        """Solve at rate ``alpha``; returns (certificate or None, gains, status)."""
+        import cvxpy as cp
+
+        self.alpha.value = float(alpha)
+        status = "not_solved"
+        for name in self._solvers():
+            options: dict[str, Any] = {"eps": 1e-9, "max_iters": 20000} if name == "SCS" else {}
+            try:
+                with warnings.catch_warnings():
+                    # inaccurate statuses are handled below by the NumPy re-check
+                    warnings.simplefilter("ignore", UserWarning)
+                    self.problem.solve(solver=name, **options)
+            except cp.error.SolverError as exc:
+                status = f"solver_error ({name}: {exc})"
+                continue
+            status = str(self.problem.status)
+            if status in ("infeasible", "infeasible_inaccurate"):
+                return None, {}, f"{status} ({name})"
+            if status in ("optimal", "optimal_inaccurate"):
+                cert, gains = self._recheck(float(alpha), name, status)
+                if cert is not None:
+                    return cert, gains, status
+                status = f"{status} but the re-check failed ({name})"
+        return None, {}, status
+
+    def _recheck(self, alpha: float, solver: str, status: str
+                 ) -> tuple[LureObserverCertificate | None, dict[str, Any]]:
+        mat = self.mat
+        theta = np.zeros(0) if self.theta is None else np.asarray(self.theta.value, float)
+        P = self._P0 + np.tensordot(theta, self._P_basis, axes=1) if theta.size else self._P0
+        K = self._K0 + np.tensordot(theta, self._K_basis, axes=1) if theta.size else self._K0
+        P = 0.5 * (P + P.T)
+        Y = np.asarray(self.Y.value, float)
+        if not (np.all(np.isfinite(P)) and np.all(np.isfinite(Y))):
+            return None, {}
+        cert = recheck_certificate(mat.A, mat.G, mat.H, mat.C, P,
+                                   np.linalg.solve(P, Y) if _is_pd(P) else Y, K, alpha,
+                                   solver=solver, solver_status=status)
+        scale = max(1.0, float(np.linalg.norm(mat.H)))
+        ok = (cert.P_min_eig >= 0.5 * self.eps_P and cert.lmi_max_eig <= -0.5 * self.eps
+              and cert.equality_residual <= EQUALITY_RTOL * scale
+              and cert.hurwitz_abscissa < 0.0
+              and (self.kappa is None or cert.gain_norm <= self.kappa * (1 + 1e-6)))
+        if not ok:
+            return None, {}
+        return cert, {"P": P, "L": np.linalg.solve(P, Y), "K": K}
+
+
+def _is_pd(P: FloatArray) -> bool:
+    return bool(np.linalg.eigvalsh(P)[0] > 0.0)
+
+
+def recheck_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any, alpha: float,
+                        *, solver: str = "given", solver_status: str = "given"
+                        ) -> LureObserverCertificate:
+    """Re-check observer gains ``(P, L, K)`` against (1)–(2) of spec §2.2 in NumPy.
+
+    Useful for certificates from elsewhere (a paper, the Siconos example's ``P = I``).
+
+    Returns
+    -------
+    LureObserverCertificate
+        Residual of ``Gᵀ P = H - K C``, eigenvalues of the Lyapunov matrix and of ``P``, the
+        Hurwitz abscissa of ``A - L C`` and ``||P L||_2``.
+    """
+    mat = _matrices(A, G, H, C)
+    P = as_matrix("P", P, rows=mat.n, cols=mat.n)
+    L = as_matrix("L", L, rows=mat.n, cols=mat.p)
+    K = as_matrix("K", K, rows=mat.m, cols=mat.p)
+    A_L = mat.A - L @ mat.C
+    lyap = A_L.T @ P + P @ A_L
+    eig_P = np.linalg.eigvalsh(0.5 * (P + P.T))
+    return LureObserverCertificate(
+        equality_residual=float(np.linalg.norm(mat.G.T @ P - (mat.H - K @ mat.C))),
+        lmi_max_eig=float(np.linalg.eigvalsh(0.5 * (lyap + lyap.T) + 2.0 * alpha * P)[-1]),
+        P_min_eig=float(eig_P[0]),
+        P_cond=float(eig_P[-1] / eig_P[0]) if eig_P[0] > 0 else float("inf"),
+        hurwitz_abscissa=float(np.max(np.linalg.eigvals(A_L).real)),
+        gain_norm=float(np.linalg.norm(P @ L, 2)),
+        solver=solver, solver_status=solver_status)
+
+
+# -- public synthesis entry points ------------------------------------------------------------
+def _prepare(A: Any, G: Any, H: Any, C: Any, D: Any, variant: str, kappa: Any, eps: Any,
+             eps_P: Any) -> tuple[_Matrices, float | None, float, float]:
+    _check_variant(variant)
+    mat = _matrices(A, G, H, C, D)
+    if mat.p == 0:
+        raise DimensionError("C: expected at least one measured output (p >= 1), got 0 rows")
+    kappa_v = None if kappa is None else check_positive("kappa", kappa)
+    margin = _default_margin(mat)
+    eps_v = margin if eps is None else check_positive("eps", eps)
+    eps_P_v = margin if eps_P is None else check_positive("eps_P", eps_P)
+    return mat, kappa_v, eps_v, eps_P_v
+
+
+def _raise_structural(mat: _Matrices, variant: str) -> None:
+    reason = _structural_reason(mat, variant)
+    if reason is not None:
+        raise InfeasibleDesignError(f"{variant} Lur'e observer: infeasible for structural "
+                                    f"reasons (no solver called): {reason}",
+                                    status="structural")
+
+
+def _design(mat: _Matrices, lmi: _ObserverLMI, cert: LureObserverCertificate,
+            gains: dict[str, Any], alpha: float, alpha_max: float | None,
+            loop_sigma: float = 0.0) -> LureObserverDesign:
+    return LureObserverDesign(
+        variant=lmi.variant, L=gains["L"], K=gains["K"], P=gains["P"], alpha=float(alpha),
+        alpha_max=alpha_max, kappa=lmi.kappa, eps=lmi.eps, eps_P=lmi.eps_P, certificate=cert,
+        A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D, loop_sigma=float(loop_sigma))
+
+
+def _bisect(lmi: _ObserverLMI, tol: float
+            ) -> tuple[float, LureObserverCertificate, dict[str, Any]]:
+    """Largest certified rate: expand the bracket by 4x, then bisect to relative ``tol``."""
+    cert, gains, status = lmi.solve(0.0)
+    if cert is None:
+        raise InfeasibleDesignError(
+            f"{lmi.variant} Lur'e observer: LMIs infeasible even at decay rate 0 (solver "
+            f"status: {status}); try the extended variant, a larger kappa, or other outputs",
+            status=status)
+    lo, best = 0.0, (cert, gains)
+    hi = 1.0
+    while hi <= ALPHA_CAP:
+        cert, gains, _ = lmi.solve(hi)
+        if cert is None:
+            break
+        lo, best, hi = hi, (cert, gains), 4.0 * hi
+    else:
+        from ..errors import InaccurateCertificateWarning
+
+        warnings.warn(f"decay rate certified up to the cap {ALPHA_CAP:g}: it is unbounded "
+                      f"without a gain bound; pass kappa", InaccurateCertificateWarning,
+                      stacklevel=3)
+        return lo, *best
+    while hi - lo > tol * max(hi, 1e-12):
+        mid = 0.5 * (lo + hi)
+        cert, gains, _ = lmi.solve(mid)
+        if cert is None:
+            hi = mid
+        else:
+            lo, best = mid, (cert, gains)
+    return lo, *best
+
+
+def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
+                      variant: Variant = "extended", alpha: float = 0.0,
+                      kappa: float | None = None, eps: float | None = None,
+                      eps_P: float | None = None, solver: str | None = None,
+                      precheck: bool = True) -> LureObserverDesign:
+    """Solve the observer LMIs of spec §2.3 at a fixed decay rate ``alpha``.
+
+    Parameters
+    ----------
+    A, G, H, C : array_like
+        Linear part of the plant ``x' = A x + G w``, ``z = H x + D w``, ``y = C x``.
+    D : array_like, optional
+        Feedthrough (``m x m``) with ``D + Dᵀ >= 0``; it does not enter the LMIs.
+    variant : {"extended", "basic"}
+        Free ``K`` or ``K = 0``.
+    alpha : float
+        Required decay rate, ``>= 0``.
+    kappa : float, optional
+        Bound on ``||Y||_2 = ||P L||_2``, ``> 0``.
+    eps, eps_P : float, optional
+        Strictness margins (default ``1e-6 max(1, ||H||_F / ||G||_F)``).
+    solver : str, optional
+        A CVXPY SDP solver name; default Clarabel, then SCS.
+    precheck : bool
+        Run :func:`structural_infeasibility` first (no solver call for hopeless cases).
+
+    Returns
+    -------
+    LureObserverDesign
+
+    Raises
+    ------
+    InfeasibleDesignError
+        No certificate (``status="structural"`` with the reason, or the solver's status).
+    DimensionError, ModelError
+        Wrong shapes, ``D + Dᵀ`` not PSD, negative ``kappa``/``alpha``/margins.
+
+    Notes
+    -----
+    Unknowns ``P = Pᵀ``, ``Y = P L``, ``K``::
+
+        P >= eps_P I,   sym(Aᵀ P + P A - Cᵀ Yᵀ - Y C) + 2 α P <= -eps I,
+        Gᵀ P = H - K C,   [[kappa I, Y], [Yᵀ, kappa I]] >= 0  (optional).
+
+    The equality is eliminated: ``(P, K)`` ranges over its affine solution set (particular
+    solution plus null-space basis computed by SVD), so it holds to round-off. Every returned
+    point is re-checked in NumPy (:func:`recheck_certificate`): equality residual
+    ``<= 1e-7 max(1, ||H||_F)``, Lyapunov matrix ``<= -eps/2``, ``P >= eps_P/2``, ``A - L C``
+    Hurwitz. Hypotheses of the theorem (spec §2.5) not checked here: maximal monotonicity of
+    ``φ`` (checked by :func:`design_lure_observer` through the law) and well-posedness of the
+    plant.
+
+    References
+    ----------
+    SICONOS D5.3, ch. 8 (Juloski, Heemels, Brogliato); B. Brogliato, W.P.M.H. Heemels,
+    "Observer design for Lur'e systems with multivalued mappings: a passivity approach",
+    IEEE TAC 54(8), 2009.
+
+    Examples
+    --------
+    >>> d = lure_observer_lmi([[0, 1], [-1, 0]], [[0], [1]], [[0, 1]], [[1, 0]], alpha=0.2,
+    ...                       kappa=20)
+    >>> bool(d.certificate.lmi_max_eig < 0 and d.certificate.hurwitz_abscissa < 0)
+    True
+    """
+    mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P)
+    alpha_v = check_positive("alpha", alpha, allow_zero=True)
+    if precheck:
+        _raise_structural(mat, variant)
+    lmi = _ObserverLMI(mat, variant, kappa_v, eps_v, eps_P_v, solver)
+    cert, gains, status = lmi.solve(alpha_v)
+    if cert is None:
+        raise InfeasibleDesignError(
+            f"{variant} Lur'e observer: no certified solution at alpha = {alpha_v:g} (solver "
+            f"status: {status}); lower alpha, raise kappa, or use the extended variant",
+            status=status)
+    return _design(mat, lmi, cert, gains, alpha_v, None)
+
+
+def max_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
+                   variant: Variant = "extended", kappa: float | None = None,
+                   eps: float | None = None, eps_P: float | None = None,
+                   solver: str | None = None, tol: float = 1e-3,
+                   precheck: bool = True) -> LureObserverDesign:
+    """Maximise the certified decay rate by bisection; the design at ``alpha_max``.
+
+    Same parameters as :func:`lure_observer_lmi`, plus ``tol`` (relative width of the final
+    bracket). The returned design has ``alpha = alpha_max``: it is the boundary point, with
+    ``P`` near singular; simulate with a design at a fraction of it
+    (:func:`design_lure_observer` does).
+
+    Raises
+    ------
+    InfeasibleDesignError
+        Infeasible already at ``alpha = 0``.
+    """
+    mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P)
+    tol = check_positive("tol", tol)
+    if precheck:
+        _raise_structural(mat, variant)
+    lmi = _ObserverLMI(mat, variant, kappa_v, eps_v, eps_P_v, solver)
+    alpha_max, cert, gains = _bisect(lmi, tol)
+    return _design(mat, lmi, cert, gains, alpha_max, alpha_max)
+
+
+def _plant_matrices(plant: Any) -> tuple[_Matrices, Any]:
+    missing = [k for k in ("A", "G", "H", "C", "law") if getattr(plant, k, None) is None]
+    if missing:
+        raise ModelError(f"plant: expected a LureSystem (with A, G, H, C, law), got "
+                         f"{type(plant).__name__} lacking {missing}; for a python-control "
+                         f"StateSpace use lure_from_statespace(ss, law) first")
+    return _matrices(plant.A, plant.G, plant.H, plant.C, getattr(plant, "D", None)), plant.law
+
+
+def design_lure_observer(plant: Any, *, variant: Variant = "extended",
+                         alpha: float | Literal["max"] = "max", alpha_fraction: float = 0.5,
+                         kappa: float | None = None, eps: float | None = None,
+                         eps_P: float | None = None, solver: str | None = None,
+                         tol: float = 1e-3, precheck: bool = True,
+                         loop_transformation: Any = None) -> LureObserverDesign:
+    """Design a passivity-based observer for a Lur'e plant with a maximal monotone law.
+
+    Parameters
+    ----------
+    plant : LureSystem
+        ``x' = A x + G w + B u``, ``z = H x + D w + g(t)``, ``w ∈ -φ(z)``, ``y = C x``.
+    variant : {"extended", "basic"}
+        Output injection ``K`` into the set-valued map, or ``K = 0``.
+    alpha : float or "max"
+        Required decay rate; ``"max"`` bisects for the largest certified rate ``alpha_max``
+        and designs at ``alpha_fraction * alpha_max`` (bisection drives ``P`` towards
+        singularity; a fraction keeps margins comfortable).
+    alpha_fraction : float in (0, 1]
+        See ``alpha``.
+    kappa : float, optional
+        Bound on ``||P L||_2`` (without it the extended observer's rate may be unbounded).
+    eps, eps_P, solver, tol, precheck
+        As in :func:`lure_observer_lmi` and :func:`max_decay_rate`.
+    loop_transformation : LoopTransformation, optional
+        For a plant object whose law is not monotone (Stribeck friction): the split
+        ``φ = φ_m - σ I`` from ``law.loop_transformation()``; the design is made for
+        ``(A + G σ H, G, H, C)`` (spec §2.6). A :class:`LureSystem` only holds monotone laws:
+        build it with :func:`loop_transformed_lure_system` instead.
+
+    Returns
+    -------
+    LureObserverDesign
+        Gains, certificate and :meth:`~LureObserverDesign.closed_loop`.
+
+    Raises
+    ------
+    InfeasibleDesignError
+        Structurally hopeless (``status="structural"``, no solver called) or no certificate.
+    ModelError
+        Non-monotone law without a loop transformation, ``D + Dᵀ`` not PSD, bad ``kappa``...
+
+    Notes
+    -----
+    Theorem (spec §2.5): if ``φ`` is maximal monotone, ``D + Dᵀ >= 0``, and ``P > 0``, ``L``,
+    ``K`` satisfy ``(A - LC)ᵀP + P(A - LC) <= -2αP - εI`` and ``GᵀP = H - KC``, then for every
+    plant solution, input and observer initial state ``V(t) = eᵀPe <= exp(-2αt) V(0)``; with
+    implicit Euler on plant and observer together ``V_{k+1} <= V_k / (1 + 2αh)``. Checked here:
+    monotonicity of the law (flag of the law object), ``D + Dᵀ >= 0``, the LMIs (re-checked in
+    NumPy). Not checked: existence of plant solutions (the plant may be unstable) and the
+    constraint qualification of spec §2.4 for laws with a bounded domain.
+
+    References
+    ----------
+    SICONOS D5.3, ch. 8; B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8):1996–2001, 2009;
+    M. Arcak, P. Kokotović, Automatica 37, 2001 (single-valued case).
+    """
+    from ..laws import require_monotone
+
+    mat, law = _plant_matrices(plant)
+    require_monotone(law, who="design_lure_observer", loop_transformation=loop_transformation)
+    sigma = 0.0
+    if not law.monotone:
+        if np.any(mat.D):
+            raise ModelError("loop_transformation: the transformation with a feedthrough D is "
+                             "not supported (it changes D too); use D = 0")
+        slope = np.asarray(loop_transformation.slope, float)
+        mat = _Matrices(loop_transformation.transform_A(mat.A, mat.G, mat.H), mat.G, mat.H,
+                        mat.C, mat.D)
+        sigma = float(np.max(np.abs(slope)))
+    frac = float(alpha_fraction)
+    if not 0.0 < frac <= 1.0:
+        raise ModelError(f"alpha_fraction: expected a value in (0, 1], got {alpha_fraction!r}")
+    kwargs = {"D": mat.D, "variant": variant, "kappa": kappa, "eps": eps, "eps_P": eps_P,
+              "solver": solver, "precheck": precheck}
+    if isinstance(alpha, str):
+        if alpha != "max":
+            raise ModelError(f"alpha: expected a rate >= 0 or 'max', got {alpha!r}")
+        best = max_decay_rate(mat.A, mat.G, mat.H, mat.C, tol=tol, **kwargs)
+        design = lure_observer_lmi(mat.A, mat.G, mat.H, mat.C, alpha=frac * best.alpha, **kwargs)
+        alpha_max: float | None = best.alpha
+    else:
+        design = lure_observer_lmi(mat.A, mat.G, mat.H, mat.C, alpha=alpha, **kwargs)
+        alpha_max = None
+    from dataclasses import replace
+
+    return replace(design, alpha_max=alpha_max, loop_sigma=sigma)
+
+
+# -- closed loop ---------------------------------------------------------------------------
+def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
+    from ..laws import Product
+    from ..systems.lure import LureSystem
+
+    mat, law = _plant_matrices(plant)
+    for name in ("A", "G", "H", "C", "D"):
+        if not np.allclose(getattr(mat, name), getattr(design, name), rtol=1e-12, atol=1e-12):
+            raise ModelError(f"plant: its {name} differs from the one the observer was designed "
+                             f"for; design for this plant (for a loop-transformed law pass the "
+                             f"transformed plant)")
+    n, A, G, H, C = mat.n, mat.A, mat.G, mat.H, mat.C
+    L, K = design.L, design.K
+    zeros = np.zeros((n, n))
+    A_cl = np.block([[A, zeros], [L @ C, A - L @ C]])
+    G_cl = np.block([[G, np.zeros_like(G)], [np.zeros_like(G), G]])
+    H_cl = np.block([[H, np.zeros_like(H)], [K @ C, H - K @ C]])
+    D_cl = np.block([[mat.D, np.zeros_like(mat.D)], [np.zeros_like(mat.D), mat.D]])
+    B_cl = u_cl = g_cl = None
+    if getattr(plant, "B", None) is not None:
+        B_cl = np.vstack([plant.B, plant.B])
+        u_cl = plant.input_at if plant.has_input else None
+    if plant.has_shift:
+        def g_cl(t: Any) -> FloatArray:
+            g = plant.shift_at(t)
+            return np.hstack([g, g])
+    names = tuple(plant.state_names) or tuple(f"x{i}" for i in range(n))
+    return LureSystem(A_cl, G_cl, H_cl, Product(law, law), B=B_cl, C=np.hstack(
+        [np.eye(n), -np.eye(n)]), D=D_cl, u=u_cl, g=g_cl,
+        state_names=names + tuple(f"{s}_hat" for s in names))
+
+
+def loop_transformed_lure_system(A: Any, G: Any, H: Any, law: Any, *, sigma: Any = None,
+                                 **lure_options: Any) -> Any:
+    """A :class:`LureSystem` for a non-monotone law through the loop transformation (§2.6).
+
+    ``φ = φ_m - diag(σ)`` with ``φ_m`` maximal monotone gives ``x' = (A + G diag(σ) H) x +
+    G w_m``, ``w_m ∈ -φ_m(z)`` (``D = 0``): the same trajectories, a monotone law.
+
+    Parameters
+    ----------
+    A, G, H : array_like
+        Linear part with the original law.
+    law : SetValuedLaw
+        The (possibly non-monotone) law, e.g. ``Stribeck``; it provides the split through
+        ``law.loop_transformation(sigma)``.
+    sigma : float or array_like, optional
+        Slope to use (default: the law's own bound on its negative slope).
+    **lure_options
+        ``B``, ``C``, ``u``, ``g``, ``state_names`` of :class:`LureSystem` (no ``D``).
+    """
+    from ..laws import require_monotone
+    from ..systems.lure import LureSystem
+
+    if "D" in lure_options and lure_options["D"] is not None and np.any(lure_options["D"]):
+        raise ModelError("D: the loop transformation is implemented for D = 0 only")
+    lt = law.loop_transformation(sigma)
+    part = require_monotone(law, who="loop_transformed_lure_system", loop_transformation=lt)
+    return LureSystem(lt.transform_A(A, G, H), G, H, part, **lure_options)
+
+
+def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> Any:
+    """A :class:`LureSystem` from a python-control ``StateSpace`` and a law.
+
+    The ``StateSpace`` has inputs ``[w; u]`` (the first ``m = law.dim`` are the multipliers)
+    and outputs ``[z; y]`` (the first ``m`` feed the law, the rest are measured), i.e.
+    ``B_ss = [G, B]``, ``C_ss = [H; C]``, ``D_ss = [[D, 0], [0, 0]]``.
+
+    Raises
+    ------
+    ModelError
+        Discrete-time system, or feedthrough from ``u`` or into ``y`` (not in the model).
+    DimensionError
+        Fewer inputs or outputs than ``m``.
+    """
+    from ..systems.lure import LureSystem
+
+    if not all(hasattr(ss, k) for k in ("A", "B", "C", "D")):
+        raise ModelError(f"ss: expected a python-control StateSpace, got {type(ss).__name__}")
+    if getattr(ss, "dt", 0) not in (0, None):
+        raise ModelError(f"ss: expected a continuous-time system (dt = 0), got dt = {ss.dt}")
+    A, Bs, Cs, Ds = (np.asarray(getattr(ss, k), float) for k in ("A", "B", "C", "D"))
+    m = int(law.dim)
+    if Bs.shape[1] < m or Cs.shape[0] <= m:
+        raise DimensionError(f"ss: expected at least {m} inputs (w) and more than {m} outputs "
+                             f"(z, then y), got {Bs.shape[1]} inputs and {Cs.shape[0]} outputs")
+    if np.any(Ds[m:, :]) or np.any(Ds[:m, m:]):
+        raise ModelError("ss: feedthrough is only allowed from w to z (D[:m, :m]); the "
+                         "measured outputs y = C x and the law's argument take no u directly "
+                         "(use the shift g(t) for a known additive term)")
+    B = Bs[:, m:] if Bs.shape[1] > m else None
+    return LureSystem(A, Bs[:, :m], Cs[:m], law, B=B, C=Cs[m:], D=Ds[:m, :m] if np.any(
+        Ds[:m, :m]) else None, u=u if B is not None else None, g=g)
