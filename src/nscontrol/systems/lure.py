@@ -1,0 +1,205 @@
+"""Lur'e systems with a maximal monotone set-valued feedback: :class:`LureSystem`.
+
+::
+
+    x' = A x + G w + B u(t)
+    z  = H x + D w (+ g(t))
+    w  ∈ -φ(z)
+    y  = C x
+
+``φ`` is any maximal monotone law of :mod:`nscontrol.laws` (relay, Coulomb friction, normal
+cones / complementarity, products of these). A plant and its observer (or controller) in closed
+loop are *one* ``LureSystem``: stack the states and combine the laws with ``Product``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray, as_matrix, as_square, as_vector
+from ..errors import DimensionError, ModelError
+
+__all__ = ["LureSystem"]
+
+
+def _input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
+    """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
+
+    Accepts ``None``, an :class:`~nscontrol.numerics.lti.Exosystem` (anything with a ``u``
+    method), a callable ``t -> vector``, or a constant vector.
+    """
+    if value is None:
+        return None
+    if hasattr(value, "u") and callable(value.u):
+        fn = value.u
+    elif callable(value):
+        fn = value
+    else:
+        const = as_vector(name, value, size)
+        return lambda t: np.broadcast_to(const, (np.size(t), size)).copy()
+    probe = np.atleast_1d(np.asarray(fn(0.0), dtype=float)).ravel()
+    if probe.shape[0] != size:
+        raise DimensionError(f"{name}: expected {name}(t) to have length {size}, got "
+                             f"length {probe.shape[0]}")
+
+    def sampled(t: Any) -> FloatArray:
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        try:
+            out = np.asarray(fn(t), dtype=float)
+            if out.shape == (t.size, size):
+                return out
+            if out.shape == (size, t.size) and size != t.size:
+                return out.T.copy()
+            if size == 1 and out.shape == (t.size,):
+                return out.reshape(-1, 1)
+        except (TypeError, ValueError):
+            pass
+        return np.array([np.atleast_1d(np.asarray(fn(float(s)), dtype=float)).ravel()
+                         for s in t]).reshape(t.size, size)
+
+    return sampled
+
+
+@dataclass(frozen=True, eq=False)
+class LureSystem:
+    """A linear system in feedback with a maximal monotone set-valued law.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        State matrix.
+    G : (n, m) array_like
+        How the multiplier ``w`` enters the state equation.
+    H : (m, n) array_like
+        Output of the state that feeds the law.
+    law : SetValuedLaw
+        The maximal monotone map ``φ`` of dimension ``m`` (``w ∈ -φ(z)``).
+    B : (n, q) array_like, optional
+        Input matrix of the external input ``u(t)``; required with ``u``.
+    C : (p, n) array_like, optional
+        Measured output ``y = C x`` (default: the whole state).
+    D : (m, m) array_like, optional
+        Feedthrough of ``w`` into ``z``; ``D + Dᵀ`` must be positive semidefinite.
+    u : Exosystem or callable or array_like, optional
+        External input ``u(t)`` (an ``Exosystem``, a function of time, or a constant).
+    g : callable or array_like, optional
+        Known shift of the law's argument, ``z = H x + D w + g(t)``.
+    state_names : tuple of str, optional
+        Names of the state components.
+
+    Raises
+    ------
+    DimensionError
+        Shapes disagree (the message names the matrix and the expected shape).
+    ModelError
+        ``D + Dᵀ`` is not positive semidefinite, or ``law`` is not monotone (the message names
+        the loop transformation that restores monotonicity).
+
+    Notes
+    -----
+    With ``D + Dᵀ ⪰ 0`` the map ``w ↦ -φ(Hx + Dw)`` is again maximal monotone and the
+    implicit Euler step is a uniquely solvable monotone inclusion whenever the step matrix
+    ``D_h = h H (I - hθA)^{-1} G + D`` is positive definite (checked by the integrator).
+
+    References
+    ----------
+    SICONOS D5.3, chapter 8; B. Brogliato, W.P.M.H. Heemels, "Observer design for Lur'e
+    systems with multivalued mappings: a passivity approach", IEEE TAC 54(8), 2009.
+    """
+
+    A: FloatArray
+    G: FloatArray
+    H: FloatArray
+    law: Any
+    B: FloatArray | None = None
+    C: FloatArray | None = None
+    D: FloatArray | None = None
+    u: Any = None
+    g: Any = None
+    state_names: tuple[str, ...] = ()
+
+    default_method = "implicit_euler"
+
+    def __post_init__(self) -> None:
+        A = as_square("A", self.A)
+        n = A.shape[0]
+        G = as_matrix("G", self.G, rows=n)
+        m = G.shape[1]
+        H = as_matrix("H", self.H, rows=m, cols=n)
+        law_dim = getattr(self.law, "dim", None)
+        if law_dim is None:
+            raise ModelError(f"law: expected a SetValuedLaw from nscontrol.laws, got "
+                             f"{type(self.law).__name__}")
+        if int(law_dim) != m:
+            raise DimensionError(f"law: expected a law of dimension {m} (G has {m} columns), "
+                                 f"got dimension {law_dim}")
+        self._require_monotone()
+        D = np.zeros((m, m)) if self.D is None else as_square("D", self.D, m)
+        lam = float(np.linalg.eigvalsh(D + D.T)[0]) if m else 0.0
+        if lam < -1e-12 * max(1.0, float(np.max(np.abs(D)))):
+            raise ModelError(f"D: expected D + D^T positive semidefinite (so that "
+                             f"w ∈ -φ(Hx + Dw) stays monotone), got smallest eigenvalue "
+                             f"{lam:.3g}; move the indefinite part of D into the law or A")
+        C = np.eye(n) if self.C is None else as_matrix("C", self.C, cols=n)
+        B = None
+        if self.B is not None:
+            B = as_matrix("B", self.B, rows=n)
+        if self.u is not None and B is None:
+            raise ModelError("u: an input u(t) was given but B is None; pass B (n, q)")
+        u_fn = None if B is None else _input_function("u", self.u, B.shape[1])
+        g_fn = _input_function("g", self.g, m)
+        if self.state_names and len(self.state_names) != n:
+            raise DimensionError(f"state_names: expected {n} names, got "
+                                 f"{len(self.state_names)}")
+        for key, value in (("A", A), ("G", G), ("H", H), ("B", B), ("C", C), ("D", D),
+                           ("state_names", tuple(self.state_names))):
+            object.__setattr__(self, key, value)
+        object.__setattr__(self, "_u_fn", u_fn)
+        object.__setattr__(self, "_g_fn", g_fn)
+
+    def _require_monotone(self) -> None:
+        from ..laws.base import require_monotone
+
+        # a non-monotone law is refused with the way out (loop transformation) named: build
+        # LureSystem(lt.transform_A(A, G, H), G, H, lt.monotone_part) with
+        # lt = law.loop_transformation()
+        require_monotone(self.law, who="LureSystem")
+
+    # -- sizes and signals ---------------------------------------------------------------
+    @property
+    def n_states(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def n_multipliers(self) -> int:
+        return int(self.G.shape[1])
+
+    @property
+    def n_inputs(self) -> int:
+        return 0 if self.B is None else int(self.B.shape[1])
+
+    def input_at(self, t: Any) -> FloatArray:
+        """``u`` sampled at the times ``t``, shape ``(len(t), q)`` (zeros without input)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if self._u_fn is None:  # type: ignore[attr-defined]
+            return np.zeros((t.size, self.n_inputs))
+        return self._u_fn(t)  # type: ignore[attr-defined]
+
+    def shift_at(self, t: Any) -> FloatArray:
+        """``g`` sampled at the times ``t``, shape ``(len(t), m)`` (zeros without shift)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if self._g_fn is None:  # type: ignore[attr-defined]
+            return np.zeros((t.size, self.n_multipliers))
+        return self._g_fn(t)  # type: ignore[attr-defined]
+
+    @property
+    def has_input(self) -> bool:
+        return self._u_fn is not None  # type: ignore[attr-defined]
+
+    @property
+    def has_shift(self) -> bool:
+        return self._g_fn is not None  # type: ignore[attr-defined]
