@@ -36,6 +36,9 @@ __all__ = [
     "max_decay_rate",
     "design_lure_observer",
     "lure_from_statespace",
+    "loop_transformed_lure_system",
+    "observer_from_gains",
+    "recheck_certificate",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -662,6 +665,33 @@ def max_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     lmi = _ObserverLMI(mat, variant, kappa_v, eps_v, eps_P_v, solver)
     alpha_max, cert, gains = _bisect(lmi, tol)
     return _design(mat, lmi, cert, gains, alpha_max, alpha_max)
+
+
+def observer_from_gains(A: Any, G: Any, H: Any, C: Any, *, L: Any, P: Any, alpha: float,
+                        K: Any = None, D: Any = None) -> LureObserverDesign:
+    """Wrap given gains ``(L, K)`` and certificate ``(P, alpha)`` after re-checking them.
+
+    For certificates from elsewhere, e.g. the Siconos ObserverLCS example (``L = [1, 1]ᵀ``,
+    ``K = 0``, ``P = I``, ``alpha = 1``).
+
+    Raises
+    ------
+    InfeasibleDesignError
+        The gains do not satisfy (1)–(2) with rate ``alpha`` (``status="recheck_failed"``).
+    """
+    mat = _matrices(A, G, H, C, D)
+    alpha_v = check_positive("alpha", alpha, allow_zero=True)
+    K = np.zeros((mat.m, mat.p)) if K is None else as_matrix("K", K, rows=mat.m, cols=mat.p)
+    cert = recheck_certificate(mat.A, mat.G, mat.H, mat.C, P, L, K, alpha_v)
+    scale = max(1.0, float(np.linalg.norm(mat.H)))
+    if not (cert.equality_residual <= EQUALITY_RTOL * scale and cert.lmi_max_eig <= 0.0
+            and cert.P_min_eig > 0.0):
+        raise InfeasibleDesignError(f"observer_from_gains: the gains are not a certificate at "
+                                    f"alpha = {alpha_v:g}: {cert}", status="recheck_failed")
+    return LureObserverDesign(
+        variant="basic" if not np.any(K) else "extended", L=as_matrix("L", L), K=K,
+        P=as_matrix("P", P), alpha=alpha_v, alpha_max=None, kappa=None, eps=0.0, eps_P=0.0,
+        certificate=cert, A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D)
 
 
 def _plant_matrices(plant: Any) -> tuple[_Matrices, Any]:

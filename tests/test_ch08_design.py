@@ -1,0 +1,165 @@
+"""Chapter 8, LMI synthesis: spec §6 checks 1 (post-conditions), 2 (infeasibility), 3 (rates),
+and bad input to the design functions."""
+
+import numpy as np
+import pytest
+
+from nscontrol.design.lure_observer import (
+    lure_observer_lmi,
+    max_decay_rate,
+    observer_from_gains,
+    recheck_certificate,
+    structural_infeasibility,
+)
+from nscontrol.errors import DimensionError, InfeasibleDesignError, ModelError
+from nscontrol.examples import ch08_lure_observer as ex
+
+
+def _postconditions(design):
+    cert = design.certificate
+    scale = max(1.0, np.linalg.norm(design.H))
+    assert cert.equality_residual <= 1e-7 * scale
+    # independent recomputation, not the stored numbers
+    A_L = design.A - design.L @ design.C
+    lyap = A_L.T @ design.P + design.P @ A_L
+    assert np.linalg.eigvalsh(0.5 * (lyap + lyap.T) + 2 * design.alpha * design.P)[-1] < 0
+    assert np.linalg.eigvalsh(design.P)[0] > 0
+    assert np.max(np.linalg.eigvals(A_L).real) < 0
+    assert np.linalg.norm(design.G.T @ design.P - (design.H - design.K @ design.C)) \
+        <= 1e-7 * scale
+
+
+FEASIBLE = [
+    (ex.coulomb_oscillator(0.0), "extended", 20.0),
+    (ex.coulomb_oscillator(0.1), "basic", None),
+    (ex.diode_circuit(), "basic", 100.0),
+    (ex.diode_circuit(), "extended", 100.0),
+    (ex.relay_relative_degree_one("z"), "basic", None),
+    (ex.relay_relative_degree_one("x1"), "extended", 100.0),
+    (ex.rotor_standin("alpha"), "extended", 1000.0),
+]
+
+
+@pytest.mark.parametrize(("scenario", "variant", "kappa"), FEASIBLE,
+                         ids=[f"{s.name}-{v}" for s, v, _ in FEASIBLE])
+def test_check1_postconditions_at_half_alpha_max(scenario, variant, kappa):
+    best = max_decay_rate(**scenario.matrices, variant=variant, kappa=kappa)
+    assert best.alpha_max > 0
+    design = lure_observer_lmi(**scenario.matrices, variant=variant, kappa=kappa,
+                               alpha=0.5 * best.alpha_max)
+    _postconditions(design)
+    if kappa is not None:
+        assert np.linalg.norm(design.P @ design.L, 2) <= kappa * (1 + 1e-6)
+    if variant == "basic":
+        assert not np.any(design.K)
+
+
+def test_check1_siconos_certificate_is_exact():
+    s = ex.siconos_observer_lcs()
+    d = observer_from_gains(**s.matrices, L=ex.SICONOS_L, P=np.eye(2), alpha=1.0)
+    assert d.certificate.equality_residual == 0.0
+    assert d.certificate.lmi_max_eig == pytest.approx(0.0, abs=1e-14)  # Q = 2I exactly
+    with pytest.raises(InfeasibleDesignError):
+        observer_from_gains(**s.matrices, L=ex.SICONOS_L, P=np.eye(2), alpha=1.01)
+
+
+def test_check2_not_passifiable_structural_reason_without_solver(monkeypatch):
+    s = ex.not_passifiable()
+    import nscontrol.design.lure_observer as lo
+
+    def no_solver(*a, **k):
+        raise AssertionError("the structural check must not build or call the SDP")
+
+    monkeypatch.setattr(lo, "_ObserverLMI", no_solver)
+    for variant in ("basic", "extended"):
+        reason = structural_infeasibility(s.A, s.G, s.H, s.C, variant=variant)
+        assert reason is not None and "H G" in reason
+        with pytest.raises(InfeasibleDesignError) as err:
+            lure_observer_lmi(**s.matrices, variant=variant)
+        assert err.value.status == "structural" and "passifiable" in str(err.value)
+
+
+@pytest.mark.parametrize("variant", ["basic", "extended"])
+def test_check2_solver_agrees_when_precheck_is_skipped(variant):
+    s = ex.not_passifiable()
+    with pytest.raises(InfeasibleDesignError) as err:
+        lure_observer_lmi(**s.matrices, variant=variant, precheck=False)
+    assert "infeasible" in err.value.status or "failed" in err.value.status
+
+
+def test_check2_relative_degree_three_infeasible():
+    s = ex.relay_relative_degree_three()
+    assert "H G" in structural_infeasibility(s.A, s.G, s.H, s.C)
+    with pytest.raises(InfeasibleDesignError):
+        lure_observer_lmi(**s.matrices, precheck=False)
+
+
+def test_check2_undamped_coulomb_basic_infeasible_extended_feasible():
+    s = ex.coulomb_oscillator(0.0)
+    reason = structural_infeasibility(s.A, s.G, s.H, s.C, variant="basic")
+    assert reason is not None and "sym(H A G)" in reason
+    with pytest.raises(InfeasibleDesignError):
+        lure_observer_lmi(**s.matrices, variant="basic", precheck=False)
+    assert structural_infeasibility(s.A, s.G, s.H, s.C, variant="extended") is None
+    d = max_decay_rate(**s.matrices, variant="extended", kappa=20.0)
+    assert 2.2 < d.alpha_max < 2.8  # spec: about 2.5 with ||Y|| <= 20
+
+
+def test_check3_rate_of_damped_coulomb_basic_is_c_over_m():
+    d = max_decay_rate(**ex.coulomb_oscillator(0.1).matrices, variant="basic")
+    assert abs(d.alpha_max - 0.1) <= 0.02 * 0.1
+
+
+@pytest.mark.parametrize("variant", ["basic", "extended"])
+def test_check3_relay_zero_limits_rate_to_two(variant):
+    d = max_decay_rate(**ex.relay_relative_degree_one("z").matrices, variant=variant)
+    assert abs(d.alpha_max - 2.0) <= 0.02 * 2.0
+
+
+def test_extended_rate_grows_with_kappa():
+    s = ex.coulomb_oscillator(0.0)
+    rates = [max_decay_rate(**s.matrices, kappa=k, tol=1e-2).alpha_max for k in (5.0, 20.0)]
+    assert rates[0] < rates[1]
+
+
+# -- bad input --------------------------------------------------------------------------------
+def test_bad_shapes_name_the_argument():
+    s = ex.coulomb_oscillator(0.1)
+    with pytest.raises(DimensionError, match="H"):
+        lure_observer_lmi(s.A, s.G, np.ones((1, 3)), s.C)
+    with pytest.raises(DimensionError, match="G"):
+        lure_observer_lmi(s.A, np.ones((3, 1)), s.H, s.C)
+    with pytest.raises(DimensionError, match="C"):
+        lure_observer_lmi(s.A, s.G, s.H, np.ones(2))
+
+
+def test_feedthrough_not_psd_is_refused():
+    s = ex.siconos_observer_lcs()
+    with pytest.raises(ModelError, match="D \\+ D\\^T"):
+        lure_observer_lmi(s.A, s.G, s.H, s.C, D=[[-0.5]])
+
+
+@pytest.mark.parametrize("kappa", [-1.0, 0.0, float("nan")])
+def test_bad_kappa_is_refused(kappa):
+    with pytest.raises(ModelError, match="kappa"):
+        max_decay_rate(**ex.coulomb_oscillator(0.0).matrices, kappa=kappa)
+
+
+def test_bad_variant_and_alpha():
+    m = ex.coulomb_oscillator(0.1).matrices
+    with pytest.raises(ModelError, match="variant"):
+        lure_observer_lmi(**m, variant="full")
+    with pytest.raises(ModelError, match="alpha"):
+        lure_observer_lmi(**m, alpha=-1.0)
+
+
+def test_infeasible_rate_says_what_to_do():
+    with pytest.raises(InfeasibleDesignError, match="lower alpha"):
+        lure_observer_lmi(**ex.coulomb_oscillator(0.1).matrices, variant="basic", alpha=0.2)
+
+
+def test_recheck_detects_a_wrong_certificate():
+    s = ex.siconos_observer_lcs()
+    cert = recheck_certificate(s.A, s.G, s.H, s.C, 2 * np.eye(2), ex.SICONOS_L, np.zeros((1, 1)),
+                               1.0)
+    assert cert.equality_residual == pytest.approx(np.sqrt(2))
