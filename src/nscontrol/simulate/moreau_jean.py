@@ -1,0 +1,369 @@
+"""Moreau–Jean event-capturing time-stepping for Lagrangian systems with impacts.
+
+Integrates :class:`~nscontrol.systems.LagrangianSystem` and
+:class:`~nscontrol.systems.ImpactingBodies` (through its Lagrangian form). One step is the
+θ-method on the smooth forces, Newton's impact law at velocity level on the contacts predicted
+to close (``g + γ h u <= 0``), and one LCP over those contacts (Acary & Brogliato 2008, §10.1;
+spec ch03 §3.1 and ch04 §3):
+
+    0 <= P ⟂ W P + G v_free + e u_k >= 0,   v_{k+1} = v_free + M̂⁻¹ Gᵀ P,
+    q_{k+1} = q_k + h((1-θ) v_k + θ v_{k+1}).
+
+Paths, chosen automatically:
+
+* constant diagonal ``M̂`` and contacts between neighbours (chains, stacks, cradles, the ball):
+  a compiled O(n) loop with the shared tridiagonal LCP kernel;
+* any other constant ``M`` with affine gaps: a compiled loop with dense ``M̂⁻¹`` and Lemke;
+* configuration-dependent ``M(q)``, nonlinear forces or gaps: a Python loop around the compiled
+  Lemke kernel, forces explicit (ch03 §3.1: enough for these examples).
+
+Recorded: states ``[q; v]``, signals ``impulse`` (per step and contact, ``P``), ``gap`` and
+``energy``; events ``"impact"`` (a contact whose impulse becomes positive while approaching).
+Impacts are captured within the step: impact times are exact to ``O(h)``, the position drift
+(penetration) at a landing is bounded by ``h |u⁻|``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._progress import TimeProgress
+from .._validation import FloatArray, check_in_interval, check_positive
+from ..errors import ModelError, SolverError
+from .trajectory import Recorder, Trajectory
+
+__all__ = ["integrate"]
+
+_LCP_STATUS = {1: "ray termination (no solution)", 2: "iteration limit",
+               3: "numerical failure"}
+#: Floats per chunk of the compiled loop (bounds memory for large systems).
+_CHUNK_FLOATS = 2_000_000
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every step needs, prepared once."""
+
+    system: Any
+    h: float
+    theta: float
+    gamma: float
+    Sinput: FloatArray | None
+
+
+def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float,
+              theta: float = 0.5, gamma: float = 0.5, u: Any = None,
+              controller: Callable[[float, FloatArray, FloatArray], Any] | None = None,
+              listeners: Sequence[Callable[..., None]] = (), record_every: int = 1,
+              signals: Sequence[str] | None = None, progress: bool | None = None,
+              activation: float | None = None, on_failure: str = "raise") -> Trajectory:
+    """Moreau–Jean time-stepping from ``x0 = [q0; v0]`` over ``t_span``.
+
+    Parameters
+    ----------
+    system : LagrangianSystem or ImpactingBodies
+    x0 : array_like (2 n,)
+        Admissible initial state.
+    t_span : (float, float)
+    h : float
+        Step, ``> 0``.
+    theta : float
+        θ of the θ-method, in ``[1/2, 1]`` (½: no numerical damping).
+    gamma : float
+        Position-prediction weight of the active set, in ``[0, 1]``.
+    u : Exosystem or callable ``t -> u``, optional
+        Open-loop input (through the system's actuation ``S``).
+    controller : callable ``(t, q, v) -> u``, optional
+        Feedback evaluated at the start of every step (zero-order hold); added to ``u``.
+    listeners : sequence of callables ``(t, x_minus, x_plus, impulse, contacts)``
+        Called after every step that contains an impact (observer resets).
+    record_every : int
+        Keep every k-th step (events are always kept).
+    signals : sequence of str, optional
+        Signals to record among ``"impulse"``, ``"gap"``, ``"energy"`` (default all).
+    progress : bool, optional
+        Progress bar (default: shown after 2 s).
+    activation : float, optional
+        Threshold of the active set test ``g + γ h u <= activation``. Default
+        ``1e-12 (1 + max|q0|)``: contacts closed up to round-off stay active (a threshold of 0
+        would drop a resting contact whose gap rounds to ``+1e-19``).
+    on_failure : {"raise", "return"}
+        What to do when an LCP fails: raise :class:`SolverError` (with ``err.trajectory``)
+        or return the partial trajectory with ``status = -1``.
+
+    Returns
+    -------
+    Trajectory
+        ``stats``: ``steps``, ``path`` (``"tridiagonal"``, ``"dense"`` or ``"python"``),
+        ``max_penetration``.
+
+    Raises
+    ------
+    ModelError
+        Unsupported system or option value.
+    InadmissibleStateError
+        ``x0`` penetrates or approaches a closed contact.
+    SolverError
+        An LCP failed.
+    """
+    from ..systems.impacting_bodies import ImpactingBodies
+    from ..systems.lagrangian import LagrangianSystem
+
+    if isinstance(system, ImpactingBodies):
+        system = system.lagrangian()
+    if not isinstance(system, LagrangianSystem):
+        raise ModelError(f"moreau_jean: integrates LagrangianSystem and ImpactingBodies, got "
+                         f"{type(system).__name__}")
+    h = check_positive("h", h)
+    theta = check_in_interval("theta", theta, 0.5, 1.0)
+    gamma = check_in_interval("gamma", gamma, 0.0, 1.0)
+    if on_failure not in ("raise", "return"):
+        raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
+    if controller is not None and not callable(controller):
+        raise ModelError("controller: expected a callable (t, q, v) -> u")
+    x0 = system.check_state(x0)
+    if activation is None:
+        activation = 1e-12 * (1.0 + float(np.max(np.abs(x0[: system.n_dof]), initial=0.0)))
+    t0, tf = t_span
+    n_steps = int(np.ceil((tf - t0) / h - 1e-9))
+    rec = Recorder(system.n_states, every=record_every, signals=signals)
+    _sample_initial(rec, system, t0, x0)
+    setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller))
+    runner = _choose_runner(system, setup, activation)
+    state = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
+             "p_prev": np.zeros(system.n_contacts), "k": 0, "t0": t0}
+    per_step = controller is not None or bool(listeners)
+    status, message = 0, None
+    with TimeProgress(t0, tf, desc="moreau_jean", enable=progress) as bar:
+        while state["k"] < n_steps:
+            k = state["k"]
+            chunk = 1 if per_step else max(1, min(n_steps - k, 20_000, _CHUNK_FLOATS // max(
+                1, 2 * system.n_dof + system.n_contacts)))
+            times = t0 + h * np.arange(k, k + chunk)
+            fext = _external_force(setup, u, controller, times, state)
+            q_pre, v_pre = state["q"].copy(), state["v"].copy()
+            done, code, q_out, v_out, p_out = runner(state, fext, chunk)
+            if done:
+                _record_chunk(rec, system, times[:done] + h, q_out[:done], v_out[:done],
+                              p_out[:done], state, q_pre, v_pre, listeners, h)
+            state["k"] = k + done
+            bar.update(t0 + h * state["k"])
+            if code:
+                status = -1
+                message = (f"moreau_jean: the LCP of step {state['k']} (t = "
+                           f"{t0 + h * state['k']:.6g}) failed: {_LCP_STATUS.get(code, code)}")
+                break
+    stats = {"steps": int(state["k"]), "path": runner.path, "h": h, "theta": theta}
+    traj = rec.finish(status=status, message=message, method="moreau_jean", stats=stats,
+                      state_names=system.state_names)
+    if "gap" in traj.signals and traj.signals["gap"].size:
+        traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
+    if status < 0 and on_failure == "raise":
+        raise SolverError(message + "; try a smaller h, or check the constraints for "
+                          "redundancy", status=_LCP_STATUS.get(code), trajectory=traj)
+    return traj
+
+
+# -- preparation ---------------------------------------------------------------------------
+def _input_matrix(system: Any, u: Any, controller: Any) -> FloatArray | None:
+    if u is None and controller is None:
+        return None
+    return (np.eye(system.n_dof) if system.actuation is None
+            else np.asarray(system.actuation, float))
+
+
+def _external_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
+                    state: dict[str, Any]) -> FloatArray:
+    """Rows ``S u(t_k)`` for the steps of a chunk (a single zero row without input)."""
+    n = setup.system.n_dof
+    if setup.Sinput is None:
+        return np.zeros((1, n))
+    S = setup.Sinput
+    total = np.zeros((times.shape[0], S.shape[1]))
+    if u is not None:
+        vals = u.u(times) if hasattr(u, "u") else np.array([np.atleast_1d(u(t)) for t in times])
+        total += np.asarray(vals, float).reshape(times.shape[0], -1)
+    if controller is not None:  # one step per chunk in closed loop
+        total[0] += np.atleast_1d(np.asarray(controller(float(times[0]), state["q"].copy(),
+                                                        state["v"].copy()), float))
+    return total @ S.T
+
+
+def _choose_runner(system: Any, setup: _Setup, activation: float) -> Any:
+    """The fastest correct step loop for this system (see the module docstring)."""
+    if system.is_linear:
+        K = system.stiffness
+        D = system.damping
+        diag = system.mass_diagonal
+        offdiag = [X for X in (K, D) if X is not None and np.count_nonzero(X - np.diag(np.diag(X)))]
+        pairs = system.pairwise_contacts()
+        if diag is not None and not offdiag and pairs is not None and _neighbour_only(pairs):
+            return _PairwiseRunner(system, setup, activation, pairs)
+        return _DenseRunner(system, setup, activation)
+    return _PythonRunner(system, setup, activation)
+
+
+def _neighbour_only(pairs: tuple[np.ndarray, ...]) -> bool:
+    """Contacts share coordinates only with their neighbours: the Delassus matrix is
+    tridiagonal."""
+    ia, ib, _, _ = pairs
+    owner: dict[int, list[int]] = {}
+    for j, (a, b) in enumerate(zip(ia, ib, strict=True)):
+        for d in (a, b):
+            if d >= 0:
+                owner.setdefault(int(d), []).append(j)
+    return all(max(js) - min(js) <= 1 for js in owner.values())
+
+
+class _PairwiseRunner:
+    path = "tridiagonal"
+
+    def __init__(self, system: Any, setup: _Setup, activation: float,
+                 pairs: tuple[np.ndarray, ...]) -> None:
+        from ._moreau_jean_kernels import mj_pairwise_kernel
+
+        h, th = setup.h, setup.theta
+        n = system.n_dof
+        self.kdiag = np.zeros(n) if system.stiffness is None else np.diag(system.stiffness).copy()
+        self.ddiag = np.zeros(n) if system.damping is None else np.diag(system.damping).copy()
+        self.minv = 1.0 / (system.mass_diagonal + h * th * self.ddiag + (h * th) ** 2 * self.kdiag)
+        self.pairs = tuple(np.ascontiguousarray(p) for p in pairs)
+        self.system, self.setup, self.activation = system, setup, float(activation)
+        self.kernel = mj_pairwise_kernel
+
+    def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
+        s, st = self.system, self.setup
+        q_out = np.empty((chunk, s.n_dof))
+        v_out = np.empty((chunk, s.n_dof))
+        p_out = np.empty((chunk, s.n_contacts))
+        ia, ib, ca, cb = self.pairs
+        done, code = self.kernel(state["q"], state["v"], self.minv, self.kdiag, self.ddiag,
+                                 s.constant_force, np.ascontiguousarray(fext), ia, ib, ca, cb,
+                                 s.gap_offset, s.restitution, st.h, st.theta, st.gamma,
+                                 self.activation, q_out, v_out, p_out)
+        return done, code, q_out, v_out, p_out
+
+
+class _DenseRunner:
+    path = "dense"
+
+    def __init__(self, system: Any, setup: _Setup, activation: float) -> None:
+        from ._moreau_jean_kernels import mj_dense_kernel
+
+        n = system.n_dof
+        h, th = setup.h, setup.theta
+        self.K = np.zeros((n, n)) if system.stiffness is None else system.stiffness
+        self.D = np.zeros((n, n)) if system.damping is None else system.damping
+        Mhat = system.mass_matrix() + h * th * self.D + (h * th) ** 2 * self.K
+        self.minv = np.linalg.inv(Mhat)
+        self.G = np.ascontiguousarray(system.dense_gap_matrix())
+        self.minv_gt = np.ascontiguousarray(self.minv @ self.G.T)
+        self.W = np.ascontiguousarray(self.G @ self.minv_gt)
+        self.system, self.setup, self.activation = system, setup, float(activation)
+        self.kernel = mj_dense_kernel
+
+    def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
+        s, st = self.system, self.setup
+        q_out = np.empty((chunk, s.n_dof))
+        v_out = np.empty((chunk, s.n_dof))
+        p_out = np.empty((chunk, s.n_contacts))
+        done, code = self.kernel(state["q"], state["v"], self.minv, self.K, self.D,
+                                 s.constant_force, np.ascontiguousarray(fext), self.G,
+                                 s.gap_offset, s.restitution, self.minv_gt, self.W, st.h,
+                                 st.theta, st.gamma, self.activation, q_out, v_out, p_out)
+        return done, code, q_out, v_out, p_out
+
+
+class _PythonRunner:
+    """``M(q)`` or nonlinear forces/gaps: explicit forces, the LCP by the compiled Lemke."""
+
+    path = "python"
+
+    def __init__(self, system: Any, setup: _Setup, activation: float) -> None:
+        self.system, self.setup, self.activation = system, setup, float(activation)
+
+    def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
+        from ..numerics._lcp_kernels import lemke_kernel
+
+        s, st = self.system, self.setup
+        h, th = st.h, st.theta
+        q, v = state["q"], state["v"]
+        q_out = np.empty((chunk, s.n_dof))
+        v_out = np.empty((chunk, s.n_dof))
+        p_out = np.zeros((chunk, s.n_contacts))
+        t = 0.0  # the nonlinear force sees the step's start time
+        for k in range(chunk):
+            t = state.get("t0", 0.0) + h * (state["k"] + k)
+            M = s.mass_matrix(q)
+            f = s.forces(t, q, v) + fext[min(k, fext.shape[0] - 1)]
+            v_free = v + h * np.linalg.solve(M, f)
+            G = np.asarray(s.gap_jacobian(q), float)
+            un = G @ v
+            active = np.flatnonzero(s.gaps(q) + st.gamma * h * un <= self.activation)
+            v_new = v_free
+            if active.size:
+                GA = G[active]
+                MinvGt = np.linalg.solve(M, GA.T)
+                W = GA @ MinvGt
+                qa = GA @ v_free + s.restitution[active] * un[active]
+                z, w = np.empty(active.size), np.empty(active.size)
+                code, _ = lemke_kernel(np.ascontiguousarray(W), qa, z, w, 0)
+                if code:
+                    return k, code, q_out, v_out, p_out
+                v_new = v_free + MinvGt @ z
+                p_out[k, active] = z
+            q = q + h * ((1 - th) * v + th * v_new)
+            v = v_new
+            q_out[k], v_out[k] = q, v
+        state["q"], state["v"] = q, v
+        return chunk, 0, q_out, v_out, p_out
+
+
+# -- recording -----------------------------------------------------------------------------
+def _signals(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
+             rec: Recorder) -> dict[str, FloatArray]:
+    out: dict[str, FloatArray] = {}
+    if rec.wants("impulse"):
+        out["impulse"] = p
+    if rec.wants("gap"):
+        out["gap"] = np.array([system.gaps(qi) for qi in q]) if system.gap is not None \
+            else np.asarray((system.gap_matrix @ q.T).T) + system.gap_offset
+    if rec.wants("energy"):
+        out["energy"] = system.energy(np.hstack([q, v]))
+    return out
+
+
+def _sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> None:
+    n = system.n_dof
+    sig = _signals(system, x0[None, :n], x0[None, n:], np.zeros((1, system.n_contacts)), rec)
+    rec.extend(np.array([t0]), x0[None, :], **sig)
+
+
+def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
+                  v: FloatArray, p: FloatArray, state: dict[str, Any], q_pre: FloatArray,
+                  v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                  h: float) -> None:
+    """Write a chunk of steps and its impact events; call the jump listeners."""
+    rec.extend(times, np.hstack([q, v]), **_signals(system, q, v, p, rec))
+    prev = np.vstack([state["p_prev"][None, :], p[:-1]])
+    rising = (p > 0.0) & (prev == 0.0)
+    steps = np.flatnonzero(rising.any(axis=1))
+    for k in steps:
+        qb = q_pre if k == 0 else q[k - 1]
+        vb = v_pre if k == 0 else v[k - 1]
+        G = system.gap_jacobian(qb)
+        contacts = np.flatnonzero(rising[k])
+        un = np.asarray(G[contacts] @ vb).ravel()
+        contacts = contacts[un < 0.0]
+        if contacts.size == 0:
+            continue
+        x_minus, x_plus = np.concatenate([qb, vb]), np.concatenate([q[k], v[k]])
+        for j in contacts:
+            rec.event(times[k], "impact", int(j), x_minus, x_plus)
+        for listener in listeners:
+            listener(float(times[k]), x_minus, x_plus, p[k].copy(), contacts)
+    state["p_prev"] = p[-1].copy()

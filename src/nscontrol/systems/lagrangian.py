@@ -1,0 +1,468 @@
+"""Lagrangian systems with unilateral constraints and Newton restitution.
+
+    M(q) v' = f(t, q, v) + S u + G(q)^T λ,     0 <= g(q) ⟂ λ >= 0,
+    f(t, q, v) = f0 - K q - D v + force(t, q, v),
+    at an impact of contact j:  G_j v+ = -e_j G_j v-   (multi-contact: Newton's law by one LCP).
+
+The state of every integrator is ``x = [q; v]`` (length ``2 n``). ``G(q)`` is the Jacobian
+``∂g/∂q`` of the gaps, shape ``(m, n)``; the matrix ``W = G^T`` of Siconos' notation is its
+transpose. When ``M`` is constant, the forces linear (``f0, K, D`` only) and the gaps affine
+(``g(q) = G q + g0``), the system is *linear between events* and the event-driven integrator is
+exact (matrix exponentials, roots to machine precision).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import (
+    FloatArray,
+    as_matrix,
+    as_square,
+    as_vector,
+    check_in_interval,
+    check_positive,
+    check_positive_definite,
+)
+from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolWarning
+
+__all__ = ["LagrangianSystem", "two_link_arm_mass", "two_link_arm_coriolis",
+           "two_link_arm_gravity"]
+
+ForceFn = Callable[[float, FloatArray, FloatArray], FloatArray]
+
+
+@dataclass(frozen=True, eq=False)
+class LagrangianSystem:
+    """A mechanical system with unilateral constraints ``g(q) >= 0`` and Newton restitution.
+
+    Parameters
+    ----------
+    mass : array_like (n, n) or callable ``q -> (n, n)``
+        Symmetric positive definite mass matrix, constant or configuration-dependent.
+    stiffness, damping : array_like (n, n), optional
+        Linear force ``-K q - D v`` (zero by default).
+    constant_force : array_like (n,), optional
+        Constant generalised force ``f0`` (gravity).
+    force : callable ``(t, q, v) -> (n,)``, optional
+        Any further (nonlinear) generalised force, e.g. ``-C(q, v) v - ∇V(q)``.
+    gap_matrix, gap_offset : array_like (m, n) and (m,), optional
+        Affine gaps ``g(q) = gap_matrix @ q + gap_offset``.
+    gap : callable ``q -> (m,)``, optional
+        Nonlinear gaps (instead of ``gap_matrix``); ``m`` is read from ``gap(zeros(n))``.
+    jacobian : callable ``q -> (m, n)``, optional
+        Analytic ``∂g/∂q`` for a nonlinear ``gap``; central differences (with a warning) when
+        missing.
+    restitution : float or array_like (m,)
+        Newton coefficients ``e_j`` in ``[0, 1]``.
+    actuation : array_like (n, p), optional
+        ``S``: how the input ``u`` enters (default: identity, fully actuated).
+    potential : callable ``q -> float``, optional
+        Potential of ``force`` (added to ``½ qᵀKq - f0ᵀq`` in :meth:`energy`).
+    names : sequence of str, optional
+        Names of the coordinates (states are named ``q_name``, ``v_name``).
+
+    Raises
+    ------
+    ModelError
+        Non-symmetric or indefinite mass matrix, restitution outside ``[0, 1]``, neither or both
+        of ``gap_matrix`` and ``gap``.
+    DimensionError
+        Shapes that disagree with ``n`` or ``m``.
+
+    Notes
+    -----
+    A constant ``mass`` is checked (symmetric, positive definite) here; a callable one is checked
+    at the initial configuration by :meth:`check_state` and by the integrators.
+
+    References
+    ----------
+    Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer 2008, ch. 1;
+    spec ``ch03-ch05-lagrangian-tracking.md`` §1 and ``ch04-walking-contacts.md`` §2.1.
+    """
+
+    mass: Any
+    stiffness: FloatArray | None = None
+    damping: FloatArray | None = None
+    constant_force: FloatArray | None = None
+    force: ForceFn | None = None
+    gap_matrix: FloatArray | None = None
+    gap_offset: FloatArray | None = None
+    gap: Callable[[FloatArray], FloatArray] | None = None
+    jacobian: Callable[[FloatArray], FloatArray] | None = None
+    restitution: Any = 0.0
+    actuation: FloatArray | None = None
+    potential: Callable[[FloatArray], float] | None = None
+    names: Sequence[str] = ()
+    n_dof: int = field(init=False)
+    n_contacts: int = field(init=False)
+
+    default_method = "event_driven"
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        if callable(self.mass):
+            n = _infer_dof(self)
+        elif np.ndim(self.mass) == 1:
+            # a diagonal mass matrix given by its diagonal (large chains and stacks)
+            M = as_vector("mass", self.mass)
+            for i, mi in enumerate(M):
+                check_positive(f"mass[{i}]", mi)
+            set_(self, "mass", M)
+            n = M.shape[0]
+        else:
+            M = as_square("mass", self.mass)
+            check_positive_definite("mass", M)
+            set_(self, "mass", M)
+            n = M.shape[0]
+        set_(self, "n_dof", n)
+        for name in ("stiffness", "damping"):
+            value = getattr(self, name)
+            if value is not None:
+                set_(self, name, as_square(name, value, n))
+        f0 = np.zeros(n) if self.constant_force is None else as_vector(
+            "constant_force", self.constant_force, n)
+        set_(self, "constant_force", f0)
+        m = self._check_constraints(n)
+        set_(self, "n_contacts", m)
+        e = np.broadcast_to(np.asarray(self.restitution, float), (m,)).copy() \
+            if np.ndim(self.restitution) == 0 else as_vector("restitution", self.restitution, m)
+        for j, ej in enumerate(e):
+            check_in_interval(f"restitution[{j}]", ej, 0.0, 1.0)
+        set_(self, "restitution", e)
+        if self.actuation is not None:
+            set_(self, "actuation", as_matrix("actuation", self.actuation, rows=n))
+        names = tuple(self.names) or tuple(str(i) for i in range(n))
+        if len(names) != n:
+            raise DimensionError(f"names: expected {n} coordinate names, got {len(names)}")
+        set_(self, "names", names)
+
+    def _check_constraints(self, n: int) -> int:
+        set_ = object.__setattr__
+        if (self.gap_matrix is None) == (self.gap is None):
+            raise ModelError("constraints: expected exactly one of gap_matrix (affine gaps "
+                             "G q + g0) or gap (a callable q -> g(q)); got "
+                             f"{'both' if self.gap is not None else 'neither'}")
+        if self.gap_matrix is not None:
+            G = _as_gap_matrix(self.gap_matrix, n)
+            set_(self, "gap_matrix", G)
+            g0 = np.zeros(G.shape[0]) if self.gap_offset is None else as_vector(
+                "gap_offset", self.gap_offset, G.shape[0])
+            set_(self, "gap_offset", g0)
+            return int(G.shape[0])
+        g = as_vector("gap(q)", self.gap(np.zeros(n)))
+        m = g.shape[0]
+        if self.jacobian is None:
+            warnings.warn("jacobian: not given; using central differences of gap (give an "
+                          "analytic jacobian for accuracy and speed)", NscontrolWarning,
+                          stacklevel=4)
+        else:
+            as_matrix("jacobian(q)", self.jacobian(np.zeros(n)), rows=m, cols=n)
+        return int(m)
+
+    # -- structure ----------------------------------------------------------------------
+    @property
+    def n_states(self) -> int:
+        """Length of the state ``[q; v]``."""
+        return 2 * self.n_dof
+
+    @property
+    def constant_mass(self) -> bool:
+        return not callable(self.mass)
+
+    @property
+    def is_linear(self) -> bool:
+        """Constant mass, linear forces and affine gaps: linear between events."""
+        return self.constant_mass and self.force is None and self.gap is None
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(f"q_{s}" for s in self.names) + tuple(f"v_{s}" for s in self.names)
+
+    # -- evaluation ---------------------------------------------------------------------
+    def mass_matrix(self, q: FloatArray | None = None) -> FloatArray:
+        """``M(q)`` as a dense matrix (``q`` unused when the mass is constant)."""
+        if callable(self.mass):
+            return np.asarray(self.mass(q), float)
+        return np.diag(self.mass) if self.mass.ndim == 1 else self.mass
+
+    @property
+    def mass_diagonal(self) -> FloatArray | None:
+        """The diagonal of a constant diagonal mass matrix, ``None`` otherwise."""
+        if callable(self.mass):
+            return None
+        if self.mass.ndim == 1:
+            return self.mass
+        d = np.diag(self.mass)
+        return d.copy() if np.array_equal(self.mass, np.diag(d)) else None
+
+    def dense_gap_matrix(self) -> FloatArray:
+        """The affine gaps' matrix as a dense array."""
+        G = self.gap_matrix
+        return G.toarray() if hasattr(G, "toarray") else np.asarray(G)
+
+    def forces(self, t: float, q: FloatArray, v: FloatArray,
+               u: FloatArray | None = None) -> FloatArray:
+        """Generalised smooth force ``f(t, q, v) + S u``."""
+        f = self.constant_force.copy()
+        if self.stiffness is not None:
+            f -= self.stiffness @ q
+        if self.damping is not None:
+            f -= self.damping @ v
+        if self.force is not None:
+            f += self.force(t, q, v)
+        if u is not None:
+            f += (np.asarray(u, float) if self.actuation is None
+                  else self.actuation @ np.atleast_1d(u))
+        return f
+
+    def gaps(self, q: FloatArray) -> FloatArray:
+        """``g(q)``, shape ``(m,)``."""
+        if self.gap_matrix is not None:
+            return self.gap_matrix @ q + self.gap_offset
+        return np.asarray(self.gap(q), float)
+
+    def gap_jacobian(self, q: FloatArray) -> FloatArray:
+        """``∂g/∂q``, shape ``(m, n)``."""
+        if self.gap_matrix is not None:
+            return self.gap_matrix
+        if self.jacobian is not None:
+            return np.asarray(self.jacobian(q), float)
+        eps = 1e-7 * max(1.0, float(np.max(np.abs(q), initial=0.0)))
+        cols = [(self.gap(q + eps * d) - self.gap(q - eps * d)) / (2 * eps)
+                for d in np.eye(self.n_dof)]
+        return np.array(cols).T
+
+    def energy(self, x: FloatArray) -> FloatArray:
+        """Mechanical energy ``½ vᵀMv + ½ qᵀKq - f0ᵀq (+ potential)``; ``x`` (.., 2n)."""
+        x = np.asarray(x, float)
+        n = self.n_dof
+        q, v = x[..., :n], x[..., n:]
+        if self.constant_mass and self.mass.ndim == 1:
+            kin = 0.5 * np.einsum("...i,i,...i->...", v, self.mass, v)
+        elif self.constant_mass:
+            kin = 0.5 * np.einsum("...i,ij,...j->...", v, self.mass, v)
+        else:
+            kin = np.array([0.5 * vi @ self.mass(qi) @ vi for qi, vi in
+                            zip(q.reshape(-1, n), v.reshape(-1, n), strict=True)]
+                           ).reshape(q.shape[:-1])
+        pot = -q @ self.constant_force
+        if self.stiffness is not None:
+            pot = pot + 0.5 * np.einsum("...i,ij,...j->...", q, self.stiffness, q)
+        if self.potential is not None:
+            pot = pot + np.array([self.potential(qi) for qi in q.reshape(-1, n)]
+                                 ).reshape(q.shape[:-1])
+        return kin + pot
+
+    def check_state(self, x0: Any, *, tol: float = 1e-12) -> FloatArray:
+        """Validate ``x0 = [q0; v0]``: no penetration, no approaching velocity at contact.
+
+        Raises
+        ------
+        DimensionError
+            ``x0`` is not of length ``2 n``.
+        InadmissibleStateError
+            Some gap is negative, or zero with a closing normal velocity.
+        ModelError
+            A configuration-dependent mass matrix is not SPD at ``q0``.
+        """
+        x0 = as_vector("x0", x0, self.n_states)
+        q, v = x0[: self.n_dof], x0[self.n_dof:]
+        if not self.constant_mass:
+            check_positive_definite("mass(q0)", as_square("mass(q0)", self.mass(q),
+                                                           self.n_dof))
+        g = self.gaps(q)
+        scale = max(1.0, float(np.max(np.abs(q), initial=0.0)))
+        bad = np.flatnonzero(g < -tol * scale)
+        if bad.size:
+            j = int(bad[0])
+            raise InadmissibleStateError(
+                f"x0: contact {j} is penetrated, gap g_{j}(q0) = {g[j]:.3g} < 0; start from a "
+                "configuration with all gaps >= 0")
+        closed = np.flatnonzero(g <= tol * scale)
+        if closed.size:
+            un = self.gap_jacobian(q)[closed] @ v
+            vscale = max(1.0, float(np.max(np.abs(v), initial=0.0)))
+            approaching = closed[un < -tol * vscale]
+            if approaching.size:
+                j = int(approaching[0])
+                raise InadmissibleStateError(
+                    f"x0: contact {j} is closed (gap {g[j]:.3g}) with approaching normal "
+                    f"velocity {float(self.gap_jacobian(q)[j] @ v):.3g} < 0; apply the impact "
+                    "law first or start with a separating velocity")
+        return x0
+
+    def pairwise_contacts(self) -> tuple[np.ndarray, ...] | None:
+        """For affine gaps touching at most two coordinates each: ``(ia, ib, ca, cb)``.
+
+        Contact ``j`` reads ``g_j = ca[j] q[ia[j]] + cb[j] q[ib[j]] + g0[j]`` (``ib = -1`` when
+        it touches one coordinate). ``None`` for any other structure.
+        """
+        if self.gap_matrix is None:
+            return None
+        from scipy import sparse
+
+        G = sparse.csr_matrix(self.gap_matrix)
+        G.eliminate_zeros()
+        G.sort_indices()
+        counts = np.diff(G.indptr)
+        if np.any(counts == 0) or np.any(counts > 2):
+            return None
+        m = G.shape[0]
+        first = G.indptr[:-1]
+        ia, ca = G.indices[first].astype(np.int64), G.data[first].copy()
+        two = counts == 2
+        ib = np.full(m, -1, np.int64)
+        cb = np.zeros(m)
+        ib[two] = G.indices[first[two] + 1]
+        cb[two] = G.data[first[two] + 1]
+        return ia, ib, ca, cb
+
+    # -- constructors -------------------------------------------------------------------
+    @classmethod
+    def point_masses(cls, masses: Any, **kwargs: Any) -> LagrangianSystem:
+        """Point masses on lines: ``M = diag(masses)``; other arguments as the class."""
+        m = as_vector("masses", masses)
+        for i, mi in enumerate(m):
+            check_positive(f"masses[{i}]", mi)
+        return cls(m, **kwargs)
+
+    @classmethod
+    def bouncing_ball(cls, restitution: float = 0.9, g: float = 9.81,
+                      mass: float = 1.0) -> LagrangianSystem:
+        """A ball of mass ``mass`` above the ground ``q >= 0`` under gravity ``g``."""
+        mass = check_positive("mass", mass)
+        g = check_positive("g", g, allow_zero=True)
+        return cls(np.array([[mass]]), constant_force=[-mass * g], gap_matrix=[[1.0]],
+                   restitution=restitution, names=("ball",))
+
+    @classmethod
+    def stack(cls, n: int, *, mass: float = 1.0, g: float = 9.81,
+              restitution: float = 0.0) -> LagrangianSystem:
+        """``n`` point masses stacked on the ground: ``q_0 >= 0``, ``q_k - q_{k-1} >= 0``.
+
+        At rest (all gaps zero) the contact ``k`` carries ``(n - k) m g``.
+        """
+        n = _check_count("n", n)
+        from scipy import sparse
+
+        mass = check_positive("mass", mass)
+        G = sparse.diags([np.ones(n), -np.ones(n - 1)], [0, -1], format="csr")
+        return cls(np.full(n, mass), constant_force=np.full(n, -mass * check_positive(
+            "g", g, allow_zero=True)), gap_matrix=G, restitution=restitution)
+
+    @classmethod
+    def chain(cls, masses: Any, *, stiffness: Any = None, spacing: float = 0.0,
+              restitution: Any = 1.0) -> LagrangianSystem:
+        """Point masses on a line, consecutive ones unilateral: ``q_{k+1} - q_k >= spacing``."""
+        from scipy import sparse
+
+        m = as_vector("masses", masses)
+        n = m.shape[0]
+        if n < 2:
+            raise ModelError(f"masses: a chain needs at least 2 masses, got {n}")
+        G = sparse.diags([-np.ones(n - 1), np.ones(n - 1)], [0, 1], shape=(n - 1, n),
+                         format="csr")
+        spacing = check_positive("spacing", spacing, allow_zero=True)
+        return cls.point_masses(m, stiffness=stiffness, gap_matrix=G,
+                                gap_offset=np.full(n - 1, -spacing), restitution=restitution)
+
+    @classmethod
+    def newtons_cradle(cls, n: int, *, mass: float = 1.0, restitution: float = 1.0,
+                       diameter: float = 0.0) -> LagrangianSystem:
+        """``n`` equal beads on a line (free flight between collisions), gaps ``>= diameter``."""
+        n = _check_count("n", n, minimum=2)
+        return cls.chain(np.full(n, check_positive("mass", mass)), spacing=diameter,
+                         restitution=restitution)
+
+    @classmethod
+    def two_link_arm(cls, *, l1: float = 0.5, l2: float = 0.5, m1: float = 1.0,
+                     m2: float = 1.0, I1: float = 1.0, I2: float = 1.0, g: float = 9.8,
+                     restitution: float = 0.0) -> LagrangianSystem:
+        """The planar two-link arm of ch03 §4.1, end effector above the ground ``y >= 0``.
+
+        Coordinates ``θ = (θ1, θ2)``; force ``-C(θ, θ')θ' - G(θ)`` (Christoffel form);
+        constraint ``y = l1 sin θ1 + l2 sin(θ1 + θ2) >= 0`` with its analytic Jacobian.
+        """
+        p = dict(l1=l1, l2=l2, m1=m1, m2=m2, I1=I1, I2=I2)
+        for key, value in p.items():
+            check_positive(key, value)
+        g = check_positive("g", g, allow_zero=True)
+
+        def force(t: float, q: FloatArray, v: FloatArray) -> FloatArray:
+            return -two_link_arm_coriolis(q, v, **p) @ v - two_link_arm_gravity(q, g=g, **p)
+
+        def gap(q: FloatArray) -> FloatArray:
+            return np.array([l1 * np.sin(q[0]) + l2 * np.sin(q[0] + q[1])])
+
+        def jacobian(q: FloatArray) -> FloatArray:
+            c12 = l2 * np.cos(q[0] + q[1])
+            return np.array([[l1 * np.cos(q[0]) + c12, c12]])
+
+        def potential(q: FloatArray) -> float:
+            return float(g * (m1 * l1 / 2 * np.sin(q[0])
+                              + m2 * (l1 * np.sin(q[0]) + l2 / 2 * np.sin(q[0] + q[1]))))
+
+        return cls(lambda q: two_link_arm_mass(q, **p), force=force, gap=gap,
+                   jacobian=jacobian, restitution=restitution, potential=potential,
+                   names=("theta1", "theta2"))
+
+
+def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: float,
+                      I1: float, I2: float) -> FloatArray:
+    """Mass matrix of the two-link arm (ch03 §4.1)."""
+    c2 = np.cos(q[1])
+    m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
+    m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + I2
+    return np.array([[m11, m12], [m12, m2 * l2**2 / 4 + I2]])
+
+
+def two_link_arm_coriolis(q: FloatArray, v: FloatArray, *, l1: float, l2: float, m1: float,
+                          m2: float, I1: float, I2: float) -> FloatArray:
+    """Coriolis matrix in Christoffel form (``Ṁ - 2C`` skew-symmetric), ch03 §4.1."""
+    h = m2 * l1 * l2 / 2 * np.sin(q[1])
+    return np.array([[-h * v[1], -h * (v[0] + v[1])], [h * v[0], 0.0]])
+
+
+def two_link_arm_gravity(q: FloatArray, *, g: float, l1: float, l2: float, m1: float,
+                         m2: float, I1: float, I2: float) -> FloatArray:
+    """Gravity torques ``G = ∂P/∂θ`` of the two-link arm, ch03 §4.1."""
+    c12 = np.cos(q[0] + q[1])
+    return np.array([g / 2 * (l1 * (m1 + 2 * m2) * np.cos(q[0]) + m2 * l2 * c12),
+                     m2 * g * l2 / 2 * c12])
+
+
+def _as_gap_matrix(value: Any, n: int) -> Any:
+    """A dense (m, n) array, or a scipy.sparse CSR matrix kept sparse (large chains)."""
+    if hasattr(value, "tocsr"):
+        G = value.tocsr().astype(np.float64)
+        if G.shape[1] != n:
+            raise DimensionError(f"gap_matrix: expected {n} columns, got shape {G.shape}")
+        if not np.all(np.isfinite(G.data)):
+            raise ModelError("gap_matrix: expected finite entries, got NaN or infinite ones")
+        return G
+    return as_matrix("gap_matrix", value, cols=n)
+
+
+def _infer_dof(system: LagrangianSystem) -> int:
+    """The number of coordinates of a system whose mass is a callable."""
+    for source in ("stiffness", "damping", "gap_matrix", "actuation"):
+        value = getattr(system, source)
+        if value is not None:
+            arr = value if hasattr(value, "shape") else np.asarray(value)
+            return int(arr.shape[1] if source == "gap_matrix" else arr.shape[0])
+    if system.names:
+        return len(system.names)
+    raise ModelError("mass: a callable mass matrix needs the number of coordinates; pass "
+                     "names=(...) with one name per coordinate")
+
+
+def _check_count(name: str, value: Any, minimum: int = 1) -> int:
+    if int(value) != value or int(value) < minimum:
+        raise ModelError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    return int(value)
