@@ -411,15 +411,27 @@ def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
     SIAM J. Numer. Anal. 47(4):3001–3026, 2009.
     """
     n = q.shape[0]
+    for i in range(n):
+        z_out[i] = 0.0
+    return tridiagonal_howard(lower, diag, upper, q, z_out, w_out, max_iter)
+
+
+@njit(cache=True)
+def tridiagonal_howard(lower, diag, upper, q, z, w, max_iter):
+    """Howard's iteration of :func:`tridiagonal_lcp_kernel` warm-started from ``z``
+    (overwritten with the result; ``w`` receives ``M z + q``). The convergence bound of at
+    most ``n`` iterations for M-matrices holds from any starting point.
+    """
+    n = q.shape[0]
     if max_iter <= 0:
         max_iter = n + 2
     qmax = 0.0
     for i in range(n):
-        z_out[i] = 0.0
-        w_out[i] = q[i]
-        if not np.isfinite(q[i]) or not np.isfinite(diag[i]):
+        if not np.isfinite(q[i]) or not np.isfinite(diag[i]) or not np.isfinite(z[i]):
+            _tridiag_w(lower, diag, upper, q, z, w)
             return NUMERICAL_FAILURE, 0
         qmax = max(qmax, abs(q[i]))
+    _tridiag_w(lower, diag, upper, q, z, w)
     eps = 1e-13 * (1.0 + qmax)
     active = np.empty(n, dtype=np.bool_)
     cp = np.empty(n)
@@ -427,7 +439,7 @@ def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
     for it in range(max_iter + 1):
         feasible = True
         for i in range(n):
-            if z_out[i] < -eps or w_out[i] < -eps:
+            if z[i] < -eps or w[i] < -eps:
                 feasible = False
                 break
         if feasible:
@@ -435,13 +447,25 @@ def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
         if it == max_iter:
             break
         for i in range(n):
-            active[i] = w_out[i] <= z_out[i]
-        if not _tridiag_active_solve(lower, diag, upper, q, active, z_out, cp, dp):
-            _tridiag_w(lower, diag, upper, q, z_out, w_out)
+            active[i] = w[i] <= z[i]
+        ok = _tridiag_active_solve(lower, diag, upper, q, active, z, cp, dp)
+        _tridiag_w(lower, diag, upper, q, z, w)
+        if not ok:
             return NUMERICAL_FAILURE, it + 1
-        _tridiag_w(lower, diag, upper, q, z_out, w_out)
         # Exact zeros on the active set (round-off would otherwise flip the branch choice).
         for i in range(n):
-            if active[i]:
-                w_out[i] = 0.0 if abs(w_out[i]) <= eps else w_out[i]
+            if active[i] and abs(w[i]) <= eps:
+                w[i] = 0.0
     return MAX_ITER, max_iter
+
+
+@njit(cache=True)
+def is_tridiagonal(M):
+    """True when the dense matrix ``M`` has no non-zero entry beyond its first off-diagonals
+    (checked in place, without temporaries)."""
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if (j > i + 1 or j < i - 1) and M[i, j] != 0.0:
+                return False
+    return True

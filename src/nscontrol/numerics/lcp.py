@@ -1,0 +1,411 @@
+"""Linear complementarity problems: ``w = M z + q,  0 <= z ⟂ w >= 0``.
+
+One verb, :func:`solve_lcp`, with four methods:
+
+- ``"lemke"``: Lemke's complementary pivoting with lexicographic anti-cycling (dense, O(n^2)
+  per pivot). Exact up to round-off; terminates on degenerate problems; a ray termination
+  means "no solution" for copositive-plus ``M`` (e.g. positive semidefinite).
+- ``"pgs"``: projected Gauss–Seidel / SOR, for symmetric positive semidefinite ``M``;
+  iterative (stops on the residual ``tol``), warm-startable with ``z0``.
+- ``"banded"``: Howard's policy iteration (semismooth Newton on ``min(z, Mz + q) = 0``) with
+  direct solves on the active set: O(n) per iteration for tridiagonal ``M`` (Thomas sweeps,
+  numba) and sparse LU for other sparse/banded ``M``. Exact in at most ``n`` iterations for
+  M-matrices such as the Delassus matrix of a chain or stack of contacts.
+- ``"auto"``: banded for tridiagonal ``M``, Lemke for small or general ``M``, PGS for large
+  symmetric positive semidefinite ``M``; the residual is verified and Lemke is the fallback.
+
+The numba kernels behind the methods live in :mod:`nscontrol.numerics._lcp_kernels` and can
+be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and figures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validation import as_float_array, as_square, as_vector, check_finite
+from ..errors import DimensionError, ModelError, SolverError
+from . import _lcp_kernels as kernels
+
+__all__ = ["LCPResult", "solve_lcp", "residual"]
+
+Method = Literal["auto", "lemke", "pgs", "banded"]
+METHODS = ("auto", "lemke", "pgs", "banded")
+STATUSES = ("solved", "ray_termination", "max_iter", "numerical_failure")
+
+#: ``auto`` uses PGS instead of Lemke for symmetric PSD problems larger than this.
+AUTO_PGS_MIN_SIZE = 400
+#: ``auto`` does not fall back to dense Lemke above this size (memory n^2, time n^3).
+AUTO_LEMKE_MAX_SIZE = 3000
+
+_EPS = np.finfo(np.float64).eps
+
+
+@dataclass(frozen=True)
+class LCPResult:
+    """Outcome of :func:`solve_lcp`.
+
+    Attributes
+    ----------
+    z, w : ndarray, shape (n,)
+        The computed point and ``w = M z + q`` (recomputed from ``z``, never taken on trust).
+        On failure: the last iterate of the method that ran last.
+    status : {"solved", "ray_termination", "max_iter", "numerical_failure"}
+        ``"solved"`` only when :attr:`residual` passed the acceptance test (see
+        :func:`solve_lcp`). ``"ray_termination"``: Lemke found no solution (for
+        copositive-plus ``M`` the LCP is infeasible).
+    iterations : int
+        Pivots (Lemke), sweeps (PGS) or active-set iterations (banded) of the last method.
+    residual : float
+        ``max_i |min(z_i, w_i)| / (1 + max|q|)``: zero exactly at a solution; it counts
+        negative entries of ``z`` or ``w`` in full.
+    method : str
+        The method that produced ``z`` (for ``"auto"``: the one finally used).
+    message : str
+        Why it stopped, and which methods were tried.
+    """
+
+    z: NDArray[np.float64]
+    w: NDArray[np.float64]
+    status: str
+    iterations: int
+    residual: float
+    method: str
+    message: str = field(default="")
+
+    @property
+    def success(self) -> bool:
+        """True when ``status == "solved"``."""
+        return self.status == "solved"
+
+
+def residual(M: Any, z: Any, q: Any) -> float:
+    """Relative natural residual ``max_i |min(z_i, (Mz + q)_i)| / (1 + max|q|)`` of a point.
+
+    Works for dense and scipy.sparse ``M``; zero exactly at solutions of LCP(M, q).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    return _natural_residual(z, M @ z + q, q)
+
+
+def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
+              max_iter: int | None = None, strict: bool = False, z0: Any = None,
+              omega: float = 1.0) -> LCPResult:
+    """Solve the linear complementarity problem ``w = M z + q, 0 <= z ⟂ w >= 0``.
+
+    Parameters
+    ----------
+    M : (n, n) array_like or scipy.sparse matrix
+        Finite square matrix. Sparse input is kept sparse by ``"banded"`` (and ``"auto"`` when
+        it is tridiagonal) and densified by ``"lemke"`` and ``"pgs"``.
+    q : (n,) array_like
+        Finite vector.
+    method : {"auto", "lemke", "pgs", "banded"}
+        See the module docstring; ``"auto"`` picks and verifies (Notes).
+    tol : float
+        Acceptance threshold on :attr:`LCPResult.residual` (and PGS's stopping criterion).
+        A direct method's result is accepted when its residual is below ``tol`` or below the
+        round-off floor ``64 eps (||M||_inf ||z||_inf + ||q||_inf) / (1 + ||q||_inf)`` of
+        evaluating ``M z + q``.
+    max_iter : int, optional
+        Iteration limit of the chosen method. Defaults: Lemke ``50 (n + 1)`` pivots, PGS
+        ``10000`` sweeps, banded ``n + 2`` iterations.
+    strict : bool
+        Raise :class:`~nscontrol.errors.SolverError` instead of returning a failed result.
+    z0 : (n,) array_like, optional
+        Starting point for ``"pgs"`` and ``"banded"`` (warm start); Lemke ignores it.
+    omega : float
+        PGS relaxation factor in ``(0, 2)``; ``1`` is plain Gauss–Seidel.
+
+    Returns
+    -------
+    LCPResult
+
+    Raises
+    ------
+    DimensionError
+        ``M`` not square, or ``q`` / ``z0`` of the wrong length.
+    ModelError
+        NaN or infinite entries, unknown ``method``, ``tol <= 0`` or ``omega`` outside (0, 2).
+    SolverError
+        With ``strict=True``, when no method reached a verified solution (``err.status``).
+
+    Notes
+    -----
+    ``"auto"``: tridiagonal ``M`` (dense or sparse) → ``"banded"``; otherwise symmetric
+    positive semidefinite ``M`` with ``n > 400`` → ``"pgs"``; otherwise ``"lemke"``. When the
+    first choice fails (status or residual), Lemke runs on the dense matrix if
+    ``n <= 3000``. A result is never marked solved without passing the residual test.
+
+    Lemke is guaranteed to find a solution for P-matrices (unique solution) and, for
+    copositive-plus ``M``, ends in a ray only when the LCP is infeasible. PGS converges for
+    symmetric PSD ``M`` with positive diagonal. Banded is exact for M-matrices (e.g. the
+    Delassus matrix of a stack); elsewhere it may stop with ``"max_iter"``.
+
+    References
+    ----------
+    R. W. Cottle, J.-S. Pang, R. E. Stone, *The Linear Complementarity Problem*, Academic
+    Press, 1992 (§4.4 Lemke, §5.2 PGS). O. Bokanowski, S. Maroso, H. Zidani, SIAM J. Numer.
+    Anal. 47(4), 2009 (Howard's algorithm).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from nscontrol.numerics.lcp import solve_lcp
+    >>> res = solve_lcp(np.array([[2.0, 1.0], [1.0, 2.0]]), np.array([-5.0, -6.0]))
+    >>> res.status, np.round(res.z, 12).tolist()
+    ('solved', [1.333333333333, 2.333333333333])
+    """
+    if method not in METHODS:
+        raise ModelError(f"method: expected one of {list(METHODS)}, got {method!r}")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ModelError(f"tol: expected a finite number > 0, got {tol!r}")
+    if not (0.0 < omega < 2.0):
+        raise ModelError(f"omega: expected a relaxation factor in (0, 2), got {omega!r}")
+    if max_iter is not None and int(max_iter) < 1:
+        raise ModelError(f"max_iter: expected a positive integer or None, got {max_iter!r}")
+    problem = _Problem.build(M, q, z0)
+    chain = _method_chain(problem, method)
+    tried: list[str] = []
+    result: LCPResult | None = None
+    for name in chain:
+        result = _RUNNERS[name](problem, tol, max_iter, omega)
+        tried.append(f"{name}: {result.status} (residual {result.residual:.3g})")
+        if result.success:
+            break
+    assert result is not None
+    result = _with_message(result, "; ".join(tried))
+    if strict and not result.success:
+        raise SolverError(f"solve_lcp: no verified solution of the LCP of size {problem.n} "
+                          f"({result.message}); check that M is a P-matrix or copositive-plus, "
+                          f"raise max_iter, or try another method", status=result.status)
+    return result
+
+
+# ----------------------------------------------------------------------------- problem
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """Validated input, with the structure ``auto`` dispatches on computed once."""
+
+    M: Any  # dense ndarray or scipy.sparse matrix (CSR)
+    q: NDArray[np.float64]
+    z0: NDArray[np.float64] | None
+    bands: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None
+
+    @property
+    def n(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def sparse(self) -> bool:
+        return not isinstance(self.M, np.ndarray)
+
+    def dense(self) -> NDArray[np.float64]:
+        return self.M if isinstance(self.M, np.ndarray) else np.asarray(self.M.toarray())
+
+    @classmethod
+    def build(cls, M: Any, q: Any, z0: Any) -> _Problem:
+        q = as_vector("q", q)
+        M = _as_lcp_matrix(M)
+        if M.shape[0] != q.shape[0]:
+            raise DimensionError(f"q: expected a vector of length {M.shape[0]} (the size of "
+                                 f"M), got length {q.shape[0]}")
+        z0v = None if z0 is None else as_vector("z0", z0, size=q.shape[0])
+        return cls(M, q, z0v, _tridiagonal_bands(M))
+
+
+def _as_lcp_matrix(M: Any) -> Any:
+    """A finite square dense float array, or a finite square scipy.sparse CSR matrix."""
+    if hasattr(M, "tocsr") and not isinstance(M, np.ndarray):
+        csr = M.tocsr().astype(np.float64)
+        if csr.ndim != 2 or csr.shape[0] != csr.shape[1]:
+            raise DimensionError(f"M: expected a square matrix, got shape {csr.shape}")
+        check_finite("M", csr.data)
+        return csr
+    if np.ndim(M) == 0:  # a scalar is a 1x1 LCP
+        M = np.reshape(as_float_array("M", M), (1, 1))
+    return np.ascontiguousarray(as_square("M", M))
+
+
+def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
+    """``(lower, diag, upper)`` when ``M`` is tridiagonal (no entry beyond the first
+    off-diagonals), else None."""
+    if isinstance(M, np.ndarray):
+        if not kernels.is_tridiagonal(M):
+            return None
+        return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
+                np.ascontiguousarray(np.diagonal(M, 1)))
+    coo = M.tocoo()
+    mask = coo.data != 0.0
+    if np.any(np.abs(coo.row[mask] - coo.col[mask]) > 1):
+        return None
+    return (np.asarray(M.diagonal(-1), dtype=np.float64),
+            np.asarray(M.diagonal(0), dtype=np.float64),
+            np.asarray(M.diagonal(1), dtype=np.float64))
+
+
+def _method_chain(problem: _Problem, method: str) -> list[str]:
+    if method != "auto":
+        return [method]
+    n = problem.n
+    if problem.bands is not None and n > 2:
+        first = "banded"
+    elif n > AUTO_PGS_MIN_SIZE and _symmetric_psd(problem):
+        first = "pgs"
+    else:
+        first = "lemke"
+    chain = [first]
+    if first != "lemke" and n <= AUTO_LEMKE_MAX_SIZE:
+        chain.append("lemke")
+    return chain
+
+
+def _symmetric_psd(problem: _Problem) -> bool:
+    M = problem.dense()
+    scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
+    if float(np.max(np.abs(M - M.T), initial=0.0)) > 1e-12 * scale:
+        return False
+    return bool(np.linalg.eigvalsh(M)[0] >= -1e-12 * scale)
+
+
+# ----------------------------------------------------------------------------- runners
+
+
+def _run_lemke(problem: _Problem, tol: float, max_iter: int | None, omega: float) -> LCPResult:
+    M = problem.dense()
+    n = problem.n
+    z = np.zeros(n)
+    w = np.empty(n)
+    code, its = kernels.lemke_kernel(M, problem.q, z, w, int(max_iter or 0))
+    return _result(problem, z, code, its, "lemke", tol)
+
+
+def _run_pgs(problem: _Problem, tol: float, max_iter: int | None, omega: float) -> LCPResult:
+    M = problem.dense()
+    n = problem.n
+    z = np.zeros(n) if problem.z0 is None else np.maximum(problem.z0, 0.0)
+    w = np.empty(n)
+    code, its = kernels.pgs_kernel(M, problem.q, z, w, float(tol), int(max_iter or 10_000),
+                                   float(omega))
+    if code in (kernels.SOLVED, kernels.MAX_ITER):
+        polished = _polish(M, problem.q, z, w)
+        if polished is not None:
+            return _result(problem, polished, kernels.SOLVED, its, "pgs", tol)
+    return _result(problem, z, code, its, "pgs", tol)
+
+
+def _polish(M: NDArray[np.float64], q: NDArray[np.float64], z: NDArray[np.float64],
+            w: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Direct solve on the active set an iterate has identified, if that solves the LCP.
+
+    PGS converges linearly, and its error in ``z`` is up to ``residual / lambda_min(M)``;
+    once the active set ``{z_i > w_i}`` is right, one solve of ``M[a, a] z_a = -q_a`` gives
+    the solution to round-off. Returns None when the polished point is not better.
+    """
+    active = np.flatnonzero(z > w)
+    polished = np.zeros_like(z)
+    if active.size:
+        try:
+            polished[active] = np.linalg.solve(M[np.ix_(active, active)], -q[active])
+        except np.linalg.LinAlgError:
+            return None
+    before = _natural_residual(z, M @ z + q, q)
+    after = _natural_residual(polished, M @ polished + q, q)
+    return polished if np.isfinite(after) and after < before else None
+
+
+def _run_banded(problem: _Problem, tol: float, max_iter: int | None, omega: float) -> LCPResult:
+    n = problem.n
+    limit = int(max_iter or n + 2)
+    z = np.zeros(n) if problem.z0 is None else problem.z0.copy()
+    if problem.bands is not None:
+        lower, diag, upper = problem.bands
+        w = np.empty(n)
+        code, its = kernels.tridiagonal_howard(lower, diag, upper, problem.q, z, w, limit)
+    else:
+        code, its = _sparse_howard(problem, z, limit)
+    return _result(problem, z, code, its, "banded", tol)
+
+
+def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int) -> tuple[int, int]:
+    """Howard's policy iteration with sparse LU on the active set (non-tridiagonal M).
+
+    The same iteration as :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard`;
+    each step factors ``M[a, a]`` with SuperLU, so banded ``M`` costs O(n b^2) per step.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    M = sp.csc_matrix(problem.M)
+    q = problem.q
+    eps = 1e-13 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
+    w = M @ z + q
+    for it in range(limit + 1):
+        if np.all(z >= -eps) and np.all(w >= -eps):
+            return kernels.SOLVED, it
+        if it == limit:
+            break
+        active = w <= z
+        z = z * 0.0
+        idx = np.flatnonzero(active)
+        if idx.size:
+            try:
+                z_a = splu(M[idx][:, idx].tocsc()).solve(-q[idx])
+            except RuntimeError:  # singular principal block
+                return kernels.NUMERICAL_FAILURE, it + 1
+            z[idx] = z_a
+        w = M @ z + q
+        if not np.all(np.isfinite(z)):
+            return kernels.NUMERICAL_FAILURE, it + 1
+    return kernels.MAX_ITER, limit
+
+
+_RUNNERS = {"lemke": _run_lemke, "pgs": _run_pgs, "banded": _run_banded}
+
+
+# ----------------------------------------------------------------------------- verification
+
+
+def _natural_residual(z: NDArray[np.float64], w: NDArray[np.float64],
+                      q: NDArray[np.float64]) -> float:
+    if z.size == 0:
+        return 0.0
+    res = float(np.max(np.abs(np.minimum(z, w))))
+    return res / (1.0 + float(np.max(np.abs(q))))
+
+
+def _roundoff_floor(problem: _Problem, z: NDArray[np.float64]) -> float:
+    """Residual attainable when evaluating ``M z + q`` in floating point."""
+    M = problem.M
+    if problem.n == 0:
+        return 0.0
+    row_sums = np.asarray(abs(M).sum(axis=1)).ravel()
+    qmax = float(np.max(np.abs(problem.q)))
+    return 64 * _EPS * (float(row_sums.max()) * float(np.max(np.abs(z))) + qmax) / (1.0 + qmax)
+
+
+def _result(problem: _Problem, z: NDArray[np.float64], code: int, iterations: int,
+            method: str, tol: float) -> LCPResult:
+    """Recompute ``w`` from ``z`` and accept "solved" only if the residual passes."""
+    z = np.array(z, dtype=np.float64)
+    w = np.asarray(problem.M @ z + problem.q, dtype=np.float64).ravel()
+    res = _natural_residual(z, w, problem.q)
+    status = STATUSES[int(code)]
+    if status == "solved" and not (res <= max(tol, _roundoff_floor(problem, z))):
+        status = "numerical_failure"
+    z.setflags(write=False)
+    w.setflags(write=False)
+    return LCPResult(z=z, w=w, status=status, iterations=int(iterations), residual=res,
+                     method=method)
+
+
+def _with_message(result: LCPResult, message: str) -> LCPResult:
+    from dataclasses import replace
+
+    return replace(result, message=message)
