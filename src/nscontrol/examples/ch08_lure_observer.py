@@ -184,7 +184,7 @@ def rotor_law() -> Any:
     from ..laws import Stribeck
 
     p = ROTOR
-    law = Stribeck(static=p["T_s"], coulomb=p["T_c"], omega_s=p["omega_s"],
+    law = Stribeck(static=p["T_s"], coulomb=p["T_c"], stribeck_velocity=p["omega_s"],
                    delta=p["delta"], viscous=p["b"])
     return law.loop_transformation(p["sigma"]).monotone_part
 
