@@ -1,0 +1,194 @@
+"""Filippov systems for :mod:`nscontrol.simulate.switching`.
+
+Each piece is integrated by DOP853 (``rtol``/``atol`` options) with one terminal event per
+surface, armed in the direction that leaves the current side (so a piece that starts on a
+surface never re-triggers it). At a hit of surface ``j`` with ``σ± = ∇h_jᵀF±``:
+
+* ``σ⁻σ⁺ > 0``: crossing; saltation ``I + (F⁺ - F⁻)nᵀ/(nᵀF⁻)``;
+* ``σ⁻ > 0 > σ⁺``: attracting sliding; the Filippov field
+  ``F_s = (σ⁺F⁻ - σ⁻F⁺)/(σ⁺ - σ⁻)`` is integrated with exit events ``σ⁻ = 0`` (leave to the
+  ``h < 0`` side) and ``σ⁺ = 0`` (leave to ``h > 0``); saltation at the start
+  ``I + (F_s - F⁻)nᵀ/(nᵀF⁻)``, identity at a tangential exit;
+* the arrival side's ``σ`` zero: grazing (recorded, the mode is kept);
+* ``σ⁻ < 0 < σ⁺``: repelling sliding, refused (non-unique forward solutions).
+
+With ``sensitivity=True`` the variational equation ``Φ' = J Φ`` (``J`` from
+``system.jacobian`` or central differences; for ``F_s`` always by differences) is integrated
+with the state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray
+from ..errors import ModelError
+from ..systems.switched import _fd_jacobian
+from .switching import saltation_matrix
+
+
+class _Fields:
+    def __init__(self, system: Any) -> None:
+        self.s = system
+        self.J = system.n_surfaces
+
+    def side(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int, side: int
+             ) -> FloatArray:
+        sg = list(signs)
+        sg[j] = side
+        return np.asarray(self.s.field(t, x, tuple(sg)), float)
+
+    def sigmas(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
+               ) -> tuple[float, float, FloatArray, FloatArray, FloatArray]:
+        n = self.s.gradient(j, x)
+        fm, fp = self.side(t, x, signs, j, -1), self.side(t, x, signs, j, 1)
+        return float(n @ fm), float(n @ fp), fm, fp, n
+
+    def sliding(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> FloatArray:
+        sm, sp, fm, fp, _ = self.sigmas(t, x, signs, j)
+        return (sp * fm - sm * fp) / (sp - sm)
+
+    def rhs(self, signs: tuple[int, ...], sliding: int) -> Any:
+        if sliding < 0:
+            return lambda t, x: np.asarray(self.s.field(t, x, signs), float)
+        return lambda t, x: self.sliding(t, x, signs, sliding)
+
+    def jac(self, signs: tuple[int, ...], sliding: int) -> Any:
+        if sliding < 0:
+            return lambda t, x: self.s.jac(t, x, signs)
+        f = self.rhs(signs, sliding)
+        return lambda t, x: _fd_jacobian(lambda xx: f(t, xx), x)
+
+
+def _mode_code(signs: tuple[int, ...], sliding: int) -> int:
+    code = sum(1 << j for j, s in enumerate(signs) if s > 0)
+    return code + (sliding + 1) * (1 << len(signs)) if sliding >= 0 else code
+
+
+def _tiny(a: float, b: FloatArray, c: FloatArray) -> float:
+    return 1e-10 * float(np.linalg.norm(b) * np.linalg.norm(c)) + 1e-300
+
+
+def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, ...], int]:
+    h = fields.s.h(x)
+    signs = [1 if v > 0 else -1 for v in h]
+    sliding = -1
+    for j in np.flatnonzero(np.abs(h) <= 1e-12 * (1.0 + np.linalg.norm(x))):
+        sm, sp, fm, fp, n = fields.sigmas(t, x, tuple(signs), int(j))
+        if sm > 0 > sp and sliding < 0:
+            sliding = int(j)
+        elif sm < 0 and sp < 0:
+            signs[j] = -1
+        else:
+            signs[j] = 1
+    return tuple(signs), sliding
+
+
+def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+                 ) -> dict[str, Any]:
+    from scipy.integrate import solve_ivp
+
+    fields = _Fields(system)
+    n, J = system.n_states, system.n_surfaces
+    t, x = run.t0, x0.copy()
+    signs, sliding = _initial_mode(fields, t, x)
+    run.rec.sample(t, x, force=True)
+    if sliding >= 0:
+        run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
+                  _mode_code(signs, sliding), np.eye(n))
+    pieces = 0
+    while t < run.tf:
+        f = fields.rhs(signs, sliding)
+        events, kinds = [], []
+        for k in range(J):
+            if k == sliding:
+                continue
+            ev = (lambda tt, y, k=k: float(system.surfaces[k](y[:n])))
+            ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]
+            events.append(ev)
+            kinds.append(("surface", k))
+        if sliding >= 0:
+            for side, direction in ((-1, -1.0), (1, 1.0)):
+                ev = (lambda tt, y, side=side: fields.sigmas(tt, y[:n], signs, sliding)
+                      [0 if side < 0 else 1])
+                ev.terminal, ev.direction = True, direction  # type: ignore[attr-defined]
+                events.append(ev)
+                kinds.append(("exit", side))
+        if run.sensitivity:
+            jf = fields.jac(signs, sliding)
+
+            def rhs(tt: float, y: FloatArray) -> FloatArray:
+                Phi = y[n:].reshape(n, n)
+                return np.concatenate([f(tt, y[:n]), (jf(tt, y[:n]) @ Phi).ravel()])
+            y0 = np.concatenate([x, np.eye(n).ravel()])
+        else:
+            rhs, y0 = f, x
+        sol = solve_ivp(rhs, (t, run.tf), y0, method="DOP853", rtol=run.rtol, atol=run.atol,
+                        events=events, dense_output=True)
+        if sol.status < 0:
+            raise ModelError(f"switching: DOP853 failed at t = {sol.t[-1]:.6g}: {sol.message}")
+        t_end = float(sol.t[-1])
+        ts = run.samples(t, t_end, last=sol.status == 0)
+        if ts.size:
+            run.rec.extend(ts, sol.sol(ts)[:n].T)
+        if run.sensitivity:
+            run.Phi = sol.y[n:, -1].reshape(n, n) @ run.Phi
+        run.stuck = 0 if t_end > t else run.stuck
+        if t_end <= t:
+            run.zero_length(t_end)
+        pieces += 1
+        t, x = t_end, sol.y[:n, -1].copy()
+        run.bar.update(t)
+        if sol.status != 1:
+            break
+        which = next(i for i, te in enumerate(sol.t_events) if te.size)
+        kind, k = kinds[which]
+        if kind == "exit":
+            old = _mode_code(signs, sliding)
+            new_signs = list(signs)
+            new_signs[sliding] = k
+            j, sliding, signs = sliding, -1, tuple(new_signs)
+            run.event(t, "sliding_exit", j, x, x, old, _mode_code(signs, -1), np.eye(n))
+            run.rec.sample(t, x, force=True)
+            continue
+        signs, sliding = _hit_surface(fields, run, t, x, signs, sliding, k)
+        run.rec.sample(t, x, force=True)
+    if run.rec.last_time < run.tf:
+        run.rec.sample(run.tf, x, force=True)
+    return {"pieces": pieces, "final_mode": _mode_code(signs, sliding),
+            "propagation": "dop853"}
+
+
+def _hit_surface(fields: _Fields, run: Any, t: float, x: FloatArray, signs: tuple[int, ...],
+                 sliding: int, k: int) -> tuple[tuple[int, ...], int]:
+    """Classify a hit of surface ``k`` and record the event; returns the new mode."""
+    sm, sp, fm, fp, nrm = fields.sigmas(t, x, signs, k)
+    came = signs[k]
+    arrival_sigma = sm if came < 0 else sp
+    old = _mode_code(signs, sliding)
+    flipped = list(signs)
+    flipped[k] = -came
+    flipped_t = tuple(flipped)
+    f_before = fields.rhs(signs, sliding)(t, x)
+    if abs(arrival_sigma) <= _tiny(arrival_sigma, nrm, fm if came < 0 else fp):
+        run.event(t, "grazing", k, x, x, old, old)
+        return signs, sliding
+    if sm * sp > 0:  # crossing (also while sliding on another surface)
+        f_after = fields.rhs(flipped_t, sliding)(t, x)
+        S = saltation_matrix(f_before, f_after, nrm) if run.sensitivity else None
+        run.event(t, "crossing", k, x, x, old, _mode_code(flipped_t, sliding), S)
+        return flipped_t, sliding
+    if sm > 0 > sp:  # attracting sliding
+        if sliding >= 0:
+            raise ModelError(f"switching: at t = {t:.12g} the motion slides on surfaces "
+                             f"{sliding} and {k} at once (codimension-2 sliding), which is "
+                             f"not supported")
+        f_s = (sp * fm - sm * fp) / (sp - sm)
+        S = saltation_matrix(f_before, f_s, nrm) if run.sensitivity else None
+        run.event(t, "sliding_start", k, x, x, old, _mode_code(signs, k), S)
+        return signs, k
+    raise ModelError(f"switching: repelling sliding on surface {k} at t = {t:.12g}, x = {x} "
+                     f"(σ⁻ = {sm:.3g} < 0 < σ⁺ = {sp:.3g}): forward solutions are not "
+                     f"unique; change the model or the initial state")
