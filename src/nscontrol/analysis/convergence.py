@@ -1,0 +1,522 @@
+"""Quadratic convergence of continuous piecewise-affine systems (chapter 11, §2.2–2.4).
+
+A continuous PWA system ``x' = A_i x + b_i + D w`` is quadratically convergent **iff** its
+linear parts share a quadratic Lyapunov function, ``A_iᵀP + PA_i < 0`` for a common ``P > 0``
+(the offsets and the input play no role). This module decides that by an LMI with a margin,
+re-checks the certificate in NumPy, cross-checks bimodal systems with two independent tests
+(the ``A_1A_2`` eigenvalue test and the circle criterion), and turns a certificate into
+steady-state bounds (input-to-state convergence gain, peak-to-peak and incremental-L2 bounds).
+
+A discontinuous model is refused: the test is not valid when the vector field jumps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validation import as_matrix, as_square, check_positive
+from ..errors import DimensionError, ModelError, SolverError
+
+__all__ = [
+    "ConvergenceCertificate", "quadratic_convergence", "verify_cqlf", "decay_rate",
+    "BimodalTests", "bimodal_tests", "product_test", "circle_test", "circle_criterion_minimum",
+    "most_negative_real_eigenvalue", "bisect_boundary", "normalising_transform",
+    "SteadyStateBound", "isc_gain", "peak_to_peak_bound", "incremental_l2_bound",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: A margin below this (in the normalised coordinates of the LMI) means "not certified".
+MARGIN_TOL = 1e-7
+
+
+@dataclass(frozen=True)
+class ConvergenceCertificate:
+    """Outcome of the quadratic convergence test.
+
+    Attributes
+    ----------
+    convergent
+        True when a common quadratic Lyapunov function was found and re-checked.
+    P
+        The certificate (original coordinates), ``None`` when not convergent.
+    margin
+        ``t*`` of ``max t s.t. I <= P̃ <= p_max I, Ã_iᵀP̃ + P̃Ã_i + 2σ̃P̃ <= -t I`` in the
+        normalised coordinates; negative when no CQLF exists.
+    decay
+        The decay rate ``σ`` imposed in the LMI (1/time unit of the model).
+    rate
+        The largest ``σ`` the returned ``P`` certifies: ``A_iᵀP + PA_i + 2σP <= 0`` for all i
+        (``nan`` when not convergent).
+    epsilon
+        ``ε = min_i λ_min(-(A_iᵀP + PA_i))`` (ε-form of the certificate; ``nan`` if none).
+    kappa
+        Condition number ``λ_max(P)/λ_min(P)`` (``nan`` if none).
+    status
+        The solver's status.
+    reason
+        Why the system is not certified (empty when it is).
+    """
+
+    convergent: bool
+    P: FloatArray | None
+    margin: float
+    decay: float
+    rate: float
+    epsilon: float
+    kappa: float
+    status: str
+    reason: str = ""
+
+    def __bool__(self) -> bool:
+        return self.convergent
+
+
+def _mode_matrices(system: Any) -> tuple[FloatArray, ...]:
+    """The linear parts ``A_i`` of a PWA system (refusing a discontinuous one) or of a list."""
+    if isinstance(system, (list, tuple)):
+        As = tuple(as_square(f"As[{i}]", A) for i, A in enumerate(system))
+    else:
+        if not getattr(system, "continuous", True):
+            raise ModelError(
+                f"system: the quadratic convergence test (CQLF of the modes) holds only for "
+                f"PWA systems with a continuous right-hand side; got a {type(system).__name__} "
+                f"with continuous=False. The discontinuous case needs the structure and "
+                f"passivity-like conditions of ch11 §2.7, not implemented")
+        As = tuple(as_square(f"system.A[{i}]", A) for i, A in enumerate(system.A))
+    if not As:
+        raise DimensionError("As: expected at least one mode matrix, got none")
+    n = As[0].shape[0]
+    for i, A in enumerate(As):
+        if A.shape != (n, n):
+            raise DimensionError(f"As[{i}]: expected shape ({n}, {n}) like As[0], got {A.shape}")
+    return As
+
+
+def normalising_transform(As: Sequence[FloatArray]) -> tuple[FloatArray, float]:
+    """Diagonal similarity ``T`` and time scale ``ω`` making ``T⁻¹A_iT/ω`` balanced and O(1).
+
+    CQLF feasibility is invariant under similarity and time scaling; badly scaled models
+    (mechanical ones with stiffness ~1e5) otherwise defeat the interior-point solver.
+    """
+    from scipy.linalg import matrix_balance
+
+    total = sum(np.abs(A) for A in As)
+    _, (scale, _perm) = matrix_balance(total, permute=False, separate=True)
+    T = np.diag(scale)
+    omega = max(float(np.linalg.norm(np.linalg.solve(T, A @ T), 2)) for A in As)
+    return T, (omega if omega > 0 else 1.0)
+
+
+def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4,
+                          normalise: bool = True) -> ConvergenceCertificate:
+    """Decide quadratic convergence of a continuous PWA system by a common quadratic
+    Lyapunov function.
+
+    Parameters
+    ----------
+    system
+        A continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem` (its ``A``
+        matrices are used) or a sequence of square mode matrices ``A_i``.
+    decay
+        Decay rate ``σ >= 0`` to certify: ``A_iᵀP + PA_i + 2σP < 0``.
+    p_max
+        Bound on ``κ(P̃)`` in normalised coordinates (``I <= P̃ <= p_max I``).
+    normalise
+        Solve in balanced, time-normalised coordinates (:func:`normalising_transform`).
+
+    Returns
+    -------
+    ConvergenceCertificate
+        ``convergent`` with ``P`` re-checked in NumPy, or the reason it is not.
+
+    Raises
+    ------
+    ModelError
+        ``system`` is declared discontinuous (``continuous=False``).
+    DimensionError
+        Mode matrices of inconsistent shapes.
+    SolverError
+        Neither Clarabel nor SCS returned an optimal solution.
+
+    Notes
+    -----
+    Theorem (ch11 §2.2, Pavlov et al. 2007): a PWA system with a *continuous* right-hand side
+    is quadratically convergent iff (CQLF) holds. Hypotheses: continuity (checked by the model
+    at construction and refused here when ``continuous`` is False); regions convex (by
+    construction of the model). Strictness is handled by maximising the margin ``t``; the
+    system is certified when ``t* > 1e-7`` and the returned ``P`` passes :func:`verify_cqlf`.
+
+    References
+    ----------
+    D5.3 chapter 11 (Pavlov, van de Wouw, Nijmeijer); A. Pavlov, A. Pogromsky, N. van de Wouw,
+    H. Nijmeijer, "On convergence properties of piecewise affine systems", Int. J. Control
+    80(8), 2007.
+    """
+    As = _mode_matrices(system)
+    decay = check_positive("decay", decay, allow_zero=True)
+    n = As[0].shape[0]
+    T, omega = normalising_transform(As) if normalise else (np.eye(n), 1.0)
+    scaled = [np.linalg.solve(T, A @ T) / omega for A in As]
+    P_s, margin, status = _max_margin_cqlf(scaled, decay / omega, p_max)
+    Tinv = np.linalg.inv(T)
+    P = Tinv.T @ P_s @ Tinv
+    P = 0.5 * (P + P.T)
+    if margin <= MARGIN_TOL:
+        return ConvergenceCertificate(False, None, margin, decay, np.nan, np.nan, np.nan, status,
+                                      f"no common quadratic Lyapunov function: best margin "
+                                      f"{margin:.3g} <= {MARGIN_TOL:g}")
+    if not verify_cqlf(As, P, decay=decay):
+        return ConvergenceCertificate(False, None, margin, decay, np.nan, np.nan, np.nan, status,
+                                      "the solver's certificate failed the NumPy re-check "
+                                      "(numerically undecided; rescale the model)")
+    eps = min(float(-np.linalg.eigvalsh(A.T @ P + P @ A)[-1]) for A in As)
+    lam = np.linalg.eigvalsh(P)
+    return ConvergenceCertificate(True, P, margin, decay, decay_rate(As, P), eps,
+                                  float(lam[-1] / lam[0]), status)
+
+
+def _max_margin_cqlf(As: Sequence[FloatArray], decay: float,
+                     p_max: float) -> tuple[FloatArray, float, str]:
+    """``max t`` s.t. ``I <= P <= p_max I``, ``A_iᵀP + PA_i + 2σP <= -tI``, ``t <= 1``."""
+    import cvxpy as cp
+
+    from ..design.convergent_pwa import solve_sdp, sym
+
+    n = As[0].shape[0]
+    P = cp.Variable((n, n), symmetric=True)
+    t = cp.Variable()
+    eye = np.eye(n)
+    cons = [P >> eye, P << p_max * eye, t <= 1]
+    cons += [sym(A.T @ P + P @ A + 2 * decay * P) << -t * eye for A in As]
+    status = solve_sdp(cp.Problem(cp.Maximize(t), cons), who="quadratic_convergence")
+    return np.asarray(P.value), float(t.value), status
+
+
+def verify_cqlf(As: Sequence[Any], P: Any, *, decay: float = 0.0, tol: float = 1e-8) -> bool:
+    """Re-check a certificate in NumPy: ``P > 0`` and
+    ``max eig(A_iᵀP + PA_i + 2σP) <= tol·‖P‖`` for every mode (spec check 3)."""
+    P = np.asarray(P, dtype=float)
+    P = 0.5 * (P + P.T)
+    norm = float(np.linalg.norm(P, 2))
+    if not np.all(np.isfinite(P)) or np.linalg.eigvalsh(P)[0] <= 0.0:
+        return False
+    return all(float(np.linalg.eigvalsh(_lyap(A, P, decay))[-1]) <= tol * norm for A in As)
+
+
+def _lyap(A: Any, P: FloatArray, decay: float) -> FloatArray:
+    A = np.asarray(A, dtype=float)
+    M = A.T @ P + P @ A + 2.0 * decay * P
+    return 0.5 * (M + M.T)
+
+
+def decay_rate(As: Sequence[Any], P: Any) -> float:
+    """The largest ``σ`` with ``A_iᵀP + PA_i + 2σP <= 0`` for all i (exact, by generalised
+    eigenvalues); negative when ``P`` is not a Lyapunov matrix of every mode."""
+    from scipy.linalg import eigh
+
+    P = 0.5 * (np.asarray(P, float) + np.asarray(P, float).T)
+    return min(float(eigh(-_lyap(A, P, 0.0), P, eigvals_only=True)[0]) / 2.0 for A in As)
+
+
+# -- bimodal cross-checks (§2.4) --------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BimodalTests:
+    """The three equivalent tests of ch11 §2.4 on a bimodal system ``A_2 = A_1 - k g cᵀ``.
+
+    Attributes
+    ----------
+    cqlf, product, circle
+        Verdict of each test (True: quadratically convergent).
+    hurwitz
+        Both modes Hurwitz (a hypothesis of the equivalence; when False all verdicts are False).
+    cqlf_margin
+        LMI margin of :func:`quadratic_convergence`.
+    min_negative_real_eig
+        The most negative real eigenvalue of ``A_1A_2`` (``nan`` when it has none).
+    circle_min
+        ``min_ω 1 + k Re G(iω)`` with ``G(s) = cᵀ(sI - A_1)⁻¹g``.
+    """
+
+    cqlf: bool
+    product: bool
+    circle: bool
+    hurwitz: bool
+    cqlf_margin: float
+    min_negative_real_eig: float
+    circle_min: float
+
+    @property
+    def agree(self) -> bool:
+        """True when the three verdicts coincide."""
+        return self.cqlf == self.product == self.circle
+
+
+def bimodal_tests(A1: Any, A2: Any) -> BimodalTests:
+    """Run the CQLF LMI, the ``A_1A_2`` eigenvalue test and the circle criterion.
+
+    Parameters
+    ----------
+    A1, A2
+        The two mode matrices; their difference must have rank one (continuous bimodal PWA).
+
+    Raises
+    ------
+    ModelError
+        ``A1 - A2`` does not have rank one.
+
+    Notes
+    -----
+    For Hurwitz ``A_1``, ``A_2`` with ``A_1 - A_2 = k g cᵀ`` (k > 0) the three conditions are
+    equivalent (Shorten & Narendra 2003; Shorten, Mason, O'Cairbre, Curran 2004): a CQLF
+    exists; ``A_1A_2`` has no real negative eigenvalue; ``1 + k Re G(iω) > 0`` for all
+    ``ω ∈ R ∪ {∞}``. Disagreement signals a numerical problem, never a theorem.
+
+    References
+    ----------
+    D5.3 chapter 11, §2.4 of our spec.
+    """
+    A1, A2 = _pair(A1, A2)
+    hurwitz = _both_hurwitz(A1, A2)
+    cert = quadratic_convergence([A1, A2])
+    worst = most_negative_real_eigenvalue(A1 @ A2)
+    circle_min = circle_criterion_minimum(A1, A2)
+    return BimodalTests(cqlf=cert.convergent, product=bool(hurwitz and np.isnan(worst)),
+                        circle=bool(hurwitz and circle_min > 0), hurwitz=hurwitz,
+                        cqlf_margin=cert.margin, min_negative_real_eig=worst,
+                        circle_min=circle_min)
+
+
+def _pair(A1: Any, A2: Any) -> tuple[FloatArray, FloatArray]:
+    A1 = as_square("A1", A1)
+    return A1, as_square("A2", A2, A1.shape[0])
+
+
+def _both_hurwitz(A1: FloatArray, A2: FloatArray) -> bool:
+    return all(float(np.max(np.linalg.eigvals(A).real)) < 0 for A in (A1, A2))
+
+
+def most_negative_real_eigenvalue(M: Any) -> float:
+    """The most negative real eigenvalue of ``M`` (``nan`` when it has none); an eigenvalue
+    counts as real when ``|Im λ| <= 1e-9|λ|``."""
+    lam = np.linalg.eigvals(np.asarray(M, float))
+    real_neg = lam[(np.abs(lam.imag) <= 1e-9 * np.abs(lam)) & (lam.real < 0)].real
+    return float(real_neg.min()) if real_neg.size else float("nan")
+
+
+def product_test(A1: Any, A2: Any) -> bool:
+    """Bimodal test 2 of §2.4: both modes Hurwitz and ``A_1A_2`` without a real negative
+    eigenvalue (⇔ a CQLF exists, for a rank-one difference)."""
+    A1, A2 = _pair(A1, A2)
+    _rank_one(A1 - A2)
+    return bool(_both_hurwitz(A1, A2) and np.isnan(most_negative_real_eigenvalue(A1 @ A2)))
+
+
+def circle_test(A1: Any, A2: Any) -> bool:
+    """Bimodal test 3 of §2.4: both modes Hurwitz and ``1 + k Re G(iω) > 0`` for all ω."""
+    A1, A2 = _pair(A1, A2)
+    return bool(_both_hurwitz(A1, A2) and circle_criterion_minimum(A1, A2) > 0)
+
+
+def circle_criterion_minimum(A1: Any, A2: Any) -> float:
+    """``min_ω 1 + k Re G(iω)``, ``G(s) = cᵀ(sI - A_1)⁻¹g``, for ``A_1 - A_2 = k g cᵀ``."""
+    A1, A2 = _pair(A1, A2)
+    g, c, k = _rank_one(A1 - A2)
+    return _circle_minimum(A1, g, c, k)
+
+
+def _rank_one(Delta: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """``Delta = k g cᵀ`` with unit vectors g, c and k > 0."""
+    U, s, Vt = np.linalg.svd(Delta)
+    if s[0] == 0.0 or (s.size > 1 and s[1] > 1e-9 * s[0]):
+        raise ModelError(f"A1 - A2: expected a rank-one difference (continuous bimodal system "
+                         f"across one facet), got singular values {np.round(s, 12)}")
+    return U[:, 0], Vt[0], float(s[0])
+
+
+def _circle_minimum(A: FloatArray, g: FloatArray, c: FloatArray, k: float) -> float:
+    """``min_ω 1 + k Re cᵀ(iωI - A)⁻¹g``: log grid around the modes, then Brent refinement."""
+    from scipy.optimize import minimize_scalar
+
+    n = A.shape[0]
+    lam, V = np.linalg.eig(A)
+    if np.linalg.cond(V) < 1e8:  # residues: G(iω) = Σ r_j / (iω - λ_j), vectorised over ω
+        r = (c @ V) * np.linalg.solve(V, g)
+
+        def phi(w: Any) -> Any:
+            return 1.0 + k * np.real(np.sum(r / (1j * np.asarray(w, float)[..., None] - lam),
+                                            axis=-1))
+    else:  # defective A: solve per frequency
+        def phi(w: Any) -> Any:
+            return np.vectorize(lambda v: 1.0 + k * float(np.real(
+                c @ np.linalg.solve(1j * v * np.eye(n) - A, g))))(w)
+
+    mags = np.abs(np.linalg.eigvals(A))
+    lo, hi = max(mags.min(), 1e-12) * 1e-3, max(mags.max(), 1e-12) * 1e3
+    grid = np.concatenate([[0.0], np.geomspace(lo, hi, 4000)])
+    vals = phi(grid)
+    i = int(np.argmin(vals))
+    best = float(vals[i])
+    if 0 < i < grid.size - 1:
+        res = minimize_scalar(lambda w: float(phi(w)), bounds=(grid[i - 1], grid[i + 1]), method="bounded",
+                              options={"xatol": 1e-12 * grid[i + 1]})
+        best = min(best, float(res.fun))
+    return min(best, 1.0)  # ω = ∞ gives exactly 1 (strictly proper G)
+
+
+def bisect_boundary(is_convergent: Callable[[float], bool], lo: float, hi: float, *,
+                    rtol: float = 1e-8) -> float:
+    """Boundary ``p*`` of a monotone test on ``[lo, hi]`` by bisection.
+
+    ``is_convergent(lo)`` and ``is_convergent(hi)`` must differ; the returned ``p*`` is where
+    the verdict changes, to ``rtol`` relative.
+
+    Raises
+    ------
+    ModelError
+        Both ends give the same verdict (no boundary bracketed).
+    """
+    f_lo, f_hi = bool(is_convergent(lo)), bool(is_convergent(hi))
+    if f_lo == f_hi:
+        raise ModelError(f"lo, hi: expected a bracket where the verdict changes, got "
+                         f"{f_lo} at {lo} and at {hi}")
+    while hi - lo > rtol * max(abs(lo), abs(hi)):
+        mid = 0.5 * (lo + hi)
+        if bool(is_convergent(mid)) == f_lo:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+# -- steady-state bounds (§2.2–2.3) -----------------------------------------------------------
+
+@dataclass(frozen=True)
+class SteadyStateBound:
+    """A steady-state bound and the LMI solution proving it.
+
+    Attributes
+    ----------
+    bound
+        The gain: ``sup|z̄_{w1} - z̄_{w2}| <= bound·‖w1 - w2‖_∞`` (peak-to-peak) or
+        ``RMS(z̄_{w1} - z̄_{w2}) <= bound·RMS(w1 - w2)`` (incremental L2).
+    P
+        The matrix of the dissipation inequality.
+    alpha
+        The ``α`` of the invariant-ellipsoid bound (``nan`` for the L2 bound).
+    status
+        Solver status.
+    """
+
+    bound: float
+    P: FloatArray
+    alpha: float
+    status: str
+
+
+def isc_gain(P: Any, D: Any, epsilon: float) -> float:
+    """Input-to-state convergence gain ``γ_ISC = 2|PD|·√κ(P)/ε`` (ch11 §2.2).
+
+    With ``A_iᵀP + PA_i <= -εI``: ``limsup|x1 - x2| <= γ_ISC·sup|w1 - w2|``; for the steady
+    state, ``sup_t|x̄_w(t) - x*| <= γ_ISC·sup_t|w(t) - w0|``.
+    """
+    P = as_square("P", P)
+    D = as_matrix("D", np.reshape(D, (P.shape[0], -1)) if np.ndim(D) == 1 else D, P.shape[0])
+    epsilon = check_positive("epsilon", epsilon)
+    lam = np.linalg.eigvalsh(0.5 * (P + P.T))
+    return 2.0 * float(np.linalg.norm(P @ D, 2)) * float(np.sqrt(lam[-1] / lam[0])) / epsilon
+
+
+def _io_matrices(As: Sequence[Any], D: Any, Cz: Any) -> tuple[list[FloatArray], FloatArray,
+                                                             FloatArray]:
+    As_ = list(_mode_matrices(list(As)))
+    n = As_[0].shape[0]
+    D = as_matrix("D", np.reshape(D, (n, -1)) if np.ndim(D) == 1 else D, n)
+    Cz = as_matrix("Cz", np.reshape(Cz, (-1, n)) if np.ndim(Cz) == 1 else Cz, cols=n)
+    return As_, D, Cz
+
+
+def peak_to_peak_bound(As: Sequence[Any], D: Any, Cz: Any, *,
+                       alphas: Any = None) -> SteadyStateBound:
+    """Invariant-ellipsoid peak-to-peak bound on incremental steady-state outputs (§2.3).
+
+    For each ``α`` minimise ``μ`` s.t. ``P >= C_zᵀC_z`` and
+    ``[[A_iᵀP + PA_i + αP, PD], [DᵀP, -μI]] <= 0``; the bound is ``min_α √(μ/α)``.
+
+    Parameters
+    ----------
+    As
+        Mode matrices of the (closed-loop) continuous PWA system.
+    D, Cz
+        Input and performance-output matrices.
+    alphas
+        Grid of ``α`` (default: 40 log-spaced points in ``[0.01, 5]·ω`` with ``ω`` the time
+        scale of :func:`normalising_transform`).
+
+    Raises
+    ------
+    SolverError
+        No ``α`` of the grid gave a feasible problem.
+    """
+    import cvxpy as cp
+
+    from ..design.convergent_pwa import try_solve_sdp, sym
+
+    As_, D, Cz = _io_matrices(As, D, Cz)
+    n, m = D.shape
+    if alphas is None:
+        alphas = np.geomspace(0.01, 5.0, 40) * normalising_transform(As_)[1] / 10.0
+    P = cp.Variable((n, n), symmetric=True)
+    mu = cp.Variable(nonneg=True)
+    alpha = cp.Parameter(nonneg=True)
+    cons = [P >> Cz.T @ Cz]
+    cons += [sym(cp.bmat([[A.T @ P + P @ A + alpha * P, P @ D], [D.T @ P, -mu * np.eye(m)]]))
+             << 0 for A in As_]
+    prob = cp.Problem(cp.Minimize(mu), cons)
+    best: SteadyStateBound | None = None
+    for a in np.asarray(alphas, float):
+        alpha.value = float(a)
+        status = try_solve_sdp(prob)
+        if status == "optimal" and mu.value is not None:
+            value = float(np.sqrt(max(mu.value, 0.0) / a))
+            if best is None or value < best.bound:
+                best = SteadyStateBound(value, np.asarray(P.value), float(a), status)
+    if best is None:
+        raise SolverError("peak_to_peak_bound: no alpha of the grid gave a feasible LMI; the "
+                          "system may not be quadratically convergent", status="infeasible")
+    return best
+
+
+def incremental_l2_bound(As: Sequence[Any], D: Any, Cz: Any) -> SteadyStateBound:
+    """Incremental L2 (RMS) gain bound of a continuous PWA system (§2.3).
+
+    Minimise ``γ²`` s.t. ``P > 0`` and ``[[A_iᵀP + PA_i + C_zᵀC_z, PD], [DᵀP, -γ²I]] <= 0``.
+    For T-periodic inputs ``RMS(z̄_{w1} - z̄_{w2}) <= γ·RMS(w1 - w2)``; one mode: the H∞ norm.
+
+    Raises
+    ------
+    SolverError
+        The LMI is infeasible (no common storage function) or the solver failed.
+    """
+    import cvxpy as cp
+
+    from ..design.convergent_pwa import try_solve_sdp, sym
+
+    As_, D, Cz = _io_matrices(As, D, Cz)
+    n, m = D.shape
+    P = cp.Variable((n, n), symmetric=True)
+    g2 = cp.Variable(nonneg=True)
+    cons = [P >> 1e-9 * np.eye(n)]
+    cons += [sym(cp.bmat([[A.T @ P + P @ A + Cz.T @ Cz, P @ D], [D.T @ P, -g2 * np.eye(m)]]))
+             << 0 for A in As_]
+    status = try_solve_sdp(cp.Problem(cp.Minimize(g2), cons))
+    if status != "optimal" or g2.value is None:
+        raise SolverError(f"incremental_l2_bound: LMI not solved (status {status!r}); the "
+                          f"system may not be quadratically convergent", status=status)
+    return SteadyStateBound(float(np.sqrt(g2.value)), np.asarray(P.value), np.nan, status)

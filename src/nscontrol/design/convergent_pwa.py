@@ -1,0 +1,615 @@
+"""LMI design of convergent closed loops for continuous PWA systems (chapter 11, §2.5).
+
+* :func:`design_state_feedback` — linear state feedback ``u = Kx`` with a decay rate and a
+  gain bound (SF-σ);
+* :func:`design_pwa_state_feedback` — continuity-preserving PWA feedback
+  ``u = Kx + ν·min(cᵀx - d, 0)`` for bimodal systems (§2.5 b);
+* :func:`design_observer` — piecewise-linear observer with the mode chosen by the estimate
+  (OBS-σ), gain-bounded.
+
+Every design is solved in scaled coordinates (:class:`Scaling`), mapped back, and its
+certificate re-checked in NumPy in the original coordinates before it is returned; an
+infeasible problem raises :class:`~nscontrol.errors.InfeasibleDesignError` carrying the
+solver's status.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validation import as_matrix, as_square, check_positive
+from ..errors import DimensionError, InfeasibleDesignError, ModelError, SolverError
+
+__all__ = [
+    "Scaling", "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
+    "design_state_feedback", "design_pwa_state_feedback",
+    "design_observer", "output_feedback_loop", "certificate_residual",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Strictness margin imposed on the LMIs in scaled coordinates (``<= -δI`` instead of ``< 0``).
+LMI_MARGIN = 1e-6
+
+
+# -- SDP plumbing (to move onto numerics.lmi once it lands) ------------------------------------
+
+def sym(M: Any) -> Any:
+    """Symmetric part of a CVXPY (or NumPy) matrix expression: impose LMIs on this."""
+    return 0.5 * (M + M.T)
+
+
+def try_solve_sdp(problem: Any) -> str:
+    """Solve with Clarabel, then SCS if Clarabel fails or is inaccurate; return the status
+    (``optimal_inaccurate`` counts as undecided: the fallback is tried)."""
+    import cvxpy as cp
+
+    status = "solver_error"
+    for solver in ("CLARABEL", "SCS"):
+        try:
+            problem.solve(solver=solver)
+        except cp.error.SolverError:
+            continue
+        status = str(problem.status)
+        if status in ("optimal", "infeasible", "unbounded"):
+            return status
+    return status
+
+
+def solve_sdp(problem: Any, *, who: str) -> str:
+    """:func:`try_solve_sdp`, raising :class:`SolverError` unless the status is optimal."""
+    status = try_solve_sdp(problem)
+    if status != "optimal":
+        raise SolverError(f"{who}: the SDP was not solved (status {status!r} with Clarabel and "
+                          f"SCS); rescale the model", status=status)
+    return status
+
+
+def certificate_residual(As: Sequence[Any], P: Any, decay: float = 0.0) -> float:
+    """``max_i λ_max(A_iᵀP + PA_i + 2σP)/‖P‖`` — ≤ 1e-8 passes the re-check (spec check 3)."""
+    P = np.asarray(P, float)
+    P = 0.5 * (P + P.T)
+    worst = -np.inf
+    for A in As:
+        A = np.asarray(A, float)
+        M = A.T @ P + P @ A + 2.0 * decay * P
+        worst = max(worst, float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]))
+    return worst / float(np.linalg.norm(P, 2))
+
+
+def _recheck(As: Sequence[FloatArray], P: FloatArray, decay: float, *, who: str,
+             status: str) -> None:
+    """Raise InfeasibleDesignError unless P > 0 and the decay LMI holds (to 1e-8·‖P‖)."""
+    lam_min = float(np.linalg.eigvalsh(0.5 * (P + P.T))[0])
+    res = certificate_residual(As, P, decay)
+    if not (lam_min > 0 and res <= 1e-8):
+        raise InfeasibleDesignError(
+            f"{who}: the solver returned {status!r} but its certificate fails the NumPy "
+            f"re-check (min eig P = {lam_min:.3g}, max eig(AᵢᵀP + PAᵢ + 2σP)/‖P‖ = {res:.3g} > "
+            f"1e-8); rescale the model (scale=Scaling.mechanical(...) or 'auto') or lower sigma",
+            status="certificate_check_failed")
+
+
+# -- scaling -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Scaling:
+    """Coordinates in which the LMIs are solved: ``x̃ = S x``, ``τ = ω t``, ``u = f ũ``.
+
+    Then ``Ã_i = S A_i S⁻¹/ω``, ``B̃ = S B f/ω``, ``C̃ = C S⁻¹``; gains map back as
+    ``K = f K̃ S``, ``L = ω S⁻¹ L̃`` and certificates as ``P = Sᵀ P̃ S``. Gain bounds reported
+    by designs are in the scaled units (that is what makes them comparable across models).
+
+    Attributes
+    ----------
+    S
+        State scaling (invertible).
+    omega
+        Time scale (1/s).
+    input_unit
+        Input unit ``f`` (e.g. a reference stiffness for forces).
+    """
+
+    S: FloatArray
+    omega: float = 1.0
+    input_unit: float = 1.0
+
+    def __post_init__(self) -> None:
+        S = as_square("Scaling.S", self.S)
+        if abs(np.linalg.det(S)) == 0.0:
+            raise ModelError("Scaling.S: expected an invertible matrix, got a singular one")
+        object.__setattr__(self, "S", S)
+        check_positive("Scaling.omega", self.omega)
+        check_positive("Scaling.input_unit", self.input_unit)
+
+    @classmethod
+    def identity(cls, n: int) -> Scaling:
+        """No scaling."""
+        return cls(np.eye(n))
+
+    @classmethod
+    def mechanical(cls, n_dof: int, omega_ref: float, input_unit: float = 1.0) -> Scaling:
+        """``x = (q, q')``: ``S = diag(I, I/ω_ref)``, ``τ = ω_ref t``, forces in ``input_unit``
+        (e.g. the static stiffness at the actuator) — ch11 §3.5, ch06 §2.4."""
+        d = np.concatenate([np.ones(n_dof), np.full(n_dof, 1.0 / omega_ref)])
+        return cls(np.diag(d), float(omega_ref), float(input_unit))
+
+    @classmethod
+    def auto(cls, As: Sequence[Any], B: Any = None) -> Scaling:
+        """Balanced diagonal similarity, time scale ``max‖Ã_i‖``, input unit making
+        ``‖B̃‖ = 1`` — for badly scaled models."""
+        return _auto_scaling([np.asarray(A, float) for A in As],
+                             None if B is None else np.asarray(B, float))
+
+
+def _auto_scaling(As: Sequence[FloatArray], B: FloatArray | None) -> Scaling:
+    from scipy.linalg import matrix_balance
+
+    total = sum(np.abs(A) for A in As)
+    _, (s, _perm) = matrix_balance(total, permute=False, separate=True)
+    S = np.diag(1.0 / s)
+    omega = max(float(np.linalg.norm(S @ A @ np.diag(s), 2)) for A in As) or 1.0
+    f = 1.0
+    if B is not None and np.linalg.norm(B) > 0:
+        f = omega / float(np.linalg.norm(S @ B, 2))
+    return Scaling(S, omega, f)
+
+
+def _resolve_scaling(scale: Scaling | str | None, As: Sequence[FloatArray],
+                     B: FloatArray | None) -> Scaling:
+    n = As[0].shape[0]
+    if scale is None:
+        return Scaling.identity(n)
+    if isinstance(scale, str):
+        if scale != "auto":
+            raise ModelError(f"scale: expected None, 'auto' or a Scaling, got {scale!r}")
+        return _auto_scaling(As, B)
+    if not isinstance(scale, Scaling):
+        raise ModelError(f"scale: expected None, 'auto' or a Scaling, got {type(scale).__name__}")
+    if scale.S.shape != (n, n):
+        raise DimensionError(f"scale.S: expected shape ({n}, {n}), got {scale.S.shape}")
+    return scale
+
+
+# -- results ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ConvergentStateFeedback:
+    """A linear state feedback ``u = Kx`` making the closed loop quadratically convergent.
+
+    Attributes
+    ----------
+    K
+        Gain, shape ``(p, n)`` (original units).
+    B
+        The control input matrix it was designed for, shape ``(n, p)``.
+    P
+        Certificate: ``(A_i + BK)ᵀP + P(A_i + BK) + 2σP <= 0`` for every mode, ``P > 0``
+        (re-checked in NumPy).
+    sigma
+        Certified decay rate (1/time unit of the model).
+    gain_bound
+        ``√κ``: ``‖K̃‖ <= √κ`` in the scaled coordinates of :attr:`scaling`.
+    scaling
+        The coordinates the LMI was solved in.
+    status
+        The solver's status.
+    """
+
+    K: FloatArray
+    B: FloatArray
+    P: FloatArray
+    sigma: float
+    gain_bound: float
+    scaling: Scaling
+    status: str
+
+    def gains(self, n_regions: int) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+        """Per-region ``(K_i, k_i)`` (the same linear law in every region)."""
+        p = self.K.shape[0]
+        return (self.K,) * n_regions, (np.zeros(p),) * n_regions
+
+    def closed_loop(self, system: Any) -> Any:
+        """The closed loop ``x' = (A_i + BK)x + b_i + Eu(t)`` as a PWA system."""
+        return _with_feedback(system, self.B, *self.gains(len(system.A)))
+
+
+@dataclass(frozen=True)
+class PWAStateFeedback:
+    """Continuity-preserving bimodal PWA feedback ``u = Kx + ν·min(cᵀx - d, 0)``.
+
+    With the model's bimodal convention (region 0: ``cᵀx <= d``, region 1: ``cᵀx >= d``) the
+    per-region law ``u = K_i x + k_i`` is ``K_0 = K + νcᵀ``, ``k_0 = -νd`` and ``K_1 = K``,
+    ``k_1 = 0``: ``K_0 - K_1 = νcᵀ``, ``k_0 - k_1 = -νd``, so ``u`` is continuous across the
+    facet.
+
+    Attributes
+    ----------
+    K, k
+        Per-region gains and offsets (region order of the model).
+    B
+        Control input matrix.
+    nu
+        Slope ``ν`` of the one-sided term (one entry per input).
+    c, d
+        The facet ``cᵀx = d``.
+    P, sigma, gain_bound, scaling, status
+        As in :class:`ConvergentStateFeedback` (common ``P`` for both closed-loop modes).
+    """
+
+    K: tuple[FloatArray, FloatArray]
+    k: tuple[FloatArray, FloatArray]
+    B: FloatArray
+    nu: FloatArray
+    c: FloatArray
+    d: float
+    P: FloatArray
+    sigma: float
+    gain_bound: float
+    scaling: Scaling
+    status: str
+
+    def gains(self, n_regions: int = 2) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+        """Per-region ``(K_i, k_i)``."""
+        return self.K, self.k
+
+    def control(self, x: Any) -> FloatArray:
+        """``u = K_1x + ν·min(cᵀx - d, 0)`` (time-major ``x`` gives time-major ``u``)."""
+        x = np.asarray(x, float)
+        s = np.minimum(x @ self.c - self.d, 0.0)
+        return x @ self.K[1].T + np.multiply.outer(s, self.nu)
+
+    def closed_loop(self, system: Any) -> Any:
+        """The closed loop ``x' = (A_i + BK_i)x + b_i + Bk_i + Eu(t)`` as a PWA system."""
+        return _with_feedback(system, self.B, self.K, self.k)
+
+
+@dataclass(frozen=True)
+class ConvergentObserver:
+    """A piecewise-linear observer ``x̂' = A_{j(x̂)}x̂ + b_{j(x̂)} + Bv + Eu + L(y - Cx̂)``.
+
+    Attributes
+    ----------
+    L
+        Output injection gain, shape ``(n, q)``.
+    C
+        The measured output matrix it was designed for.
+    P
+        Certificate: ``(A_i - LC)ᵀP + P(A_i - LC) + 2σP <= 0`` for every mode, so
+        ``|e(t)| <= √κ(P) e^{-σt}|e(0)|`` whatever the plant does.
+    sigma
+        Certified decay rate of the error.
+    gain_bound
+        ``√κ_o``: ``‖L̃‖ <= √κ_o`` in scaled coordinates.
+    kappa
+        Condition number of ``P`` (the overshoot factor is ``√kappa``).
+    scaling, status
+        As in :class:`ConvergentStateFeedback`.
+    """
+
+    L: FloatArray
+    C: FloatArray
+    P: FloatArray
+    sigma: float
+    gain_bound: float
+    kappa: float
+    scaling: Scaling
+    status: str
+
+    def error_bound(self, t: Any, e0_norm: float) -> FloatArray:
+        """``√κ(P) e^{-σt}|e(0)|``."""
+        return np.sqrt(self.kappa) * np.exp(-self.sigma * np.asarray(t, float)) * e0_norm
+
+
+# -- closed loops ----------------------------------------------------------------------------
+
+def _with_feedback(system: Any, B: FloatArray, Ks: Sequence[FloatArray],
+                   ks: Sequence[FloatArray]) -> Any:
+    from dataclasses import replace
+
+    return replace(system, A=tuple(A + B @ K for A, K in zip(system.A, Ks, strict=True)),
+                   b=tuple(b + B @ k for b, k in zip(system.b, ks, strict=True)))
+
+
+def output_feedback_loop(system: Any, observer: ConvergentObserver,
+                         feedback: ConvergentStateFeedback | PWAStateFeedback | None = None
+                         ) -> Any:
+    """Plant + observer + feedback ``u = K_{j(x̂)}x̂ + k_{j(x̂)}`` as one PWA system in
+    ``(x, x̂)`` (2n states, regions = products of plant and observer regions).
+
+    In region ``(i, j)`` (plant in ``i``, estimate in ``j``)::
+
+        x'  = A_i x + b_i + BK_j x̂ + Bk_j + E u(t)
+        x̂' = A_j x̂ + b_j + BK_j x̂ + Bk_j + E u(t) + LC(x - x̂)
+
+    With ``feedback=None`` the plant runs open loop (observer only). The output ``C`` of the
+    result is ``[I, 0]`` (plant state) — use ``x[:, n:]`` for the estimate.
+
+    Notes
+    -----
+    Separation (ch11 §2.5 d): the error decays by the observer certificate whatever the
+    plant does, and the plant is input-to-state convergent under the feedback, so the loop is
+    convergent and its steady state has ``x̂ = x = x̄^{SF}``. A CQLF of the 2n-dimensional loop
+    need not exist; test it by simulation and Floquet multipliers.
+    """
+    from ..systems.pwa import PiecewiseAffineSystem
+
+    n = system.n_states
+    N = len(system.A)
+    if feedback is None:
+        B = np.zeros((n, 1))
+        Ks, ks = (np.zeros((1, n)),) * N, (np.zeros(1),) * N
+    else:
+        B = feedback.B
+        Ks, ks = feedback.gains(N)
+    LC = observer.L @ observer.C
+    As, bs, regions = [], [], []
+    for i in range(N):
+        Hi, hi = system.regions[i]
+        for j in range(N):
+            Hj, hj = system.regions[j]
+            As.append(np.block([[system.A[i], B @ Ks[j]],
+                                [LC, system.A[j] + B @ Ks[j] - LC]]))
+            bs.append(np.concatenate([system.b[i] + B @ ks[j], system.b[j] + B @ ks[j]]))
+            regions.append((np.block([[Hi, np.zeros_like(Hi)], [np.zeros_like(Hj), Hj]]),
+                            np.concatenate([hi, hj])))
+    E = None if system.E is None else np.vstack([system.E, system.E])
+    return PiecewiseAffineSystem(A=tuple(As), b=tuple(bs), regions=tuple(regions), E=E,
+                                 u=system.u, C=np.hstack([np.eye(n), np.zeros((n, n))]),
+                                 continuous=True)
+
+
+# -- designs ---------------------------------------------------------------------------------
+
+def _modes(system: Any) -> tuple[FloatArray, ...]:
+    if not getattr(system, "continuous", True):
+        raise ModelError(f"system: the convergent-PWA designs need a continuous right-hand "
+                         f"side (ch11 §2.2); got a {type(system).__name__} with "
+                         f"continuous=False")
+    return tuple(np.asarray(A, float) for A in system.A)
+
+
+def _input_matrix(system: Any, B: Any) -> FloatArray:
+    n = system.n_states
+    if B is None:
+        B = getattr(system, "E", None)
+        if B is None:
+            raise ModelError("B: the model has no input matrix E; pass the control input "
+                             "matrix B (n, p)")
+        return np.asarray(B, float)
+    B = np.asarray(B, float)
+    return as_matrix("B", B.reshape(n, -1) if B.ndim == 1 and B.size == n else B, rows=n)
+
+
+def design_state_feedback(system: Any, *, sigma: float, B: Any = None,
+                          scale: Scaling | str | None = None) -> ConvergentStateFeedback:
+    """Linear state feedback ``u = Kx`` with decay rate ``σ`` and minimal gain bound (SF-σ).
+
+    Solves, in the coordinates of ``scale``,
+    ``min κ`` s.t. ``Q >= I``, ``[[κI, Y], [Yᵀ, Q]] >= 0``,
+    ``Ã_iQ + QÃ_iᵀ + B̃Y + YᵀB̃ᵀ + 2σ̃Q <= -δI`` (all modes), then ``K̃ = YQ⁻¹``.
+
+    Parameters
+    ----------
+    system
+        Continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`.
+    sigma
+        Decay rate to certify (> 0, 1/time unit of the model).
+    B
+        Control input matrix ``(n, p)``; default: the model's input matrix ``E`` (actuator
+        where the disturbance acts).
+    scale
+        :class:`Scaling`, ``"auto"`` or ``None`` (no scaling).
+
+    Returns
+    -------
+    ConvergentStateFeedback
+        With ``‖K̃‖ <= gain_bound`` and the certificate re-checked.
+
+    Raises
+    ------
+    InfeasibleDesignError
+        No such ``K`` (``status`` holds the solver's diagnosis) or the certificate failed its
+        re-check.
+    ModelError
+        A model declared discontinuous.
+
+    Notes
+    -----
+    Hypotheses: continuous right-hand side (checked: ``continuous=False`` is refused); a
+    linear feedback keeps the closed loop continuous, so the CQLF theorem of ch11 §2.2 applies
+    to ``A_i + BK``; the closed loop is exponentially and input-to-state convergent with rate
+    ``σ``. ``Q >= I`` gives ``‖K̃‖ <= √κ``.
+
+    References
+    ----------
+    D5.3 chapter 11 §2.5(a); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Convergent systems:
+    analysis and synthesis", LNCIS 322, Springer 2005.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from nscontrol.systems.pwa import PiecewiseAffineSystem
+    >>> plant = PiecewiseAffineSystem.bimodal([[0, 1], [-6, -0.1]], [[0, 1], [-1, -0.1]],
+    ...                                       [1, 0], E=[[0], [1]])
+    >>> sf = design_state_feedback(plant, sigma=0.3)
+    >>> np.round(sf.K, 2), round(sf.gain_bound, 2)
+    (array([[-1.48, -1.74]]), 3.9)
+    """
+    As = _modes(system)
+    return _state_feedback(As, _input_matrix(system, B), check_positive("sigma", sigma), scale)
+
+
+def _state_feedback(As: Sequence[FloatArray], B: FloatArray, sigma: float,
+                    scale: Scaling | str | None) -> ConvergentStateFeedback:
+    import cvxpy as cp
+
+    sc = _resolve_scaling(scale, As, B)
+    n, p = B.shape
+    Sinv = np.linalg.inv(sc.S)
+    At = [sc.S @ A @ Sinv / sc.omega for A in As]
+    Bt = sc.S @ B * (sc.input_unit / sc.omega)
+    s_t = sigma / sc.omega
+    Q = cp.Variable((n, n), symmetric=True)
+    Y = cp.Variable((p, n))
+    kappa = cp.Variable()
+    cons = [Q >> np.eye(n), cp.bmat([[kappa * np.eye(p), Y], [Y.T, Q]]) >> 0]
+    cons += [sym(A @ Q + Q @ A.T + Bt @ Y + Y.T @ Bt.T + 2 * s_t * Q) << -LMI_MARGIN * np.eye(n)
+             for A in At]
+    status = try_solve_sdp(cp.Problem(cp.Minimize(kappa), cons))
+    if status != "optimal":
+        raise InfeasibleDesignError(
+            f"design_state_feedback: no linear K certifies decay rate sigma={sigma:g} for all "
+            f"{len(As)} modes (solver status {status!r}); lower sigma or add actuators",
+            status=status)
+    Qv = np.asarray(Q.value)
+    K = sc.input_unit * (np.asarray(Y.value) @ np.linalg.inv(Qv)) @ sc.S
+    P = sc.S.T @ np.linalg.inv(Qv) @ sc.S
+    P = 0.5 * (P + P.T)
+    _recheck([A + B @ K for A in As], P, sigma, who="design_state_feedback", status=status)
+    return ConvergentStateFeedback(K, B, P, sigma, float(np.sqrt(kappa.value)), sc, status)
+
+
+def design_pwa_state_feedback(system: Any, *, nu: Any, sigma: float, B: Any = None,
+                              scale: Scaling | str | None = None) -> PWAStateFeedback:
+    """Continuity-preserving bimodal PWA feedback ``u = Kx + ν·min(cᵀx - d, 0)`` (§2.5 b).
+
+    The continuity constraint ``K_0 - K_1 = νcᵀ`` makes the joint problem bilinear in
+    ``(ν, Q)``; for a *given* ``ν`` the one-sided term is absorbed into the plant
+    (``A_0 ← A_0 + νBcᵀ``, ``b_0 ← b_0 - νBd``) and (SF-σ) is solved for the common ``K``.
+    Scan or bisect ``ν`` outside to trade gain bound against nonlinearity.
+
+    Parameters
+    ----------
+    system
+        Continuous *bimodal* model built by
+        :meth:`~nscontrol.systems.pwa.PiecewiseAffineSystem.bimodal` (region 0: ``cᵀx <= d``).
+    nu
+        Slope of the one-sided term, one entry per input.
+    sigma
+        Decay rate to certify.
+    B, scale
+        As in :func:`design_state_feedback`.
+
+    Raises
+    ------
+    ModelError
+        The model is not bimodal with a single facet.
+    InfeasibleDesignError
+        No common ``K`` for this ``ν``.
+
+    Notes
+    -----
+    Hypotheses: continuous bimodal model (checked); the feedback is continuous by
+    construction, so the closed loop is a continuous PWA system and the CQLF theorem applies;
+    the common ``P`` is re-checked on both closed-loop modes. This extension is ours (not
+    known to be in the chapter).
+
+    References
+    ----------
+    D5.3 chapter 11 §2.5(b) of our spec.
+    """
+    As = _modes(system)
+    B = _input_matrix(system, B)
+    c, d = _bimodal_facet(system)
+    nu = np.atleast_1d(np.asarray(nu, float))
+    if nu.shape != (B.shape[1],):
+        raise DimensionError(f"nu: expected {B.shape[1]} entries (one per input), got "
+                             f"shape {nu.shape}")
+    absorbed = (As[0] + B @ np.outer(nu, c), As[1])
+    sf = _state_feedback(absorbed, B, check_positive("sigma", sigma), scale)
+    K0 = sf.K + np.outer(nu, c)
+    return PWAStateFeedback((K0, sf.K), (-nu * d, np.zeros(B.shape[1])), B, nu, c, d, sf.P,
+                            sigma, sf.gain_bound, sf.scaling, sf.status)
+
+
+def _bimodal_facet(system: Any) -> tuple[FloatArray, float]:
+    """``(c, d)`` of a bimodal model with region 0 ``cᵀx <= d`` and region 1 ``cᵀx >= d``."""
+    regs = system.regions
+    ok = len(regs) == 2 and all(np.shape(H)[0] == 1 for H, _ in regs)
+    if ok:
+        (H0, h0), (H1, h1) = regs
+        ok = np.allclose(H0[0], -H1[0]) and np.isclose(h0[0], -h1[0])
+    if not ok:
+        raise ModelError("system: expected a bimodal model (two half-spaces cᵀx <= d and "
+                         "cᵀx >= d, as built by PiecewiseAffineSystem.bimodal)")
+    return np.asarray(regs[0][0][0], float), float(regs[0][1][0])
+
+
+def design_observer(system: Any, *, sigma: float, C: Any = None,
+                    scale: Scaling | str | None = None) -> ConvergentObserver:
+    """Gain-bounded piecewise-linear observer with error decay rate ``σ`` (OBS-σ).
+
+    Solves ``min κ_o`` s.t. ``P̃ >= I``, ``[[κ_o I, Zᵀ], [Z, P̃]] >= 0``,
+    ``Ã_iᵀP̃ + P̃Ã_i - C̃ᵀZᵀ - ZC̃ + 2σ̃P̃ <= -δI`` (all modes), then ``L̃ = P̃⁻¹Z``.
+
+    Parameters
+    ----------
+    system
+        Continuous PWA model.
+    sigma
+        Error decay rate to certify.
+    C
+        Measured output ``y = Cx`` (default: the model's ``C``).
+    scale
+        As in :func:`design_state_feedback` (``C̃ = CS⁻¹``, ``L = ωS⁻¹L̃``).
+
+    Raises
+    ------
+    InfeasibleDesignError
+        No such ``L``, or the certificate failed its re-check.
+
+    Notes
+    -----
+    The observer chooses its mode by the *estimate*; by the segment lemma of ch11 §2.2
+    (continuity) ``e' = (Σθ_i A_i - LC)e``, so the common ``P`` gives
+    ``|e(t)| <= √κ(P) e^{-σt}|e(0)|`` whatever ``x``, ``u`` and ``w`` — the plant need not be
+    convergent. Hypotheses: continuous model (checked), inputs known to the observer.
+    Without the gain bound the solver places poles far too fast (seen: 2700× on the beam).
+
+    References
+    ----------
+    D5.3 chapter 11 §2.5(c); A. Juloski, W.P.M.H. Heemels, S. Weiland, "Observer design for a
+    class of piecewise linear systems", Int. J. Robust Nonlinear Control, 2007.
+    """
+    import cvxpy as cp
+
+    As = _modes(system)
+    n = As[0].shape[0]
+    C = system.C if C is None else C
+    if C is None:
+        raise ModelError("C: the observer needs the measured output matrix; pass C or build "
+                         "the model with C=...")
+    C = as_matrix("C", np.reshape(C, (-1, n)) if np.ndim(C) == 1 else C, cols=n)
+    sigma = check_positive("sigma", sigma)
+    sc = _resolve_scaling(scale, As, None)
+    q = C.shape[0]
+    Sinv = np.linalg.inv(sc.S)
+    At = [sc.S @ A @ Sinv / sc.omega for A in As]
+    Ct = C @ Sinv
+    s_t = sigma / sc.omega
+    P = cp.Variable((n, n), symmetric=True)
+    Z = cp.Variable((n, q))
+    kappa = cp.Variable()
+    cons = [P >> np.eye(n), cp.bmat([[kappa * np.eye(q), Z.T], [Z, P]]) >> 0]
+    cons += [sym(A.T @ P + P @ A - Ct.T @ Z.T - Z @ Ct + 2 * s_t * P) << -LMI_MARGIN * np.eye(n)
+             for A in At]
+    status = try_solve_sdp(cp.Problem(cp.Minimize(kappa), cons))
+    if status != "optimal":
+        raise InfeasibleDesignError(
+            f"design_observer: no output injection L certifies error decay rate sigma="
+            f"{sigma:g} for all {len(As)} modes (solver status {status!r}); lower sigma or "
+            f"measure more outputs", status=status)
+    Pv = 0.5 * (np.asarray(P.value) + np.asarray(P.value).T)
+    L = sc.omega * Sinv @ np.linalg.solve(Pv, np.asarray(Z.value))
+    Po = sc.S.T @ Pv @ sc.S
+    Po = 0.5 * (Po + Po.T)
+    _recheck([A - L @ C for A in As], Po, sigma, who="design_observer", status=status)
+    lam = np.linalg.eigvalsh(Po)
+    return ConvergentObserver(L, C, Po, sigma, float(np.sqrt(kappa.value)),
+                              float(lam[-1] / lam[0]), sc, status)
