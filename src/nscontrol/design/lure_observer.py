@@ -760,7 +760,7 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     SICONOS D5.3, ch. 8; B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8):1996–2001, 2009;
     M. Arcak, P. Kokotović, Automatica 37, 2001 (single-valued case).
     """
-    from ..laws import require_monotone
+    from ..laws.set_valued import require_monotone
 
     mat, law = _plant_matrices(plant)
     require_monotone(law, who="design_lure_observer", loop_transformation=loop_transformation)
@@ -794,7 +794,7 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
 
 # -- closed loop ---------------------------------------------------------------------------
 def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
-    from ..laws import Product
+    from ..laws.set_valued import Product
     from ..systems.lure import LureSystem
 
     mat, law = _plant_matrices(plant)
@@ -843,7 +843,7 @@ def loop_transformed_lure_system(A: Any, G: Any, H: Any, law: Any, *, sigma: Any
     **lure_options
         ``B``, ``C``, ``u``, ``g``, ``state_names`` of :class:`LureSystem` (no ``D``).
     """
-    from ..laws import require_monotone
+    from ..laws.set_valued import require_monotone
     from ..systems.lure import LureSystem
 
     if "D" in lure_options and lure_options["D"] is not None and np.any(lure_options["D"]):

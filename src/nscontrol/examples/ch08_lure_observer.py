@@ -65,14 +65,14 @@ def _row(*v: float) -> np.ndarray:
 
 
 def _complementarity() -> Any:
-    from ..laws import Complementarity
+    from ..laws.set_valued import Complementarity
 
     return Complementarity(1)
 
 
 def _relay(c: float = 1.0) -> Callable[[], Any]:
     def make() -> Any:
-        from ..laws import Relay
+        from ..laws.set_valued import Relay
 
         return Relay(c)
     return make
@@ -181,7 +181,7 @@ def rotor_standin(output: str = "alpha") -> Scenario:
 
 def rotor_law() -> Any:
     """Monotone part ``φ_m = Stribeck + σ id`` of the lower-disc friction (spec 5.7)."""
-    from ..laws import Stribeck
+    from ..laws.set_valued import Stribeck
 
     p = ROTOR
     law = Stribeck(static=p["T_s"], coulomb=p["T_c"], stribeck_velocity=p["omega_s"],

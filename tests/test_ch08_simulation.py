@@ -1,0 +1,166 @@
+"""Chapter 8, plant + observer as one implicit Euler system: spec §6 checks 4 (discrete
+Lyapunov oracle), 5 (convergence), 7 (plant solver refusals), 8 (regularised cross-check),
+9 (exact sticking), and the closed loop's construction."""
+
+import math
+
+import numpy as np
+import pytest
+
+from nscontrol import simulate
+from nscontrol.design.lure_observer import design_lure_observer, observer_from_gains
+from nscontrol.errors import ModelError
+from nscontrol.examples import ch08_lure_observer as ex
+
+
+def _violations(V, alpha, h):
+    """Steps breaking V_{k+1} <= V_k / (1 + 2 alpha h) (1 + 1e-9) + 1e-14 V_0 (spec §6.4)."""
+    bound = V[:-1] / (1.0 + 2.0 * alpha * h) * (1.0 + 1e-9) + 1e-14 * V[0]
+    return int(np.sum(V[1:] > bound))
+
+
+@pytest.fixture(scope="module")
+def coulomb():
+    s = ex.coulomb_oscillator(0.0)
+    plant = s.plant()
+    design = design_lure_observer(plant, variant="extended", kappa=20.0)
+    return s, plant, design, design.closed_loop(plant)
+
+
+@pytest.fixture(scope="module")
+def coulomb_runs(coulomb):
+    s, _, _, loop = coulomb
+    x0 = np.r_[s.x0, s.xhat0]
+    return {h: simulate(loop, x0, (0.0, 12.0), h=h, progress=False) for h in (1e-2, 1e-3, 1e-4)}
+
+
+@pytest.fixture(scope="module")
+def siconos():
+    s = ex.siconos_observer_lcs()
+    plant = s.plant()
+    design = observer_from_gains(**s.matrices, L=ex.SICONOS_L, P=np.eye(2), alpha=1.0)
+    traj = simulate(design.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, 2.0), h=1e-3,
+                    progress=False)
+    return design, traj
+
+
+def test_closed_loop_is_one_stacked_lure_system(coulomb):
+    s, plant, design, loop = coulomb
+    assert loop.n_states == 4 and loop.n_multipliers == 2
+    np.testing.assert_array_equal(loop.A[2:, :2], design.L @ s.C)
+    np.testing.assert_allclose(loop.H[1], np.hstack([design.K @ s.C, s.H - design.K @ s.C])[0])
+    np.testing.assert_array_equal(loop.C, np.hstack([np.eye(2), -np.eye(2)]))
+
+
+def test_closed_loop_refuses_a_different_plant(coulomb):
+    _, _, design, _ = coulomb
+    with pytest.raises(ModelError, match="differs"):
+        design.closed_loop(ex.coulomb_oscillator(0.1).plant())
+
+
+@pytest.mark.parametrize("h", [1e-2, 1e-3])
+def test_check4_discrete_lyapunov_bound_coulomb(coulomb, coulomb_runs, h):
+    _, _, design, _ = coulomb
+    traj = coulomb_runs[h]
+    V = design.lyapunov(traj.signal("y"))  # the closed loop's output is e = x - xhat
+    assert len(V) == round(12.0 / h) + 1
+    assert _violations(V, design.alpha, h) == 0
+    # the bound is not vacuous: V really decays by many orders of magnitude
+    assert V[-1] < 1e-12 * V[0]
+
+
+def test_check4_discrete_lyapunov_bound_siconos(siconos):
+    design, traj = siconos
+    V = design.lyapunov(traj.signal("y"))
+    assert _violations(V, 1.0, 1e-3) == 0
+
+
+def test_check5_convergence_step_coulomb(coulomb, coulomb_runs):
+    _, _, design, _ = coulomb
+    for h in (1e-2, 1e-3):
+        V = design.lyapunov(coulomb_runs[h].signal("y"))
+        k_bound = math.ceil(math.log(1e6) / math.log(1 + 2 * design.alpha * h))
+        k_hit = int(np.argmax(V <= 1e-6 * V[0]))
+        assert V[k_hit] <= 1e-6 * V[0] and k_hit <= k_bound
+
+
+def test_check5_siconos_error_at_T(siconos):
+    _, traj = siconos
+    assert np.linalg.norm(traj.signal("y")[-1]) <= 10 * math.exp(-2.0)  # 1.3534
+
+
+def test_theta_half_runs_but_has_no_guarantee(siconos):
+    s = ex.siconos_observer_lcs()
+    design, _ = siconos
+    traj = simulate(design.closed_loop(s.plant()), np.r_[s.x0, s.xhat0], (0.0, 2.0), h=1e-3,
+                    theta=0.5, progress=False)
+    assert np.linalg.norm(traj.signal("y")[-1]) <= 10 * math.exp(-2.0)
+
+
+def test_check7_plant_solver_refuses_negative_step_matrix():
+    s = ex.not_passifiable()  # H G = -1 < 0: D_h^plant is not a P-matrix
+    with pytest.raises(ModelError, match="D_h"):
+        simulate(s.plant(), [1.0, 0.0], (0.0, 1.0), h=1e-2, progress=False)
+
+
+def test_check7_plant_solver_refuses_singular_step():
+    from nscontrol.laws.set_valued import Relay
+    from nscontrol.systems.lure import LureSystem
+
+    plant = LureSystem([[10.0]], [[1.0]], [[1.0]], Relay(1.0))
+    with pytest.raises(ModelError, match="singular"):
+        simulate(plant, [1.0], (0.0, 1.0), h=0.1, progress=False)
+
+
+def test_check9_sticking_is_exact_and_step_independent(coulomb, coulomb_runs):
+    s, plant, _, _ = coulomb
+    v3, v4 = coulomb_runs[1e-3].x[:, 1], coulomb_runs[1e-4].x[:, 1]
+    frac3, frac4 = np.mean(np.abs(v3) <= 1e-3), np.mean(np.abs(v4) <= 1e-3)
+    assert 0.1 < frac4 < 0.5
+    assert abs(frac3 - frac4) <= 0.005
+    # stick steps are exact: the law's argument is exactly 0 and the velocity is round-off
+    # (<= 1e-15, the Lemke path of the stacked loop leaves ~1e-20), never a 1e-12 creep
+    z4 = coulomb_runs[1e-4].signal("z")[:, 0]
+    assert np.all(v4[z4 == 0.0] == 0.0)
+    near = np.abs(v4) <= 1e-3
+    assert np.mean(np.abs(v4[near]) <= 1e-15) > 0.95
+    # the plant alone takes the closed-form path: exact zeros on stick steps
+    alone = simulate(plant, s.x0, (0.0, 12.0), h=1e-4, progress=False).x[:, 1]
+    assert np.mean(alone == 0.0) > 0.9 * np.mean(np.abs(alone) <= 1e-3)
+
+
+def _regularised(loop, x0, eps, t_end):
+    from scipy.integrate import solve_ivp
+
+    A, G, H, B = loop.A, loop.G, loop.H, loop.B[:, 0]
+
+    def f(t, x):
+        return A @ x - G @ np.tanh(H @ x / eps) + B * 2.0 * np.sin(t)
+
+    def jac(t, x):
+        dw = (1.0 - np.tanh(H @ x / eps) ** 2) / eps
+        return A - G @ (dw[:, None] * H)
+
+    sol = solve_ivp(f, (0.0, t_end), x0, method="Radau", rtol=1e-9, atol=1e-12, jac=jac,
+                    dense_output=True)
+    assert sol.success
+    return sol
+
+
+def test_check8_regularised_solutions_approach_time_stepping(coulomb, coulomb_runs):
+    s, _, _, loop = coulomb
+    x0 = np.r_[s.x0, s.xhat0]
+    ts = coulomb_runs[1e-4]
+    x5 = ts.x[np.argmin(np.abs(ts.t - 5.0)), :2]
+    # the error at t = 1 against h = 1e-5: at h = 1e-4 the O(h) error of the time-stepping
+    # (about 2e-4) would hide the last decade of eps
+    fine = simulate(loop, x0, (0.0, 1.0), h=1e-5, progress=False)
+    e1 = fine.signal("y")[-1]
+    d_plant, d_err = [], []
+    for eps in (1e-2, 1e-3, 1e-4):
+        sol = _regularised(loop, x0, eps, 5.0)
+        d_plant.append(np.linalg.norm(sol.sol(5.0)[:2] - x5))
+        xe = sol.sol(1.0)
+        d_err.append(np.linalg.norm(xe[:2] - xe[2:] - e1))
+    for d in (d_plant, d_err):
+        assert d[0] / d[1] > 5 and d[1] / d[2] > 5, d
