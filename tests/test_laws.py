@@ -10,11 +10,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nscontrol.errors import (DimensionError, InadmissibleStateError, ModelError)
+from nscontrol.errors import DimensionError, InadmissibleStateError, ModelError
 from nscontrol.laws.impact import NewtonImpactLaw, restitution_matrix
-from nscontrol.laws.set_valued import (Complementarity, Coulomb, MonotoneFunction,
-                                       NormalConeBox, NormalConeInterval, Product, Relay,
-                                       SetValuedLaw, Stribeck, require_monotone, solve_inclusion)
+from nscontrol.laws.set_valued import (
+    Complementarity,
+    Coulomb,
+    MonotoneFunction,
+    NormalConeBox,
+    NormalConeInterval,
+    Product,
+    Relay,
+    SetValuedLaw,
+    Stribeck,
+    require_monotone,
+    solve_inclusion,
+)
 
 SETTINGS = settings(max_examples=60, deadline=None)
 
@@ -348,3 +358,17 @@ def test_bad_input_raises_specific_errors():
         NewtonImpactLaw([0.5, 0.5, 0.5]).apply(np.eye(3), W, [1.0, 0.0, 0.0])
     with pytest.raises(DimensionError, match="active"):
         law.apply(np.eye(3), W, [1.0, 0.0, 0.0], active=[0, 5])
+
+
+def test_domains_and_product_blocks():
+    box = NormalConeBox([0.0, -1.0], [1.0, np.inf])
+    assert box.in_domain([0.5, 10.0]) and not box.in_domain([1.5, 0.0])
+    assert box.in_domain([1.0 + 1e-10, 0.0], tol=1e-9)
+    assert Relay(1.0).in_domain([1e9])
+    prod = Product(Relay(1.0), Product(Complementarity(2), Coulomb(0.5, 2.0)))
+    assert prod.dim == 4 and len(prod.parts) == 3            # nested products flatten
+    assert not prod.in_domain([0.0, -1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(prod.resolvent([3.0, -1.0, 2.0, -4.0], [1.0, 1.0, 1.0, 2.0]),
+                                  [2.0, 0.0, 2.0, -2.0])
+    with pytest.raises(AttributeError):
+        prod.dim = 5

@@ -229,6 +229,10 @@ class SetValuedLaw(ABC):
         """Whether ``v in phi(z)`` up to ``graph_residual(z, v) <= tol``."""
         return self.graph_residual(z, v) <= tol
 
+    def in_domain(self, z: Any, tol: float = 0.0) -> bool:
+        """Whether ``phi(z)`` is nonempty, allowing a violation of the domain by ``tol``."""
+        return self._in_domain(as_vector("z", z, self.dim), float(tol))
+
     def select(self, z: Any) -> FloatArray:
         """The minimum-norm element of ``phi(z)``.
 
@@ -265,6 +269,9 @@ class SetValuedLaw(ABC):
         return f"{type(self).__name__}(dim={self.dim})"
 
     # -- subclass hooks -------------------------------------------------------------------
+    def _in_domain(self, z: FloatArray, tol: float) -> bool:
+        return True    # full domain unless a subclass says otherwise
+
     @abstractmethod
     def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray: ...
 

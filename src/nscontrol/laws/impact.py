@@ -12,8 +12,15 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import (FloatArray, as_matrix, as_square, as_vector,
-                           check_positive, check_positive_definite, check_in_interval)
+from .._validation import (
+    FloatArray,
+    as_matrix,
+    as_square,
+    as_vector,
+    check_in_interval,
+    check_positive,
+    check_positive_definite,
+)
 from ..errors import DimensionError, ModelError, SolverError
 
 __all__ = ["NewtonImpactLaw", "ImpactResult", "restitution_matrix"]

@@ -89,6 +89,9 @@ class NormalConeBox(SetValuedLaw):
     def _graph_distance(self, z: FloatArray, v: FloatArray) -> float:
         return float(np.linalg.norm(box_normal_cone_distance(z, v, self.lower, self.upper)))
 
+    def _in_domain(self, z: FloatArray, tol: float) -> bool:
+        return bool(np.all((z >= self.lower - tol) & (z <= self.upper + tol)))
+
     def _select(self, z: FloatArray) -> FloatArray:
         bad = (z < self.lower) | (z > self.upper)
         if np.any(bad):

@@ -6,9 +6,15 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
+from .._validation import FloatArray, as_vector
 from ..errors import ModelError
-from .base import ComplementarityForm, LoopTransformation, SetValuedLaw, broadcast_parameter
+from .base import (
+    ComplementarityForm,
+    LoopTransformation,
+    SetValuedLaw,
+    as_gamma,
+    broadcast_parameter,
+)
 
 __all__ = ["Product"]
 
@@ -58,6 +64,9 @@ class Product(SetValuedLaw):
         return float(np.hypot.reduce([p._graph_distance(z[s], v[s])
                                       for p, s in zip(self.parts, self._slices, strict=True)]))
 
+    def _in_domain(self, z: FloatArray, tol: float) -> bool:
+        return all(p._in_domain(z[s], tol) for p, s in zip(self.parts, self._slices, strict=True))
+
     def _select(self, z: FloatArray) -> FloatArray:
         return np.concatenate([p._select(z[s])
                                for p, s in zip(self.parts, self._slices, strict=True)])
@@ -65,9 +74,6 @@ class Product(SetValuedLaw):
     def resolvent(self, x: Any, gamma: Any = 1.0) -> FloatArray:
         """Blockwise resolvent; ``gamma`` may be a vector when every part accepts one for its
         block (a non-componentwise part needs a constant ``gamma`` on its block)."""
-        from .base import as_gamma
-        from .._validation import as_vector
-
         x = as_vector("x", x, self.dim)
         g = as_gamma(gamma, self.dim)
         for p, s in zip(self.parts, self._slices, strict=True):
