@@ -171,7 +171,7 @@ def rotor_standin(output: str = "alpha") -> Scenario:
                   [p["k_theta"] / p["J_l"], 0.0, p["sigma"] / p["J_l"]]])
 
     def u(t: Any) -> Any:  # motor torque on the upper disc (our choice)
-        return 0.4 + 0.3 * np.sin(0.5 * np.asarray(t, dtype=float))
+        return 1.0 + 0.5 * np.sin(0.5 * np.asarray(t, dtype=float))
 
     return Scenario(name=f"5.7 rotor stand-in (y = {output})", A=A, G=_col(0, 0, 1 / p["J_l"]),
                     H=_row(0, 0, 1), C=C, law=rotor_law, B=_col(0, 1 / p["J_u"], 0), u=u,
