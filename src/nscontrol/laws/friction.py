@@ -127,6 +127,15 @@ class Stribeck(SetValuedLaw):
     < J``). Use :meth:`loop_transformation` for methods needing monotonicity (ch08 §2.6).
     ``graph_residual`` is exact on the vertical segment and the vertical distance on the
     curved branches. No complementarity form.
+
+    Examples
+    --------
+    >>> law = Stribeck(static=0.3, coulomb=0.1, stribeck_velocity=1.0, delta=2.0, viscous=0.01)
+    >>> law.monotone, round(float(law.sigma_tan[0]), 6)
+    (False, 0.161553)
+    >>> lt = law.loop_transformation()
+    >>> lt.monotone_part.monotone
+    True
     """
 
     static: Any

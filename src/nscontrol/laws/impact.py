@@ -92,6 +92,16 @@ class NewtonImpactLaw:
     e
         Restitution coefficient(s) in ``[0, 1]``: a scalar or one per contact.
 
+    Examples
+    --------
+    Three touching unit balls, the first arriving at speed 1 (simultaneous impact):
+
+    >>> import numpy as np
+    >>> W = np.array([[-1.0, 0.0], [1.0, -1.0], [0.0, 1.0]])   # gaps q2 - q1, q3 - q2
+    >>> res = NewtonImpactLaw(1.0).apply(np.eye(3), W, [1.0, 0.0, 0.0])
+    >>> np.round(res.v_plus, 12).tolist()
+    [-0.333333333333, 0.666666666667, 0.666666666667]
+
     References
     ----------
     Ch. 2 (Martinelli, Menini, Tornambè) for the two-body map; M. Frémond / B. Brogliato,

@@ -147,6 +147,12 @@ class Complementarity(NormalConeBox):
     ----------
     dim
         Number of complementarity pairs.
+
+    Examples
+    --------
+    >>> law = Complementarity(2)
+    >>> law.resolvent([-1.0, 2.0]).tolist(), law.contains([0.0, 3.0], [-4.0, 0.0])
+    ([0.0, 2.0], True)
     """
 
     def __init__(self, dim: int = 1) -> None:
