@@ -372,3 +372,14 @@ def test_domains_and_product_blocks():
                                   [2.0, 0.0, 2.0, -2.0])
     with pytest.raises(AttributeError):
         prod.dim = 5
+
+
+def test_laws_are_cheap_to_vary_with_replace():
+    import dataclasses
+
+    c = dataclasses.replace(Coulomb(0.5, [1.0, 2.0]), mu=0.1)
+    np.testing.assert_allclose(c.bound, [0.1, 0.2])
+    s = dataclasses.replace(Stribeck(0.3, 0.1, 1.0), static=0.1)
+    assert s.monotone and s.sigma_tan[0] == 0.0          # T_s = T_c: Coulomb + viscous
+    with pytest.raises(ModelError, match="bound"):
+        dataclasses.replace(Relay(1.0), bound=-1.0)

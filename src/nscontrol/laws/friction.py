@@ -33,8 +33,9 @@ class Coulomb(Relay):
         Number of contacts when both are scalars (default 1).
     """
 
-    mu: FloatArray
-    normal_force: FloatArray
+    bound: Any = field(init=False, default=None)     # derived: mu * normal_force
+    mu: FloatArray = field(default=None)  # type: ignore[assignment]
+    normal_force: FloatArray = field(default=None)  # type: ignore[assignment]
 
     def __init__(self, mu: Any, normal_force: Any = 1.0, dim: int | None = None) -> None:
         if dim is None:
