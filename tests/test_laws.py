@@ -383,3 +383,20 @@ def test_laws_are_cheap_to_vary_with_replace():
     assert s.monotone and s.sigma_tan[0] == 0.0          # T_s = T_c: Coulomb + viscous
     with pytest.raises(ModelError, match="bound"):
         dataclasses.replace(Relay(1.0), bound=-1.0)
+
+
+def test_graph_residual_is_the_euclidean_distance_for_polyline_graphs(rng):
+    # dense samples of the graphs of 1.5 Sign and N_[-1, 2] in the box [-6, 6]^2
+    t = np.linspace(-6.0, 6.0, 120001)
+    relay_graph = np.concatenate([
+        np.stack([np.zeros_like(t), np.clip(t, -1.5, 1.5)], 1),
+        np.stack([np.abs(t), np.full_like(t, 1.5)], 1),
+        np.stack([-np.abs(t), np.full_like(t, -1.5)], 1)])
+    cone_graph = np.concatenate([
+        np.stack([np.clip(t, -1.0, 2.0), np.zeros_like(t)], 1),
+        np.stack([np.full_like(t, -1.0), -np.abs(t)], 1),
+        np.stack([np.full_like(t, 2.0), np.abs(t)], 1)])
+    for law, graph in ((Relay(1.5), relay_graph), (NormalConeInterval(-1.0, 2.0), cone_graph)):
+        for point in rng.uniform(-3.0, 3.0, (30, 2)):
+            sampled = np.min(np.hypot(*(graph - point).T))
+            assert law.graph_residual([point[0]], [point[1]]) == pytest.approx(sampled, abs=2e-4)

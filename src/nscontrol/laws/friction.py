@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -69,23 +70,29 @@ def _tangent_shape_constant(delta: float) -> float:
     return float(delta * k ** k * np.exp(-k))
 
 
+@functools.lru_cache(maxsize=64)
 def _secant_shape_constant(delta: float) -> float:
     """``sup_x (1 - exp(-x^delta)) / x``: the steepest secant from the static level."""
     if delta < 1.0:
         return np.inf
     if delta == 1.0:
         return 1.0                                  # supremum at x -> 0+
-    from scipy.optimize import minimize_scalar
 
     def ratio(x: float) -> float:
         return float(-np.expm1(-x ** delta) / x)
 
+    # coarse log grid, then golden-section refinement around the best node (unimodal there)
     grid = np.logspace(-6, 3, 400)
     i = int(np.argmax([ratio(x) for x in grid]))
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-    best = minimize_scalar(lambda x: -ratio(x), bounds=(lo, hi), method="bounded",
-                           options={"xatol": 1e-12})
-    return max(ratio(float(best.x)), ratio(grid[i]))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    invphi = (np.sqrt(5.0) - 1.0) / 2.0
+    while b - a > 1e-13 * b:
+        c, d = b - invphi * (b - a), a + invphi * (b - a)
+        if ratio(c) >= ratio(d):
+            b = d
+        else:
+            a = c
+    return max(ratio(0.5 * (a + b)), ratio(grid[i]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,7 +182,7 @@ class Stribeck(SetValuedLaw):
         object.__setattr__(self, "dim", dim)
         drop = (ts - tc) / ws
         kt = np.array([_tangent_shape_constant(d) for d in dl])
-        ks = np.array([_secant_shape_constant(d) for d in dl])
+        ks = np.array([_secant_shape_constant(float(d)) for d in dl])
         with np.errstate(invalid="ignore"):
             raw_tan = np.where(drop > 0.0, drop * kt, 0.0) - b
             raw_sec = np.where(drop > 0.0, drop * ks, 0.0) - b
