@@ -1,0 +1,504 @@
+"""Linear matrix inequalities on CVXPY, with certificates that are checked, not trusted.
+
+An :class:`LMIProblem` collects named variables and named constraints, each one a *strict*
+LMI written with an explicit margin (``F(x) ⪰ margin·I``, the block symmetrised before CVXPY
+sees it) or a linear equality. :meth:`LMIProblem.solve` runs Clarabel and falls back to SCS
+(tight tolerances) when Clarabel errors out or is inaccurate, then **re-checks every
+constraint in NumPy at the returned values**: the smallest eigenvalue of each LMI block and
+the residual of each equality. The result is an :class:`LMIResult` (frozen) with the values,
+the status, the solver that produced them and the margin of every constraint.
+
+Decisions, in order:
+
+* solver status ``infeasible``/``unbounded`` (or no solver succeeding) ->
+  :class:`~nscontrol.errors.InfeasibleDesignError` naming the problem, its constraints and the
+  status;
+* a block whose smallest eigenvalue is below ``recheck_fraction · margin`` (default 0.5;
+  for a zero margin: below ``-1e-9·scale``) or an equality residual above ``eq_tol`` ->
+  ``InfeasibleDesignError(status="recheck_failed")`` naming the constraint;
+* a block that passes but with less than 0.9 of its requested margin, or a solution from an
+  ``*_inaccurate`` status -> :class:`~nscontrol.errors.InaccurateCertificateWarning`.
+
+Badly scaled data (mechanical models with stiffnesses ~1e5) is handled by :class:`Scaling`: a
+diagonal similarity (``scipy.linalg.matrix_balance`` on ``Σ|A_i|``) and a time scale
+``ω = max ||Ã_i||``, under which Lyapunov-type LMIs are invariant (``P = D^{-1} P̃ D^{-1}``,
+decay rates ``α = ω α̃``). :func:`bisect_max` maximises a scalar (a decay rate) over a
+quasi-convex family of problems.
+
+References
+----------
+D5.3 chapter 8, section 2.3 and chapter 11, section 3.5 (LMI numerics); Boyd, El Ghaoui,
+Feron, Balakrishnan, *Linear Matrix Inequalities in System and Control Theory*, SIAM 1994.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import scipy.linalg
+
+from .._validation import FloatArray, as_square, check_positive
+from ..errors import InaccurateCertificateWarning, InfeasibleDesignError, ModelError
+
+__all__ = ["LMIProblem", "LMIResult", "Scaling", "BisectionResult", "bisect_max",
+           "lyapunov_certificate", "max_decay_rate", "sym"]
+
+SolverName = Literal["auto", "CLARABEL", "SCS"]
+_ACCEPTED = ("optimal", "optimal_inaccurate")
+_SCS_OPTIONS = {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 20_000}
+
+
+def sym(expr: Any) -> Any:
+    """``(M + Mᵀ)/2`` of a square CVXPY expression or array."""
+    return 0.5 * (expr + expr.T)
+
+
+@dataclass(frozen=True)
+class LMIResult:
+    """A solved and re-checked LMI problem.
+
+    Attributes
+    ----------
+    values : dict of str to ndarray
+        Value of every declared variable (symmetric ones exactly symmetrised).
+    status : str
+        CVXPY status of the accepted solve (``"optimal"`` or ``"optimal_inaccurate"``).
+    solver : str
+        The solver that produced the values.
+    margins : dict of str to float
+        Smallest eigenvalue of each LMI block in its ``F ⪰ 0`` orientation (for
+        ``F ⪯ -m·I`` that is ``-λ_max(F)``), re-computed in NumPy.
+    required : dict of str to float
+        The margin each LMI asked for.
+    residuals : dict of str to float
+        Relative Frobenius residual of each equality constraint.
+    objective : float or None
+        Optimal value (None for a feasibility problem).
+    """
+
+    values: dict[str, FloatArray]
+    status: str
+    solver: str
+    margins: dict[str, float]
+    required: dict[str, float]
+    residuals: dict[str, float] = field(default_factory=dict)
+    objective: float | None = None
+
+    def __getitem__(self, name: str) -> FloatArray:
+        return self.values[name]
+
+    @property
+    def min_slack(self) -> float:
+        """Smallest ``margin - required`` over the LMIs (``inf`` when there are none)."""
+        return min((self.margins[k] - self.required[k] for k in self.margins),
+                   default=float("inf"))
+
+
+@dataclass
+class _Block:
+    name: str
+    expr: Any           # CVXPY expression F with F ⪰ margin I required
+    margin: Any         # float or scalar CVXPY expression
+
+
+@dataclass
+class _Equality:
+    name: str
+    lhs: Any
+    rhs: FloatArray
+
+
+class LMIProblem:
+    """A builder for LMI feasibility/optimisation problems with strict margins.
+
+    Parameters
+    ----------
+    name : str
+        Used in error messages (e.g. ``"Lur'e observer (ch08 eq. 1-2)"``).
+
+    Examples
+    --------
+    >>> A = np.array([[-1.0, 2.0], [0.0, -3.0]])
+    >>> prob = LMIProblem("Lyapunov")
+    >>> P = prob.symmetric("P", 2)
+    >>> prob.positive("P > 0", P, margin=1.0)
+    >>> prob.negative("A'P + PA < 0", A.T @ P + P @ A, margin=1e-3)
+    >>> res = prob.solve()
+    >>> bool(np.all(np.linalg.eigvalsh(A.T @ res["P"] + res["P"] @ A) < 0))
+    True
+    """
+
+    def __init__(self, name: str = "LMI problem") -> None:
+        self.name = name
+        self._vars: dict[str, Any] = {}
+        self._symmetric: set[str] = set()
+        self._blocks: list[_Block] = []
+        self._equalities: list[_Equality] = []
+
+    # -- variables ---------------------------------------------------------------------------
+    def symmetric(self, name: str, n: int) -> Any:
+        """A new symmetric ``n × n`` variable."""
+        import cvxpy as cp
+
+        self._symmetric.add(name)
+        return self._declare(name, cp.Variable((n, n), symmetric=True, name=name))
+
+    def variable(self, name: str, shape: int | tuple[int, ...] = ()) -> Any:
+        """A new unstructured variable (``shape=()`` for a scalar)."""
+        import cvxpy as cp
+
+        return self._declare(name, cp.Variable(shape, name=name))
+
+    def _declare(self, name: str, var: Any) -> Any:
+        if name in self._vars:
+            raise ModelError(f"name: variable {name!r} is already declared in {self.name}")
+        self._vars[name] = var
+        return var
+
+    # -- constraints -------------------------------------------------------------------------
+    def positive(self, name: str, expr: Any, margin: Any = 0.0) -> None:
+        """Require ``sym(expr) ⪰ margin·I`` (``margin`` a float ≥ 0 or a scalar variable)."""
+        self._add_block(name, expr, margin, sign=1.0)
+
+    def negative(self, name: str, expr: Any, margin: Any = 0.0) -> None:
+        """Require ``sym(expr) ⪯ -margin·I``."""
+        self._add_block(name, expr, margin, sign=-1.0)
+
+    def equal(self, name: str, lhs: Any, rhs: Any = 0.0) -> None:
+        """Require ``lhs == rhs`` (``rhs`` numeric data)."""
+        self._check_name(name)
+        self._equalities.append(_Equality(name, lhs, np.asarray(rhs, dtype=float)))
+
+    def _add_block(self, name: str, expr: Any, margin: Any, sign: float) -> None:
+        self._check_name(name)
+        shape = tuple(getattr(expr, "shape", np.shape(expr)))
+        if len(shape) != 2 or shape[0] != shape[1]:
+            raise ModelError(f"{name}: expected a square matrix expression, got shape {shape}")
+        if _is_number(margin):
+            check_positive(f"margin of {name!r}", margin, allow_zero=True)
+        self._blocks.append(_Block(name, sign * sym(expr), margin))
+
+    def _check_name(self, name: str) -> None:
+        taken = {b.name for b in self._blocks} | {e.name for e in self._equalities}
+        if name in taken:
+            raise ModelError(f"name: constraint {name!r} is already used in {self.name}")
+
+    # -- solve -------------------------------------------------------------------------------
+    def solve(self, *, minimize: Any = None, maximize: Any = None,
+              solver: SolverName = "auto", recheck_fraction: float = 0.5,
+              eq_tol: float = 1e-7) -> LMIResult:
+        """Solve, then re-check every constraint at the returned values.
+
+        Parameters
+        ----------
+        minimize, maximize : CVXPY scalar expression, optional
+            Objective (at most one); feasibility problem when both are None.
+        solver : {"auto", "CLARABEL", "SCS"}
+            ``"auto"``: Clarabel, then SCS when Clarabel fails or is inaccurate.
+        recheck_fraction : float
+            A block passes the re-check when its smallest eigenvalue is at least this
+            fraction of its requested margin.
+        eq_tol : float
+            Largest accepted relative residual ``||lhs - rhs||_F / max(1, ||rhs||_F)``.
+
+        Returns
+        -------
+        LMIResult
+
+        Raises
+        ------
+        InfeasibleDesignError
+            The solver reports infeasibility (``status`` holds its status), no solver
+            succeeded, or the re-check failed (``status="recheck_failed"``).
+        """
+        import cvxpy as cp
+
+        if minimize is not None and maximize is not None:
+            raise ModelError("minimize, maximize: expected at most one objective, got both")
+        objective = (cp.Minimize(minimize) if minimize is not None
+                     else cp.Maximize(maximize) if maximize is not None else cp.Minimize(0))
+        problem = cp.Problem(objective, self._constraints())
+        status, used = self._run(problem, solver)
+        if status not in _ACCEPTED:
+            raise InfeasibleDesignError(
+                f"{self.name}: no certificate — solver {used} returned status {status!r} for "
+                f"the constraints {', '.join(self._names())}; relax margins or bounds, or "
+                "check the model (e.g. stabilisability/detectability)", status=status)
+        result = self._recheck(status, used, recheck_fraction, eq_tol,
+                               None if minimize is None and maximize is None
+                               else float(problem.value))
+        if status != "optimal":
+            warnings.warn(f"{self.name}: solver {used} returned {status!r}; the certificate "
+                          f"passed the re-check (min slack {result.min_slack:.3g})",
+                          InaccurateCertificateWarning, stacklevel=2)
+        return result
+
+    def _names(self) -> list[str]:
+        return [b.name for b in self._blocks] + [e.name for e in self._equalities]
+
+    def _constraints(self) -> list[Any]:
+        out = []
+        for b in self._blocks:
+            k = b.expr.shape[0]
+            out.append(b.expr - b.margin * np.eye(k) >> 0)
+        out.extend(e.lhs == e.rhs for e in self._equalities)
+        return out
+
+    def _run(self, problem: Any, solver: SolverName) -> tuple[str, str]:
+        """Solve with the requested solver(s); return (status, solver used)."""
+        import cvxpy as cp
+
+        order = ["CLARABEL", "SCS"] if solver == "auto" else [solver]
+        status, used = "solver_error", order[0]
+        for name in order:
+            options = _SCS_OPTIONS if name == "SCS" else {}
+            try:
+                with warnings.catch_warnings():  # we judge accuracy ourselves (re-check)
+                    warnings.filterwarnings("ignore", "Solution may be inaccurate")
+                    problem.solve(solver=name, **options)
+            except cp.error.SolverError:
+                status, used = "solver_error", name
+                continue
+            status, used = str(problem.status), name
+            if status == "optimal" or status in ("infeasible", "unbounded"):
+                break  # a decision: no fallback needed
+        return status, used
+
+    def _recheck(self, status: str, used: str, fraction: float, eq_tol: float,
+                 objective: float | None) -> LMIResult:
+        values = {}
+        for name, var in self._vars.items():
+            v = np.asarray(var.value, dtype=float)
+            values[name] = 0.5 * (v + v.T) if name in self._symmetric else v
+        margins, required, residuals = {}, {}, {}
+        for b in self._blocks:
+            F = np.asarray(b.expr.value, dtype=float)
+            F = 0.5 * (F + F.T)
+            lam = float(np.linalg.eigvalsh(F)[0])
+            req = float(np.asarray(getattr(b.margin, "value", b.margin), dtype=float))
+            margins[b.name], required[b.name] = lam, req
+            tiny = 1e-9 * max(1.0, float(np.abs(F).max()))
+            if _is_number(b.margin):
+                floor = fraction * req if req > 0 else -tiny
+            else:  # a decision variable (e.g. maximised margin t): hold to what it claims
+                floor = req - abs(req) * (1.0 - fraction) - tiny
+            if not np.isfinite(lam) or lam < floor:
+                raise InfeasibleDesignError(
+                    f"{self.name}: re-check failed for {b.name!r}: smallest eigenvalue "
+                    f"{lam:.3g} < {floor:.3g} ({fraction} × requested margin {req:.3g}) at the "
+                    f"values returned by {used} ({status}); the problem is at or beyond its "
+                    "feasibility boundary — relax the design target or rescale the data",
+                    status="recheck_failed")
+            if _is_number(b.margin) and req > 0 and lam < 0.9 * req:
+                warnings.warn(f"{self.name}: {b.name!r} holds with smallest eigenvalue "
+                              f"{lam:.3g}, less than 0.9 × the requested margin {req:.3g}",
+                              InaccurateCertificateWarning, stacklevel=3)
+        for e in self._equalities:
+            lhs = np.asarray(e.lhs.value, dtype=float)
+            res = float(np.linalg.norm(lhs - e.rhs) / max(1.0, float(np.linalg.norm(e.rhs))))
+            residuals[e.name] = res
+            if not res <= eq_tol:
+                raise InfeasibleDesignError(
+                    f"{self.name}: re-check failed for equality {e.name!r}: relative "
+                    f"residual {res:.3g} > {eq_tol:.3g} at the values returned by {used}",
+                    status="recheck_failed")
+        return LMIResult(values, status, used, margins, required, residuals, objective)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating))
+
+
+# ----------------------------------------------------------------------------- scaling
+@dataclass(frozen=True)
+class Scaling:
+    """State and time scaling ``x̃ = D^{-1} x``, ``τ = ω t``: ``Ã = D^{-1} A D / ω``.
+
+    Attributes
+    ----------
+    d : ndarray
+        Diagonal of ``D`` (powers of two, from balancing: exact in floating point).
+    omega : float
+        Time scale.
+    """
+
+    d: FloatArray
+    omega: float
+
+    @classmethod
+    def for_matrices(cls, As: Sequence[Any]) -> Scaling:
+        """A common balancing similarity and time scale for the matrices ``As``."""
+        mats = [as_square(f"As[{i}]", A) for i, A in enumerate(As)]
+        if not mats:
+            raise ModelError("As: expected at least one matrix, got none")
+        _, (d, _) = scipy.linalg.matrix_balance(sum(np.abs(A) for A in mats), permute=False,
+                                                separate=True)
+        d = d.astype(float)
+        norms = [np.linalg.norm(A * (1.0 / d)[:, None] * d[None, :], 2) for A in mats]
+        omega = max(max(norms), 1e-300)
+        return cls(d, float(omega))
+
+    def matrix(self, A: Any) -> FloatArray:
+        """``D^{-1} A D / ω``."""
+        return np.asarray(A, dtype=float) / self.d[:, None] * self.d[None, :] / self.omega
+
+    def quadratic_back(self, P_scaled: Any) -> FloatArray:
+        """``P = D^{-1} P̃ D^{-1}`` so that ``x̃ᵀ P̃ x̃ = xᵀ P x``."""
+        return np.asarray(P_scaled, dtype=float) / self.d[:, None] / self.d[None, :]
+
+
+# ----------------------------------------------------------------------------- Lyapunov
+def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
+                         scale: bool = True, solver: SolverName = "auto") -> LMIResult:
+    """A quadratic Lyapunov function proving ``Re λ(A) < -decay``.
+
+    Solves ``P ⪰ I``, ``AᵀP + PA + 2·decay·P ⪯ -margin·I`` (after :class:`Scaling` when
+    ``scale``), maps ``P`` back to the original coordinates and checks the unscaled
+    inequalities once more (``P ≻ 0``, ``λ_max(AᵀP + PA + 2·decay·P) < 0``).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        System matrix.
+    decay : float
+        Required exponential decay rate ``α`` of ``V(x) = xᵀPx`` (``V' ≤ -2αV``).
+    margin : float
+        Strictness margin of the (scaled) LMI.
+    scale : bool
+        Balance and time-scale ``A`` first (recommended for badly scaled data).
+    solver : {"auto", "CLARABEL", "SCS"}
+
+    Returns
+    -------
+    LMIResult
+        ``values["P"]`` in the original coordinates; margins of the scaled problem.
+
+    Raises
+    ------
+    InfeasibleDesignError
+        No such ``P`` (e.g. ``A + decay·I`` not Hurwitz).
+
+    Notes
+    -----
+    Hypotheses of the Lyapunov theorem: ``A`` constant; the LMI is feasible iff every
+    eigenvalue has real part ``< -decay``. Scaling is a similarity plus a time scale, under
+    which feasibility is invariant (``decay`` is divided by ``ω``).
+
+    References
+    ----------
+    D5.3 chapter 11, section 3.5; Boyd et al. 1994, section 2.2.
+    """
+    A = as_square("A", A)
+    n = A.shape[0]
+    sc = Scaling.for_matrices([A]) if scale else Scaling(np.ones(n), 1.0)
+    As, alpha = sc.matrix(A), float(decay) / sc.omega
+    prob = LMIProblem(f"Lyapunov certificate (decay {decay:.6g})")
+    P = prob.symmetric("P", n)
+    prob.positive("P >= I", P, margin=1.0)
+    prob.negative("A'P + PA + 2 decay P < 0", As.T @ P + P @ As + 2.0 * alpha * P,
+                  margin=margin)
+    res = prob.solve(solver=solver)
+    P_orig = sc.quadratic_back(res["P"])
+    # re-verify the returned P itself; eigenvalues are taken on the congruent form
+    # D (AᵀP + PA + 2αP) D / ω (D powers of two: exact), which has the same inertia and is
+    # well conditioned even when A is not
+    Pc = P_orig * sc.d[:, None] * sc.d[None, :]
+    lyap = As.T @ Pc + Pc @ As + 2.0 * alpha * Pc
+    lam_max = float(np.linalg.eigvalsh(0.5 * (lyap + lyap.T))[-1])
+    if not (np.linalg.eigvalsh(Pc)[0] > 0.0 and lam_max < 0.0):
+        raise InfeasibleDesignError(
+            f"A: the certificate does not hold in the original coordinates "
+            f"(λ_max of the scaled AᵀP + PA + 2αP = {lam_max:.3g}); decay {decay} is too close "
+            "to the spectral abscissa", status="recheck_failed")
+    return LMIResult({"P": P_orig}, res.status, res.solver, res.margins, res.required,
+                     res.residuals, res.objective)
+
+
+# ----------------------------------------------------------------------------- bisection
+@dataclass(frozen=True)
+class BisectionResult:
+    """Largest feasible value found by :func:`bisect_max`.
+
+    Attributes
+    ----------
+    value : float
+        Largest value proven feasible (the lower end of the final bracket).
+    upper : float
+        Smallest value found infeasible (``value`` when the upper end was feasible).
+    result : Any
+        What the feasibility callback returned at ``value`` (e.g. an :class:`LMIResult`).
+    iterations : int
+        Number of problems solved.
+    """
+
+    value: float
+    upper: float
+    result: Any
+    iterations: int
+
+
+def bisect_max(feasible: Callable[[float], Any], lo: float, hi: float, *,
+               tol: float = 1e-4, max_iter: int = 60) -> BisectionResult:
+    """Largest ``s`` in ``[lo, hi]`` for which ``feasible(s)`` succeeds (quasi-convexity).
+
+    ``feasible(s)`` returns a certificate, or raises :class:`InfeasibleDesignError` (or
+    returns None) when ``s`` is infeasible. Feasibility must be monotone: feasible at ``s``
+    implies feasible at every smaller ``s`` (e.g. a decay rate).
+
+    Raises
+    ------
+    InfeasibleDesignError
+        Already infeasible at ``lo``.
+    """
+    lo, hi = float(lo), float(hi)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise ModelError(f"lo, hi: expected finite lo < hi, got ({lo}, {hi})")
+    check_positive("tol", tol)
+
+    def attempt(s: float) -> Any:
+        try:
+            return feasible(s)
+        except InfeasibleDesignError:
+            return None
+
+    best = attempt(lo)
+    iterations = 1
+    if best is None:
+        raise InfeasibleDesignError(f"lo: the problem is infeasible already at the lower end "
+                                    f"{lo}; lower it or check the model",
+                                    status="infeasible_at_lower_bound")
+    top = attempt(hi)
+    iterations += 1
+    if top is not None:
+        return BisectionResult(hi, hi, top, iterations)
+    while hi - lo > tol and iterations < max_iter:
+        mid = 0.5 * (lo + hi)
+        res = attempt(mid)
+        iterations += 1
+        if res is None:
+            hi = mid
+        else:
+            lo, best = mid, res
+    return BisectionResult(lo, hi, best, iterations)
+
+
+def max_decay_rate(A: Any, *, tol: float = 1e-4, margin: float = 1e-6,
+                   solver: SolverName = "CLARABEL") -> BisectionResult:
+    """Largest ``α`` with a Lyapunov certificate ``AᵀP + PA + 2αP ≺ 0`` (bisection).
+
+    For a constant ``A`` it approaches minus the spectral abscissa ``-max Re λ(A)`` from
+    below; used as a self-check of the LMI machinery. Near the boundary solvers become
+    inaccurate; an undecided solve counts as infeasible, so the value is a proven lower
+    bound. Clarabel alone by default (the SCS fallback is slow there and decides nothing).
+    """
+    A = as_square("A", A)
+    bound = float(np.linalg.norm(A, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InaccurateCertificateWarning)
+        return bisect_max(lambda a: lyapunov_certificate(A, decay=a, margin=margin,
+                                                         solver=solver),
+                          -bound - 1.0, bound + 1.0, tol=tol)
