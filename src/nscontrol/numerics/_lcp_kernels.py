@@ -469,3 +469,84 @@ def is_tridiagonal(M):
             if (j > i + 1 or j < i - 1) and M[i, j] != 0.0:
                 return False
     return True
+
+
+@njit(cache=True)
+def csr_tridiagonal_bands(indptr, indices, data, lower, diag, upper):
+    """Fill ``(lower, diag, upper)`` from a CSR matrix; False when an entry lies beyond the
+    first off-diagonals (the matrix is not tridiagonal)."""
+    n = diag.shape[0]
+    diag[:] = 0.0
+    lower[:] = 0.0
+    upper[:] = 0.0
+    for i in range(n):
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            v = data[k]
+            if j == i:
+                diag[i] += v
+            elif j == i + 1:
+                upper[i] += v
+            elif j == i - 1:
+                lower[j] += v
+            elif v != 0.0:
+                return False
+    return True
+
+
+# --------------------------------------------------------------------------------- verification
+_EPS = np.finfo(np.float64).eps
+
+
+@njit(cache=True)
+def _residual_and_floor(z, w, q, row_sum_max):
+    """Natural residual, and the round-off floor ``64 eps (||M|| ||z|| + ||q||) / (1 + ||q||)``
+    below which no evaluation of ``M z + q`` can certify anything."""
+    zmax = 0.0
+    qmax = 0.0
+    for i in range(q.shape[0]):
+        zmax = max(zmax, abs(z[i]))
+        qmax = max(qmax, abs(q[i]))
+    floor = 64.0 * _EPS * (row_sum_max * zmax + qmax) / (1.0 + qmax)
+    return natural_residual(z, w, q), floor
+
+
+@njit(cache=True)
+def verify_dense(M, q, z, w_out):
+    """``w_out = M z + q``; returns ``(residual, round-off floor)``."""
+    n = q.shape[0]
+    row_sum_max = 0.0
+    for i in range(n):
+        s = q[i]
+        a = 0.0
+        for j in range(n):
+            s += M[i, j] * z[j]
+            a += abs(M[i, j])
+        w_out[i] = s
+        row_sum_max = max(row_sum_max, a)
+    return _residual_and_floor(z, w_out, q, row_sum_max)
+
+
+@njit(cache=True)
+def verify_tridiagonal(lower, diag, upper, q, z, w_out):
+    """``w_out = M z + q`` for tridiagonal ``M``; returns ``(residual, round-off floor)``."""
+    n = q.shape[0]
+    _tridiag_w(lower, diag, upper, q, z, w_out)
+    row_sum_max = 0.0
+    for i in range(n):
+        a = abs(diag[i])
+        if i > 0:
+            a += abs(lower[i - 1])
+        if i < n - 1:
+            a += abs(upper[i])
+        row_sum_max = max(row_sum_max, a)
+    return _residual_and_floor(z, w_out, q, row_sum_max)
+
+
+@njit(cache=True)
+def all_finite(a):
+    """True when every entry of the 1-d array ``a`` is finite (no temporaries)."""
+    for i in range(a.shape[0]):
+        if not np.isfinite(a[i]):
+            return False
+    return True

@@ -41,8 +41,6 @@ AUTO_PGS_MIN_SIZE = 400
 #: ``auto`` does not fall back to dense Lemke above this size (memory n^2, time n^3).
 AUTO_LEMKE_MAX_SIZE = 3000
 
-_EPS = np.finfo(np.float64).eps
-
 
 @dataclass(frozen=True)
 class LCPResult:
@@ -89,7 +87,7 @@ def residual(M: Any, z: Any, q: Any) -> float:
     """
     z = np.asarray(z, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
-    return _natural_residual(z, M @ z + q, q)
+    return _natural_residual(z, np.asarray(M @ z + q, dtype=np.float64).ravel(), q)
 
 
 def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
@@ -178,7 +176,8 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
         if result.success:
             break
     assert result is not None
-    result = _with_message(result, "; ".join(tried))
+    result = LCPResult(result.z, result.w, result.status, result.iterations, result.residual,
+                       result.method, "; ".join(tried))
     if strict and not result.success:
         raise SolverError(f"solve_lcp: no verified solution of the LCP of size {problem.n} "
                           f"({result.message}); check that M is a P-matrix or copositive-plus, "
@@ -211,7 +210,8 @@ class _Problem:
 
     @classmethod
     def build(cls, M: Any, q: Any, z0: Any) -> _Problem:
-        q = as_vector("q", q)
+        if not _clean(q, 1):
+            q = as_vector("q", q)
         M = _as_lcp_matrix(M)
         if M.shape[0] != q.shape[0]:
             raise DimensionError(f"q: expected a vector of length {M.shape[0]} (the size of "
@@ -223,14 +223,25 @@ class _Problem:
 def _as_lcp_matrix(M: Any) -> Any:
     """A finite square dense float array, or a finite square scipy.sparse CSR matrix."""
     if hasattr(M, "tocsr") and not isinstance(M, np.ndarray):
-        csr = M.tocsr().astype(np.float64)
+        csr = M.tocsr()
+        if csr.dtype != np.float64:
+            csr = csr.astype(np.float64)
         if csr.ndim != 2 or csr.shape[0] != csr.shape[1]:
             raise DimensionError(f"M: expected a square matrix, got shape {csr.shape}")
         check_finite("M", csr.data)
         return csr
+    if _clean(M, 2) and M.shape[0] == M.shape[1]:
+        return M
     if np.ndim(M) == 0:  # a scalar is a 1x1 LCP
         M = np.reshape(as_float_array("M", M), (1, 1))
     return np.ascontiguousarray(as_square("M", M))
+
+
+def _clean(a: Any, ndim: int) -> bool:
+    """Fast path: already a C-contiguous finite float64 array of rank ``ndim`` (the checks of
+    ``nscontrol._validation`` run otherwise, and raise their specific errors)."""
+    return (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == ndim
+            and a.flags.c_contiguous and bool(kernels.all_finite(a.reshape(-1))))
 
 
 def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
@@ -241,13 +252,11 @@ def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
             return None
         return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
                 np.ascontiguousarray(np.diagonal(M, 1)))
-    coo = M.tocoo()
-    mask = coo.data != 0.0
-    if np.any(np.abs(coo.row[mask] - coo.col[mask]) > 1):
+    n = M.shape[0]
+    lower, diag, upper = np.empty(max(n - 1, 0)), np.empty(n), np.empty(max(n - 1, 0))
+    if not kernels.csr_tridiagonal_bands(M.indptr, M.indices, M.data, lower, diag, upper):
         return None
-    return (np.asarray(M.diagonal(-1), dtype=np.float64),
-            np.asarray(M.diagonal(0), dtype=np.float64),
-            np.asarray(M.diagonal(1), dtype=np.float64))
+    return lower, diag, upper
 
 
 def _method_chain(problem: _Problem, method: str) -> list[str]:
@@ -376,36 +385,36 @@ def _natural_residual(z: NDArray[np.float64], w: NDArray[np.float64],
                       q: NDArray[np.float64]) -> float:
     if z.size == 0:
         return 0.0
-    res = float(np.max(np.abs(np.minimum(z, w))))
-    return res / (1.0 + float(np.max(np.abs(q))))
+    return float(kernels.natural_residual(z, w, q))
 
 
-def _roundoff_floor(problem: _Problem, z: NDArray[np.float64]) -> float:
-    """Residual attainable when evaluating ``M z + q`` in floating point."""
-    M = problem.M
+def _verify(problem: _Problem, z: NDArray[np.float64]) -> tuple[NDArray[np.float64], float,
+                                                                 float]:
+    """``w = M z + q`` recomputed, the residual and the round-off floor (see solve_lcp)."""
+    w = np.empty_like(z)
     if problem.n == 0:
-        return 0.0
-    row_sums = np.asarray(abs(M).sum(axis=1)).ravel()
-    qmax = float(np.max(np.abs(problem.q)))
-    return 64 * _EPS * (float(row_sums.max()) * float(np.max(np.abs(z))) + qmax) / (1.0 + qmax)
+        return w, 0.0, 0.0
+    if problem.bands is not None:
+        lower, diag, upper = problem.bands
+        res, floor = kernels.verify_tridiagonal(lower, diag, upper, problem.q, z, w)
+    elif isinstance(problem.M, np.ndarray):
+        res, floor = kernels.verify_dense(problem.M, problem.q, z, w)
+    else:
+        w = np.asarray(problem.M @ z + problem.q, dtype=np.float64)
+        row_sum_max = float(np.asarray(abs(problem.M).sum(axis=1)).max())
+        res, floor = kernels._residual_and_floor(z, w, problem.q, row_sum_max)
+    return w, float(res), float(floor)
 
 
 def _result(problem: _Problem, z: NDArray[np.float64], code: int, iterations: int,
             method: str, tol: float) -> LCPResult:
     """Recompute ``w`` from ``z`` and accept "solved" only if the residual passes."""
     z = np.array(z, dtype=np.float64)
-    w = np.asarray(problem.M @ z + problem.q, dtype=np.float64).ravel()
-    res = _natural_residual(z, w, problem.q)
+    w, res, floor = _verify(problem, z)
     status = STATUSES[int(code)]
-    if status == "solved" and not (res <= max(tol, _roundoff_floor(problem, z))):
+    if status == "solved" and not (res <= max(tol, floor)):
         status = "numerical_failure"
     z.setflags(write=False)
     w.setflags(write=False)
     return LCPResult(z=z, w=w, status=status, iterations=int(iterations), residual=res,
                      method=method)
-
-
-def _with_message(result: LCPResult, message: str) -> LCPResult:
-    from dataclasses import replace
-
-    return replace(result, message=message)

@@ -1,0 +1,159 @@
+"""LCP solver speed: nscontrol's methods against Siconos's Lemke and PGS, in the same run.
+
+Scenarios: random P-matrices (n = 10, 100; Lemke and auto), random symmetric positive
+definite matrices (n = 10, 100; PGS), and the tridiagonal Delassus matrix of a stack of N unit
+masses at rest (N = 10, 100, 1000, 10000; banded, auto, Lemke, PGS) whose impulses are known
+(``nscontrol.testing.lcp_problems.stack_delassus``). Siconos gets the same dense matrices
+through temporary ``.npy`` files; its Lemke is skipped above N = 1000 (dense n^2 tableau:
+seconds at N = 1000, minutes at 10000) and its PGS above N = 100 (10^4 sweeps of O(N^2)).
+
+``ratio`` = Siconos seconds per solve / ours (> 1: we are faster). ``accuracy`` holds both
+residuals (``max |min(z, Mz + q)| / (1 + max|q|)``), both statuses, ``max |z_ours - z_ref|``
+and, for the stack, both errors against the analytic impulses.
+
+Run: ``nscontrol bench lcp --json`` (``--quick`` for a smoke run).
+"""
+
+
+# No `from __future__ import annotations`: the CLI loads this file without registering it in
+# sys.modules, and dataclasses then cannot resolve string annotations.
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from harness import run_siconos, siconos_available, siconos_version, time_per_call
+
+from nscontrol.numerics import _lcp_kernels as kernels
+from nscontrol.numerics.lcp import solve_lcp
+from nscontrol.testing.lcp_problems import random_p_matrix, stack_delassus
+
+SICONOS_LEMKE_MAX = 1000
+SICONOS_PGS_MAX = 100
+OURS_DENSE_MAX = 1000  # our dense Lemke/PGS on the stack: same limits as Siconos's
+PGS_TOL = 1e-12
+PGS_MAX_ITER = 10_000
+#: Which Siconos solver each of our methods is compared with.
+COUNTERPART = {"lemke": "lemke", "auto": "lemke", "banded": "lemke", "pgs": "pgs"}
+
+
+@dataclass(frozen=True)
+class Case:
+    family: str
+    size: int
+    M: Any  # what we pass to solve_lcp (dense or sparse)
+    q: np.ndarray
+    methods: tuple[str, ...]
+    exact: np.ndarray | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.family}-{self.size}"
+
+    def dense(self) -> np.ndarray:
+        return self.M if isinstance(self.M, np.ndarray) else self.M.toarray()
+
+
+def cases(quick: bool) -> list[Case]:
+    rng = np.random.default_rng(20261122)
+    out = []
+    for n in (10,) if quick else (10, 100):
+        out.append(Case("random-P", n, random_p_matrix(n, rng), rng.standard_normal(n),
+                        ("lemke", "auto")))
+    for n in (10,) if quick else (10, 100):
+        B = rng.standard_normal((n, n))
+        out.append(Case("random-SPD", n, B @ B.T / n + np.eye(n), rng.standard_normal(n),
+                        ("pgs", "lemke")))
+    for n in (10, 100) if quick else (10, 100, 1000, 10_000):
+        prob = stack_delassus(n)
+        methods = ("banded", "auto") + (("lemke",) if n <= OURS_DENSE_MAX else ()) + (
+            ("pgs",) if n <= SICONOS_PGS_MAX else ())
+        out.append(Case("stack", n, prob.M, prob.q, methods, prob.z))
+    return out
+
+
+def siconos_results(cases_: list[Case], budget: float) -> dict[tuple[str, str], dict]:
+    """Run Siconos on every case it can handle; ``{(case name, method): record}``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        problems = []
+        for case in cases_:
+            wanted = sorted({COUNTERPART[m] for m in case.methods})
+            wanted = [m for m in wanted if case.size <= (SICONOS_LEMKE_MAX if m == "lemke"
+                                                         else SICONOS_PGS_MAX)]
+            if not wanted:
+                continue
+            m_path, q_path = Path(tmp, f"{case.name}-M.npy"), Path(tmp, f"{case.name}-q.npy")
+            np.save(m_path, case.dense())
+            np.save(q_path, case.q)
+            problems.append({"name": case.name, "M_npy": str(m_path), "q_npy": str(q_path),
+                             "methods": wanted})
+        records = run_siconos("lcp.py", {"problems": problems, "budget": budget,
+                                         "pgs_tol": PGS_TOL, "pgs_max_iter": PGS_MAX_ITER},
+                              timeout=900)
+    return {(r["name"], r["method"]): r for r in records}
+
+
+def kernel_time(case: Case, budget: float) -> float | None:
+    """Seconds per call of the bare njit kernel (what a Moreau–Jean step pays)."""
+    if case.family != "stack":
+        return None
+    M = case.M
+    lower, diag, upper = (np.asarray(M.diagonal(k), dtype=np.float64) for k in (-1, 0, 1))
+    z, w = np.empty(case.size), np.empty(case.size)
+    return time_per_call(lambda: kernels.tridiagonal_lcp_kernel(lower, diag, upper, case.q,
+                                                                z, w, 0), budget=budget)
+
+
+def record(case: Case, method: str, ref: dict | None, ref_note: str | None,
+           budget: float) -> dict:
+    M, q = case.M, case.q
+    if method in ("lemke", "pgs"):
+        M = case.dense()
+    res = solve_lcp(M, q, method=method)
+    ours = time_per_call(lambda: solve_lcp(M, q, method=method), budget=budget)
+    accuracy: dict[str, Any] = {"ours_status": res.status, "ours_method": res.method,
+                                "ours_residual": res.residual, "ours_iterations": res.iterations}
+    if case.exact is not None:
+        accuracy["ours_max_err_vs_analytic"] = float(np.abs(res.z - case.exact).max())
+    out = {"scenario": f"lcp/{case.family}/{method}", "size": case.size,
+           "ours_s_per_solve": ours, "reference": None, "reference_solver": None,
+           "reference_s_per_solve": None, "ratio": None, "accuracy": accuracy}
+    if method == "banded":
+        out["ours_kernel_s_per_solve"] = kernel_time(case, budget)
+    if ref is None:
+        out["note"] = ref_note
+        return out
+    z_ref = np.asarray(ref["z"])
+    accuracy.update(reference_info=ref["info"], reference_residual=ref["residual"],
+                    reference_calls=ref["calls"],
+                    max_abs_dz=float(np.abs(res.z - z_ref).max()))
+    if case.exact is not None:
+        accuracy["reference_max_err_vs_analytic"] = float(np.abs(z_ref - case.exact).max())
+    out.update(reference=siconos_version(), reference_solver=f"siconos {ref['method']}",
+               reference_s_per_solve=ref["s_per_solve"], ratio=ref["s_per_solve"] / ours)
+    return out
+
+
+def run(quick: bool = False) -> Iterator[dict]:
+    budget = 0.1 if quick else 0.5
+    all_cases = cases(quick)
+    ok, why = siconos_available()
+    refs: dict[tuple[str, str], dict] = {}
+    if ok:
+        refs = siconos_results(all_cases, budget)
+    for case in all_cases:
+        for method in case.methods:
+            counterpart = COUNTERPART[method]
+            ref = refs.get((case.name, counterpart))
+            if ref is not None:
+                note = None
+            elif not ok:
+                note = why
+            else:
+                limit = SICONOS_LEMKE_MAX if counterpart == "lemke" else SICONOS_PGS_MAX
+                note = (f"siconos {counterpart} skipped above n = {limit} (dense solver; "
+                        f"time budget)")
+            yield record(case, method, ref, note, budget)
+
