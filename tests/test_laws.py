@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from nscontrol.errors import DimensionError, InadmissibleStateError, ModelError
 from nscontrol.laws.impact import NewtonImpactLaw, restitution_matrix
 from nscontrol.laws.set_valued import (
+    AsymmetricStribeck,
     Complementarity,
     Coulomb,
     MonotoneFunction,
@@ -37,6 +38,7 @@ def _law_zoo(seed: int) -> list[SetValuedLaw]:
     lo[2], hi[1] = -np.inf, np.inf
     stribeck = Stribeck(static=[0.3, 1.0], coulomb=[0.1, 0.6], stribeck_velocity=[1.0, 0.2],
                         delta=[2.0, 1.0], viscous=[0.01, 0.05])
+    asym = AsymmetricStribeck(Stribeck(0.3, 0.1, 1.0), Stribeck(0.5, 0.2, 0.5, viscous=0.1))
     return [
         Relay(rng.uniform(0.0, 5.0, 3)),
         Relay(0.0),
@@ -48,6 +50,8 @@ def _law_zoo(seed: int) -> list[SetValuedLaw]:
         MonotoneFunction(lambda z: z ** 3, dim=1),
         stribeck,
         stribeck.loop_transformation().monotone_part,
+        asym,
+        asym.loop_transformation().monotone_part,
         Product(Relay([1.0, 2.0]), Complementarity(1), MonotoneFunction(np.arctan)),
     ]
 
@@ -59,7 +63,8 @@ def _graph_point(law: SetValuedLaw, x: np.ndarray, gamma: np.ndarray):
 
 def _gamma_for(law: SetValuedLaw, rng: np.random.Generator) -> np.ndarray:
     gamma = rng.uniform(0.05, 20.0, law.dim) if law.componentwise else np.full(law.dim, 1.3)
-    if isinstance(law, Stribeck):   # the non-monotone resolvent needs gamma sigma_tan < 1
+    # the non-monotone resolvent needs gamma sigma_tan < 1
+    if isinstance(law, (Stribeck, AsymmetricStribeck)):
         gamma = np.minimum(gamma, 0.9 / np.maximum(law.sigma_tan, 1e-300))
     return gamma
 
@@ -400,3 +405,20 @@ def test_graph_residual_is_the_euclidean_distance_for_polyline_graphs(rng):
         for point in rng.uniform(-3.0, 3.0, (30, 2)):
             sampled = np.min(np.hypot(*(graph - point).T))
             assert law.graph_residual([point[0]], [point[1]]) == pytest.approx(sampled, abs=2e-4)
+
+
+def test_asymmetric_stribeck_uses_each_side_and_the_worse_slope():
+    plus, minus = Stribeck(0.3, 0.1, 1.0), Stribeck(0.5, 0.2, 0.5, viscous=0.1)
+    law = AsymmetricStribeck(plus, minus)
+    assert not law.monotone
+    np.testing.assert_allclose(law.sigma_tan, max(plus.sigma_tan[0], minus.sigma_tan[0]))
+    assert law.contains([0.0], [-0.5]) and law.contains([0.0], [0.3])
+    assert not law.contains([0.0], [0.4])                # above T_s_plus
+    assert law.select([2.0])[0] == pytest.approx(plus.magnitude([2.0])[0])
+    assert law.select([-2.0])[0] == pytest.approx(-minus.magnitude([2.0])[0])
+    assert law.resolvent([-0.2], gamma=0.5)[0] == 0.0      # |x| <= gamma T_s_minus = 0.25
+    assert law.resolvent([0.2], gamma=0.5)[0] > 0.0        # x > gamma T_s_plus = 0.15
+    lt = law.loop_transformation()
+    assert lt.monotone_part.monotone
+    with pytest.raises(ModelError, match="dimensions"):
+        AsymmetricStribeck(plus, Stribeck([0.3, 0.3], 0.1, 1.0))

@@ -14,7 +14,7 @@ from ._roots import solve_increasing
 from .base import LoopTransformation, SetValuedLaw, broadcast_parameter
 from .relay import Relay
 
-__all__ = ["Coulomb", "Stribeck"]
+__all__ = ["Coulomb", "Stribeck", "AsymmetricStribeck"]
 
 
 @dataclass(frozen=True, eq=False, init=False, repr=False)
@@ -256,3 +256,64 @@ class Stribeck(SetValuedLaw):
         return (f"Stribeck(static={self.static.tolist()}, coulomb={self.coulomb.tolist()}, "
                 f"stribeck_velocity={self.stribeck_velocity.tolist()}, "
                 f"delta={self.delta.tolist()}, viscous={self.viscous.tolist()})")
+
+
+@dataclass(frozen=True, eq=False)
+class AsymmetricStribeck(SetValuedLaw):
+    """Stribeck friction with its own curve on each side (ch07 §1.1, asymmetric variant).
+
+    ``phi(v) = f_plus(v)`` for ``v > 0``, ``-f_minus(-v)`` for ``v < 0`` and
+    ``phi(0) = [-T_s_minus, T_s_plus]``, with ``f_plus``, ``f_minus`` the magnitudes of two
+    symmetric :class:`Stribeck` laws. Slope constants are the worse of the two sides.
+
+    Parameters
+    ----------
+    plus, minus
+        :class:`Stribeck` laws of the same ``dim`` giving the positive and negative branches.
+    """
+
+    plus: Stribeck
+    minus: Stribeck
+    componentwise = True
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.plus, Stribeck) and isinstance(self.minus, Stribeck)):
+            raise ModelError(f"plus, minus: expected two Stribeck laws, got "
+                             f"{type(self.plus).__name__} and {type(self.minus).__name__}")
+        if self.plus.dim != self.minus.dim:
+            raise ModelError(f"plus, minus: dimensions disagree ({self.plus.dim} vs "
+                             f"{self.minus.dim})")
+        object.__setattr__(self, "dim", self.plus.dim)
+        object.__setattr__(self, "sigma_tan", np.maximum(self.plus.sigma_tan,
+                                                         self.minus.sigma_tan))
+        object.__setattr__(self, "sigma_sec", np.maximum(self.plus.sigma_sec,
+                                                         self.minus.sigma_sec))
+        object.__setattr__(self, "monotone", self.plus.monotone and self.minus.monotone)
+
+    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+        """Both sides shifted by the same slope ``sigma >= sigma_tan`` (``sigma I`` is odd)."""
+        sig = self.sigma_tan.copy() if sigma is None else broadcast_parameter("sigma", sigma,
+                                                                              self.dim)
+        plus = self.plus.loop_transformation(sig).monotone_part
+        minus = self.minus.loop_transformation(sig).monotone_part
+        return LoopTransformation(monotone_part=AsymmetricStribeck(plus, minus), slope=sig)
+
+    def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray:
+        z_plus = self.plus._resolvent(np.maximum(x, 0.0), gamma)
+        z_minus = self.minus._resolvent(np.minimum(x, 0.0), gamma)
+        return np.where(x > 0.0, z_plus, z_minus)
+
+    def _graph_distance(self, z: FloatArray, v: FloatArray) -> float:
+        below = np.maximum(-self.minus.static - v, 0.0)
+        above = np.maximum(v - self.plus.static, 0.0)
+        to_segment = np.hypot(z, below + above)
+        branch = np.where(z > 0.0, self.plus.magnitude(z), -self.minus.magnitude(z))
+        to_branch = np.where(z != 0.0, np.abs(v - branch), np.inf)
+        return float(np.linalg.norm(np.minimum(to_segment, to_branch)))
+
+    def _select(self, z: FloatArray) -> FloatArray:
+        return np.where(z > 0.0, self.plus.magnitude(z),
+                        np.where(z < 0.0, -self.minus.magnitude(z), 0.0))
+
+    def __repr__(self) -> str:
+        return f"AsymmetricStribeck(plus={self.plus!r}, minus={self.minus!r})"

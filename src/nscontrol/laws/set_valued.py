@@ -5,7 +5,7 @@ Each concept lives in its own module (``base``, ``relay``, ``normal_cone``, ``fr
 """
 
 from .base import ComplementarityForm, LoopTransformation, SetValuedLaw, require_monotone
-from .friction import Coulomb, Stribeck
+from .friction import AsymmetricStribeck, Coulomb, Stribeck
 from .inclusion import InclusionSolution, solve_inclusion
 from .monotone_function import MonotoneFunction
 from .normal_cone import Complementarity, NormalConeBox, NormalConeInterval
@@ -23,6 +23,7 @@ __all__ = [
     "Complementarity",
     "Coulomb",
     "Stribeck",
+    "AsymmetricStribeck",
     "MonotoneFunction",
     "Product",
     "solve_inclusion",
