@@ -26,7 +26,7 @@ __all__ = [
     "ConvergenceCertificate", "quadratic_convergence", "verify_cqlf", "decay_rate",
     "BimodalTests", "bimodal_tests", "product_test", "circle_test", "circle_criterion_minimum",
     "most_negative_real_eigenvalue", "bisect_boundary", "normalising_transform",
-    "SteadyStateBound", "isc_gain", "peak_to_peak_bound", "incremental_l2_bound",
+    "SteadyStateBound", "isc_gain", "peak_to_peak_bound", "incremental_l2_bound", "equilibrium",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -520,3 +520,42 @@ def incremental_l2_bound(As: Sequence[Any], D: Any, Cz: Any) -> SteadyStateBound
         raise SolverError(f"incremental_l2_bound: LMI not solved (status {status!r}); the "
                           f"system may not be quadratically convergent", status=status)
     return SteadyStateBound(float(np.sqrt(g2.value)), np.asarray(P.value), np.nan, status)
+
+
+def equilibrium(system: Any, w0: Any) -> FloatArray:
+    """The equilibrium of a continuous PWA system for a constant input ``w0`` (ch11 §2.2).
+
+    For each region solve ``A_i x = -b_i - E w0`` and keep the solution if it lies in the
+    region (relative tolerance 1e-9); exactly one distinct point must survive (it may be found
+    in two regions when it lies on a facet).
+
+    Raises
+    ------
+    ModelError
+        None or several distinct equilibria (the system is then not convergent), or a
+        discontinuous model.
+    DimensionError
+        ``w0`` does not match the input matrix.
+    """
+    _mode_matrices(system)
+    n = system.n_states
+    forcing = np.zeros(n)
+    if system.E is not None:
+        w0 = np.atleast_1d(np.asarray(w0, float))
+        if w0.shape != (system.E.shape[1],):
+            raise DimensionError(f"w0: expected {system.E.shape[1]} entries, got {w0.shape}")
+        forcing = system.E @ w0
+    found: list[FloatArray] = []
+    for i, (A, b) in enumerate(zip(system.A, system.b, strict=True)):
+        try:
+            x = np.linalg.solve(A, -b - forcing)
+        except np.linalg.LinAlgError:
+            continue
+        if system.contains(i, x) and not any(np.allclose(x, y, rtol=1e-9, atol=1e-12)
+                                             for y in found):
+            found.append(x)
+    if len(found) != 1:
+        raise ModelError(f"system: expected exactly one equilibrium for w0={w0!r}, found "
+                         f"{len(found)}; the system is not convergent (check "
+                         f"quadratic_convergence first)")
+    return found[0]
