@@ -422,3 +422,21 @@ def test_asymmetric_stribeck_uses_each_side_and_the_worse_slope():
     assert lt.monotone_part.monotone
     with pytest.raises(ModelError, match="dimensions"):
         AsymmetricStribeck(plus, Stribeck([0.3, 0.3], 0.1, 1.0))
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), e=st.floats(0.0, 1.0))
+def test_impact_with_a_full_mass_matrix(seed, e):
+    rng = np.random.default_rng(seed)
+    n, k = 4, 3
+    A = rng.normal(size=(n, n))
+    M = A @ A.T + n * np.eye(n)
+    W = rng.normal(size=(n, k))
+    v_minus = rng.uniform(-2.0, 2.0, n)
+    res = NewtonImpactLaw(e).apply(M, W, v_minus)
+    np.testing.assert_allclose(M @ (res.v_plus - v_minus), W @ res.impulse, atol=1e-10)
+    slack = W.T @ res.v_plus + e * (W.T @ v_minus)
+    assert np.all(res.impulse >= 0.0) and np.all(slack >= -1e-10)
+    assert abs(res.impulse @ slack) <= 1e-9
+    ke = lambda v: 0.5 * v @ M @ v   # noqa: E731
+    assert ke(res.v_plus) <= ke(v_minus) + 1e-9

@@ -27,6 +27,8 @@ __all__ = [
 
 def as_gamma(gamma: Any, dim: int) -> FloatArray:
     """``gamma`` as a length-``dim`` vector of finite positive step weights."""
+    if isinstance(gamma, (float, int, np.floating)) and 0.0 < gamma < np.inf:
+        return np.full(dim, float(gamma))         # fast path: the common scalar step
     g = as_vector("gamma", gamma)
     if g.shape[0] == 1 and dim != 1:
         g = np.full(dim, g[0])

@@ -7,6 +7,7 @@ acts on the generalised velocities as ``M (v+ - v-) = W P``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,6 +21,7 @@ from .._validation import (
     check_in_interval,
     check_positive,
     check_positive_definite,
+    check_symmetric,
 )
 from ..errors import DimensionError, ModelError, SolverError
 
@@ -156,7 +158,7 @@ class NewtonImpactLaw:
             The impact LCP has no solution found (should not happen for SPD ``M``).
         """
         M = as_square("M", M)
-        check_positive_definite("M", M)
+        inverse_times = _mass_inverse(M)
         n = M.shape[0]
         W = as_matrix("W", np.reshape(W, (n, -1)) if np.ndim(W) == 1 else W, n)
         v_minus = as_vector("v_minus", v_minus, n)
@@ -164,14 +166,33 @@ class NewtonImpactLaw:
         e = self.coefficients(k)
         idx = _active_indices(active, k)
         impulse = np.zeros(k)
+        v_plus = v_minus.copy()
         if idx.size:
             Wa = W[:, idx]
-            MinvW = np.linalg.solve(M, Wa)
-            delassus = Wa.T @ MinvW
+            MinvW = inverse_times(Wa)
             q = (1.0 + e[idx]) * (Wa.T @ v_minus)
-            impulse[idx] = _impact_lcp(delassus, q)
-        v_plus = v_minus + np.linalg.solve(M, W @ impulse)
+            impulse[idx] = _impact_lcp(Wa.T @ MinvW, q)
+            v_plus += MinvW @ impulse[idx]
         return ImpactResult(v_plus=v_plus, impulse=impulse, normal_velocity=W.T @ v_plus)
+
+
+def _mass_inverse(M: FloatArray) -> Callable[[FloatArray], FloatArray]:
+    """``X -> M^{-1} X`` for a symmetric positive definite ``M`` (checked on the way)."""
+    check_symmetric("M", M)
+    d = np.diag(M).copy()
+    if not np.any(M - np.diag(d)):                  # point masses: no factorisation
+        if np.any(d <= 0.0):
+            raise ModelError(f"M: expected a symmetric positive definite mass matrix, got "
+                             f"diagonal entries with min {d.min():.3g}")
+        return lambda X: X / d[:, None]
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        check_positive_definite("M", M)             # raises with the smallest eigenvalue
+        raise
+    from scipy.linalg import solve_triangular
+
+    return lambda X: solve_triangular(L.T, solve_triangular(L, X, lower=True), lower=False)
 
 
 def _active_indices(active: Any, k: int) -> np.ndarray:
