@@ -440,3 +440,24 @@ def test_impact_with_a_full_mass_matrix(seed, e):
     assert abs(res.impulse @ slack) <= 1e-9
     ke = lambda v: 0.5 * v @ M @ v   # noqa: E731
     assert ke(res.v_plus) <= ke(v_minus) + 1e-9
+
+
+def test_require_monotone_and_loop_transformation_edge_cases():
+    law = Stribeck(0.3, 0.1, 1.0)
+    relay = Relay(1.0)
+    assert require_monotone(relay, who="x") is relay
+    with pytest.raises(ModelError, match="SetValuedLaw"):
+        require_monotone("relay", who="x")
+    fake = law.loop_transformation()
+    fake = type(fake)(monotone_part=law, slope=fake.slope)    # not monotone: refused
+    with pytest.raises(ModelError, match="monotone_part"):
+        require_monotone(law, who="x", loop_transformation=fake)
+    with pytest.raises(ModelError, match="already monotone"):
+        relay.loop_transformation(0.3)
+    with pytest.raises(ModelError, match="finite"):
+        Stribeck(2.0, 1.0, 1.0, delta=0.5).loop_transformation()
+    lt = Product(relay, law).loop_transformation([0.0, 2 * law.sigma_tan[0]])
+    np.testing.assert_allclose(lt.slope, [0.0, 2 * law.sigma_tan[0]])
+    assert lt.monotone_part.monotone
+    with pytest.raises(DimensionError, match="G"):
+        lt.transform_A(np.eye(3), np.ones((3, 1)), np.ones((2, 3)))
