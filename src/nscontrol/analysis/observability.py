@@ -40,6 +40,8 @@ __all__ = [
     "alpha_limit",
     "observer_flow_norms",
     "search_epsilon",
+    "DecayMeasurement",
+    "impact_decay_rate",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -505,3 +507,77 @@ def search_epsilon(F: Any, P: Any, A_b: Any, M: Any, delta_min: float, delta_max
         eps = lo
     return EpsilonCertificate(float(eps), alpha, alpha_L, rho, float(b1), float(b0), radius,
                               "theorem3" if equal else "theorem4")
+
+
+# ----------------------------------------------------------------------------------------------
+# Measured convergence of an observer along a simulated run
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DecayMeasurement:
+    """Decay rate of ``||x~||`` fitted over impact cycles.
+
+    Attributes
+    ----------
+    rate
+        ``-slope`` of the least-squares line through ``(t_i, ln ||x~(t_i-)||)``.
+    times, norms
+        The pre-impact instants and error norms used (above the floor).
+    initial_norm
+        ``||x~(t0)||``.
+    dwell_min, dwell_max
+        Observed dwell times between the impacts of the run (Assumption 2's bounds, seen).
+    """
+
+    rate: float
+    times: FloatArray
+    norms: FloatArray
+    initial_norm: float
+    dwell_min: float
+    dwell_max: float
+
+
+def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-10,
+                      kind: str = "jump", skip: int = 0) -> DecayMeasurement:
+    """Fit the decay rate of ``||x~(t_i-)||`` at the impacts of a closed-loop run.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        A closed-loop run (events of ``kind`` are the plant's impacts).
+    error_matrix : (k, n) array_like
+        Maps the closed-loop state to the estimation error (``closed_loop.outputs["error"]``).
+    floor : float
+        Norms below ``floor * ||x~(t0)||`` are left out (rounding level, not convergence).
+    kind : str
+        Event kind marking impacts (``"jump"`` for linear hybrid systems).
+    skip : int
+        Impacts left out at the start (transient before the observer engages).
+
+    Returns
+    -------
+    DecayMeasurement
+
+    Raises
+    ------
+    ModelError
+        Fewer than two pre-impact norms above the floor: no rate can be fitted.
+    """
+    E = np.asarray(error_matrix, float)
+    events = trajectory.events_of(kind)[skip:]
+    times = np.array([ev.time for ev in events])
+    norms = np.array([np.linalg.norm(E @ ev.pre) for ev in events])
+    e0 = float(np.linalg.norm(E @ trajectory.x[0]))
+    keep = norms > floor * e0
+    n_above = int(np.argmin(keep)) if not keep.all() else keep.size
+    if n_above < 2:
+        raise ModelError(f"trajectory: {n_above} pre-impact error norm(s) above the "
+                         f"floor {floor:g} x ||x~(t0)||; need two to fit a rate -- simulate "
+                         "longer or use a larger eps")
+    below = np.flatnonzero(~keep)
+    end = int(below[0]) if below.size else norms.size   # past the floor: rounding, not decay
+    t_fit, n_fit = times[:end], norms[:end]
+    slope = float(np.polyfit(t_fit, np.log(n_fit), 1)[0])
+    dwell = np.diff(trajectory.event_times(kind))
+    return DecayMeasurement(-slope, t_fit, n_fit, e0,
+                            float(dwell.min()) if dwell.size else np.inf,
+                            float(dwell.max()) if dwell.size else np.inf)
