@@ -71,12 +71,25 @@ def _tiny(a: float, b: FloatArray, c: FloatArray) -> float:
     return 1e-10 * float(np.linalg.norm(b) * np.linalg.norm(c)) + 1e-300
 
 
+def _robust_sigmas(fields: _Fields, t: float, x: FloatArray, signs: tuple[int, ...], j: int
+                   ) -> tuple[float, float, FloatArray, FloatArray, FloatArray]:
+    """``σ⁻, σ⁺`` at a hit; a side whose ``σ`` vanishes (tangent field) is decided by the sign
+    ``σ`` takes a moment later along that side's field."""
+    sm, sp, fm, fp, n = fields.sigmas(t, x, signs, j)
+    dt = 1e-7 * (1.0 + abs(t))
+    if abs(sm) <= _tiny(sm, n, fm):
+        sm = fields.sigmas(t + dt, x + dt * fm, signs, j)[0]
+    if abs(sp) <= _tiny(sp, n, fp):
+        sp = fields.sigmas(t + dt, x + dt * fp, signs, j)[1]
+    return sm, sp, fm, fp, n
+
+
 def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, ...], int]:
     h = fields.s.h(x)
     signs = [1 if v > 0 else -1 for v in h]
     sliding = -1
     for j in np.flatnonzero(np.abs(h) <= 1e-12 * (1.0 + np.linalg.norm(x))):
-        sm, sp, fm, fp, n = fields.sigmas(t, x, tuple(signs), int(j))
+        sm, sp, fm, fp, n = _robust_sigmas(fields, t, x, tuple(signs), int(j))
         if sm > 0 > sp and sliding < 0:
             sliding = int(j)
         elif sm < 0 and sp < 0:
@@ -164,9 +177,10 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
 def _hit_surface(fields: _Fields, run: Any, t: float, x: FloatArray, signs: tuple[int, ...],
                  sliding: int, k: int) -> tuple[tuple[int, ...], int]:
     """Classify a hit of surface ``k`` and record the event; returns the new mode."""
-    sm, sp, fm, fp, nrm = fields.sigmas(t, x, signs, k)
+    sm0, sp0, _, _, _ = fields.sigmas(t, x, signs, k)
+    sm, sp, fm, fp, nrm = _robust_sigmas(fields, t, x, signs, k)
     came = signs[k]
-    arrival_sigma = sm if came < 0 else sp
+    arrival_sigma = sm0 if came < 0 else sp0
     old = _mode_code(signs, sliding)
     flipped = list(signs)
     flipped[k] = -came

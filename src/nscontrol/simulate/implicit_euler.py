@@ -94,17 +94,16 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     from ..laws.normal_cone import NormalConeBox
     from ..laws.relay import Relay
 
-    if type(law).__name__ == "Product":
-        parts = [componentwise_spec(p) for p in _product_parts(law)]
+    from ..laws.product import Product
+
+    if isinstance(law, Product):
+        parts = [componentwise_spec(p) for p in law.parts]
         if any(p is None for p in parts):
             return None
         return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))  # type: ignore
     m = int(law.dim)
-    if isinstance(law, Relay):
+    if isinstance(law, Relay):  # Coulomb is a Relay of bound mu·N
         return np.zeros(m, np.int64), _per_component(law.bound, m), np.zeros(m)
-    if type(law).__name__ == "Coulomb" and getattr(law, "componentwise", False):
-        c = np.asarray(law.mu, float) * np.asarray(law.normal_force, float)
-        return np.zeros(m, np.int64), _per_component(c, m), np.zeros(m)
     if isinstance(law, NormalConeBox):
         return (np.ones(m, np.int64), _per_component(law.lower, m),
                 _per_component(law.upper, m))
@@ -113,13 +112,6 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
 
 def _per_component(value: Any, m: int) -> FloatArray:
     return np.ascontiguousarray(np.broadcast_to(np.asarray(value, float), (m,)), dtype=float)
-
-
-def _product_parts(law: Any) -> tuple[Any, ...]:
-    for attr in ("laws", "parts", "factors"):
-        if hasattr(law, attr):
-            return tuple(getattr(law, attr))
-    raise ModelError(f"{type(law).__name__}: cannot list the factors of this product law")
 
 
 def lcp_step_data(law: Any, Dh: FloatArray) -> tuple[FloatArray, ...] | None:
@@ -164,43 +156,32 @@ def _initial_multiplier(system: Any, x0: FloatArray, t0: float) -> tuple[FloatAr
             return a, -np.asarray(system.law.select(a), float).reshape(m)
         except Exception:  # outside the law's domain: the first step projects
             return a, np.full(m, np.nan)
-    z, w = _solve_inclusion_python(system.law, a, system.D)
-    return z, w
+    return _solve_inclusion_python(system.law, a, system.D)
 
 
 def _solve_inclusion_python(law: Any, a: FloatArray, Dh: FloatArray
                             ) -> tuple[FloatArray, FloatArray]:
-    """Solve ``w ∈ -φ(a + D_h w)`` for a general monotone law (outside the compiled loops)."""
-    m = a.shape[0]
-    if _is_diagonal(Dh):
-        d = np.diag(Dh)
-        z = np.asarray(law.resolvent(a, gamma=d if m > 1 else float(d[0])), float).reshape(m)
-        return z, (z - a) / d
-    data = lcp_step_data(law, Dh)
-    if data is not None:
-        from ..numerics.lcp import solve_lcp
+    """Solve ``w ∈ -φ(a + D_h w)`` for a general monotone law (outside the compiled loops):
+    the shared :func:`nscontrol.laws.inclusion.solve_inclusion` (closed form or LCP), and for
+    curved laws with a full ``D_h`` forward–backward splitting."""
+    from ..laws.inclusion import solve_inclusion
 
-        M, Qa, q0, T, s = data
-        res = solve_lcp(M, Qa @ a + q0, strict=True)
-        w = T @ res.z + s
-        return a + Dh @ w, w
-    # forward-backward splitting on 0 ∈ D_h⁻¹(z - a) + φ(z) (strongly monotone, Lipschitz)
+    if _is_diagonal(Dh) or lcp_step_data(law, Dh) is not None:
+        sol = solve_inclusion(law, Dh, a)
+        return sol.z, sol.w
+    # forward-backward on 0 ∈ D_h⁻¹(z - a) + φ(z): strongly monotone + Lipschitz (ch08 §3.1)
     Dinv = np.linalg.inv(Dh)
     mu = float(np.linalg.eigvalsh(0.5 * (Dinv + Dinv.T))[0])
-    L = float(np.linalg.norm(Dinv, 2))
-    gamma = mu / L**2
+    gamma = mu / float(np.linalg.norm(Dinv, 2)) ** 2
     z = a.copy()
     for _ in range(100_000):
         z_new = np.asarray(law.resolvent(z - gamma * (Dinv @ (z - a)), gamma=gamma), float)
         if np.linalg.norm(z_new - z) <= 1e-13 * max(1.0, np.linalg.norm(z)):
-            z = z_new
-            break
+            return z_new, Dinv @ (z_new - a)
         z = z_new
-    else:
-        raise SolverError("implicit_euler: forward-backward iteration for the one-step "
-                          "inclusion did not converge in 100000 iterations; the step matrix "
-                          "is badly conditioned (reduce h)", status="max_iter")
-    return z, Dinv @ (z - a)
+    raise SolverError("implicit_euler: forward-backward iteration for the one-step inclusion "
+                      "did not converge in 100000 iterations; the step matrix is badly "
+                      "conditioned (reduce h)", status="max_iter")
 
 
 def _check_options(options: dict[str, Any]) -> None:
