@@ -12,7 +12,9 @@ A discontinuous model is refused: the test is not valid when the vector field ju
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,12 +22,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import as_matrix, as_square, check_positive
-from ..errors import DimensionError, ModelError, SolverError
+from ..errors import (
+    DimensionError,
+    InaccurateCertificateWarning,
+    InfeasibleDesignError,
+    ModelError,
+    SolverError,
+)
 
 __all__ = [
     "ConvergenceCertificate", "quadratic_convergence", "verify_cqlf", "decay_rate",
     "BimodalTests", "bimodal_tests", "product_test", "circle_test", "circle_criterion_minimum",
-    "most_negative_real_eigenvalue", "bisect_boundary", "normalising_transform",
+    "most_negative_real_eigenvalue", "bisect_boundary",
     "SteadyStateBound", "isc_gain", "peak_to_peak_bound", "incremental_l2_bound", "equilibrium",
 ]
 
@@ -98,21 +106,6 @@ def _mode_matrices(system: Any) -> tuple[FloatArray, ...]:
     return As
 
 
-def normalising_transform(As: Sequence[FloatArray]) -> tuple[FloatArray, float]:
-    """Diagonal similarity ``T`` and time scale ``ω`` making ``T⁻¹A_iT/ω`` balanced and O(1).
-
-    CQLF feasibility is invariant under similarity and time scaling; badly scaled models
-    (mechanical ones with stiffness ~1e5) otherwise defeat the interior-point solver.
-    """
-    from scipy.linalg import matrix_balance
-
-    total = sum(np.abs(A) for A in As)
-    _, (scale, _perm) = matrix_balance(total, permute=False, separate=True)
-    T = np.diag(scale)
-    omega = max(float(np.linalg.norm(np.linalg.solve(T, A @ T), 2)) for A in As)
-    return T, (omega if omega > 0 else 1.0)
-
-
 def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4,
                           normalise: bool = True) -> ConvergenceCertificate:
     """Decide quadratic convergence of a continuous PWA system by a common quadratic
@@ -128,7 +121,8 @@ def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4
     p_max
         Bound on ``κ(P̃)`` in normalised coordinates (``I <= P̃ <= p_max I``).
     normalise
-        Solve in balanced, time-normalised coordinates (:func:`normalising_transform`).
+        Solve in balanced, time-normalised coordinates
+        (:meth:`nscontrol.numerics.lmi.Scaling.for_matrices`).
 
     Returns
     -------
@@ -161,11 +155,16 @@ def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4
     As = _mode_matrices(system)
     decay = check_positive("decay", decay, allow_zero=True)
     n = As[0].shape[0]
-    T, omega = normalising_transform(As) if normalise else (np.eye(n), 1.0)
-    scaled = [np.linalg.solve(T, A @ T) / omega for A in As]
-    P_s, margin, status = _max_margin_cqlf(scaled, decay / omega, p_max)
-    Tinv = np.linalg.inv(T)
-    P = Tinv.T @ P_s @ Tinv
+    from ..numerics.lmi import Scaling
+
+    sc = Scaling.for_matrices(As) if normalise else Scaling(np.ones(n), 1.0)
+    try:
+        P_s, margin, status = _max_margin_cqlf([sc.matrix(A) for A in As], decay / sc.omega,
+                                               p_max)
+    except InfeasibleDesignError as err:  # solver failure or a certificate failing re-check
+        return ConvergenceCertificate(False, None, np.nan, decay, np.nan, np.nan, np.nan,
+                                      str(err.status), f"undecided: {err}")
+    P = sc.quadratic_back(P_s)
     P = 0.5 * (P + P.T)
     if margin <= MARGIN_TOL:
         return ConvergenceCertificate(False, None, margin, decay, np.nan, np.nan, np.nan, status,
@@ -186,16 +185,19 @@ def _max_margin_cqlf(As: Sequence[FloatArray], decay: float,
     """``max t`` s.t. ``I <= P <= p_max I``, ``A_iᵀP + PA_i + 2σP <= -tI``, ``t <= 1``."""
     import cvxpy as cp
 
-    from ..design.convergent_pwa import solve_sdp, sym
+    from ..numerics.lmi import LMIProblem
 
     n = As[0].shape[0]
-    P = cp.Variable((n, n), symmetric=True)
-    t = cp.Variable()
-    eye = np.eye(n)
-    cons = [P >> eye, P << p_max * eye, t <= 1]
-    cons += [sym(A.T @ P + P @ A + 2 * decay * P) << -t * eye for A in As]
-    status = solve_sdp(cp.Problem(cp.Maximize(t), cons), who="quadratic_convergence")
-    return np.asarray(P.value), float(t.value), status
+    prob = LMIProblem("common quadratic Lyapunov function (ch11 CQLF)")
+    P = prob.symmetric("P", n)
+    t = prob.variable("t")
+    prob.positive("P >= I", P, margin=1.0)
+    prob.positive("P <= p_max I", p_max * np.eye(n) - P)
+    prob.positive("t <= 1", cp.reshape(1 - t, (1, 1), order="F"))
+    for i, A in enumerate(As):
+        prob.negative(f"mode {i}", A.T @ P + P @ A + 2 * decay * P, margin=t)
+    res = prob.solve(maximize=t)
+    return res["P"], float(res["t"]), res.status
 
 
 def verify_cqlf(As: Sequence[Any], P: Any, *, decay: float = 0.0, tol: float = 1e-8) -> bool:
@@ -464,33 +466,53 @@ def peak_to_peak_bound(As: Sequence[Any], D: Any, Cz: Any, *,
     SolverError
         No ``α`` of the grid gave a feasible problem.
     """
-    import cvxpy as cp
-
-    from ..design.convergent_pwa import try_solve_sdp, sym
-
     As_, D, Cz = _io_matrices(As, D, Cz)
-    n, m = D.shape
     if alphas is None:
-        alphas = np.geomspace(0.01, 5.0, 40) * normalising_transform(As_)[1] / 10.0
-    P = cp.Variable((n, n), symmetric=True)
-    mu = cp.Variable(nonneg=True)
-    alpha = cp.Parameter(nonneg=True)
-    cons = [P >> Cz.T @ Cz]
-    cons += [sym(cp.bmat([[A.T @ P + P @ A + alpha * P, P @ D], [D.T @ P, -mu * np.eye(m)]]))
-             << 0 for A in As_]
-    prob = cp.Problem(cp.Minimize(mu), cons)
+        from ..numerics.lmi import Scaling
+
+        alphas = np.geomspace(0.01, 5.0, 40) * Scaling.for_matrices(As_).omega / 10.0
     best: SteadyStateBound | None = None
     for a in np.asarray(alphas, float):
-        alpha.value = float(a)
-        status = try_solve_sdp(prob)
-        if status == "optimal" and mu.value is not None:
-            value = float(np.sqrt(max(mu.value, 0.0) / a))
-            if best is None or value < best.bound:
-                best = SteadyStateBound(value, np.asarray(P.value), float(a), status)
+        try:
+            res = _peak_lmi(As_, D, Cz, float(a))
+        except InfeasibleDesignError:
+            continue  # this alpha is too large for an invariant ellipsoid
+        value = float(np.sqrt(max(float(res["mu"]), 0.0) / a))
+        if best is None or value < best.bound:
+            best = SteadyStateBound(value, res["P"], float(a), res.status)
     if best is None:
         raise SolverError("peak_to_peak_bound: no alpha of the grid gave a feasible LMI; the "
                           "system may not be quadratically convergent", status="infeasible")
     return best
+
+
+#: Margin of the bound LMIs (data are O(1)): keeps the optimum off the re-check's edge.
+_BOUND_MARGIN = 1e-8
+
+
+def _peak_lmi(As: Sequence[FloatArray], D: FloatArray, Cz: FloatArray, alpha: float) -> Any:
+    import cvxpy as cp
+
+    from ..numerics.lmi import LMIProblem
+
+    n, m = D.shape
+    prob = LMIProblem(f"peak-to-peak bound (alpha={alpha:.3g})")
+    P = prob.symmetric("P", n)
+    mu = prob.variable("mu")
+    prob.positive("P >= Cz'Cz", P - Cz.T @ Cz, margin=_BOUND_MARGIN)
+    for i, A in enumerate(As):
+        prob.negative(f"mode {i}", cp.bmat([[A.T @ P + P @ A + alpha * P, P @ D],
+                                            [D.T @ P, -mu * np.eye(m)]]), margin=_BOUND_MARGIN)
+    with _quiet():
+        return prob.solve(minimize=mu)
+
+
+@contextmanager
+def _quiet() -> Iterator[None]:
+    """Silence thin-margin warnings of bound LMIs (their margin only guards the re-check)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InaccurateCertificateWarning)
+        yield
 
 
 def incremental_l2_bound(As: Sequence[Any], D: Any, Cz: Any) -> SteadyStateBound:
@@ -506,20 +528,24 @@ def incremental_l2_bound(As: Sequence[Any], D: Any, Cz: Any) -> SteadyStateBound
     """
     import cvxpy as cp
 
-    from ..design.convergent_pwa import try_solve_sdp, sym
+    from ..numerics.lmi import LMIProblem
 
     As_, D, Cz = _io_matrices(As, D, Cz)
     n, m = D.shape
-    P = cp.Variable((n, n), symmetric=True)
-    g2 = cp.Variable(nonneg=True)
-    cons = [P >> 1e-9 * np.eye(n)]
-    cons += [sym(cp.bmat([[A.T @ P + P @ A + Cz.T @ Cz, P @ D], [D.T @ P, -g2 * np.eye(m)]]))
-             << 0 for A in As_]
-    status = try_solve_sdp(cp.Problem(cp.Minimize(g2), cons))
-    if status != "optimal" or g2.value is None:
-        raise SolverError(f"incremental_l2_bound: LMI not solved (status {status!r}); the "
-                          f"system may not be quadratically convergent", status=status)
-    return SteadyStateBound(float(np.sqrt(g2.value)), np.asarray(P.value), np.nan, status)
+    prob = LMIProblem("incremental L2 bound")
+    P = prob.symmetric("P", n)
+    g2 = prob.variable("gamma2")
+    prob.positive("P > 0", P, margin=_BOUND_MARGIN)
+    for i, A in enumerate(As_):
+        prob.negative(f"mode {i}", cp.bmat([[A.T @ P + P @ A + Cz.T @ Cz, P @ D],
+                                            [D.T @ P, -g2 * np.eye(m)]]), margin=_BOUND_MARGIN)
+    try:
+        with _quiet():
+            res = prob.solve(minimize=g2)
+    except InfeasibleDesignError as err:
+        raise SolverError(f"incremental_l2_bound: {err}; the system may not be quadratically "
+                          f"convergent", status=err.status) from err
+    return SteadyStateBound(float(np.sqrt(res["gamma2"])), res["P"], np.nan, res.status)
 
 
 def equilibrium(system: Any, w0: Any) -> FloatArray:

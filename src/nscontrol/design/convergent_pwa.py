@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import as_matrix, as_square, check_positive
-from ..errors import DimensionError, InfeasibleDesignError, ModelError, SolverError
+from ..errors import DimensionError, InfeasibleDesignError, ModelError
 
 __all__ = [
     "Scaling", "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
@@ -37,38 +37,7 @@ FloatArray = NDArray[np.float64]
 LMI_MARGIN = 1e-6
 
 
-# -- SDP plumbing (to move onto numerics.lmi once it lands) ------------------------------------
-
-def sym(M: Any) -> Any:
-    """Symmetric part of a CVXPY (or NumPy) matrix expression: impose LMIs on this."""
-    return 0.5 * (M + M.T)
-
-
-def try_solve_sdp(problem: Any) -> str:
-    """Solve with Clarabel, then SCS if Clarabel fails or is inaccurate; return the status
-    (``optimal_inaccurate`` counts as undecided: the fallback is tried)."""
-    import cvxpy as cp
-
-    status = "solver_error"
-    for solver in ("CLARABEL", "SCS"):
-        try:
-            problem.solve(solver=solver)
-        except cp.error.SolverError:
-            continue
-        status = str(problem.status)
-        if status in ("optimal", "infeasible", "unbounded"):
-            return status
-    return status
-
-
-def solve_sdp(problem: Any, *, who: str) -> str:
-    """:func:`try_solve_sdp`, raising :class:`SolverError` unless the status is optimal."""
-    status = try_solve_sdp(problem)
-    if status != "optimal":
-        raise SolverError(f"{who}: the SDP was not solved (status {status!r} with Clarabel and "
-                          f"SCS); rescale the model", status=status)
-    return status
-
+# -- certificate re-check ---------------------------------------------------------------------
 
 def certificate_residual(As: Sequence[Any], P: Any, decay: float = 0.0) -> float:
     """``max_i λ_max(A_iᵀP + PA_i + 2σP)/‖P‖`` — ≤ 1e-8 passes the re-check (spec check 3)."""
@@ -449,30 +418,38 @@ def _state_feedback(As: Sequence[FloatArray], B: FloatArray, sigma: float,
                     scale: Scaling | str | None) -> ConvergentStateFeedback:
     import cvxpy as cp
 
+    from ..numerics.lmi import LMIProblem
+
     sc = _resolve_scaling(scale, As, B)
     n, p = B.shape
     Sinv = np.linalg.inv(sc.S)
     At = [sc.S @ A @ Sinv / sc.omega for A in As]
     Bt = sc.S @ B * (sc.input_unit / sc.omega)
     s_t = sigma / sc.omega
-    Q = cp.Variable((n, n), symmetric=True)
-    Y = cp.Variable((p, n))
-    kappa = cp.Variable()
-    cons = [Q >> np.eye(n), cp.bmat([[kappa * np.eye(p), Y], [Y.T, Q]]) >> 0]
-    cons += [sym(A @ Q + Q @ A.T + Bt @ Y + Y.T @ Bt.T + 2 * s_t * Q) << -LMI_MARGIN * np.eye(n)
-             for A in At]
-    status = try_solve_sdp(cp.Problem(cp.Minimize(kappa), cons))
-    if status != "optimal":
+    prob = LMIProblem("convergent state feedback (ch11 SF-sigma)")
+    Q = prob.symmetric("Q", n)
+    Y = prob.variable("Y", (p, n))
+    kappa = prob.variable("kappa")
+    prob.positive("Q >= I", Q, margin=1.0)
+    prob.positive("gain bound [[kI, Y], [Y', Q]] >= 0",
+                  cp.bmat([[cp.reshape(kappa, (1, 1), order="F") if p == 1 else kappa * np.eye(p), Y],
+                           [Y.T, Q]]), margin=LMI_MARGIN)
+    for i, A in enumerate(At):
+        prob.negative(f"decay, mode {i}", A @ Q + Q @ A.T + Bt @ Y + Y.T @ Bt.T + 2 * s_t * Q,
+                      margin=LMI_MARGIN)
+    try:
+        res = prob.solve(minimize=kappa)
+    except InfeasibleDesignError as err:
         raise InfeasibleDesignError(
             f"design_state_feedback: no linear K certifies decay rate sigma={sigma:g} for all "
-            f"{len(As)} modes (solver status {status!r}); lower sigma or add actuators",
-            status=status)
-    Qv = np.asarray(Q.value)
-    K = sc.input_unit * (np.asarray(Y.value) @ np.linalg.inv(Qv)) @ sc.S
-    P = sc.S.T @ np.linalg.inv(Qv) @ sc.S
+            f"{len(As)} modes ({err}); lower sigma or add actuators", status=err.status) from err
+    status = res.status
+    Q, Y, kappa = res["Q"], res["Y"], float(res["kappa"])
+    K = sc.input_unit * (Y @ np.linalg.inv(Q)) @ sc.S
+    P = sc.S.T @ np.linalg.inv(Q) @ sc.S
     P = 0.5 * (P + P.T)
     _recheck([A + B @ K for A in As], P, sigma, who="design_state_feedback", status=status)
-    return ConvergentStateFeedback(K, B, P, sigma, float(np.sqrt(kappa.value)), sc, status)
+    return ConvergentStateFeedback(K, B, P, sigma, float(np.sqrt(kappa)), sc, status)
 
 
 def design_pwa_state_feedback(system: Any, *, nu: Any, sigma: float, B: Any = None,
@@ -579,6 +556,8 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
     """
     import cvxpy as cp
 
+    from ..numerics.lmi import LMIProblem
+
     As = _modes(system)
     n = As[0].shape[0]
     C = system.C if C is None else C
@@ -593,23 +572,30 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
     At = [sc.S @ A @ Sinv / sc.omega for A in As]
     Ct = C @ Sinv
     s_t = sigma / sc.omega
-    P = cp.Variable((n, n), symmetric=True)
-    Z = cp.Variable((n, q))
-    kappa = cp.Variable()
-    cons = [P >> np.eye(n), cp.bmat([[kappa * np.eye(q), Z.T], [Z, P]]) >> 0]
-    cons += [sym(A.T @ P + P @ A - Ct.T @ Z.T - Z @ Ct + 2 * s_t * P) << -LMI_MARGIN * np.eye(n)
-             for A in At]
-    status = try_solve_sdp(cp.Problem(cp.Minimize(kappa), cons))
-    if status != "optimal":
+    prob = LMIProblem("convergent PWA observer (ch11 OBS-sigma)")
+    P = prob.symmetric("P", n)
+    Z = prob.variable("Z", (n, q))
+    kappa = prob.variable("kappa")
+    prob.positive("P >= I", P, margin=1.0)
+    prob.positive("gain bound [[kI, Z'], [Z, P]] >= 0",
+                  cp.bmat([[cp.reshape(kappa, (1, 1), order="F") if q == 1 else kappa * np.eye(q), Z.T],
+                           [Z, P]]), margin=LMI_MARGIN)
+    for i, A in enumerate(At):
+        prob.negative(f"decay, mode {i}", A.T @ P + P @ A - Ct.T @ Z.T - Z @ Ct + 2 * s_t * P,
+                      margin=LMI_MARGIN)
+    try:
+        res = prob.solve(minimize=kappa)
+    except InfeasibleDesignError as err:
         raise InfeasibleDesignError(
             f"design_observer: no output injection L certifies error decay rate sigma="
-            f"{sigma:g} for all {len(As)} modes (solver status {status!r}); lower sigma or "
-            f"measure more outputs", status=status)
-    Pv = 0.5 * (np.asarray(P.value) + np.asarray(P.value).T)
-    L = sc.omega * Sinv @ np.linalg.solve(Pv, np.asarray(Z.value))
+            f"{sigma:g} for all {len(As)} modes ({err}); lower sigma or measure more outputs",
+            status=err.status) from err
+    status = res.status
+    Pv = res["P"]
+    L = sc.omega * Sinv @ np.linalg.solve(Pv, res["Z"])
     Po = sc.S.T @ Pv @ sc.S
     Po = 0.5 * (Po + Po.T)
     _recheck([A - L @ C for A in As], Po, sigma, who="design_observer", status=status)
     lam = np.linalg.eigvalsh(Po)
-    return ConvergentObserver(L, C, Po, sigma, float(np.sqrt(kappa.value)),
+    return ConvergentObserver(L, C, Po, sigma, float(np.sqrt(res["kappa"])),
                               float(lam[-1] / lam[0]), sc, status)
