@@ -680,7 +680,7 @@ def deadbeat_n1(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
     ----------
     Chapter 2 of SICONOS D5.3, Theorem 2 and section on dead-beat observers.
     """
-    from scipy.linalg import expm
+    from ..numerics.lti import LTIFlow
 
     plant = impact_plant(bodies)
     if plant.n_b != 1:
@@ -691,6 +691,7 @@ def deadbeat_n1(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
     tq = np.atleast_1d(as_vector("t_query", t_query))
     na, M = plant.n_a, plant.M
     rec = _WindowReconstructor(plant, u)
+    flow_b = LTIFlow(plant.A_b)
     out = np.full((tq.size, 2 * na + 2), np.nan)
     cache: dict[int, FloatArray] = {}
     used: set[float] = set()
@@ -708,7 +709,7 @@ def deadbeat_n1(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
             cache[i] = np.array([pre[na - 1], v_plus])
         used.add(float(t_i))
         out[k, :2 * na] = rec.before(ts, ys, t, window)
-        out[k, 2 * na:] = expm(plant.A_b * (t - t_i)) @ cache[i]
+        out[k, 2 * na:] = flow_b.propagate(cache[i], t - t_i)
     valid = ~np.isnan(out[:, 0])
     return DeadbeatEstimate(tq, out, valid, np.array(sorted(used)), 2, 1.0)
 
@@ -775,7 +776,7 @@ def deadbeat_1n(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
     ----------
     Chapter 2 of SICONOS D5.3, section 4 (the (1, n-1) case).
     """
-    from scipy.linalg import expm
+    from ..numerics.lti import LTIFlow
 
     plant = impact_plant(bodies)
     if plant.n_a != 1:
@@ -787,6 +788,7 @@ def deadbeat_1n(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
     tq = np.atleast_1d(as_vector("t_query", t_query))
     nb2, M = 2 * plant.n_b, plant.M
     rec = _WindowReconstructor(plant, u)
+    flow_b = LTIFlow(plant.A_b)
     need = plant.n_b
     usable = _consecutive_usable(impacts, ts, window)
     if len(usable) < need:
@@ -805,7 +807,7 @@ def deadbeat_1n(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
     Phi, offset = np.eye(nb2), np.zeros(nb2)   # x_b(t_i-) = Phi x_b(t_1-) + offset
     for k in range(need):
         if k > 0:
-            step = expm(plant.A_b * (usable[k] - usable[k - 1]))
+            step = flow_b.expm(usable[k] - usable[k - 1])
             Phi, offset = step @ Phi, step @ offset
         q1, v2_minus, v2_plus = jumps[k]
         rows += [e_q2 @ Phi, e_v2 @ Phi]
@@ -822,7 +824,7 @@ def deadbeat_1n(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
     xb = Phi @ np.linalg.solve(Amat, np.array(rhs)) + offset
     post_states = {need - 1: xb}          # x_b(t_i+) from the (n-1)-th impact on
     for k in range(need, len(usable)):
-        xb = expm(plant.A_b * (usable[k] - usable[k - 1])) @ xb
+        xb = flow_b.propagate(xb, usable[k] - usable[k - 1])
         xb = xb + e_v2 * (jumps[k][2] - xb[plant.n_b])  # measured post-impact velocity
         post_states[k] = xb
     out = np.full((tq.size, 2 + nb2), np.nan)
@@ -834,7 +836,7 @@ def deadbeat_1n(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
         if j not in post_states:
             continue
         out[k, :2] = rec.before(ts, ys, t, window)
-        out[k, 2:] = expm(plant.A_b * (t - usable[j])) @ post_states[j]
+        out[k, 2:] = flow_b.propagate(post_states[j], t - usable[j])
     valid = ~np.isnan(out[:, 0])
     return DeadbeatEstimate(tq, out, valid, np.array(usable[:need]), rank,
                             float(sv[0] / sv[-1]))

@@ -1,0 +1,181 @@
+"""Chapter 2, simulation side (spec ch02 §7): the observer (7) on the exact event-driven
+integrator, with and without impacts, its decay rates, the dead-beat observers, and the exact
+impact times against an independent ODE solver."""
+
+import numpy as np
+import pytest
+
+from nscontrol.analysis.observability import reconstructibility
+from nscontrol.design.impact_observer import (
+    deadbeat_1n,
+    deadbeat_n1,
+    design_impact_observer,
+    impact_plant,
+)
+from nscontrol.errors import InadmissibleStateError, InfeasibleDesignError
+from nscontrol.examples.ch02_impact_observer import (
+    DEADBEAT_WINDOW,
+    LAMBDA1,
+    M3_UNEQUAL,
+    X0_PLANT,
+    X0_PLANT_1N,
+    _per_impact_prediction,
+    _rate,
+    bodies_1n,
+    bodies_n1,
+    deadbeat_error,
+    input_generator,
+    ivp_impact_times,
+    run_observer,
+    simulate_plant,
+)
+from nscontrol.simulate import simulate
+
+EPS = (0.25, 0.125, 0.0625)
+
+
+@pytest.fixture(scope="module")
+def runs_equal():
+    return {eps: run_observer(bodies_n1(1.0), eps) for eps in EPS}
+
+
+@pytest.fixture(scope="module")
+def runs_unequal():
+    return {eps: run_observer(bodies_n1(M3_UNEQUAL), eps) for eps in (0.0625, 0.03125)}
+
+
+def test_body_b_recovered_only_with_impacts(runs_equal):
+    on = runs_equal[0.0625]
+    off = run_observer(bodies_n1(1.0), 0.0625, impacts=False, t_end=20.0)
+    eb_on = np.linalg.norm(on.error[:, 4:6], axis=1)
+    eb_off = np.linalg.norm(off.error[:, 4:6], axis=1)
+    assert off.trajectory.events == ()
+    assert eb_off[-1] / eb_off[0] > 0.5            # measured 1.99 at t = 40: never recovered
+    assert eb_on[-1] / eb_on[0] < 1e-9              # measured 6e-13
+    # body a is recovered either way (its pair (C_a, A_a) is observable)
+    assert np.linalg.norm(off.error[-1, :4]) < 1e-9 * np.linalg.norm(off.error[0, :4])
+    # Theorem 2 on the two records
+    p = impact_plant(bodies_n1(1.0))
+    assert reconstructibility(p.A_a, p.C_a, on.trajectory.event_times("jump"),
+                              (0.0, 40.0)).reconstructible
+    assert not reconstructibility(p.A_a, p.C_a, off.trajectory.event_times("jump"),
+                                  (0.0, 20.0)).reconstructible
+
+
+def test_decay_rate_grows_as_eps_shrinks_equal_masses(runs_equal):
+    rates = [_rate(runs_equal[eps]).rate for eps in EPS]
+    # measured 0.225, 0.995, 2.77
+    assert rates[0] > 0.1
+    assert rates[1] > 2.0 * rates[0] and rates[2] > 2.0 * rates[1]
+
+
+def test_decay_rate_saturates_for_unequal_masses(runs_unequal):
+    r1, r2 = (_rate(runs_unequal[eps]) for eps in (0.0625, 0.03125))
+    assert r2.rate / r1.rate < 1.1                  # measured 1.012 (equal masses: 2.8x)
+    # the saturated rate is the free mass's per-impact contraction |M22 cos(w delta)|
+    predicted = _per_impact_prediction(bodies_n1(M3_UNEQUAL), runs_unequal[0.03125].trajectory,
+                                       0.03125, r2)
+    assert r2.rate == pytest.approx(predicted, rel=0.05)   # measured 1.9 % apart
+
+
+def test_certified_design_meets_its_rate_and_alpha_L_caps_it(runs_unequal):
+    traj = runs_unequal[0.0625].trajectory
+    dwell = np.diff(traj.event_times("jump"))
+    p = impact_plant(bodies_n1(M3_UNEQUAL))
+    alpha_L = -np.log(abs(p.M[1, 1])) / dwell.max()
+    d = design_impact_observer(bodies_n1(M3_UNEQUAL), LAMBDA1, alpha=0.5 * alpha_L,
+                               delta_min=0.99 * dwell.min(), delta_max=1.01 * dwell.max())
+    run = run_observer(bodies_n1(M3_UNEQUAL), design=d)
+    assert _rate(run).rate >= d.certificate.alpha    # measured 1.10 vs 0.387
+    with pytest.raises(InfeasibleDesignError, match="alpha_L"):
+        design_impact_observer(bodies_n1(M3_UNEQUAL), LAMBDA1, alpha=1.05 * d.alpha_L,
+                               delta_min=0.99 * dwell.min(), delta_max=1.01 * dwell.max())
+
+
+@pytest.mark.parametrize("e", [1.0, 0.8])
+def test_exact_estimate_stays_exact_through_impacts(e):
+    """With xhat(0) = x(0) the jumps (7c)-(7g) (general e, Remark 1) keep xhat = x."""
+    bodies = bodies_n1(1.0, e=e)
+    d = design_impact_observer(bodies, LAMBDA1, 0.125)
+    u = input_generator()
+    loop = d.closed_loop(u)
+    z0 = d.initial_state(np.concatenate([X0_PLANT, u.w0]), X0_PLANT)
+    traj = simulate(loop, z0, (0.0, 20.0), method="event_driven", dt=0.05, progress=False)
+    assert len(traj.events) >= 5
+    assert np.max(np.abs(traj.signal("error"))) < 1e-10
+
+
+def test_inelastic_impacts_observer_converges():
+    run = run_observer(bodies_n1(1.0, e=0.8), 0.0625, t_end=30.0)
+    err = np.linalg.norm(run.error, axis=1)
+    assert len(run.trajectory.events) >= 5
+    assert err[-1] < 1e-8 * err[0]
+
+
+def test_scaled_and_original_realisations_agree():
+    d = design_impact_observer(bodies_n1(1.0), LAMBDA1, 0.25)
+    u = input_generator()
+    x0 = np.concatenate([X0_PLANT, u.w0])
+    xh0 = np.full(6, 0.1)
+    out = []
+    for real in ("scaled", "original"):
+        loop = d.closed_loop(u, realisation=real)
+        z0 = d.initial_state(x0, xh0, realisation=real)
+        out.append(simulate(loop, z0, (0.0, 10.0), method="event_driven", dt=0.05,
+                            progress=False))
+    assert len(out[0].events) == len(out[1].events) >= 3
+    assert np.max(np.abs(out[0].signal("xhat") - out[1].signal("xhat"))) < 1e-8
+
+
+def test_inadmissible_initial_state_rejected_by_the_closed_loop():
+    d = design_impact_observer(bodies_n1(1.0), LAMBDA1, 0.25)
+    u = input_generator()
+    loop = d.closed_loop(u)
+    z0 = np.concatenate([[0.0, 1.0, 0.0, 0.0, 0.5, 0.0], u.w0, np.zeros(6)])  # q2 > q3
+    with pytest.raises(InadmissibleStateError):
+        simulate(loop, z0, (0.0, 1.0), method="event_driven", progress=False)
+
+
+# -- dead-beat observers ------------------------------------------------------------------------
+def test_deadbeat_n1_exact_after_one_impact_and_a_window():
+    res = deadbeat_error(bodies_n1(1.0), X0_PLANT, "n1")
+    first_impact = res["trajectory"].event_times("jump")[0]
+    assert res["relative_error_max"] < 1e-9               # measured 1.0e-12
+    assert res["first_valid_time"] <= first_impact + DEADBEAT_WINDOW + 0.1
+
+
+def test_deadbeat_1n_exact_after_n_minus_1_impacts():
+    res = deadbeat_error(bodies_1n(), X0_PLANT_1N, "1n")
+    assert res["impacts_needed"] == 2                       # n - 1 = 2
+    second = res["trajectory"].event_times("jump")[1]
+    assert res["first_valid_time"] >= second
+    assert res["relative_error_max"] < 1e-9                # measured 2.7e-13
+
+
+def test_deadbeat_1n_reports_too_few_impacts():
+    traj = simulate_plant(bodies_1n(), X0_PLANT_1N, t_end=12.0)
+    impacts = traj.event_times("jump")
+    cut = 0.5 * (impacts[0] + impacts[1])                  # data hold one impact only
+    keep = traj.t < cut
+    with pytest.raises(InfeasibleDesignError, match=r"1 usable .* 2 \(= n - 1\)") as info:
+        deadbeat_1n(bodies_1n(), traj.t[keep], traj.signal("y")[keep, 0], impacts[:1],
+                    [cut - 0.1], window=DEADBEAT_WINDOW, u=input_generator())
+    assert info.value.status == "rank_deficient"
+
+
+def test_deadbeat_window_with_too_few_samples_is_rank_deficient():
+    traj = simulate_plant(bodies_n1(1.0), X0_PLANT, t_end=6.0)
+    sparse = slice(None, None, 40)                         # one sample every 0.4 s
+    with pytest.raises(InfeasibleDesignError, match="samples") as info:
+        deadbeat_n1(bodies_n1(1.0), traj.t[sparse], traj.signal("y")[sparse, 0],
+                    traj.event_times("jump"), [5.5], window=DEADBEAT_WINDOW,
+                    u=input_generator())
+    assert info.value.status == "rank_deficient"
+
+
+# -- exact integration vs an independent ODE solver -------------------------------------------
+def test_impact_times_agree_with_tight_dop853():
+    exact = simulate_plant(bodies_n1(1.0), X0_PLANT, t_end=20.0).event_times("jump")
+    ref = ivp_impact_times(bodies_n1(1.0), X0_PLANT, 20.0)
+    assert exact.size == ref.size >= 8
+    assert np.max(np.abs(exact - ref)) < 1e-9             # measured 2.8e-13
