@@ -218,7 +218,18 @@ class _Propagator:
 
     def __call__(self, x: FloatArray, t: Any) -> FloatArray:
         if self.powers is None:
-            return self.flow.propagate(x, t)
+            ts = np.atleast_1d(np.asarray(t, float))
+            if self.flow.method == "eig" or ts.size < 3:
+                return self.flow.propagate(x, t)
+            # a regular grid of samples: one exponential per step size, then products
+            # (sampling only; event states always come from a direct propagation)
+            step = ts[1] - ts[0]
+            Phi = self.flow.expm(step)
+            out = np.empty((ts.size, x.size))
+            out[0] = self.flow.propagate(x, ts[0])
+            for k in range(1, ts.size):
+                out[k] = Phi @ out[k - 1]
+            return out
         ts = np.atleast_1d(np.asarray(t, float))
         out = np.zeros((ts.size, x.size))
         fact = 1.0
@@ -538,10 +549,9 @@ class _NonlinearMechanicsRun:
         self._sample(np.array([t]), x[None])
         events = [self._gap_event(j) for j in range(s.n_contacts)]
         while t < self.tf:
-            g = s.gaps(x[:n])
-            un = s.gap_jacobian(x[:n]) @ x[n:]
-            # contacts closed and separating are watched from the next step on
-            watch = [ev for j, ev in enumerate(events) if not (abs(g[j]) <= 1e-12 and un[j] >= 0)]
+            # a contact closed and separating at t is not re-detected: only falling crossings
+            # (direction -1) count
+            watch = events
             grid = _sample_times(t, self.tf, self.opts.dt, self.t0)
             sol = solve_ivp(self._rhs, (t, self.tf), x, method="DOP853", rtol=self.opts.rtol,
                             atol=self.opts.atol, events=watch or None, dense_output=True)
@@ -581,8 +591,13 @@ class _NonlinearMechanicsRun:
         self.zeno.n_events += 1
         J = s.gap_jacobian(q)
         hitting = [int(j) for j in closed if J[j] @ v < 0]
+        if not hitting:
+            return _fail_zeno(self.opts, self.rec, f"event_driven: contacts {closed.tolist()} "
+                              f"are closed at t = {t:.12g} with zero normal velocity and pushed "
+                              "inwards (persistent contact), which is supported for linear "
+                              "systems only", t, **finish)
         if self.zeno.n_events > self.opts.max_events or any(
-                self.zeno.add(j, t) is not None or self.zeno.too_close(j, t) for j in hitting):
+                self.zeno.too_close(j, t) or self.zeno.add(j, t) is not None for j in hitting):
             return _fail_zeno(self.opts, self.rec, f"event_driven: impacts of contacts "
                               f"{hitting} accumulate near t = {t:.12g}; persistent contact "
                               "is supported for linear systems only", t, **finish)

@@ -1,0 +1,130 @@
+"""Mechanical problems with known answers, for the conformance tests of the integrators.
+
+* :class:`BouncingBall` — impact times in closed form and the accumulation (Zeno) time;
+* :class:`RestingStack` — a stack of masses at rest: Moreau–Jean impulses ``(N - k) m g h``;
+* :class:`NewtonsCradle` — beads apart on a line, a striker: velocity passed bead to bead at
+  known times, momentum and energy conserved;
+* :func:`impact_oscillator` — a damped, harmonically forced mass hitting a wall.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import FloatArray, check_positive
+from ..systems.lagrangian import LagrangianSystem
+
+__all__ = ["BouncingBall", "RestingStack", "NewtonsCradle", "impact_oscillator"]
+
+
+@dataclass(frozen=True)
+class BouncingBall:
+    """A ball dropped from ``height`` at rest, ground ``q >= 0``, restitution ``e``.
+
+    Free flights are parabolas: the first impact is at ``t_0 = sqrt(2 q0 / g)`` with speed
+    ``v_0 = g t_0``; the k-th rebound lasts ``2 e^k v_0 / g``, so
+    ``t_k = t_0 + (2 v_0 / g) e (1 - e^k) / (1 - e)`` and the impacts accumulate at
+    ``t_∞ = t_0 + (2 v_0 / g) e / (1 - e)`` (8.578949 s for ``e = 0.9, q0 = 1, g = 9.81``),
+    after which the ball rests on the ground.
+    """
+
+    restitution: float = 0.9
+    height: float = 1.0
+    g: float = 9.81
+    mass: float = 1.0
+
+    def system(self) -> LagrangianSystem:
+        return LagrangianSystem.bouncing_ball(self.restitution, self.g, self.mass)
+
+    @property
+    def x0(self) -> FloatArray:
+        return np.array([check_positive("height", self.height), 0.0])
+
+    def impact_times(self, count: int) -> FloatArray:
+        """The first ``count`` impact times."""
+        e, g = self.restitution, self.g
+        t0 = np.sqrt(2.0 * self.height / g)
+        k = np.arange(count)
+        return t0 + 2.0 * t0 * np.sum(np.power.outer(e, np.arange(1, count + 1)) *
+                                      (np.arange(1, count + 1)[None, :] <= k[:, None]),
+                                      axis=1)
+
+    @property
+    def accumulation_time(self) -> float:
+        e = self.restitution
+        t0 = np.sqrt(2.0 * self.height / self.g)
+        return float(t0 + 2.0 * t0 * e / (1.0 - e)) if e < 1.0 else np.inf
+
+    def impact_velocity(self, k: int) -> float:
+        """Speed just before the k-th impact (k = 0 first)."""
+        return float(np.sqrt(2.0 * self.g * self.height) * self.restitution**k)
+
+
+@dataclass(frozen=True)
+class RestingStack:
+    """``n`` masses stacked on the ground at rest (all gaps zero), ``e = 0``.
+
+    With Moreau–Jean at step ``h`` every contact stays active and the impulse of contact
+    ``k`` (under mass ``k``, counting from the ground) is the weight it carries over one step:
+    ``P_k = (n - k) m g h``.
+    """
+
+    n: int
+    mass: float = 1.0
+    g: float = 9.81
+
+    def system(self) -> LagrangianSystem:
+        return LagrangianSystem.stack(self.n, mass=self.mass, g=self.g)
+
+    @property
+    def x0(self) -> FloatArray:
+        return np.zeros(2 * self.n)
+
+    def impulses(self, h: float) -> FloatArray:
+        return (self.n - np.arange(self.n)) * self.mass * self.g * h
+
+
+@dataclass(frozen=True)
+class NewtonsCradle:
+    """``n`` equal beads ``spacing`` apart on a line; bead 0 strikes with ``velocity``, ``e = 1``.
+
+    Each collision passes the whole velocity on (equal masses, elastic): contact ``j``
+    (between beads ``j`` and ``j + 1``) closes at ``t_j = (j + 1) spacing / velocity``; at the
+    end only the last bead moves, with ``velocity``. Momentum ``m v`` and kinetic energy
+    ``m v² / 2`` are conserved at every impact.
+    """
+
+    n: int
+    spacing: float = 0.01
+    velocity: float = 1.0
+    mass: float = 1.0
+
+    def system(self) -> LagrangianSystem:
+        return LagrangianSystem.newtons_cradle(self.n, mass=self.mass, restitution=1.0)
+
+    @property
+    def x0(self) -> FloatArray:
+        v = np.zeros(self.n)
+        v[0] = self.velocity
+        return np.concatenate([self.spacing * np.arange(self.n), v])
+
+    def impact_times(self) -> FloatArray:
+        return self.spacing * np.arange(1, self.n) / self.velocity
+
+    @property
+    def final_time(self) -> float:
+        """Time of the last collision."""
+        return float(self.spacing * (self.n - 1) / self.velocity)
+
+
+def impact_oscillator(*, mass: float = 1.0, stiffness: float = 1.0, damping: float = 0.1,
+                      wall: float = 0.5, restitution: float = 0.8) -> LagrangianSystem:
+    """A mass on a spring (and damper) hitting a wall at ``q = wall``: gap ``wall - q >= 0``.
+
+    Drive it with ``u=Exosystem.sinusoid(F, omega)`` (the input acts on the mass).
+    """
+    return LagrangianSystem(np.array([[mass]]), stiffness=[[stiffness]], damping=[[damping]],
+                            gap_matrix=[[-1.0]], gap_offset=[wall], restitution=restitution,
+                            actuation=[[1.0]], names=("mass",))

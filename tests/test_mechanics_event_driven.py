@@ -1,0 +1,148 @@
+"""Event-driven integration of mechanical and linear hybrid systems against closed forms."""
+
+import numpy as np
+import pytest
+
+from nscontrol.errors import ZenoError
+from nscontrol.numerics.lti import Exosystem
+from nscontrol.simulate import simulate
+from nscontrol.simulate.hybrid import LinearHybridSystem
+from nscontrol.systems.impacting_bodies import ImpactingBodies
+from nscontrol.systems.lagrangian import LagrangianSystem
+from nscontrol.testing.mechanics_problems import BouncingBall, NewtonsCradle
+
+
+def test_bouncing_ball_impact_times_and_accumulation() -> None:
+    ball = BouncingBall(restitution=0.9, height=1.0, g=9.81)
+    traj = simulate(ball.system(), ball.x0, (0.0, 10.0), method="event_driven")
+    impacts = traj.event_times("impact")
+    assert np.max(np.abs(impacts[:20] - ball.impact_times(20))) < 1e-12
+    acc = traj.events_of("accumulation")
+    assert len(acc) == 1
+    assert abs(acc[0].time - 8.57895) < 5e-6
+    assert abs(acc[0].time - ball.accumulation_time) < 1e-9
+    after = traj.t > acc[0].time
+    assert np.all(np.abs(traj.x[after]) < 1e-12)  # at rest on the ground
+    assert traj.events_of("contact_start")[-1].time == acc[0].time
+    # energy only decreases, and each impact keeps e² of the kinetic energy
+    assert np.all(np.diff(traj.signals["energy"]) <= 1e-12)
+    for k, ev in enumerate(traj.events_of("impact")[:20]):
+        assert ev.post[1] == pytest.approx(-0.9 * ev.pre[1], rel=1e-12)
+        assert -ev.pre[1] == pytest.approx(ball.impact_velocity(k), rel=1e-11)
+
+
+def test_plastic_impact_then_persistent_contact() -> None:
+    ball = BouncingBall(restitution=0.0)
+    traj = simulate(ball.system(), ball.x0, (0.0, 2.0))
+    (impact,) = traj.events_of("impact")
+    assert impact.time == pytest.approx(np.sqrt(2 / 9.81), rel=1e-14)
+    assert [e.kind for e in traj.events] == ["impact", "contact_start"]
+    assert np.all(np.abs(traj.x[traj.t > impact.time]) < 1e-12)
+
+
+def test_contact_is_left_when_the_force_would_become_negative() -> None:
+    # mass on a spring held against the wall q <= 0.5 by a decreasing push u = 2 - t: the
+    # contact force is λ = u - k q = 1.5 - t, which vanishes at t = 1.5
+    system = LagrangianSystem(np.array([[1.0]]), stiffness=[[1.0]], gap_matrix=[[-1.0]],
+                              gap_offset=[0.5], restitution=0.0, actuation=[[1.0]])
+    traj = simulate(system, [0.5, 0.0], (0.0, 3.0), u=Exosystem.polynomial([2.0, -1.0]))
+    kinds = [(e.kind, e.time) for e in traj.events]
+    assert kinds[0] == ("contact_start", 0.0)
+    assert kinds[1][0] == "contact_end"
+    assert kinds[1][1] == pytest.approx(1.5, abs=1e-12)
+    during = traj.t < 1.5
+    assert np.all(traj.x[during, 0] == pytest.approx(0.5, abs=1e-12))
+    assert np.all(traj.x[traj.t > 1.6, 0] < 0.5)  # leaves the wall
+
+
+def test_newtons_cradle_momentum_and_energy_per_impact() -> None:
+    cradle = NewtonsCradle(n=6, spacing=0.01, velocity=1.0)
+    traj = simulate(cradle.system(), cradle.x0, (0.0, 0.1))
+    impacts = traj.events_of("impact")
+    assert [e.index for e in impacts] == list(range(5))
+    assert np.max(np.abs(traj.event_times("impact") - cradle.impact_times())) < 1e-12
+    n = cradle.n
+    for ev in impacts:
+        for x in (ev.pre, ev.post):
+            assert np.sum(x[n:]) == pytest.approx(1.0, abs=1e-12)
+            assert 0.5 * np.sum(x[n:] ** 2) == pytest.approx(0.5, abs=1e-12)
+        j = ev.index
+        assert ev.post[n + j] == pytest.approx(0.0, abs=1e-12)  # velocity handed on
+        assert ev.post[n + j + 1] == pytest.approx(1.0, abs=1e-12)
+    assert np.allclose(traj.x[-1, n:], np.eye(n)[-1], atol=1e-12)
+
+
+def test_restitution_law_for_random_masses_and_velocities(rng: np.random.Generator) -> None:
+    for _ in range(15):
+        m = rng.uniform(0.1, 10.0, 2)
+        e = rng.uniform(0.0, 1.0)
+        v = np.sort(rng.normal(size=2))[::-1]  # v1 > v2: approaching
+        chain = LagrangianSystem.chain(m, restitution=e)
+        traj = simulate(chain, [0.0, 0.3, *v], (0.0, 0.3 / (v[0] - v[1]) + 1.0))
+        (ev,) = traj.events_of("impact")
+        pre, post = ev.pre[2:], ev.post[2:]
+        assert post[1] - post[0] == pytest.approx(-e * (pre[1] - pre[0]), rel=1e-12)
+        assert m @ post == pytest.approx(m @ pre, rel=1e-12, abs=1e-12)
+        assert 0.5 * m @ post**2 <= 0.5 * m @ pre**2 * (1 + 1e-14)
+
+
+def _ch02_plant() -> ImpactingBodies:
+    return ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 1.0, (0, 1): 1.0},
+                                        {(0, 0): 1.0}, restitution=1.0)
+
+
+def test_impacting_bodies_hybrid_matches_lagrangian_form() -> None:
+    plant = _ch02_plant()
+    u = Exosystem.sinusoid(2.0, 1.3)
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])
+    hyb = plant.hybrid(u)
+    a = simulate(hyb, np.concatenate([x0, u.w0]), (0.0, 20.0))
+    b = simulate(plant, x0, (0.0, 20.0), u=u)
+    ta, tb = a.event_times("jump"), b.event_times("impact")
+    assert len(ta) >= 3
+    assert np.max(np.abs(ta - tb)) < 1e-10
+    assert np.allclose(a.x[-1, :6], b.x[-1], atol=1e-9)
+    assert np.allclose(a.signals["y"][:, 0], a.x[:, 0])
+    # e = 1: momentum of the colliding pair kept, relative velocity reversed
+    for ev in a.events_of("jump"):
+        assert ev.post[3] + ev.post[5] == pytest.approx(ev.pre[3] + ev.pre[5], abs=1e-12)
+        assert ev.post[5] - ev.post[3] == pytest.approx(-(ev.pre[5] - ev.pre[3]), abs=1e-12)
+
+
+def test_unresolvable_accumulation_raises_zeno_with_partial_trajectory() -> None:
+    # a bouncing ball written as a bare hybrid system has no persistent-contact mode
+    A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -9.81], [0.0, 0.0, 0.0]])
+
+    def jump(t, x, idx):
+        return np.array([x[0], -0.9 * x[1], x[2]])
+
+    ball = LinearHybridSystem(A, [[1.0, 0.0, 0.0]], [0.0], jump)
+    with pytest.raises(ZenoError) as err:
+        simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=30)
+    assert len(err.value.trajectory.events) == 30
+    assert err.value.trajectory.status == -1
+    assert err.value.time < BouncingBall().accumulation_time
+
+
+def test_nonlinear_path_matches_closed_form() -> None:
+    # the bouncing ball with a callable (constant) mass takes the DOP853 path
+    ball = LagrangianSystem(lambda q: np.array([[1.0]]), constant_force=[-9.81],
+                            gap=lambda q: q.copy(), jacobian=lambda q: np.eye(1),
+                            restitution=0.9, names=("ball",))
+    traj = simulate(ball, [1.0, 0.0], (0.0, 3.0))
+    exact = BouncingBall().impact_times(10)
+    exact = exact[exact < 3.0]
+    assert exact.size == 4
+    assert np.max(np.abs(traj.event_times("impact") - exact)) < 1e-8
+
+
+def test_two_link_arm_falls_onto_the_ground() -> None:
+    arm = LagrangianSystem.two_link_arm(restitution=0.5)
+    x0 = [0.8, -1.2, 0.0, 0.0]
+    traj = simulate(arm, x0, (0.0, 0.6))
+    impacts = traj.events_of("impact")
+    assert impacts, "the arm should hit the ground"
+    ev = impacts[0]
+    J = arm.gap_jacobian(ev.pre[:2])
+    assert J @ ev.post[2:] == pytest.approx(-0.5 * (J @ ev.pre[2:]), rel=1e-9)
+    assert arm.energy(ev.post) <= arm.energy(ev.pre)
