@@ -149,7 +149,7 @@ def test_deadbeat_1n_exact_after_n_minus_1_impacts():
     assert res["impacts_needed"] == 2                       # n - 1 = 2
     second = res["trajectory"].event_times("jump")[1]
     assert res["first_valid_time"] >= second
-    assert res["relative_error_max"] < 1e-9                # measured 2.7e-13
+    assert res["relative_error_max"] < 1e-9                # measured 1.4e-14
 
 
 def test_deadbeat_1n_reports_too_few_impacts():
