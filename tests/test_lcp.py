@@ -143,6 +143,20 @@ def test_all_methods_agree_on_tridiagonal_m_matrices(n, seed):
         np.testing.assert_allclose(res.z, ref.z, atol=1e-10)
 
 
+@PROPERTY
+@given(n=st.integers(3, 40), seed=st.integers(0, 2**32 - 1))
+def test_banded_on_pentadiagonal_m_matrices_uses_sparse_lu_and_agrees(n, seed):
+    rng = np.random.default_rng(seed)
+    off1, off2 = -rng.uniform(0, 1, n - 1), -rng.uniform(0, 1, n - 2)
+    M = np.diag(off1, 1) + np.diag(off1, -1) + np.diag(off2, 2) + np.diag(off2, -2)
+    M += np.diag(np.abs(M).sum(axis=1) + rng.uniform(0.1, 1.0, n))  # strictly dominant
+    q = rng.standard_normal(n)
+    ref = solve_lcp(M, q, method="lemke")
+    res = solve_lcp(sp.csr_matrix(M), q, method="banded")
+    assert_is_solution(res, M, q)
+    np.testing.assert_allclose(res.z, ref.z, atol=1e-10)
+
+
 def _infeasible(M, q) -> bool:
     """No z >= 0 with M z + q >= 0 (LP phase one)."""
     n = len(q)
@@ -195,17 +209,19 @@ def test_pgs_warm_start_converges_immediately():
     assert res.success and res.iterations == 0
 
 
-def test_kernels_are_callable_from_njit_code():
-    @njit
-    def both(M, q, lower, diag, upper):
-        n = q.shape[0]
-        z1, w1, z2, w2 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        s1, _ = lemke_kernel(M, q, z1, w1, 0)
-        s2, _ = tridiagonal_lcp_kernel(lower, diag, upper, q, z2, w2, 0)
-        z3, w3 = np.zeros(n), np.empty(n)
-        s3, _ = pgs_kernel(M, q, z3, w3, 1e-12, 100_000, 1.5)
-        return s1, s2, s3, z1, z2, z3
+@njit(cache=True)
+def _all_kernels_from_njit(M, q, lower, diag, upper):
+    n = q.shape[0]
+    z1, w1, z2, w2 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    s1, _ = lemke_kernel(M, q, z1, w1, 0)
+    s2, _ = tridiagonal_lcp_kernel(lower, diag, upper, q, z2, w2, 0)
+    z3, w3 = np.zeros(n), np.empty(n)
+    s3, _ = pgs_kernel(M, q, z3, w3, 1e-12, 100_000, 1.5)
+    return s1, s2, s3, z1, z2, z3
 
+
+def test_kernels_are_callable_from_njit_code():
+    both = _all_kernels_from_njit
     prob = stack_delassus(20, sparse=False)
     M = prob.M
     s1, s2, s3, z1, z2, z3 = both(M, prob.q, np.diagonal(M, -1).copy(), np.diagonal(M).copy(),

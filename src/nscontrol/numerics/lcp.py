@@ -338,11 +338,12 @@ def _run_banded(problem: _Problem, tol: float, max_iter: int | None, omega: floa
         w = np.empty(n)
         code, its = kernels.tridiagonal_howard(lower, diag, upper, problem.q, z, w, limit)
     else:
-        code, its = _sparse_howard(problem, z, limit)
+        code, its, z = _sparse_howard(problem, z, limit)
     return _result(problem, z, code, its, "banded", tol)
 
 
-def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int) -> tuple[int, int]:
+def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int
+                   ) -> tuple[int, int, NDArray[np.float64]]:
     """Howard's policy iteration with sparse LU on the active set (non-tridiagonal M).
 
     The same iteration as :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard`;
@@ -357,22 +358,22 @@ def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int) -> tup
     w = M @ z + q
     for it in range(limit + 1):
         if np.all(z >= -eps) and np.all(w >= -eps):
-            return kernels.SOLVED, it
+            return kernels.SOLVED, it, z
         if it == limit:
             break
         active = w <= z
-        z = z * 0.0
+        z = np.zeros_like(z)
         idx = np.flatnonzero(active)
         if idx.size:
             try:
                 z_a = splu(M[idx][:, idx].tocsc()).solve(-q[idx])
             except RuntimeError:  # singular principal block
-                return kernels.NUMERICAL_FAILURE, it + 1
+                return kernels.NUMERICAL_FAILURE, it + 1, z
             z[idx] = z_a
         w = M @ z + q
         if not np.all(np.isfinite(z)):
-            return kernels.NUMERICAL_FAILURE, it + 1
-    return kernels.MAX_ITER, limit
+            return kernels.NUMERICAL_FAILURE, it + 1, z
+    return kernels.MAX_ITER, limit, z
 
 
 _RUNNERS = {"lemke": _run_lemke, "pgs": _run_pgs, "banded": _run_banded}
