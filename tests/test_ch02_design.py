@@ -36,6 +36,15 @@ def example_bodies(m3=1.0, e=1.0, E=None, k12=6.0):
                                         {(0, 0): 4.0 * m3}, E=E, restitution=e)
 
 
+def test_docstring_examples():
+    import doctest
+
+    import nscontrol.analysis.observability as obs
+
+    failures, tried = doctest.testmod(obs, optionflags=doctest.ELLIPSIS)
+    assert tried >= 4 and failures == 0
+
+
 # -- restitution (Newton, Remark 1) ----------------------------------------------------------
 @settings(max_examples=200, deadline=None)
 @given(m1=st.floats(0.05, 20.0), m2=st.floats(0.05, 20.0), e=st.floats(0.0, 1.0),

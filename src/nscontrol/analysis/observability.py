@@ -34,6 +34,7 @@ __all__ = [
     "ReconstructibilityResult",
     "EpsilonCertificate",
     "theorem1_test",
+    "impact_observability",
     "pbh_observability",
     "reconstructibility",
     "jury_second_order",
@@ -180,6 +181,35 @@ def theorem1_test(A_a: Any, B_a: Any, C_a: Any, C_contact: Any, *,
                           markov_relative, margin, modes, reason)
 
 
+def impact_observability(bodies: Any) -> Theorem1Result:
+    """Theorem 1 for an :class:`~nscontrol.systems.impacting_bodies.ImpactingBodies` model.
+
+    Parameters
+    ----------
+    bodies : ImpactingBodies
+        The plant; the contact mass is the last of body a.
+
+    Returns
+    -------
+    Theorem1Result
+
+    Examples
+    --------
+    >>> from nscontrol.systems.impacting_bodies import ImpactingBodies
+    >>> chain = ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 4.0, (0, 1): 6.0},
+    ...                                      {(0, 0): 4.0})
+    >>> impact_observability(chain).observable
+    True
+    >>> cut = ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 4.0}, {(0, 0): 4.0})
+    >>> impact_observability(cut).reason.split(":")[0]
+    'condition (1) fails'
+    """
+    n_a = int(bodies.n_a)
+    contact = np.zeros(2 * n_a)
+    contact[n_a - 1] = 1.0
+    return theorem1_test(bodies.A_a, bodies.B_a, bodies.C_a, contact)
+
+
 # ----------------------------------------------------------------------------------------------
 # Theorem 2
 # ----------------------------------------------------------------------------------------------
@@ -276,6 +306,13 @@ def jury_second_order(c1: float, c0: float, rho: float) -> bool:
     ``a0 = -c0/rho^2``, Schur-stable iff ``|a0| < 1`` and ``|a1| < 1 + a0``, i.e.
     ``|c0| < rho^2`` and ``|c1| < rho - c0/rho``. For ``c0, c1 >= 0`` this is the chapter's
     ``c1 < rho - c0/rho``, ``c0 < rho^2``.
+
+    Examples
+    --------
+    >>> jury_second_order(0.5, 0.1, 1.0)        # roots 0.64, -0.14
+    True
+    >>> jury_second_order(0.5, 0.1, 0.6)
+    False
     """
     rho = check_positive("rho", rho)
     return bool(abs(c0) < rho * rho and abs(c1) < rho - c0 / rho)

@@ -27,7 +27,7 @@ norm and how far the spectrum computed in the original coordinates strays from
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -205,8 +205,8 @@ class ScaledPlacement:
         Gain ``G_eps`` in the original coordinates.
     P
         Observer-canonical transformation, ``P^{-1} A_a P = A_c``, ``C_a P = e_1^T``.
-    T
-        ``P S_eps^{-1}``: ``xh_a = T xi``.
+    T, T_inv
+        ``P S_eps^{-1}`` (``xh_a = T xi``) and its inverse ``S_eps P^{-1}``.
     F
         ``companion(Lambda_1)``: the scaled flow matrix is ``F / eps``.
     g_scaled
@@ -218,6 +218,7 @@ class ScaledPlacement:
     G: FloatArray
     P: FloatArray
     T: FloatArray
+    T_inv: FloatArray
     F: FloatArray
     g_scaled: FloatArray
     conditioning: PlacementConditioning
@@ -274,6 +275,7 @@ def place_scaled(A: Any, C: Any, Lambda1: Any, eps: float) -> ScaledPlacement:
     g_eps = p / (eps * powers) - a                    # p_k / eps^k - a_k, k = 1..N
     G = P @ g_eps
     T = P / powers[None, :]
+    T_inv = np.linalg.inv(P) * powers[:, None]
     F = _companion_first_column(p)
     g_scaled = p / eps - powers * a                   # S_eps g_eps, no cancellation
     want = lam / eps
@@ -281,7 +283,7 @@ def place_scaled(A: Any, C: Any, Lambda1: Any, eps: float) -> ScaledPlacement:
     err_scaled = _spectrum_error(np.linalg.eigvals(F / eps), want)
     cond = PlacementConditioning(float(np.linalg.cond(P)), float(np.linalg.norm(G)),
                                  err_orig, err_scaled)
-    return ScaledPlacement(G, P, T, F, g_scaled, cond)
+    return ScaledPlacement(G, P, T, T_inv, F, g_scaled, cond)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -345,7 +347,6 @@ class ImpactObserverDesign:
     observability: Theorem1Result
     alpha_L: float
     certificate: EpsilonCertificate | None = None
-    _names: tuple[str, ...] = field(default=(), repr=False)
 
     @property
     def conditioning(self) -> PlacementConditioning:
@@ -380,76 +381,81 @@ class ImpactObserverDesign:
         """
         from ..simulate.hybrid import LinearHybridSystem
 
-        if realisation not in ("scaled", "original"):
-            raise ModelError(f"realisation: expected 'scaled' or 'original', got "
-                             f"{realisation!r}")
         plant_sys = self.plant.bodies.hybrid(u)
-        pl, sp = self.plant, self.placement
-        na2, nb2 = 2 * pl.n_a, 2 * pl.n_b
-        n_p = plant_sys.n_states
-        n_w = n_p - na2 - nb2
+        F_obs, g_obs, T, T_inv = self._observer_flow(realisation)
+        pl = self.plant
+        na2, nb2, n_p = 2 * pl.n_a, 2 * pl.n_b, plant_sys.n_states
         n = n_p + na2 + nb2
-        Cu = np.zeros((1, n_w)) if u is None else np.reshape(np.asarray(u.Cu, float), (1, n_w))
-        if realisation == "scaled":
-            T = sp.T
-            F_obs, g_obs = sp.F / self.eps, sp.g_scaled
-            B_obs = np.linalg.solve(T, pl.B_a)
-        else:
-            T = np.eye(na2)
-            F_obs, g_obs = pl.A_a - np.outer(self.G_eps, pl.C_a), self.G_eps
-            B_obs = pl.B_a
+        o = n_p                                   # first observer state
+        Cu = np.zeros((1, n_p - na2 - nb2)) if u is None else np.atleast_2d(u.Cu)
         A = np.zeros((n, n))
         A[:n_p, :n_p] = plant_sys.A
-        o = n_p
         A[o:o + na2, o:o + na2] = F_obs
-        A[o:o + na2, :na2] = np.outer(g_obs, pl.C_a)
-        A[o:o + na2, na2 + nb2:n_p] = np.outer(B_obs, Cu)
+        A[o:o + na2, :na2] = np.outer(g_obs, pl.C_a)              # G_eps y
+        A[o:o + na2, na2 + nb2:n_p] = np.outer(T_inv @ pl.B_a, Cu)  # B_a u, u = Cu w
         A[o + na2:, o + na2:] = pl.A_b
         G = np.hstack([plant_sys.G, np.zeros((plant_sys.G.shape[0], na2 + nb2))])
         g0 = plant_sys.g0
-        if not impacts:   # a guard that never reaches zero
+        if not impacts:   # a guard that never reaches zero: body b out of reach
             G, g0 = np.zeros_like(G), np.ones_like(g0)
-        to_xhat = np.zeros((na2 + nb2, n))
-        to_xhat[:na2, o:o + na2] = T
-        to_xhat[na2:, o + na2:] = np.eye(nb2)
-        to_x = np.zeros((na2 + nb2, n))
-        to_x[:, :na2 + nb2] = np.eye(na2 + nb2)
-        outputs = {k: np.hstack([v, np.zeros((v.shape[0], na2 + nb2))])
-                   for k, v in plant_sys.outputs.items()}
-        outputs.update({"y": np.hstack([pl.C_a, np.zeros(n - na2)]).reshape(1, n),
-                        "xhat": to_xhat, "error": to_x - to_xhat})
-        lu_T = np.linalg.inv(T)
-        M = pl.M
 
         def jump(t: float, x: FloatArray, indices: np.ndarray) -> FloatArray:
             out = np.empty_like(x)
             out[:n_p] = plant_sys.jump(t, x[:n_p], indices)
-            xa_hat = T @ x[o:o + na2]
-            xa_plus, xb_plus = observer_jump(xa_hat, x[o + na2:], float(pl.C_a @ x[:na2]), M)
-            out[o:o + na2] = lu_T @ xa_plus
+            xa_plus, xb_plus = observer_jump(T @ x[o:o + na2], x[o + na2:],
+                                             float(pl.C_a @ x[:na2]), pl.M)
+            out[o:o + na2] = T_inv @ xa_plus
             out[o + na2:] = xb_plus
             return out
 
-        obs_names = (tuple(f"xi{i + 1}" for i in range(na2)) if realisation == "scaled"
-                     else tuple(f"hat_{s}" for s in plant_sys.state_names[:na2]))
-        names = ()
-        if plant_sys.state_names:
-            names = (tuple(plant_sys.state_names) + obs_names
-                     + tuple(f"hat_{s}" for s in plant_sys.state_names[na2:na2 + nb2]))
-        plant_ok = plant_sys.admissible
+        return LinearHybridSystem(A, G, g0, jump,
+                                  state_names=self._state_names(plant_sys, realisation),
+                                  outputs=self._outputs(plant_sys, T))
 
-        def admissible(x: FloatArray) -> str | None:
-            return None if plant_ok is None else plant_ok(x[:n_p])
+    def _observer_flow(self, realisation: str
+                       ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Flow matrix, output-injection gain and ``xh_a = T (observer state)``."""
+        sp, pl = self.placement, self.plant
+        if realisation == "scaled":
+            return sp.F / self.eps, sp.g_scaled, sp.T, sp.T_inv
+        if realisation == "original":
+            eye = np.eye(2 * pl.n_a)
+            return pl.A_a - np.outer(self.G_eps, pl.C_a), self.G_eps, eye, eye
+        raise ModelError(f"realisation: expected 'scaled' or 'original', got {realisation!r}")
 
-        return LinearHybridSystem(A, G, g0, jump, state_names=names,
-                                  outputs=outputs, admissible=admissible)
+    def _outputs(self, plant_sys: Any, T: FloatArray) -> dict[str, FloatArray]:
+        na2, nb2, n_p = 2 * self.plant.n_a, 2 * self.plant.n_b, plant_sys.n_states
+        n = n_p + na2 + nb2
+        to_xhat = np.zeros((na2 + nb2, n))
+        to_xhat[:na2, n_p:n_p + na2] = T
+        to_xhat[na2:, n_p + na2:] = np.eye(nb2)
+        to_x = np.zeros((na2 + nb2, n))
+        to_x[:, :na2 + nb2] = np.eye(na2 + nb2)
+        outputs = {k: np.hstack([v, np.zeros((v.shape[0], na2 + nb2))])
+                   for k, v in plant_sys.outputs.items()}
+        outputs.update({"xhat": to_xhat, "error": to_x - to_xhat})
+        return outputs
+
+    def _state_names(self, plant_sys: Any, realisation: str) -> tuple[str, ...]:
+        na2, nb2 = 2 * self.plant.n_a, 2 * self.plant.n_b
+        names = tuple(plant_sys.state_names)
+        if not names:
+            return ()
+        obs_a = (tuple(f"xi{i + 1}" for i in range(na2)) if realisation == "scaled"
+                 else tuple(f"hat_{s}" for s in names[:na2]))
+        return names + obs_a + tuple(f"hat_{s}" for s in names[na2:na2 + nb2])
 
     def initial_state(self, x_plant0: Any, xhat0: Any, *,
                       realisation: Literal["scaled", "original"] = "scaled") -> FloatArray:
         """Stack ``[x_plant0; observer state]`` for :meth:`closed_loop`.
 
         ``x_plant0`` is the plant's state ``[x_a; x_b; w]``, ``xhat0`` the estimate
-        ``[xh_a; xh_b]``.
+        ``[xh_a; xh_b]``; ``realisation`` must match the one given to :meth:`closed_loop`.
+
+        Raises
+        ------
+        InadmissibleStateError
+            ``x_plant0`` penetrates, or touches with approaching velocities.
         """
         na2, nb2 = 2 * self.plant.n_a, 2 * self.plant.n_b
         xp = as_vector("x_plant0", x_plant0)
@@ -458,7 +464,7 @@ class ImpactObserverDesign:
                                  f"([x_a; x_b; w]), got {xp.size}")
         xh = as_vector("xhat0", xhat0, na2 + nb2)
         self.plant.bodies.check_state(xp[:na2 + nb2])
-        xa = np.linalg.solve(self.placement.T, xh[:na2]) if realisation == "scaled" else xh[:na2]
+        xa = self._observer_flow(realisation)[3] @ xh[:na2]
         return np.concatenate([xp, xa, xh[na2:]])
 
 
