@@ -128,6 +128,15 @@ def test_grazing_touch_is_reported():
     assert abs(ev.t - v0 / 9.81) <= 1e-7
 
 
+def test_search_restarted_at_a_grazing_point_finds_the_next_touch():
+    flow = LTIFlow(HARMONIC)
+    ev = first_event(flow, [1.0, 0.0], [[1.0, 0.0]], [1.0], 10.0)
+    for x_shift in (0.0, -3e-9, 3e-9):  # the touch located exactly, or off by ~sqrt(eps)
+        x = flow.propagate([1.0, 0.0], ev.t + x_shift)
+        nxt = first_event(flow, x, [[1.0, 0.0]], [1.0], 10.0)
+        assert nxt.grazing and abs(nxt.t - 2 * np.pi + x_shift) <= 1e-7
+
+
 @pytest.mark.parametrize("delta", [1e-4, 1e-8])
 def test_two_roots_closer_than_the_grid(delta):
     # g = 1 - delta + cos t dips to -delta around pi: roots pi -+ 2 asin(sqrt(delta/2))

@@ -377,12 +377,32 @@ class _GuardContext:
         self.bern = _bernstein_matrix(K)
         self.bern_d = _bernstein_matrix(K - 1)
         self._taylor: FloatArray | None = None
+        self._pow_arrays: dict[int, FloatArray] = {}
+        self._guards: dict[Any, tuple[FloatArray, ...]] = {}
 
     def powers(self, m: int) -> FloatArray:
         """``[Φ^0, ..., Φ^m]`` as an ``(m + 1, n, n)`` array."""
-        while len(self.phi_pows) <= m:
-            self.phi_pows.append(self._phi @ self.phi_pows[-1])
-        return np.asarray(self.phi_pows[: m + 1])
+        if m not in self._pow_arrays:
+            while len(self.phi_pows) <= m:
+                self.phi_pows.append(self._phi @ self.phi_pows[-1])
+            self._pow_arrays[m] = np.asarray(self.phi_pows[: m + 1])
+        return self._pow_arrays[m]
+
+    def guard_data(self, G: FloatArray, h_cell: float) -> tuple[FloatArray, ...]:
+        """``(G D, row norms, W)`` with ``W[j] = G D (Ab h)^j / j!``: the guard Taylor
+        coefficients are ``W @ (cell start states)``. Cached for the grid step (an
+        integrator calls first_event with the same G at every event)."""
+        key = (G.shape, G.tobytes())
+        if h_cell == self.h and key in self._guards:
+            return self._guards[key]
+        GD = G * self.d
+        data = (GD, np.linalg.norm(GD, axis=1),
+                np.einsum("pn,knl->kpl", GD, self.taylor_matrices(h_cell)))
+        if h_cell == self.h:
+            if len(self._guards) >= 16:
+                self._guards.pop(next(iter(self._guards)))
+            self._guards[key] = data
+        return data
 
     def taylor_matrices(self, h_cell: float) -> FloatArray:
         """``[(Ab h)^j / j!]_{j=0..K}`` as a ``(K + 1, n, n)`` array (cached for the grid h)."""
@@ -452,15 +472,30 @@ def first_event(flow_or_A: LTIFlow | Any, x0: Any, G: Any, g0: Any, t_max: float
     """
     flow = flow_or_A if isinstance(flow_or_A, LTIFlow) else LTIFlow(flow_or_A)
     n = flow.n
-    x0 = as_vector("x0", x0, n)
-    G = as_matrix("G", G, cols=n)
+    x0 = x0 if _clean(x0, (n,)) else as_vector("x0", x0, n)
+    G = G if _clean(G, (None, n)) else as_matrix("G", G, cols=n)
     p = G.shape[0]
-    g0 = as_vector("g0", g0, p)
+    g0 = g0 if _clean(g0, (p,)) else as_vector("g0", g0, p)
     t_max = check_positive("t_max", t_max)
     graze_tol = check_positive("graze_tol", graze_tol)
     simultaneous_tol = check_positive("simultaneous_tol", simultaneous_tol, allow_zero=True)
     ctx = flow.guard_context()
     return _Search(flow, ctx, x0, G, g0, t_max, graze_tol, simultaneous_tol).run()
+
+
+def _shallow_dip(a: FloatArray, tol: float) -> bool:
+    """Whether ``a0 + a1 s + a2 s^2`` (a1 < 0 < a2) dips no deeper than ``-tol``: a guard
+    restarted at a grazing point located to ~sqrt(eps) has a tiny negative slope there but
+    leaves the surface; that is not a new event."""
+    return bool(a[2] > 0.0 and a[0] - a[1] ** 2 / (4.0 * a[2]) >= -tol)
+
+
+def _clean(a: Any, shape: tuple[int | None, ...]) -> bool:
+    """Fast path: already a finite float64 array of this shape (else the checks of
+    ``nscontrol._validation`` run and raise their specific errors)."""
+    return (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == len(shape)
+            and all(s is None or s == d for s, d in zip(shape, a.shape, strict=True))
+            and bool(np.isfinite(a).all()))
 
 
 class _Search:
@@ -469,14 +504,11 @@ class _Search:
     def __init__(self, flow: LTIFlow, ctx: _GuardContext, x0: FloatArray, G: FloatArray,
                  g0: FloatArray, t_max: float, graze_tol: float, sim_tol: float) -> None:
         self.flow, self.ctx, self.x0 = flow, ctx, x0
-        self.GD = G * ctx.d
         self.g0, self.t_max = g0, t_max
         self.graze_tol, self.sim_tol = graze_tol, sim_tol
         self.y0 = x0 / ctx.d
         self.h = min(ctx.h, t_max)
-        self.row_norm = np.linalg.norm(self.GD, axis=1)
-        # W[j] = G D (Ab h)^j / j!: guard Taylor coefficients are W @ (cell start states)
-        self.W = np.einsum("pn,knl->kpl", self.GD, ctx.taylor_matrices(self.h))
+        self.GD, self.row_norm, self.W = ctx.guard_data(G, self.h)
         self.active = np.ones(len(g0), dtype=bool)
         self.skip_start = np.zeros(len(g0), dtype=bool)
 
@@ -525,7 +557,7 @@ class _Search:
             nz = np.flatnonzero(np.abs(a[1:, i]) > tol[i])
             if nz.size == 0:
                 self.active[i] = False  # identically zero: moves along the surface
-            elif a[1 + nz[0], i] < 0.0:
+            elif a[1 + nz[0], i] < 0.0 and not _shallow_dip(a[:3, i], tol[i]):
                 falling.append(int(i))
             else:
                 self.skip_start[i] = True
