@@ -255,6 +255,7 @@ class _HybridRun:
 
         self.s, self.x, self.t0, self.tf, self.opts = system, x0.copy(), t0, tf, opts
         self.flow = LTIFlow(system.A)
+        self.prop = _Propagator(self.flow)
         self.rec = Recorder(system.n_states)
         self.zeno = _Zeno(opts)
 
@@ -275,8 +276,8 @@ class _HybridRun:
                 t_next = self.tf if ev is None else t + ev.t
                 grid = _sample_times(t, t_next, self.opts.dt, self.t0)
                 if grid.size:
-                    self._sample(grid, self.flow.propagate(x, grid - t))
-                x_minus = self.flow.propagate(x, t_next - t)
+                    self._sample(grid, self.prop(x, grid - t))
+                x_minus = self.prop(x, t_next - t)
                 self._sample(np.array([t_next]), x_minus[None])
                 t = t_next
                 bar.update(t)

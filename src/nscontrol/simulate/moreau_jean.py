@@ -114,7 +114,14 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float,
     from ..systems.lagrangian import LagrangianSystem
 
     if isinstance(system, ImpactingBodies):
-        system = system.lagrangian()
+        from .event_driven import reorder_states
+
+        perm = system.lagrangian_permutation()
+        traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
+                         theta=theta, gamma=gamma, u=u, controller=controller,
+                         listeners=listeners, record_every=record_every, signals=signals,
+                         progress=progress, activation=activation, on_failure=on_failure)
+        return reorder_states(traj, np.argsort(perm), system.state_names)
     if not isinstance(system, LagrangianSystem):
         raise ModelError(f"moreau_jean: integrates LagrangianSystem and ImpactingBodies, got "
                          f"{type(system).__name__}")
@@ -358,12 +365,17 @@ def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
         G = system.gap_jacobian(qb)
         contacts = np.flatnonzero(rising[k])
         un = np.asarray(G[contacts] @ vb).ravel()
-        contacts = contacts[un < 0.0]
+        keep = un < 0.0
+        contacts, un = contacts[keep], un[keep]
         if contacts.size == 0:
             continue
+        # the impact time inside the step, where the gap extrapolated from the step's start
+        # reaches zero (the step's end would bias every impact time by up to h)
+        gap = np.asarray(system.gaps(qb))[contacts]
+        tau = np.clip(gap / -un, 0.0, h)
         x_minus, x_plus = np.concatenate([qb, vb]), np.concatenate([q[k], v[k]])
-        for j in contacts:
-            rec.event(times[k], "impact", int(j), x_minus, x_plus)
+        for j, tj in zip(contacts, tau, strict=True):
+            rec.event(times[k] - h + tj, "impact", int(j), x_minus, x_plus)
         for listener in listeners:
             listener(float(times[k]), x_minus, x_plus, p[k].copy(), contacts)
     state["p_prev"] = p[-1].copy()

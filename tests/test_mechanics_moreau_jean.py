@@ -1,0 +1,126 @@
+"""Moreau–Jean time-stepping against closed forms and the event-driven integrator."""
+
+import numpy as np
+import pytest
+
+from nscontrol.numerics.lti import Exosystem
+from nscontrol.simulate import simulate
+from nscontrol.systems.impacting_bodies import ImpactingBodies
+from nscontrol.systems.lagrangian import LagrangianSystem
+from nscontrol.testing.mechanics_problems import (
+    BouncingBall,
+    NewtonsCradle,
+    RestingStack,
+    impact_oscillator,
+)
+
+
+def test_bouncing_ball_impacts_within_two_steps_then_rest() -> None:
+    ball = BouncingBall()
+    h = 1e-3
+    traj = simulate(ball.system(), ball.x0, (0.0, 10.0), method="moreau_jean", h=h)
+    times = traj.event_times("impact")
+    exact = ball.impact_times(60)
+    resolved = exact[np.concatenate([[np.inf], np.diff(exact)]) > 20 * h]  # bounces >> h
+    assert resolved.size >= 20
+    err = times[: resolved.size] - resolved
+    # each impact is captured within 2h of where its flight should end (first impact, and
+    # every flight interval); the scheme's O(h) position drift at each landing accumulates
+    # over the bounces (less than h per impact) (Siconos: 4.5e-3 s at h = 1e-3)
+    assert abs(err[0]) <= 2 * h
+    assert np.max(np.abs(np.diff(err))) <= 2 * h
+    assert np.all(np.abs(err[:20]) <= (2 + np.arange(20)) * h)
+    assert np.max(np.abs(err)) <= 10 * h
+    # the documented penetration bound: h times the largest approach speed
+    v_max = ball.impact_velocity(0)
+    assert traj.stats["max_penetration"] <= h * v_max
+    rest = traj.t > ball.accumulation_time + 0.2
+    assert np.all(np.abs(traj.x[rest, 1]) < 1e-12)
+    assert np.all(np.abs(traj.x[rest, 0]) <= h * v_max)
+    # θ = 1/2, e < 1: the discrete energy does not grow, except by the drift of the Zeno phase
+    # (ch04 §3 measured up to 6e-8 E0 per step there)
+    energy = traj.signals["energy"]
+    assert np.max(np.diff(energy)) <= 1e-7 * energy[0]
+    assert np.max(np.diff(energy[traj.t < 5.0])) <= 1e-12 * energy[0]
+
+
+@pytest.mark.parametrize("n", [10, 1000, 10000])
+def test_stack_at_rest_impulses(n: int) -> None:
+    stack = RestingStack(n)
+    h = 1e-3
+    traj = simulate(stack.system(), stack.x0, (0.0, 5 * h), method="moreau_jean", h=h,
+                    signals=["impulse"])
+    assert traj.stats["path"] == "tridiagonal"
+    p = traj.signals["impulse"][1:]
+    assert np.max(np.abs(p - stack.impulses(h)) / stack.impulses(h)) < 1e-10
+    assert np.max(np.abs(traj.x[-1])) < 1e-12
+
+
+def test_newtons_cradle_conserves_momentum_and_energy() -> None:
+    cradle = NewtonsCradle(n=8)
+    h = 1e-4
+    traj = simulate(cradle.system(), cradle.x0, (0.0, cradle.final_time + 0.02),
+                    method="moreau_jean", h=h)
+    n = cradle.n
+    v = traj.x[:, n:]
+    assert np.max(np.abs(v.sum(axis=1) - 1.0)) < 1e-12
+    assert np.max(np.abs(0.5 * (v**2).sum(axis=1) - 0.5)) < 1e-12
+    assert [e.index for e in traj.events_of("impact")] == list(range(n - 1))
+    assert np.max(np.abs(traj.event_times("impact") - cradle.impact_times())) <= 2 * h
+    assert np.allclose(v[-1], np.eye(n)[-1], atol=1e-12)  # velocity handed along the chain
+
+
+def test_impact_oscillator_periodic_orbit_agrees_with_event_driven() -> None:
+    system = impact_oscillator()
+    u = Exosystem.sinusoid(1.0, 1.2)
+    period = 2 * np.pi / 1.2
+    ed = simulate(system, [0.0, 0.0], (0.0, 150.0), u=u)
+    mj = simulate(system, [0.0, 0.0], (0.0, 150.0), method="moreau_jean", h=1e-3, u=u)
+    ted, tmj = ed.event_times("impact"), mj.event_times("impact")
+    # a period-1 impacting orbit, reached by both methods
+    assert np.allclose(np.diff(ted[-4:]), period, rtol=1e-5)
+    assert np.allclose(np.diff(tmj[-4:]), period, atol=2e-3)
+    assert np.max(np.abs(ted[-3:] - tmj[-3:])) <= 3e-3
+    v_ed = np.array([e.pre[1] for e in ed.events_of("impact")[-3:]])
+    v_mj = np.array([e.pre[1] for e in mj.events_of("impact")[-3:]])
+    assert np.allclose(v_mj, v_ed, rtol=5e-3)
+
+
+def test_controller_hook_and_jump_listener() -> None:
+    # a feedback u = -k (q - 0.5) - c v drives the mass into the wall; the listener sees
+    # every impact with the post-impact state
+    system = impact_oscillator(stiffness=0.0, damping=0.0, wall=0.3, restitution=0.5)
+    seen = []
+    traj = simulate(system, [0.0, 0.0], (0.0, 10.0), method="moreau_jean", h=1e-3,
+                    controller=lambda t, q, v: -4.0 * (q - 0.5) - 1.0 * v,
+                    listeners=[lambda t, xm, xp, p, c: seen.append((t, xm, xp, p))])
+    assert len(seen) == len(traj.events_of("impact")) >= 1
+    t, xm, xp, p = seen[0]
+    assert xm[1] > 0 and xp[1] < 0 and p[0] > 0
+    # in the end the controller presses the mass on the wall: resting at the wall,
+    # contact force P/h equal to the controller's push 4 (0.5 - 0.3)
+    assert traj.x[-1, 0] == pytest.approx(0.3, abs=2e-3)
+    assert traj.signals["impulse"][-1, 0] / 1e-3 == pytest.approx(0.8, rel=1e-2)
+
+
+def test_configuration_dependent_mass_path() -> None:
+    arm = LagrangianSystem.two_link_arm(restitution=0.0)
+    h = 1e-3
+    traj = simulate(arm, [0.8, -1.2, 0.0, 0.0], (0.0, 1.5), method="moreau_jean", h=h)
+    assert traj.stats["path"] == "python"
+    assert traj.events_of("impact")
+    assert traj.stats["max_penetration"] < 5e-3
+    assert traj.signals["energy"][-1] < traj.signals["energy"][0]
+
+
+def test_impacting_bodies_moreau_jean_keeps_state_order() -> None:
+    plant = ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 1.0, (0, 1): 1.0},
+                                         {(0, 0): 1.0}, restitution=1.0)
+    u = Exosystem.sinusoid(2.0, 1.3)
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])
+    ed = simulate(plant, x0, (0.0, 10.0), u=u)
+    mj = simulate(plant, x0, (0.0, 10.0), method="moreau_jean", h=1e-4, u=u)
+    assert mj.state_names == plant.state_names
+    tj, tm = ed.event_times("impact"), mj.event_times("impact")
+    assert len(tj) == len(tm) >= 2
+    assert np.max(np.abs(tj - tm)) < 1e-3
