@@ -210,3 +210,29 @@ def test_inadmissible_initial_state_is_rejected():
         d.initial_state([0.0, 1.0, 0, 0, 0.5, 0.0], np.zeros(6))     # q2 > q3
     with pytest.raises(InadmissibleStateError, match="approach"):
         d.initial_state([0.0, 0.5, 0, 1.0, 0.5, 0.0], np.zeros(6))   # touching, closing
+
+
+def test_certified_eps_is_the_largest_independent_recheck():
+    """Re-derive the Theorem-4 comparison matrix in the original coordinates (scipy expm of
+    A_a - G_eps C_a): it certifies just below the returned eps and fails just above it."""
+    from scipy.linalg import expm
+
+    p = impact_plant(example_bodies(m3=0.7))
+    d_min, d_max = 0.6, 2.3
+    alpha = 0.3
+    cert = search_epsilon(*_scaled(p), p.A_b, p.M, d_min, d_max, alpha)
+    deltas = np.linspace(d_min, d_max, 64)
+    Phis = [expm(p.A_b * d) for d in deltas]
+    r = max(np.hypot(P[1, 0], P[1, 1] * p.M[1, 0]) for P in Phis)
+    gamma = abs(p.M[1, 1]) * max(abs(P[1, 1]) for P in Phis)
+
+    def radius(eps):
+        G = place_scaled(p.A_a, p.C_a, LAMBDA1, eps).G
+        A_O = p.A_a - np.outer(G, p.C_a)
+        beta = max(np.linalg.norm(expm(A_O * d), 2) for d in deltas)
+        comp = np.array([[beta, beta * abs(p.M[0, 1])], [r, gamma]])
+        return np.max(np.abs(np.linalg.eigvals(comp)))
+
+    rho = np.exp(-alpha * d_max)
+    assert cert.rho == pytest.approx(rho)
+    assert radius(0.97 * cert.eps) < rho < radius(1.03 * cert.eps)
