@@ -197,3 +197,26 @@ def test_bad_input_periodic(loop):
         pr.frequency_response(loop, [1.0, -2.0])
     with pytest.raises(DimensionError):
         pr.frequency_response(loop, [1.0], output=np.ones(3))
+
+
+def test_frequency_sweep_up_and_down_reveals_period_doubling(plant):
+    branches = pr.frequency_sweep(plant, [2.7, 2.9], n_transient=150, n_record=6,
+                                  progress=False)
+    assert set(branches) == {"up", "down"}
+    for res in branches.values():
+        assert res.direction in ("up", "down") and res.errors == ()
+        assert res.multiplicity[1] == 2  # ω = 2.9: the 2T orbit of check 7
+        assert 1.1 <= res.gamma[1] <= 1.35
+    with pytest.raises(ModelError, match="directions"):
+        pr.frequency_sweep(plant, [1.0], directions=("sideways",))
+
+
+def test_frequency_response_in_worker_processes_matches_serial(loop):
+    from concurrent.futures import ProcessPoolExecutor
+
+    omegas = [0.8, W_SUB]
+    serial = pr.frequency_response(loop, omegas, progress=False)
+    with ProcessPoolExecutor(2) as pool:
+        parallel = pr.frequency_response(loop, omegas, executor=pool, progress=False)
+    np.testing.assert_allclose(parallel.gamma, serial.gamma, rtol=1e-12)
+    assert parallel.gamma[1] == pytest.approx(0.18919, abs=1e-5)

@@ -683,6 +683,7 @@ def frequency_sweep(system: Any, omegas: Any, *, amplitude: float = 1.0, output:
     for d in directions:
         if d not in ("up", "down"):
             raise ModelError(f"directions: expected 'up' and/or 'down', got {d!r}")
+    options.setdefault("progress", False)  # one bar for the sweep, not one per simulation
     task = _SweepBranch(system, float(check_positive("amplitude", amplitude)), output,
                         int(n_transient), int(n_record), int(n_harmonics), method,
                         dict(options))
