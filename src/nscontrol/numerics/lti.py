@@ -542,9 +542,12 @@ class _Search:
 
     def _classify_start(self) -> GuardEvent | None:
         """Handle guards at zero at t = 0; reject negative ones."""
-        a = self.W @ self.y0  # (K+1, p)
+        g_start = self.GD @ self.y0 + self.g0
+        tol = self.graze_tol * (self.row_norm * math.sqrt(self.y0 @ self.y0) + np.abs(self.g0))
+        if (g_start > tol).all():
+            return None  # the common case: every guard strictly positive
+        a = self.W @ self.y0  # (K+1, p): scaled derivatives at 0
         a[0] += self.g0
-        tol = self.graze_tol * self.scale(self.y0[:, None])[:, 0]
         negative = a[0] < -tol
         if negative.any():
             i = int(np.flatnonzero(negative)[0])
@@ -571,7 +574,8 @@ class _Search:
         a[0] += self.g0[:, None]
         scale = self.scale(Y)
         tol = self.graze_tol * scale
-        bern_min = np.einsum("lk,kpm->lpm", self.ctx.bern, a).min(axis=0)
+        K1, p, m = a.shape
+        bern_min = (self.ctx.bern @ a.reshape(K1, p * m)).min(axis=0).reshape(p, m)
         # not certified positive (enclosure minus truncation remainder): look closer
         flagged = (bern_min <= tol + _REMAINDER * scale) & self.active[:, None]
         for k in np.flatnonzero(flagged.any(axis=0)):
@@ -611,9 +615,9 @@ class _Search:
 
 def _trim(a: FloatArray) -> FloatArray:
     """Drop negligible high-order coefficients (keeps np.roots well conditioned)."""
-    big = np.abs(a) > 1e-17 * np.abs(a).sum()
-    last = int(np.flatnonzero(big)[-1]) if big.any() else 0
-    return a[: last + 1]
+    mags = np.abs(a)
+    big = np.flatnonzero(mags > 1e-17 * mags.sum())
+    return a[: int(big[-1]) + 1] if big.size else a[:1]
 
 
 def _horner(c_desc: list[float], x: float) -> float:
@@ -622,6 +626,15 @@ def _horner(c_desc: list[float], x: float) -> float:
     for c in c_desc:
         r = r * x + c
     return r
+
+
+def _horner2(c_desc: list[float], x: float) -> tuple[float, float]:
+    """Value and derivative at ``x`` (one Horner sweep)."""
+    r, d = 0.0, 0.0
+    for c in c_desc:
+        d = d * x + r
+        r = r * x + c
+    return r, d
 
 
 def _derivative(a: FloatArray) -> FloatArray:
@@ -675,27 +688,26 @@ def _walk(a: FloatArray, sigma_end: float, tol: float, skip_start: bool,
         if j < last and abs(vals[j]) <= tol:
             return pts[j], True  # a local minimum at zero: tangential touch
         if vals[j] <= 0.0:
-            return _bracketed_root(a, pts[j - 1], pts[j]), False
+            return _bracketed_root(a, pts[j - 1], pts[j], vals[j - 1], vals[j]), False
     return None
 
 
 _EPS = float(np.finfo(float).eps)
 
 
-def _bracketed_root(a: FloatArray, lo: float, hi: float) -> float:
+def _bracketed_root(a: FloatArray, lo: float, hi: float, f_lo: float, f_hi: float) -> float:
     """Root of the monotone ``P`` on ``[lo, hi]`` with ``P(lo) > 0 >= P(hi)``: safeguarded
-    Newton (a bisection step whenever Newton leaves the bracket)."""
-    p, dp = a[::-1].tolist(), _derivative(a)[::-1].tolist()
-    x = 0.5 * (lo + hi)
+    Newton from the secant point (a bisection step whenever Newton leaves the bracket)."""
+    p = a[::-1].tolist()
+    x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo > f_hi else 0.5 * (lo + hi)
     for _ in range(200):
-        fx = _horner(p, x)
+        fx, d = _horner2(p, x)
         if fx == 0.0:
             return x
         if fx > 0.0:
             lo = x
         else:
             hi = x
-        d = _horner(dp, x)
         x_new = x - fx / d if d != 0.0 else 0.5 * (lo + hi)
         if not lo < x_new < hi:
             x_new = 0.5 * (lo + hi)
@@ -707,14 +719,13 @@ def _bracketed_root(a: FloatArray, lo: float, hi: float) -> float:
 
 def _polish(a: FloatArray, s: float, grazing: bool) -> float:
     """Newton polish of a root (or, when grazing, of the minimum) of ``P`` near ``s``."""
-    c = _derivative(a) if grazing else a
-    f, df = c[::-1].tolist(), _derivative(c)[::-1].tolist()
+    c = (_derivative(a) if grazing else a)[::-1].tolist()
     x = s
     for _ in range(4):
-        d = _horner(df, x)
+        f, d = _horner2(c, x)
         if d == 0.0:
             break
-        step = _horner(f, x) / d
+        step = f / d
         if not math.isfinite(step) or abs(step) > 1e-6:
             return s  # the exact polynomial disagrees: keep the scan's estimate
         x -= step
