@@ -118,6 +118,8 @@ def test_check10_bounds_hold(plant, sf, loop, n_omega):
     l2 = cv.incremental_l2_bound(loop.A, loop.E, loop.C).bound
     assert p2p == pytest.approx(1.127, abs=2e-3) and l2 == pytest.approx(0.804, abs=2e-3)
     assert frf.gamma.max() <= p2p and frf.rms_gain.max() <= l2
+    # P6: with the (SF-σ) certificate every Floquet multiplier obeys |μ| <= e^{-σT}
+    assert np.all(frf.max_floquet <= np.exp(-0.3 * 2 * np.pi / omegas) * (1 + 1e-9))
     assert frf.gamma.max() == pytest.approx(0.415, abs=1e-2)
     assert frf.rms_gain.max() == pytest.approx(0.329, abs=1e-2)
     eps = 2 * 0.3 * np.linalg.eigvalsh(sf.P)[0]

@@ -379,6 +379,7 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     ax.set_xscale("log")
     ax.set_xlabel("ω")
     ax.set_ylabel("max|q| / a")
+    ax.set_title("open loop: brute force from continuation; closed loop: unique steady state")
     ax.legend(fontsize="small")
     save_figure(fig, out_dir, "ch11_frequency_response", figures)
     out["open_loop_sweep_multiplicities"] = {k: v.multiplicity for k, v in branches.items()}
@@ -386,7 +387,7 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     fig, ax = new_figure(figsize=(6, 3.6))
     ax.semilogx(frf.omega, frf.max_floquet, "k.-", label="closed loop max|μ|")
     ax.semilogx(frf.omega, np.exp(-SIGMA * 2 * np.pi / frf.omega), "g--",
-                label="bound e^{-σT}·√κ^{1/k}→e^{-σT}")
+                label="P6 bound e^(-σT), σ = 0.3")
     opens = []
     for w in ws[::3]:
         try:
