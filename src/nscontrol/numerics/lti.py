@@ -377,16 +377,23 @@ class _GuardContext:
         self.bern = _bernstein_matrix(K)
         self.bern_d = _bernstein_matrix(K - 1)
         self._taylor: FloatArray | None = None
-        self._pow_arrays: dict[int, FloatArray] = {}
+        self._pow_array = np.eye(n)[None]
         self._guards: dict[Any, tuple[FloatArray, ...]] = {}
 
     def powers(self, m: int) -> FloatArray:
-        """``[Φ^0, ..., Φ^m]`` as an ``(m + 1, n, n)`` array."""
-        if m not in self._pow_arrays:
+        """``[Φ^0, ..., Φ^m]`` as an ``(m + 1, n, n)`` array (a view of a cache that grows by
+        doubling)."""
+        if self._pow_array.shape[0] <= m:
             while len(self.phi_pows) <= m:
                 self.phi_pows.append(self._phi @ self.phi_pows[-1])
-            self._pow_arrays[m] = np.asarray(self.phi_pows[: m + 1])
-        return self._pow_arrays[m]
+            self._pow_array = np.asarray(self.phi_pows)
+        return self._pow_array[: m + 1]
+
+    @property
+    def max_chunk(self) -> int:
+        """Cells per chunk at most: keeps the cached powers of Φ below ~8 MB."""
+        n = max(self.Ab.shape[0], 1)
+        return int(min(_MAX_CHUNK, max(_FIRST_CHUNK, 10**6 // (n * n))))
 
     def guard_data(self, G: FloatArray, h_cell: float) -> tuple[FloatArray, ...]:
         """``(G D, row norms, W)`` with ``W[j] = G D (Ab h)^j / j!``: the guard Taylor
@@ -537,7 +544,7 @@ class _Search:
             if n_cells > 1:
                 y_start = Y[:, m]
             k0 += m
-            chunk = min(2 * chunk, _MAX_CHUNK)
+            chunk = min(2 * chunk, self.ctx.max_chunk)
         return None
 
     def _classify_start(self) -> GuardEvent | None:
