@@ -158,12 +158,20 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float,
                 _record_chunk(rec, system, times[:done] + h, q_out[:done], v_out[:done],
                               p_out[:done], state, q_pre, v_pre, listeners, h)
             state["k"] = k + done
+            if done:
+                state["last"] = (times[done - 1] + h, q_out[done - 1], v_out[done - 1],
+                                 p_out[done - 1])
             bar.update(t0 + h * state["k"])
             if code:
                 status = -1
                 message = (f"moreau_jean: the LCP of step {state['k']} (t = "
                            f"{t0 + h * state['k']:.6g}) failed: {_LCP_STATUS.get(code, code)}")
                 break
+    if "last" in state and rec.last_time < state["last"][0]:  # always keep the final state
+        t_last, q_l, v_l, p_l = state["last"]
+        sig = _signals(system, q_l[None], v_l[None], p_l[None], rec)
+        rec.sample(t_last, np.concatenate([q_l, v_l]), force=True,
+                   **{k: val[0] for k, val in sig.items()})
     stats = {"steps": int(state["k"]), "path": runner.path, "h": h, "theta": theta}
     traj = rec.finish(status=status, message=message, method="moreau_jean", stats=stats,
                       state_names=system.state_names)
