@@ -366,7 +366,8 @@ def _circle_minimum(A: FloatArray, g: FloatArray, c: FloatArray, k: float) -> fl
     i = int(np.argmin(vals))
     best = float(vals[i])
     if 0 < i < grid.size - 1:
-        res = minimize_scalar(lambda w: float(phi(w)), bounds=(grid[i - 1], grid[i + 1]), method="bounded",
+        res = minimize_scalar(lambda w: float(phi(w)), bounds=(grid[i - 1], grid[i + 1]),
+                              method="bounded",
                               options={"xatol": 1e-12 * grid[i + 1]})
         best = min(best, float(res.fun))
     return min(best, 1.0)  # ω = ∞ gives exactly 1 (strictly proper G)

@@ -335,6 +335,13 @@ def output_feedback_loop(system: Any, observer: ConvergentObserver,
 
 # -- designs ---------------------------------------------------------------------------------
 
+def _scalar_block(kappa: Any, k: int) -> Any:
+    """``κ·I_k`` as a CVXPY block (a 1×1 reshape when ``k = 1``)."""
+    import cvxpy as cp
+
+    return cp.reshape(kappa, (1, 1), order="F") if k == 1 else kappa * np.eye(k)
+
+
 def _modes(system: Any) -> tuple[FloatArray, ...]:
     if not getattr(system, "continuous", True):
         raise ModelError(f"system: the convergent-PWA designs need a continuous right-hand "
@@ -432,8 +439,7 @@ def _state_feedback(As: Sequence[FloatArray], B: FloatArray, sigma: float,
     kappa = prob.variable("kappa")
     prob.positive("Q >= I", Q, margin=1.0)
     prob.positive("gain bound [[kI, Y], [Y', Q]] >= 0",
-                  cp.bmat([[cp.reshape(kappa, (1, 1), order="F") if p == 1 else kappa * np.eye(p), Y],
-                           [Y.T, Q]]), margin=LMI_MARGIN)
+                  cp.bmat([[_scalar_block(kappa, p), Y], [Y.T, Q]]), margin=LMI_MARGIN)
     for i, A in enumerate(At):
         prob.negative(f"decay, mode {i}", A @ Q + Q @ A.T + Bt @ Y + Y.T @ Bt.T + 2 * s_t * Q,
                       margin=LMI_MARGIN)
@@ -578,8 +584,7 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
     kappa = prob.variable("kappa")
     prob.positive("P >= I", P, margin=1.0)
     prob.positive("gain bound [[kI, Z'], [Z, P]] >= 0",
-                  cp.bmat([[cp.reshape(kappa, (1, 1), order="F") if q == 1 else kappa * np.eye(q), Z.T],
-                           [Z, P]]), margin=LMI_MARGIN)
+                  cp.bmat([[_scalar_block(kappa, q), Z.T], [Z, P]]), margin=LMI_MARGIN)
     for i, A in enumerate(At):
         prob.negative(f"decay, mode {i}", A.T @ P + P @ A - Ct.T @ Z.T - Z @ Ct + 2 * s_t * P,
                       margin=LMI_MARGIN)

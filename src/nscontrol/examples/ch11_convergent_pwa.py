@@ -174,8 +174,8 @@ def _designs(plant: Any, out: dict[str, Any]) -> tuple[Any, Any, list[Any], list
         check("3 certificates: min eig P", min_eig, 0.0, ">"),
         check("12 |K| / gain bound", float(np.linalg.norm(sf.K, 2)) / sf.gain_bound,
               1 + 1e-6),
-        check("15 K_2 - K_1 - nu c' (exact)", float(np.max(np.abs(dK - NU * np.array([[1.0, 0.0]])))),
-              0.0, "=="),
+        check("15 K_2 - K_1 - nu c' (exact)",
+              float(np.max(np.abs(dK - NU * np.array([[1.0, 0.0]])))), 0.0, "=="),
         check("15 control jump on 100 facet points", jump, 1e-12),
         check("15 PWA gain bound below linear (nu=2.5 vs 0)", pwa[NU].gain_bound,
               pwa[0.0].gain_bound, "<")]
