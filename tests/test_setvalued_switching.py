@@ -1,0 +1,170 @@
+"""Event-driven switching integrator: exact crossings, Filippov sliding, grazing, PWM instants,
+saltation matrices and monodromy (issue 4 conformance)."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from nscontrol import simulate
+from nscontrol.numerics.lti import Exosystem
+from nscontrol.systems.pwa import PiecewiseAffineSystem
+from nscontrol.systems.switched import FilippovSystem, PWMController, SwitchedAffineSystem
+from nscontrol.testing import setvalued_problems as sp
+
+
+def test_relay_feedback_reaching_time_to_1e10_and_exact_sliding():
+    p = sp.relay_feedback()
+    tr = simulate(p.switched, p.x0, p.t_span)
+    (ev,) = tr.events
+    assert ev.kind == "sliding_start" and ev.mode_from == 1 and ev.mode_to == 3
+    assert abs(ev.time - p.facts["reaching_time"]) <= 1e-10
+    after = tr.t > ev.time
+    assert np.max(np.abs(tr.x[after] @ np.ones(2))) <= 1e-12
+    assert np.max(np.abs(tr.x - p.facts["exact"](tr.t))) <= 1e-9
+
+
+def test_scalar_relay_reaching_time_to_1e10():
+    p = sp.relay_scalar()
+    tr = simulate(p.switched, p.x0, p.t_span)
+    assert [e.kind for e in tr.events] == ["sliding_start"]
+    assert abs(tr.events[0].time - p.facts["reaching_time"]) <= 1e-10
+    assert np.max(np.abs(tr.x[tr.t > tr.events[0].time])) <= 1e-12
+
+
+def test_sliding_exit_is_detected():
+    # x' = -sign(x) + d(t) with |d| exceeding 1 after a while: sliding ends where d = 1
+    f = FilippovSystem.two_sided(lambda t, x: np.array([1.0 + 0.5 * t]),
+                                 lambda t, x: np.array([-1.0 + 0.5 * t]),
+                                 lambda x: float(x[0]), 1, gradient=lambda x: np.ones(1))
+    tr = simulate(f, [0.5], (0.0, 4.0))
+    kinds = [e.kind for e in tr.events]
+    assert kinds == ["sliding_start", "sliding_exit"]
+    assert abs(tr.events[1].time - 2.0) <= 1e-9          # σ⁺ = -1 + t/2 reaches 0 at t = 2
+    assert tr.events[1].mode_to == 1                      # leaves to the h > 0 side
+    assert abs(tr.x[-1, 0] - 0.25 * (4.0 - 2.0) ** 2 / 1.0 * 1.0) <= 1e-9  # ∫(-1 + s/2) ds
+
+
+def test_bimodal_oscillator_agrees_with_tight_ode_through_many_crossings():
+    p = sp.bimodal_oscillator()
+    tr = simulate(p.system, p.x0, p.t_span)
+    crossings = tr.event_times("crossing")
+    assert crossings.size >= 20
+    ref = solve_ivp(p.facts["rhs"], p.t_span, p.x0, method="DOP853", rtol=1e-13, atol=1e-15,
+                    events=lambda t, x: x[0], dense_output=True)
+    assert ref.t_events[0].size == crossings.size
+    assert np.max(np.abs(ref.t_events[0] - crossings)) <= 1e-9
+    assert np.max(np.abs(ref.sol(tr.t).T - tr.x)) <= 1e-9
+    # continuous field: every saltation matrix is the identity
+    tr2 = simulate(p.system, p.x0, (0.0, 10.0), sensitivity=True)
+    S = tr2.stats["saltation_matrices"]
+    assert S.shape[0] == tr2.event_times("crossing").size
+    assert np.max(np.abs(S - np.eye(2))) <= 1e-12
+
+
+def _period_map(system, T, x, **kw):
+    return simulate(system, x, (0.0, T), n_samples=2, **kw)
+
+
+@pytest.mark.parametrize("continuous", [True, False])
+def test_monodromy_from_saltation_matches_finite_differences(continuous):
+    omega = 1.3
+    T = 2 * np.pi / omega
+    A1 = np.array([[0.0, 1.0], [-1.0, -0.4]])
+    if continuous:
+        A2 = np.array([[0.0, 1.0], [-4.0, -0.4]])
+        pwa = PiecewiseAffineSystem.bimodal(A2, A1, [1.0, 0.0], E=[[0.0], [1.0]],
+                                            u=Exosystem.sinusoid(2.0, omega))
+    else:  # a relay-type restoring force on q: crossings with a non-identity saltation
+        pwa = PiecewiseAffineSystem.bimodal(A1, A1, [1.0, 0.0], b1=[0.0, 0.3], b2=[0.0, -0.3],
+                                            E=[[0.0], [1.0]], u=Exosystem.sinusoid(2.0, omega),
+                                            continuous=False)
+    x = np.array([0.5, 0.0])
+    for _ in range(60):                                   # settle on the periodic orbit
+        x = _period_map(pwa, T, x).x[-1]
+    tr = _period_map(pwa, T, x, sensitivity=True)
+    assert np.linalg.norm(tr.x[-1] - x) <= 1e-8
+    assert tr.event_times("crossing").size == 2
+    M = tr.stats["state_transition"]
+    fd = np.empty((2, 2))
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = 1e-6
+        fd[:, k] = (_period_map(pwa, T, x + d).x[-1] - _period_map(pwa, T, x - d).x[-1]) / 2e-6
+    assert np.max(np.abs(M - fd)) <= 1e-6
+    S = tr.stats["saltation_matrices"]
+    assert bool(np.max(np.abs(S - np.eye(2))) > 0.01) is (not continuous)
+
+
+def test_filippov_sensitivity_through_sliding_matches_finite_differences():
+    p = sp.relay_feedback(T=2.0)
+
+    def end(x0):
+        return simulate(p.switched, x0, p.t_span, n_samples=2).x[-1]
+
+    tr = simulate(p.switched, p.x0, p.t_span, sensitivity=True, n_samples=2)
+    fd = np.column_stack([(end(p.x0 + d) - end(p.x0 - d)) / 2e-6
+                          for d in (np.array([1e-6, 0.0]), np.array([0.0, 1e-6]))])
+    assert np.max(np.abs(tr.stats["state_transition"] - fd)) <= 1e-6
+    (S,) = tr.stats["saltation_matrices"]
+    assert abs(np.linalg.det(S)) <= 1e-12                 # entering sliding projects
+
+
+def test_coulomb_stick_slip_times_agree_between_integrators():
+    p = sp.coulomb_oscillator(friction=1.0, amplitude=1.0, T=14.0)
+    sw = simulate(p.switched, p.x0, p.t_span)
+    starts = sw.event_times("sliding_start")
+    exits = sw.event_times("sliding_exit")
+    assert starts.size >= 2 and exits.size >= 2
+    h = 1e-4
+    ie = simulate(p.system, p.x0, p.t_span, h=h)
+    stick = ie.signal("z")[:, 0] == 0.0
+    change = np.flatnonzero(np.diff(stick.astype(int)))
+    t_start = ie.t[change[~stick[change]] + 1]
+    t_exit = ie.t[change[stick[change]] + 1]
+    starts_in = starts[starts > 0.0]
+    assert t_start.size == starts_in.size and t_exit.size == exits.size
+    assert np.max(np.abs(t_start - starts_in)) <= 20 * h
+    assert np.max(np.abs(t_exit - exits)) <= 20 * h
+    assert np.max(np.abs(ie.x - sw.at(ie.t))) <= 20 * h
+
+
+def test_grazing_is_flagged_and_mode_kept():
+    A = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    pwa = PiecewiseAffineSystem.bimodal(A, A, [1.0, 0.0], d=1.0)  # x1 = sin t touches 1
+    tr = simulate(pwa, [0.0, 1.0], (0.0, 3.0))
+    (ev,) = tr.events
+    assert ev.kind == "grazing" and ev.mode_from == ev.mode_to == 0
+    assert abs(ev.time - np.pi / 2) <= 1e-6
+
+
+def test_pwm_switching_instants_exact_and_state_matches_ode():
+    delta, T, d = 0.5, 0.25, 0.15
+    A = np.array([[0.0, 1.0], [-1.0, -delta]])
+    buck = SwitchedAffineSystem(((A, [0.0, -1.0]), (A, [0.0, 1.0])),
+                                PWMController(T, lambda t, x: d))
+    tr = simulate(buck, [0.0, 0.0], (0.0, 10 * T))
+    sw = tr.events_of("switch")
+    expected = np.sort(np.concatenate([np.arange(10) * T + d / 2,
+                                       np.arange(10) * T + T - d / 2]))
+    assert np.max(np.abs(np.array([e.time for e in sw]) - expected)) <= 1e-14
+    x = np.zeros(2)
+    edges = np.concatenate([[0.0], expected, [10 * T]])
+    for k in range(edges.size - 1):
+        u = 1.0 if k % 2 == 0 else -1.0
+        sol = solve_ivp(lambda t, y: A @ y + np.array([0.0, u]), (edges[k], edges[k + 1]), x,
+                        method="DOP853", rtol=1e-13, atol=1e-15)
+        x = sol.y[:, -1]
+    assert np.max(np.abs(tr.x[-1] - x)) <= 1e-10
+    assert np.allclose(tr.stats["duty"], d)
+
+
+def test_discontinuous_pwa_with_sliding_goes_through_filippov_form():
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])
+    # relay feedback on x1 + x2 as a discontinuous bimodal PWA
+    pwa = PiecewiseAffineSystem.bimodal(A, A, [1.0, 1.0], b1=[0.0, 1.0], b2=[0.0, -1.0],
+                                        continuous=False)
+    with pytest.raises(Exception, match="FilippovSystem.from_pwa") as info:
+        simulate(pwa, [1.0, 0.0], (0.0, 3.0))
+    assert info.value.trajectory is not None
+    tr = simulate(FilippovSystem.from_pwa(pwa), [1.0, 0.0], (0.0, 3.0))
+    assert abs(tr.event_times("sliding_start")[0] - (np.sqrt(3) - 1)) <= 1e-10
