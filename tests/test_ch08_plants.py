@@ -57,14 +57,15 @@ def test_loop_transformation_reproduces_the_spec_matrix_and_designs():
 def test_rotor_observer_obeys_discrete_lyapunov_bound():
     s = ex.rotor_standin("alpha")
     plant = s.plant()
-    d = design_lure_observer(plant, kappa=1000.0, tol=1e-2)
+    d = design_lure_observer(plant, kappa=100.0, tol=1e-2)
     h = 0.02
-    traj = simulate(d.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, 6.0), h=h,
+    traj = simulate(d.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, 4.0), h=h,
                     progress=False)
     V = d.lyapunov(traj.signal("y"))
     bound = V[:-1] / (1 + 2 * d.alpha * h) * (1 + 1e-9) + 1e-14 * V[0]
     assert np.all(V[1:] <= bound)
     assert V[-1] < 1e-6 * V[0]
+    assert np.any(np.abs(traj.x[:, 2]) > 0.1)  # the lower disc slips: not only sticking
 
 
 @pytest.mark.parametrize(("output", "variant"), [("omega_u", "extended"), ("alpha", "basic"),
