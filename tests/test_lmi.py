@@ -145,8 +145,16 @@ def test_bad_input_each_its_error():
         lyapunov_certificate(np.array([[np.nan, 0.0], [0.0, -1.0]]))
 
 
-def test_warning_category_exists_for_inaccurate_solutions():
+def test_thin_margin_warns_and_accurate_solution_does_not():
     # a well-posed problem solved accurately does not warn
     with warnings.catch_warnings():
         warnings.simplefilter("error", InaccurateCertificateWarning)
         lyapunov_certificate(HURWITZ)
+    # minimising trace Q with Q >= I puts lambda_min(Q) on its margin (1.0): passes the
+    # re-check (>= 0.5) but is below a demanded 1.5 x margin -> warned, named
+    prob = LMIProblem("thin")
+    Q = prob.symmetric("Q", 2)
+    prob.positive("Q >= I", Q, margin=1.0)
+    with pytest.warns(InaccurateCertificateWarning, match="Q >= I"):
+        res = prob.solve(minimize=Q[0, 0] + Q[1, 1], warn_fraction=1.5)
+    assert res.margins["Q >= I"] == pytest.approx(1.0, abs=1e-6)

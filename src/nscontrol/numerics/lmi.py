@@ -190,7 +190,7 @@ class LMIProblem:
     # -- solve -------------------------------------------------------------------------------
     def solve(self, *, minimize: Any = None, maximize: Any = None,
               solver: SolverName = "auto", recheck_fraction: float = 0.5,
-              eq_tol: float = 1e-7) -> LMIResult:
+              warn_fraction: float = 0.9, eq_tol: float = 1e-7) -> LMIResult:
         """Solve, then re-check every constraint at the returned values.
 
         Parameters
@@ -202,6 +202,9 @@ class LMIProblem:
         recheck_fraction : float
             A block passes the re-check when its smallest eigenvalue is at least this
             fraction of its requested margin.
+        warn_fraction : float
+            Below this fraction of its margin (but above ``recheck_fraction``) a block passes
+            with an :class:`~nscontrol.errors.InaccurateCertificateWarning`.
         eq_tol : float
             Largest accepted relative residual ``||lhs - rhs||_F / max(1, ||rhs||_F)``.
 
@@ -228,7 +231,7 @@ class LMIProblem:
                 f"{self.name}: no certificate — solver {used} returned status {status!r} for "
                 f"the constraints {', '.join(self._names())}; relax margins or bounds, or "
                 "check the model (e.g. stabilisability/detectability)", status=status)
-        result = self._recheck(status, used, recheck_fraction, eq_tol,
+        result = self._recheck(status, used, recheck_fraction, warn_fraction, eq_tol,
                                None if minimize is None and maximize is None
                                else float(problem.value))
         if status != "optimal":
@@ -268,8 +271,8 @@ class LMIProblem:
                 break  # a decision: no fallback needed
         return status, used
 
-    def _recheck(self, status: str, used: str, fraction: float, eq_tol: float,
-                 objective: float | None) -> LMIResult:
+    def _recheck(self, status: str, used: str, fraction: float, warn_fraction: float,
+                 eq_tol: float, objective: float | None) -> LMIResult:
         values = {}
         for name, var in self._vars.items():
             v = np.asarray(var.value, dtype=float)
@@ -293,9 +296,10 @@ class LMIProblem:
                     f"values returned by {used} ({status}); the problem is at or beyond its "
                     "feasibility boundary — relax the design target or rescale the data",
                     status="recheck_failed")
-            if _is_number(b.margin) and req > 0 and lam < 0.9 * req:
+            if _is_number(b.margin) and req > 0 and lam < warn_fraction * req:
                 warnings.warn(f"{self.name}: {b.name!r} holds with smallest eigenvalue "
-                              f"{lam:.3g}, less than 0.9 × the requested margin {req:.3g}",
+                              f"{lam:.3g}, less than {warn_fraction} × the requested margin "
+                              f"{req:.3g}",
                               InaccurateCertificateWarning, stacklevel=3)
         for e in self._equalities:
             lhs = np.asarray(e.lhs.value, dtype=float)
