@@ -90,6 +90,10 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
     sliding = -1
     for j in np.flatnonzero(np.abs(h) <= 1e-12 * (1.0 + np.linalg.norm(x))):
         sm, sp, fm, fp, n = _robust_sigmas(fields, t, x, tuple(signs), int(j))
+        if sm < 0 < sp:
+            raise ModelError(f"x0: starts on surface {j} where both sides push away "
+                             f"(repelling sliding, σ⁻ = {sm:.3g} < 0 < σ⁺ = {sp:.3g}): "
+                             f"forward solutions are not unique; move x0 off the surface")
         if sm > 0 > sp and sliding < 0:
             sliding = int(j)
         elif sm < 0 and sp < 0:
