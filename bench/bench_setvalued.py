@@ -1,0 +1,110 @@
+"""Set-valued and switched integrators against their references, in one run.
+
+1. relay Lur'e system ``x' = Ax + Bλ, y = Cx, λ ∈ -Sign(y)``, ``A = [[0, 1], [0, 0]]``,
+   ``B = [0, 1]ᵀ``, ``C = [1, 1]``, ``x0 = (1, 0)``, ``h = 1e-3``, ``T = 10``: our implicit Euler
+   (compiled closed-form resolvent) vs Siconos ``EulerMoreauOSI(1) + Relay`` (θ = 1 both);
+   accuracy: reaching step vs ``√3 - 1``, largest ``|y|`` after reaching, final states vs the
+   exact solution.
+2. PWA one-sided-spring oscillator (ch11 example A, ``a = 1``, ``ω = 2.9``) over 1000 forcing
+   periods: our exact switching integrator vs ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10,
+   atol 1e-12, a terminal event on the facet, restarted at every crossing); accuracy: number of
+   crossings and final-state difference between the two.
+
+Run: ``nscontrol bench setvalued --json`` (``--quick``: 100 periods, shorter budgets).
+"""
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+from harness import run_siconos, siconos_available, siconos_version, time_per_call
+
+from nscontrol.simulate import simulate
+from nscontrol.testing import setvalued_problems as sp
+
+H, T_RELAY = 1e-3, 10.0
+
+
+def _relay(quick: bool) -> dict:
+    p = sp.relay_feedback(T=T_RELAY)
+    steps = round(T_RELAY / H)
+
+    def ours() -> object:
+        return simulate(p.system, p.x0, p.t_span, h=H, progress=False)
+
+    sec = time_per_call(ours, budget=0.5 if quick else 2.0, min_calls=3)
+    tr = ours()
+    z = tr.signal("z")[:, 0]
+    k = int(np.argmax(z == 0.0))
+    exact_final = p.facts["exact"](T_RELAY)[0]
+    acc = {"ours_reaching_time": float(tr.t[k]), "exact_reaching_time": p.facts["reaching_time"],
+           "ours_max_abs_y_after": float(np.max(np.abs(tr.signal("y")[k:]))),
+           "ours_final_error": float(np.max(np.abs(tr.x[-1] - exact_final)))}
+    rec = {"scenario": "relay-lure-h1e-3-T10", "size": 2, "ours_steps_per_s": steps / sec,
+           "reference": None, "reference_steps_per_s": None, "ratio": None, "unit": "steps",
+           "accuracy": acc}
+    ok, why = siconos_available()
+    if not ok:
+        rec["note"] = f"Siconos skipped: {why}"
+        return rec
+    payload = {"A": [[0.0, 1.0], [0.0, 0.0]], "B": [[0.0], [1.0]], "C": [[1.0, 1.0]],
+               "x0": [1.0, 0.0], "h": H, "T": T_RELAY, "theta": 1.0,
+               "repeats": 2 if quick else 5}
+    (ref,) = run_siconos("setvalued.py", payload, timeout=200)
+    ref_rate = ref["steps"] / ref["seconds"]
+    acc.update({"siconos_reaching_time": ref["reaching_time"],
+                "siconos_max_abs_y_after": ref["max_abs_y_after"],
+                "siconos_final_error": float(np.max(np.abs(np.array(ref["final"])
+                                                          - exact_final))),
+                "ours_vs_siconos_final": float(np.max(np.abs(np.array(ref["final"])
+                                                            - tr.x[-1])))})
+    rec.update(reference=siconos_version(), reference_steps_per_s=ref_rate,
+               ratio=(steps / sec) / ref_rate)
+    return rec
+
+
+def _scipy_pwa(p: sp.SetValuedProblem, t_end: float) -> tuple[np.ndarray, int]:
+    from scipy.integrate import solve_ivp
+
+    rhs = p.facts["rhs"]
+    t, x, n_cross = 0.0, p.x0.copy(), 0
+
+    def facet(t: float, x: np.ndarray) -> float:
+        return x[0]
+    facet.terminal = True  # type: ignore[attr-defined]
+    while t < t_end:
+        sol = solve_ivp(rhs, (t, t_end), x, method="DOP853", rtol=1e-10, atol=1e-12,
+                        events=facet)
+        t, x = float(sol.t[-1]), sol.y[:, -1].copy()
+        if sol.status != 1:
+            break
+        n_cross += 1
+        # step off the facet so the restarted run does not stop at once
+        x = x + 1e-12 * rhs(t, x)
+        t = t + 1e-12
+    return x, n_cross
+
+
+def _pwa(quick: bool) -> dict:
+    p = sp.bimodal_oscillator()
+    periods = 100 if quick else 1000
+    t_end = periods * p.facts["period"]
+    simulate(p.system, p.x0, (0.0, 5 * p.facts["period"]), progress=False)  # warm-up
+    start = time.perf_counter()
+    tr = simulate(p.system, p.x0, (0.0, t_end), progress=False, n_samples=2)
+    ours = time.perf_counter() - start
+    start = time.perf_counter()
+    x_ref, n_ref = _scipy_pwa(p, t_end)
+    ref = time.perf_counter() - start
+    n_ours = tr.event_times("crossing").size
+    return {"scenario": f"pwa-oscillator-{periods}-periods", "size": periods,
+            "ours_s_per_solve": ours, "reference": "scipy solve_ivp DOP853 + events",
+            "reference_s_per_solve": ref, "ratio": ref / ours, "unit": "solves",
+            "ours_steps_per_s": n_ours / ours, "reference_steps_per_s": n_ref / ref,
+            "accuracy": {"ours_crossings": n_ours, "scipy_crossings": n_ref,
+                         "final_state_difference": float(np.max(np.abs(x_ref - tr.x[-1])))}}
+
+
+def run(quick: bool = False) -> Iterator[dict]:
+    yield _relay(quick)
+    yield _pwa(quick)
