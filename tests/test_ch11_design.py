@@ -121,3 +121,13 @@ def test_bad_design_input(plant):
         d.design_state_feedback(plant, sigma=0.0)
     with pytest.raises(ModelError):
         d.design_state_feedback(plant, sigma=0.1, scale="bogus")
+
+
+def test_auto_scaling_certifies_the_badly_scaled_beam():
+    beam = beam_surrogate()  # entries up to 4.7e5
+    sc = d.Scaling.auto(beam.A, beam.E)
+    Bt = sc.S @ beam.E * sc.input_unit / sc.omega
+    assert np.linalg.norm(Bt, 2) == pytest.approx(1.0)
+    sf = d.design_state_feedback(beam, sigma=0.1 * 2 * np.pi * 20, scale="auto")
+    assert _certificate_ok(sf.closed_loop(beam).A, sf.P, 0.1 * 2 * np.pi * 20)
+    assert cv.quadratic_convergence(sf.closed_loop(beam)).convergent

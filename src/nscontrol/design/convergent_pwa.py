@@ -117,16 +117,16 @@ class Scaling:
 
 
 def _auto_scaling(As: Sequence[FloatArray], B: FloatArray | None) -> Scaling:
-    from scipy.linalg import matrix_balance
+    """The shared balancing of :class:`nscontrol.numerics.lmi.Scaling` (``x̃ = D⁻¹x``,
+    ``τ = ωt``) plus an input unit making ``‖B̃‖ = 1``."""
+    from ..numerics.lmi import Scaling as Balancing
 
-    total = sum(np.abs(A) for A in As)
-    _, (s, _perm) = matrix_balance(total, permute=False, separate=True)
-    S = np.diag(1.0 / s)
-    omega = max(float(np.linalg.norm(S @ A @ np.diag(s), 2)) for A in As) or 1.0
+    bal = Balancing.for_matrices(As)
+    S = np.diag(1.0 / bal.d)
     f = 1.0
     if B is not None and np.linalg.norm(B) > 0:
-        f = omega / float(np.linalg.norm(S @ B, 2))
-    return Scaling(S, omega, f)
+        f = bal.omega / float(np.linalg.norm(S @ B, 2))
+    return Scaling(S, bal.omega, f)
 
 
 def _resolve_scaling(scale: Scaling | str | None, As: Sequence[FloatArray],

@@ -372,15 +372,22 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     ws = np.linspace(0.5, 4.0, 36)
     branches = pr.frequency_sweep(plant, ws, n_transient=100, n_record=6, executor=None,
                                   progress=False)
+    shot = _open_loop_T_orbits(plant, ws[::2])
     fig, ax = new_figure(figsize=(7, 4))
-    ax.semilogy(ws, branches["up"].gamma, "^-", ms=3, label="open loop, sweep up")
-    ax.semilogy(ws, branches["down"].gamma, "v-", ms=3, label="open loop, sweep down")
+    ax.semilogy(ws, branches["up"].gamma, "^-", ms=3, label="open loop, brute force, sweep up")
+    ax.semilogy(ws, branches["down"].gamma, "v--", ms=3, label="open loop, sweep down")
+    for stable, mark, text in ((True, "o", "stable"), (False, "x", "unstable")):
+        pts = [(w, g) for w, g, mu in shot if (mu < 1) == stable]
+        if pts:
+            ax.semilogy(*zip(*pts, strict=True), mark, color="r",
+                        label=f"open-loop T-periodic solution ({text}, shooting)")
     ax.semilogy(frf.omega, frf.gamma, "k-", label="closed loop γ₁(ω) (shooting)")
     ax.set_xscale("log")
     ax.set_xlabel("ω")
     ax.set_ylabel("max|q| / a")
-    ax.set_title("open loop: brute force from continuation; closed loop: unique steady state")
-    ax.legend(fontsize="small")
+    ax.set_title("open loop: coexisting responses; closed loop: one steady state",
+                 fontsize="medium")
+    ax.legend(fontsize="x-small")
     save_figure(fig, out_dir, "ch11_frequency_response", figures)
     out["open_loop_sweep_multiplicities"] = {k: v.multiplicity for k, v in branches.items()}
 
@@ -388,20 +395,32 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     ax.semilogx(frf.omega, frf.max_floquet, "k.-", label="closed loop max|μ|")
     ax.semilogx(frf.omega, np.exp(-SIGMA * 2 * np.pi / frf.omega), "g--",
                 label="P6 bound e^(-σT), σ = 0.3")
-    opens = []
-    for w in ws[::3]:
-        try:
-            opens.append((w, _orbit(plant, w, fallback=False).max_multiplier))
-        except Exception:  # noqa: BLE001 - an open-loop T-orbit may not be reachable
-            continue
-    if opens:
-        ax.semilogx(*zip(*opens, strict=True), "r^", label="open-loop T-orbit max|μ|")
+    if shot:
+        ax.semilogx([w for w, _, _ in shot], [mu for _, _, mu in shot], "r^",
+                    label="open-loop T-orbit max|μ|")
     ax.axhline(1.0, color="0.5", lw=0.8)
     ax.set_yscale("log")
     ax.set_xlabel("ω")
     ax.set_ylabel("Floquet multiplier modulus")
     ax.legend(fontsize="small")
     save_figure(fig, out_dir, "ch11_floquet", figures)
+
+
+def _open_loop_T_orbits(plant: Any, omegas: Any) -> list[tuple[float, float, float]]:
+    """``(ω, γ, max|μ|)`` of the open loop's T-periodic solutions reachable by Newton (they
+    exist, stable or not, beside the subharmonic responses found by brute force)."""
+    from ..analysis.periodic import harmonic_response
+    from ..errors import SolverError
+
+    found = []
+    for w in omegas:
+        try:
+            orbit = _orbit(plant, w, fallback=False)
+        except SolverError:
+            continue
+        found.append((float(w), harmonic_response(orbit, amplitude=1.0, system=plant).gamma,
+                      orbit.max_multiplier))
+    return found
 
 
 def run(out_dir: Path | None = None) -> ExampleResult:
