@@ -33,6 +33,7 @@ NUMERICAL_FAILURE = 3
 _PIVOT_TOL = 1e-12
 #: Relative tolerance for ties in Lemke's ratio test (degenerate problems).
 _TIE_TOL = 1e-12
+_EPS = np.finfo(np.float64).eps
 
 
 @njit(cache=True)
@@ -433,7 +434,7 @@ def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
     ``min(z_i, w_i)`` that is smaller at the current iterate (``w_i <= z_i``: impose
     ``w_i = 0``, i.e. ``i`` active; else ``z_i = 0``), solves the principal system on the
     active set by a Thomas sweep restarted at each run of consecutive active indices, and
-    stops as soon as ``z >= 0`` and ``w >= 0`` (to ``1e-13 (1 + max|q|)``).
+    stops as soon as ``z >= 0`` and ``w >= 0`` (to ``1e-13 (1 + max|q|) + 64 eps ||M|| max|z|``).
 
     *When it is exact.* For an M-matrix ``M`` (positive diagonal, non-positive off-diagonals,
     positive definite or diagonally dominant — e.g. the Delassus matrix ``W^T M^{-1} W`` of a
@@ -475,11 +476,23 @@ def tridiagonal_howard(lower, diag, upper, q, z, w, max_iter):
             return NUMERICAL_FAILURE, 0
         qmax = max(qmax, abs(q[i]))
     _tridiag_w(lower, diag, upper, q, z, w)
-    eps = 1e-13 * (1.0 + qmax)
+    row_max = 0.0
+    for i in range(n):
+        a = abs(diag[i])
+        if i > 0:
+            a += abs(lower[i - 1])
+        if i < n - 1:
+            a += abs(upper[i])
+        row_max = max(row_max, a)
     active = np.empty(n, dtype=np.bool_)
     cp = np.empty(n)
     dp = np.empty(n)
     for it in range(max_iter + 1):
+        # feasibility tolerance: relative to q, widened by the round-off of M z for large z
+        zmax = 0.0
+        for i in range(n):
+            zmax = max(zmax, abs(z[i]))
+        eps = 1e-13 * (1.0 + qmax) + 64.0 * _EPS * row_max * zmax
         feasible = True
         for i in range(n):
             if z[i] < -eps or w[i] < -eps:
@@ -538,7 +551,6 @@ def csr_tridiagonal_bands(indptr, indices, data, lower, diag, upper):
 
 
 # --------------------------------------------------------------------------------- verification
-_EPS = np.finfo(np.float64).eps
 
 
 @njit(cache=True)
