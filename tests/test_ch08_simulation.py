@@ -164,3 +164,16 @@ def test_check8_regularised_solutions_approach_time_stepping(coulomb, coulomb_ru
         d_err.append(np.linalg.norm(xe[:2] - xe[2:] - e1))
     for d in (d_plant, d_err):
         assert d[0] / d[1] > 5 and d[1] / d[2] > 5, d
+
+
+def test_observer_alone_on_recorded_output_matches_the_closed_loop(coulomb, coulomb_runs):
+    s, plant, design, _ = coulomb
+    traj = coulomb_runs[1e-3]
+    y_rec = traj.x[:, :2] @ s.C.T
+
+    def y(t):
+        return np.interp(np.atleast_1d(t), traj.t, y_rec[:, 0]).reshape(-1, 1)
+
+    obs = design.observer_system(plant, y)
+    alone = simulate(obs, s.xhat0, (0.0, 12.0), h=1e-3, progress=False)
+    assert np.max(np.abs(alone.x - traj.x[:, 2:])) <= 1e-9 * np.max(np.abs(traj.x))

@@ -375,6 +375,22 @@ class LureObserverDesign:
         """
         return _closed_loop(self, plant)
 
+    def observer_system(self, plant: Any, y: Any) -> Any:
+        """The observer alone as a :class:`LureSystem` driven by a measured output ``y(t)``.
+
+        ``xhat' = (A - L C) xhat + G what + [B, L] [u; y]``,
+        ``zhat = (H - K C) xhat + D what + K y(t) + g(t)``, ``what ∈ -φ(zhat)``: for running
+        the observer on recorded measurements (its output is ``xhat`` itself).
+
+        Parameters
+        ----------
+        plant : LureSystem
+            The plant the design was made for (its ``B``, ``u``, ``g`` and law are reused).
+        y : callable
+            Measured output ``t -> (p,)`` (vectorised ``t -> (len(t), p)`` preferred).
+        """
+        return _observer_system(self, plant, y)
+
 
 # -- the LMIs (cvxpy) -------------------------------------------------------------------------
 def _default_margin(mat: _Matrices) -> float:
@@ -793,16 +809,20 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
 
 
 # -- closed loop ---------------------------------------------------------------------------
-def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
-    from ..laws.set_valued import Product
-    from ..systems.lure import LureSystem
-
-    mat, law = _plant_matrices(plant)
+def _check_same_plant(design: LureObserverDesign, mat: _Matrices) -> None:
     for name in ("A", "G", "H", "C", "D"):
         if not np.allclose(getattr(mat, name), getattr(design, name), rtol=1e-12, atol=1e-12):
             raise ModelError(f"plant: its {name} differs from the one the observer was designed "
                              f"for; design for this plant (for a loop-transformed law pass the "
                              f"transformed plant)")
+
+
+def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
+    from ..laws.set_valued import Product
+    from ..systems.lure import LureSystem
+
+    mat, law = _plant_matrices(plant)
+    _check_same_plant(design, mat)
     n, A, G, H, C = mat.n, mat.A, mat.G, mat.H, mat.C
     L, K = design.L, design.K
     zeros = np.zeros((n, n))
@@ -822,6 +842,39 @@ def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
     return LureSystem(A_cl, G_cl, H_cl, Product(law, law), B=B_cl, C=np.hstack(
         [np.eye(n), -np.eye(n)]), D=D_cl, u=u_cl, g=g_cl,
         state_names=names + tuple(f"{s}_hat" for s in names))
+
+
+def _observer_system(design: LureObserverDesign, plant: Any, y: Any) -> Any:
+    from ..systems.lure import LureSystem
+
+    mat, law = _plant_matrices(plant)
+    _check_same_plant(design, mat)
+    if not callable(y):
+        raise ModelError(f"y: expected a function of time returning the measured output, got "
+                         f"{type(y).__name__}")
+    p, n = mat.p, mat.n
+    q = plant.n_inputs if getattr(plant, "B", None) is not None else 0
+
+    def y_of(t: Any) -> FloatArray:
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.asarray(y(t), dtype=float)
+        if out.shape != (t.size, p):
+            out = np.array([np.ravel(y(float(s))) for s in t]).reshape(t.size, p)
+        return out
+
+    def inputs(t: Any) -> FloatArray:
+        u = plant.input_at(t) if q else np.zeros((np.size(t), 0))
+        return np.hstack([u, y_of(t)])
+
+    def shift(t: Any) -> FloatArray:
+        return y_of(t) @ design.K.T + plant.shift_at(t)
+
+    B = np.hstack([plant.B if q else np.zeros((n, 0)), design.L])
+    names = tuple(f"{s}_hat" for s in (plant.state_names or
+                                       tuple(f"x{i}" for i in range(n))))
+    return LureSystem(design.A_L, mat.G, mat.H - design.K @ mat.C, law, B=B, C=np.eye(n),
+                      D=mat.D if np.any(mat.D) else None, u=inputs, g=shift,
+                      state_names=names)
 
 
 def loop_transformed_lure_system(A: Any, G: Any, H: Any, law: Any, *, sigma: Any = None,
