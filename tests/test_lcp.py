@@ -141,6 +141,8 @@ def test_all_methods_agree_on_tridiagonal_m_matrices(n, seed):
         res = solve_lcp(matrix, q, method=method)
         assert_is_solution(res, M, q)
         np.testing.assert_allclose(res.z, ref.z, atol=1e-10)
+        # Howard's iteration on an M-matrix: at most n + 1 active-set solves (Bokanowski et al.)
+        assert res.method == "lemke" or res.iterations <= n + 1
 
 
 @PROPERTY
