@@ -22,20 +22,21 @@ on a certified local representation of ``g`` and of ``g'``.
 
 1. *Balance and grid.* ``A`` is balanced by a diagonal similarity ``A = D Ab D^{-1}``
    (``scipy.linalg.matrix_balance``) and the horizon is cut into cells of width
-   ``h = 1/||Ab||_2``. Cell start states come from powers of ``Φ = e^{Ab h}`` (computed once
-   per flow and cached), in chunks of geometrically growing size, so a near event costs
-   little and a far one few Python iterations.
+   ``h = 1/||Ab||_2``. Cell start states are ``y_{k+1} = Φ y_k`` with ``Φ = e^{Ab h}``
+   (computed once per flow and cached); the scan over cells runs in a numba kernel
+   (:mod:`nscontrol.numerics._lti_kernels`), so a far event costs microseconds per cell.
 2. *Taylor polynomial per cell.* On a cell starting at ``t_k``, ``g(t_k + σh) = Σ_j a_j σ^j``
    with ``a_j = G D (Ab h)^j y_k / j!``, ``j <= K = 18``; since ``||Ab h|| = 1`` the truncation
-   error is below ``e/19! ≈ 2e-17`` relative, i.e. the polynomial *is* ``g`` to rounding. All
-   cells and guards are expanded at once (vectorised).
+   error is below ``e/19! ≈ 2e-17`` relative, i.e. the polynomial *is* ``g`` to rounding. The
+   matrices ``G D (Ab h)^j / j!`` are cached per flow and guard matrix.
 3. *Certificate.* The Bernstein coefficients of each polynomial on ``[0, 1]`` enclose its
    range. A cell whose smallest Bernstein coefficient exceeds the touch tolerance is
    certified root-free for that guard. No grid step needs tuning: the enclosure is
    rigorous, so a double root or a near-grazing pair between grid points cannot slip through.
-4. *Exact analysis of the remaining cells, in time order.* For a flagged cell the critical
-   points of ``g`` (real roots of the polynomial ``g'``, skipped when the Bernstein
-   coefficients of ``g'`` show it has one sign) split the cell into monotone pieces. Walking
+4. *Exact analysis of the remaining cells, in time order.* When the Bernstein coefficients
+   of ``g'`` have one sign, ``g`` is monotone on the cell and the kernel finds its root
+   directly. Otherwise (in Python) the critical points of ``g`` (real roots of the polynomial
+   ``g'``) split the cell into monotone pieces. Walking
    them left to right: the first piece whose right end has ``g <= 0`` holds the first root,
    a unique one, refined by a safeguarded Newton iteration (bisection whenever the Newton
    step leaves the bracket); a local minimum with ``|g| <= tol`` is a tangential touch
@@ -77,8 +78,6 @@ EIG_COND_LIMIT = 1e5
 #: Taylor degree per cell; with ||Ab h|| = 1 the remainder is below e/(K+1)! ≈ 2e-17.
 TAYLOR_DEGREE = 18
 _REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
-_FIRST_CHUNK = 16
-_MAX_CHUNK = 1024
 
 
 # --------------------------------------------------------------------------- exosystem
@@ -282,6 +281,12 @@ class LTIFlow:
             out = scipy.linalg.expm(ts[:, None, None] * self.A) @ x0
         return out[0] if scalar else out
 
+    def state_at(self, x0: FloatArray, t: float) -> FloatArray:
+        """``e^{At} x0`` for a validated ``x0`` and one time (no checks: internal hot path)."""
+        if self.method == "eig":
+            return (self._V @ (np.exp(self._lam * t) * (self._Vinv @ x0))).real
+        return scipy.linalg.expm(self.A * t) @ x0
+
     def guard_context(self) -> _GuardContext:
         """Balanced matrix, cell width and cached powers used by :func:`first_event`."""
         if self._guard is None:
@@ -371,29 +376,12 @@ class _GuardContext:
         self.h = 1.0 / norm if norm > 0.0 else 1.0
         self.Ab = Ab
         self.Abh = Ab * self.h
-        self.phi_pows = [np.eye(n)]
-        self._phi = scipy.linalg.expm(self.Abh) if n else np.eye(0)
+        self.phi = scipy.linalg.expm(self.Abh) if n else np.eye(0)
         K = TAYLOR_DEGREE
         self.bern = _bernstein_matrix(K)
         self.bern_d = _bernstein_matrix(K - 1)
         self._taylor: FloatArray | None = None
-        self._pow_array = np.eye(n)[None]
         self._guards: dict[Any, tuple[FloatArray, ...]] = {}
-
-    def powers(self, m: int) -> FloatArray:
-        """``[Φ^0, ..., Φ^m]`` as an ``(m + 1, n, n)`` array (a view of a cache that grows by
-        doubling)."""
-        if self._pow_array.shape[0] <= m:
-            while len(self.phi_pows) <= m:
-                self.phi_pows.append(self._phi @ self.phi_pows[-1])
-            self._pow_array = np.asarray(self.phi_pows)
-        return self._pow_array[: m + 1]
-
-    @property
-    def max_chunk(self) -> int:
-        """Cells per chunk at most: keeps the cached powers of Φ below ~8 MB."""
-        n = max(self.Ab.shape[0], 1)
-        return int(min(_MAX_CHUNK, max(_FIRST_CHUNK, 10**6 // (n * n))))
 
     def guard_data(self, G: FloatArray, h_cell: float) -> tuple[FloatArray, ...]:
         """``(G D, row norms, W)`` with ``W[j] = G D (Ab h)^j / j!``: the guard Taylor
@@ -403,8 +391,8 @@ class _GuardContext:
         if h_cell == self.h and key in self._guards:
             return self._guards[key]
         GD = G * self.d
-        data = (GD, np.linalg.norm(GD, axis=1),
-                np.einsum("pn,knl->kpl", GD, self.taylor_matrices(h_cell)))
+        W = np.einsum("pn,knl->kpl", GD, self.taylor_matrices(h_cell))
+        data = (GD, np.linalg.norm(GD, axis=1), np.ascontiguousarray(W))
         if h_cell == self.h:
             if len(self._guards) >= 16:
                 self._guards.pop(next(iter(self._guards)))
@@ -519,33 +507,50 @@ class _Search:
         self.active = np.ones(len(g0), dtype=bool)
         self.skip_start = np.zeros(len(g0), dtype=bool)
 
-    def scale(self, y: FloatArray) -> FloatArray:
-        """Magnitude of each guard's terms for cell start states ``y`` (n, m) -> (p, m)."""
-        return np.multiply.outer(self.row_norm, np.linalg.norm(y, axis=0)) \
-            + np.abs(self.g0)[:, None]
-
     def run(self) -> GuardEvent | None:
+        from ._lti_kernels import HITS, NO_EVENT, scan_cells
+
         early = self._classify_start()
         if early is not None:
             return early
         if not self.active.any():
             return None
+        ctx, p = self.ctx, len(self.g0)
         n_cells = max(1, math.ceil(self.t_max / self.h))
-        k0, y_start, chunk = 0, self.y0, _FIRST_CHUNK
-        while k0 < n_cells:
-            m = min(chunk, n_cells - k0)
-            if n_cells == 1:
-                Y = y_start[:, None]
-            else:
-                Y = (self.ctx.powers(m) @ y_start).T  # (n, m + 1)
-            event = self._scan(k0, Y[:, :m])
+        y, k = self.y0.copy(), 0
+        sigma, hit = np.zeros(p), np.zeros(p, dtype=np.int8)
+        while k < n_cells:
+            code, k = scan_cells(self.W, self.g0, self.row_norm, self.graze_tol, _REMAINDER,
+                                 ctx.phi, ctx.bern, ctx.bern_d, y, k, n_cells, self.h,
+                                 self.t_max, self.active, self.skip_start, sigma, hit)
+            if code == NO_EVENT:
+                return None
+            a = self.W @ y
+            a[0] += self.g0
+            if code == HITS:
+                hits = {int(i): (float(sigma[i]), False) for i in np.flatnonzero(hit)}
+                return self._finish(k, k * self.h, a, hits)
+            event = self._walk_cell(k, a, y)
             if event is not None:
                 return event
-            if n_cells > 1:
-                y_start = Y[:, m]
-            k0 += m
-            chunk = min(2 * chunk, self.ctx.max_chunk)
+            y = ctx.phi @ y
+            k += 1
         return None
+
+    def _walk_cell(self, k: int, a: FloatArray, y: FloatArray) -> GuardEvent | None:
+        """Exact analysis (critical points of g) of cell ``k``, Taylor coefficients ``a``."""
+        scale = self.row_norm * math.sqrt(y @ y) + np.abs(self.g0)
+        tol = self.graze_tol * scale
+        bern_min = (self.ctx.bern @ a).min(axis=0)
+        flagged = (bern_min <= tol + _REMAINDER * scale) & self.active
+        sigma_end = min(1.0, (self.t_max - k * self.h) / self.h)
+        hits = {}
+        for i in np.flatnonzero(flagged):
+            hit = _walk(a[:, i], sigma_end, tol[i], bool(self.skip_start[i] and k == 0),
+                        self.ctx)
+            if hit is not None:
+                hits[int(i)] = hit
+        return self._finish(k, k * self.h, a, hits) if hits else None
 
     def _classify_start(self) -> GuardEvent | None:
         """Handle guards at zero at t = 0; reject negative ones."""
@@ -575,47 +580,26 @@ class _Search:
             return GuardEvent(0.0, tuple(falling), False)
         return None
 
-    def _scan(self, k0: int, Y: FloatArray) -> GuardEvent | None:
-        """Search cells ``k0 .. k0 + m - 1`` whose start states are the columns of ``Y``."""
-        a = self.W @ Y  # (K+1, p, m)
-        a[0] += self.g0[:, None]
-        scale = self.scale(Y)
-        tol = self.graze_tol * scale
-        K1, p, m = a.shape
-        bern_min = (self.ctx.bern @ a.reshape(K1, p * m)).min(axis=0).reshape(p, m)
-        # not certified positive (enclosure minus truncation remainder): look closer
-        flagged = (bern_min <= tol + _REMAINDER * scale) & self.active[:, None]
-        for k in np.flatnonzero(flagged.any(axis=0)):
-            k_glob = k0 + int(k)
-            t_k = k_glob * self.h
-            sigma_end = min(1.0, (self.t_max - t_k) / self.h)
-            if sigma_end <= 0.0:
-                break
-            hits = {}
-            for i in np.flatnonzero(flagged[:, k]):
-                hit = _walk(a[:, i, k], sigma_end, tol[i, k],
-                            bool(self.skip_start[i] and k_glob == 0), self.ctx)
-                if hit is not None:
-                    hits[int(i)] = hit
-            if hits:
-                return self._finish(k_glob, t_k, a[:, :, k], hits)
-        return None
-
     def _finish(self, k_glob: int, t_k: float, a: FloatArray,
                 hits: dict[int, tuple[float, bool]]) -> GuardEvent:
         """Re-polish on the exact start state, gather simultaneous guards."""
+        from ._lti_kernels import polish
+
         if k_glob > 0:
-            y = self.flow.propagate(self.x0, t_k) / self.ctx.d
+            y = self.flow.state_at(self.x0, t_k) / self.ctx.d
             a = self.W @ y
             a[0] += self.g0
-            hits = {i: (_polish(a[:, i], s, g), g) for i, (s, g) in hits.items()}
+            hits = {i: (polish(np.ascontiguousarray(a[:, i]), s, g), g)
+                    for i, (s, g) in hits.items()}
         s_first = min(s for s, _ in hits.values())
         t_first = t_k + s_first * self.h
         delta = self.sim_tol * max(t_first, self.h) / self.h
         chosen = {i: g for i, (s, g) in hits.items() if s <= s_first + delta}
-        for i in np.flatnonzero(self.active & ~(self.skip_start & (k_glob == 0))):
-            if int(i) not in chosen and _horner(a[::-1, i].tolist(), s_first + delta) <= 0.0:
-                chosen[int(i)] = False
+        if len(chosen) < len(self.g0):
+            for i in np.flatnonzero(self.active & ~(self.skip_start & (k_glob == 0))):
+                if int(i) not in chosen and _horner(a[::-1, i].tolist(),
+                                                    s_first + delta) <= 0.0:
+                    chosen[int(i)] = False
         t_event = min(t_first, self.t_max)
         return GuardEvent(float(t_event), tuple(sorted(chosen)), all(chosen.values()))
 
@@ -722,20 +706,3 @@ def _bracketed_root(a: FloatArray, lo: float, hi: float, f_lo: float, f_hi: floa
             return x_new
         x = x_new
     return x
-
-
-def _polish(a: FloatArray, s: float, grazing: bool) -> float:
-    """Newton polish of a root (or, when grazing, of the minimum) of ``P`` near ``s``."""
-    c = (_derivative(a) if grazing else a)[::-1].tolist()
-    x = s
-    for _ in range(4):
-        f, d = _horner2(c, x)
-        if d == 0.0:
-            break
-        step = f / d
-        if not math.isfinite(step) or abs(step) > 1e-6:
-            return s  # the exact polynomial disagrees: keep the scan's estimate
-        x -= step
-        if abs(step) <= 2.0 * _EPS * max(abs(x), 1.0):
-            break
-    return float(x)
