@@ -172,6 +172,17 @@ def periodic_steady_state(system: Any, period: float, *, u: Any = None, x0: Any 
     ----------
     D5.3 chapter 11 (§3.3 of our spec); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
     response functions for nonlinear convergent systems", IEEE TAC 52(6), 2007.
+
+    Examples
+    --------
+    The open-loop one-sided oscillator of ch11 §4.1 at ω = 2.9 has an *unstable* T-orbit:
+
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> from nscontrol.numerics.lti import Exosystem
+    >>> orbit = periodic_steady_state(one_sided_oscillator(0.1), 2 * np.pi / 2.9,
+    ...                               u=Exosystem.sinusoid(1.0, 2.9))
+    >>> round(float(orbit.floquet[0].real), 2), orbit.stable
+    (-2.19, False)
     """
     period = check_positive("period", period)
     n = int(system.n_states)
