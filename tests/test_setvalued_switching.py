@@ -151,7 +151,7 @@ def test_pwm_switching_instants_exact_and_state_matches_ode():
     edges = np.concatenate([[0.0], expected, [10 * T]])
     for k in range(edges.size - 1):
         u = 1.0 if k % 2 == 0 else -1.0
-        sol = solve_ivp(lambda t, y: A @ y + np.array([0.0, u]), (edges[k], edges[k + 1]), x,
+        sol = solve_ivp(lambda t, y, u=u: A @ y + np.array([0.0, u]), (edges[k], edges[k + 1]), x,
                         method="DOP853", rtol=1e-13, atol=1e-15)
         x = sol.y[:, -1]
     assert np.max(np.abs(tr.x[-1] - x)) <= 1e-10

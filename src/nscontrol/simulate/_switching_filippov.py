@@ -108,7 +108,7 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     from scipy.integrate import solve_ivp
 
     fields = _Fields(system)
-    n, J = system.n_states, system.n_surfaces
+    n = system.n_states
     t, x = run.t0, x0.copy()
     signs, sliding = _initial_mode(fields, t, x)
     run.rec.sample(t, x, force=True)
@@ -118,28 +118,10 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     pieces = 0
     while t < run.tf:
         f = fields.rhs(signs, sliding)
-        events, kinds = [], []
-        for k in range(J):
-            if k == sliding:
-                continue
-            ev = (lambda tt, y, k=k: float(system.surfaces[k](y[:n])))
-            ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]
-            events.append(ev)
-            kinds.append(("surface", k))
-        if sliding >= 0:
-            for side, direction in ((-1, -1.0), (1, 1.0)):
-                ev = (lambda tt, y, side=side: fields.sigmas(tt, y[:n], signs, sliding)
-                      [0 if side < 0 else 1])
-                ev.terminal, ev.direction = True, direction  # type: ignore[attr-defined]
-                events.append(ev)
-                kinds.append(("exit", side))
+        events, kinds = _events(system, fields, signs, sliding)
         if run.sensitivity:
-            jf = fields.jac(signs, sliding)
-
-            def rhs(tt: float, y: FloatArray) -> FloatArray:
-                Phi = y[n:].reshape(n, n)
-                return np.concatenate([f(tt, y[:n]), (jf(tt, y[:n]) @ Phi).ravel()])
-            y0 = np.concatenate([x, np.eye(n).ravel()])
+            rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
+                np.concatenate([x, np.eye(n).ravel()])
         else:
             rhs, y0 = f, x
         sol = solve_ivp(rhs, (t, run.tf), y0, method="DOP853", rtol=run.rtol, atol=run.atol,
@@ -176,6 +158,45 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         run.rec.sample(run.tf, x, force=True)
     return {"pieces": pieces, "final_mode": _mode_code(signs, sliding),
             "propagation": "dop853"}
+
+
+def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
+            ) -> tuple[list[Any], list[tuple[str, int]]]:
+    """Terminal events of a piece: each surface armed in the direction leaving the current
+    side, and while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0`` (rising)."""
+    n = system.n_states
+    events: list[Any] = []
+    kinds: list[tuple[str, int]] = []
+
+    def surface(k: int) -> Any:
+        def ev(t: float, y: FloatArray) -> float:
+            return float(system.surfaces[k](y[:n]))
+        ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]
+        return ev
+
+    def exit_event(side: int) -> Any:
+        def ev(t: float, y: FloatArray) -> float:
+            return fields.sigmas(t, y[:n], signs, sliding)[0 if side < 0 else 1]
+        ev.terminal, ev.direction = True, float(side)  # type: ignore[attr-defined]
+        return ev
+
+    for k in range(len(signs)):
+        if k != sliding:
+            events.append(surface(k))
+            kinds.append(("surface", k))
+    if sliding >= 0:
+        for side in (-1, 1):
+            events.append(exit_event(side))
+            kinds.append(("exit", side))
+    return events, kinds
+
+
+def _with_variational(f: Any, jf: Any, n: int) -> Any:
+    """The right-hand side of ``[x; vec Φ]`` with ``Φ' = J(x) Φ``."""
+    def rhs(t: float, y: FloatArray) -> FloatArray:
+        Phi = y[n:].reshape(n, n)
+        return np.concatenate([f(t, y[:n]), (jf(t, y[:n]) @ Phi).ravel()])
+    return rhs
 
 
 def _hit_surface(fields: _Fields, run: Any, t: float, x: FloatArray, signs: tuple[int, ...],

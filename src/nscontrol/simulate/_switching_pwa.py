@@ -202,13 +202,8 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     segments = 0
     while t < run.tf:
         H, h = system.regions[i]
-        events = []
-        for r in range(H.shape[0]):
-            def g(tt: float, xx: FloatArray, r: int = r) -> float:
-                return float(h[r] - H[r] @ xx)
-            g.terminal, g.direction = True, -1.0  # type: ignore[attr-defined]
-            events.append(g)
-        sol = solve_ivp(lambda tt, xx: field(i, tt, xx), (t, run.tf), x, method="DOP853",
+        events = [_facet_event(H[r], float(h[r])) for r in range(H.shape[0])]
+        sol = solve_ivp(lambda tt, xx, i=i: field(i, tt, xx), (t, run.tf), x, method="DOP853",
                         rtol=run.rtol, atol=run.atol, events=events, dense_output=True)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
@@ -235,3 +230,11 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     if run.rec.last_time < run.tf:
         run.rec.sample(run.tf, x, force=True)
     return {"segments": segments, "final_mode": i, "propagation": "dop853"}
+
+
+def _facet_event(row: FloatArray, offset: float) -> Any:
+    """Terminal event ``offset - row·x`` falling through zero (leaving the region)."""
+    def g(t: float, x: FloatArray) -> float:
+        return float(offset - row @ x)
+    g.terminal, g.direction = True, -1.0  # type: ignore[attr-defined]
+    return g

@@ -92,9 +92,8 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     cone of ``[p1[i], p2[i]]`` (complementarity: ``[0, inf)``). ``None`` for other laws.
     """
     from ..laws.normal_cone import NormalConeBox
-    from ..laws.relay import Relay
-
     from ..laws.product import Product
+    from ..laws.relay import Relay
 
     if isinstance(law, Product):
         parts = [componentwise_spec(p) for p in law.parts]
