@@ -168,3 +168,16 @@ def test_discontinuous_pwa_with_sliding_goes_through_filippov_form():
     assert info.value.trajectory is not None
     tr = simulate(FilippovSystem.from_pwa(pwa), [1.0, 0.0], (0.0, 3.0))
     assert abs(tr.event_times("sliding_start")[0] - (np.sqrt(3) - 1)) <= 1e-10
+
+
+def test_pwa_with_a_function_input_matches_the_exact_exosystem_path():
+    p = sp.bimodal_oscillator()
+    omega = p.facts["omega"]
+    exact = simulate(p.system, p.x0, (0.0, 15.0), sensitivity=True)
+    ode = simulate(p.system, p.x0, (0.0, 15.0), sensitivity=True,
+                   u=lambda t: np.reshape(np.sin(omega * np.asarray(t, float)), (-1, 1)))
+    assert ode.stats["propagation"] == "dop853" and exact.stats["propagation"] == "exact"
+    assert np.max(np.abs(ode.event_times("crossing") - exact.event_times("crossing"))) <= 1e-9
+    assert np.max(np.abs(ode.x[-1] - exact.x[-1])) <= 1e-9
+    assert np.max(np.abs(ode.stats["state_transition"] - exact.stats["state_transition"])) \
+        <= 1e-8
