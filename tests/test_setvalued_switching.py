@@ -181,3 +181,14 @@ def test_pwa_with_a_function_input_matches_the_exact_exosystem_path():
     assert np.max(np.abs(ode.x[-1] - exact.x[-1])) <= 1e-9
     assert np.max(np.abs(ode.stats["state_transition"] - exact.stats["state_transition"])) \
         <= 1e-8
+
+
+def test_event_budget_exceeded_raises_zeno_with_the_computed_part():
+    from nscontrol.errors import ZenoError
+
+    p = sp.bimodal_oscillator()
+    with pytest.raises(ZenoError, match="max_events") as info:
+        simulate(p.system, p.x0, p.t_span, max_events=5)
+    part = info.value.trajectory
+    assert part.status == -1 and len(part.events) == 6
+    assert 0.0 < part.t[-1] <= part.events[-1].time
