@@ -50,7 +50,7 @@ import numpy as np
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_vector, check_in_interval, check_positive
-from ..errors import ModelError, SolverError
+from ..errors import InadmissibleStateError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
@@ -153,7 +153,7 @@ def _initial_multiplier(system: Any, x0: FloatArray, t0: float) -> tuple[FloatAr
     if not np.any(system.D):
         try:
             return a, -np.asarray(system.law.select(a), float).reshape(m)
-        except Exception:  # outside the law's domain: the first step projects
+        except InadmissibleStateError:  # outside the law's domain: the first step projects
             return a, np.full(m, np.nan)
     return _solve_inclusion_python(system.law, a, system.D)
 
