@@ -399,11 +399,19 @@ def _default_margin(mat: _Matrices) -> float:
 
 
 class _ObserverLMI:
-    """The observer LMIs compiled once, with the decay rate as a CVXPY parameter."""
+    """The observer LMIs compiled once, with the decay rate as a CVXPY parameter.
+
+    Not built on :class:`nscontrol.numerics.lmi.LMIProblem`, which compiles a new CVXPY
+    problem per solve: with the rate as a parameter a bisection step costs 2.7 ms instead of
+    15.5 ms (measured on 5.2). The re-check is the problem-specific one of
+    :func:`recheck_certificate` (equality residual, Hurwitz ``A - L C``, gain bound).
+    """
 
     def __init__(self, mat: _Matrices, variant: str, kappa: float | None, eps: float,
                  eps_P: float, solver: str | None) -> None:
         import cvxpy as cp
+
+        from ..numerics.lmi import sym
 
         self.mat, self.variant, self.kappa = mat, variant, kappa
         self.eps, self.eps_P, self.solver = eps, eps_P, solver
@@ -421,8 +429,7 @@ class _ObserverLMI:
         self.alpha = cp.Parameter(nonneg=True)
         A, C = mat.A, mat.C
         lyap = A.T @ P + P @ A - C.T @ self.Y.T - self.Y @ C + 2.0 * self.alpha * P
-        constraints = [0.5 * (lyap + lyap.T) << -eps * np.eye(n),
-                       0.5 * (P + P.T) >> eps_P * np.eye(n)]
+        constraints = [sym(lyap) << -eps * np.eye(n), sym(P) >> eps_P * np.eye(n)]
         if kappa is not None:
             constraints.append(cp.bmat([[kappa * np.eye(n), self.Y],
                                         [self.Y.T, kappa * np.eye(p)]]) >> 0)
@@ -547,35 +554,44 @@ def _design(mat: _Matrices, lmi: _ObserverLMI, cert: LureObserverCertificate,
 
 def _bisect(lmi: _ObserverLMI, tol: float
             ) -> tuple[float, LureObserverCertificate, dict[str, Any]]:
-    """Largest certified rate: expand the bracket by 4x, then bisect to relative ``tol``."""
+    """Largest certified rate: a geometric bracket (x4 up from 1, or /4 down), then bisection
+    (:func:`nscontrol.numerics.lmi.bisect_max`) to ``tol`` relative to the bracket."""
     cert, gains, status = lmi.solve(0.0)
     if cert is None:
         raise InfeasibleDesignError(
             f"{lmi.variant} Lur'e observer: LMIs infeasible even at decay rate 0 (solver "
             f"status: {status}); try the extended variant, a larger kappa, or other outputs",
             status=status)
-    lo, best = 0.0, (cert, gains)
-    hi = 1.0
-    while hi <= ALPHA_CAP:
-        cert, gains, _ = lmi.solve(hi)
-        if cert is None:
-            break
-        lo, best, hi = hi, (cert, gains), 4.0 * hi
-    else:
-        from ..errors import InaccurateCertificateWarning
+    best = (cert, gains)
+    if lmi.solve(1.0)[0] is not None:
+        lo, hi = 1.0, 4.0
+        while lmi.solve(hi)[0] is not None:
+            lo, hi = hi, 4.0 * hi
+            if hi > ALPHA_CAP:
+                from ..errors import InaccurateCertificateWarning
 
-        warnings.warn(f"decay rate certified up to the cap {ALPHA_CAP:g}: it is unbounded "
-                      f"without a gain bound; pass kappa", InaccurateCertificateWarning,
-                      stacklevel=3)
-        return lo, *best
-    while hi - lo > tol * max(hi, 1e-12):
-        mid = 0.5 * (lo + hi)
-        cert, gains, _ = lmi.solve(mid)
-        if cert is None:
-            hi = mid
-        else:
-            lo, best = mid, (cert, gains)
-    return lo, *best
+                warnings.warn(f"decay rate certified up to {lo:g}: it is unbounded without a "
+                              f"gain bound; pass kappa", InaccurateCertificateWarning,
+                              stacklevel=3)
+                cert, gains, _ = lmi.solve(lo)
+                return lo, cert, gains
+    else:
+        lo, hi = 0.0, 1.0
+        while hi > 1e-6 and lo == 0.0:
+            if lmi.solve(hi / 4.0)[0] is not None:
+                lo = hi / 4.0
+            else:
+                hi = hi / 4.0
+    if lo == 0.0:
+        return 0.0, *best
+    from ..numerics.lmi import bisect_max
+
+    def attempt(a: float) -> tuple[LureObserverCertificate, dict[str, Any]] | None:
+        cert, gains, _ = lmi.solve(a)
+        return None if cert is None else (cert, gains)
+
+    found = bisect_max(attempt, lo, hi, tol=tol * lo)
+    return found.value, *found.result
 
 
 def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
