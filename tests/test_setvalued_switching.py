@@ -192,3 +192,21 @@ def test_event_budget_exceeded_raises_zeno_with_the_computed_part():
     part = info.value.trajectory
     assert part.status == -1 and len(part.events) == 6
     assert 0.0 < part.t[-1] <= part.events[-1].time
+
+
+def test_conewise_system_is_homogeneous_of_degree_one():
+    # four quadrant cones of a continuous conewise-linear field (rank-one jumps across axes)
+    A0 = np.array([[-0.2, 1.0], [-1.0, -0.2]])
+    g1, g2 = np.array([0.0, -3.0]), np.array([-0.5, 0.0])
+    e1, e2 = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    As = [A0, A0 + np.outer(g1, e1), A0 + np.outer(g1, e1) + np.outer(g2, e2),
+          A0 + np.outer(g2, e2)]
+    cones = [[[-1.0, 0.0], [0.0, -1.0]], [[1.0, 0.0], [0.0, -1.0]], [[1.0, 0.0], [0.0, 1.0]],
+             [[-1.0, 0.0], [0.0, 1.0]]]
+    pwl = PiecewiseAffineSystem.conewise(As, cones)
+    assert pwl.is_pwl and len(pwl.neighbours) == 8
+    a = simulate(pwl, [1.0, 0.5], (0.0, 8.0))
+    b = simulate(pwl, [3.0, 1.5], (0.0, 8.0))
+    assert a.event_times("crossing").size >= 4
+    assert np.max(np.abs(b.event_times("crossing") - a.event_times("crossing"))) <= 1e-12
+    assert np.max(np.abs(b.x - 3.0 * a.x)) <= 1e-12
