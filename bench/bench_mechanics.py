@@ -14,7 +14,6 @@ impulses ``(N - k) m g h``, momentum and energy).
 Run: ``nscontrol bench mechanics --json`` (``--quick``: smaller sizes).
 """
 
-import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -99,8 +98,8 @@ def _ball_mj(specs: dict, ref: dict, budget: float, note: str) -> Iterator[dict]
             continue
         h = sc["h"]
         system = ball.system()
-        s, traj = _timed(lambda: _ours_mj(system, ball.x0, 10.0, h, record_every=10**9,
-                                          signals=()), budget)
+        s, traj = _timed(lambda system=system, h=h: _ours_mj(
+            system, ball.x0, 10.0, h, record_every=10**9, signals=()), budget)
         steps = traj.stats["steps"]
         full = _ours_mj(system, ball.x0, 10.0, h, signals=["gap"])
         ours_t = full.event_times("impact")[:10]

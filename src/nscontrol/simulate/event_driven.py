@@ -46,6 +46,7 @@ import numpy as np
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_positive
 from ..errors import ModelError, SolverError, ZenoError, ZenoWarning
+from ..numerics.lti import LTIFlow, first_event
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate"]
@@ -203,40 +204,60 @@ def _fail_zeno(opts: _Options, rec: Recorder, message: str, t: float, **finish: 
                     trajectory=traj)
 
 
-class _Propagator:
-    """``e^{At} x`` for many times: the truncated series when ``A`` is nilpotent (free flight
-    under constant forces: ``A^3 = 0``), exact and much cheaper than Padé; the
-    :class:`~nscontrol.numerics.lti.LTIFlow` otherwise."""
+def _make_flow(A: FloatArray) -> LTIFlow:
+    """An :class:`~nscontrol.numerics.lti.LTIFlow` of ``A``, exact series when nilpotent."""
+    powers = [np.eye(A.shape[0])]
+    while len(powers) <= A.shape[0] and np.any(powers[-1]):
+        powers.append(powers[-1] @ A)
+    if np.any(powers[-1]):
+        return LTIFlow(A)
+    return _NilpotentFlow(A, powers[:-1])
 
-    def __init__(self, flow: Any) -> None:
+
+class _NilpotentFlow(LTIFlow):
+    """The flow of a nilpotent ``A`` (free flight under constant forces: ``A^3 = 0``): its
+    exponential is the finite series ``Σ A^k t^k / k!`` — exact, and free of Padé's cost
+    (which multi-threaded BLAS makes ~400x slower for 3x3 matrices on a loaded machine)."""
+
+    def __init__(self, A: FloatArray, powers: list[FloatArray]) -> None:
+        super().__init__(A)
+        fact = np.cumprod([1.0] + list(range(1, len(powers))))
+        self._terms = np.array(powers) / fact[:, None, None]  # A^k / k!
+
+    def _monomials(self, t: Any) -> FloatArray:
+        return np.power.outer(np.atleast_1d(np.asarray(t, float)), np.arange(len(self._terms)))
+
+    def expm(self, t: Any) -> FloatArray:
+        out = np.einsum("tk,kij->tij", self._monomials(t), self._terms)
+        return out[0] if np.ndim(t) == 0 else out
+
+    def propagate(self, x0: Any, t: Any) -> FloatArray:
+        out = self._monomials(t) @ (self._terms @ np.asarray(x0, float))
+        return out[0] if np.ndim(t) == 0 else out
+
+    def state_at(self, x0: FloatArray, t: float) -> FloatArray:
+        return self.propagate(x0, t)
+
+
+class _Propagator:
+    """``e^{At} x`` on a regular grid of sample times: one exponential per step size, then
+    matrix products, when the flow has no cheap closed form (sampling only; event states
+    always come from a direct propagation)."""
+
+    def __init__(self, flow: LTIFlow) -> None:
         self.flow = flow
-        A = flow.A
-        powers = [np.eye(A.shape[0])]
-        while len(powers) <= 4 and np.any(powers[-1]):
-            powers.append(powers[-1] @ A)
-        self.powers = powers[:-1] if not np.any(powers[-1]) else None
 
     def __call__(self, x: FloatArray, t: Any) -> FloatArray:
-        if self.powers is None:
-            ts = np.atleast_1d(np.asarray(t, float))
-            if self.flow.method == "eig" or ts.size < 3:
-                return self.flow.propagate(x, t)
-            # a regular grid of samples: one exponential per step size, then products
-            # (sampling only; event states always come from a direct propagation)
-            step = ts[1] - ts[0]
-            Phi = self.flow.expm(step)
-            out = np.empty((ts.size, x.size))
-            out[0] = self.flow.propagate(x, ts[0])
-            for k in range(1, ts.size):
-                out[k] = Phi @ out[k - 1]
-            return out
         ts = np.atleast_1d(np.asarray(t, float))
-        out = np.zeros((ts.size, x.size))
-        fact = 1.0
-        for k, Ak in enumerate(self.powers):
-            fact *= max(k, 1)
-            out += np.multiply.outer(ts**k / fact, Ak @ x)
-        return out[0] if np.ndim(t) == 0 else out
+        cheap = isinstance(self.flow, _NilpotentFlow) or self.flow.method == "eig"
+        if cheap or ts.size < 3:
+            return self.flow.propagate(x, t)
+        Phi = self.flow.expm(ts[1] - ts[0])
+        out = np.empty((ts.size, x.size))
+        out[0] = self.flow.propagate(x, ts[0])
+        for k in range(1, ts.size):
+            out[k] = Phi @ out[k - 1]
+        return out
 
 
 def _sample_times(t: float, t_next: float, dt: float, t0: float) -> FloatArray:
@@ -251,10 +272,8 @@ def _sample_times(t: float, t_next: float, dt: float, t0: float) -> FloatArray:
 class _HybridRun:
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float,
                  opts: _Options) -> None:
-        from ..numerics.lti import LTIFlow
-
         self.s, self.x, self.t0, self.tf, self.opts = system, x0.copy(), t0, tf, opts
-        self.flow = LTIFlow(system.A)
+        self.flow = _make_flow(system.A)
         self.prop = _Propagator(self.flow)
         self.rec = Recorder(system.n_states)
         self.zeno = _Zeno(opts)
@@ -264,8 +283,6 @@ class _HybridRun:
         self.rec.extend(times, X, **sig)
 
     def run(self) -> Trajectory:
-        from ..numerics.lti import first_event
-
         s, t, x = self.s, self.t0, self.x
         self._sample(np.array([t]), x[None])
         finish = dict(method="event_driven", state_names=s.state_names)
@@ -350,8 +367,6 @@ class _LinearMechanicsRun:
         """Flow, guard matrix, guard offsets and contact-force map of the mode ``C``."""
         if C in self.flows:
             return self.flows[C]
-        from ..numerics.lti import LTIFlow
-
         n, N = self.n, self.N
         A = self.base.copy()
         acc = self.Afree
@@ -373,7 +388,7 @@ class _LinearMechanicsRun:
         gmat = np.array(rows).reshape(-1, N)
         g0 = np.concatenate([self.s.gap_offset[free], np.zeros(len(C))])
         guard_ids = np.array(free + [-1 - j for j in sorted(C)], dtype=np.int64)
-        flow = LTIFlow(A)
+        flow = _make_flow(A)
         self.flows[C] = (flow, gmat, g0, guard_ids, _Propagator(flow))
         return self.flows[C]
 
@@ -420,8 +435,6 @@ class _LinearMechanicsRun:
 
     # -- main loop -----------------------------------------------------------------------
     def run(self) -> Trajectory:
-        from ..numerics.lti import first_event
-
         t, z = self.t0, self.z
         finish = dict(method="event_driven", state_names=self.s.state_names)
         self._sample(np.array([t]), z[None])
@@ -544,7 +557,7 @@ class _NonlinearMechanicsRun:
     def run(self) -> Trajectory:
         from scipy.integrate import solve_ivp
 
-        s, n = self.s, self.s.n_dof
+        s = self.s
         t, x = self.t0, self.x.copy()
         finish = dict(method="event_driven", state_names=s.state_names)
         self._sample(np.array([t]), x[None])

@@ -116,8 +116,8 @@ class LinearHybridSystem:
         closing = np.flatnonzero((np.abs(g) <= tol * scale) & (rate < -tol * scale))
         if closing.size:
             raise InadmissibleStateError(
-                f"x0: guard {int(closing[0])} is zero and decreasing (rate {rate[closing[0]]:.3g}); "
-                "apply the jump map first or start strictly inside")
+                f"x0: guard {int(closing[0])} is zero and decreasing (rate "
+                f"{rate[closing[0]]:.3g}); apply the jump map first or start strictly inside")
         if self.admissible is not None:
             why = self.admissible(x0)
             if why:
