@@ -210,3 +210,19 @@ def test_conewise_system_is_homogeneous_of_degree_one():
     assert a.event_times("crossing").size >= 4
     assert np.max(np.abs(b.event_times("crossing") - a.event_times("crossing"))) <= 1e-12
     assert np.max(np.abs(b.x - 3.0 * a.x)) <= 1e-12
+
+
+def test_sliding_ends_where_another_surface_is_crossed():
+    # slide on x2 = 0 while x1 < 1; beyond x1 = 1 both sides push up, so sliding must end there
+    def field(t, x, s):
+        if s[1] < 0:
+            return np.array([1.0, -1.0 if s[0] > 0 else 1.0])
+        return np.array([1.0, 1.0])
+
+    f = FilippovSystem(2, (lambda x: x[1], lambda x: x[0] - 1.0), field)
+    tr = simulate(f, [0.0, 0.5], (0.0, 3.0))
+    assert [(e.kind, e.index) for e in tr.events] == [
+        ("sliding_start", 0), ("crossing", 1), ("sliding_exit", 0)]
+    assert np.allclose(tr.event_times(), [0.5, 1.0, 1.0], atol=1e-10)
+    assert np.max(np.abs(tr.x[(tr.t > 0.5) & (tr.t < 1.0), 1])) <= 1e-12
+    assert np.allclose(tr.x[-1], [3.0, 2.0], atol=1e-9)

@@ -215,10 +215,20 @@ def _hit_surface(fields: _Fields, run: Any, t: float, x: FloatArray, signs: tupl
         run.event(t, "grazing", k, x, x, old, old)
         return signs, sliding
     if sm * sp > 0:  # crossing (also while sliding on another surface)
-        f_after = fields.rhs(flipped_t, sliding)(t, x)
+        slide_after = sliding
+        if sliding >= 0:  # does the sliding on `sliding` survive with the new fields?
+            jm, jp = fields.sigmas(t, x, flipped_t, sliding)[:2]
+            if not jm > 0 > jp:
+                slide_after = -1
+                flipped[sliding] = -1 if jm <= 0 else 1
+                flipped_t = tuple(flipped)
+        f_after = fields.rhs(flipped_t, slide_after)(t, x)
         S = saltation_matrix(f_before, f_after, nrm) if run.sensitivity else None
-        run.event(t, "crossing", k, x, x, old, _mode_code(flipped_t, sliding), S)
-        return flipped_t, sliding
+        run.event(t, "crossing", k, x, x, old, _mode_code(flipped_t, slide_after), S)
+        if slide_after < 0 <= sliding:
+            run.event(t, "sliding_exit", sliding, x, x, _mode_code(flipped_t, sliding),
+                      _mode_code(flipped_t, -1))
+        return flipped_t, slide_after
     if sm > 0 > sp:  # attracting sliding
         if sliding >= 0:
             raise ModelError(f"switching: at t = {t:.12g} the motion slides on surfaces "
