@@ -146,3 +146,15 @@ def test_two_link_arm_falls_onto_the_ground() -> None:
     J = arm.gap_jacobian(ev.pre[:2])
     assert J @ ev.post[2:] == pytest.approx(-0.5 * (J @ ev.pre[2:]), rel=1e-9)
     assert arm.energy(ev.post) <= arm.energy(ev.pre)
+
+
+def test_zeno_warning_option_keeps_the_run() -> None:
+    from nscontrol.errors import ZenoWarning
+
+    A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -9.81], [0.0, 0.0, 0.0]])
+    ball = LinearHybridSystem(A, [[1.0, 0.0, 0.0]], [0.0],
+                              lambda t, x, idx: np.array([x[0], -0.9 * x[1], x[2]]))
+    with pytest.warns(ZenoWarning, match="accumulation"):
+        traj = simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=10, on_zeno="warn")
+    assert traj.status == -1
+    assert np.max(np.abs(traj.event_times("jump") - BouncingBall().impact_times(10))) < 1e-12
