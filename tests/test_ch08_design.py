@@ -163,3 +163,24 @@ def test_recheck_detects_a_wrong_certificate():
     cert = recheck_certificate(s.A, s.G, s.H, s.C, 2 * np.eye(2), ex.SICONOS_L, np.zeros((1, 1)),
                                1.0)
     assert cert.equality_residual == pytest.approx(np.sqrt(2))
+
+
+def test_design_options_are_validated():
+    from nscontrol.design.lure_observer import design_lure_observer
+
+    plant = ex.coulomb_oscillator(0.1).plant()
+    with pytest.raises(ModelError, match="alpha"):
+        design_lure_observer(plant, alpha="fastest")
+    with pytest.raises(ModelError, match="alpha_fraction"):
+        design_lure_observer(plant, alpha_fraction=1.5)
+    with pytest.raises(ModelError, match="LureSystem"):
+        design_lure_observer(np.eye(2))
+
+
+def test_structural_check_is_not_fooled_by_rank_deficient_G():
+    # two identical multiplier channels: G has rank 1, H G = [[1, 1], [1, 1]] is only PSD;
+    # nothing certain can be said, so the pre-check must stay silent
+    A = [[0.0, 1.0], [-1.0, -1.0]]
+    G = [[0.0, 0.0], [1.0, 1.0]]
+    H = [[0.0, 1.0], [0.0, 1.0]]
+    assert structural_infeasibility(A, G, H, [[1.0, 0.0]], variant="basic") is None

@@ -202,9 +202,7 @@ def _structural_reason(mat: _Matrices, variant: str) -> str | None:
     if variant == "extended":
         constraint = np.vstack([constraint, mat.C @ mat.A @ mat.G])
     S = _null_space(constraint, mat.m)
-    if S.shape[1]:
-        S = S[:, np.linalg.norm(mat.G @ S, axis=0) > 1e-12] if full_rank else S
-    if S.shape[1]:
+    if S.shape[1] and full_rank:  # (with rank-deficient G, G s = 0 would make the form 0)
         worst = float(np.linalg.eigvalsh(_restricted_sym(mat.H @ mat.A @ mat.G, S))[-1])
         if worst >= -1e-12 * scale:
             return ("along directions v = G s invisible to the output (C G s = 0"
