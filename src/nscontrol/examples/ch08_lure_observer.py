@@ -320,6 +320,9 @@ def _run_coulomb(ctx: dict[str, Any]) -> dict[str, Any]:
     out["t_to_1e-6"] = float(runs[1e-3].traj.t[k_hits[1e-3]])
     stick = {h: float(np.mean(np.abs(runs[h].traj.x[:, 1]) <= 1e-3)) for h in (1e-3, 1e-4)}
     out["stick_fraction"] = {str(h): v for h, v in stick.items()}
+    # step-halving style check (spec §3.3): h = 1e-3 against h = 1e-4 on the coarse grid
+    coarse, fine = runs[1e-3].traj.x, runs[1e-4].traj.x[::10]
+    out["state_diff_h1e-3_vs_h1e-4"] = float(np.max(np.abs(coarse - fine)))
     z4, v4 = runs[1e-4].traj.signal("z")[:, 0], runs[1e-4].traj.x[:, 1]
     out["max_velocity_on_exact_stick_steps"] = float(np.max(np.abs(v4[z4 == 0.0]), initial=0.0))
     out["exact_stick_steps"] = int(np.sum(z4 == 0.0))
