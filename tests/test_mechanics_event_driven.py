@@ -158,3 +158,19 @@ def test_zeno_warning_option_keeps_the_run() -> None:
         traj = simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=10, on_zeno="warn")
     assert traj.status == -1
     assert np.max(np.abs(traj.event_times("jump") - BouncingBall().impact_times(10))) < 1e-12
+
+
+@pytest.mark.parametrize("method", ["event_driven", "moreau_jean"])
+def test_simultaneous_impacts_through_the_multi_contact_law(method: str) -> None:
+    # two beads hit a resting middle bead at the same instant from both sides (e = 1): the
+    # Delassus LCP gives equal impulses, the outer beads bounce back, the middle one stays
+    chain = LagrangianSystem.chain([1.0, 1.0, 1.0], restitution=1.0)
+    x0 = [-0.1, 0.0, 0.1, 1.0, 0.0, -1.0]
+    opts = {"h": 1e-4} if method == "moreau_jean" else {}
+    traj = simulate(chain, x0, (0.0, 0.2), method=method, **opts)
+    impacts = traj.events_of("impact")
+    assert sorted(e.index for e in impacts) == [0, 1]
+    assert impacts[0].time == impacts[1].time
+    if method == "event_driven":
+        assert impacts[0].time == pytest.approx(0.1, abs=1e-14)
+    assert np.allclose(traj.x[-1, 3:], [-1.0, 0.0, 1.0], atol=1e-12)
