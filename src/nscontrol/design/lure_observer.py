@@ -128,7 +128,7 @@ def _equality_space(mat: _Matrices, variant: str
     rank = int(np.sum(s > 1e-12 * max(1.0, s[0] if s.size else 0.0)))
     null = Vt[rank:]
 
-    def unpack(u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def unpack(u: np.ndarray) -> tuple[FloatArray, FloatArray]:
         P = sum((ui * Pe for ui, (Pe, _) in zip(u, columns, strict=True)), np.zeros((n, n)))
         K = sum((ui * Ke for ui, (_, Ke) in zip(u, columns, strict=True)), np.zeros((m, p)))
         return P, K
@@ -420,7 +420,7 @@ class _ObserverLMI:
         r = len(P_basis)
         self.theta = cp.Variable(r) if r else None
         P = cp.Constant(P0)
-        if r:
+        if self.theta is not None:
             basis = np.column_stack([Pb.ravel() for Pb in P_basis])
             P = P + cp.reshape(basis @ self.theta, (n, n), order="C")
         self.Y = cp.Variable((n, p))
@@ -561,9 +561,14 @@ def _bisect(lmi: _ObserverLMI, tol: float
             f"status: {status}); try the extended variant, a larger kappa, or other outputs",
             status=status)
     best = (cert, gains)
-    if lmi.solve(1.0)[0] is not None:
+    cert, gains, _ = lmi.solve(1.0)
+    if cert is not None:
         lo, hi = 1.0, 4.0
-        while lmi.solve(hi)[0] is not None:
+        while True:
+            best = (cert, gains)
+            cert, gains, _ = lmi.solve(hi)
+            if cert is None:
+                break
             lo, hi = hi, 4.0 * hi
             if hi > ALPHA_CAP:
                 from ..errors import InaccurateCertificateWarning
@@ -571,7 +576,6 @@ def _bisect(lmi: _ObserverLMI, tol: float
                 warnings.warn(f"decay rate certified up to {lo:g}: it is unbounded without a "
                               f"gain bound; pass kappa", InaccurateCertificateWarning,
                               stacklevel=3)
-                cert, gains, _ = lmi.solve(lo)
                 return lo, cert, gains
     else:
         lo, hi = 0.0, 1.0
@@ -819,8 +823,8 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     frac = float(alpha_fraction)
     if not 0.0 < frac <= 1.0:
         raise ModelError(f"alpha_fraction: expected a value in (0, 1], got {alpha_fraction!r}")
-    kwargs = {"D": mat.D, "variant": variant, "kappa": kappa, "eps": eps, "eps_P": eps_P,
-              "solver": solver, "precheck": precheck}
+    kwargs: dict[str, Any] = {"D": mat.D, "variant": variant, "kappa": kappa, "eps": eps,
+                              "eps_P": eps_P, "solver": solver, "precheck": precheck}
     if isinstance(alpha, str):
         if alpha != "max":
             raise ModelError(f"alpha: expected a rate >= 0 or 'max', got {alpha!r}")
