@@ -118,9 +118,16 @@ def test_impacting_bodies_moreau_jean_keeps_state_order() -> None:
                                          {(0, 0): 1.0}, restitution=1.0)
     u = Exosystem.sinusoid(2.0, 1.3)
     x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])
-    ed = simulate(plant, x0, (0.0, 10.0), u=u)
-    mj = simulate(plant, x0, (0.0, 10.0), method="moreau_jean", h=1e-4, u=u)
+    seen_ed, seen_mj = [], []
+    ed = simulate(plant, x0, (0.0, 10.0), u=u,
+                  listeners=[lambda t, xm, xp, idx: seen_ed.append(xp)])
+    mj = simulate(plant, x0, (0.0, 10.0), method="moreau_jean", h=1e-4, u=u,
+                  listeners=[lambda t, xm, xp, p, c: seen_mj.append(xp)])
     assert mj.state_names == plant.state_names
+    # listeners see the chapter's [x_a; x_b] order, like the trajectories
+    assert np.allclose(seen_ed[0], ed.events_of("impact")[0].post)
+    assert np.allclose(seen_mj[0], mj.events_of("impact")[0].post)
+    assert plant.gap(seen_ed[0]) == pytest.approx(0.0, abs=1e-12)
     tj, tm = ed.event_times("impact"), mj.event_times("impact")
     assert len(tj) == len(tm) >= 2
     assert np.max(np.abs(tj - tm)) < 1e-3

@@ -127,12 +127,13 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     if isinstance(system, ImpactingBodies):
         x0 = system.check_state(x0)
         perm = system.lagrangian_permutation()
+        back = np.argsort(perm)
         traj = integrate(system.lagrangian(), x0[perm], t_span, u=u, dt=dt,
                          max_events=max_events, min_interval=min_interval,
                          zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon,
-                         on_zeno=on_zeno, listeners=listeners, rtol=rtol, atol=atol,
-                         progress=progress)
-        return reorder_states(traj, np.argsort(perm), system.state_names)
+                         on_zeno=on_zeno, listeners=reorder_listeners(listeners, back),
+                         rtol=rtol, atol=atol, progress=progress)
+        return reorder_states(traj, back, system.state_names)
     if isinstance(system, LagrangianSystem):
         x0 = system.check_state(x0)
         if system.is_linear:
@@ -145,6 +146,17 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
 class _Options:
     def __init__(self, **kw: Any) -> None:
         self.__dict__.update(kw)
+
+
+def reorder_listeners(listeners: Sequence[Callable[..., None]], order: np.ndarray
+                      ) -> list[Callable[..., None]]:
+    """Listeners that receive ``x_minus, x_plus`` permuted by ``order`` (the caller's state
+    convention, e.g. ``[x_a; x_b]`` of :class:`ImpactingBodies`)."""
+    def wrap(fn: Callable[..., None]) -> Callable[..., None]:
+        def call(t: float, x_minus: FloatArray, x_plus: FloatArray, *rest: Any) -> None:
+            fn(t, x_minus[order], x_plus[order], *rest)
+        return call
+    return [wrap(fn) for fn in listeners]
 
 
 def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) -> Trajectory:

@@ -114,14 +114,16 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float,
     from ..systems.lagrangian import LagrangianSystem
 
     if isinstance(system, ImpactingBodies):
-        from .event_driven import reorder_states
+        from .event_driven import reorder_listeners, reorder_states
 
         perm = system.lagrangian_permutation()
+        back = np.argsort(perm)
         traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
                          theta=theta, gamma=gamma, u=u, controller=controller,
-                         listeners=listeners, record_every=record_every, signals=signals,
-                         progress=progress, activation=activation, on_failure=on_failure)
-        return reorder_states(traj, np.argsort(perm), system.state_names)
+                         listeners=reorder_listeners(listeners, back),
+                         record_every=record_every, signals=signals, progress=progress,
+                         activation=activation, on_failure=on_failure)
+        return reorder_states(traj, back, system.state_names)
     if not isinstance(system, LagrangianSystem):
         raise ModelError(f"moreau_jean: integrates LagrangianSystem and ImpactingBodies, got "
                          f"{type(system).__name__}")
