@@ -184,3 +184,11 @@ def test_structural_check_is_not_fooled_by_rank_deficient_G():
     G = [[0.0, 0.0], [1.0, 1.0]]
     H = [[0.0, 1.0], [0.0, 1.0]]
     assert structural_infeasibility(A, G, H, [[1.0, 0.0]], variant="basic") is None
+
+
+def test_unbounded_rate_without_kappa_warns_and_names_the_fix():
+    from nscontrol.errors import InaccurateCertificateWarning
+
+    with pytest.warns(InaccurateCertificateWarning, match="pass kappa"):
+        d = max_decay_rate(**ex.coulomb_oscillator(0.0).matrices, tol=1e-2)
+    assert d.alpha_max >= 1e3 and d.certificate.gain_norm > 1e6  # huge gains: why kappa exists
