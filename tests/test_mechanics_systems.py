@@ -60,6 +60,8 @@ def test_step_and_options() -> None:
     ball = LagrangianSystem.bouncing_ball()
     with pytest.raises(ModelError, match="h"):
         simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=-1e-3)
+    with pytest.raises(ModelError, match="needs a step"):
+        simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean")
     with pytest.raises(ModelError, match="theta"):
         simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3, theta=0.2)
     with pytest.raises(ModelError, match="t_span"):

@@ -55,7 +55,7 @@ class _Setup:
     Sinput: FloatArray | None
 
 
-def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float,
+def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | None = None,
               theta: float = 0.5, gamma: float = 0.5, u: Any = None,
               controller: Callable[[float, FloatArray, FloatArray], Any] | None = None,
               listeners: Sequence[Callable[..., None]] = (), record_every: int = 1,
@@ -113,6 +113,9 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float,
     from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
 
+    if h is None:
+        raise ModelError("h: Moreau-Jean time-stepping needs a step, e.g. h=1e-3 (impacts are "
+                         "captured to O(h), penetration <= h |u-|)")
     if isinstance(system, ImpactingBodies):
         from .event_driven import reorder_listeners, reorder_states
 
