@@ -26,7 +26,6 @@ from .errors import (
     SolverError,
     ZenoError,
 )
-
 from .simulate import Trajectory, simulate  # noqa: E402  (the verb shadows its subpackage)
 
 __version__ = "0.1.0"

@@ -399,16 +399,18 @@ class ImpactObserverDesign:
         if not impacts:   # a guard that never reaches zero: body b out of reach
             G, g0 = np.zeros_like(G), np.ones_like(g0)
 
-        def jump(t: float, x: FloatArray, indices: np.ndarray) -> FloatArray:
+        def jump(x: FloatArray) -> FloatArray:
             out = np.empty_like(x)
-            out[:n_p] = plant_sys.jump(t, x[:n_p], indices)
+            out[:n_p] = plant_sys.apply_jump(0.0, x[:n_p], np.array([0]))
             xa_plus, xb_plus = observer_jump(T @ x[o:o + na2], x[o + na2:],
                                              float(pl.C_a @ x[:na2]), pl.M)
             out[o:o + na2] = T_inv @ xa_plus
             out[o + na2:] = xb_plus
             return out
 
-        return LinearHybridSystem(A, G, g0, jump,
+        # restitution and the jumps (7c)-(7g) are linear in the stacked state: their matrix
+        J = np.column_stack([jump(e) for e in np.eye(n)])
+        return LinearHybridSystem(A, G, g0, J,
                                   state_names=self._state_names(plant_sys, realisation),
                                   outputs=self._outputs(plant_sys, T))
 

@@ -108,7 +108,7 @@ def ivp_impact_times(bodies: Any, x0: Any, t_end: float, *, tol: float = 1e-13) 
             break
         t, x = float(sol.t_events[0][0]), sol.y_events[0][0]
         out.append(t)
-        x = sys_.jump(t, x, np.array([0]))
+        x = sys_.apply_jump(t, x, np.array([0]))
     return np.array(out)
 
 

@@ -1,10 +1,18 @@
-"""numba kernel of the cell scan of :func:`nscontrol.numerics.lti.first_event`.
+"""numba kernels of the exact event search of :func:`nscontrol.numerics.lti.first_event`.
 
-The kernel walks the cells one by one (``y <- Φ y``), expands every active guard as its Taylor
-polynomial on the cell, certifies root-free cells by Bernstein enclosures and, for a flagged
-cell whose ``g'`` has one sign (Bernstein coefficients of ``g'``), finds the unique root by
-safeguarded Newton. A flagged cell where ``g'`` may change sign is handed back to Python
-(exact analysis with the critical points of ``g``). See the module docstring of ``lti``.
+Everything the search does runs compiled, so that integrators can call it from their own
+compiled loops (:mod:`nscontrol.simulate._event_kernels`):
+
+* :func:`search` — the whole first-event search from a (balanced) start state: the
+  classification of guards at zero at ``t = 0``, the cell scan (``y <- Φ y``, Taylor
+  polynomial per cell and guard, Bernstein certificate of root-free cells), the exact analysis
+  of a flagged cell (critical points of ``g`` isolated by Bernstein subdivision of ``g'``,
+  then a walk over the monotone pieces), the re-polish on the exact start state of the event's
+  cell and the gathering of simultaneous guards;
+* :func:`propagate` — ``e^{At} x`` for one time: eigen-decomposition when well conditioned,
+  otherwise ``Φ^k`` by binary powering followed by the Taylor polynomial inside the cell.
+
+See the module docstring of :mod:`nscontrol.numerics.lti` for the strategy and its guarantees.
 """
 
 from __future__ import annotations
@@ -12,8 +20,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-#: Return codes of :func:`scan_cells`.
-NO_EVENT, HITS, NEEDS_WALK = 0, 1, 2
+#: Return codes of :func:`search`.
+NO_EVENT, EVENT, NEGATIVE = 0, 1, 2
+#: Propagation kinds of :func:`propagate`.
+KIND_EIG, KIND_CELLS = 0, 1
+
+_EPS = 2.220446049250313e-16
+_STACK = 96          # subdivision stack (depth <= 45 at width 1e-13)
+_MIN_WIDTH = 1e-13   # below this a cluster of critical points counts as one
 
 
 @njit(cache=True)
@@ -28,9 +42,17 @@ def _horner2(a, m, x):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _horner(a, m, x):  # pragma: no cover - compiled
+    r = 0.0
+    for j in range(m - 1, -1, -1):
+        r = r * x + a[j]
+    return r
+
+
+@njit(cache=True)
 def _root(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
-    """Root of the monotone polynomial on [lo, hi] with P(lo) > 0 >= P(hi)."""
-    eps = 2.220446049250313e-16
+    """Root of the monotone polynomial on [lo, hi] with P(lo) > 0 >= P(hi): safeguarded Newton
+    from the secant point (bisection whenever Newton leaves the bracket)."""
     x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo > f_hi else 0.5 * (lo + hi)
     for _ in range(200):
         fx, d = _horner2(a, m, x)
@@ -43,17 +65,30 @@ def _root(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
         x_new = x - fx / d if d != 0.0 else 0.5 * (lo + hi)
         if not (lo < x_new < hi):
             x_new = 0.5 * (lo + hi)
-        if abs(x_new - x) <= 2.0 * eps * abs(x) or hi - lo <= 4.0 * eps * abs(hi):
+        if abs(x_new - x) <= 2.0 * _EPS * abs(x) or hi - lo <= 4.0 * _EPS * abs(hi):
             return x_new
         x = x_new
     return x
 
 
 @njit(cache=True)
+def _signed_root(a, m, lo, hi, sign, work):  # pragma: no cover - compiled
+    """Root of ``sign · P`` (``P`` monotone, changing sign on [lo, hi])."""
+    for j in range(m):
+        work[j] = sign * a[j]
+    f_lo = _horner(work, m, lo)
+    f_hi = _horner(work, m, hi)
+    if f_lo <= 0.0:
+        return lo
+    if f_hi >= 0.0:
+        return hi
+    return _root(work, m, lo, hi, f_lo, f_hi)
+
+
+@njit(cache=True)
 def polish(a, s, grazing):  # pragma: no cover - compiled
     """Newton polish of a root of ``P = Σ a_j σ^j`` (of ``P'`` when ``grazing``) near ``s``;
     ``s`` is kept when the exact polynomial disagrees (a step above 1e-6)."""
-    eps = 2.220446049250313e-16
     m = a.shape[0]
     c = np.empty(m)
     if grazing:
@@ -71,80 +106,328 @@ def polish(a, s, grazing):  # pragma: no cover - compiled
         if not np.isfinite(step) or abs(step) > 1e-6:
             return s
         x -= step
-        if abs(step) <= 2.0 * eps * max(abs(x), 1.0):
+        if abs(step) <= 2.0 * _EPS * max(abs(x), 1.0):
             break
     return x
 
 
 @njit(cache=True)
-def scan_cells(W, g0, row_norm, graze_tol, remainder, phi, bern, bern_d, y, k_start,
-               n_cells, h, t_max, active, skip0, sigma_out, hit_out):  # pragma: no cover
-    """Scan cells ``k_start ..`` from cell-start state ``y`` (overwritten with the state at
-    the returned cell). Returns ``(code, k)``; with ``HITS`` the hit guards have
-    ``hit_out[i] = 1`` and their root ``sigma_out[i]`` (cell coordinate in [0, 1])."""
+def _bernstein(B, a, m, out):  # pragma: no cover - compiled
+    """Bernstein coefficients on [0, 1] of ``Σ_{j<m} a_j σ^j`` (``B`` of degree m - 1)."""
+    for r in range(m):
+        s = 0.0
+        for j in range(r + 1):
+            s += B[r, j] * a[j]
+        out[r] = s
+
+
+@njit(cache=True)
+def _sign_changes(b, m):  # pragma: no cover - compiled
+    """Sign variations of ``b`` (zeros skipped): an upper bound on the number of roots in the
+    open interval, with the same parity (Descartes' rule for the Bernstein basis)."""
+    count = 0
+    last = 0.0
+    for j in range(m):
+        if b[j] != 0.0:
+            if last != 0.0 and (b[j] > 0.0) != (last > 0.0):
+                count += 1
+            last = b[j]
+    return count
+
+
+@njit(cache=True)
+def _critical_points(da, m, bern_d, s_end, out, stack_b, stack_lo, stack_hi, work
+                     ):  # pragma: no cover - compiled
+    """Roots of ``P' = Σ_{j<m} da_j σ^j`` in ``(0, s_end)``, ascending, into ``out``.
+
+    Isolated by subdivision of the Bernstein form (de Casteljau at the midpoint, left half
+    first): no sign change -> no root; one -> exactly one root, refined by safeguarded Newton;
+    several on an interval narrower than ``_MIN_WIDTH`` -> one (clustered) critical point.
+    """
+    count = 0
+    _bernstein(bern_d, da, m, stack_b[0])
+    stack_lo[0] = 0.0
+    stack_hi[0] = 1.0
+    top = 1
+    while top > 0:
+        top -= 1
+        lo = stack_lo[top]
+        hi = stack_hi[top]
+        if lo >= s_end:
+            continue
+        b = stack_b[top]
+        var = _sign_changes(b, m)
+        if var == 0:
+            continue
+        if var == 1:
+            sign = 1.0 if b[0] > 0.0 or (b[0] == 0.0 and b[m - 1] < 0.0) else -1.0
+            r = _signed_root(da, m, lo, hi, sign, work)
+            if 0.0 < r < s_end and count < out.shape[0]:
+                out[count] = r
+                count += 1
+            continue
+        if hi - lo <= _MIN_WIDTH or top + 2 > stack_b.shape[0]:
+            r = 0.5 * (lo + hi)
+            if 0.0 < r < s_end and count < out.shape[0]:
+                out[count] = r
+                count += 1
+            continue
+        # split: right half pushed first so that the left half is processed first
+        mid = 0.5 * (lo + hi)
+        for j in range(m):
+            work[j] = b[j]
+        left = stack_b[top + 1]
+        right = stack_b[top]  # overwrites b, already copied to work
+        left[0] = work[0]
+        right[m - 1] = work[m - 1]
+        for r_ in range(1, m):
+            for j in range(m - r_):
+                work[j] = 0.5 * (work[j] + work[j + 1])
+            left[r_] = work[0]
+            right[m - 1 - r_] = work[m - 1 - r_]
+        stack_lo[top] = mid
+        stack_hi[top] = hi
+        stack_lo[top + 1] = lo
+        stack_hi[top + 1] = mid
+        top += 2
+    return count
+
+
+@njit(cache=True)
+def _walk(a, K1, s_end, tol, skip_start, bern_d, crit, stack_b, stack_lo, stack_hi, work,
+          da):  # pragma: no cover - compiled
+    """First zero of ``P(σ) = Σ a_j σ^j`` on ``[0, s_end]``: ``(found, σ, grazing)``.
+
+    The critical points of ``P`` cut the cell into monotone pieces; walking them left to
+    right, the first piece whose right end has ``P <= 0`` holds the first root; a local
+    minimum with ``|P| <= tol`` is a tangential touch (reported at the minimum).
+    """
+    for j in range(K1 - 1):
+        da[j] = (j + 1) * a[j + 1]
+    ncrit = _critical_points(da, K1 - 1, bern_d, s_end, crit, stack_b, stack_lo, stack_hi,
+                             work)
+    start = 0
+    if skip_start:  # flat start of a guard leaving zero: not a touch
+        while start < ncrit and _horner(a, K1, crit[start]) <= tol:
+            start += 1
+    prev_x = 0.0
+    prev_v = _horner(a, K1, 0.0)
+    if not skip_start and prev_v <= 0.0:
+        return True, 0.0, False
+    for j in range(start, ncrit + 1):
+        x = crit[j] if j < ncrit else s_end
+        v = _horner(a, K1, x)
+        if j < ncrit and abs(v) <= tol:
+            return True, x, True
+        if v <= 0.0:
+            return True, _root(a, K1, prev_x, x, prev_v, v), False
+        prev_x = x
+        prev_v = v
+    return False, 0.0, False
+
+
+@njit(cache=True)
+def _coefficients(W, g0, i, y, a):  # pragma: no cover - compiled
+    """Taylor coefficients on a cell of guard ``i`` from the cell-start state ``y``."""
+    K1, _, n = W.shape
+    for j in range(K1):
+        s = 0.0
+        for l in range(n):
+            s += W[j, i, l] * y[l]
+        a[j] = s
+    a[0] += g0[i]
+
+
+@njit(cache=True)
+def _matvec(M, x, out):  # pragma: no cover - compiled
+    n = M.shape[0]
+    for r in range(n):
+        s = 0.0
+        for c in range(M.shape[1]):
+            s += M[r, c] * x[c]
+        out[r] = s
+
+
+@njit(cache=True)
+def _power_apply(phi, k, y, out):  # pragma: no cover - compiled
+    """``out = Φ^k y`` by binary powering (``log2 k`` squarings)."""
+    n = y.shape[0]
+    out[:] = y
+    if k <= 0:
+        return
+    P = phi.copy()
+    P2 = np.empty_like(phi)
+    tmp = np.empty(n)
+    while True:
+        if k & 1:
+            _matvec(P, out, tmp)
+            out[:] = tmp
+        k >>= 1
+        if k == 0:
+            break
+        for r in range(n):  # P <- P @ P (loops: no BLAS threads for these small matrices)
+            for c in range(n):
+                s = 0.0
+                for l in range(n):
+                    s += P[r, l] * P[l, c]
+                P2[r, c] = s
+        P[:, :] = P2
+
+
+@njit(cache=True)
+def propagate(kind, lam, V, Vinv, phi, T, d, h, x, t, out):  # pragma: no cover - compiled
+    """``out = e^{At} x`` for one time ``t >= 0``.
+
+    ``KIND_EIG``: ``V diag(e^{λt}) V^{-1} x``. ``KIND_CELLS``: in balanced coordinates
+    ``y = x / d``, ``t = k h + σ h``: ``y_k = Φ^k y`` by binary powering, then
+    ``Σ_j T_j σ^j y_k`` (``T_j = (Ab h)^j / j!``, exact to rounding since ``||Ab h|| = 1``).
+    """
+    n = x.shape[0]
+    if kind == KIND_EIG:
+        c = np.empty(n, dtype=np.complex128)
+        for j in range(n):
+            s = 0j
+            for l in range(n):
+                s += Vinv[j, l] * x[l]
+            c[j] = s * np.exp(lam[j] * t)
+        for j in range(n):
+            s = 0j
+            for l in range(n):
+                s += V[j, l] * c[l]
+            out[j] = s.real
+        return
+    y = np.empty(n)
+    for j in range(n):
+        y[j] = x[j] / d[j]
+    k = int(np.floor(t / h))
+    sigma = t / h - k
+    if sigma >= 1.0:  # rounding of t / h
+        k += 1
+        sigma = 0.0
+    yk = np.empty(n)
+    _power_apply(phi, k, y, yk)
+    acc = np.zeros(n)
+    tmp = np.empty(n)
+    for j in range(T.shape[0] - 1, -1, -1):  # Horner in σ over the matrices T_j
+        for r in range(n):
+            acc[r] *= sigma
+        _matvec(T[j], yk, tmp)
+        for r in range(n):
+            acc[r] += tmp[r]
+    for j in range(n):
+        out[j] = acc[j] * d[j]
+
+
+@njit(cache=True)
+def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, bern_d, y0, h, t_max,
+           kind, lam, V, Vinv, T, d, hit_out, graze_out):  # pragma: no cover - compiled
+    """The first event of the guards ``g_i(t) = (W[0] e^{Ab t} y0)_i + g0_i`` in
+    ``(0, t_max]`` (balanced coordinates, cells of width ``h``).
+
+    Returns ``(code, t, index)``: ``NO_EVENT``; ``EVENT`` with the event time ``t`` and
+    ``hit_out[i] = 1`` for every guard at zero then (``graze_out[i] = 1`` when it only
+    touches); ``NEGATIVE`` with the ``index`` of a guard negative at ``t = 0``.
+    """
     K1, p, n = W.shape
     a = np.empty(K1)
     da = np.empty(K1 - 1)
+    work = np.empty(K1)
+    crit = np.empty(4 * K1)
+    stack_b = np.empty((_STACK, K1 - 1))
+    stack_lo = np.empty(_STACK)
+    stack_hi = np.empty(_STACK)
+    active = np.ones(p, dtype=np.bool_)
+    skip0 = np.zeros(p, dtype=np.bool_)
+    sigma = np.zeros(p)
+    for i in range(p):
+        hit_out[i] = 0
+        graze_out[i] = 0
+    # -- guards at zero at t = 0 ------------------------------------------------------
+    ynorm = np.sqrt(np.sum(y0 * y0))
+    falling = False
+    for i in range(p):
+        _coefficients(W, g0, i, y0, a)
+        tol = graze_tol * (row_norm[i] * ynorm + abs(g0[i]))
+        if a[0] > tol:
+            continue
+        if a[0] < -tol:
+            return NEGATIVE, 0.0, i
+        first = -1
+        for j in range(1, K1):
+            if abs(a[j]) > tol:
+                first = j
+                break
+        if first < 0:
+            active[i] = False  # identically zero: moves along the surface
+        elif a[first] < 0.0 and not (a[2] > 0.0 and a[0] - a[1] ** 2 / (4.0 * a[2]) >= -tol):
+            hit_out[i] = 1
+            falling = True
+        else:
+            skip0[i] = True  # leaving the surface (just after an impact)
+    if falling:
+        return EVENT, 0.0, -1
+    # -- cell scan ---------------------------------------------------------------------
+    n_cells = max(1, int(np.ceil(t_max / h)))
+    y = y0.copy()
     y_next = np.empty(n)
-    for k in range(k_start, n_cells):
-        ynorm = 0.0
-        for l in range(n):
-            ynorm += y[l] * y[l]
-        ynorm = np.sqrt(ynorm)
+    k_hit = -1
+    for k in range(n_cells):
         sigma_end = min(1.0, (t_max - k * h) / h)
         if sigma_end <= 0.0:
-            return NO_EVENT, k
-        any_hit = False
+            break
+        ynorm = np.sqrt(np.sum(y * y))
         for i in range(p):
-            hit_out[i] = 0
             if not active[i]:
                 continue
-            for j in range(K1):
-                s = 0.0
-                for l in range(n):
-                    s += W[j, i, l] * y[l]
-                a[j] = s
-            a[0] += g0[i]
+            _coefficients(W, g0, i, y, a)
             scale = row_norm[i] * ynorm + abs(g0[i])
             tol = graze_tol * scale
+            _bernstein(bern, a, K1, work)
             bmin = np.inf
             for r in range(K1):
-                s = 0.0
-                for j in range(r + 1):
-                    s += bern[r, j] * a[j]
-                bmin = min(bmin, s)
+                bmin = min(bmin, work[r])
             if bmin > tol + remainder * scale:
                 continue  # certified: no zero of this guard on the cell
-            for j in range(K1 - 1):
-                da[j] = (j + 1) * a[j + 1]
-            dmin = np.inf
-            dmax = -np.inf
-            for r in range(K1 - 1):
-                s = 0.0
-                for j in range(r + 1):
-                    s += bern_d[r, j] * da[j]
-                dmin = min(dmin, s)
-                dmax = max(dmax, s)
-            if not (dmin > 0.0 or dmax < 0.0):
-                return NEEDS_WALK, k  # g' may vanish: exact analysis in Python
-            skip = skip0[i] and k == 0
-            v0, _ = _horner2(a, K1, 0.0)
-            v1, _ = _horner2(a, K1, sigma_end)
-            if not skip and v0 <= 0.0:
-                sigma_out[i] = 0.0
+            found, s, grazing = _walk(a, K1, sigma_end, tol, skip0[i] and k == 0, bern_d,
+                                      crit, stack_b, stack_lo, stack_hi, work, da)
+            if found:
                 hit_out[i] = 1
-                any_hit = True
-            elif v1 <= 0.0:
-                sigma_out[i] = _root(a, K1, 0.0, sigma_end, v0, v1)
-                hit_out[i] = 1
-                any_hit = True
-        if any_hit:
-            return HITS, k
-        for r in range(n):
-            s = 0.0
-            for l in range(n):
-                s += phi[r, l] * y[l]
-            y_next[r] = s
-        for r in range(n):
-            y[r] = y_next[r]
-    return NO_EVENT, n_cells
+                graze_out[i] = 1 if grazing else 0
+                sigma[i] = s
+                k_hit = k
+        if k_hit >= 0:
+            break
+        _matvec(phi, y, y_next)
+        y[:] = y_next
+    if k_hit < 0:
+        return NO_EVENT, 0.0, -1
+    # -- re-polish on the exact start state of the cell, simultaneous guards -------------
+    k = k_hit
+    if k > 0:
+        x_start = np.empty(n)
+        x0 = y0 * d
+        propagate(kind, lam, V, Vinv, phi, T, d, h, x0, k * h, x_start)
+        for l in range(n):
+            y[l] = x_start[l] / d[l]
+        for i in range(p):
+            if hit_out[i]:
+                _coefficients(W, g0, i, y, a)
+                sigma[i] = polish(a, sigma[i], graze_out[i] == 1)
+    s_first = np.inf
+    for i in range(p):
+        if hit_out[i]:
+            s_first = min(s_first, sigma[i])
+    t_first = k * h + s_first * h
+    delta = sim_tol * max(t_first, h) / h
+    for i in range(p):
+        if hit_out[i] and sigma[i] > s_first + delta:
+            hit_out[i] = 0
+            graze_out[i] = 0
+    for i in range(p):
+        if hit_out[i] or not active[i] or (skip0[i] and k == 0):
+            continue
+        _coefficients(W, g0, i, y, a)
+        if _horner(a, K1, s_first + delta) <= 0.0:
+            hit_out[i] = 1
+            graze_out[i] = 0
+    return EVENT, min(t_first, t_max), -1

@@ -23,8 +23,9 @@ on a certified local representation of ``g`` and of ``g'``.
 1. *Balance and grid.* ``A`` is balanced by a diagonal similarity ``A = D Ab D^{-1}``
    (``scipy.linalg.matrix_balance``) and the horizon is cut into cells of width
    ``h = 1/||Ab||_2``. Cell start states are ``y_{k+1} = Φ y_k`` with ``Φ = e^{Ab h}``
-   (computed once per flow and cached); the scan over cells runs in a numba kernel
-   (:mod:`nscontrol.numerics._lti_kernels`), so a far event costs microseconds per cell.
+   (computed once per flow and cached). The whole search (steps 2-6) is one numba kernel
+   (:func:`nscontrol.numerics._lti_kernels.search`), which integrators also call from their
+   own compiled event loops; a far event costs about a microsecond per cell.
 2. *Taylor polynomial per cell.* On a cell starting at ``t_k``, ``g(t_k + σh) = Σ_j a_j σ^j``
    with ``a_j = G D (Ab h)^j y_k / j!``, ``j <= K = 18``; since ``||Ab h|| = 1`` the truncation
    error is below ``e/19! ≈ 2e-17`` relative, i.e. the polynomial *is* ``g`` to rounding. The
@@ -34,16 +35,19 @@ on a certified local representation of ``g`` and of ``g'``.
    certified root-free for that guard. No grid step needs tuning: the enclosure is
    rigorous, so a double root or a near-grazing pair between grid points cannot slip through.
 4. *Exact analysis of the remaining cells, in time order.* When the Bernstein coefficients
-   of ``g'`` have one sign, ``g`` is monotone on the cell and the kernel finds its root
-   directly. Otherwise (in Python) the critical points of ``g`` (real roots of the polynomial
-   ``g'``) split the cell into monotone pieces. Walking
+   of ``g'`` have one sign, ``g`` is monotone on the cell. Otherwise the critical points of
+   ``g`` (real roots of the polynomial ``g'``) are isolated by subdivision of the Bernstein
+   form of ``g'`` (de Casteljau halving, left half first; no sign variation -> no root, one
+   -> exactly one, refined by safeguarded Newton) and split the cell into monotone pieces.
+   Walking
    them left to right: the first piece whose right end has ``g <= 0`` holds the first root,
    a unique one, refined by a safeguarded Newton iteration (bisection whenever the Newton
    step leaves the bracket); a local minimum with ``|g| <= tol`` is a tangential touch
    (``grazing=True``), reported at the minimum. Two roots closer than the grid appear as a
    negative local minimum and the first of them is returned.
 5. *Machine precision.* The cell start state is recomputed from ``x0`` by the exact flow
-   (no accumulated powers of ``Φ``) and the root re-polished by Newton on that polynomial.
+   (the eigen-decomposition, or ``Φ^k`` by binary powering: ``log2 k`` products instead of
+   ``k``) and the root re-polished by Newton on that polynomial.
 6. *Simultaneous guards.* Every guard whose first event lies within ``simultaneous_tol``
    (relative to ``max(t, h)``) of the earliest one is reported in ``indices``.
 
@@ -61,7 +65,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -259,6 +263,25 @@ class LTIFlow:
     def __repr__(self) -> str:
         return f"LTIFlow(n={self.n}, method={self.method!r})"
 
+    @classmethod
+    def shared(cls, A: Any) -> LTIFlow:
+        """The flow of ``A``, reused across calls with an equal matrix.
+
+        Integrators build the flow of every mode they visit; a sweep or a benchmark that
+        simulates the same model again would redo the decomposition, the balancing and the
+        event-search tables each time. Flows are immutable, so one instance can serve all
+        (the most recent ``_SHARED_FLOWS_MAX`` matrices are kept).
+        """
+        A = as_square("A", A)
+        key = (A.shape, A.tobytes())
+        flow = _SHARED_FLOWS.pop(key, None)
+        if flow is None:
+            flow = cls(A)
+            if len(_SHARED_FLOWS) >= _SHARED_FLOWS_MAX:
+                _SHARED_FLOWS.pop(next(iter(_SHARED_FLOWS)))
+        _SHARED_FLOWS[key] = flow  # most recently used last
+        return flow
+
     def expm(self, t: Any) -> FloatArray:
         """``e^{At}``: ``(n, n)`` for a scalar ``t``, ``(len(t), n, n)`` for an array."""
         ts, scalar = _times(t)
@@ -290,8 +313,12 @@ class LTIFlow:
     def guard_context(self) -> _GuardContext:
         """Balanced matrix, cell width and cached powers used by :func:`first_event`."""
         if self._guard is None:
-            self._guard = _GuardContext(self.A)
+            self._guard = _GuardContext(self)
         return self._guard
+
+
+_SHARED_FLOWS: dict[Any, LTIFlow] = {}
+_SHARED_FLOWS_MAX = 64
 
 
 def _times(t: Any) -> tuple[FloatArray, bool]:
@@ -356,61 +383,70 @@ class GuardEvent:
     grazing: bool
 
 
+@cache
 def _bernstein_matrix(K: int) -> FloatArray:
-    """``b = M a``: Bernstein coefficients on [0, 1] of ``Σ_j a_j σ^j`` (degree K)."""
+    """``b = M a``: Bernstein coefficients on [0, 1] of ``Σ_j a_j σ^j`` (degree K); a
+    constant, computed once (read-only)."""
     M = np.zeros((K + 1, K + 1))
     for k in range(K + 1):
         for j in range(k + 1):
             M[k, j] = math.comb(k, j) / math.comb(K, j)
+    M.setflags(write=False)
     return M
 
 
 class _GuardContext:
-    """Per-flow cache for the event search (balancing, cell width, powers of Φ)."""
+    """Per-flow data of the compiled event search (balancing, cell width, ``Φ``, the Taylor
+    matrices, Bernstein matrices and the flow's propagation data), with the guard matrices
+    cached (an integrator searches with the same ``G`` at every event)."""
 
-    def __init__(self, A: FloatArray) -> None:
+    def __init__(self, flow: LTIFlow) -> None:
+        from ._lti_kernels import KIND_CELLS, KIND_EIG
+
+        A = flow.A
         n = A.shape[0]
         Ab, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
-        self.d = scale.astype(float)
+        self.d = np.ascontiguousarray(scale, dtype=float)
         norm = float(np.linalg.norm(Ab, 2)) if n else 0.0
         self.h = 1.0 / norm if norm > 0.0 else 1.0
         self.Ab = Ab
-        self.Abh = Ab * self.h
-        self.phi = scipy.linalg.expm(self.Abh) if n else np.eye(0)
+        self.phi = np.ascontiguousarray(scipy.linalg.expm(Ab * self.h)) if n else np.eye(0)
         K = TAYLOR_DEGREE
         self.bern = _bernstein_matrix(K)
         self.bern_d = _bernstein_matrix(K - 1)
-        self._taylor: FloatArray | None = None
-        self._guards: dict[Any, tuple[FloatArray, ...]] = {}
+        M = Ab * self.h
+        T = [np.eye(n)]
+        for j in range(1, K + 1):
+            T.append((M @ T[-1]) / j)
+        self.taylor = np.ascontiguousarray(T)  # (Ab h)^j / j!, j = 0..K
+        if flow.method == "eig":
+            self.kind = KIND_EIG
+            self.lam = np.ascontiguousarray(flow._lam, dtype=complex)
+            self.V = np.ascontiguousarray(flow._V, dtype=complex)
+            self.Vinv = np.ascontiguousarray(flow._Vinv, dtype=complex)
+        else:
+            self.kind = KIND_CELLS
+            self.lam = np.zeros(1, dtype=complex)
+            self.V = self.Vinv = np.zeros((1, 1), dtype=complex)
+        self._guards: dict[Any, tuple[FloatArray, FloatArray]] = {}
 
-    def guard_data(self, G: FloatArray, h_cell: float) -> tuple[FloatArray, ...]:
-        """``(G D, row norms, W)`` with ``W[j] = G D (Ab h)^j / j!``: the guard Taylor
-        coefficients are ``W @ (cell start states)``. Cached for the grid step (an
-        integrator calls first_event with the same G at every event)."""
+    def guard_data(self, G: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(W, row norms of G D)`` with ``W[j] = G D (Ab h)^j / j!``: the guard Taylor
+        coefficients on a cell are ``W @ (cell start state)``."""
         key = (G.shape, G.tobytes())
-        if h_cell == self.h and key in self._guards:
-            return self._guards[key]
-        GD = G * self.d
-        W = np.einsum("pn,knl->kpl", GD, self.taylor_matrices(h_cell))
-        data = (GD, np.linalg.norm(GD, axis=1), np.ascontiguousarray(W))
-        if h_cell == self.h:
+        data = self._guards.get(key)
+        if data is None:
+            GD = G * self.d
+            W = np.ascontiguousarray(np.einsum("pn,knl->kpl", GD, self.taylor))
+            data = (W, np.linalg.norm(GD, axis=1))
             if len(self._guards) >= 16:
                 self._guards.pop(next(iter(self._guards)))
             self._guards[key] = data
         return data
 
-    def taylor_matrices(self, h_cell: float) -> FloatArray:
-        """``[(Ab h)^j / j!]_{j=0..K}`` as a ``(K + 1, n, n)`` array (cached for the grid h)."""
-        if h_cell == self.h and self._taylor is not None:
-            return self._taylor
-        M = self.Ab * h_cell
-        T = [np.eye(M.shape[0])]
-        for j in range(1, TAYLOR_DEGREE + 1):
-            T.append((M @ T[-1]) / j)
-        T = np.asarray(T)
-        if h_cell == self.h:
-            self._taylor = T
-        return T
+    def flow_args(self) -> tuple[Any, ...]:
+        """Propagation data in the order of :func:`._lti_kernels.propagate`."""
+        return (self.kind, self.lam, self.V, self.Vinv, self.phi, self.taylor, self.d, self.h)
 
 
 def first_event(flow_or_A: LTIFlow | Any, x0: Any, G: Any, g0: Any, t_max: float, *,
@@ -475,14 +511,29 @@ def first_event(flow_or_A: LTIFlow | Any, x0: Any, G: Any, g0: Any, t_max: float
     graze_tol = check_positive("graze_tol", graze_tol)
     simultaneous_tol = check_positive("simultaneous_tol", simultaneous_tol, allow_zero=True)
     ctx = flow.guard_context()
-    return _Search(flow, ctx, x0, G, g0, t_max, graze_tol, simultaneous_tol).run()
+    return _search(ctx, x0, G, g0, t_max, graze_tol, simultaneous_tol)
 
 
-def _shallow_dip(a: FloatArray, tol: float) -> bool:
-    """Whether ``a0 + a1 s + a2 s^2`` (a1 < 0 < a2) dips no deeper than ``-tol``: a guard
-    restarted at a grazing point located to ~sqrt(eps) has a tiny negative slope there but
-    leaves the surface; that is not a new event."""
-    return bool(a[2] > 0.0 and a[0] - a[1] ** 2 / (4.0 * a[2]) >= -tol)
+def _search(ctx: _GuardContext, x0: FloatArray, G: FloatArray, g0: FloatArray, t_max: float,
+            graze_tol: float, simultaneous_tol: float) -> GuardEvent | None:
+    """Run the compiled search on validated arguments."""
+    from ._lti_kernels import EVENT, NEGATIVE, search
+
+    W, row_norm = ctx.guard_data(G)
+    p = G.shape[0]
+    hit, graze = np.zeros(p, dtype=np.int8), np.zeros(p, dtype=np.int8)
+    code, t, index = search(W, g0, row_norm, graze_tol, simultaneous_tol, _REMAINDER, ctx.phi,
+                            ctx.bern, ctx.bern_d, x0 / ctx.d, ctx.h, t_max, ctx.kind, ctx.lam,
+                            ctx.V, ctx.Vinv, ctx.taylor, ctx.d, hit, graze)
+    if code == NEGATIVE:
+        value = float(G[index] @ x0 + g0[index])
+        raise InadmissibleStateError(
+            f"x0: guard {index} is negative at t = 0 (g = {value:.3g} < 0); the search "
+            "needs every guard >= 0 at its start — check the state or the guard signs")
+    if code != EVENT:
+        return None
+    indices = tuple(int(i) for i in np.flatnonzero(hit))
+    return GuardEvent(float(t), indices, bool(graze[list(indices)].all()))
 
 
 def _clean(a: Any, shape: tuple[int | None, ...]) -> bool:
@@ -491,218 +542,3 @@ def _clean(a: Any, shape: tuple[int | None, ...]) -> bool:
     return (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == len(shape)
             and all(s is None or s == d for s, d in zip(shape, a.shape, strict=True))
             and bool(np.isfinite(a).all()))
-
-
-class _Search:
-    """One call of :func:`first_event` (state of the chunked scan)."""
-
-    def __init__(self, flow: LTIFlow, ctx: _GuardContext, x0: FloatArray, G: FloatArray,
-                 g0: FloatArray, t_max: float, graze_tol: float, sim_tol: float) -> None:
-        self.flow, self.ctx, self.x0 = flow, ctx, x0
-        self.g0, self.t_max = g0, t_max
-        self.graze_tol, self.sim_tol = graze_tol, sim_tol
-        self.y0 = x0 / ctx.d
-        self.h = min(ctx.h, t_max)
-        self.GD, self.row_norm, self.W = ctx.guard_data(G, self.h)
-        self.active = np.ones(len(g0), dtype=bool)
-        self.skip_start = np.zeros(len(g0), dtype=bool)
-
-    def run(self) -> GuardEvent | None:
-        from ._lti_kernels import HITS, NO_EVENT, scan_cells
-
-        early = self._classify_start()
-        if early is not None:
-            return early
-        if not self.active.any():
-            return None
-        ctx, p = self.ctx, len(self.g0)
-        n_cells = max(1, math.ceil(self.t_max / self.h))
-        y, k = self.y0.copy(), 0
-        sigma, hit = np.zeros(p), np.zeros(p, dtype=np.int8)
-        while k < n_cells:
-            code, k = scan_cells(self.W, self.g0, self.row_norm, self.graze_tol, _REMAINDER,
-                                 ctx.phi, ctx.bern, ctx.bern_d, y, k, n_cells, self.h,
-                                 self.t_max, self.active, self.skip_start, sigma, hit)
-            if code == NO_EVENT:
-                return None
-            a = self.W @ y
-            a[0] += self.g0
-            if code == HITS:
-                hits = {int(i): (float(sigma[i]), False) for i in np.flatnonzero(hit)}
-                return self._finish(k, k * self.h, a, hits)
-            event = self._walk_cell(k, a, y)
-            if event is not None:
-                return event
-            y = ctx.phi @ y
-            k += 1
-        return None
-
-    def _walk_cell(self, k: int, a: FloatArray, y: FloatArray) -> GuardEvent | None:
-        """Exact analysis (critical points of g) of cell ``k``, Taylor coefficients ``a``."""
-        scale = self.row_norm * math.sqrt(y @ y) + np.abs(self.g0)
-        tol = self.graze_tol * scale
-        bern_min = (self.ctx.bern @ a).min(axis=0)
-        flagged = (bern_min <= tol + _REMAINDER * scale) & self.active
-        sigma_end = min(1.0, (self.t_max - k * self.h) / self.h)
-        hits = {}
-        for i in np.flatnonzero(flagged):
-            hit = _walk(a[:, i], sigma_end, tol[i], bool(self.skip_start[i] and k == 0),
-                        self.ctx)
-            if hit is not None:
-                hits[int(i)] = hit
-        return self._finish(k, k * self.h, a, hits) if hits else None
-
-    def _classify_start(self) -> GuardEvent | None:
-        """Handle guards at zero at t = 0; reject negative ones."""
-        g_start = self.GD @ self.y0 + self.g0
-        tol = self.graze_tol * (self.row_norm * math.sqrt(self.y0 @ self.y0) + np.abs(self.g0))
-        if (g_start > tol).all():
-            return None  # the common case: every guard strictly positive
-        a = self.W @ self.y0  # (K+1, p): scaled derivatives at 0
-        a[0] += self.g0
-        negative = a[0] < -tol
-        if negative.any():
-            i = int(np.flatnonzero(negative)[0])
-            raise InadmissibleStateError(
-                f"x0: guard {i} is negative at t = 0 (g = {a[0, i]:.3g} < 0); the search "
-                "needs every guard >= 0 at its start — check the state or the guard signs")
-        starts_zero = np.abs(a[0]) <= tol
-        falling = []
-        for i in np.flatnonzero(starts_zero):
-            nz = np.flatnonzero(np.abs(a[1:, i]) > tol[i])
-            if nz.size == 0:
-                self.active[i] = False  # identically zero: moves along the surface
-            elif a[1 + nz[0], i] < 0.0 and not _shallow_dip(a[:3, i], tol[i]):
-                falling.append(int(i))
-            else:
-                self.skip_start[i] = True
-        if falling:
-            return GuardEvent(0.0, tuple(falling), False)
-        return None
-
-    def _finish(self, k_glob: int, t_k: float, a: FloatArray,
-                hits: dict[int, tuple[float, bool]]) -> GuardEvent:
-        """Re-polish on the exact start state, gather simultaneous guards."""
-        from ._lti_kernels import polish
-
-        if k_glob > 0:
-            y = self.flow.state_at(self.x0, t_k) / self.ctx.d
-            a = self.W @ y
-            a[0] += self.g0
-            hits = {i: (polish(np.ascontiguousarray(a[:, i]), s, g), g)
-                    for i, (s, g) in hits.items()}
-        s_first = min(s for s, _ in hits.values())
-        t_first = t_k + s_first * self.h
-        delta = self.sim_tol * max(t_first, self.h) / self.h
-        chosen = {i: g for i, (s, g) in hits.items() if s <= s_first + delta}
-        if len(chosen) < len(self.g0):
-            for i in np.flatnonzero(self.active & ~(self.skip_start & (k_glob == 0))):
-                if int(i) not in chosen and _horner(a[::-1, i].tolist(),
-                                                    s_first + delta) <= 0.0:
-                    chosen[int(i)] = False
-        t_event = min(t_first, self.t_max)
-        return GuardEvent(float(t_event), tuple(sorted(chosen)), all(chosen.values()))
-
-
-def _trim(a: FloatArray) -> FloatArray:
-    """Drop negligible high-order coefficients (keeps np.roots well conditioned)."""
-    mags = np.abs(a)
-    big = np.flatnonzero(mags > 1e-17 * mags.sum())
-    return a[: int(big[-1]) + 1] if big.size else a[:1]
-
-
-def _horner(c_desc: list[float], x: float) -> float:
-    """Value at ``x`` of the polynomial with descending coefficients ``c_desc``."""
-    r = 0.0
-    for c in c_desc:
-        r = r * x + c
-    return r
-
-
-def _horner2(c_desc: list[float], x: float) -> tuple[float, float]:
-    """Value and derivative at ``x`` (one Horner sweep)."""
-    r, d = 0.0, 0.0
-    for c in c_desc:
-        d = d * x + r
-        r = r * x + c
-    return r, d
-
-
-def _derivative(a: FloatArray) -> FloatArray:
-    """Ascending coefficients of ``P'`` from those of ``P``."""
-    return a[1:] * np.arange(1, len(a))
-
-
-def _critical_points(a: FloatArray, sigma_end: float, ctx: _GuardContext) -> list[float]:
-    """Real roots of ``P'`` in ``(0, sigma_end)``, polished (``P = Σ a_j σ^j``)."""
-    if len(a) < 3:
-        return []
-    da = _derivative(a)
-    if len(a) == TAYLOR_DEGREE + 1:
-        bd = ctx.bern_d @ da
-        if bd.min() > 0.0 or bd.max() < 0.0:
-            return []  # g' has one sign on the whole cell: g is monotone
-    da = _trim(da)
-    if len(da) < 2:
-        return []
-    roots = np.roots(da[::-1])
-    near_real = roots[np.abs(roots.imag) <= 1e-6].real
-    d1, d2 = da[::-1].tolist(), _derivative(da)[::-1].tolist()
-    out = []
-    for r in near_real.tolist():
-        if -1e-9 <= r <= sigma_end + 1e-9:
-            for _ in range(3):
-                curv = _horner(d2, r)
-                if curv == 0.0:
-                    break
-                r -= _horner(d1, r) / curv
-            if 0.0 < r < sigma_end:
-                out.append(r)
-    return sorted(out)
-
-
-def _walk(a: FloatArray, sigma_end: float, tol: float, skip_start: bool,
-          ctx: _GuardContext) -> tuple[float, bool] | None:
-    """First zero of ``P(σ) = Σ a_j σ^j`` on ``[0, sigma_end]``: ``(σ, grazing)`` or None."""
-    crit = _critical_points(a, sigma_end, ctx)
-    a = _trim(a)
-    p = a[::-1].tolist()
-    if skip_start:  # flat start of a guard leaving zero: not a touch
-        while crit and _horner(p, crit[0]) <= tol:
-            crit.pop(0)
-    pts = [0.0, *crit, sigma_end]
-    vals = [_horner(p, x) for x in pts]
-    if not skip_start and vals[0] <= 0.0:
-        return 0.0, False
-    last = len(pts) - 1
-    for j in range(1, len(pts)):
-        if j < last and abs(vals[j]) <= tol:
-            return pts[j], True  # a local minimum at zero: tangential touch
-        if vals[j] <= 0.0:
-            return _bracketed_root(a, pts[j - 1], pts[j], vals[j - 1], vals[j]), False
-    return None
-
-
-_EPS = float(np.finfo(float).eps)
-
-
-def _bracketed_root(a: FloatArray, lo: float, hi: float, f_lo: float, f_hi: float) -> float:
-    """Root of the monotone ``P`` on ``[lo, hi]`` with ``P(lo) > 0 >= P(hi)``: safeguarded
-    Newton from the secant point (a bisection step whenever Newton leaves the bracket)."""
-    p = a[::-1].tolist()
-    x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo > f_hi else 0.5 * (lo + hi)
-    for _ in range(200):
-        fx, d = _horner2(p, x)
-        if fx == 0.0:
-            return x
-        if fx > 0.0:
-            lo = x
-        else:
-            hi = x
-        x_new = x - fx / d if d != 0.0 else 0.5 * (lo + hi)
-        if not lo < x_new < hi:
-            x_new = 0.5 * (lo + hi)
-        if abs(x_new - x) <= 2.0 * _EPS * abs(x) or hi - lo <= 4.0 * _EPS * abs(hi):
-            return x_new
-        x = x_new
-    return x

@@ -46,7 +46,7 @@ import numpy as np
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_positive
 from ..errors import ModelError, SolverError, ZenoError, ZenoWarning
-from ..numerics.lti import LTIFlow, first_event
+from ..numerics.lti import LTIFlow
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate"]
@@ -112,7 +112,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     if on_zeno not in ("raise", "warn"):
         raise ModelError(f"on_zeno: expected 'raise' or 'warn', got {on_zeno!r}")
     t0, tf = t_span
-    opts = _Options(dt=check_positive("dt", dt) if dt is not None else (tf - t0) / 1000,
+    opts = _Options(t0=t0, dt=check_positive("dt", dt) if dt is not None else (tf - t0) / 1000,
                     max_events=int(max_events), min_interval=float(min_interval),
                     ratio_tol=check_positive("zeno_ratio_tol", zeno_ratio_tol),
                     horizon=(check_positive("zeno_horizon", zeno_horizon)
@@ -174,35 +174,42 @@ def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) ->
 
 # ------------------------------------------------------------------------------ shared
 class _Zeno:
-    """Per-contact impact times and the geometric-shrinking test."""
+    """Per-slot (contact or guard) event times and the accumulation tests, on arrays shared
+    with the compiled event loop (:func:`._event_kernels.zeno_status` is the one test)."""
 
-    def __init__(self, opts: _Options) -> None:
+    def __init__(self, opts: _Options, n_slots: int) -> None:
         self.opts = opts
-        self.times: dict[int, list[float]] = {}
+        self.hist = np.zeros((max(n_slots, 1), 6))
+        self.count = np.zeros(max(n_slots, 1), dtype=np.int64)
         self.n_events = 0
 
     def reset(self, j: int) -> None:
-        self.times.pop(j, None)
+        self.count[j] = 0
+
+    def _status(self, j: int, t: float, geometric: bool) -> tuple[int, float]:
+        from ._event_kernels import zeno_status
+
+        o = self.opts
+        return zeno_status(self.hist, self.count, j, t, geometric, o.ratio_tol, o.horizon,
+                           o.min_interval)
+
+    def too_close(self, j: int, t: float) -> bool:
+        from ._event_kernels import ZENO_CLOSE
+
+        return self._status(j, t, False)[0] == ZENO_CLOSE
+
+    def push(self, j: int, t: float) -> None:
+        from ._event_kernels import zeno_push
+
+        zeno_push(self.hist, self.count, j, t)
 
     def add(self, j: int, t: float) -> float | None:
         """Record an impact; return the accumulation time when it is due."""
-        ts = self.times.setdefault(j, [])
-        ts.append(t)
-        del ts[:-6]
-        if len(ts) < 5:
-            return None
-        d = np.diff(ts)
-        if np.any(d <= 0.0):
-            return None
-        r = d[1:] / d[:-1]
-        if not (np.all(r < 1.0) and np.ptp(r) <= self.opts.ratio_tol * r[-1]):
-            return None
-        remaining = d[-1] * r[-1] / (1.0 - r[-1])
-        return t + remaining if remaining <= self.opts.horizon else None
+        from ._event_kernels import ZENO_DUE
 
-    def too_close(self, j: int, t: float) -> bool:
-        ts = self.times.get(j)
-        return bool(ts) and t - ts[-1] < self.opts.min_interval
+        code, t_acc = self._status(j, t, True)
+        self.push(j, t)
+        return t_acc if code == ZENO_DUE else None
 
 
 def _fail_zeno(opts: _Options, rec: Recorder, message: str, t: float, **finish: Any
@@ -216,60 +223,88 @@ def _fail_zeno(opts: _Options, rec: Recorder, message: str, t: float, **finish: 
                     trajectory=traj)
 
 
-def _make_flow(A: FloatArray) -> LTIFlow:
-    """An :class:`~nscontrol.numerics.lti.LTIFlow` of ``A``, exact series when nilpotent."""
-    powers = [np.eye(A.shape[0])]
-    while len(powers) <= A.shape[0] and np.any(powers[-1]):
-        powers.append(powers[-1] @ A)
-    if np.any(powers[-1]):
-        return LTIFlow(A)
-    return _NilpotentFlow(A, powers[:-1])
+def _propagate(flow: LTIFlow, x: FloatArray, taus: Any) -> FloatArray:
+    """``e^{A τ} x`` for each ``τ >= 0`` of ``taus`` (time-major), by the same compiled
+    propagation as the event loop."""
+    from ..numerics._lti_kernels import propagate
+
+    args = flow.guard_context().flow_args()
+    ts = np.atleast_1d(np.asarray(taus, float))
+    out = np.empty((ts.size, x.size))
+    for k, tau in enumerate(ts):
+        propagate(*args, x, float(tau), out[k])
+    return out
 
 
-class _NilpotentFlow(LTIFlow):
-    """The flow of a nilpotent ``A`` (free flight under constant forces: ``A^3 = 0``): its
-    exponential is the finite series ``Σ A^k t^k / k!`` — exact, and free of Padé's cost
-    (which multi-threaded BLAS makes ~400x slower for 3x3 matrices on a loaded machine)."""
+class _Flight:
+    """One flow (mode) prepared for the compiled event loop: guards, and the linear jump
+    ``x+ = J_i x`` of each guard that has one (``jump_ok``); others are handed back.
 
-    def __init__(self, A: FloatArray, powers: list[FloatArray]) -> None:
-        super().__init__(A)
-        fact = np.cumprod([1.0] + list(range(1, len(powers))))
-        self._terms = np.array(powers) / fact[:, None, None]  # A^k / k!
+    :meth:`run` flows from ``(t, x)``, settles the simple events in compiled code (see
+    :mod:`._event_kernels`), passes their samples and events to the callbacks and returns
+    ``(t, x, event)`` at ``tf`` (``event`` None) or at the first event Python must handle.
+    """
 
-    def _monomials(self, t: Any) -> FloatArray:
-        return np.power.outer(np.atleast_1d(np.asarray(t, float)), np.arange(len(self._terms)))
+    SAMPLES, EVENTS = 4096, 512
 
-    def expm(self, t: Any) -> FloatArray:
-        out = np.einsum("tk,kij->tij", self._monomials(t), self._terms)
-        return out[0] if np.ndim(t) == 0 else out
+    def __init__(self, flow: LTIFlow, G: FloatArray, g0: FloatArray, J: FloatArray | None,
+                 jump_ok: np.ndarray, slots: np.ndarray) -> None:
+        from ..numerics.lti import TAYLOR_DEGREE
 
-    def propagate(self, x0: Any, t: Any) -> FloatArray:
-        out = self._monomials(t) @ (self._terms @ np.asarray(x0, float))
-        return out[0] if np.ndim(t) == 0 else out
-
-    def state_at(self, x0: FloatArray, t: float) -> FloatArray:
-        return self.propagate(x0, t)
-
-
-class _Propagator:
-    """``e^{At} x`` on a regular grid of sample times: one exponential per step size, then
-    matrix products, when the flow has no cheap closed form (sampling only; event states
-    always come from a direct propagation)."""
-
-    def __init__(self, flow: LTIFlow) -> None:
         self.flow = flow
+        self.ctx = ctx = flow.guard_context()
+        n, p = flow.n, len(g0)
+        self.G, self.g0 = np.ascontiguousarray(G, dtype=float).reshape(p, n), np.asarray(g0,
+                                                                                    float)
+        if p:
+            self.W, self.row_norm = ctx.guard_data(self.G)
+        else:
+            self.W, self.row_norm = np.zeros((TAYLOR_DEGREE + 1, 0, n)), np.zeros(0)
+        self.J = np.zeros((max(p, 1), n, n)) if J is None else np.ascontiguousarray(J, float)
+        self.jump_ok = np.asarray(jump_ok, dtype=np.bool_).reshape(p)
+        self.slots = np.asarray(slots, dtype=np.int64).reshape(p)
 
-    def __call__(self, x: FloatArray, t: Any) -> FloatArray:
-        ts = np.atleast_1d(np.asarray(t, float))
-        cheap = isinstance(self.flow, _NilpotentFlow) or self.flow.method == "eig"
-        if cheap or ts.size < 3:
-            return self.flow.propagate(x, t)
-        Phi = self.flow.expm(ts[1] - ts[0])
-        out = np.empty((ts.size, x.size))
-        out[0] = self.flow.propagate(x, ts[0])
-        for k in range(1, ts.size):
-            out[k] = Phi @ out[k - 1]
-        return out
+    def run(self, x: FloatArray, t: float, tf: float, zeno: _Zeno, geometric: bool,
+            opts: _Options, *, sample_pre: bool, on_samples: Callable[..., None],
+            on_events: Callable[..., None]) -> tuple[float, FloatArray, Any]:
+        from ..numerics.lti import _REMAINDER, GuardEvent
+        from ._event_kernels import DONE, FULL, HANDOFF, INADMISSIBLE, run_linear_jumps
+
+        ctx, n, p = self.ctx, self.flow.n, len(self.g0)
+        x = np.array(x, dtype=float)
+        s_t, s_x = np.empty(self.SAMPLES), np.empty((self.SAMPLES, n))
+        e_t, e_i = np.empty(self.EVENTS), np.empty(self.EVENTS, dtype=np.int64)
+        e_pre, e_post = np.empty((self.EVENTS, n)), np.empty((self.EVENTS, n))
+        hit, graze = np.zeros(max(p, 1), dtype=np.int8), np.zeros(max(p, 1), dtype=np.int8)
+        while True:
+            budget = opts.max_events - zeno.n_events
+            code, t, n_s, n_e = run_linear_jumps(
+                self.W, self.g0, self.row_norm, 1e-12, 1e-12, _REMAINDER, ctx.phi, ctx.bern,
+                ctx.bern_d, ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
+                self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, geometric,
+                opts.ratio_tol, opts.horizon, opts.min_interval, budget,
+                x, t, tf, opts.dt, opts.t0, sample_pre,
+                s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze)
+            zeno.n_events += n_e
+            if n_s:
+                on_samples(s_t[:n_s].copy(), s_x[:n_s].copy())
+            if n_e:
+                on_events(e_t[:n_e].copy(), e_i[:n_e].copy(), e_pre[:n_e].copy(),
+                          e_post[:n_e].copy())
+            if code == FULL:
+                continue
+            if code == DONE:
+                return t, x, None
+            if code == INADMISSIBLE:
+                from ..errors import InadmissibleStateError
+
+                g = self.G @ x + self.g0
+                raise InadmissibleStateError(
+                    f"event_driven: guard {int(np.argmin(g))} is negative at t = {t:.12g} "
+                    f"(g = {g.min():.3g}); the state left the admissible set")
+            assert code == HANDOFF
+            idx = tuple(int(i) for i in np.flatnonzero(hit[:p]))
+            return t, x, GuardEvent(0.0, idx, bool(graze[list(idx)].all()))
 
 
 def _sample_times(t: float, t_next: float, dt: float, t0: float) -> FloatArray:
@@ -285,14 +320,24 @@ class _HybridRun:
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float,
                  opts: _Options) -> None:
         self.s, self.x, self.t0, self.tf, self.opts = system, x0.copy(), t0, tf, opts
-        self.flow = _make_flow(system.A)
-        self.prop = _Propagator(self.flow)
+        self.flow = LTIFlow.shared(system.A)
+        p = system.n_guards
+        J = system.jump_matrices
+        self.flight = _Flight(self.flow, system.G, system.g0, J,
+                              np.full(p, J is not None), np.arange(p))
         self.rec = Recorder(system.n_states)
-        self.zeno = _Zeno(opts)
+        self.zeno = _Zeno(opts, p)
 
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
         sig = {k: X @ C.T for k, C in self.s.outputs.items()}
         self.rec.extend(times, X, **sig)
+
+    def _jumped(self, times: FloatArray, idx: np.ndarray, pre: FloatArray,
+                post: FloatArray) -> None:
+        for t, i, xm, xp in zip(times, idx, pre, post, strict=True):
+            self.rec.event(float(t), "jump", int(i), xm, xp)
+            for listener in self.opts.listeners:
+                listener(float(t), xm.copy(), xp.copy(), np.array([i]))
 
     def run(self) -> Trajectory:
         s, t, x = self.s, self.t0, self.x
@@ -301,18 +346,12 @@ class _HybridRun:
         with TimeProgress(self.t0, self.tf, desc="event_driven",
                           enable=self.opts.progress) as bar:
             while t < self.tf:
-                ev = first_event(self.flow, x, s.G, s.g0, self.tf - t) if s.n_guards else None
-                t_next = self.tf if ev is None else t + ev.t
-                grid = _sample_times(t, t_next, self.opts.dt, self.t0)
-                if grid.size:
-                    self._sample(grid, self.prop(x, grid - t))
-                x_minus = self.prop(x, t_next - t)
-                self._sample(np.array([t_next]), x_minus[None])
-                t = t_next
+                t, x, ev = self.flight.run(x, t, self.tf, self.zeno, False, self.opts,
+                                           sample_pre=True, on_samples=self._sample,
+                                           on_events=self._jumped)
                 bar.update(t)
                 if ev is None:
                     break
-                x = x_minus
                 if ev.grazing:
                     for i in ev.indices:
                         self.rec.event(t, "grazing", i, x, x)
@@ -325,8 +364,8 @@ class _HybridRun:
                                       f"events of guards {idx.tolist()} near t = {t:.12g}",
                                       t, **finish)
                 for i in idx:
-                    self.zeno.times.setdefault(int(i), []).append(t)
-                x_plus = np.asarray(s.jump(t, x, idx), float)
+                    self.zeno.push(int(i), t)
+                x_plus = np.asarray(s.apply_jump(t, x, idx), float)
                 for i in idx:
                     self.rec.event(t, "jump", int(i), x, x_plus)
                 for listener in self.opts.listeners:
@@ -368,15 +407,16 @@ class _LinearMechanicsRun:
             self.base[2 * n + 1:, 2 * n + 1:] = u.S
         self.z = np.concatenate([x0, [1.0], [] if u is None else u.w0])
         self.n, self.N = n, N
-        self.flows: dict[frozenset[int], tuple[Any, FloatArray, FloatArray, FloatArray,
-                                               _Propagator]] = {}
+        self.flows: dict[frozenset[int], tuple[_Flight, np.ndarray]] = {}
         self.rec = Recorder(2 * n)
-        self.zeno = _Zeno(opts)
+        self.zeno = _Zeno(opts, s.n_contacts)
         self.contact: set[int] = set()
+        self.n_impacts = 0
 
     # -- modes ---------------------------------------------------------------------------
-    def _mode(self, C: frozenset[int]) -> tuple[Any, FloatArray, FloatArray, FloatArray]:
-        """Flow, guard matrix, guard offsets and contact-force map of the mode ``C``."""
+    def _mode(self, C: frozenset[int]) -> tuple[_Flight, np.ndarray]:
+        """The flight (flow, guards, linear impact maps) of the mode ``C`` and its guard ids
+        (contact ``j >= 0`` for a free gap, ``-1 - j`` for the force of a closed contact)."""
         if C in self.flows:
             return self.flows[C]
         n, N = self.n, self.N
@@ -400,8 +440,16 @@ class _LinearMechanicsRun:
         gmat = np.array(rows).reshape(-1, N)
         g0 = np.concatenate([self.s.gap_offset[free], np.zeros(len(C))])
         guard_ids = np.array(free + [-1 - j for j in sorted(C)], dtype=np.int64)
-        flow = _make_flow(A)
-        self.flows[C] = (flow, gmat, g0, guard_ids, _Propagator(flow))
+        # a free contact hit alone, with nothing else closed, bounces by a linear map
+        J = np.tile(np.eye(N), (len(guard_ids), 1, 1))
+        for k, j in enumerate(free):
+            Gj = self.G[j]
+            MinvG = self.Minv @ Gj
+            J[k, n:2 * n, n:2 * n] -= (1.0 + self.s.restitution[j]) * np.outer(
+                MinvG, Gj) / float(Gj @ MinvG)
+        jump_ok = (guard_ids >= 0) & (not C)
+        slots = np.where(guard_ids >= 0, guard_ids, 0)
+        self.flows[C] = (_Flight(LTIFlow.shared(A), gmat, g0, J, jump_ok, slots), guard_ids)
         return self.flows[C]
 
     def _signals(self, Z: FloatArray) -> dict[str, FloatArray]:
@@ -410,6 +458,20 @@ class _LinearMechanicsRun:
 
     def _sample(self, times: FloatArray, Z: FloatArray) -> None:
         self.rec.extend(times, Z[:, :2 * self.n], **self._signals(Z))
+
+    def _bounced(self, ids: np.ndarray) -> Callable[..., None]:
+        """Record the impacts settled by the compiled loop (``ids``: guard -> contact)."""
+        m = 2 * self.n
+
+        def record(times: FloatArray, idx: np.ndarray, pre: FloatArray,
+                   post: FloatArray) -> None:
+            for t, i, zm, zp in zip(times, idx, pre, post, strict=True):
+                j = int(ids[i])
+                self.rec.event(float(t), "impact", j, zm[:m], zp[:m])
+                for listener in self.opts.listeners:
+                    listener(float(t), zm[:m].copy(), zp[:m].copy(), np.array([j]))
+            self.n_impacts += len(times)
+        return record
 
     def _persistent(self, z: FloatArray, candidates: Sequence[int]) -> set[int]:
         """Contacts among ``candidates`` (closed, zero normal velocity) with a positive
@@ -452,21 +514,15 @@ class _LinearMechanicsRun:
         self._sample(np.array([t]), z[None])
         closed = self._closed(z)
         self._set_mode(t, z, self._persistent(z, self._resting(z, closed)))
-        n_impacts = 0
         with TimeProgress(self.t0, self.tf, desc="event_driven",
                           enable=self.opts.progress) as bar:
             while t < self.tf:
-                flow, gmat, g0, ids, prop = self._mode(frozenset(self.contact))
-                ev = first_event(flow, z, gmat, g0, self.tf - t) if len(ids) else None
-                t_next = self.tf if ev is None else t + ev.t
-                grid = _sample_times(t, t_next, self.opts.dt, self.t0)
-                if grid.size:
-                    self._sample(grid, prop(z, grid - t))
-                z = prop(z, t_next - t) if t_next > t else z
-                t = t_next
+                flight, ids = self._mode(frozenset(self.contact))
+                t, z, ev = flight.run(z, t, self.tf, self.zeno, True, self.opts,
+                                      sample_pre=False, on_samples=self._sample,
+                                      on_events=self._bounced(ids))
                 bar.update(t)
                 if ev is None:
-                    self._sample(np.array([t]), z[None])
                     break
                 hit = ids[list(ev.indices)]
                 if ev.grazing and np.all(hit >= 0):
@@ -485,12 +541,12 @@ class _LinearMechanicsRun:
                     if isinstance(out, Trajectory):
                         return out
                     t, z = out
-                    n_impacts += len(impacts)
+                    self.n_impacts += len(impacts)
                 else:
                     remaining = self.contact - set(ended)
                     self._sample(np.array([t]), z[None])
                     self._set_mode(t, z, self._persistent(z, sorted(remaining)))
-        stats = {"events": self.zeno.n_events, "impacts": n_impacts}
+        stats = {"events": self.zeno.n_events, "impacts": self.n_impacts}
         return self.rec.finish(status=0, stats=stats, **finish)
 
     def _impact(self, t: float, z: FloatArray, impacts: list[int]) -> Any:
@@ -530,11 +586,11 @@ class _LinearMechanicsRun:
                                   "force there would be negative", t, **finish)
             self._sample(np.array([t]), z[None])
             self.contact = new - set(impacts) | (self.contact & new)
-            prop = self._mode(frozenset(new))[4]
+            flow = self._mode(frozenset(new))[0].flow
             grid = _sample_times(t, t_acc, self.opts.dt, self.t0)
             if grid.size:
-                self._sample(grid, prop(z, grid - t))
-            z = prop(z, t_acc - t)
+                self._sample(grid, _propagate(flow, z, grid - t))
+            z = _propagate(flow, z, t_acc - t)[0]
             t = t_acc
             for j in impacts:
                 self.rec.event(t, "accumulation", j, z[:2 * n], z[:2 * n])
@@ -553,7 +609,7 @@ class _NonlinearMechanicsRun:
         self.s, self.x, self.t0, self.tf, self.u, self.opts = system, x0, t0, tf, u, opts
         self.law = NewtonImpactLaw(system.restitution)
         self.rec = Recorder(system.n_states)
-        self.zeno = _Zeno(opts)
+        self.zeno = _Zeno(opts, system.n_contacts)
 
     def _rhs(self, t: float, x: FloatArray) -> FloatArray:
         s, n = self.s, self.s.n_dof

@@ -401,8 +401,8 @@ class Recorder:
     def event(self, time: float, kind: str, index: int = -1, pre: Any = (), post: Any = (),
               mode_from: int = -1, mode_to: int = -1) -> None:
         """Record one event."""
-        self.events.append(Event(float(time), kind, int(index), np.array(pre, float).copy(),
-                                 np.array(post, float).copy(), int(mode_from), int(mode_to)))
+        self.events.append(Event(float(time), kind, int(index), np.array(pre, float),
+                                 np.array(post, float), int(mode_from), int(mode_to)))
 
     @property
     def last_time(self) -> float:

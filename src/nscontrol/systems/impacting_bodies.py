@@ -217,18 +217,15 @@ class ImpactingBodies:
         G[0, self.n_a - 1], G[0, na2] = -1.0, 1.0
         R = self.restitution_matrix
         ia, ib = na2 - 1, na2 + self.n_b  # v_na and v_na+1 in the hybrid state
-
-        def jump(t: float, x: FloatArray, indices: np.ndarray) -> FloatArray:
-            xp = np.array(x, float)
-            xp[[ia, ib]] = R @ x[[ia, ib]]
-            return xp
+        J = np.eye(N)  # the restitution acts on the two colliding velocities only
+        J[np.ix_([ia, ib], [ia, ib])] = R
 
         y = np.zeros((1, N))
         y[0, 0] = 1.0
         uo = np.zeros((1, N))
         uo[0, na2 + nb2:] = Cu
         names = self.state_names + tuple(f"w{i + 1}" for i in range(nw))
-        return LinearHybridSystem(A, G, [0.0], jump, state_names=names,
+        return LinearHybridSystem(A, G, [0.0], J, state_names=names,
                                   outputs={"y": y, "u": uo})
 
 

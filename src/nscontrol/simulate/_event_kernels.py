@@ -1,0 +1,208 @@
+"""numba event loop of :mod:`nscontrol.simulate.event_driven` for linear flows with linear
+jumps.
+
+Between events the flow is ``x' = A x`` (exact, :func:`nscontrol.numerics._lti_kernels.propagate`),
+events are located by the compiled search :func:`nscontrol.numerics._lti_kernels.search`, and an
+event of a single guard ``i`` whose jump is linear (``x+ = J_i x``) is applied here — a bouncing
+ball in free flight, the impacts of a chapter-2 plant and its observer. The loop writes samples
+(regular grid points, optionally the pre-event state) and events into caller buffers and hands
+back to Python every event it does not settle unambiguously:
+
+* several guards at once, a tangential touch, a guard whose jump is not linear;
+* another guard at (or within ``1e-9`` relative of) zero at the event (a contact closed
+  elsewhere: the multi-contact law decides);
+* a jumped guard that would not leave its surface (rest, persistent contact);
+* an accumulation of events (too close, or geometrically shrinking intervals), or the event
+  budget exhausted.
+
+Python then runs its general code for that event exactly as without this loop, so the loop is an
+acceleration, never a change of semantics.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..numerics._lti_kernels import EVENT, NEGATIVE, _coefficients, propagate, search
+
+#: Return codes of :func:`run_linear_jumps`.
+DONE, HANDOFF, FULL, INADMISSIBLE = 0, 1, 2, 3
+#: Return codes of :func:`zeno_status`.
+ZENO_NONE, ZENO_CLOSE, ZENO_DUE = 0, 1, 2
+
+_CLOSED_TOL = 1e-9  # relative: a guard this close to zero counts as closed
+
+
+@njit(cache=True)
+def zeno_status(hist, count, slot, t, geometric, ratio_tol, horizon, min_interval
+                ):  # pragma: no cover - compiled
+    """Whether an event of history row ``slot`` at ``t`` belongs to an accumulation.
+
+    Returns ``(ZENO_CLOSE, 0)`` when it is closer than ``min_interval`` to the previous one,
+    ``(ZENO_DUE, t_acc)`` when (``geometric``) it ends five or six event times whose
+    intervals shrink with ratios equal within ``ratio_tol`` and the remaining time
+    ``Δ r / (1 - r)`` is below ``horizon`` (``t_acc = t + Δ r / (1 - r)``), else
+    ``(ZENO_NONE, 0)``. The history itself is not changed (see :func:`zeno_push`).
+    """
+    m = count[slot]
+    if m > 0 and t - hist[slot, m - 1] < min_interval:
+        return ZENO_CLOSE, 0.0
+    if not geometric or m < 4:
+        return ZENO_NONE, 0.0
+    k = min(m, 5)  # with t: k + 1 times, k differences
+    d = np.empty(k)
+    prev = hist[slot, m - k]
+    for j in range(k):
+        cur = hist[slot, m - k + j + 1] if j < k - 1 else t
+        d[j] = cur - prev
+        prev = cur
+        if d[j] <= 0.0:
+            return ZENO_NONE, 0.0
+    r_min = np.inf
+    r_max = -np.inf
+    for j in range(k - 1):
+        r = d[j + 1] / d[j]
+        if r >= 1.0:
+            return ZENO_NONE, 0.0
+        r_min = min(r_min, r)
+        r_max = max(r_max, r)
+    r_last = d[k - 1] / d[k - 2]
+    if r_max - r_min > ratio_tol * r_last:
+        return ZENO_NONE, 0.0
+    remaining = d[k - 1] * r_last / (1.0 - r_last)
+    if remaining <= horizon:
+        return ZENO_DUE, t + remaining
+    return ZENO_NONE, 0.0
+
+
+@njit(cache=True)
+def zeno_push(hist, count, slot, t):  # pragma: no cover - compiled
+    """Append ``t`` to history row ``slot`` (the last six times are kept)."""
+    m = count[slot]
+    if m == hist.shape[1]:
+        for j in range(m - 1):
+            hist[slot, j] = hist[slot, j + 1]
+        hist[slot, m - 1] = t
+    else:
+        hist[slot, m] = t
+        count[slot] = m + 1
+
+
+@njit(cache=True)
+def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, bern_d,
+                     kind, lam, V, Vinv, T, d, h,
+                     J, jump_ok, zeno_slot, hist, count, geometric, ratio_tol, horizon,
+                     min_interval, budget,
+                     x, t, tf, dt, t_grid0, sample_pre,
+                     s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze):  # pragma: no cover
+    """Flow from ``(t, x)`` and settle the simple events until ``tf`` or a hand-off.
+
+    Returns ``(code, t, n_samples, n_events)``; ``x`` is overwritten with the state at the
+    returned ``t`` (pre-event state for ``HANDOFF``, with ``hit``/``graze`` describing the
+    event). Samples written: grid points ``t_grid0 + k dt`` strictly inside each flight, the
+    pre-event state when ``sample_pre``, the post-jump state of every settled event and the
+    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``.
+    """
+    n = x.shape[0]
+    p = g0.shape[0]
+    n_s = 0
+    n_e = 0
+    xn = np.empty(n)
+    y = np.empty(n)
+    a = np.empty(W.shape[0])
+    cap_s = s_t.shape[0]
+    cap_e = e_t.shape[0]
+    while t < tf:
+        if n_s + 4 > cap_s or n_e + 1 > cap_e:
+            return FULL, t, n_s, n_e
+        for j in range(n):
+            y[j] = x[j] / d[j]
+        if p:
+            code, tau, _ = search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
+                                  bern_d, y, h, tf - t, kind, lam, V, Vinv, T, d, hit, graze)
+        else:
+            code, tau = 0, 0.0
+        if code == NEGATIVE:
+            return INADMISSIBLE, t, n_s, n_e
+        t_next = tf if code != EVENT else t + tau
+        # grid samples strictly inside (t, t_next)
+        k = int(np.floor((t - t_grid0) / dt)) + 1
+        while True:
+            tg = t_grid0 + dt * k
+            if tg >= t_next:
+                break
+            if tg > t:
+                if n_s + 3 > cap_s:
+                    # resume from this grid point: exact state there
+                    propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
+                    s_t[n_s] = tg
+                    s_x[n_s] = xn
+                    n_s += 1
+                    x[:] = xn
+                    return FULL, tg, n_s, n_e
+                propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
+                s_t[n_s] = tg
+                s_x[n_s] = xn
+                n_s += 1
+            k += 1
+        if t_next > t:
+            propagate(kind, lam, V, Vinv, phi, T, d, h, x, t_next - t, xn)
+            x[:] = xn
+        t = t_next
+        if code != EVENT:
+            s_t[n_s] = t
+            s_x[n_s] = x
+            n_s += 1
+            return DONE, t, n_s, n_e
+        if sample_pre:
+            s_t[n_s] = t
+            s_x[n_s] = x
+            n_s += 1
+        # -- is it a simple event? -------------------------------------------------------
+        i = -1
+        n_hit = 0
+        for j in range(p):
+            if hit[j]:
+                n_hit += 1
+                i = j
+        if n_hit != 1 or graze[i] or not jump_ok[i] or budget <= n_e:
+            return HANDOFF, t, n_s, n_e
+        for j in range(n):
+            y[j] = x[j] / d[j]
+        ynorm = np.sqrt(np.sum(y * y))
+        closed_elsewhere = False
+        for j in range(p):
+            if j != i:
+                _coefficients(W, g0, j, y, a)
+                if a[0] <= _CLOSED_TOL * (row_norm[j] * ynorm + abs(g0[j])):
+                    closed_elsewhere = True
+        if closed_elsewhere:
+            return HANDOFF, t, n_s, n_e
+        slot = zeno_slot[i]
+        status, _ = zeno_status(hist, count, slot, t, geometric, ratio_tol, horizon,
+                                min_interval)
+        if status != ZENO_NONE:
+            return HANDOFF, t, n_s, n_e
+        # the jump, and does the guard leave its surface afterwards?
+        for r in range(n):
+            s = 0.0
+            for c in range(n):
+                s += J[i, r, c] * x[c]
+            xn[r] = s
+        for j in range(n):
+            y[j] = xn[j] / d[j]
+        _coefficients(W, g0, i, y, a)
+        if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
+            return HANDOFF, t, n_s, n_e
+        zeno_push(hist, count, slot, t)
+        e_t[n_e] = t
+        e_i[n_e] = i
+        e_pre[n_e] = x
+        e_post[n_e] = xn
+        n_e += 1
+        x[:] = xn
+        s_t[n_s] = t
+        s_x[n_s] = x
+        n_s += 1
+    return DONE, t, n_s, n_e
