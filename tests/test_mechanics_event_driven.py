@@ -174,3 +174,73 @@ def test_simultaneous_impacts_through_the_multi_contact_law(method: str) -> None
     if method == "event_driven":
         assert impacts[0].time == pytest.approx(0.1, abs=1e-14)
     assert np.allclose(traj.x[-1, 3:], [-1.0, 0.0, 1.0], atol=1e-12)
+
+
+def _forced_oscillator_with_wall() -> tuple[LinearHybridSystem, np.ndarray]:
+    """Mass on a spring, harmonically forced, hitting a wall at q = 0.3 (e = 0.8); the
+    exosystem state is part of the hybrid state."""
+    e, omega = 0.8, 1.7
+    A = np.zeros((4, 4))
+    A[0, 1], A[1, 0], A[1, 1], A[1, 2] = 1.0, -1.0, -0.05, 1.0
+    A[2, 3], A[3, 2] = omega, -omega  # (u, u') generator: u = 0.9 sin(ωt)
+    J = np.eye(4)
+    J[1, 1] = -e
+    x0 = np.array([0.0, 0.0, 0.0, 0.9])
+    return LinearHybridSystem(A, [[-1.0, 0.0, 0.0, 0.0]], [0.3], J), x0
+
+
+def test_compiled_impacts_agree_with_the_python_path() -> None:
+    # the same system with its jump as a matrix (impacts settled in the compiled loop) and as
+    # a callable (every event through the Python path) gives the same run
+    fast, x0 = _forced_oscillator_with_wall()
+    J = fast.jump_matrices[0]
+    slow = LinearHybridSystem(fast.A, fast.G, fast.g0, lambda t, x, idx: J @ x)
+    a = simulate(fast, x0, (0.0, 60.0), dt=0.05)
+    b = simulate(slow, x0, (0.0, 60.0), dt=0.05)
+    ta, tb = a.event_times("jump"), b.event_times("jump")
+    assert ta.size >= 15
+    assert np.array_equal(a.t, b.t)
+    assert np.max(np.abs(ta - tb)) < 1e-13
+    assert np.max(np.abs(a.x - b.x)) < 1e-11
+    # and both agree with scipy's DOP853 with event location
+    from scipy.integrate import solve_ivp
+
+    t, x, ref = 0.0, x0.copy(), []
+    gap = lambda _t, z: 0.3 - z[0]  # noqa: E731
+    gap.terminal, gap.direction = True, -1.0
+    while True:
+        sol = solve_ivp(lambda _t, z: fast.A @ z, (t, 60.0), x, method="DOP853", rtol=1e-13,
+                        atol=1e-13, events=gap)
+        if sol.status != 1:
+            break
+        t, x = float(sol.t_events[0][0]), J @ sol.y_events[0][0]
+        ref.append(t)
+    assert len(ref) == ta.size
+    assert np.max(np.abs(ta - np.array(ref))) < 1e-9
+
+
+def test_listeners_see_every_impact_in_time_order() -> None:
+    ball = BouncingBall(restitution=0.9)
+    seen = []
+    traj = simulate(ball.system(), ball.x0, (0.0, 10.0),
+                    listeners=[lambda t, xm, xp, idx: seen.append((t, xm, xp, list(idx)))])
+    impacts = traj.events_of("impact")
+    assert len(seen) == len(impacts) > 20
+    assert [s[0] for s in seen] == [e.time for e in impacts]
+    assert all(s[3] == [0] for s in seen)
+    for (t, xm, xp, _), ev in zip(seen, impacts, strict=True):
+        assert np.array_equal(xm, ev.pre) and np.array_equal(xp, ev.post)
+    for _, xm, xp, _ in seen[:-1]:  # the last one closes the accumulation plastically
+        assert xp[1] == pytest.approx(-0.9 * xm[1], rel=1e-14)
+    assert seen[-1][2][1] == 0.0
+
+
+def test_samples_on_the_grid_are_exact() -> None:
+    ball = BouncingBall(restitution=0.9)
+    traj = simulate(ball.system(), ball.x0, (0.0, 1.2), dt=0.01)
+    t1 = ball.impact_times(1)[0]
+    flight = (traj.t > 0.0) & (traj.t < t1)
+    tt = traj.t[flight]
+    assert np.allclose(tt / 0.01, np.round(tt / 0.01), atol=1e-9)  # grid points
+    assert np.max(np.abs(traj.x[flight, 0] - (1.0 - 0.5 * 9.81 * tt**2))) < 1e-15
+    assert np.max(np.abs(traj.x[flight, 1] + 9.81 * tt)) < 1e-14
