@@ -228,7 +228,7 @@ def test_listeners_see_every_impact_in_time_order() -> None:
     assert len(seen) == len(impacts) > 20
     assert [s[0] for s in seen] == [e.time for e in impacts]
     assert all(s[3] == [0] for s in seen)
-    for (t, xm, xp, _), ev in zip(seen, impacts, strict=True):
+    for (_t, xm, xp, _), ev in zip(seen, impacts, strict=True):
         assert np.array_equal(xm, ev.pre) and np.array_equal(xp, ev.post)
     for _, xm, xp, _ in seen[:-1]:  # the last one closes the accumulation plastically
         assert xp[1] == pytest.approx(-0.9 * xm[1], rel=1e-14)
@@ -244,3 +244,24 @@ def test_samples_on_the_grid_are_exact() -> None:
     assert np.allclose(tt / 0.01, np.round(tt / 0.01), atol=1e-9)  # grid points
     assert np.max(np.abs(traj.x[flight, 0] - (1.0 - 0.5 * 9.81 * tt**2))) < 1e-15
     assert np.max(np.abs(traj.x[flight, 1] + 9.81 * tt)) < 1e-14
+
+
+def test_record_every_and_selected_signals() -> None:
+    from nscontrol.errors import ModelError
+
+    ball = BouncingBall(restitution=0.9)
+    full = simulate(ball.system(), ball.x0, (0.0, 10.0), dt=0.01)
+    thin = simulate(ball.system(), ball.x0, (0.0, 10.0), dt=0.01, record_every=10,
+                    signals=["gap"])
+    assert set(thin.signals) == {"gap"}
+    assert thin.t.size < full.t.size / 5
+    assert thin.t[-1] == full.t[-1] == 10.0  # the final state is always kept
+    assert np.array_equal(thin.x[-1], full.x[-1])
+    assert len(thin.events) == len(full.events)  # events are never thinned
+    assert np.isin(thin.t, full.t).all()
+    bare = simulate(ball.system(), ball.x0, (0.0, 1.0), signals=[])
+    assert bare.signals == {}
+    with pytest.raises(ModelError, match=r"^signals: unknown name\(s\) \['gapp'\]"):
+        simulate(ball.system(), ball.x0, (0.0, 1.0), signals=["gapp"])
+    with pytest.raises(ModelError, match=r"^record_every: expected an integer >= 1"):
+        simulate(ball.system(), ball.x0, (0.0, 1.0), record_every=0)

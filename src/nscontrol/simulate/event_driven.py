@@ -57,7 +57,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
               min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
               zeno_horizon: float | None = None, on_zeno: str = "raise",
               listeners: Sequence[Callable[..., None]] = (), rtol: float = 1e-10,
-              atol: float = 1e-12, progress: bool | None = None) -> Trajectory:
+              atol: float = 1e-12, record_every: int = 1, signals: Sequence[str] | None = None,
+              progress: bool | None = None) -> Trajectory:
     """Event-driven simulation from ``x0`` over ``t_span`` (see the module docstring).
 
     Parameters
@@ -88,6 +89,11 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
         Called after every jump / impact.
     rtol, atol : float
         Tolerances of DOP853 (nonlinear systems only).
+    record_every : int
+        Keep every ``record_every``-th sample (events, and the final state, are always kept).
+    signals : sequence of str, optional
+        Signals to record (default all: the system's outputs for a hybrid system, ``gap`` and
+        ``energy`` for mechanics); an empty sequence records states only.
     progress : bool, optional
         Progress bar (default: shown after 2 s).
 
@@ -118,7 +124,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
                     horizon=(check_positive("zeno_horizon", zeno_horizon)
                              if zeno_horizon is not None else 1e-3 * (tf - t0)),
                     on_zeno=on_zeno, listeners=tuple(listeners), rtol=rtol, atol=atol,
-                    progress=progress)
+                    every=_check_every(record_every),
+                    signals=None if signals is None else tuple(signals), progress=progress)
     if isinstance(system, LinearHybridSystem):
         if u is not None:
             raise ModelError("u: a LinearHybridSystem carries its input generator in its state; "
@@ -132,7 +139,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
                          max_events=max_events, min_interval=min_interval,
                          zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon,
                          on_zeno=on_zeno, listeners=reorder_listeners(listeners, back),
-                         rtol=rtol, atol=atol, progress=progress)
+                         rtol=rtol, atol=atol, record_every=record_every, signals=signals,
+                         progress=progress)
         return reorder_states(traj, back, system.state_names)
     if isinstance(system, LagrangianSystem):
         x0 = system.check_state(x0)
@@ -146,6 +154,36 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
 class _Options:
     def __init__(self, **kw: Any) -> None:
         self.__dict__.update(kw)
+
+
+def _check_every(record_every: Any) -> int:
+    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) \
+            or record_every < 1:
+        raise ModelError(f"record_every: expected an integer >= 1, got {record_every!r}")
+    return int(record_every)
+
+
+class _Samples:
+    """The run's :class:`Recorder` (``record_every``, selected signals) and the last sample
+    offered, so that the final state is kept whatever ``record_every`` drops."""
+
+    def __init__(self, n: int, opts: _Options, offered: Sequence[str]) -> None:
+        unknown = sorted(set(opts.signals or ()) - set(offered))
+        if unknown:
+            raise ModelError(f"signals: unknown name(s) {unknown}; this system records "
+                             f"{sorted(offered)}")
+        self.rec = Recorder(n, every=opts.every, signals=opts.signals)
+        self.last: tuple[float, FloatArray, dict[str, FloatArray]] | None = None
+
+    def extend(self, times: FloatArray, X: FloatArray, **signals: FloatArray) -> None:
+        self.rec.extend(times, X, **signals)
+        self.last = (float(times[-1]), X[-1], {k: v[-1] for k, v in signals.items()})
+
+    def finish(self, **kw: Any) -> Trajectory:
+        if self.last is not None and self.rec.last_time < self.last[0]:
+            t, x, sig = self.last
+            self.rec.sample(t, x, force=True, **sig)
+        return self.rec.finish(**kw)
 
 
 def reorder_listeners(listeners: Sequence[Callable[..., None]], order: np.ndarray
@@ -212,7 +250,7 @@ class _Zeno:
         return t_acc if code == ZENO_DUE else None
 
 
-def _fail_zeno(opts: _Options, rec: Recorder, message: str, t: float, **finish: Any
+def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
                ) -> Trajectory:
     traj = rec.finish(status=-1, message=message, **finish)
     if opts.on_zeno == "warn":
@@ -325,12 +363,13 @@ class _HybridRun:
         J = system.jump_matrices
         self.flight = _Flight(self.flow, system.G, system.g0, J,
                               np.full(p, J is not None), np.arange(p))
-        self.rec = Recorder(system.n_states)
+        self.samples = _Samples(system.n_states, opts, tuple(system.outputs))
+        self.rec = self.samples.rec
         self.zeno = _Zeno(opts, p)
 
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
-        sig = {k: X @ C.T for k, C in self.s.outputs.items()}
-        self.rec.extend(times, X, **sig)
+        sig = {k: X @ C.T for k, C in self.s.outputs.items() if self.rec.wants(k)}
+        self.samples.extend(times, X, **sig)
 
     def _jumped(self, times: FloatArray, idx: np.ndarray, pre: FloatArray,
                 post: FloatArray) -> None:
@@ -360,7 +399,7 @@ class _HybridRun:
                 self.zeno.n_events += 1
                 if self.zeno.n_events > self.opts.max_events or any(
                         self.zeno.too_close(int(i), t) for i in idx):
-                    return _fail_zeno(self.opts, self.rec, f"event_driven: accumulation of "
+                    return _fail_zeno(self.opts, self.samples, f"event_driven: accumulation of "
                                       f"events of guards {idx.tolist()} near t = {t:.12g}",
                                       t, **finish)
                 for i in idx:
@@ -372,7 +411,7 @@ class _HybridRun:
                     listener(t, x.copy(), x_plus.copy(), idx)
                 x = x_plus
                 self._sample(np.array([t]), x[None])
-        return self.rec.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
+        return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
 
 
 # ------------------------------------------------------------------------------ mechanics
@@ -408,7 +447,8 @@ class _LinearMechanicsRun:
         self.z = np.concatenate([x0, [1.0], [] if u is None else u.w0])
         self.n, self.N = n, N
         self.flows: dict[frozenset[int], tuple[_Flight, np.ndarray]] = {}
-        self.rec = Recorder(2 * n)
+        self.samples = _Samples(2 * n, opts, ("gap", "energy"))
+        self.rec = self.samples.rec
         self.zeno = _Zeno(opts, s.n_contacts)
         self.contact: set[int] = set()
         self.n_impacts = 0
@@ -453,11 +493,15 @@ class _LinearMechanicsRun:
         return self.flows[C]
 
     def _signals(self, Z: FloatArray) -> dict[str, FloatArray]:
-        q = Z[:, : self.n]
-        return {"gap": q @ self.G.T + self.s.gap_offset, "energy": self.s.energy(Z[:, :2 * self.n])}
+        out = {}
+        if self.rec.wants("gap"):
+            out["gap"] = Z[:, : self.n] @ self.G.T + self.s.gap_offset
+        if self.rec.wants("energy"):
+            out["energy"] = self.s.energy(Z[:, :2 * self.n])
+        return out
 
     def _sample(self, times: FloatArray, Z: FloatArray) -> None:
-        self.rec.extend(times, Z[:, :2 * self.n], **self._signals(Z))
+        self.samples.extend(times, Z[:, :2 * self.n], **self._signals(Z))
 
     def _bounced(self, ids: np.ndarray) -> Callable[..., None]:
         """Record the impacts settled by the compiled loop (``ids``: guard -> contact)."""
@@ -531,7 +575,7 @@ class _LinearMechanicsRun:
                     continue
                 self.zeno.n_events += 1
                 if self.zeno.n_events > self.opts.max_events:
-                    return _fail_zeno(self.opts, self.rec, f"event_driven: more than "
+                    return _fail_zeno(self.opts, self.samples, f"event_driven: more than "
                                       f"{self.opts.max_events} events by t = {t:.12g}", t,
                                       **finish)
                 ended = [int(-1 - j) for j in hit if j < 0]
@@ -547,7 +591,7 @@ class _LinearMechanicsRun:
                     self._sample(np.array([t]), z[None])
                     self._set_mode(t, z, self._persistent(z, sorted(remaining)))
         stats = {"events": self.zeno.n_events, "impacts": self.n_impacts}
-        return self.rec.finish(status=0, stats=stats, **finish)
+        return self.samples.finish(status=0, stats=stats, **finish)
 
     def _impact(self, t: float, z: FloatArray, impacts: list[int]) -> Any:
         """Apply Newton's law at ``t``; handle accumulations. Returns ``(t, z)`` or a failed
@@ -557,7 +601,7 @@ class _LinearMechanicsRun:
         closed = sorted(set(self._closed(z).tolist()) | set(impacts) | self.contact)
         for j in impacts:
             if self.zeno.too_close(j, t):
-                return _fail_zeno(self.opts, self.rec, f"event_driven: impacts of contact {j} "
+                return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contact {j} "
                                   f"accumulate near t = {t:.12g} without a geometric pattern",
                                   t, **finish)
         t_acc = None
@@ -581,7 +625,7 @@ class _LinearMechanicsRun:
         new = self._persistent(z, self._resting(z, np.array(closed, dtype=np.int64)))
         if t_acc is not None:
             if not set(impacts) <= new:
-                return _fail_zeno(self.opts, self.rec, f"event_driven: impacts of contacts "
+                return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
                                   f"{impacts} accumulate at t = {t_acc:.12g} but the contact "
                                   "force there would be negative", t, **finish)
             self._sample(np.array([t]), z[None])
@@ -608,7 +652,8 @@ class _NonlinearMechanicsRun:
 
         self.s, self.x, self.t0, self.tf, self.u, self.opts = system, x0, t0, tf, u, opts
         self.law = NewtonImpactLaw(system.restitution)
-        self.rec = Recorder(system.n_states)
+        self.samples = _Samples(system.n_states, opts, ("gap", "energy"))
+        self.rec = self.samples.rec
         self.zeno = _Zeno(opts, system.n_contacts)
 
     def _rhs(self, t: float, x: FloatArray) -> FloatArray:
@@ -619,8 +664,12 @@ class _NonlinearMechanicsRun:
 
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
         n = self.s.n_dof
-        gaps = np.array([self.s.gaps(x[:n]) for x in X])
-        self.rec.extend(times, X, gap=gaps, energy=self.s.energy(X))
+        sig = {}
+        if self.rec.wants("gap"):
+            sig["gap"] = np.array([self.s.gaps(x[:n]) for x in X])
+        if self.rec.wants("energy"):
+            sig["energy"] = self.s.energy(X)
+        self.samples.extend(times, X, **sig)
 
     def run(self) -> Trajectory:
         from scipy.integrate import solve_ivp
@@ -639,7 +688,7 @@ class _NonlinearMechanicsRun:
                             atol=self.opts.atol, events=watch or None, dense_output=True)
             if not sol.success:
                 raise SolverError(f"event_driven: DOP853 failed at t = {sol.t[-1]:.6g}: "
-                                  f"{sol.message}", trajectory=self.rec.finish(
+                                  f"{sol.message}", trajectory=self.samples.finish(
                                       status=-1, **finish))
             t_end = float(sol.t[-1])
             grid = grid[grid < t_end]
@@ -654,7 +703,7 @@ class _NonlinearMechanicsRun:
             if isinstance(out, Trajectory):
                 return out
             x = out
-        return self.rec.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
+        return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
 
     def _gap_event(self, j: int) -> Callable[[float, FloatArray], float]:
         def event(t: float, x: FloatArray) -> float:
@@ -674,13 +723,13 @@ class _NonlinearMechanicsRun:
         J = s.gap_jacobian(q)
         hitting = [int(j) for j in closed if J[j] @ v < 0]
         if not hitting:
-            return _fail_zeno(self.opts, self.rec, f"event_driven: contacts {closed.tolist()} "
+            return _fail_zeno(self.opts, self.samples, f"event_driven: contacts {closed.tolist()} "
                               f"are closed at t = {t:.12g} with zero normal velocity and pushed "
                               "inwards (persistent contact), which is supported for linear "
                               "systems only", t, **finish)
         if self.zeno.n_events > self.opts.max_events or any(
                 self.zeno.too_close(j, t) or self.zeno.add(j, t) is not None for j in hitting):
-            return _fail_zeno(self.opts, self.rec, f"event_driven: impacts of contacts "
+            return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
                               f"{hitting} accumulate near t = {t:.12g}; persistent contact "
                               "is supported for linear systems only", t, **finish)
         res = self.law.apply(s.mass_matrix(q), J.T, v, closed)
