@@ -31,6 +31,14 @@ accumulation that cannot be resolved that way (no geometric pattern, a contact f
 would be negative, more than ``max_events`` events) raises :class:`ZenoError` with the
 trajectory computed so far (or warns and returns it, ``on_zeno="warn"``).
 
+Speed: the flow between events, the event search and every event of a single guard with a
+linear jump (a free contact bouncing with nothing else closed; a :class:`LinearHybridSystem`
+whose ``jump`` is given as matrices, such as the chapter-2 plant with its observer) run in one
+compiled loop (:mod:`nscontrol.simulate._event_kernels`); any other event — simultaneous,
+grazing, a contact coming to rest, an accumulation — is handed back to the Python code below,
+unchanged. Listeners are called for the compiled events too, in time order, once the loop
+returns (they observe, they cannot alter the run).
+
 Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"``,
 ``"contact_end"`` (mechanics), ``"jump"`` and ``"grazing"`` (linear hybrid systems).
 """
