@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from nscontrol.errors import DimensionError
+from nscontrol.errors import DimensionError, ModelError
 from nscontrol.simulate import Recorder, Trajectory
 
 
@@ -76,3 +76,88 @@ def test_shape_mismatch_is_reported():
         Trajectory(t=np.zeros(3), x=np.zeros((4, 2)))
     with pytest.raises(DimensionError, match="signal 'y'"):
         Trajectory(t=np.zeros(3), x=np.zeros((3, 2)), signals={"y": np.zeros(2)})
+
+
+def test_hdf5_round_trip_of_every_kind_of_stat(tmp_path):
+    rng = np.random.default_rng(7)
+    stats = {
+        "saltation_matrices": rng.standard_normal((2308, 2, 2)),   # 74 KB: beyond attributes
+        "state_transition": rng.standard_normal((3, 3)),
+        "none": None, "flag": True, "steps": 12345, "h": 0.1, "nan": float("nan"),
+        "solver": "lemke", "counts": [1, 2, 3], "mixed": [1, "a", None, 2.5],
+        "pair": (1, "two"), "nested": {"a": 1, "b": [0.5, None], "c": {"d": "e"}},
+        "int_keys": {0: "zero", (1, 2): "pair"}, "complex": 1.0 - 2.0j,
+        "numpy_scalar": np.float64(1.0 / 3.0), "numpy_int": np.int64(2**40),
+        "arrays_in_list": [np.eye(2), np.arange(3)], "slash/key": np.arange(4),
+        "long_list": list(range(50_000)),
+    }
+    traj = Trajectory(t=np.arange(3.0), x=np.zeros((3, 1)), stats=stats)
+    path = tmp_path / "stats.h5"
+    traj.save(path)
+    back = Trajectory.load(path).stats
+    assert list(back) == list(stats)                       # insertion order kept
+    for key in ("saltation_matrices", "state_transition", "slash/key"):
+        assert isinstance(back[key], np.ndarray) and back[key].dtype == stats[key].dtype
+        np.testing.assert_array_equal(back[key], stats[key])
+    for key in ("none", "flag", "steps", "h", "solver", "counts", "mixed", "pair", "nested",
+                "int_keys", "complex", "long_list"):
+        assert back[key] == stats[key] and type(back[key]) is type(stats[key]), key
+    assert np.isnan(back["nan"])
+    assert back["numpy_scalar"] == stats["numpy_scalar"]    # same value, as a Python float
+    assert back["numpy_int"] == 2**40
+    for a, b in zip(back["arrays_in_list"], stats["arrays_in_list"], strict=True):
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
+
+
+def test_unsaveable_stat_names_its_key(tmp_path):
+    traj = Trajectory(t=np.arange(2.0), x=np.zeros((2, 1)), stats={"fn": print})
+    with pytest.raises(ModelError, match=r"^stats\['fn'\]: cannot be saved: values of type"):
+        traj.save(tmp_path / "bad.h5")
+
+
+def test_load_refuses_other_files(tmp_path):
+    import h5py
+
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f.attrs["format"] = "something else"
+    with pytest.raises(ModelError, match=r"^path: expected an nscontrol trajectory file"):
+        Trajectory.load(tmp_path / "other.h5")
+
+
+def test_recorder_refuses_unknown_signals_and_bad_record_every():
+    offered = ("gap", "energy", "impulse")
+    Recorder(2, signals=["gap"], offered=offered)          # known names pass
+    with pytest.raises(ModelError, match=r"^signals: unknown name\(s\) \['gpa'\]; this "
+                                         r"integrator records \['energy', 'gap', 'impulse'\]"):
+        Recorder(2, signals=["gap", "gpa"], offered=offered)
+    with pytest.raises(ModelError, match=r"^signals: expected a sequence of signal names, got "
+                                         r"the string 'gap'"):
+        Recorder(2, signals="gap", offered=offered)
+    for every in (0, -1, 2.5, "3", True, None):
+        with pytest.raises(ModelError, match=r"^record_every: expected an integer >= 1"):
+            Recorder(2, every=every)
+    assert Recorder(2, every=3.0).every == 3                # an integral float is an integer
+    # backward compatible positional/keyword use by the integrators
+    rec = Recorder(1, every=2, signals=None)
+    rec.sample(0.0, [1.0], y=1.0)
+    assert rec.finish().signals["y"].shape == (1,)
+
+
+def test_recorder_without_offered_refuses_a_signal_never_recorded():
+    rec = Recorder(1, signals=["y", "yy"])
+    for k in range(3):
+        rec.sample(float(k), [k], y=2.0 * k, z=1.0)
+    with pytest.raises(ModelError, match=r"^signals: requested signal\(s\) \['yy'\] were never "
+                                         r"recorded by test; it recorded \['y'\]") as err:
+        rec.finish(method="test")
+    assert isinstance(err.value.trajectory, Trajectory)   # the run is not lost
+    np.testing.assert_array_equal(err.value.trajectory.signals["y"], [0.0, 2.0, 4.0])
+
+
+def test_docstrings_of_views():
+    assert Trajectory.n_states.__doc__ and Recorder.last_time.__doc__
+    rec = Recorder(2)
+    assert rec.last_time == -np.inf
+    rec.sample(0.5, [0.0, 1.0])
+    assert rec.last_time == 0.5 and rec.finish().n_states == 2

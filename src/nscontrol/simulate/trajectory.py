@@ -11,6 +11,7 @@ step or selected signals only) and call :meth:`Recorder.finish` to obtain the fr
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -19,7 +20,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import DimensionError
+from .._validation import check_integer
+from ..errors import DimensionError, ModelError
 
 __all__ = ["Event", "Trajectory", "Recorder", "STATUS_MESSAGES"]
 
@@ -124,6 +126,7 @@ class Trajectory:
 
     @property
     def n_states(self) -> int:
+        """Number of state components (``x.shape[1]``)."""
         return int(self.x.shape[1])
 
     def __len__(self) -> int:
@@ -179,11 +182,24 @@ class Trajectory:
 
     # -- persistence ----------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
-        """Write the trajectory to an HDF5 file (lossless: :meth:`load` returns an equal one)."""
+        """Write the trajectory to an HDF5 file (lossless: :meth:`load` returns an equal one).
+
+        Layout (format ``nscontrol.Trajectory/2``): datasets ``t``, ``x``, group ``signals``
+        (one dataset each), group ``events`` (columns), group ``stats``: a numeric array stat
+        is a dataset of its own (any size: HDF5 attributes stop at 64 KB), every other stat
+        (``None``, bool, int, float, str, list, tuple, dict, complex, numpy scalars, arrays
+        nested in containers) a JSON string dataset tagged so that :meth:`load` restores
+        its type (tuples stay tuples, dicts with non-string keys keep their keys).
+
+        Raises
+        ------
+        ModelError
+            A stat of a type that has no lossless encoding (the message names its key).
+        """
         import h5py
 
         with h5py.File(path, "w") as f:
-            f.attrs["format"] = "nscontrol.Trajectory/1"
+            f.attrs["format"] = _FORMAT
             f.attrs["status"] = self.status
             f.attrs["message"] = self.message
             f.attrs["method"] = self.method
@@ -211,16 +227,26 @@ class Trajectory:
                 ev.create_dataset(key + "_size", data=sizes)
             st = f.create_group("stats")
             for key, value in self.stats.items():
-                st.attrs[key] = value
+                if not isinstance(key, str):
+                    raise ModelError(f"stats: expected string keys, got {key!r}")
+                _save_stat(st, key, value)
 
     @classmethod
     def load(cls, path: str | Path) -> Trajectory:
-        """Read a trajectory written by :meth:`save`."""
+        """Read a trajectory written by :meth:`save` (formats 1 and 2).
+
+        Raises
+        ------
+        ModelError
+            ``path`` is not an nscontrol trajectory file.
+        """
         import h5py
 
         with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != "nscontrol.Trajectory/1":
-                raise ValueError(f"{path}: not an nscontrol trajectory file")
+            fmt = f.attrs.get("format")
+            if fmt not in (_FORMAT, _FORMAT_V1):
+                raise ModelError(f"path: expected an nscontrol trajectory file (format "
+                                 f"{_FORMAT!r}), got {path} with format {fmt!r}")
             ev = f["events"]
             pre, post = ev["pre"][...], ev["post"][...]
             pre_n, post_n = ev["pre_size"][...], ev["post_size"][...]
@@ -230,8 +256,11 @@ class Trajectory:
                       post=post[i, : post_n[i]].copy(), mode_from=int(ev["mode_from"][i]),
                       mode_to=int(ev["mode_to"][i]))
                 for i in range(ev["time"].shape[0]))
-            stats = {k: (v.item() if isinstance(v, np.generic) else v)
-                     for k, v in f["stats"].attrs.items()}
+            if fmt == _FORMAT_V1:
+                stats = {k: (v.item() if isinstance(v, np.generic) else v)
+                         for k, v in f["stats"].attrs.items()}
+            else:
+                stats = _load_stats(f["stats"])
             return cls(
                 t=f["t"][...], x=f["x"][...],
                 signals={k: v[...] for k, v in f["signals"].items()},
@@ -309,6 +338,107 @@ class Trajectory:
         return fig
 
 
+_FORMAT = "nscontrol.Trajectory/2"
+_FORMAT_V1 = "nscontrol.Trajectory/1"
+
+
+def _save_stat(group: Any, key: str, value: Any) -> None:
+    """One stat into the ``stats`` group: numeric arrays as datasets, the rest as tagged JSON.
+
+    Datasets are named by position (``"0"``, ``"1"``...: a key may hold ``/``, which HDF5
+    would read as a path) and carry the key in their ``key`` attribute.
+    """
+    import h5py
+
+    name = str(len(group))
+    if isinstance(value, np.ndarray) and value.dtype.kind in "biufc":
+        ds = group.create_dataset(name, data=value)
+        ds.attrs["encoding"] = "array"
+    else:
+        try:
+            text = json.dumps(_to_json(value, f"stats[{key!r}]"), allow_nan=True)
+        except RecursionError:
+            raise ModelError(f"stats[{key!r}]: cannot be saved: the value is nested too "
+                             f"deeply (or refers to itself)") from None
+        ds = group.create_dataset(name, data=text, dtype=h5py.string_dtype())
+        ds.attrs["encoding"] = "json"
+    ds.attrs["key"] = key
+
+
+def _load_stats(group: Any) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name in sorted(group, key=int):
+        ds = group[name]
+        if ds.attrs["encoding"] == "array":
+            value = ds[...]
+        else:
+            raw = ds[()]
+            value = _from_json(json.loads(raw.decode() if isinstance(raw, bytes) else raw))
+        out[str(ds.attrs["key"])] = value
+    return out
+
+
+_TAGS = ("__tuple__", "__ndarray__", "__complex__", "__items__")
+
+
+def _to_json(value: Any, where: str) -> Any:
+    """A JSON-encodable image of ``value`` from which :func:`_from_json` restores it."""
+    if value is None or isinstance(value, bool | str):
+        return value
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, complex | np.complexfloating):
+        return {"__complex__": [float(value.real), float(value.imag)]}
+    if isinstance(value, list):
+        return [_to_json(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, tuple):
+        return {"__tuple__": [_to_json(v, f"{where}[{i}]") for i, v in enumerate(value)]}
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biufcU":
+            raise ModelError(f"{where}: cannot be saved: arrays of dtype {value.dtype} have no "
+                             "lossless encoding; convert to a numeric or string array")
+        flat = [_to_json(v, where) for v in value.ravel().tolist()]
+        return {"__ndarray__": flat, "dtype": value.dtype.str, "shape": list(value.shape)}
+    if isinstance(value, Mapping):
+        if all(isinstance(k, str) for k in value) and not any(k in _TAGS for k in value):
+            return {k: _to_json(v, f"{where}[{k!r}]") for k, v in value.items()}
+        return {"__items__": [[_to_json(k, where), _to_json(v, f"{where}[{k!r}]")]
+                              for k, v in value.items()]}
+    raise ModelError(f"{where}: cannot be saved: values of type {type(value).__name__} have no "
+                     "lossless encoding; store numbers, strings, None, lists, tuples, dicts or "
+                     "numpy arrays")
+
+
+def _from_json(data: Any) -> Any:
+    if isinstance(data, list):
+        return [_from_json(v) for v in data]
+    if not isinstance(data, dict):
+        return data
+    if "__tuple__" in data:
+        return tuple(_from_json(v) for v in data["__tuple__"])
+    if "__complex__" in data:
+        re, im = data["__complex__"]
+        return complex(re, im)
+    if "__ndarray__" in data:
+        dtype = np.dtype(data["dtype"])
+        flat = [_from_json(v) for v in data["__ndarray__"]]
+        return np.array(flat, dtype=dtype).reshape(data["shape"])
+    if "__items__" in data:
+        return {_hashable(_from_json(k)): _from_json(v) for k, v in data["__items__"]}
+    return {k: _from_json(v) for k, v in data.items()}
+
+
+def _hashable(key: Any) -> Any:
+    return tuple(_hashable(k) for k in key) if isinstance(key, list) else key
+
+
+
 class Recorder:
     """Growing buffers an integrator writes samples and events into.
 
@@ -318,22 +448,40 @@ class Recorder:
         State dimension.
     every
         Keep every ``every``-th call to :meth:`sample` (events are always kept, and
-        :meth:`sample` with ``force=True`` always records, e.g. for the final state).
+        :meth:`sample` with ``force=True`` always records, e.g. for the final state). The
+        user-facing option is ``record_every``: an integer ``>= 1``.
     signals
         Names of the signals to keep; ``None`` keeps all that the integrator offers.
     capacity
         Initial buffer length (buffers double when full).
+    offered
+        The names of the signals the integrator can record. When given, a requested name
+        outside it (a typo) is refused at once; when not, :meth:`finish` refuses a requested
+        signal that was never recorded, so a typo never yields a silently empty result.
+
+    Raises
+    ------
+    ModelError
+        ``every`` not an integer ``>= 1``; ``signals`` a bare string or holding names the
+        integrator does not offer (the message lists the offered ones).
+
+    Examples
+    --------
+    >>> rec = Recorder(1, signals=["gap"], offered=("gap", "energy", "impulse"))
+    >>> Recorder(1, signals=["gpa"], offered=("gap", "energy"))  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: signals: unknown name(s) ['gpa']; this integrator ...
     """
 
     def __init__(self, n_states: int, *, every: int = 1, signals: Iterable[str] | None = None,
-                 capacity: int = 1024) -> None:
-        if int(every) < 1:
-            raise ValueError(f"record_every: expected an integer >= 1, got {every!r}")
-        self.n_states = int(n_states)
-        self.every = int(every)
-        self.keep = None if signals is None else set(signals)
-        self._t = np.empty(capacity)
-        self._x = np.empty((capacity, self.n_states))
+                 capacity: int = 1024, offered: Iterable[str] | None = None) -> None:
+        self.n_states = check_integer("n_states", n_states, minimum=0, error=DimensionError)
+        self.every = check_integer("record_every", every, minimum=1)
+        self.offered = None if offered is None else tuple(offered)
+        self.keep = None if signals is None else _signal_names(signals, self.offered)
+        self._t = np.empty(max(int(capacity), 1))
+        self._x = np.empty((self._t.shape[0], self.n_states))
         self._sig: dict[str, np.ndarray] = {}
         self._n = 0
         self._calls = 0
@@ -406,12 +554,32 @@ class Recorder:
 
     @property
     def last_time(self) -> float:
+        """Time of the last recorded sample (``-inf`` before the first one)."""
         return float(self._t[self._n - 1]) if self._n else -np.inf
 
     def finish(self, *, status: int = 0, message: str | None = None, method: str = "",
                stats: Mapping[str, Any] | None = None,
                state_names: Sequence[str] = ()) -> Trajectory:
-        """Freeze the buffers into a :class:`Trajectory`."""
+        """Freeze the buffers into a :class:`Trajectory`.
+
+        Raises
+        ------
+        ModelError
+            Without ``offered``: a requested signal was never recorded (an unknown name);
+            ``err.trajectory`` holds the finished trajectory.
+        """
+        traj = self._freeze(status, message, method, stats, state_names)
+        if self.keep is not None and self.offered is None and self._n:
+            missing = sorted(self.keep - set(self._sig))
+            if missing:
+                raise ModelError(f"signals: requested signal(s) {missing} were never recorded "
+                                 f"by {method or 'the integrator'}; it recorded "
+                                 f"{sorted(self._sig)} (check the names; err.trajectory "
+                                 "holds the run)", trajectory=traj)
+        return traj
+
+    def _freeze(self, status: int, message: str | None, method: str,
+                stats: Mapping[str, Any] | None, state_names: Sequence[str]) -> Trajectory:
         n = self._n
         return Trajectory(
             t=self._t[:n].copy(), x=self._x[:n].copy(),
@@ -421,3 +589,20 @@ class Recorder:
             message=STATUS_MESSAGES[status] if message is None else message,
             method=method, state_names=tuple(state_names),
         )
+
+
+def _signal_names(signals: Iterable[str], offered: tuple[str, ...] | None) -> set[str]:
+    """The requested signal names, checked against the offered ones when known."""
+    if isinstance(signals, str | bytes):
+        raise ModelError(f"signals: expected a sequence of signal names, got the string "
+                         f"{signals!r} (write signals=[{signals!r}])")
+    names = list(signals)
+    bad = [n for n in names if not isinstance(n, str)]
+    if bad:
+        raise ModelError(f"signals: expected signal names (str), got {bad!r}")
+    if offered is not None:
+        unknown = sorted(set(names) - set(offered))
+        if unknown:
+            raise ModelError(f"signals: unknown name(s) {unknown}; this integrator "
+                             f"records {sorted(offered)}")
+    return set(names)
