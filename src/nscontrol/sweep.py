@@ -13,12 +13,19 @@ points travel by pickle: ``fn`` must be a module-level function (or a
 :func:`functools.partial` of one, or an instance of a module-level class with ``__call__``),
 not a lambda, a closure or a function defined in ``__main__`` of an interactive session. Use
 ``executor="serial"`` or a :class:`~concurrent.futures.ThreadPoolExecutor` for anything else.
+A task that cannot be shipped is recorded as each point's :class:`PointError` with the rule in
+its message (Dask serialises at ``submit``, local pools in transit); it never aborts the sweep.
+
+``executor="auto"`` times the first point in this process and sends the rest to a local
+process pool only when that pays (see :data:`AUTO_PARALLEL_SECONDS`); it is the default of the
+frequency-response helpers of :mod:`nscontrol.analysis.periodic`.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
@@ -28,7 +35,7 @@ from typing import Any
 
 from .errors import ModelError, NscontrolError
 
-__all__ = ["run", "SweepResult", "PointError", "SweepError"]
+__all__ = ["run", "SweepResult", "PointError", "SweepError", "AUTO_PARALLEL_SECONDS"]
 
 
 class SweepError(NscontrolError, RuntimeError):
@@ -123,6 +130,14 @@ class _Guarded:
                                      traceback.format_exc())
 
 
+#: ``executor="auto"`` goes parallel when the pilot point predicts more serial work than this
+#: (seconds) for the rest of the grid. Measured on the project's 2-core machine (fork start
+#: method): a local pool starts, runs one task and shuts down in ~0.035 s, and a chapter-11
+#: shooting point costs 0.01–0.02 s, so 2 processes win from ~15 points on; 0.25 s keeps the
+#: pool for grids where it saves at least about a tenth of a second.
+AUTO_PARALLEL_SECONDS = 0.25
+
+
 def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         executor: Executor | str | Any | None = None,
         progress: bool | None = None, desc: str = "sweep") -> SweepResult:
@@ -140,8 +155,11 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         ``min(os.cpu_count(), len(grid))`` workers, created and shut down here.
         An :class:`~concurrent.futures.Executor` (e.g. ``Client.get_executor()``): used as is,
         not shut down. A ``dask.distributed.Client``: its executor. A string: ``"serial"`` runs
-        in this process (debugging, unpicklable ``fn``); anything else is a Dask scheduler
-        address, connected to (and disconnected from) here.
+        in this process (debugging, unpicklable ``fn``); ``"auto"`` runs the first point here,
+        timed, and the rest in a local process pool when that predicts more than
+        :data:`AUTO_PARALLEL_SECONDS` of serial work (and ``fn`` pickles and there are two or
+        more CPUs), else here too; anything else is a Dask scheduler address, connected to
+        (and disconnected from) here.
     progress
         Progress bar on stderr: ``None`` shows it when the sweep lasts more than 2 s,
         ``True`` always, ``False`` never.
@@ -151,7 +169,10 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     Returns
     -------
     SweepResult
-        Values and per-point errors in grid order.
+        Values and per-point errors in grid order. A point that cannot be submitted (an
+        unpicklable ``fn`` or point on a cluster), fails in transit or loses its worker is
+        recorded as that point's :class:`PointError`; the message says which picklability
+        rule was broken.
 
     Raises
     ------
@@ -174,41 +195,103 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     points = tuple(grid)
     if not points:
         return SweepResult((), (), ())
-    with _executor_for(executor, len(points)) as ex:
-        values, errors = _collect(ex, _Guarded(fn), points, progress, desc)
-    return SweepResult(points, tuple(values), tuple(errors))
-
-
-def _collect(ex: Executor | None, call: _Guarded, points: tuple[Any, ...],
-             progress: bool | None, desc: str) -> tuple[list[Any], list[PointError | None]]:
-    """Submit every point, gather results as they complete, store them by index."""
+    call = _Guarded(fn)
     values: list[Any] = [None] * len(points)
     errors: list[PointError | None] = [None] * len(points)
+    todo = list(enumerate(points))
     bar = _bar(len(points), progress, desc)
     try:
-        if ex is None:
-            done: Iterable[tuple[int, Any]] = ((i, _resolved(call, (i, p)))
-                                               for i, p in enumerate(points))
+        if isinstance(executor, str) and executor == "auto":
+            _run_auto(call, todo, values, errors, bar)
         else:
-            futures = {ex.submit(call, (i, p)): i for i, p in enumerate(points)}
-            done = ((futures[f], f) for f in as_completed(futures))
-        for index, future in done:
-            _store(index, future, values, errors)
-            if bar is not None:
-                bar.update(1)
+            with _executor_for(executor, len(points)) as ex:
+                _gather(ex, call, todo, values, errors, bar)
     finally:
         if bar is not None:
             bar.close()
-    return values, errors
+    return SweepResult(points, tuple(values), tuple(errors))
 
 
-def _store(index: int, future: Future, values: list[Any],
-           errors: list[PointError | None]) -> None:
-    """Unpack one finished future; a lost worker or an unpicklable fn is that point's error."""
+def _run_auto(call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
+              errors: list[PointError | None], bar: Any) -> None:
+    """``executor="auto"``: a timed pilot point here, then processes only if they pay."""
+    t = time.perf_counter()
+    _gather(None, call, todo[:1], values, errors, bar)
+    pilot = time.perf_counter() - t
+    rest = todo[1:]
+    workers = min(os.cpu_count() or 1, len(rest))
+    if (workers > 1 and pilot * len(rest) > AUTO_PARALLEL_SECONDS
+            and not _pickling_problem(call, dask=False)):
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            _gather(pool, call, rest, values, errors, bar)
+    else:
+        _gather(None, call, rest, values, errors, bar)
+
+
+def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
+            errors: list[PointError | None], bar: Any) -> None:
+    """Run the ``(index, point)`` pairs of ``todo`` on ``ex`` (in this process when None) and
+    store values and errors by index."""
+    if ex is None:
+        for i, p in todo:
+            _store(i, _resolved(call, (i, p)), values, errors, "")
+            if bar is not None:
+                bar.update(1)
+        return
+    dask = type(ex).__module__.startswith("distributed")
+    futures: dict[Future, int] = {}
+    fn_problem = ""  # set once fn itself is known not to serialise: no more submits
+    for i, p in todo:
+        if not fn_problem:
+            try:
+                futures[ex.submit(call, (i, p))] = i
+                continue
+            except Exception as exc:  # Dask serialises at submit: record, go on
+                fn_problem = _pickling_problem(call, dask=dask)
+                errors[i] = PointError(
+                    i, type(exc).__name__, fn_problem or
+                    f"could not submit point {i} ({exc}); with process or cluster executors "
+                    f"every grid point must be picklable", traceback.format_exc())
+        else:
+            errors[i] = PointError(i, "PicklingError", fn_problem)
+        if bar is not None:
+            bar.update(1)
+    diagnosis: str | None = None
+    for f in as_completed(futures):
+        i = futures[f]
+        if diagnosis is None and f.exception() is not None:
+            diagnosis = _pickling_problem(call, dask=dask)
+        _store(i, f, values, errors, diagnosis or "")
+        if bar is not None:
+            bar.update(1)
+
+
+def _pickling_problem(call: _Guarded, *, dask: bool) -> str:
+    """Why the task cannot travel to process or cluster workers (empty when it can): the rule
+    of the module docstring, with the serialiser's own error."""
+    try:
+        if dask:
+            from distributed.protocol.pickle import dumps  # pickle, then cloudpickle
+        else:
+            from pickle import dumps
+        dumps(call)
+    except Exception as exc:
+        return (f"fn cannot be pickled ({type(exc).__name__}: {exc}); process and cluster "
+                f"executors ship fn to their workers by pickle: use a module-level function, "
+                f"a functools.partial of one or an instance of a module-level class holding "
+                f"picklable data, or run with executor='serial' or a ThreadPoolExecutor")
+    return ""
+
+
+def _store(index: int, future: Future, values: list[Any], errors: list[PointError | None],
+           diagnosis: str) -> None:
+    """Unpack one finished future; a lost worker or an unpicklable fn is that point's error
+    (``diagnosis`` says which picklability rule was broken, if any)."""
     try:
         ok, payload = future.result()
     except Exception as exc:
-        errors[index] = PointError(index, type(exc).__name__, str(exc))
+        errors[index] = PointError(index, type(exc).__name__,
+                                   f"{exc}; {diagnosis}" if diagnosis else str(exc))
         return
     if ok:
         values[index] = payload
@@ -249,9 +332,9 @@ def _executor_for(executor: Any, n_points: int) -> Iterator[Executor | None]:
     elif hasattr(executor, "get_executor"):  # a dask.distributed.Client
         yield executor.get_executor()
     else:
-        raise ModelError(f"executor: expected None, 'serial', a concurrent.futures.Executor, a "
-                         f"dask.distributed.Client or a scheduler address, got "
-                         f"{type(executor).__name__}")
+        raise ModelError(f"executor: expected None, 'serial', 'auto', a "
+                         f"concurrent.futures.Executor, a dask.distributed.Client or a "
+                         f"scheduler address, got {type(executor).__name__}")
 
 
 @contextmanager
