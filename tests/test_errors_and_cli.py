@@ -95,3 +95,44 @@ def test_simulate_verb_survives_submodule_imports():
     import nscontrol.simulate.trajectory  # noqa: F401  (would rebind a lazily bound name)
 
     assert callable(nscontrol.simulate) and nscontrol.Trajectory.__name__ == "Trajectory"
+
+
+@pytest.mark.parametrize("value", [[1.0 + 2.0j], np.array([1.0j]), np.complex128(1.0),
+                                   [[1.0, 0.5j]], np.array([1.0, 2.0], dtype=complex)])
+def test_complex_input_is_refused_not_truncated(value):
+    with pytest.raises(errors.ModelError, match=r"^x0: expected real entries, got a complex "
+                                                r"array"):
+        v.as_float_array("x0", value)
+    with pytest.raises(errors.ModelError, match=r"^x0: expected real entries"):
+        v.as_vector("x0", value)
+
+
+@pytest.mark.parametrize("value", ["1.5", ["1", "2"], np.array(["a"])])
+def test_strings_are_refused_not_parsed(value):
+    with pytest.raises(errors.ModelError, match=r"^q: expected a real numeric array, got "
+                                                r"strings"):
+        v.as_float_array("q", value)
+
+
+@pytest.mark.parametrize("value", ["2", 1j, np.complex128(1.0), True, None, [1.0, 2.0],
+                                   np.ones(2)])
+def test_scalar_checks_name_the_argument(value):
+    with pytest.raises(errors.ModelError, match=r"^tol: expected a real number, got"):
+        v.check_positive("tol", value)
+    with pytest.raises(errors.ModelError, match=r"^e: expected a real number, got"):
+        v.check_in_interval("e", value, 0.0, 1.0)
+
+
+def test_scalar_and_integer_checks():
+    assert v.check_positive("h", np.array([0.5])) == 0.5   # a one-element array is its value
+    assert v.check_in_interval("omega", 1.0, 0.0, 2.0, open_interval=True) == 1.0
+    with pytest.raises(errors.ModelError, match=r"^omega: expected a value in \(0.0, 2.0\), "
+                                                r"got 2.0"):
+        v.check_in_interval("omega", 2.0, 0.0, 2.0, open_interval=True)
+    assert v.check_integer("n", np.int32(3), minimum=1) == 3
+    assert v.check_integer("n", 1e4, minimum=1) == 10_000
+    for bad in (2.7, "3", True, np.nan, None, [3]):
+        with pytest.raises(errors.ModelError, match=r"^n: expected an integer >= 1, got"):
+            v.check_integer("n", bad, minimum=1)
+    with pytest.raises(errors.DimensionError, match=r"^dim: expected an integer >= 1, got 0"):
+        v.check_integer("dim", 0, minimum=1, error=errors.DimensionError)

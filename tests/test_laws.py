@@ -19,6 +19,7 @@ from nscontrol.laws.set_valued import (
     MonotoneFunction,
     NormalConeBox,
     NormalConeInterval,
+    PiecewiseLinearFunction,
     Product,
     Relay,
     SetValuedLaw,
@@ -53,6 +54,11 @@ def _law_zoo(seed: int) -> list[SetValuedLaw]:
         asym,
         asym.loop_transformation().monotone_part,
         Product(Relay([1.0, 2.0]), Complementarity(1), MonotoneFunction(np.arctan)),
+        PiecewiseLinearFunction.saturation(rng.uniform(0.5, 3.0), rng.uniform(0.2, 4.0), dim=2),
+        PiecewiseLinearFunction(np.cumsum(rng.uniform(0.1, 2.0, 4)) - 3.0,
+                                np.cumsum([0.0, 1.0, 0.0, 0.5]), slope_left=rng.uniform(0, 2),
+                                slope_right=0.3, dim=3),
+        Product(PiecewiseLinearFunction([-1.0, 1.0], [0.0, 0.0], 1.0, 1.0), Relay(1.0)),
     ]
 
 
@@ -196,6 +202,67 @@ def test_inclusion_with_coupled_positive_definite_step(seed, m):
         np.testing.assert_allclose(sol.z, z, atol=1e-8)
 
 
+def _pwl_pieces(law):
+    """Affine pieces ``(z_lo, z_hi, slope, offset)`` of a PiecewiseLinearFunction:
+    ``f(z) = offset + slope z`` on ``[z_lo, z_hi]``."""
+    b, v = law.breakpoints, law.values
+    pieces = [(-np.inf, b[0], law.slope_left, v[0] - law.slope_left * b[0])]
+    for j in range(b.size - 1):
+        s = (v[j + 1] - v[j]) / (b[j + 1] - b[j])
+        pieces.append((b[j], b[j + 1], s, v[j] - s * b[j]))
+    pieces.append((b[-1], np.inf, law.slope_right, v[-1] - law.slope_right * b[-1]))
+    return pieces
+
+
+@SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(1, 3))
+def test_piecewise_linear_function_lcp_form_is_exact(seed, m):
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, 5))
+    law = PiecewiseLinearFunction(np.cumsum(rng.uniform(0.2, 2.0, k)) - 2.0,
+                                  np.cumsum(np.where(rng.random(k) < 0.3, 0.0,
+                                                     rng.uniform(0.0, 2.0, k))),
+                                  slope_left=rng.choice([0.0, 1.5]),
+                                  slope_right=rng.choice([0.0, 0.7]), dim=m)
+    A = rng.normal(size=(m, m))
+    M = A @ A.T + 0.2 * np.eye(m) + (A - A.T)      # positive definite, not symmetric
+    q = rng.uniform(-6.0, 6.0, m)
+    sol = solve_inclusion(law, M, q, method="lcp")
+    np.testing.assert_allclose(sol.z, M @ sol.w + q, atol=1e-12)
+    assert law.graph_residual(sol.z, -sol.w) <= 1e-12
+    np.testing.assert_allclose(sol.w, -law.select(sol.z), atol=1e-12)
+    # unique solution: enumerate the affine pieces (w = -(offset + slope z) on each)
+    found = []
+    for choice in itertools.product(_pwl_pieces(law), repeat=m):
+        S = np.diag([c[2] for c in choice])
+        off = np.array([c[3] for c in choice])
+        z = np.linalg.solve(np.eye(m) + M @ S, q - M @ off)   # z = M(-(off + S z)) + q
+        if all(lo - 1e-9 <= zi <= hi + 1e-9 for zi, (lo, hi, _, _) in zip(z, choice,
+                                                                           strict=True)):
+            found.append(z)
+    assert found
+    for z in found:
+        np.testing.assert_allclose(sol.z, z, atol=1e-8)
+    # diagonal step: the closed-form resolvent and the LCP path agree
+    Md = np.diag(rng.uniform(0.1, 5.0, m))
+    closed, via_lcp = solve_inclusion(law, Md, q), solve_inclusion(law, Md, q, method="lcp")
+    assert closed.method == "closed_form"
+    np.testing.assert_allclose(via_lcp.z, closed.z, atol=1e-10)
+
+
+def test_saturation_closed_forms():
+    sat = PiecewiseLinearFunction.saturation(level=2.0, slope=4.0, dim=3)
+    np.testing.assert_array_equal(sat.select([-1.0, 0.25, 7.0]), [-2.0, 1.0, 2.0])
+    # z + 0.5 sat(z) = x: on the linear part z (1 + 2) = x, beyond it z = x - 1
+    np.testing.assert_allclose(sat.resolvent([0.6, 5.0, -5.0], 0.5), [0.2, 4.0, -4.0])
+    # (0, 3) is nearest to the corner (0.5, 2) of the polyline; (1, 0) to the segment v = 4 z
+    assert sat.graph_residual([0.0, 0.0, 0.0], [0.0, 3.0, 0.0]) == pytest.approx(np.sqrt(1.25))
+    assert sat.graph_residual([0.0, 0.2, 0.0], [0.0, 0.0, 0.0]) == pytest.approx(
+        0.8 / np.hypot(1.0, 4.0))
+    form = sat.complementarity_form()
+    assert form.n_complementarity == 6          # one rising segment per component: 2 each
+
+
 def test_stribeck_slope_constants_match_the_closed_forms_of_ch07():
     law = Stribeck(0.3, 0.1, 1.0, delta=2.0, viscous=0.01)
     assert law.sigma_tan[0] == pytest.approx(0.857764 * 0.2 - 0.01, rel=1e-6)
@@ -308,61 +375,94 @@ def test_chain_impact_satisfies_newton_complementarity(seed, n, e):
     assert ke(res.v_plus) <= ke(v_minus) + tol * masses.sum()
 
 
-def test_bad_input_raises_specific_errors():
-    with pytest.raises(ModelError, match="bound"):
-        Relay(-1.0)
-    with pytest.raises(ModelError, match="bound"):
-        Relay([1.0, np.nan])
-    with pytest.raises(DimensionError, match="bound"):
-        Relay([1.0, 2.0], dim=3)
-    with pytest.raises(ModelError, match="lower"):
-        NormalConeBox([0.0, 2.0], [1.0, 1.0])
-    with pytest.raises(ModelError, match="scalar"):
-        NormalConeInterval([0.0, 1.0], 2.0)
-    with pytest.raises(ModelError, match="mu"):
-        Coulomb(-0.1, 1.0)
-    with pytest.raises(ModelError, match="normal_force"):
-        Coulomb(0.3, -2.0)
-    with pytest.raises(ModelError, match="static"):
-        Stribeck(static=0.1, coulomb=0.3, stribeck_velocity=1.0)
-    with pytest.raises(ModelError, match="stribeck_velocity"):
-        Stribeck(0.3, 0.1, 0.0)
-    with pytest.raises(ModelError, match="nondecreasing"):
-        MonotoneFunction(lambda z: -z)
-    with pytest.raises(ModelError, match="laws"):
-        Product()
-    relay = Relay([1.0, 1.0])
-    with pytest.raises(DimensionError, match="x"):
-        relay.resolvent([1.0, 2.0, 3.0])
-    with pytest.raises(ModelError, match="gamma"):
-        relay.resolvent([1.0, 2.0], gamma=0.0)
-    with pytest.raises(DimensionError, match="v"):
-        relay.graph_residual([0.0, 0.0], [1.0])
-    with pytest.raises(InadmissibleStateError, match="z"):
-        NormalConeBox(0.0, 1.0).select([2.0])
-    with pytest.raises(ModelError, match="complementarity"):
-        solve_inclusion(MonotoneFunction(np.tanh, dim=2), [[2.0, 1.0], [0.0, 2.0]], [1.0, 1.0])
-    with pytest.raises(DimensionError, match="M"):
-        solve_inclusion(relay, np.eye(3), [1.0, 1.0])
-    for e in (1.2, -0.1, np.nan):
-        with pytest.raises(ModelError, match="e"):
-            NewtonImpactLaw(e)
-    with pytest.raises(ModelError, match="e"):
-        restitution_matrix(1.0, 1.0, 1.5)
-    with pytest.raises(ModelError, match="m1"):
-        restitution_matrix(0.0, 1.0, 0.5)
-    law = NewtonImpactLaw([0.5, 0.9])
-    W = np.array([[-1.0, 0.0], [1.0, -1.0], [0.0, 1.0]])
-    with pytest.raises(ModelError, match="symmetric"):
-        law.apply([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], W, [1.0, 0.0, 0.0])
-    with pytest.raises(ModelError, match="positive definite"):
-        law.apply(np.diag([1.0, -1.0, 1.0]), W, [1.0, 0.0, 0.0])
-    with pytest.raises(DimensionError, match="W"):
-        law.apply(np.eye(3), W[:2], [1.0, 0.0, 0.0])
-    with pytest.raises(DimensionError, match="e"):
-        NewtonImpactLaw([0.5, 0.5, 0.5]).apply(np.eye(3), W, [1.0, 0.0, 0.0])
-    with pytest.raises(DimensionError, match="active"):
-        law.apply(np.eye(3), W, [1.0, 0.0, 0.0], active=[0, 5])
+_W3 = np.array([[-1.0, 0.0], [1.0, -1.0], [0.0, 1.0]])
+_RELAY2 = Relay([1.0, 1.0])
+_LAW2 = NewtonImpactLaw([0.5, 0.9])
+
+BAD_INPUT = [
+    (lambda: Relay(-1.0), ModelError, r"^bound: expected relay bounds c >= 0"),
+    (lambda: Relay([1.0, np.nan]), ModelError, r"^bound: expected real entries, got NaN"),
+    (lambda: Relay([1.0, 2.0], dim=3), DimensionError,
+     r"^bound: expected a scalar or a vector of length dim=3, got length 2"),
+    (lambda: Relay(1.0, dim=0), DimensionError, r"^dim: expected an integer >= 1, got 0"),
+    (lambda: Relay(1.0, dim=2.5), DimensionError, r"^dim: expected an integer >= 1, got 2.5"),
+    (lambda: Relay(1.0j), ModelError, r"^bound: expected real entries, got a complex array"),
+    (lambda: Coulomb(0.3, 1.0, dim=0), DimensionError, r"^dim: expected an integer >= 1"),
+    (lambda: Stribeck(0.3, 0.1, 1.0, dim=1.5), DimensionError, r"^dim: expected an integer"),
+    (lambda: NormalConeBox([0.0, 2.0], [1.0, 1.0]), ModelError,
+     r"^lower, upper: expected lower <= upper componentwise, got lower\[1\] = 2.0"),
+    (lambda: NormalConeInterval([0.0, 1.0], 2.0), ModelError,
+     r"^lower, upper: NormalConeInterval takes scalar bounds"),
+    (lambda: Complementarity(0), DimensionError, r"^dim: expected an integer >= 1, got 0"),
+    (lambda: Coulomb(-0.1, 1.0), ModelError, r"^mu: expected finite friction coefficients >= 0"),
+    (lambda: Coulomb(0.3, -2.0), ModelError, r"^normal_force: expected finite normal forces"),
+    (lambda: Stribeck(static=0.1, coulomb=0.3, stribeck_velocity=1.0), ModelError,
+     r"^static: expected static levels T_s >= coulomb T_c"),
+    (lambda: Stribeck(0.3, 0.1, 0.0), ModelError,
+     r"^stribeck_velocity, delta: expected positive values"),
+    (lambda: MonotoneFunction(lambda z: -z), ModelError,
+     r"^f: expected a nondecreasing function, but it decreases near"),
+    (lambda: MonotoneFunction(lambda z: z + 1j).resolvent([1.0]), ModelError,
+     r"^f: expected real entries, got a complex array"),
+    (lambda: PiecewiseLinearFunction([0.0, 0.0], [0.0, 1.0]), ModelError,
+     r"^breakpoints: expected strictly increasing values"),
+    (lambda: PiecewiseLinearFunction([0.0, 1.0], [1.0, 0.0]), ModelError,
+     r"^values: expected nondecreasing values"),
+    (lambda: PiecewiseLinearFunction([0.0, 1.0], [0.0]), DimensionError,
+     r"^values: expected a vector of length 2, got length 1"),
+    (lambda: PiecewiseLinearFunction([0.0], [0.0], slope_left=-1.0), ModelError,
+     r"^slope_left: expected a finite slope >= 0"),
+    (lambda: PiecewiseLinearFunction.saturation(level=0.0), ModelError,
+     r"^level: expected a finite saturation level > 0"),
+    (lambda: Product(), ModelError, r"^laws: Product needs at least one law, got none"),
+    (lambda: Product(Relay(1.0), "relay"), ModelError, r"^laws\[1\]: expected a SetValuedLaw"),
+    (lambda: _RELAY2.resolvent([1.0, 2.0, 3.0]), DimensionError,
+     r"^x: expected a vector of length 2, got length 3"),
+    (lambda: _RELAY2.resolvent([1.0, 2.0], gamma=0.0), ModelError,
+     r"^gamma: expected positive weights"),
+    (lambda: _RELAY2.graph_residual([0.0, 0.0], [1.0]), DimensionError,
+     r"^v: expected a vector of length 2, got length 1"),
+    (lambda: NormalConeBox(0.0, 1.0).select([2.0]), InadmissibleStateError,
+     r"^z: the normal cone is empty outside the box"),
+    (lambda: solve_inclusion(MonotoneFunction(np.tanh, dim=2), [[2.0, 1.0], [0.0, 2.0]],
+                             [1.0, 1.0]), ModelError,
+     r"^MonotoneFunction\(f='tanh', dim=2\) has no complementarity \(LCP\) form: an LCP "
+     r"encodes only graphs made of finitely many straight pieces"),
+    (lambda: solve_inclusion(_RELAY2, np.eye(3), [1.0, 1.0]), DimensionError,
+     r"^M: expected shape \(2, 2\), got \(3, 3\)"),
+    (lambda: NewtonImpactLaw(1.2), ModelError, r"^e: expected restitution coefficients in "
+                                               r"\[0, 1\], got \[1.2\]"),
+    (lambda: NewtonImpactLaw(-0.1), ModelError, r"^e: expected restitution coefficients"),
+    (lambda: NewtonImpactLaw(np.nan), ModelError, r"^e: expected restitution coefficients"),
+    (lambda: NewtonImpactLaw("a"), ModelError, r"^e: expected a real numeric array, got "
+                                               r"strings"),
+    (lambda: NewtonImpactLaw([[0.5]]), DimensionError, r"^e: expected a scalar or a vector"),
+    (lambda: restitution_matrix(1.0, 1.0, 1.5), ModelError,
+     r"^e: expected a value in \[0.0, 1.0\], got 1.5"),
+    (lambda: restitution_matrix(0.0, 1.0, 0.5), ModelError,
+     r"^m1: expected a finite number > 0, got 0.0"),
+    (lambda: _LAW2.apply([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], _W3,
+                         [1.0, 0.0, 0.0]), ModelError, r"^M: expected a symmetric matrix"),
+    (lambda: _LAW2.apply(np.diag([1.0, -1.0, 1.0]), _W3, [1.0, 0.0, 0.0]), ModelError,
+     r"^M: expected a symmetric positive definite mass matrix"),
+    (lambda: _LAW2.apply(np.eye(3), _W3[:2], [1.0, 0.0, 0.0]), DimensionError,
+     r"^W: expected 3 rows, got shape \(2, 2\)"),
+    (lambda: NewtonImpactLaw(0.5).apply(np.eye(3), [1.0, -1.0], [1.0, 0.0, 0.0]),
+     DimensionError, r"^W: expected a vector of length 3, got length 2"),
+    (lambda: NewtonImpactLaw([0.5, 0.5, 0.5]).apply(np.eye(3), _W3, [1.0, 0.0, 0.0]),
+     DimensionError, r"^e: expected one coefficient or 2 \(one per contact"),
+    (lambda: _LAW2.apply(np.eye(3), _W3, [1.0, 0.0, 0.0], active=[0, 5]), DimensionError,
+     r"^active: expected distinct indices in \[0, 2\), got \[0, 5\]"),
+    (lambda: _LAW2.apply(np.eye(3), _W3, [1.0, 0.0j, 0.0]), ModelError,
+     r"^v_minus: expected real entries, got a complex array"),
+]
+
+
+@pytest.mark.parametrize(("make", "error", "pattern"), BAD_INPUT,
+                         ids=[f"case{i}" for i in range(len(BAD_INPUT))])
+def test_bad_input_raises_specific_errors(make, error, pattern):
+    with pytest.raises(error, match=pattern):
+        make()
 
 
 def test_domains_and_product_blocks():

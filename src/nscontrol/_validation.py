@@ -17,24 +17,68 @@ from .errors import DimensionError, ModelError
 FloatArray = NDArray[np.float64]
 
 
-def as_float_array(name: str, value: Any, *, ndim: int | None = None,
-                   shape: Sequence[int | None] | None = None) -> FloatArray:
-    """Convert ``value`` to a finite float64 array, checking its rank and shape.
+def _to_float64(name: str, value: Any) -> FloatArray:
+    """``value`` as a float64 array; complex, string and non-numeric input is refused.
 
-    ``shape`` may contain ``None`` for a free dimension.
+    numpy would silently drop the imaginary part of a complex array (with only a
+    ``ComplexWarning``) and parse strings such as ``"1.5"``; both are bad input here.
+    """
+    if isinstance(value, np.ndarray | np.generic):
+        kind = value.dtype.kind
+        if kind in "fiub":
+            return np.array(value, dtype=np.float64)
+    else:
+        try:
+            value = np.asarray(value)
+        except (TypeError, ValueError) as exc:
+            raise ModelError(f"{name}: expected a real numeric array, got "
+                             f"{type(value).__name__} ({exc})") from None
+        kind = value.dtype.kind
+    if kind == "c":
+        raise ModelError(f"{name}: expected real entries, got a complex array (dtype "
+                         f"{value.dtype}); pass its .real or .imag explicitly if that is meant")
+    if kind in "USV":
+        raise ModelError(f"{name}: expected a real numeric array, got strings or bytes (dtype "
+                         f"{value.dtype}): {_short(value)}")
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{name}: expected a real numeric array, got {_short(value)} "
+                         f"({exc})") from None
+    return arr
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value.tolist() if isinstance(value, np.ndarray) else value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def as_float_array(name: str, value: Any, *, ndim: int | None = None,
+                   shape: Sequence[int | None] | None = None,
+                   finite: bool = True) -> FloatArray:
+    """Convert ``value`` to a float64 array, checking its rank and shape.
+
+    ``shape`` may contain ``None`` for a free dimension. With ``finite=False`` infinite and
+    NaN entries pass (the caller checks them itself, e.g. half-line bounds).
 
     Raises
     ------
     DimensionError
         Wrong rank or shape.
     ModelError
-        NaN or infinite entries, or a value that is not numeric.
+        NaN or infinite entries (unless ``finite=False``), or a value that is not real and
+        numeric (complex, strings, objects that do not convert to float).
+
+    Examples
+    --------
+    >>> as_float_array("x", [1, 2]).tolist()
+    [1.0, 2.0]
+    >>> as_float_array("x", [1j])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: x: expected real entries, got a complex array ...
     """
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{name}: expected a real numeric array, got {type(value).__name__} "
-                         f"({exc})") from None
+    arr = _to_float64(name, value)
     if ndim is not None and arr.ndim != ndim:
         raise DimensionError(f"{name}: expected a {ndim}-d array, got shape {arr.shape}")
     if shape is not None:
@@ -42,7 +86,8 @@ def as_float_array(name: str, value: Any, *, ndim: int | None = None,
                                          for s, a in zip(shape, arr.shape, strict=True)):
             want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
             raise DimensionError(f"{name}: expected shape {want}, got {arr.shape}")
-    check_finite(name, arr)
+    if finite:
+        check_finite(name, arr)
     return arr
 
 
@@ -110,26 +155,79 @@ def check_positive_definite(name: str, M: FloatArray) -> None:
                          f"eigenvalue {lam_min:.3g}")
 
 
-def check_positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
-    """A finite scalar that is > 0 (or >= 0 with ``allow_zero``)."""
+def as_real_scalar(name: str, value: Any) -> float:
+    """A real scalar (Python or numpy number, or a one-element array; not bool, complex or a
+    string) as a float.
+
+    Not checked for finiteness; :func:`check_positive` and :func:`check_in_interval` do that.
+    """
+    if isinstance(value, bool | np.bool_) or isinstance(value, str | bytes):
+        raise ModelError(f"{name}: expected a real number, got {value!r}")
+    if isinstance(value, complex | np.complexfloating):
+        raise ModelError(f"{name}: expected a real number, got the complex {value!r}")
+    if isinstance(value, np.ndarray):
+        if value.size != 1:        # a one-element array is accepted as its element
+            raise ModelError(f"{name}: expected a real number, got an array of shape "
+                             f"{value.shape}")
+        value = value.reshape(()).item() if value.dtype.kind != "O" else value.flat[0]
+        if isinstance(value, complex | str | bytes | bool):
+            raise ModelError(f"{name}: expected a real number, got {value!r}")
+    elif np.ndim(value) != 0:
+        raise ModelError(f"{name}: expected a real number, got a sequence of shape "
+                         f"{np.shape(value)}")
     try:
-        v = float(value)
+        return float(value)
     except (TypeError, ValueError):
         raise ModelError(f"{name}: expected a real number, got {value!r}") from None
+
+
+def check_positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
+    """A finite scalar that is > 0 (or >= 0 with ``allow_zero``)."""
+    v = as_real_scalar(name, value)
     if not np.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
         raise ModelError(f"{name}: expected a finite number {bound}, got {value!r}")
     return v
 
 
-def check_in_interval(name: str, value: Any, lo: float, hi: float) -> float:
-    """A finite scalar in the closed interval ``[lo, hi]``."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ModelError(f"{name}: expected a real number, got {value!r}") from None
-    if not (np.isfinite(v) and lo <= v <= hi):
-        raise ModelError(f"{name}: expected a value in [{lo}, {hi}], got {value!r}")
+def check_in_interval(name: str, value: Any, lo: float, hi: float, *,
+                      open_interval: bool = False) -> float:
+    """A finite scalar in the closed interval ``[lo, hi]`` (the open one with
+    ``open_interval=True``)."""
+    v = as_real_scalar(name, value)
+    inside = lo < v < hi if open_interval else lo <= v <= hi
+    if not (np.isfinite(v) and inside):
+        span = f"({lo}, {hi})" if open_interval else f"[{lo}, {hi}]"
+        raise ModelError(f"{name}: expected a value in {span}, got {value!r}")
+    return v
+
+
+def check_integer(name: str, value: Any, *, minimum: int | None = None,
+                  error: type[Exception] = ModelError) -> int:
+    """An integer (``int``, numpy integer, or a float with an integral value such as ``1e4``)
+    that is ``>= minimum``; ``2.7``, ``True``, strings and NaN are refused with ``error``.
+
+    Examples
+    --------
+    >>> check_integer("max_iter", 1e4, minimum=1)
+    10000
+    >>> check_integer("max_iter", 2.7, minimum=1)
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: max_iter: expected an integer >= 1, got 2.7
+    """
+    want = "an integer" if minimum is None else f"an integer >= {minimum}"
+    if isinstance(value, bool | np.bool_):
+        raise error(f"{name}: expected {want}, got {value!r}")
+    if isinstance(value, int | np.integer):
+        v = int(value)
+    elif isinstance(value, float | np.floating) and np.isfinite(value) \
+            and float(value).is_integer():
+        v = int(value)
+    else:
+        raise error(f"{name}: expected {want}, got {value!r}")
+    if minimum is not None and v < minimum:
+        raise error(f"{name}: expected {want}, got {value!r}")
     return v
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, as_matrix, as_vector
+from .._validation import FloatArray, as_float_array, as_matrix, as_vector, check_integer
 from ..errors import DimensionError, ModelError
 
 __all__ = [
@@ -46,10 +46,7 @@ def broadcast_parameter(name: str, value: Any, dim: int | None) -> FloatArray:
 
     Infinite entries are allowed (half-line bounds); NaN is not.
     """
-    try:
-        arr = np.atleast_1d(np.array(value, dtype=np.float64))
-    except (TypeError, ValueError):
-        raise ModelError(f"{name}: expected a real scalar or vector, got {value!r}") from None
+    arr = np.atleast_1d(as_float_array(name, value, finite=False))
     if arr.ndim != 1:
         raise DimensionError(f"{name}: expected a scalar or a vector, got shape {arr.shape}")
     if np.any(np.isnan(arr)):
@@ -66,10 +63,8 @@ def broadcast_parameter(name: str, value: Any, dim: int | None) -> FloatArray:
 
 
 def check_dim(dim: Any) -> int:
-    """A positive integer dimension."""
-    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
-        raise DimensionError(f"dim: expected a positive integer, got {dim!r}")
-    return int(dim)
+    """A positive integer dimension (``DimensionError`` naming ``dim`` otherwise)."""
+    return check_integer("dim", dim, minimum=1, error=DimensionError)
 
 
 @dataclass(frozen=True, eq=False)

@@ -11,7 +11,7 @@ import numpy as np
 from .._validation import FloatArray
 from ..errors import ModelError
 from ._roots import solve_increasing
-from .base import LoopTransformation, SetValuedLaw, broadcast_parameter
+from .base import LoopTransformation, SetValuedLaw, broadcast_parameter, check_dim
 from .relay import Relay
 
 __all__ = ["Coulomb", "Stribeck", "AsymmetricStribeck"]
@@ -39,7 +39,9 @@ class Coulomb(Relay):
     normal_force: FloatArray = field(default=None)  # type: ignore[assignment]
 
     def __init__(self, mu: Any, normal_force: Any = 1.0, dim: int | None = None) -> None:
-        if dim is None:
+        if dim is not None:
+            dim = check_dim(dim)
+        else:
             sizes = {np.size(mu), np.size(normal_force)} - {1}
             dim = sizes.pop() if len(sizes) == 1 else (1 if not sizes else None)
             if dim is None:
@@ -156,7 +158,7 @@ class Stribeck(SetValuedLaw):
 
     def __post_init__(self) -> None:
         names = ("static", "coulomb", "stribeck_velocity", "delta", "viscous")
-        dim = self.dim
+        dim = None if self.dim is None else check_dim(self.dim)
         if dim is None:
             sizes = {int(np.size(getattr(self, n))) for n in names} - {1}
             if len(sizes) > 1:

@@ -15,6 +15,7 @@ import numpy as np
 
 from .._validation import (
     FloatArray,
+    as_float_array,
     as_matrix,
     as_square,
     as_vector,
@@ -113,7 +114,7 @@ class NewtonImpactLaw:
     e: Any = 1.0
 
     def __post_init__(self) -> None:
-        e = np.atleast_1d(np.array(self.e, dtype=np.float64))
+        e = np.atleast_1d(as_float_array("e", self.e, finite=False))
         if e.ndim != 1 or e.size == 0:
             raise DimensionError(f"e: expected a scalar or a vector, got shape {e.shape}")
         if not np.all(np.isfinite(e)) or np.any((e < 0.0) | (e > 1.0)):
@@ -125,8 +126,8 @@ class NewtonImpactLaw:
         if self.e.size == 1:
             return np.full(n_contacts, self.e[0])
         if self.e.size != n_contacts:
-            raise DimensionError(f"e: the law has {self.e.size} coefficients but W has "
-                                 f"{n_contacts} contacts (columns)")
+            raise DimensionError(f"e: expected one coefficient or {n_contacts} (one per "
+                                 f"contact: the columns of W), got {self.e.size}")
         return self.e
 
     def apply(self, M: Any, W: Any, v_minus: Any, active: Any = None) -> ImpactResult:
@@ -160,7 +161,9 @@ class NewtonImpactLaw:
         M = as_square("M", M)
         inverse_times = _mass_inverse(M)
         n = M.shape[0]
-        W = as_matrix("W", np.reshape(W, (n, -1)) if np.ndim(W) == 1 else W, n)
+        if np.ndim(W) == 1:                          # one contact: a gradient vector
+            W = as_vector("W", W, n).reshape(n, 1)
+        W = as_matrix("W", W, n)
         v_minus = as_vector("v_minus", v_minus, n)
         k = W.shape[1]
         e = self.coefficients(k)

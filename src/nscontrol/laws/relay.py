@@ -9,7 +9,7 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..errors import ModelError
-from .base import ComplementarityForm, SetValuedLaw, broadcast_parameter
+from .base import ComplementarityForm, SetValuedLaw, broadcast_parameter, check_dim
 
 __all__ = ["Relay"]
 
@@ -64,7 +64,8 @@ class Relay(SetValuedLaw):
     componentwise: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        c = broadcast_parameter("bound", self.bound, self.dim)
+        dim = None if self.dim is None else check_dim(self.dim)
+        c = broadcast_parameter("bound", self.bound, dim)
         if np.any(~np.isfinite(c)):
             raise ModelError(f"bound: expected finite relay bounds, got {c}")
         if np.any(c < 0.0):

@@ -7,7 +7,7 @@ Each concept lives in its own module (``base``, ``relay``, ``normal_cone``, ``fr
 from .base import ComplementarityForm, LoopTransformation, SetValuedLaw, require_monotone
 from .friction import AsymmetricStribeck, Coulomb, Stribeck
 from .inclusion import InclusionSolution, solve_inclusion
-from .monotone_function import MonotoneFunction
+from .monotone_function import MonotoneFunction, PiecewiseLinearFunction
 from .normal_cone import Complementarity, NormalConeBox, NormalConeInterval
 from .product import Product
 from .relay import Relay
@@ -25,6 +25,7 @@ __all__ = [
     "Stribeck",
     "AsymmetricStribeck",
     "MonotoneFunction",
+    "PiecewiseLinearFunction",
     "Product",
     "solve_inclusion",
     "InclusionSolution",

@@ -26,7 +26,15 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_float_array, as_square, as_vector, check_finite
+from .._validation import (
+    as_float_array,
+    as_square,
+    as_vector,
+    check_finite,
+    check_in_interval,
+    check_integer,
+    check_positive,
+)
 from ..errors import DimensionError, ModelError, SolverError
 from . import _lcp_kernels as kernels
 
@@ -128,7 +136,9 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     DimensionError
         ``M`` not square, or ``q`` / ``z0`` of the wrong length.
     ModelError
-        NaN or infinite entries, unknown ``method``, ``tol <= 0`` or ``omega`` outside (0, 2).
+        NaN, infinite or complex entries, unknown ``method``, ``tol`` not a finite number
+        ``> 0``, ``omega`` outside (0, 2), ``max_iter`` not an integer ``>= 1`` (``2.7`` is
+        refused, not truncated).
     SolverError
         With ``strict=True``, when no method reached a verified solution (``err.status``).
 
@@ -158,14 +168,12 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ModelError(f"method: expected one of {list(METHODS)}, got {method!r}")
-    if not (np.isfinite(tol) and tol > 0):
-        raise ModelError(f"tol: expected a finite number > 0, got {tol!r}")
-    if not (0.0 < omega < 2.0):
-        raise ModelError(f"omega: expected a relaxation factor in (0, 2), got {omega!r}")
-    if max_iter is not None and int(max_iter) < 1:
-        raise ModelError(f"max_iter: expected a positive integer or None, got {max_iter!r}")
+    tol = check_positive("tol", tol)
+    omega = check_in_interval("omega", omega, 0.0, 2.0, open_interval=True)
+    if max_iter is not None:
+        max_iter = check_integer("max_iter", max_iter, minimum=1)
     problem = _Problem.build(M, q, z0)
     chain = _method_chain(problem, method)
     tried: list[str] = []
@@ -225,6 +233,8 @@ def _as_lcp_matrix(M: Any) -> Any:
     if hasattr(M, "tocsr") and not isinstance(M, np.ndarray):
         csr = M.tocsr()
         if csr.dtype != np.float64:
+            if csr.dtype.kind not in "fiub":
+                raise ModelError(f"M: expected a real sparse matrix, got dtype {csr.dtype}")
             csr = csr.astype(np.float64)
         if csr.ndim != 2 or csr.shape[0] != csr.shape[1]:
             raise DimensionError(f"M: expected a square matrix, got shape {csr.shape}")
