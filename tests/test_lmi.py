@@ -158,3 +158,48 @@ def test_thin_margin_warns_and_accurate_solution_does_not():
     with pytest.warns(InaccurateCertificateWarning, match="Q >= I"):
         res = prob.solve(minimize=Q[0, 0] + Q[1, 1], warn_fraction=1.5)
     assert res.margins["Q >= I"] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_solver_names_are_checked_before_solving():
+    import cvxpy as cp
+
+    from nscontrol.numerics.lmi import SDP_SOLVERS, solver_order
+
+    assert solver_order(None) == solver_order("auto") == ["CLARABEL", "SCS"]
+    assert solver_order("Scs") == ["SCS"]
+    for bad in ("BOGUS", "", 3, "ECOS"):  # ECOS: installed or not, it has no SDP cone
+        with pytest.raises(ModelError, match="solver: expected one of 'auto', 'CLARABEL'"):
+            solver_order(bad)
+    missing = [n for n in SDP_SOLVERS if n not in cp.installed_solvers()]
+    if missing:
+        with pytest.raises(ModelError, match="not installed"):
+            solver_order(missing[0])
+    # LMIProblem and the helpers built on it use the same check (no InfeasibleDesignError)
+    with pytest.raises(ModelError, match="got 'BOGUS'"):
+        lyapunov_certificate(HURWITZ, solver="BOGUS")
+    with pytest.raises(ModelError, match="got 'BOGUS'"):
+        max_decay_rate(HURWITZ, solver="BOGUS")
+
+
+def test_clarabel_failure_falls_back_to_scs(monkeypatch):
+    import cvxpy as cp
+
+    original = cp.Problem.solve
+    attempts = []
+
+    def clarabel_breaks(self, *args, **kwargs):
+        attempts.append(kwargs.get("solver"))
+        if kwargs.get("solver") == "CLARABEL":
+            raise cp.error.SolverError("Clarabel made to fail by the test")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cp.Problem, "solve", clarabel_breaks)
+    res = lyapunov_certificate(HURWITZ)
+    assert attempts == ["CLARABEL", "SCS"] and res.solver == "SCS"
+    P = res["P"]
+    assert np.linalg.eigvalsh(P)[0] > 0.0
+    assert np.linalg.eigvalsh(HURWITZ.T @ P + P @ HURWITZ)[-1] < 0.0
+    # Clarabel alone has no fallback: the failure is reported, naming the solver
+    with pytest.raises(InfeasibleDesignError, match="CLARABEL") as err:
+        lyapunov_certificate(HURWITZ, solver="CLARABEL")
+    assert err.value.status == "solver_error"

@@ -45,11 +45,74 @@ from .._validation import FloatArray, as_square, check_positive
 from ..errors import InaccurateCertificateWarning, InfeasibleDesignError, ModelError
 
 __all__ = ["LMIProblem", "LMIResult", "Scaling", "BisectionResult", "bisect_max",
-           "lyapunov_certificate", "max_decay_rate", "sym"]
+           "lyapunov_certificate", "max_decay_rate", "sym", "SDP_SOLVERS", "solver_order",
+           "solver_options"]
 
-SolverName = Literal["auto", "CLARABEL", "SCS"]
+SolverName = Literal["auto", "CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT"]
 _ACCEPTED = ("optimal", "optimal_inaccurate")
 _SCS_OPTIONS = {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 20_000}
+
+#: CVXPY solvers that handle the semidefinite cones of an LMI problem (CVXPY's spelling).
+SDP_SOLVERS = ("CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT")
+#: ``solver="auto"``: Clarabel, then SCS (tight tolerances) as the fallback.
+_AUTO_ORDER = ("CLARABEL", "SCS")
+
+
+def solver_order(solver: str | None) -> list[str]:
+    """The SDP solvers to try, in order, for a ``solver=`` argument (checked once, up front).
+
+    Parameters
+    ----------
+    solver : str or None
+        ``None`` or ``"auto"``: Clarabel, then SCS (those of the two that are installed);
+        otherwise one name of :data:`SDP_SOLVERS` (any case), which must be installed.
+
+    Returns
+    -------
+    list of str
+        CVXPY solver names.
+
+    Raises
+    ------
+    ModelError
+        An unknown name (a misspelling is bad input, not an infeasible design), a solver that
+        is not installed, or no default solver installed.
+
+    Examples
+    --------
+    >>> solver_order("auto")
+    ['CLARABEL', 'SCS']
+    >>> solver_order("scs")
+    ['SCS']
+    >>> solver_order("BOGUS")
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: solver: expected one of 'auto', 'CLARABEL', 'SCS', 'MOSEK', \
+'CVXOPT', 'SDPA', 'COPT', got 'BOGUS'
+    """
+    import cvxpy as cp
+
+    installed = set(cp.installed_solvers())
+    if solver is None or (isinstance(solver, str) and solver.lower() == "auto"):
+        order = [name for name in _AUTO_ORDER if name in installed]
+        if not order:
+            raise ModelError(f"solver: 'auto' needs CLARABEL or SCS, and neither is installed "
+                             f"(installed: {sorted(installed)}); install clarabel or pass an "
+                             f"installed SDP solver")
+        return order
+    name = solver.upper() if isinstance(solver, str) else None
+    if name not in SDP_SOLVERS:
+        names = ", ".join(repr(s) for s in ("auto", *SDP_SOLVERS))
+        raise ModelError(f"solver: expected one of {names}, got {solver!r}")
+    if name not in installed:
+        raise ModelError(f"solver: {name!r} is an SDP solver but it is not installed "
+                         f"(installed: {sorted(installed)})")
+    return [name]
+
+
+def solver_options(name: str) -> dict[str, Any]:
+    """Keyword options passed to CVXPY for solver ``name`` (tight tolerances for SCS)."""
+    return dict(_SCS_OPTIONS) if name == "SCS" else {}
 
 
 def sym(expr: Any) -> Any:
@@ -197,8 +260,9 @@ class LMIProblem:
         ----------
         minimize, maximize : CVXPY scalar expression, optional
             Objective (at most one); feasibility problem when both are None.
-        solver : {"auto", "CLARABEL", "SCS"}
-            ``"auto"``: Clarabel, then SCS when Clarabel fails or is inaccurate.
+        solver : str
+            ``"auto"``: Clarabel, then SCS when Clarabel fails or is inaccurate; or one name
+            of :data:`SDP_SOLVERS` (checked by :func:`solver_order`).
         recheck_fraction : float
             A block passes the re-check when its smallest eigenvalue is at least this
             fraction of its requested margin.
@@ -217,15 +281,18 @@ class LMIProblem:
         InfeasibleDesignError
             The solver reports infeasibility (``status`` holds its status), no solver
             succeeded, or the re-check failed (``status="recheck_failed"``).
+        ModelError
+            Unknown or uninstalled ``solver``; both objectives given.
         """
         import cvxpy as cp
 
+        order = solver_order(solver)
         if minimize is not None and maximize is not None:
             raise ModelError("minimize, maximize: expected at most one objective, got both")
         objective = (cp.Minimize(minimize) if minimize is not None
                      else cp.Maximize(maximize) if maximize is not None else cp.Minimize(0))
         problem = cp.Problem(objective, self._constraints())
-        status, used = self._run(problem, solver)
+        status, used = self._run(problem, order)
         if status not in _ACCEPTED:
             raise InfeasibleDesignError(
                 f"{self.name}: no certificate — solver {used} returned status {status!r} for "
@@ -251,14 +318,13 @@ class LMIProblem:
         out.extend(e.lhs == e.rhs for e in self._equalities)
         return out
 
-    def _run(self, problem: Any, solver: SolverName) -> tuple[str, str]:
-        """Solve with the requested solver(s); return (status, solver used)."""
+    def _run(self, problem: Any, order: list[str]) -> tuple[str, str]:
+        """Solve with the solvers of ``order`` in turn; return (status, solver used)."""
         import cvxpy as cp
 
-        order = ["CLARABEL", "SCS"] if solver == "auto" else [solver]
         status, used = "solver_error", order[0]
         for name in order:
-            options = _SCS_OPTIONS if name == "SCS" else {}
+            options = solver_options(name)
             try:
                 with warnings.catch_warnings():  # we judge accuracy ourselves (re-check)
                     warnings.filterwarnings("ignore", "Solution may be inaccurate")
@@ -374,7 +440,8 @@ def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
         Strictness margin of the (scaled) LMI.
     scale : bool
         Balance and time-scale ``A`` first (recommended for badly scaled data).
-    solver : {"auto", "CLARABEL", "SCS"}
+    solver : str
+        ``"auto"`` (Clarabel, then SCS) or a name of :data:`SDP_SOLVERS`.
 
     Returns
     -------
