@@ -192,3 +192,78 @@ def test_unbounded_rate_without_kappa_warns_and_names_the_fix():
     with pytest.warns(InaccurateCertificateWarning, match="pass kappa"):
         d = max_decay_rate(**ex.coulomb_oscillator(0.0).matrices, tol=1e-2)
     assert d.alpha_max >= 1e3 and d.certificate.gain_norm > 1e6  # huge gains: why kappa exists
+
+
+# -- solver names and the Clarabel -> SCS fallback -------------------------------------------
+def test_misspelt_solver_is_bad_input_not_an_infeasible_design():
+    from nscontrol.design.lure_observer import design_lure_observer
+
+    s = ex.coulomb_oscillator(0.1)
+    calls = (lambda: lure_observer_lmi(**s.matrices, variant="basic", solver="BOGUS"),
+             lambda: max_decay_rate(**s.matrices, variant="basic", solver="BOGUS"),
+             lambda: design_lure_observer(s.plant(), variant="basic", solver="BOGUS"),
+             # found before the structural pre-check would report infeasibility
+             lambda: lure_observer_lmi(**ex.not_passifiable().matrices, solver="BOGUS"))
+    for call in calls:
+        with pytest.raises(ModelError, match="solver: expected one of 'auto', 'CLARABEL', "
+                                             "'SCS'.*got 'BOGUS'"):
+            call()
+    # a known SDP solver that is not installed is named as such
+    import cvxpy as cp
+
+    missing = [n for n in ("MOSEK", "COPT", "SDPA", "CVXOPT") if n not in cp.installed_solvers()]
+    if missing:
+        with pytest.raises(ModelError, match=f"solver: '{missing[0]}' .*not installed"):
+            lure_observer_lmi(**s.matrices, variant="basic", solver=missing[0])
+    # names are case-insensitive, "auto" is the default order
+    d = lure_observer_lmi(**s.matrices, variant="basic", alpha=0.05, solver="scs")
+    assert d.certificate.solver == "SCS"
+    _postconditions(d)
+    assert lure_observer_lmi(**s.matrices, variant="basic", alpha=0.05,
+                             solver="auto").certificate.solver == "CLARABEL"
+
+
+def test_clarabel_failure_falls_back_to_scs(monkeypatch):
+    import cvxpy as cp
+
+    original = cp.Problem.solve
+    attempts = []
+
+    def clarabel_breaks(self, *args, **kwargs):
+        attempts.append(kwargs.get("solver"))
+        if kwargs.get("solver") == "CLARABEL":
+            raise cp.error.SolverError("Clarabel made to fail by the test")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cp.Problem, "solve", clarabel_breaks)
+    s = ex.coulomb_oscillator(0.1)
+    d = lure_observer_lmi(**s.matrices, variant="basic", alpha=0.05)
+    assert attempts == ["CLARABEL", "SCS"]
+    assert d.certificate.solver == "SCS" and d.certificate.solver_status == "optimal"
+    _postconditions(d)
+    # asking for Clarabel alone: no fallback, and the solver error is the reported status
+    with pytest.raises(InfeasibleDesignError, match="solver_error.*Clarabel made to fail"):
+        lure_observer_lmi(**s.matrices, variant="basic", alpha=0.05, solver="CLARABEL")
+
+
+# -- observer_from_gains: only strict certificates ---------------------------------------------
+def test_observer_from_gains_refuses_a_non_converging_observer():
+    # A = 0, L = 0: A - L C = 0 is not Hurwitz; P = I satisfies G^T P = H and the Lyapunov
+    # matrix is 0 <= 0, but with alpha = 0 that only says V does not grow
+    A, G, H, C = np.zeros((2, 2)), [[0.0], [1.0]], [[0.0, 1.0]], np.eye(2)
+    with pytest.raises(InfeasibleDesignError) as err:
+        observer_from_gains(A, G, H, C, L=np.zeros((2, 2)), P=np.eye(2), alpha=0.0)
+    msg = str(err.value)
+    assert err.value.status == "recheck_failed"
+    assert "must be strict" in msg and "not Hurwitz" in msg
+    # with alpha > 0 the same gains break the Lyapunov inequality outright
+    with pytest.raises(InfeasibleDesignError, match="not negative semidefinite"):
+        observer_from_gains(A, G, H, C, L=np.zeros((2, 2)), P=np.eye(2), alpha=0.1)
+    # a strict certificate at alpha = 0 is accepted (Siconos example: A_L'P + PA_L = -2I)
+    s = ex.siconos_observer_lcs()
+    d = observer_from_gains(**s.matrices, L=ex.SICONOS_L, P=np.eye(2), alpha=0.0)
+    assert d.certificate.lmi_max_eig == pytest.approx(-2.0, abs=1e-14)
+    # P not positive definite and a broken equality are both listed
+    with pytest.raises(InfeasibleDesignError) as err:
+        observer_from_gains(**s.matrices, L=ex.SICONOS_L, P=-np.eye(2), alpha=1.0)
+    assert "G^T P = H - K C fails" in str(err.value) and "positive definite" in str(err.value)

@@ -24,34 +24,68 @@ def _stribeck():
                     delta=p["delta"], viscous=p["b"])
 
 
-def _untransformed_rotor():
+def test_a_plant_that_is_not_a_lure_system_is_refused_with_the_way_out():
     s = ex.rotor_standin("alpha")
-    A0 = s.A.copy()
-    A0[2, 2] = 0.0  # the lower disc's own dynamics carry no linear friction term
-    return s, A0
+    raw = SimpleNamespace(A=s.A, G=s.G, H=s.H, C=s.C, D=None, law=_stribeck())
+    with pytest.raises(ModelError, match="plant: expected a .*LureSystem") as err:
+        design_lure_observer(raw)
+    assert "loop_transformed_lure_system" in str(err.value)
+    assert "lure_from_statespace" in str(err.value)
+    d = design_lure_observer(s.plant(), kappa=100.0, tol=1e-2)
+    with pytest.raises(ModelError, match="plant"):  # not an AttributeError deep inside
+        d.closed_loop(raw)
+    with pytest.raises(ModelError, match="plant"):
+        d.observer_system(raw, lambda t: np.zeros((np.size(t), 1)))
 
 
-def test_non_monotone_law_without_transformation_is_refused():
-    s, A0 = _untransformed_rotor()
-    plant = SimpleNamespace(A=A0, G=s.G, H=s.H, C=s.C, D=None, law=_stribeck())
+def test_a_lure_system_refuses_the_non_monotone_law_itself():
+    s = ex.rotor_standin("alpha")
+    from nscontrol.systems.lure import LureSystem
+
     with pytest.raises(ModelError, match="loop_transformation"):
-        design_lure_observer(plant)
+        LureSystem(s.A, s.G, s.H, _stribeck(), C=s.C)
 
 
 def test_loop_transformation_reproduces_the_spec_matrix_and_designs():
-    s, A0 = _untransformed_rotor()
+    s = ex.rotor_standin("alpha")
     law = _stribeck()
-    assert law.sigma_tan[0] == pytest.approx(ex.ROTOR["sigma"], abs=1e-6)
-    plant = loop_transformed_lure_system(A0, s.G, s.H, law, B=s.B, C=s.C, u=s.u)
-    np.testing.assert_allclose(plant.A, s.A, atol=1e-5)
-    assert plant.law.monotone
-    # the same design through a duck-typed plant holding the non-monotone law
-    raw = SimpleNamespace(A=A0, G=s.G, H=s.H, C=s.C, D=None, law=law)
-    d = design_lure_observer(raw, kappa=1000.0, tol=1e-2,
-                             loop_transformation=law.loop_transformation())
-    assert d.loop_sigma == pytest.approx(law.sigma_tan[0])
-    np.testing.assert_allclose(d.A, plant.A, atol=1e-12)
+    assert law.sigma_tan[0] == pytest.approx(0.161553, abs=1e-6)  # the spec's figure
+    plant = loop_transformed_lure_system(s.A, s.G, s.H, law, B=s.B, C=s.C, u=s.u)
+    assert plant.A[2, 2] == pytest.approx(law.sigma_tan[0] / ex.ROTOR["J_l"], rel=1e-14)
+    np.testing.assert_array_equal(plant.A[:, :2], s.A[:, :2])  # only the friction column
+    assert plant.law.monotone and plant.law.viscous[0] == pytest.approx(
+        ex.ROTOR["b"] + law.sigma_tan[0], rel=1e-14)
+    # the example scenario builds exactly this plant
+    np.testing.assert_array_equal(s.plant().A, plant.A)
+    d = design_lure_observer(plant, kappa=1000.0, tol=1e-2)
+    np.testing.assert_array_equal(d.A, plant.A)
     assert 3.5 < d.alpha_max < 4.5  # spec 5.7: about 4 with ||Y|| <= 1000
+
+
+def test_the_loop_transformation_is_the_laws_own():
+    """A slope that leaves law - slope non-monotone, or a transformation unrelated to the law,
+    cannot reach a design (it would certify an observer for another plant)."""
+    from nscontrol.laws.base import LoopTransformation
+
+    s = ex.rotor_standin("alpha")
+    law = _stribeck()
+    with pytest.raises(ModelError, match="sigma: expected sigma >= sigma_tan"):
+        loop_transformed_lure_system(s.A, s.G, s.H, law, sigma=0.5 * law.sigma_tan, C=s.C)
+    with pytest.raises(ModelError, match="sigma"):
+        loop_transformed_lure_system(s.A, s.G, s.H, law, sigma=0.0, C=s.C)
+    steeper = loop_transformed_lure_system(s.A, s.G, s.H, law, sigma=0.3, C=s.C)
+    assert steeper.A[2, 2] == pytest.approx(0.3 / ex.ROTOR["J_l"], rel=1e-14)
+    with pytest.raises(ModelError, match="sigma.*already monotone"):
+        loop_transformed_lure_system(s.A, s.G, s.H, Relay(1.0), sigma=0.2, C=s.C)
+    with pytest.raises(ModelError, match="law: expected a SetValuedLaw"):
+        loop_transformed_lure_system(s.A, s.G, s.H, "stribeck", C=s.C)
+    with pytest.raises(ModelError, match="D: "):
+        loop_transformed_lure_system(s.A, s.G, s.H, law, D=[[0.1]], C=s.C)
+    # design_lure_observer takes no user-made transformation at all (audit finding: an
+    # unrelated one gave loop_sigma = 0 and a certificate for another plant)
+    bogus = LoopTransformation(monotone_part=Relay(1.0), slope=np.zeros(1))
+    with pytest.raises(TypeError, match="loop_transformation"):
+        design_lure_observer(s.plant(), loop_transformation=bogus)
 
 
 def test_rotor_observer_obeys_discrete_lyapunov_bound():
@@ -99,3 +133,10 @@ def test_statespace_bad_input():
     ss = control.ss(s.A, np.hstack([s.G, s.B]), np.vstack([s.H, s.C]), [[0, 0], [0, 1.0]])
     with pytest.raises(ModelError, match="feedthrough"):
         lure_from_statespace(ss, Relay(1.0))
+    # an input u with no input column for it is refused, not silently dropped
+    no_u = control.ss(s.A, s.G, np.vstack([s.H, s.C]), np.zeros((2, 1)))
+    with pytest.raises(ModelError, match="^u: "):
+        lure_from_statespace(no_u, Relay(1.0), u=s.u)
+    assert lure_from_statespace(no_u, Relay(1.0)).B is None
+    with pytest.raises(ModelError, match="law"):
+        lure_from_statespace(no_u, "relay")

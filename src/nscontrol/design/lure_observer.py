@@ -243,6 +243,12 @@ def structural_infeasibility(A: Any, G: Any, H: Any, C: Any, *,
       ``vᵀ(A_Lᵀ P + P A_L) v = 2 sᵀ H A G s`` does not depend on ``L, K``; it must be negative.
       This is why the basic observer of an undamped Coulomb oscillator is infeasible.
 
+    References
+    ----------
+    Spec ``ch08-lure-observer`` §2.2 (consequences of the equality; example 5.3, "not
+    passifiable"); B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8):1996–2001, 2009 (the
+    passivity conditions); SICONOS D5.3, ch. 8.
+
     Examples
     --------
     >>> structural_infeasibility([[0, 1], [0, 0]], [[0], [1]], [[0, -1]], [[1, 0]]) is not None
@@ -306,8 +312,6 @@ class LureObserverDesign:
         The NumPy re-check of the solution.
     A, G, H, C, D : ndarray
         The (possibly loop-transformed) linear part the design was made for.
-    loop_sigma : float
-        Loop-transformation slope ``σ`` used for a non-monotone law (0 when none).
     status : str
         ``"feasible"`` (infeasible designs raise :class:`InfeasibleDesignError`).
     """
@@ -327,7 +331,6 @@ class LureObserverDesign:
     H: FloatArray
     C: FloatArray
     D: FloatArray
-    loop_sigma: float = 0.0
     status: str = "feasible"
 
     @property
@@ -409,10 +412,11 @@ class _ObserverLMI:
                  eps_P: float, solver: str | None) -> None:
         import cvxpy as cp
 
-        from ..numerics.lmi import sym
+        from ..numerics.lmi import solver_order, sym
 
         self.mat, self.variant, self.kappa = mat, variant, kappa
-        self.eps, self.eps_P, self.solver = eps, eps_P, solver
+        self.eps, self.eps_P = eps, eps_P
+        self.solvers = solver_order(solver)
         n, p = mat.n, mat.p
         P0, K0, P_basis, K_basis, _ = _equality_space(mat, variant)
         self._P0, self._K0 = P0, K0
@@ -433,17 +437,16 @@ class _ObserverLMI:
                                         [self.Y.T, kappa * np.eye(p)]]) >> 0)
         self.problem = cp.Problem(cp.Minimize(0), constraints)
 
-    def _solvers(self) -> list[str]:
-        return [self.solver] if self.solver else ["CLARABEL", "SCS"]
-
     def solve(self, alpha: float) -> tuple[LureObserverCertificate | None, dict[str, Any], str]:
         """Solve at rate ``alpha``; returns (certificate or None, gains, status)."""
         import cvxpy as cp
 
+        from ..numerics.lmi import solver_options
+
         self.alpha.value = float(alpha)
         status = "not_solved"
-        for name in self._solvers():
-            options: dict[str, Any] = {"eps": 1e-9, "max_iters": 20000} if name == "SCS" else {}
+        for name in self.solvers:
+            options = solver_options(name)
             try:
                 with warnings.catch_warnings():
                     # inaccurate statuses are handled below by the NumPy re-check
@@ -494,13 +497,48 @@ def recheck_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any, 
                         ) -> LureObserverCertificate:
     """Re-check observer gains ``(P, L, K)`` against (1)–(2) of spec §2.2 in NumPy.
 
-    Useful for certificates from elsewhere (a paper, the Siconos example's ``P = I``).
+    Useful for certificates from elsewhere (a paper, the Siconos example's ``P = I``). It
+    measures, it does not decide: :func:`observer_from_gains` and the synthesis functions
+    apply the acceptance thresholds.
+
+    Parameters
+    ----------
+    A, G, H, C : array_like
+        Plant matrices (``n x n``, ``n x m``, ``m x n``, ``p x n``).
+    P, L, K : array_like
+        Storage matrix (``n x n``), gains ``L`` (``n x p``) and ``K`` (``m x p``).
+    alpha : float
+        The decay rate the Lyapunov matrix is tested with.
+    solver, solver_status : str
+        Recorded in the certificate (where the point came from).
 
     Returns
     -------
     LureObserverCertificate
         Residual of ``Gᵀ P = H - K C``, eigenvalues of the Lyapunov matrix and of ``P``, the
         Hurwitz abscissa of ``A - L C`` and ``||P L||_2``.
+
+    Notes
+    -----
+    Computed: ``‖Gᵀ P - (H - K C)‖_F``; ``λ_max(sym(A_Lᵀ P + P A_L) + 2 α P)`` with
+    ``A_L = A - L C``; ``λ_min(sym P)`` and ``cond P``; ``max Re λ(A_L)``; ``‖P L‖_2``. With the
+    equality, a negative Lyapunov eigenvalue and ``P ≻ 0``, the theorem of spec §2.5 gives
+    ``V(t) <= exp(-2 α t) V(0)`` for every maximal monotone law (hypotheses as in
+    :func:`design_lure_observer`).
+
+    References
+    ----------
+    Spec ``ch08-lure-observer`` §2.2–§2.3 (post-check); B. Brogliato, W.P.M.H. Heemels,
+    IEEE TAC 54(8), 2009.
+
+    Examples
+    --------
+    ``P = 2 I`` breaks the equality of the Siconos example (``Gᵀ P = 2 H``):
+
+    >>> c = recheck_certificate([[1, 1], [3, 1]], [[-1], [1]], [[-1, 1]], [[2, 2]],
+    ...                         P=[[2, 0], [0, 2]], L=[[1], [1]], K=[[0]], alpha=1.0)
+    >>> round(c.equality_residual, 12), c.lmi_max_eig
+    (1.414213562373, 0.0)
     """
     mat = _matrices(A, G, H, C)
     P = as_matrix("P", P, rows=mat.n, cols=mat.n)
@@ -521,8 +559,11 @@ def recheck_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any, 
 
 # -- public synthesis entry points ------------------------------------------------------------
 def _prepare(A: Any, G: Any, H: Any, C: Any, D: Any, variant: str, kappa: Any, eps: Any,
-             eps_P: Any) -> tuple[_Matrices, float | None, float, float]:
+             eps_P: Any, solver: Any) -> tuple[_Matrices, float | None, float, float]:
+    from ..numerics.lmi import solver_order
+
     _check_variant(variant)
+    solver_order(solver)  # a misspelt or missing solver is bad input, found before any work
     mat = _matrices(A, G, H, C, D)
     if mat.p == 0:
         raise DimensionError("C: expected at least one measured output (p >= 1), got 0 rows")
@@ -542,12 +583,11 @@ def _raise_structural(mat: _Matrices, variant: str) -> None:
 
 
 def _design(mat: _Matrices, lmi: _ObserverLMI, cert: LureObserverCertificate,
-            gains: dict[str, Any], alpha: float, alpha_max: float | None,
-            loop_sigma: float = 0.0) -> LureObserverDesign:
+            gains: dict[str, Any], alpha: float, alpha_max: float | None) -> LureObserverDesign:
     return LureObserverDesign(
         variant=lmi.variant, L=gains["L"], K=gains["K"], P=gains["P"], alpha=float(alpha),
         alpha_max=alpha_max, kappa=lmi.kappa, eps=lmi.eps, eps_P=lmi.eps_P, certificate=cert,
-        A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D, loop_sigma=float(loop_sigma))
+        A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D)
 
 
 def _bisect(lmi: _ObserverLMI, tol: float
@@ -618,7 +658,8 @@ def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     eps, eps_P : float, optional
         Strictness margins (default ``1e-6 max(1, ||H||_F / ||G||_F)``).
     solver : str, optional
-        A CVXPY SDP solver name; default Clarabel, then SCS.
+        ``"auto"`` (default: Clarabel, then SCS with tight tolerances when Clarabel errors or
+        gives no usable point) or one name of :data:`nscontrol.numerics.lmi.SDP_SOLVERS`.
     precheck : bool
         Run :func:`structural_infeasibility` first (no solver call for hopeless cases).
 
@@ -631,7 +672,8 @@ def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     InfeasibleDesignError
         No certificate (``status="structural"`` with the reason, or the solver's status).
     DimensionError, ModelError
-        Wrong shapes, ``D + Dᵀ`` not PSD, negative ``kappa``/``alpha``/margins.
+        Wrong shapes, ``D + Dᵀ`` not PSD, negative ``kappa``/``alpha``/margins, an unknown
+        or uninstalled ``solver`` (``ModelError("solver: ...")``).
 
     Notes
     -----
@@ -661,7 +703,8 @@ def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     >>> bool(d.certificate.lmi_max_eig < 0 and d.certificate.hurwitz_abscissa < 0)
     True
     """
-    mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P)
+    mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P,
+                                                solver)
     alpha_v = check_positive("alpha", alpha, allow_zero=True)
     if precheck:
         _raise_structural(mat, variant)
@@ -682,17 +725,62 @@ def max_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
                    precheck: bool = True) -> LureObserverDesign:
     """Maximise the certified decay rate by bisection; the design at ``alpha_max``.
 
-    Same parameters as :func:`lure_observer_lmi`, plus ``tol`` (relative width of the final
-    bracket). The returned design has ``alpha = alpha_max``: it is the boundary point, with
-    ``P`` near singular; simulate with a design at a fraction of it
-    (:func:`design_lure_observer` does).
+    Parameters
+    ----------
+    A, G, H, C, D, variant, kappa, eps, eps_P, solver, precheck
+        As in :func:`lure_observer_lmi`.
+    tol : float
+        Relative width of the final bracket (``hi - lo <= tol · lo``).
+
+    Returns
+    -------
+    LureObserverDesign
+        The certified design at ``alpha = alpha_max``, the largest rate proven feasible
+        (a lower bound of the true supremum within ``tol``). It is the boundary point, with
+        ``P`` near singular; simulate with a design at a fraction of it
+        (:func:`design_lure_observer` does).
 
     Raises
     ------
     InfeasibleDesignError
-        Infeasible already at ``alpha = 0``.
+        Structurally hopeless (``status="structural"``), or infeasible already at
+        ``alpha = 0``.
+    ModelError, DimensionError
+        As in :func:`lure_observer_lmi`.
+
+    Warns
+    -----
+    InaccurateCertificateWarning
+        The rate is still certified at the cap ``1e4`` (unbounded without ``kappa``).
+
+    Notes
+    -----
+    Feasibility of the LMIs of spec §2.3 is monotone in ``α`` (a certificate at ``α`` is one
+    at every smaller rate), so bisection applies. The rate is a CVXPY parameter: the problem
+    is compiled once. Bracket: ×4 up from 1 while feasible, or ÷4 down; then
+    :func:`nscontrol.numerics.lmi.bisect_max`. An undecided solve counts as infeasible, so
+    ``alpha_max`` is always a proven rate. Hypotheses of the theorem behind the rate: those of
+    :func:`design_lure_observer` (maximal monotone law, ``D + Dᵀ >= 0``). Known values: the
+    damped Coulomb oscillator's basic observer has ``alpha_max = c/m`` (spec 5.2); relay
+    feedback measuring ``z`` is limited to 2 by the zero at ``-2`` (spec 5.5).
+
+    References
+    ----------
+    Spec ``ch08-lure-observer`` §2.3 (bisection on ``α``); SICONOS D5.3, ch. 8;
+    S. Boyd et al., *Linear Matrix Inequalities in System and Control Theory*, SIAM 1994,
+    §5.1 (decay rate).
+
+    Examples
+    --------
+    Relay feedback with the multivalued input measured (``C = H``, spec 5.5): the rate is 2.
+
+    >>> d = max_decay_rate([[0, 1], [-3, -4]], [[0], [1]], [[2, 1]], [[2, 1]],
+    ...                    variant="basic", tol=1e-2)
+    >>> bool(abs(d.alpha_max - 2.0) < 0.02), d.alpha == d.alpha_max
+    (True, True)
     """
-    mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P)
+    mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P,
+                                                solver)
     tol = check_positive("tol", tol)
     if precheck:
         _raise_structural(mat, variant)
@@ -708,47 +796,120 @@ def observer_from_gains(A: Any, G: Any, H: Any, C: Any, *, L: Any, P: Any, alpha
     For certificates from elsewhere, e.g. the Siconos ObserverLCS example (``L = [1, 1]ᵀ``,
     ``K = 0``, ``P = I``, ``alpha = 1``).
 
+    Parameters
+    ----------
+    A, G, H, C : array_like
+        Plant matrices (``n x n``, ``n x m``, ``m x n``, ``p x n``).
+    L : array_like
+        Output-injection gain, ``n x p``.
+    P : array_like
+        Storage matrix of ``V(e) = eᵀ P e``, ``n x n``.
+    alpha : float
+        Claimed decay rate, ``>= 0``.
+    K : array_like, optional
+        Map-injection gain, ``m x p`` (default 0: the basic observer).
+    D : array_like, optional
+        Feedthrough, ``m x m``, ``D + Dᵀ >= 0``.
+
+    Returns
+    -------
+    LureObserverDesign
+        With ``eps = eps_P = 0`` (no margins were requested) and ``alpha_max = None``.
+
     Raises
     ------
     InfeasibleDesignError
-        The gains do not satisfy (1)–(2) with rate ``alpha`` (``status="recheck_failed"``).
+        The gains are not a strict certificate (``status="recheck_failed"``; the message
+        lists every condition that fails).
+    DimensionError, ModelError
+        Wrong shapes, ``D + Dᵀ`` not PSD, negative ``alpha``.
+
+    Notes
+    -----
+    Accepted when (1)–(2) of spec §2.2 hold with rate ``alpha`` and the error provably
+    converges: ``‖Gᵀ P - (H - K C)‖_F <= 1e-7 max(1, ‖H‖_F)``, ``P ≻ 0``,
+    ``λ_max(sym(A_Lᵀ P + P A_L) + 2 α P) <= 0`` and either ``alpha > 0`` or, with
+    ``alpha = 0``, the Lyapunov inequality strict (``λ_max < -1e-12 ‖P‖ ‖A_L‖``, round-off
+    excluded); ``A - L C`` must be Hurwitz (implied by the rest; checked as a safeguard).
+    A non-strict certificate with ``alpha = 0`` only proves that ``V`` does not increase.
+
+    References
+    ----------
+    Spec ``ch08-lure-observer`` §2.2, §2.5 and §5.1 (the Siconos ObserverLCS example,
+    Brogliato, Acary, Pérignon 2008); B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8), 2009.
+
+    Examples
+    --------
+    The public certificate of the Siconos ObserverLCS example (spec 5.1), exact with ``Q = 2I``:
+
+    >>> d = observer_from_gains([[1, 1], [3, 1]], [[-1], [1]], [[-1, 1]], [[2, 2]],
+    ...                         L=[[1], [1]], P=[[1, 0], [0, 1]], alpha=1.0, D=[[1]])
+    >>> d.certificate.equality_residual, d.certificate.hurwitz_abscissa
+    (0.0, -1.0)
     """
     mat = _matrices(A, G, H, C, D)
     alpha_v = check_positive("alpha", alpha, allow_zero=True)
     K = np.zeros((mat.m, mat.p)) if K is None else as_matrix("K", K, rows=mat.m, cols=mat.p)
     cert = recheck_certificate(mat.A, mat.G, mat.H, mat.C, P, L, K, alpha_v)
+    P_arr, L_arr = as_matrix("P", P), as_matrix("L", L)
     scale = max(1.0, float(np.linalg.norm(mat.H)))
-    if not (cert.equality_residual <= EQUALITY_RTOL * scale and cert.lmi_max_eig <= 0.0
-            and cert.P_min_eig > 0.0):
-        raise InfeasibleDesignError(f"observer_from_gains: the gains are not a certificate at "
-                                    f"alpha = {alpha_v:g}: {cert}", status="recheck_failed")
+    failures = []
+    if not cert.equality_residual <= EQUALITY_RTOL * scale:
+        failures.append(f"G^T P = H - K C fails (residual {cert.equality_residual:.3g} > "
+                        f"{EQUALITY_RTOL * scale:.3g})")
+    if not cert.P_min_eig > 0.0:
+        failures.append(f"P is not positive definite (smallest eigenvalue "
+                        f"{cert.P_min_eig:.3g})")
+    if not cert.lmi_max_eig <= 0.0:
+        failures.append(f"sym(A_L^T P + P A_L) + 2 alpha P is not negative semidefinite "
+                        f"(largest eigenvalue {cert.lmi_max_eig:.3g})")
+    elif alpha_v == 0.0:
+        A_L = mat.A - L_arr @ mat.C
+        strict = -1e-12 * max(1.0, float(np.linalg.norm(P_arr, 2) * np.linalg.norm(A_L, 2)))
+        if not cert.lmi_max_eig < strict:
+            failures.append(f"with alpha = 0 the Lyapunov inequality must be strict, but "
+                            f"the largest eigenvalue of sym(A_L^T P + P A_L) is "
+                            f"{cert.lmi_max_eig:.3g} (not < {strict:.3g}): V need not "
+                            f"decrease, the error need not converge")
+    if not cert.hurwitz_abscissa < 0.0:
+        failures.append(f"A - L C is not Hurwitz (largest real part of its eigenvalues "
+                        f"{cert.hurwitz_abscissa:.3g})")
+    if failures:
+        raise InfeasibleDesignError(f"observer_from_gains: the gains are not a strict "
+                                    f"certificate at alpha = {alpha_v:g}: "
+                                    + "; ".join(failures), status="recheck_failed")
     return LureObserverDesign(
-        variant="basic" if not np.any(K) else "extended", L=as_matrix("L", L), K=K,
-        P=as_matrix("P", P), alpha=alpha_v, alpha_max=None, kappa=None, eps=0.0, eps_P=0.0,
+        variant="basic" if not np.any(K) else "extended", L=L_arr, K=K,
+        P=P_arr, alpha=alpha_v, alpha_max=None, kappa=None, eps=0.0, eps_P=0.0,
         certificate=cert, A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D)
 
 
 def _plant_matrices(plant: Any) -> tuple[_Matrices, Any]:
-    missing = [k for k in ("A", "G", "H", "C", "law") if getattr(plant, k, None) is None]
-    if missing:
-        raise ModelError(f"plant: expected a LureSystem (with A, G, H, C, law), got "
-                         f"{type(plant).__name__} lacking {missing}; for a python-control "
-                         f"StateSpace use lure_from_statespace(ss, law) first")
-    return _matrices(plant.A, plant.G, plant.H, plant.C, getattr(plant, "D", None)), plant.law
+    from ..systems.lure import LureSystem
+
+    if not isinstance(plant, LureSystem):
+        raise ModelError(f"plant: expected a nscontrol.systems.lure.LureSystem, got "
+                         f"{type(plant).__name__}; build one from a python-control StateSpace "
+                         f"with lure_from_statespace(ss, law), or, for a non-monotone law "
+                         f"(Stribeck friction), with loop_transformed_lure_system(A, G, H, law)")
+    return _matrices(plant.A, plant.G, plant.H, plant.C, plant.D), plant.law
 
 
 def design_lure_observer(plant: Any, *, variant: Variant = "extended",
                          alpha: float | Literal["max"] = "max", alpha_fraction: float = 0.5,
                          kappa: float | None = None, eps: float | None = None,
                          eps_P: float | None = None, solver: str | None = None,
-                         tol: float = 1e-3, precheck: bool = True,
-                         loop_transformation: Any = None) -> LureObserverDesign:
+                         tol: float = 1e-3, precheck: bool = True) -> LureObserverDesign:
     """Design a passivity-based observer for a Lur'e plant with a maximal monotone law.
 
     Parameters
     ----------
     plant : LureSystem
-        ``x' = A x + G w + B u``, ``z = H x + D w + g(t)``, ``w ∈ -φ(z)``, ``y = C x``.
+        ``x' = A x + G w + B u``, ``z = H x + D w + g(t)``, ``w ∈ -φ(z)``, ``y = C x``
+        (a :class:`LureSystem` holds only maximal monotone laws). A python-control
+        ``StateSpace`` goes through :func:`lure_from_statespace`; a non-monotone law
+        (Stribeck friction) through :func:`loop_transformed_lure_system`, which builds the
+        split ``φ = φ_m - σ I`` from the law itself (spec §2.6).
     variant : {"extended", "basic"}
         Output injection ``K`` into the set-valued map, or ``K = 0``.
     alpha : float or "max"
@@ -761,11 +922,6 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
         Bound on ``||P L||_2`` (without it the extended observer's rate may be unbounded).
     eps, eps_P, solver, tol, precheck
         As in :func:`lure_observer_lmi` and :func:`max_decay_rate`.
-    loop_transformation : LoopTransformation, optional
-        For a plant object whose law is not monotone (Stribeck friction): the split
-        ``φ = φ_m - σ I`` from ``law.loop_transformation()``; the design is made for
-        ``(A + G σ H, G, H, C)`` (spec §2.6). A :class:`LureSystem` only holds monotone laws:
-        build it with :func:`loop_transformed_lure_system` instead.
 
     Returns
     -------
@@ -777,7 +933,8 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     InfeasibleDesignError
         Structurally hopeless (``status="structural"``, no solver called) or no certificate.
     ModelError
-        Non-monotone law without a loop transformation, ``D + Dᵀ`` not PSD, bad ``kappa``...
+        ``plant`` not a :class:`LureSystem`, bad ``alpha``/``alpha_fraction``/``kappa``,
+        unknown ``solver``...
 
     Notes
     -----
@@ -785,9 +942,9 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     ``K`` satisfy ``(A - LC)ᵀP + P(A - LC) <= -2αP - εI`` and ``GᵀP = H - KC``, then for every
     plant solution, input and observer initial state ``V(t) = eᵀPe <= exp(-2αt) V(0)``; with
     implicit Euler on plant and observer together ``V_{k+1} <= V_k / (1 + 2αh)``. Checked here:
-    monotonicity of the law (flag of the law object), ``D + Dᵀ >= 0``, the LMIs (re-checked in
-    NumPy). Not checked: existence of plant solutions (the plant may be unstable) and the
-    constraint qualification of spec §2.4 for laws with a bounded domain.
+    monotonicity of the law and ``D + Dᵀ >= 0`` (by :class:`LureSystem` at construction), the
+    LMIs (re-checked in NumPy). Not checked: existence of plant solutions (the plant may be
+    unstable) and the constraint qualification of spec §2.4 for laws with a bounded domain.
 
     References
     ----------
@@ -807,19 +964,7 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     >>> bool(abs(d.alpha_max - 0.1) < 0.002), d.alpha == d.alpha_max / 2
     (True, True)
     """
-    from ..laws.set_valued import require_monotone
-
-    mat, law = _plant_matrices(plant)
-    require_monotone(law, who="design_lure_observer", loop_transformation=loop_transformation)
-    sigma = 0.0
-    if not law.monotone:
-        if np.any(mat.D):
-            raise ModelError("loop_transformation: the transformation with a feedthrough D is "
-                             "not supported (it changes D too); use D = 0")
-        slope = np.asarray(loop_transformation.slope, float)
-        mat = _Matrices(loop_transformation.transform_A(mat.A, mat.G, mat.H), mat.G, mat.H,
-                        mat.C, mat.D)
-        sigma = float(np.max(np.abs(slope)))
+    mat, _ = _plant_matrices(plant)  # a LureSystem: its law is maximal monotone
     frac = float(alpha_fraction)
     if not 0.0 < frac <= 1.0:
         raise ModelError(f"alpha_fraction: expected a value in (0, 1], got {alpha_fraction!r}")
@@ -836,7 +981,7 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
         alpha_max = None
     from dataclasses import replace
 
-    return replace(design, alpha_max=alpha_max, loop_sigma=sigma)
+    return replace(design, alpha_max=alpha_max)
 
 
 # -- closed loop ---------------------------------------------------------------------------
@@ -909,32 +1054,85 @@ def _observer_system(design: LureObserverDesign, plant: Any, y: Any) -> Any:
 
 
 def loop_transformed_lure_system(A: Any, G: Any, H: Any, law: Any, *, sigma: Any = None,
-                                 **lure_options: Any) -> Any:
+                                 B: Any = None, C: Any = None, D: Any = None, u: Any = None,
+                                 g: Any = None, state_names: tuple[str, ...] = ()) -> Any:
     """A :class:`LureSystem` for a non-monotone law through the loop transformation (§2.6).
 
     ``φ = φ_m - diag(σ)`` with ``φ_m`` maximal monotone gives ``x' = (A + G diag(σ) H) x +
-    G w_m``, ``w_m ∈ -φ_m(z)`` (``D = 0``): the same trajectories, a monotone law.
+    G w_m``, ``w_m ∈ -φ_m(z)`` (``D = 0``): the same trajectories, a monotone law. The split
+    is the law's own (``law.loop_transformation(sigma)``), so the transformed system always
+    describes the plant with ``law``.
 
     Parameters
     ----------
     A, G, H : array_like
-        Linear part with the original law.
+        Linear part with the original law (``n x n``, ``n x m``, ``m x n``).
     law : SetValuedLaw
-        The (possibly non-monotone) law, e.g. ``Stribeck``; it provides the split through
-        ``law.loop_transformation(sigma)``.
+        The (possibly non-monotone) law, e.g. ``Stribeck``.
     sigma : float or array_like, optional
-        Slope to use (default: the law's own bound on its negative slope).
-    **lure_options
-        ``B``, ``C``, ``u``, ``g``, ``state_names`` of :class:`LureSystem` (no ``D``).
+        Slopes to use, one per component; the law checks that ``φ + diag(σ)`` is monotone
+        (for Stribeck friction ``σ >= sigma_tan``). Default: the law's own bound, the
+        smallest slope that works (zero for a monotone law).
+    B, C, u, g, state_names
+        As in :class:`LureSystem`.
+    D : array_like, optional
+        Must be absent or zero: with a feedthrough the transformation also changes ``D``.
+
+    Returns
+    -------
+    LureSystem
+        ``(A + G diag(σ) H, G, H)`` with the monotone part ``φ + diag(σ)`` as its law.
+
+    Raises
+    ------
+    ModelError
+        ``law`` is not a set-valued law; ``sigma`` too small (``law − σ`` would not be made
+        monotone) or non-zero for a law that is monotone already; a non-zero ``D``.
+
+    Notes
+    -----
+    Hypothesis: ``φ + diag(σ)`` maximal monotone, i.e. the negative slope of ``φ`` is bounded
+    by ``σ`` (Stribeck with ``delta >= 1``; ``delta < 1`` has an unbounded slope at 0 and is
+    refused). With ``w = w_m + diag(σ) z`` and ``z = H x`` the substitution is exact: the
+    transformed system has the same solutions. The extra ``G σ H`` acts as negative damping;
+    observers for it usually need the extended variant (spec 5.7).
+
+    References
+    ----------
+    Spec ``ch08-lure-observer`` §2.6 and example 5.7; A. Doris et al., IEEE TCST 16(6), 2008
+    (rotor with non-monotone friction); chapter 7 spec for ``sigma_tan``.
+
+    Examples
+    --------
+    The two-inertia rotor of spec 5.7, Stribeck friction on the lower disc (``J_l = 0.05``):
+
+    >>> from nscontrol.laws.set_valued import Stribeck
+    >>> law = Stribeck(static=0.3, coulomb=0.1, stribeck_velocity=1.0, delta=2.0,
+    ...                viscous=0.01)
+    >>> A = [[0, 1, -1], [-0.16, -4, 0], [1.6, 0, 0]]
+    >>> plant = loop_transformed_lure_system(A, [[0], [0], [20]], [[0, 0, 1]], law,
+    ...                                      C=[[1, 0, 0]])
+    >>> round(float(plant.A[2, 2]), 4), plant.law.monotone   # sigma_tan / J_l
+    (3.2311, True)
+    >>> loop_transformed_lure_system(A, [[0], [0], [20]], [[0, 0, 1]], law, sigma=0.1)
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: sigma: expected sigma >= sigma_tan = ...
     """
-    from ..laws.set_valued import require_monotone
+    from ..laws.set_valued import SetValuedLaw, require_monotone
     from ..systems.lure import LureSystem
 
-    if "D" in lure_options and lure_options["D"] is not None and np.any(lure_options["D"]):
-        raise ModelError("D: the loop transformation is implemented for D = 0 only")
-    lt = law.loop_transformation(sigma)
+    if not isinstance(law, SetValuedLaw):
+        raise ModelError(f"law: expected a SetValuedLaw from nscontrol.laws, got "
+                         f"{type(law).__name__}")
+    if D is not None and np.any(np.asarray(D, dtype=float)):
+        raise ModelError("D: the loop transformation is implemented for D = 0 only (with a "
+                         "feedthrough it changes D too), got a non-zero D")
+    lt = law.loop_transformation(sigma)  # validates sigma against the law's own slope bound
     part = require_monotone(law, who="loop_transformed_lure_system", loop_transformation=lt)
-    return LureSystem(lt.transform_A(A, G, H), G, H, part, **lure_options)
+    return LureSystem(lt.transform_A(A, G, H), G, H, part, B=B, C=C, u=u, g=g,
+                      state_names=state_names)
 
 
 def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> Any:
@@ -944,12 +1142,50 @@ def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> 
     and outputs ``[z; y]`` (the first ``m`` feed the law, the rest are measured), i.e.
     ``B_ss = [G, B]``, ``C_ss = [H; C]``, ``D_ss = [[D, 0], [0, 0]]``.
 
+    Parameters
+    ----------
+    ss : control.StateSpace
+        Continuous-time linear part (``dt = 0``).
+    law : SetValuedLaw
+        Maximal monotone law of dimension ``m``.
+    u : callable or array_like, optional
+        External input for the inputs after the first ``m`` (requires such inputs).
+    g : callable or array_like, optional
+        Known shift of the law's argument, ``z = H x + D w + g(t)``.
+
+    Returns
+    -------
+    LureSystem
+
     Raises
     ------
     ModelError
-        Discrete-time system, or feedthrough from ``u`` or into ``y`` (not in the model).
+        Not a state-space object, discrete-time system, feedthrough from ``u`` or into ``y``
+        (not in the model), or ``u`` given while the system has no input besides ``w``.
     DimensionError
-        Fewer inputs or outputs than ``m``.
+        Fewer inputs or outputs than ``m`` (and no measured output).
+
+    Notes
+    -----
+    Hypotheses of the model (checked by :class:`LureSystem`): ``law`` maximal monotone and
+    ``D + Dᵀ >= 0``. A non-monotone law must be loop-transformed first
+    (:func:`loop_transformed_lure_system` on the matrices).
+
+    References
+    ----------
+    Spec ``ch08-lure-observer`` §1 (system class); python-control ``StateSpace``
+    (R. M. Murray et al., python-control documentation).
+
+    Examples
+    --------
+    The damped Coulomb oscillator of spec 5.2, inputs ``[w; u]``, outputs ``[z; y] = [q'; q]``:
+
+    >>> import control
+    >>> from nscontrol.laws.set_valued import Relay
+    >>> ss = control.ss([[0, 1], [-1, -0.1]], [[0, 0], [1, 1]], [[0, 1], [1, 0]], 0)
+    >>> plant = lure_from_statespace(ss, Relay(1.0), u=lambda t: 2 * np.sin(t))
+    >>> plant.G.ravel().tolist(), plant.B.ravel().tolist(), plant.C.tolist()
+    ([0.0, 1.0], [0.0, 1.0], [[1.0, 0.0]])
     """
     from ..systems.lure import LureSystem
 
@@ -958,7 +1194,11 @@ def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> 
     if getattr(ss, "dt", 0) not in (0, None):
         raise ModelError(f"ss: expected a continuous-time system (dt = 0), got dt = {ss.dt}")
     A, Bs, Cs, Ds = (np.asarray(getattr(ss, k), float) for k in ("A", "B", "C", "D"))
-    m = int(law.dim)
+    m = getattr(law, "dim", None)
+    if m is None:
+        raise ModelError(f"law: expected a SetValuedLaw from nscontrol.laws, got "
+                         f"{type(law).__name__}")
+    m = int(m)
     if Bs.shape[1] < m or Cs.shape[0] <= m:
         raise DimensionError(f"ss: expected at least {m} inputs (w) and more than {m} outputs "
                              f"(z, then y), got {Bs.shape[1]} inputs and {Cs.shape[0]} outputs")
@@ -967,5 +1207,10 @@ def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> 
                          "measured outputs y = C x and the law's argument take no u directly "
                          "(use the shift g(t) for a known additive term)")
     B = Bs[:, m:] if Bs.shape[1] > m else None
+    if B is None and u is not None:
+        raise ModelError(f"u: the StateSpace has {Bs.shape[1]} inputs, all taken by the "
+                         f"law's multipliers w (m = {m}), so there is no input for u; add the "
+                         f"u columns to B after the first {m}, or drop u (got "
+                         f"{type(u).__name__})")
     return LureSystem(A, Bs[:, :m], Cs[:m], law, B=B, C=Cs[m:], D=Ds[:m, :m] if np.any(
-        Ds[:m, :m]) else None, u=u if B is not None else None, g=g)
+        Ds[:m, :m]) else None, u=u, g=g)
