@@ -3,9 +3,10 @@
 * :func:`design_state_feedback` — linear state feedback ``u = Kx`` with a decay rate and a
   gain bound (SF-σ);
 * :func:`design_pwa_state_feedback` — continuity-preserving PWA feedback
-  ``u = Kx + ν·min(cᵀx - d, 0)`` for bimodal systems (§2.5 b);
+  ``u = Kx + ν·min(cᵀx - d, 0)`` for bimodal systems (§2.5 b), and
+  :func:`tune_pwa_state_feedback` choosing ``ν`` by a one-dimensional search;
 * :func:`design_observer` — piecewise-linear observer with the mode chosen by the estimate
-  (OBS-σ), gain-bounded.
+  (OBS-σ), gain-bounded; :func:`output_feedback_loop` — plant + observer + feedback.
 
 Every design is solved in scaled coordinates (:class:`Scaling`), mapped back, and its
 certificate re-checked in NumPy in the original coordinates before it is returned; an
@@ -27,8 +28,9 @@ from ..errors import DimensionError, InfeasibleDesignError, ModelError
 
 __all__ = [
     "Scaling", "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
-    "design_state_feedback", "design_pwa_state_feedback",
-    "design_observer", "output_feedback_loop", "certificate_residual",
+    "EstimateFeedback", "design_state_feedback", "design_pwa_state_feedback",
+    "tune_pwa_state_feedback", "design_observer", "output_feedback_loop",
+    "certificate_residual",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -68,10 +70,11 @@ def _recheck(As: Sequence[FloatArray], P: FloatArray, decay: float, *, who: str,
 
 @dataclass(frozen=True)
 class Scaling:
-    """Coordinates in which the LMIs are solved: ``x̃ = S x``, ``τ = ω t``, ``u = f ũ``.
+    """Coordinates in which the LMIs are solved: ``x̃ = S x``, ``τ = ω t``, ``u = f ũ``,
+    ``y = g ỹ``.
 
-    Then ``Ã_i = S A_i S⁻¹/ω``, ``B̃ = S B f/ω``, ``C̃ = C S⁻¹``; gains map back as
-    ``K = f K̃ S``, ``L = ω S⁻¹ L̃`` and certificates as ``P = Sᵀ P̃ S``. Gain bounds reported
+    Then ``Ã_i = S A_i S⁻¹/ω``, ``B̃ = S B f/ω``, ``C̃ = C S⁻¹/g``; gains map back as
+    ``K = f K̃ S``, ``L = ω S⁻¹ L̃/g`` and certificates as ``P = Sᵀ P̃ S``. Gain bounds reported
     by designs are in the scaled units (that is what makes them comparable across models).
 
     Attributes
@@ -82,11 +85,14 @@ class Scaling:
         Time scale (1/s).
     input_unit
         Input unit ``f`` (e.g. a reference stiffness for forces).
+    output_unit
+        Output unit ``g`` of the measured output (observer designs).
     """
 
     S: FloatArray
     omega: float = 1.0
     input_unit: float = 1.0
+    output_unit: float = 1.0
 
     def __post_init__(self) -> None:
         S = as_square("Scaling.S", self.S)
@@ -95,6 +101,7 @@ class Scaling:
         object.__setattr__(self, "S", S)
         check_positive("Scaling.omega", self.omega)
         check_positive("Scaling.input_unit", self.input_unit)
+        check_positive("Scaling.output_unit", self.output_unit)
 
     @classmethod
     def identity(cls, n: int) -> Scaling:
@@ -102,42 +109,50 @@ class Scaling:
         return cls(np.eye(n))
 
     @classmethod
-    def mechanical(cls, n_dof: int, omega_ref: float, input_unit: float = 1.0) -> Scaling:
+    def mechanical(cls, n_dof: int, omega_ref: float, input_unit: float = 1.0,
+                   output_unit: float = 1.0) -> Scaling:
         """``x = (q, q')``: ``S = diag(I, I/ω_ref)``, ``τ = ω_ref t``, forces in ``input_unit``
-        (e.g. the static stiffness at the actuator) — ch11 §3.5, ch06 §2.4."""
+        (e.g. the static stiffness at the actuator), measurements in ``output_unit`` —
+        ch11 §3.5, ch06 §2.4."""
         d = np.concatenate([np.ones(n_dof), np.full(n_dof, 1.0 / omega_ref)])
-        return cls(np.diag(d), float(omega_ref), float(input_unit))
+        return cls(np.diag(d), float(omega_ref), float(input_unit), float(output_unit))
 
     @classmethod
-    def auto(cls, As: Sequence[Any], B: Any = None) -> Scaling:
+    def auto(cls, As: Sequence[Any], B: Any = None, C: Any = None) -> Scaling:
         """Balanced diagonal similarity, time scale ``max‖Ã_i‖``, input unit making
-        ``‖B̃‖ = 1`` — for badly scaled models."""
+        ``‖B̃‖ = 1`` and output unit making ``‖C̃‖ = 1`` — for badly scaled models."""
         return _auto_scaling([np.asarray(A, float) for A in As],
-                             None if B is None else np.asarray(B, float))
+                             None if B is None else np.asarray(B, float),
+                             None if C is None else np.asarray(C, float))
 
 
-def _auto_scaling(As: Sequence[FloatArray], B: FloatArray | None) -> Scaling:
+def _auto_scaling(As: Sequence[FloatArray], B: FloatArray | None,
+                  C: FloatArray | None = None) -> Scaling:
     """The shared balancing of :class:`nscontrol.numerics.lmi.Scaling` (``x̃ = D⁻¹x``,
-    ``τ = ωt``) plus an input unit making ``‖B̃‖ = 1``."""
+    ``τ = ωt``) plus an input unit making ``‖B̃‖ = 1`` and an output unit making
+    ``‖C̃‖ = 1``: every block of the design LMIs is then O(1) (without the output unit the
+    beam's ``C̃`` is ~4e-3 and the observer LMI fails its re-check)."""
     from ..numerics.lmi import Scaling as Balancing
 
     bal = Balancing.for_matrices(As)
     S = np.diag(1.0 / bal.d)
-    f = 1.0
+    f = g = 1.0
     if B is not None and np.linalg.norm(B) > 0:
         f = bal.omega / float(np.linalg.norm(S @ B, 2))
-    return Scaling(S, bal.omega, f)
+    if C is not None and np.linalg.norm(C) > 0:
+        g = float(np.linalg.norm(C @ np.diag(bal.d), 2))
+    return Scaling(S, bal.omega, f, g)
 
 
 def _resolve_scaling(scale: Scaling | str | None, As: Sequence[FloatArray],
-                     B: FloatArray | None) -> Scaling:
+                     B: FloatArray | None, C: FloatArray | None = None) -> Scaling:
     n = As[0].shape[0]
     if scale is None:
         return Scaling.identity(n)
     if isinstance(scale, str):
         if scale != "auto":
             raise ModelError(f"scale: expected None, 'auto' or a Scaling, got {scale!r}")
-        return _auto_scaling(As, B)
+        return _auto_scaling(As, B, C)
     if not isinstance(scale, Scaling):
         raise ModelError(f"scale: expected None, 'auto' or a Scaling, got {type(scale).__name__}")
     if scale.S.shape != (n, n):
@@ -183,6 +198,11 @@ class ConvergentStateFeedback:
         p = self.K.shape[0]
         return (self.K,) * n_regions, (np.zeros(p),) * n_regions
 
+    def control(self, x: Any) -> FloatArray:
+        """``u = Kx`` (time-major ``x`` of shape ``(k, n)`` gives ``u`` of shape ``(k, p)``);
+        pass it as ``control=`` to the frequency-response helpers to get the effort."""
+        return np.asarray(x, float) @ self.K.T
+
     def closed_loop(self, system: Any) -> Any:
         """The closed loop ``x' = (A_i + BK)x + b_i + Eu(t)`` as a PWA system."""
         return _with_feedback(system, self.B, *self.gains(len(system.A)))
@@ -226,6 +246,14 @@ class PWAStateFeedback:
     def gains(self, n_regions: int = 2) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
         """Per-region ``(K_i, k_i)``."""
         return self.K, self.k
+
+    @property
+    def region_gains(self) -> tuple[float, float]:
+        """``‖K̃_i‖`` per region in the scaled coordinates (``K̃_i = K_i S⁻¹/f``), the figure
+        :func:`tune_pwa_state_feedback` minimises the largest of."""
+        Sinv = np.linalg.inv(self.scaling.S)
+        return tuple(float(np.linalg.norm(K @ Sinv, 2)) / self.scaling.input_unit
+                     for K in self.K)  # type: ignore[return-value]
 
     def control(self, x: Any) -> FloatArray:
         """``u = K_1x + ν·min(cᵀx - d, 0)`` (time-major ``x`` gives time-major ``u``)."""
@@ -275,6 +303,27 @@ class ConvergentObserver:
         return np.sqrt(self.kappa) * np.exp(-self.sigma * np.asarray(t, float)) * e0_norm
 
 
+@dataclass(frozen=True)
+class EstimateFeedback:
+    """The control of an observer-based loop, ``u = K_{j(x̂)}x̂ + k_{j(x̂)}``, read from the
+    state ``(x, x̂)`` of :func:`output_feedback_loop` (a picklable callable: pass it as
+    ``control=`` to the frequency-response helpers to get the effort).
+
+    Attributes
+    ----------
+    feedback
+        The state feedback applied to the estimate.
+    n_plant
+        ``n``: the estimate is ``x[:, n:]``.
+    """
+
+    feedback: Any
+    n_plant: int
+
+    def __call__(self, x: Any) -> FloatArray:
+        return self.feedback.control(np.asarray(x, float)[..., self.n_plant:])
+
+
 # -- closed loops ----------------------------------------------------------------------------
 
 def _with_feedback(system: Any, B: FloatArray, Ks: Sequence[FloatArray],
@@ -303,8 +352,36 @@ def output_feedback_loop(system: Any, observer: ConvergentObserver,
     -----
     Separation (ch11 §2.5 d): the error decays by the observer certificate whatever the
     plant does, and the plant is input-to-state convergent under the feedback, so the loop is
-    convergent and its steady state has ``x̂ = x = x̄^{SF}``. A CQLF of the 2n-dimensional loop
-    need not exist; test it by simulation and Floquet multipliers.
+    convergent and its steady state has ``x̂ = x = x̄^{SF}``. Hypotheses: the plant is a
+    continuous PWA model (checked by the designs), the feedback and the observer were designed
+    for it (independently), and the observer knows ``u(t)``. A CQLF of the 2n-dimensional
+    loop need not exist; test it by simulation and Floquet multipliers. The loop's control
+    signal is :class:`EstimateFeedback` ``(feedback, n)``.
+
+    References
+    ----------
+    D5.3 chapter 11 §2.5(d); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Convergent systems:
+    analysis and synthesis", LNCIS 322, Springer 2005 (output-feedback design for
+    input-to-state convergence).
+
+    Examples
+    --------
+    The steady state of the observer-based loop is the state-feedback one, with ``e = 0``:
+
+    >>> import numpy as np
+    >>> from nscontrol.analysis.periodic import periodic_steady_state
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> from nscontrol.numerics.lti import Exosystem
+    >>> plant = one_sided_oscillator(0.1)
+    >>> sf = design_state_feedback(plant, sigma=0.3)
+    >>> loop = output_feedback_loop(plant, design_observer(plant, sigma=1.0), sf)
+    >>> loop.n_states, loop.n_regions
+    (4, 4)
+    >>> w = Exosystem.sinusoid(1.0, 2.9)
+    >>> x0 = periodic_steady_state(loop, 2 * np.pi / 2.9, u=w).x0
+    >>> ref = periodic_steady_state(sf.closed_loop(plant), 2 * np.pi / 2.9, u=w).x0
+    >>> bool(np.allclose(x0[:2], ref, atol=1e-9) and np.allclose(x0[2:], x0[:2], atol=1e-9))
+    True
     """
     from ..systems.pwa import PiecewiseAffineSystem
 
@@ -380,7 +457,9 @@ def design_state_feedback(system: Any, *, sigma: float, B: Any = None,
         Control input matrix ``(n, p)``; default: the model's input matrix ``E`` (actuator
         where the disturbance acts).
     scale
-        :class:`Scaling`, ``"auto"`` or ``None`` (no scaling).
+        :class:`Scaling`, ``"auto"`` (balanced states, time scale ``max‖Ã_i‖``, ``‖B̃‖ = 1``:
+        for badly scaled models such as the beam) or ``None`` (no scaling, the default: the
+        gain bound that is minimised is then in the model's own units).
 
     Returns
     -------
@@ -496,6 +575,17 @@ def design_pwa_state_feedback(system: Any, *, nu: Any, sigma: float, B: Any = No
     References
     ----------
     D5.3 chapter 11 §2.5(b) of our spec.
+
+    Examples
+    --------
+    Example A with ``ν = 2.5`` (ch11 check 15): the gain bound drops from 3.90 (ν = 0) to 2.29
+    and the law is continuous across ``q = 0``:
+
+    >>> import numpy as np
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> pf = design_pwa_state_feedback(one_sided_oscillator(0.1), nu=2.5, sigma=0.3)
+    >>> round(pf.gain_bound, 2), pf.K[0] - pf.K[1]
+    (2.29, array([[2.5, 0. ]]))
     """
     As = _modes(system)
     B = _input_matrix(system, B)
@@ -509,6 +599,101 @@ def design_pwa_state_feedback(system: Any, *, nu: Any, sigma: float, B: Any = No
     K0 = sf.K + np.outer(nu, c)
     return PWAStateFeedback((K0, sf.K), (-nu * d, np.zeros(B.shape[1])), B, nu, c, d, sf.P,
                             sigma, sf.gain_bound, sf.scaling, sf.status)
+
+
+def tune_pwa_state_feedback(system: Any, *, sigma: float, nu_bounds: tuple[float, float],
+                            n_grid: int = 11, B: Any = None,
+                            scale: Scaling | str | None = None) -> PWAStateFeedback:
+    """Continuity-preserving PWA feedback with the slope ``ν`` chosen to minimise the largest
+    per-region gain ``max(‖K̃_0‖, ‖K̃_1‖)`` (scaled units) over ``nu_bounds`` (single input).
+
+    ``ν`` enters the (SF-σ) problem bilinearly, so it is searched outside the LMI: a grid of
+    ``n_grid`` values (infeasible ones skipped), then a bounded Brent search between the best
+    point's neighbours — about ``n_grid + 12`` LMI solves. The largest per-region gain, not
+    :attr:`PWAStateFeedback.gain_bound`, is the objective: the gain bound only bounds the
+    common ``K`` and decreases all the way to the ``ν`` that cancels the nonlinearity (Example
+    A: ``ν = k_s = 5``, bound 0.58) while ``K_0 = K + νcᵀ`` grows with ``ν``.
+
+    Parameters
+    ----------
+    system, sigma, B, scale
+        As in :func:`design_pwa_state_feedback`.
+    nu_bounds
+        ``(lo, hi)``, the interval searched.
+    n_grid
+        Points of the initial grid (>= 3).
+
+    Returns
+    -------
+    PWAStateFeedback
+        The design at the best ``ν`` found (a local optimum of a one-dimensional search).
+
+    Raises
+    ------
+    ModelError
+        More than one input, or a bad interval/grid.
+    InfeasibleDesignError
+        No ``ν`` of the grid gives a feasible design.
+
+    Notes
+    -----
+    Each candidate is a full :func:`design_pwa_state_feedback` (certificate re-checked), so
+    the returned design carries the same guarantees; only the choice of ``ν`` is heuristic.
+
+    References
+    ----------
+    D5.3 chapter 11 §2.5(b) of our spec (the bilinearity and the outer search over ``ν``).
+
+    Examples
+    --------
+    Example A, ``σ = 0.3``: the largest per-region gain drops from 2.29 (``ν = 0``, linear)
+    to 1.71 at ``ν ≈ 1.9``, where ``‖K_0‖ = ‖K_1‖``:
+
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> pf = tune_pwa_state_feedback(one_sided_oscillator(0.1), sigma=0.3, nu_bounds=(0, 5),
+    ...                              n_grid=6)
+    >>> round(float(pf.nu[0]), 1), round(max(pf.region_gains), 2)
+    (1.9, 1.71)
+    """
+    from scipy.optimize import minimize_scalar
+
+    B_ = _input_matrix(system, B)
+    if B_.shape[1] != 1:
+        raise ModelError(f"B: tune_pwa_state_feedback searches a scalar nu (one input); got "
+                         f"{B_.shape[1]} inputs — call design_pwa_state_feedback per nu")
+    lo, hi = (float(v) for v in nu_bounds)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi) or int(n_grid) < 3:
+        raise ModelError(f"nu_bounds, n_grid: expected finite lo < hi and n_grid >= 3, got "
+                         f"{nu_bounds!r}, {n_grid!r}")
+    found: dict[float, PWAStateFeedback | None] = {}
+
+    def design(nu: float) -> PWAStateFeedback | None:
+        if nu not in found:
+            try:
+                found[nu] = design_pwa_state_feedback(system, nu=nu, sigma=sigma, B=B_,
+                                                      scale=scale)
+            except InfeasibleDesignError:
+                found[nu] = None
+        return found[nu]
+
+    def cost(nu: float) -> float:
+        pf = design(float(nu))
+        return np.inf if pf is None else max(pf.region_gains)
+
+    grid = np.linspace(lo, hi, int(n_grid))
+    costs = np.array([cost(v) for v in grid])
+    if not np.any(np.isfinite(costs)):
+        raise InfeasibleDesignError(f"tune_pwa_state_feedback: no nu in [{lo:g}, {hi:g}] "
+                                    f"({int(n_grid)} points) gives a feasible design for "
+                                    f"sigma={sigma:g}", status="infeasible")
+    i = int(np.argmin(costs))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    res = minimize_scalar(cost, bounds=(a, b), method="bounded",
+                          options={"xatol": 1e-3 * max(hi - lo, 1e-12), "maxiter": 12})
+    best = float(res.x) if np.isfinite(res.fun) and res.fun < costs[i] else float(grid[i])
+    out = design(best)
+    assert out is not None
+    return out
 
 
 def _bimodal_facet(system: Any) -> tuple[FloatArray, float]:
@@ -540,7 +725,8 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
     C
         Measured output ``y = Cx`` (default: the model's ``C``).
     scale
-        As in :func:`design_state_feedback` (``C̃ = CS⁻¹``, ``L = ωS⁻¹L̃``).
+        As in :func:`design_state_feedback` (``C̃ = CS⁻¹/g``, ``L = ωS⁻¹L̃/g``; ``"auto"``
+        also normalises ``‖C̃‖ = 1``).
 
     Raises
     ------
@@ -559,6 +745,19 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
     ----------
     D5.3 chapter 11 §2.5(c); A. Juloski, W.P.M.H. Heemels, S. Weiland, "Observer design for a
     class of piecewise linear systems", Int. J. Robust Nonlinear Control, 2007.
+
+    Examples
+    --------
+    Example A (ch11 §4.1), ``y = q``, ``σ_o = 1``; the badly scaled beam needs ``"auto"``:
+
+    >>> import numpy as np
+    >>> from nscontrol.examples.ch11_convergent_pwa import beam_surrogate, one_sided_oscillator
+    >>> obs = design_observer(one_sided_oscillator(0.1), sigma=1.0)
+    >>> np.round(obs.L.ravel(), 2), round(obs.kappa, 2)
+    (array([3.11, 3.4 ]), 9.73)
+    >>> beam = design_observer(beam_surrogate(), sigma=0.3 * 2 * np.pi * 20, scale="auto")
+    >>> beam.status
+    'optimal'
     """
     import cvxpy as cp
 
@@ -572,11 +771,11 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
                          "the model with C=...")
     C = as_matrix("C", np.reshape(C, (-1, n)) if np.ndim(C) == 1 else C, cols=n)
     sigma = check_positive("sigma", sigma)
-    sc = _resolve_scaling(scale, As, None)
+    sc = _resolve_scaling(scale, As, None, C)
     q = C.shape[0]
     Sinv = np.linalg.inv(sc.S)
     At = [sc.S @ A @ Sinv / sc.omega for A in As]
-    Ct = C @ Sinv
+    Ct = C @ Sinv / sc.output_unit
     s_t = sigma / sc.omega
     prob = LMIProblem("convergent PWA observer (ch11 OBS-sigma)")
     P = prob.symmetric("P", n)
@@ -597,7 +796,7 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
             status=err.status) from err
     status = res.status
     Pv = res["P"]
-    L = sc.omega * Sinv @ np.linalg.solve(Pv, res["Z"])
+    L = (sc.omega / sc.output_unit) * Sinv @ np.linalg.solve(Pv, res["Z"])
     Po = sc.S.T @ Pv @ sc.S
     Po = 0.5 * (Po + Po.T)
     _recheck([A - L @ C for A in As], Po, sigma, who="design_observer", status=status)
