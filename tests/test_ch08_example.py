@@ -28,5 +28,8 @@ def test_example_json_has_every_check_and_passes(tmp_path):
         for field in ("feasible", "alpha_max", "equality_residual", "V_ratio_at_T",
                       "bound_violations"):
             assert field in entry, (key, field)
+        # per-example checks (issue 6), each with its measured value
+        own = entry["checks"]
+        assert own and all(c["passed"] and "value" in c for c in own), (key, own)
     assert data["metrics"]["5.3"]["feasible"] is False
     assert len(list(tmp_path.glob("ch08_*.png"))) == 4
