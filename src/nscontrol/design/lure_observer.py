@@ -372,7 +372,7 @@ class LureObserverDesign:
         ----------
         plant : LureSystem
             The plant the design was made for (same ``A, G, H, C, D``; for a non-monotone law
-            the loop-transformed plant, see :func:`design_lure_observer`).
+            the plant from :func:`loop_transformed_lure_system`).
         """
         return _closed_loop(self, plant)
 
