@@ -132,8 +132,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
                     horizon=(check_positive("zeno_horizon", zeno_horizon)
                              if zeno_horizon is not None else 1e-3 * (tf - t0)),
                     on_zeno=on_zeno, listeners=tuple(listeners), rtol=rtol, atol=atol,
-                    every=_check_every(record_every),
-                    signals=None if signals is None else tuple(signals), progress=progress)
+                    every=record_every, signals=signals, progress=progress)
     if isinstance(system, LinearHybridSystem):
         if u is not None:
             raise ModelError("u: a LinearHybridSystem carries its input generator in its state; "
@@ -164,23 +163,12 @@ class _Options:
         self.__dict__.update(kw)
 
 
-def _check_every(record_every: Any) -> int:
-    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) \
-            or record_every < 1:
-        raise ModelError(f"record_every: expected an integer >= 1, got {record_every!r}")
-    return int(record_every)
-
-
 class _Samples:
     """The run's :class:`Recorder` (``record_every``, selected signals) and the last sample
     offered, so that the final state is kept whatever ``record_every`` drops."""
 
     def __init__(self, n: int, opts: _Options, offered: Sequence[str]) -> None:
-        unknown = sorted(set(opts.signals or ()) - set(offered))
-        if unknown:
-            raise ModelError(f"signals: unknown name(s) {unknown}; this system records "
-                             f"{sorted(offered)}")
-        self.rec = Recorder(n, every=opts.every, signals=opts.signals)
+        self.rec = Recorder(n, every=opts.every, signals=opts.signals, offered=offered)
         self.last: tuple[float, FloatArray, dict[str, FloatArray]] | None = None
 
     def extend(self, times: FloatArray, X: FloatArray, **signals: FloatArray) -> None:
