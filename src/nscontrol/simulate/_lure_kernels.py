@@ -1,8 +1,9 @@
 """Compiled inner loops of the implicit Euler / θ-method for Lur'e systems.
 
-Both kernels advance ``x_{k+1} = Φ x_k + Γ ū_k + G_h w_{k+1}`` where ``w_{k+1}`` solves the
+The kernels advance ``x_{k+1} = Φ x_k + Γ ū_k + G_h w_{k+1}`` where ``w_{k+1}`` solves the
 one-step inclusion ``w ∈ -φ(a + D_h w)``, ``a = H Φ x_k + H Γ ū_k + g_{k+1}``, for laws that act
-componentwise. Component kinds:
+componentwise and a step matrix ``D_h`` that is diagonal or lower triangular after a permutation
+of the components (a plant and its observer). Component kinds:
 
 * ``KIND_SOFT`` (relay ``c Sign``, Coulomb): ``z = sign(a) max(|a| - γ c, 0)``;
 * ``KIND_CLIP`` (normal cone of ``[lo, hi]``, complementarity when ``[0, inf)``):
@@ -40,38 +41,71 @@ def _affine_part(Phi, Gam, HPhi, HGam, x, ubar, gnext, q, a):
 
 
 @njit(cache=True)
-def diagonal_steps(Phi, Gam, Gh, HPhi, HGam, dh, kind, p1, p2, x0, ubar, gnext,
-                   X, Z, Wout):
-    """Steps with a diagonal step matrix ``D_h = diag(dh)``: closed-form resolvents.
+def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2, H, ucol, x0,
+                     ubar, gnext, X, Z, Wout):
+    """Steps with a step matrix ``D_h`` that is lower triangular in the component order
+    ``order`` (diagonal when ``coupled`` is False): closed-form resolvents, one component after
+    the other, ``z_i = (1 + d_ii φ_i)⁻¹(a_i + Σ_{j before i} d_ij w_j)``.
 
-    ``ubar[k]``, ``gnext[k]`` are the input average and the shift used by step ``k``;
-    outputs ``X[k]``, ``Z[k]``, ``Wout[k]`` are the state, law argument and multiplier after
-    step ``k``.
+    ``ubar[k]``, ``gnext[k]`` are the input mean and the shift used by step ``k``; outputs
+    ``X[k]``, ``Z[k]``, ``Wout[k]`` are the state, law argument and multiplier after step
+    ``k``. ``Z`` is the resolvent's value (a stuck relay has ``z_i == 0.0``), a sliding relay
+    has ``w_i = ∓c_i`` exactly. When component ``i`` sits at a kink of its law (stuck, or
+    clipped to a bound) and ``z_i = H[i, j] x_j + g_i`` involves one state only
+    (``ucol[i] = j >= 0``), ``x_j`` is set to ``(z_i - g_i)/H[i, j]``: the active constraint
+    holds exactly on the state instead of up to the round-off of ``Φx + G_h w``.
     """
     n = Phi.shape[0]
-    m = dh.shape[0]
+    m = Dh.shape[0]
     q = np.empty(n)
     a = np.empty(m)
+    w = np.zeros(m)
+    stuck = np.zeros(m, np.bool_)
     x = x0.copy()
     for k in range(ubar.shape[0]):
         _affine_part(Phi, Gam, HPhi, HGam, x, ubar[k], gnext[k], q, a)
-        for i in range(m):
+        if coupled:
+            for i in range(m):
+                w[i] = 0.0
+        for idx in range(m):
+            i = order[idx]
             ai = a[i]
+            if coupled:
+                for j in range(m):
+                    if j != i:
+                        ai += Dh[i, j] * w[j]
+            d = Dh[i, i]
+            kink = False
             if kind[i] == KIND_SOFT:
-                thr = dh[i] * p1[i]
-                if ai > thr:
+                thr = d * p1[i]
+                if ai > thr:          # sliding: the multiplier sits on its bound exactly
                     zi = ai - thr
+                    wi = -p1[i]
                 elif ai < -thr:
                     zi = ai + thr
-                else:
+                    wi = p1[i]
+                else:                 # stuck
                     zi = 0.0
+                    wi = -ai / d
+                    kink = True
             else:
                 zi = min(max(ai, p1[i]), p2[i])
+                if zi == ai:
+                    wi = 0.0
+                else:
+                    wi = (zi - ai) / d
+                    kink = True
+            w[i] = wi
             Z[k, i] = zi
-            Wout[k, i] = (zi - ai) / dh[i]
+            Wout[k, i] = wi
+            stuck[i] = kink
         for i in range(n):
             s = q[i]
             for j in range(m):
-                s += Gh[i, j] * Wout[k, j]
+                s += Gh[i, j] * w[j]
             x[i] = s
-            X[k, i] = s
+        for i in range(m):
+            if stuck[i] and ucol[i] >= 0:
+                x[ucol[i]] = (Z[k, i] - gnext[k, i]) / H[i, ucol[i]]
+        for i in range(n):
+            X[k, i] = x[i]

@@ -1,5 +1,6 @@
 """Compiled inner loop of the θ-method for Lur'e systems whose step matrix is not diagonal:
-one LCP per step through the shared Lemke kernel of :mod:`nscontrol.numerics._lcp_kernels`.
+one LCP per step and per diagonal block of ``D_h`` through the shared Lemke kernel of
+:mod:`nscontrol.numerics._lcp_kernels`, each solution verified by its natural residual.
 (Kept apart from :mod:`._lure_kernels` so that the closed-form path never loads the LCP code.)
 """
 
@@ -8,52 +9,87 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lcp_kernels import lemke_kernel
+from ..numerics._lcp_kernels import NUMERICAL_FAILURE, lemke_kernel, verify_dense
 from ._lure_kernels import _affine_part
 
 
 @njit(cache=True)
-def lcp_steps(Phi, Gam, Gh, HPhi, HGam, Dh, M, Qa, q0, T, s, x0, ubar, gnext, X, Z, Wout,
-              max_iter):
-    """Steps with a full step matrix: one LCP ``0 <= ζ ⟂ M ζ + Qa a + q0 >= 0`` per step,
-    solved by the shared Lemke kernel, then ``w = T ζ + s``.
+def lcp_steps(Phi, Gam, Gh, HPhi, HGam, Dh, M3, Qa3, q03, T3, s3, comp, nv, mg, x0, ubar, gnext,
+              X, Z, Wout, tol):
+    """Steps with a full or block-triangular step matrix.
 
-    Returns ``(k, status)``: the number of completed steps and the kernel status of the first
-    failed step (0 when all succeeded).
+    Block ``g`` (in dependency order) holds the law components ``comp[g, :mg[g]]`` and the LCP
+    ``0 <= ζ ⟂ M ζ + Qa a_g + q0 >= 0`` of size ``nv[g]`` (zero-padded in ``M3[g]``,
+    ``Qa3[g]``, ``q03[g]``), with ``a_g = a + D_h w`` restricted to the block (the multipliers
+    of the blocks solved before it enter, the others are still zero) and ``w = T ζ + s``.
+    Every Lemke solution is accepted only if its natural residual is below ``tol`` (or the
+    round-off floor).
+
+    Returns ``(k, status, residual)``: the number of completed steps, the status of the first
+    failed step (0 when all succeeded; ``NUMERICAL_FAILURE`` for a rejected residual) and
+    the worst accepted residual (or the rejected one).
     """
     n = Phi.shape[0]
     m = Dh.shape[0]
-    nv = M.shape[0]
+    nb = nv.shape[0]
+    P = M3.shape[1]
     qv = np.empty(n)
     a = np.empty(m)
-    qlcp = np.empty(nv)
-    zeta = np.empty(nv)
-    wv = np.empty(nv)
+    w = np.zeros(m)
+    ag = np.empty(m)
+    qbuf = np.empty(P)
+    zbuf = np.zeros(P)
+    wbuf = np.empty(P)
+    Ms = [np.ascontiguousarray(M3[g, :nv[g], :nv[g]]) for g in range(nb)]
+    worst = 0.0
     x = x0.copy()
     for k in range(ubar.shape[0]):
         _affine_part(Phi, Gam, HPhi, HGam, x, ubar[k], gnext[k], qv, a)
-        for r in range(nv):
-            acc = q0[r]
-            for j in range(m):
-                acc += Qa[r, j] * a[j]
-            qlcp[r] = acc
-        status, _ = lemke_kernel(M, qlcp, zeta, wv, max_iter)
-        if status != 0:
-            return k, status
         for i in range(m):
-            acc = s[i]
-            for r in range(nv):
-                acc += T[i, r] * zeta[r]
-            Wout[k, i] = acc
+            w[i] = 0.0
+        for g in range(nb):
+            v = nv[g]
+            kg = mg[g]
+            for li in range(kg):
+                i = comp[g, li]
+                acc = a[i]
+                for j in range(m):
+                    acc += Dh[i, j] * w[j]
+                ag[li] = acc
+            zeta = zbuf[:v]
+            if v > 0:
+                M = Ms[g]
+                qlcp = qbuf[:v]
+                wv = wbuf[:v]
+                for r in range(v):
+                    acc = q03[g, r]
+                    for li in range(kg):
+                        acc += Qa3[g, r, li] * ag[li]
+                    qlcp[r] = acc
+                status, _ = lemke_kernel(M, qlcp, zeta, wv, 50 * (v + 1))
+                if status != 0:
+                    return k, status, np.inf
+                res, floor = verify_dense(M, qlcp, zeta, wv)
+                if not res <= max(tol, floor):
+                    return k, NUMERICAL_FAILURE, res
+                worst = max(worst, res)
+            for li in range(kg):
+                acc = s3[g, li]
+                for r in range(v):
+                    acc += T3[g, li, r] * zeta[r]
+                w[comp[g, li]] = acc
+            for li in range(kg):
+                i = comp[g, li]
+                acc = ag[li]
+                for lj in range(kg):
+                    acc += Dh[i, comp[g, lj]] * w[comp[g, lj]]
+                Z[k, i] = acc
         for i in range(m):
-            acc = a[i]
-            for j in range(m):
-                acc += Dh[i, j] * Wout[k, j]
-            Z[k, i] = acc
+            Wout[k, i] = w[i]
         for i in range(n):
             acc = qv[i]
             for j in range(m):
-                acc += Gh[i, j] * Wout[k, j]
+                acc += Gh[i, j] * w[j]
             x[i] = acc
             X[k, i] = acc
-    return ubar.shape[0], 0
+    return ubar.shape[0], 0, worst

@@ -12,6 +12,15 @@ surface never re-triggers it). At a hit of surface ``j`` with ``σ± = ∇h_jᵀ
 * the arrival side's ``σ`` zero: grazing (recorded, the mode is kept);
 * ``σ⁻ < 0 < σ⁺``: repelling sliding, refused (non-unique forward solutions).
 
+A tangential touch without a sign change of ``h_k`` is caught by a non-terminal event on
+``σ_k = ∇h_kᵀF`` of the current field, armed in the direction of an extremum of ``h_k`` towards
+the surface: at a root where ``|h_k| <= 100 (atol + rtol |x|) |∇h_k|`` a ``grazing`` event is
+recorded (the mode is kept).
+
+While sliding on ``h_j = 0`` the samples and the state at the end of every sliding piece are
+projected back onto the surface (Newton along ``∇h_j``), so the integration error of the
+Filippov field does not accumulate off a curved surface.
+
 With ``sensitivity=True`` the variational equation ``Φ' = J Φ`` (``J`` from
 ``system.jacobian`` or central differences; for ``F_s`` always by differences) is integrated
 with the state.
@@ -24,9 +33,11 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray
-from ..errors import ModelError
+from ..errors import ModelError, SolverError
 from ..systems.switched import _fd_jacobian
 from .switching import saltation_matrix
+
+_GRAZE_FACTOR = 100.0
 
 
 class _Fields:
@@ -116,6 +127,7 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
                   _mode_code(signs, sliding), np.eye(n))
     pieces = 0
+    last_graze: dict[int, float] = {}
     while t < run.tf:
         f = fields.rhs(signs, sliding)
         events, kinds = _events(system, fields, signs, sliding)
@@ -126,12 +138,19 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             rhs, y0 = f, x
         sol = solve_ivp(rhs, (t, run.tf), y0, method="DOP853", rtol=run.rtol, atol=run.atol,
                         events=events, dense_output=True)
-        if sol.status < 0:
-            raise ModelError(f"switching: DOP853 failed at t = {sol.t[-1]:.6g}: {sol.message}")
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
-        if ts.size:
-            run.rec.extend(ts, sol.sol(ts)[:n].T)
+        if ts.size and sol.sol is not None:
+            X = sol.sol(ts)[:n].T
+            if sliding >= 0:
+                X = np.array([_project(system, sliding, xs) for xs in X])
+            run.rec.extend(ts, X)
+        if sol.status < 0:
+            raise SolverError(f"switching: DOP853 failed at t = {t_end:.6g} "
+                              f"({sol.message}); the field may be singular or blow up there. "
+                              f"The trajectory up to that time is in err.trajectory",
+                              status="dop853")
+        _record_grazings(system, run, sol, kinds, signs, sliding, t_end, last_graze)
         if run.sensitivity:
             run.Phi = sol.y[n:, -1].reshape(n, n) @ run.Phi
         run.stuck = 0 if t_end > t else run.stuck
@@ -139,10 +158,13 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             run.zero_length(t_end)
         pieces += 1
         t, x = t_end, sol.y[:n, -1].copy()
+        if sliding >= 0:
+            x = _project(system, sliding, x)
         run.bar.update(t)
         if sol.status != 1:
             break
-        which = next(i for i, te in enumerate(sol.t_events) if te.size)
+        which = next(i for i, te in enumerate(sol.t_events)
+                     if te.size and kinds[i][0] != "graze")
         kind, k = kinds[which]
         if kind == "exit":
             old = _mode_code(signs, sliding)
@@ -151,8 +173,12 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             j, sliding, signs = sliding, -1, tuple(new_signs)
             run.event(t, "sliding_exit", j, x, x, old, _mode_code(signs, -1), np.eye(n))
             run.rec.sample(t, x, force=True)
+            last_graze[j] = t   # a tangential exit: the σ root at its start is not a graze
             continue
         signs, sliding = _hit_surface(fields, run, t, x, signs, sliding, k)
+        last = run.rec.events[-1] if run.rec.events else None
+        if last is not None and last.kind == "grazing" and last.index == k:
+            last_graze[k] = t   # a σ root right after this touch is the same grazing
         run.rec.sample(t, x, force=True)
     if run.rec.last_time < run.tf:
         run.rec.sample(run.tf, x, force=True)
@@ -160,10 +186,60 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             "propagation": "dop853"}
 
 
+def _project(system: Any, j: int, x: FloatArray) -> FloatArray:
+    """``x`` moved back onto ``h_j = 0`` by Newton steps along ``∇h_j`` (at most 4)."""
+    best = x
+    hb = abs(float(system.surfaces[j](x)))
+    for _ in range(4):
+        if hb == 0.0:
+            break
+        g = system.gradient(j, best)
+        gg = float(g @ g)
+        if gg == 0.0:
+            break
+        cand = best - float(system.surfaces[j](best)) / gg * g
+        hc = abs(float(system.surfaces[j](cand)))
+        if not hc < hb:
+            break
+        best, hb = cand, hc
+    return best
+
+
+def _record_grazings(system: Any, run: Any, sol: Any, kinds: list[tuple[str, int]],
+                     signs: tuple[int, ...], sliding: int, t_end: float,
+                     last_graze: dict[int, float]) -> None:
+    """Grazing events from the roots of ``σ_k`` found in the piece (before its end)."""
+    n = system.n_states
+    found = []
+    for i, (kind, k) in enumerate(kinds):
+        if kind != "graze":
+            continue
+        for tr in sol.t_events[i]:
+            tr = float(tr)
+            if tr >= t_end and sol.status == 1:
+                continue
+            xr = sol.sol(tr)[:n]
+            g = system.gradient(k, xr)
+            tol = _GRAZE_FACTOR * (run.atol + run.rtol * float(np.max(np.abs(xr)))) * \
+                float(np.linalg.norm(g))
+            if abs(float(system.surfaces[k](xr))) > tol:
+                continue
+            if abs(tr - last_graze.get(k, -np.inf)) <= 1e-9 * (1.0 + abs(tr)):
+                continue
+            found.append((tr, k, xr))
+    code = _mode_code(signs, sliding)
+    for tr, k, xr in sorted(found, key=lambda e: e[0]):
+        last_graze[k] = tr
+        run.event(tr, "grazing", k, xr, xr, code, code)
+        run.rec.sample(tr, xr, force=True)
+
+
 def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
             ) -> tuple[list[Any], list[tuple[str, int]]]:
-    """Terminal events of a piece: each surface armed in the direction leaving the current
-    side, and while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0`` (rising)."""
+    """Events of a piece: each surface armed in the direction leaving the current side
+    (terminal), the extrema of each surface function towards it (``σ_k = 0``, non-terminal:
+    grazing candidates), and while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0``
+    (rising, terminal)."""
     n = system.n_states
     events: list[Any] = []
     kinds: list[tuple[str, int]] = []
@@ -180,10 +256,19 @@ def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
         ev.terminal, ev.direction = True, float(side)  # type: ignore[attr-defined]
         return ev
 
+    def graze(k: int) -> Any:
+        def ev(t: float, y: FloatArray) -> float:
+            x = y[:n]
+            return float(system.gradient(k, x) @ fields.rhs(signs, sliding)(t, x))
+        ev.terminal, ev.direction = False, float(signs[k])  # type: ignore[attr-defined]
+        return ev
+
     for k in range(len(signs)):
         if k != sliding:
             events.append(surface(k))
             kinds.append(("surface", k))
+            events.append(graze(k))
+            kinds.append(("graze", k))
     if sliding >= 0:
         for side in (-1, 1):
             events.append(exit_event(side))
@@ -225,9 +310,9 @@ def _hit_surface(fields: _Fields, run: Any, t: float, x: FloatArray, signs: tupl
         f_after = fields.rhs(flipped_t, slide_after)(t, x)
         S = saltation_matrix(f_before, f_after, nrm) if run.sensitivity else None
         run.event(t, "crossing", k, x, x, old, _mode_code(flipped_t, slide_after), S)
-        if slide_after < 0 <= sliding:
+        if slide_after < 0 <= sliding:  # the crossing's saltation already maps F_s to F⁺
             run.event(t, "sliding_exit", sliding, x, x, _mode_code(flipped_t, sliding),
-                      _mode_code(flipped_t, -1))
+                      _mode_code(flipped_t, -1), np.eye(x.shape[0]))
         return flipped_t, slide_after
     if sm > 0 > sp:  # attracting sliding
         if sliding >= 0:

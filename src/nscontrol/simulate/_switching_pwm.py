@@ -1,17 +1,20 @@
 """PWM-switched affine systems for :mod:`nscontrol.simulate.switching`.
 
-At each sampling instant the controller's schedule gives the switching instants of the period in
-closed form; each sub-interval is propagated exactly with the exponential of the augmented
-matrix ``[[A_σ, b_σ], [0, 0]]`` (cached per mode and duration, so a periodic schedule costs a
-few exponentials in total).
+At each sampling instant ``t_k = t0 + kT`` (computed from ``k``, never accumulated) the
+controller reads ``x(t_k)`` and its schedule gives the switching instants ``t_k + o_j`` of the
+period in closed form. The state is carried from instant to instant over the differences of
+these exact instants, each piece propagated exactly by the mode's
+:class:`~nscontrol.numerics.lti.LTIFlow` on the augmented state ``[x; 1]``
+(:meth:`SwitchedAffineSystem.flow`, shared across runs). So neither the instants nor the times
+at which the duty is evaluated drift over long runs.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg import expm
 
 from .._validation import FloatArray
 from ..errors import ModelError
@@ -20,51 +23,60 @@ from ..errors import ModelError
 def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
     ctrl = system.controller
     if ctrl is None:
-        raise ModelError("system.controller: a SwitchedAffineSystem needs a PWMController to be "
-                         "simulated; pass controller=PWMController(period, duty)")
+        raise ModelError("system.controller: a SwitchedAffineSystem needs its PWMController to "
+                         "be simulated, and the controller is part of the model (not a "
+                         "simulate option): build SwitchedAffineSystem(modes, "
+                         "controller=PWMController(period, duty))")
     if run.sensitivity:
         raise ModelError("sensitivity: not available for PWM systems (the switching instants "
                          "depend on the sampled state); use the stroboscopic-map analysis")
     n = system.n_states
-    aug = []
-    for A, b in system.modes:
-        M = np.zeros((n + 1, n + 1))
-        M[:n, :n], M[:n, n] = A, b
-        aug.append(M)
-    cache: dict[tuple[int, float], FloatArray] = {}
+    flows: dict[int, Any] = {}
 
-    def step(mode: int, x: FloatArray, tau: float) -> FloatArray:
-        key = (mode, tau)
-        E = cache.get(key)
-        if E is None:
-            E = expm(aug[mode] * tau)
-            if len(cache) < 4096:
-                cache[key] = E
-        return E[:n, :n] @ x + E[:n, n]
+    def flow(mode: int) -> Any:
+        if mode not in flows:
+            flows[mode] = system.flow(mode)
+        return flows[mode]
 
-    T = ctrl.period
-    t, x = run.t0, x0.copy()
-    run.rec.sample(t, x, force=True)
+    T, t0, tf = ctrl.period, run.t0, run.tf
+    n_periods = math.ceil((tf - t0) / T - 1e-12)
+    xi = np.r_[x0, 1.0]
+    t = t0
+    run.rec.sample(t, x0, force=True)
     duties, mode_prev = [], -1
     k = 0
-    while t < run.tf - 1e-12 * T:
-        t_k = run.t0 + k * T
-        d, pieces = ctrl.schedule(t_k, x)
+    while k < n_periods:
+        t_k = t0 + k * T                      # exact instants, not accumulated
+        t_next = t0 + (k + 1) * T
+        if not t_next > t_k:
+            raise ModelError(f"period: T = {T:g} is below the floating-point resolution of the "
+                             f"time near t_k = {t_k:.17g}: the run cannot advance; shift t_span "
+                             f"towards 0 or use a longer period")
+        d = ctrl.duty_at(t_k, xi[:n])
         duties.append(d)
-        for tau, mode in pieces:
-            if mode_prev >= 0 and mode != mode_prev:  # a switching instant, exact
-                run.event(t, "switch", -1, x, x, mode_prev, mode)
-                run.rec.sample(t, x, force=True)
-            t_end = min(t + tau, run.tf)
-            ts = run.samples(t, t_end, last=False)
-            if ts.size:
-                run.rec.extend(ts, np.array([step(mode, x, s - t) for s in ts]))
-            x = step(mode, x, t_end - t)
-            t, mode_prev = t_end, mode
-            if t >= run.tf:
+        offs = ctrl.offsets(d)
+        starts = [t_k + o for o, _ in offs]
+        ends = starts[1:] + [t_next]
+        for (_, mode), a, b in zip(offs, starts, ends, strict=True):
+            if a >= tf:
                 break
+            b = min(b, tf)
+            if mode_prev >= 0 and mode != mode_prev:  # a switching instant, exact
+                x = xi[:n]
+                run.event(a, "switch", -1, x, x, mode_prev, mode)
+                run.rec.sample(a, x, force=True)
+            mode_prev = mode
+            if b <= a:
+                continue
+            fl = flow(mode)
+            ts = run.samples(a, b, last=False)
+            if ts.size:
+                run.rec.extend(ts, np.atleast_2d(fl.propagate(xi, ts - a))[:, :n])
+            xi = fl.state_at(xi, b - a)
+            xi[n] = 1.0
+            t = b
         k += 1
         run.bar.update(t)
-    if run.rec.last_time < run.tf:
-        run.rec.sample(run.tf, x, force=True)
+    if run.rec.last_time < tf:
+        run.rec.sample(tf, xi[:n], force=True)
     return {"periods": k, "duty": np.array(duties), "final_mode": mode_prev}

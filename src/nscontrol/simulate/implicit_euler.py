@@ -13,13 +13,27 @@ with ``W = I - hθA``, ``Φ = W⁻¹(I + h(1-θ)A)``, ``Γ = hW⁻¹B``, ``G_h =
 ``D_h = H G_h + D``. It is solved exactly at every step:
 
 * componentwise laws (relay, Coulomb, normal cones of intervals, complementarity and their
-  products) with a diagonal ``D_h``: closed-form resolvent ``z = (I + D_h φ)⁻¹(a)`` in a
-  compiled loop;
+  products) with a diagonal ``D_h``, or one that a permutation makes lower triangular (a plant
+  and its observer): closed-form resolvents ``z_i = (1 + d_ii φ_i)⁻¹(a_i + Σ_j d_ij w_j)``
+  component after component, in a compiled loop;
 * laws with a complementarity form (``law.complementarity_form()``: relay, friction, normal
-  cones, products) and a full ``D_h``: one LCP per step by the shared Lemke kernel of
-  :mod:`nscontrol.numerics._lcp_kernels`, in the same compiled loop;
-* any other monotone law (curved graphs): its own resolvent when ``D_h`` is diagonal, else
-  forward–backward splitting on ``0 ∈ D_h⁻¹(z - a) + φ(z)``, in Python.
+  cones, products) and a full ``D_h``: one LCP per step (or per diagonal block, see below) by
+  the shared Lemke kernel of :mod:`nscontrol.numerics._lcp_kernels`, in the same compiled loop,
+  each solution verified by its natural residual;
+* any other monotone law (curved graphs): its own resolvent when the (block of) ``D_h`` is
+  diagonal, else forward–backward splitting on ``0 ∈ D_h⁻¹(z - a) + φ(z)``, in Python, each
+  solution verified by the law's graph residual.
+
+Block structure: when the law is a ``Product`` whose parts are coupled one way only through
+``D_h`` (a plant and its observer: the observer sees the plant, not the reverse), ``D_h`` is
+block triangular up to a permutation of the parts. Each diagonal block is then solved after the
+blocks it depends on, and only the diagonal blocks need a positive definite symmetric part (the
+whole ``D_h`` need not). Couplings below ``1e-14 max|D_h|`` count as structural zeros.
+
+Inputs: an :class:`~nscontrol.numerics.lti.Exosystem` input enters through its exact mean over
+each step, ``ū_k = (1/h) ∫ u`` (so ``x' = -sign(x) + d(t)`` is integrated exactly before
+reaching, and the reaching time is found within one step); any other input through the
+θ-combination ``ū_k = (1-θ) u(t_k) + θ u(t_{k+1})`` of its samples (first-order accurate).
 
 Because the multiplier is implicit, a sliding motion is reached in finitely many steps and then
 held with ``z`` exactly zero (no chattering).
@@ -33,17 +47,20 @@ theta : float in [1/2, 1]
 record_every : int
     Keep every k-th step (the final state is always kept).
 signals : iterable of str, optional
-    Subset of ``("z", "w", "y")`` to record.
+    Subset of ``("z", "w", "y")`` to record (other names raise ``ModelError``).
 progress : bool, optional
     Progress bar on stderr (default: shown after 2 s).
 on_failure : {"raise", "return"}
     On a failed step raise :class:`~nscontrol.errors.SolverError` (with the partial
-    trajectory) or return it with ``status = -1``.
+    trajectory) or return it with ``status = -1``. A step fails when its one-step problem has
+    no verified solution: Lemke's status, or a natural residual above ``1e-10`` (LCP), or a
+    graph residual above ``1e-9 (1 + |a| + |w|)`` (Python path).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -51,16 +68,55 @@ import numpy as np
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_vector, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
+from ._setvalued_options import check_count, check_on_failure, check_signals
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
 
 _CHUNK = 1 << 16
 _OPTIONS = {"h", "theta", "record_every", "signals", "progress", "on_failure"}
+_SIGNALS = ("z", "w", "y")
+#: Couplings of ``D_h`` below this fraction of ``max|D_h|`` are structural zeros.
+_STRUCTURAL_ZERO = 1e-14
+#: Acceptance of a per-step LCP solution (natural residual, relative to ``1 + max|q|``).
+LCP_TOL = 1e-10
+#: Acceptance of a per-step inclusion solution on the Python path (graph residual, relative
+#: to ``1 + |a| + |w|``).
+GRAPH_TOL = 1e-9
 
 
 class StepMatrices:
-    """The constant matrices of one θ-method step (see the module docstring)."""
+    """The constant matrices of one θ-method step.
+
+    Parameters
+    ----------
+    system : LureSystem
+        The Lur'e system.
+    h : float
+        Step.
+    theta : float
+        θ of the smooth part, in ``[1/2, 1]``.
+
+    Attributes
+    ----------
+    Phi, Gam, Gh : ndarray
+        ``Φ = W⁻¹(I + h(1-θ)A)``, ``Γ = hW⁻¹B``, ``G_h = hW⁻¹G`` with ``W = I - hθA``.
+    HPhi, HGam : ndarray
+        ``HΦ`` and ``HΓ``.
+    Dh : ndarray
+        The one-step matrix ``D_h = H G_h + D``.
+
+    Notes
+    -----
+    Entries of ``Φ``, ``Γ``, ``G_h`` below ``1e-14`` times the largest are set to exact zeros:
+    the round-off of the solve must not couple blocks that are uncoupled (a plant does not see
+    its observer).
+
+    Raises
+    ------
+    ModelError
+        ``I - hθA`` is singular (condition number above ``1e14``).
+    """
 
     def __init__(self, system: Any, h: float, theta: float) -> None:
         A, G, H = system.A, system.G, system.H
@@ -71,9 +127,9 @@ class StepMatrices:
             raise ModelError(f"h: I - h·θ·A is singular for h = {h:g}, θ = {theta:g} "
                              f"(condition number {cond:.3g}); change the step h")
         B = system.B if system.B is not None else np.zeros((n, 0))
-        self.Phi = np.linalg.solve(W, np.eye(n) + h * (1.0 - theta) * A)
-        self.Gam = np.linalg.solve(W, h * B)
-        self.Gh = np.linalg.solve(W, h * G)
+        self.Phi = _structural(np.linalg.solve(W, np.eye(n) + h * (1.0 - theta) * A), False)
+        self.Gam = _structural(np.linalg.solve(W, h * B), False)
+        self.Gh = _structural(np.linalg.solve(W, h * G), False)
         self.HPhi = H @ self.Phi
         self.HGam = H @ self.Gam
         self.Dh = H @ self.Gh + system.D
@@ -81,15 +137,58 @@ class StepMatrices:
 
 
 def step_matrices(system: Any, h: float, theta: float = 1.0) -> StepMatrices:
-    """The step matrices ``Φ, Γ, G_h, D_h`` of the θ-method for ``system`` and step ``h``."""
+    """The step matrices of the θ-method for ``system`` and step ``h``.
+
+    Parameters
+    ----------
+    system : LureSystem
+        The Lur'e system.
+    h : float
+        Step, ``> 0``.
+    theta : float, optional
+        θ in ``[1/2, 1]`` (default 1, backward Euler).
+
+    Returns
+    -------
+    StepMatrices
+        ``Φ, Γ, G_h, HΦ, HΓ, D_h`` (see the module docstring).
+
+    Examples
+    --------
+    >>> from nscontrol.laws.relay import Relay
+    >>> from nscontrol.systems.lure import LureSystem
+    >>> m = step_matrices(LureSystem([[0.0]], [[1.0]], [[1.0]], Relay(1.0)), 0.1)
+    >>> float(m.Phi[0, 0]), float(m.Dh[0, 0])
+    (1.0, 0.1)
+    """
+    h = check_positive("h", h)
+    theta = check_in_interval("theta", theta, 0.5, 1.0)
     return StepMatrices(system, h, theta)
 
 
 def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | None:
-    """``(kind, p1, p2)`` arrays when ``law`` acts componentwise with a known resolvent.
+    """The compiled description of a law that acts componentwise with a known resolvent.
 
-    ``kind[i] = 0``: ``c Sign`` with ``c = p1[i]`` (relay, Coulomb); ``kind[i] = 1``: normal
-    cone of ``[p1[i], p2[i]]`` (complementarity: ``[0, inf)``). ``None`` for other laws.
+    Parameters
+    ----------
+    law : SetValuedLaw
+        A relay, Coulomb, interval/box normal cone, complementarity law or a product of them.
+
+    Returns
+    -------
+    (kind, p1, p2) or None
+        Per component: ``kind[i] = 0`` for ``c Sign`` with ``c = p1[i]`` (relay, Coulomb),
+        ``kind[i] = 1`` for the normal cone of ``[p1[i], p2[i]]`` (complementarity:
+        ``[0, inf)``). ``None`` for any other law.
+
+    Examples
+    --------
+    >>> from nscontrol.laws.normal_cone import Complementarity
+    >>> from nscontrol.laws.product import Product
+    >>> from nscontrol.laws.relay import Relay
+    >>> kind, p1, p2 = componentwise_spec(Product(Relay(2.0), Complementarity(1)))
+    >>> kind.tolist(), p1.tolist(), p2.tolist()
+    ([0, 1], [2.0, 0.0], [0.0, inf])
     """
     from ..laws.normal_cone import NormalConeBox
     from ..laws.product import Product
@@ -114,11 +213,33 @@ def _per_component(value: Any, m: int) -> FloatArray:
 
 
 def lcp_step_data(law: Any, Dh: FloatArray) -> tuple[FloatArray, ...] | None:
-    """The per-step LCP ``0 <= ξ ⟂ Mξ + Qa·a + q0 >= 0``, ``w = Tξ + s`` of the inclusion
-    ``w ∈ -φ(a + D_h w)``, from the law's complementarity form (``None`` when it has none).
+    """The per-step LCP of the inclusion ``w ∈ -φ(a + D_h w)``, from the law's complementarity
+    form.
 
+    Parameters
+    ----------
+    law : SetValuedLaw
+        The law ``φ``.
+    Dh : (m, m) ndarray
+        The one-step matrix.
+
+    Returns
+    -------
+    (M, Qa, q0, T, s) or None
+        The LCP ``0 <= ξ ⟂ Mξ + Qa·a + q0 >= 0`` and the multiplier ``w = Tξ + s``; ``None``
+        when the law has no complementarity form (curved graphs).
+
+    Notes
+    -----
     With the form ``w = w0 + Eξ``, ``η = Nz z + Nξ ξ + r``: ``M = Nz D_h E + Nξ``, ``Qa = Nz``,
     ``q0 = Nz D_h w0 + r``, ``T = E``, ``s = w0``; ``M`` is monotone when ``D_h`` is.
+
+    Examples
+    --------
+    >>> from nscontrol.laws.normal_cone import Complementarity
+    >>> M, Qa, q0, T, s = lcp_step_data(Complementarity(1), np.array([[2.0]]))
+    >>> M.tolist(), Qa.tolist(), T.tolist()
+    ([[2.0]], [[1.0]], [[1.0]])
     """
     try:
         form = law.complementarity_form()
@@ -130,45 +251,249 @@ def lcp_step_data(law: Any, Dh: FloatArray) -> tuple[FloatArray, ...] | None:
             np.ascontiguousarray(form.E), np.asarray(form.w0, float).copy())
 
 
-def _is_diagonal(M: FloatArray) -> bool:
-    off = M - np.diag(np.diag(M))
-    return bool(np.max(np.abs(off), initial=0.0) <= 1e-14 * max(1.0, np.max(np.abs(M))))
+# -- structure of the one-step matrix -----------------------------------------------------
+def _structural(M: FloatArray, keep_diagonal: bool = True) -> FloatArray:
+    """``M`` with entries below ``1e-14 max|M|`` set to exact zeros (diagonal kept)."""
+    D = np.array(M, dtype=float)
+    tol = _STRUCTURAL_ZERO * float(np.max(np.abs(D), initial=0.0))
+    off = np.abs(D) <= tol
+    if keep_diagonal and D.ndim == 2 and D.shape[0] == D.shape[1]:
+        np.fill_diagonal(off, False)
+    D[off] = 0.0
+    return D
 
 
-def _check_step_matrix(Dh: FloatArray, h: float) -> None:
-    sym = 0.5 * (Dh + Dh.T)
-    lam = float(np.linalg.eigvalsh(sym)[0])
-    if lam <= 0.0:
-        raise ModelError(
-            f"h: the one-step matrix D_h = h·H(I - hθA)⁻¹G + D is not positive definite for "
-            f"h = {h:g} (smallest eigenvalue of its symmetric part {lam:.3g}); the one-step "
-            f"inclusion may have no or several solutions. Check the sign of H·G (it must be "
-            f"positive, relative degree one) or add a positive feedthrough D")
+def _acyclic_order(D: FloatArray) -> np.ndarray | None:
+    """An order of the components in which each depends only on earlier ones (``D[i, j] != 0``
+    for ``j`` before ``i``): ``D`` is lower triangular after this permutation. ``None`` if the
+    coupling graph has a cycle (Kahn's algorithm)."""
+    m = D.shape[0]
+    dep = D != 0.0
+    np.fill_diagonal(dep, False)
+    remaining = dep.sum(axis=1)
+    order = [int(i) for i in np.flatnonzero(remaining == 0)]
+    done = np.zeros(m, bool)
+    done[order] = True
+    head = 0
+    while head < len(order):
+        j = order[head]
+        head += 1
+        for i in np.flatnonzero(dep[:, j]):
+            remaining[i] -= 1
+            if remaining[i] == 0 and not done[i]:
+                done[i] = True
+                order.append(int(i))
+    return np.array(order, np.int64) if len(order) == m else None
 
 
+@dataclass(frozen=True, eq=False)
+class _Block:
+    """One diagonal block of ``D_h``: the law components ``idx`` of the parts ``parts``."""
+
+    idx: np.ndarray
+    parts: tuple[int, ...]
+    law: Any
+    D: FloatArray
+
+
+def _law_parts(law: Any) -> list[tuple[slice, Any]]:
+    from ..laws.product import Product
+
+    if isinstance(law, Product):
+        return list(zip(law._slices, law.parts, strict=True))
+    return [(slice(0, int(law.dim)), law)]
+
+
+def _blocks(law: Any, D: FloatArray) -> list[_Block]:
+    """The strongly connected groups of the law's parts under the coupling of ``D``, in an
+    order where each group depends only on earlier ones (block lower triangular)."""
+    from ..laws.product import Product
+
+    parts = _law_parts(law)
+    k = len(parts)
+    reach = np.zeros((k, k), bool)
+    for a, (sa, _) in enumerate(parts):
+        for b, (sb, _) in enumerate(parts):
+            reach[a, b] = a == b or bool(np.any(D[sa, sb] != 0.0))
+    for c in range(k):  # transitive closure (Warshall)
+        reach |= reach[:, c:c + 1] & reach[c:c + 1, :]
+    groups: list[list[int]] = []
+    seen: set[int] = set()
+    for a in range(k):
+        if a not in seen:
+            g = [b for b in range(k) if reach[a, b] and reach[b, a]]
+            seen.update(g)
+            groups.append(g)
+    # a group depending on another reaches strictly more parts: sort by that count
+    groups.sort(key=lambda g: int(reach[g[0]].sum()))
+    out = []
+    for g in groups:
+        idx = np.concatenate([np.arange(parts[a][0].start, parts[a][0].stop) for a in g])
+        sub = parts[g[0]][1] if len(g) == 1 else Product(*(parts[a][1] for a in g))
+        out.append(_Block(idx.astype(np.int64), tuple(g), sub, D[np.ix_(idx, idx)].copy()))
+    return out
+
+
+def _single_state_rows(system: Any) -> np.ndarray:
+    """``ucol[i] = j`` when ``z_i = H[i, j] x_j + g_i`` (one state, no feedthrough), else -1:
+    the closed form then imposes an active constraint exactly on ``x_j``."""
+    H, D = system.H, system.D
+    ucol = np.full(H.shape[0], -1, np.int64)
+    for i in range(H.shape[0]):
+        nz = np.flatnonzero(H[i])
+        if nz.size == 1 and not np.any(D[i]):
+            ucol[i] = nz[0]
+    return ucol
+
+
+def _min_sym_eig(M: FloatArray) -> float:
+    return float(np.linalg.eigvalsh(0.5 * (M + M.T))[0]) if M.size else 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class _Plan:
+    """How every step's inclusion is solved (chosen once per run)."""
+
+    solver: str                # "closed_form", "lcp" or "python"
+    structure: str             # "diagonal", "triangular", "block_triangular" or "full"
+    D: FloatArray              # D_h with structural zeros
+    order: np.ndarray | None   # closed form: component order
+    blocks: tuple[_Block, ...]
+    lcp: tuple[Any, ...] | None = None   # padded per-block LCP data for the compiled loop
+
+
+def _plan(system: Any, Dh: FloatArray, h: float) -> _Plan:
+    """Choose the solver and check that the one-step inclusion is uniquely solvable."""
+    D = _structural(Dh)
+    spec = componentwise_spec(system.law)
+    if spec is not None:
+        order = _acyclic_order(D)
+        if order is not None:
+            d = np.diag(D)
+            bad = np.flatnonzero(d <= 0.0)
+            if bad.size:
+                i = int(bad[0])
+                raise ModelError(
+                    f"h: the one-step matrix D_h = h·H(I - hθA)⁻¹G + D is not positive "
+                    f"definite on law component {i} for h = {h:g}: D_h[{i}, {i}] = {d[i]:.3g} "
+                    f"(D_h is triangular up to a permutation, so its diagonal entries must be "
+                    f"positive); the one-step inclusion may have no or several solutions. "
+                    f"Check the sign of (H·G)[{i}, {i}] (it must be positive, relative degree "
+                    f"one) or add a positive feedthrough D")
+            off = D - np.diag(d)
+            structure = "diagonal" if not np.any(off) else "triangular"
+            return _Plan("closed_form", structure, D, order, ())
+    blocks = _blocks(system.law, D)
+    if len(blocks) == 1:
+        lam = _min_sym_eig(D)
+        if lam <= 0.0:
+            raise ModelError(
+                f"h: the one-step matrix D_h = h·H(I - hθA)⁻¹G + D is not positive definite for "
+                f"h = {h:g} (smallest eigenvalue of its symmetric part {lam:.3g}), and it has no "
+                f"block-triangular structure (one-way coupled parts of a Product law, as a "
+                f"plant and its observer) that would let smaller blocks be solved one after "
+                f"the other; the one-step inclusion may have no or several solutions. Check "
+                f"the sign of H·G (it must be positive, relative degree one) or add a positive "
+                f"feedthrough D")
+        structure = "full"
+    else:
+        for b, blk in enumerate(blocks):
+            lam = _min_sym_eig(blk.D)
+            if lam <= 0.0:
+                raise ModelError(
+                    f"h: diagonal block {b} of the one-step matrix D_h = h·H(I - hθA)⁻¹G + D "
+                    f"(law components {blk.idx.tolist()}, part(s) {list(blk.parts)} of the "
+                    f"Product law) is not positive definite for h = {h:g}: smallest "
+                    f"eigenvalue of its symmetric part {lam:.3g}. D_h is block triangular "
+                    f"(solved block by block), so each diagonal block must be positive "
+                    f"definite; check the sign of H·G on these components (relative degree "
+                    f"one), add a positive feedthrough D there, or change h")
+        structure = "block_triangular"
+    data = [lcp_step_data(b.law, b.D) for b in blocks]
+    if all(d is not None for d in data):
+        return _Plan("lcp", structure, D, None, tuple(blocks), _pad_lcp(blocks, data))
+    return _Plan("python", structure, D, None, tuple(blocks))
+
+
+def _pad_lcp(blocks: list[_Block], data: list[Any]) -> tuple[Any, ...]:
+    """Per-block LCP data stacked in zero-padded arrays for the compiled loop."""
+    nb = len(blocks)
+    P = max(1, max(d[0].shape[0] for d in data))
+    Pm = max(1, max(b.idx.size for b in blocks))
+    M3, Qa3, q03 = np.zeros((nb, P, P)), np.zeros((nb, P, Pm)), np.zeros((nb, P))
+    T3, s3 = np.zeros((nb, Pm, P)), np.zeros((nb, Pm))
+    comp = np.zeros((nb, Pm), np.int64)
+    nv, mg = np.zeros(nb, np.int64), np.zeros(nb, np.int64)
+    for g, (blk, (M, Qa, q0, T, s)) in enumerate(zip(blocks, data, strict=True)):
+        v, k = M.shape[0], blk.idx.size
+        nv[g], mg[g] = v, k
+        comp[g, :k] = blk.idx
+        M3[g, :v, :v], Qa3[g, :v, :k], q03[g, :v] = M, Qa, q0
+        T3[g, :k, :v], s3[g, :k] = T, s
+    return M3, Qa3, q03, T3, s3, comp, nv, mg
+
+
+# -- the initial multiplier and the Python one-step solve ----------------------------------
 def _initial_multiplier(system: Any, x0: FloatArray, t0: float) -> tuple[FloatArray, FloatArray]:
-    """``(z0, w0)`` at the initial time (the minimal-norm selection when ``D = 0``)."""
+    """``(z0, w0)`` at the initial time (the minimal-norm selection when ``D = 0``).
+
+    Raises
+    ------
+    InadmissibleStateError
+        ``D = 0`` and ``H x0 + g(t0)`` lies outside the domain of the law.
+    """
     a = system.H @ x0 + system.shift_at(t0)[0]
     m = a.shape[0]
     if not np.any(system.D):
+        bad = [f"z[{sl.start}:{sl.stop}] = {np.array2string(a[sl], precision=6)} outside the "
+               f"domain of {part!r}" for sl, part in _law_parts(system.law)
+               if not part.in_domain(a[sl], 1e-12 * (1.0 + float(np.max(np.abs(a[sl])))))]
+        if bad:
+            raise InadmissibleStateError(
+                f"x0: the initial state violates the law's constraint: z0 = H x0 + g(t0) must "
+                f"lie in dom φ (with D = 0 the multiplier cannot enforce it), got "
+                f"{'; '.join(bad)} for x0 = {np.array2string(x0, precision=6)}. Start from an "
+                f"admissible state (e.g. z0 >= 0 for complementarity)")
         try:
             return a, -np.asarray(system.law.select(a), float).reshape(m)
-        except InadmissibleStateError:  # outside the law's domain: the first step projects
-            return a, np.full(m, np.nan)
-    return _solve_inclusion_python(system.law, a, system.D)
+        except InadmissibleStateError as exc:  # a boundary point within the tolerance
+            raise InadmissibleStateError(f"x0: z0 = H x0 + g(t0) = {a} is outside dom φ: "
+                                         f"{exc}") from None
+    z, w, _ = _solve_inclusion_python(system.law, a, system.D)
+    return z, w
 
 
 def _solve_inclusion_python(law: Any, a: FloatArray, Dh: FloatArray
-                            ) -> tuple[FloatArray, FloatArray]:
+                            ) -> tuple[FloatArray, FloatArray, float]:
     """Solve ``w ∈ -φ(a + D_h w)`` for a general monotone law (outside the compiled loops):
     the shared :func:`nscontrol.laws.inclusion.solve_inclusion` (closed form or LCP), and for
-    curved laws with a full ``D_h`` forward–backward splitting."""
+    curved laws with a full ``D_h`` forward–backward splitting. Returns ``(z, w, residual)``
+    with the law's graph residual of ``(z, -w)``.
+
+    Raises
+    ------
+    SolverError
+        No convergence, or a graph residual above ``GRAPH_TOL (1 + |a| + |w|)``.
+    """
     from ..laws.inclusion import solve_inclusion
 
     if _is_diagonal(Dh) or lcp_step_data(law, Dh) is not None:
         sol = solve_inclusion(law, Dh, a)
-        return sol.z, sol.w
-    # forward-backward on 0 ∈ D_h⁻¹(z - a) + φ(z): strongly monotone + Lipschitz (ch08 §3.1)
+        z, w, res = sol.z, sol.w, float(sol.residual)
+    else:
+        z, w = _forward_backward(law, a, Dh)
+        res = law.graph_residual(z, -w)
+    scale = 1.0 + float(np.max(np.abs(a), initial=0.0)) + float(np.max(np.abs(w), initial=0.0))
+    if not res <= GRAPH_TOL * scale:
+        raise SolverError(f"implicit_euler: the one-step inclusion was not solved to tolerance "
+                          f"(graph residual {res:.3g} > {GRAPH_TOL:g}·{scale:.3g}); the step "
+                          f"matrix is badly conditioned (reduce h)", status="residual")
+    return z, w, res
+
+
+def _forward_backward(law: Any, a: FloatArray, Dh: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Forward–backward splitting on ``0 ∈ D_h⁻¹(z - a) + φ(z)``: the first operator is
+    strongly monotone and Lipschitz when ``D_h`` is positive definite (ch08 §3.1)."""
     Dinv = np.linalg.inv(Dh)
     mu = float(np.linalg.eigvalsh(0.5 * (Dinv + Dinv.T))[0])
     gamma = mu / float(np.linalg.norm(Dinv, 2)) ** 2
@@ -183,6 +508,12 @@ def _solve_inclusion_python(law: Any, a: FloatArray, Dh: FloatArray
                       "conditioned (reduce h)", status="max_iter")
 
 
+def _is_diagonal(M: FloatArray) -> bool:
+    off = M - np.diag(np.diag(M))
+    return bool(np.max(np.abs(off), initial=0.0) <= 1e-14 * max(1.0, np.max(np.abs(M))))
+
+
+# -- the integrator -----------------------------------------------------------------------
 def _check_options(options: dict[str, Any]) -> None:
     unknown = set(options) - _OPTIONS
     if unknown:
@@ -198,7 +529,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     system : LureSystem
         The Lur'e system (a plant with its observer is one stacked system).
     x0 : array_like, shape (n,)
-        Initial state.
+        Initial state; with ``D = 0``, ``H x0 + g(t0)`` must lie in the law's domain.
     t_span : (float, float)
         Start and end times.
     **options
@@ -209,14 +540,32 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     -------
     Trajectory
         States at the step times and signals ``z`` (law argument), ``w`` (multiplier) and
-        ``y = C x``; ``stats`` has ``steps``, ``h``, ``theta``, ``solver``.
+        ``y = C x``; ``stats`` has ``steps``, ``h``, ``theta``, ``solver`` (``closed_form``,
+        ``lcp`` or ``python``), ``structure`` of ``D_h`` (``diagonal``, ``triangular``,
+        ``block_triangular`` or ``full``), ``blocks`` and ``input`` (``exact_mean`` or
+        ``samples``).
 
     Raises
     ------
     ModelError
-        Not a LureSystem, bad options, ``I - hθA`` singular, or ``D_h`` not positive definite.
+        Not a LureSystem, bad options, ``I - hθA`` singular, or ``D_h`` (or one of its
+        diagonal blocks, when block triangular) not positive definite.
+    InadmissibleStateError
+        ``D = 0`` and ``H x0 + g(t0)`` outside the law's domain.
     SolverError
-        A one-step problem failed; ``err.trajectory`` holds the steps before it.
+        A one-step problem failed or its solution did not pass the residual check;
+        ``err.trajectory`` holds the steps before it.
+
+    Examples
+    --------
+    An ideal diode clamping a capacitor voltage (complementarity, exact ``z·w = 0``):
+
+    >>> from nscontrol import simulate
+    >>> from nscontrol.testing.setvalued_problems import diode_circuit
+    >>> p = diode_circuit()
+    >>> tr = simulate(p.system, p.x0, p.t_span, h=1e-3)
+    >>> tr.stats["solver"], bool(np.all(tr.signal("z") * tr.signal("w") == 0.0))
+    ('closed_form', True)
     """
     from ..systems.lure import LureSystem
 
@@ -229,31 +578,29 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
                          "method='implicit_euler', h=1e-3)")
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
-    on_failure = options.get("on_failure", "raise")
-    if on_failure not in ("raise", "return"):
-        raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
+    on_failure = check_on_failure(options.get("on_failure", "raise"))
+    every = check_count("record_every", options.get("record_every", 1), 1)
+    signals = check_signals(options.get("signals"), _SIGNALS)
     n = system.n_states
     x0 = as_vector("x0", x0, n)
     t0, tf = t_span
     n_steps = max(1, math.ceil((tf - t0) / h_req - 1e-9))
     h = (tf - t0) / n_steps
     mats = StepMatrices(system, h, theta)
-    _check_step_matrix(mats.Dh, h)
-    spec = componentwise_spec(system.law)
-    lcp_data = None
-    if spec is not None and _is_diagonal(mats.Dh):
-        solver = "closed_form"
-    else:
-        lcp_data = lcp_step_data(system.law, mats.Dh)
-        solver = "python" if lcp_data is None else "lcp"
-
-    rec = Recorder(n, every=int(options.get("record_every", 1)), signals=options.get("signals"))
+    plan = _plan(system, mats.Dh, h)
     z0, w0 = _initial_multiplier(system, x0, t0)
+
+    rec = Recorder(n, every=every, signals=signals)
     rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
-    stepper = _Stepper(system, mats, spec, solver, lcp_data)
+    stepper = _Stepper(system, mats, plan)
     x = x0
     done = 0
-    status, message = 0, None
+
+    def stats(steps: int) -> dict[str, Any]:
+        return {"steps": int(steps), "h": float(h), "theta": float(theta),
+                "solver": plan.solver, "structure": plan.structure,
+                "blocks": max(1, len(plan.blocks)), "input": stepper.input_mode}
+
     with TimeProgress(t0, tf, desc="implicit_euler", enable=options.get("progress")) as bar:
         while done < n_steps:
             k1 = min(n_steps, done + _CHUNK)
@@ -264,7 +611,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
                 X, Z, W = exc.partial  # type: ignore[attr-defined]
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
                 traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
-                                  stats=_stats(done + X.shape[0], h, theta, solver),
+                                  stats=stats(done + X.shape[0]),
                                   state_names=system.state_names)
                 if on_failure == "return":
                     return traj
@@ -273,12 +620,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
             x = X[-1]
             done = k1
             bar.update(times[-1])
-    return rec.finish(status=status, message=message, method="implicit_euler",
-                      stats=_stats(n_steps, h, theta, solver), state_names=system.state_names)
-
-
-def _stats(steps: int, h: float, theta: float, solver: str) -> dict[str, Any]:
-    return {"steps": int(steps), "h": float(h), "theta": float(theta), "solver": solver}
+    return rec.finish(status=0, message=None, method="implicit_euler", stats=stats(n_steps),
+                      state_names=system.state_names)
 
 
 def _record_block(rec: Recorder, system: Any, t: FloatArray, X: FloatArray, Z: FloatArray,
@@ -301,17 +644,40 @@ def _record_block(rec: Recorder, system: Any, t: FloatArray, X: FloatArray, Z: F
         rec.extend(t, X, **sig)
 
 
+def _exosystem_mean(exo: Any, h: float) -> FloatArray:
+    """``Ψ/h`` with ``Ψ = ∫_0^h e^{Sτ} dτ``: the mean of ``ω`` over a step is ``(Ψ/h) ω(t_k)``
+    (top-right block of the exponential of ``[[S, I], [0, 0]] h``)."""
+    from scipy.linalg import expm
+
+    S = np.atleast_2d(np.asarray(exo.S, float))
+    r = S.shape[0]
+    M = np.zeros((2 * r, 2 * r))
+    M[:r, :r], M[:r, r:] = S, np.eye(r)
+    return expm(M * h)[:r, r:] / h
+
+
 class _Stepper:
     """Runs blocks of steps with the solver chosen once for the whole run."""
 
-    def __init__(self, system: Any, mats: StepMatrices, spec: Any, solver: str,
-                 lcp_data: Any) -> None:
-        self.system, self.m, self.spec, self.solver = system, mats, spec, solver
-        self.enc = lcp_data
+    def __init__(self, system: Any, mats: StepMatrices, plan: _Plan) -> None:
+        self.system, self.m, self.plan = system, mats, plan
+        u = system.u
+        self.exo = None
+        if system.has_input and all(hasattr(u, a) for a in ("S", "Cu", "w0", "w")):
+            self.exo = u
+            self.mean = _exosystem_mean(u, mats.h).T @ np.atleast_2d(np.asarray(u.Cu, float)).T
+        self.input_mode = ("exact_mean" if self.exo is not None else
+                           "samples" if system.has_input else "none")
+        if plan.solver == "closed_form":
+            kind, p1, p2 = componentwise_spec(system.law)  # type: ignore[misc]
+            self.spec = (kind, p1, p2)
+            self.ucol = _single_state_rows(system)
 
     def _inputs(self, times: FloatArray) -> tuple[FloatArray, FloatArray]:
         sys_, th = self.system, self.m.theta
-        if sys_.has_input:
+        if self.exo is not None:   # exact mean of the input over each step
+            ubar = np.atleast_2d(self.exo.w(times[:-1])).reshape(times.size - 1, -1) @ self.mean
+        elif sys_.has_input:
             U = sys_.input_at(times)
             ubar = (1.0 - th) * U[:-1] + th * U[1:]
         else:
@@ -325,36 +691,48 @@ class _Stepper:
         k = times.size - 1
         n, mm = self.system.n_states, self.system.n_multipliers
         X, Z, W = np.empty((k, n)), np.empty((k, mm)), np.empty((k, mm))
-        m = self.m
-        if self.solver == "closed_form":
-            from ._lure_kernels import diagonal_steps
+        m, plan = self.m, self.plan
+        if plan.solver == "closed_form":
+            from ._lure_kernels import triangular_steps
 
             kind, p1, p2 = self.spec
-            diagonal_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, np.ascontiguousarray(
-                np.diag(m.Dh)), kind, p1, p2, x, ubar, gnext, X, Z, W)
+            triangular_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
+                             plan.structure != "diagonal", kind, p1, p2, self.system.H,
+                             self.ucol, x, ubar, gnext, X, Z, W)
             return X, Z, W
-        if self.solver == "lcp":
+        if plan.solver == "lcp":
             from ._lure_lcp_kernels import lcp_steps
 
-            M, Qa, q0, T, s = self.enc
-            done, status = lcp_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, m.Dh, M, Qa, q0, T, s,
-                                     x, ubar, gnext, X, Z, W, 50 * (M.shape[0] + 1))
+            M3, Qa3, q03, T3, s3, comp, nv, mg = plan.lcp  # type: ignore[misc]
+            done, status, res = lcp_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, M3, Qa3,
+                                          q03, T3, s3, comp, nv, mg, x, ubar, gnext, X, Z, W,
+                                          LCP_TOL)
             if status != 0:
+                why = (f"Lemke status {status}" if status != _RESIDUAL_FAILURE else
+                       f"a natural residual {res:.3g} above {LCP_TOL:g}")
                 err = SolverError(f"implicit_euler: the LCP of step {done} (t = "
-                                  f"{times[done + 1]:.6g}) failed with Lemke status {status}",
-                                  status=str(status))
+                                  f"{times[done + 1]:.6g}) failed: {why}; the step matrix may "
+                                  f"be badly conditioned (reduce h)", status=str(status))
                 err.partial = (X[:done], Z[:done], W[:done])  # type: ignore[attr-defined]
                 raise err
             return X, Z, W
-        law = self.system.law
+        H, D = self.system.H, plan.D
         for j in range(k):
             q = m.Phi @ x + m.Gam @ ubar[j]
-            a = self.system.H @ q + gnext[j]
+            a = H @ q + gnext[j]
+            w = np.zeros(mm)
+            z = np.empty(mm)
             try:
-                z, w = _solve_inclusion_python(law, a, m.Dh)
+                for blk in plan.blocks:   # in dependency order: earlier blocks are solved
+                    ag = a[blk.idx] + D[blk.idx] @ w   # w of this and later blocks is 0
+                    zg, wg, _ = _solve_inclusion_python(blk.law, ag, blk.D)
+                    w[blk.idx], z[blk.idx] = wg, zg
             except SolverError as exc:
                 exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]
                 raise
             x = q + m.Gh @ w
             X[j], Z[j], W[j] = x, z, w
         return X, Z, W
+
+
+_RESIDUAL_FAILURE = 3  # NUMERICAL_FAILURE of the LCP kernels: residual check failed

@@ -25,17 +25,20 @@ u : Exosystem or callable, optional
 t_eval : array_like, optional
     Sample times (event instants are always added). Default: ``n_samples`` equally spaced.
 n_samples : int
-    Default number of regular samples (1001).
+    Number of regular samples when ``t_eval`` is not given (1001; at least 2).
 sensitivity : bool
     Also compute ``stats["state_transition"]`` (``∂x(tf)/∂x(t0)``, from the flows' exponentials
     or variational equations and the saltation matrices) and ``stats["saltation_matrices"]``
     (array ``(k, n, n)``, one per crossing / sliding start / sliding exit, in event order).
 rtol, atol : float
-    Tolerances of DOP853 where an ODE solver is used (1e-11, 1e-13).
+    Tolerances of DOP853 where an ODE solver is used (1e-11, 1e-13; both > 0).
 max_events : int
     Zeno guard: more events than this raises :class:`~nscontrol.errors.ZenoError` (1e6).
 progress : bool, optional
 on_failure : {"raise", "return"}
+    On a failure during the run (``ZenoError``, ``SolverError``: DOP853 failed) raise with the
+    partial trajectory in ``err.trajectory``, or return it with ``status = -1``. Errors in the
+    model or its initial state are always raised.
 """
 
 from __future__ import annotations
@@ -45,8 +48,9 @@ from typing import Any
 import numpy as np
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_vector
-from ..errors import ModelError, NscontrolError, ZenoError
+from .._validation import FloatArray, as_float_array, as_vector, check_positive
+from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolError, ZenoError
+from ._setvalued_options import check_count, check_on_failure
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "saltation_matrix"]
@@ -56,13 +60,39 @@ _OPTIONS = {"u", "t_eval", "n_samples", "sensitivity", "rtol", "atol", "max_even
 
 
 def saltation_matrix(f_minus: Any, f_plus: Any, normal: Any) -> FloatArray:
-    """``S = I + (F⁺ - F⁻) nᵀ / (nᵀ F⁻)``: the jump of the state sensitivity at a crossing of a
-    surface with gradient ``n`` where the field switches from ``F⁻`` to ``F⁺``.
+    """The jump of the state sensitivity at a transversal crossing of a switching surface.
+
+    Parameters
+    ----------
+    f_minus : (n,) array_like
+        The field ``F⁻`` before the crossing.
+    f_plus : (n,) array_like
+        The field ``F⁺`` after it.
+    normal : (n,) array_like
+        The surface gradient ``n`` at the crossing point.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        ``S = I + (F⁺ - F⁻) nᵀ / (nᵀ F⁻)``: ``∂x(t⁺)/∂x(t⁻)`` including the shift of the
+        crossing time; the identity for a continuous field.
 
     Raises
     ------
     ModelError
         ``nᵀF⁻ = 0`` (grazing: the saltation matrix is unbounded).
+
+    Notes
+    -----
+    Hypotheses: the surface is crossed transversally (``nᵀF⁻ ≠ 0``) and both fields are
+    smooth near the crossing point (Aizerman and Gantmacher, 1958; Leine and Nijmeijer,
+    *Dynamics and bifurcations of non-smooth mechanical systems*, 2004, §7.2).
+
+    Examples
+    --------
+    >>> S = saltation_matrix([1.0, 1.0], [1.0, -1.0], [0.0, 1.0])
+    >>> S.tolist()
+    [[1.0, 0.0], [0.0, -1.0]]
     """
     fm, fp, n = (np.asarray(v, float) for v in (f_minus, f_plus, normal))
     den = float(n @ fm)
@@ -84,20 +114,24 @@ class _Run:
         self.n = x0.shape[0]
         self.t0, self.tf = t_span
         t_eval = options.get("t_eval")
+        n_samples = check_count("n_samples", options.get("n_samples", 1001), 2)
         if t_eval is None:
-            t_eval = np.linspace(self.t0, self.tf, int(options.get("n_samples", 1001)))
-        t_eval = np.asarray(t_eval, float)
+            t_eval = np.linspace(self.t0, self.tf, n_samples)
+        t_eval = as_float_array("t_eval", t_eval)
         if t_eval.ndim != 1 or np.any(np.diff(t_eval) < 0):
-            raise ModelError("t_eval: expected an increasing 1-d array of times")
+            raise ModelError(f"t_eval: expected an increasing 1-d array of times, got shape "
+                             f"{t_eval.shape}" + ("" if t_eval.ndim != 1 else " (not sorted)"))
         self.t_eval = t_eval[(t_eval >= self.t0) & (t_eval <= self.tf)]
-        self.sensitivity = bool(options.get("sensitivity", False))
-        self.rtol = float(options.get("rtol", 1e-11))
-        self.atol = float(options.get("atol", 1e-13))
-        self.max_events = int(options.get("max_events", 1_000_000))
-        self.on_failure = options.get("on_failure", "raise")
-        if self.on_failure not in ("raise", "return"):
-            raise ModelError(f"on_failure: expected 'raise' or 'return', got "
-                             f"{self.on_failure!r}")
+        self._ptr = 0
+        sens = options.get("sensitivity", False)
+        if not isinstance(sens, bool | np.bool_):
+            raise ModelError(f"sensitivity: expected True or False, got {sens!r}")
+        self.sensitivity = bool(sens)
+        self.rtol = check_positive("rtol", options.get("rtol", 1e-11))
+        self.atol = check_positive("atol", options.get("atol", 1e-13))
+        self.max_events = check_count("max_events", options.get("max_events", 1_000_000), 0)
+        self.on_failure = check_on_failure(options.get("on_failure", "raise"))
+        self.status, self.message = 0, None
         self.rec = Recorder(self.n)
         self.Phi = np.eye(self.n)
         self.saltations: list[FloatArray] = []
@@ -110,9 +144,16 @@ class _Run:
     def samples(self, t_lo: float, t_hi: float, last: bool) -> FloatArray:
         """Requested sample times in ``(t_lo, t_hi]`` (``[t_lo, t_hi]`` at the first piece)."""
         te = self.t_eval
-        lo = np.searchsorted(te, t_lo, side="right")
-        hi = np.searchsorted(te, t_hi, side="right")
-        return te[lo:hi]
+        size = te.shape[0]
+        i = self._ptr   # runs ask for consecutive windows: try the remembered position first
+        if not (i <= size and (i == 0 or te[i - 1] <= t_lo) and (i == size or te[i] > t_lo)):
+            i = int(np.searchsorted(te, t_lo, side="right"))
+        if i == size or te[i] > t_hi:
+            self._ptr = i
+            return te[i:i]
+        j = int(np.searchsorted(te, t_hi, side="right"))
+        self._ptr = j
+        return te[i:j]
 
     def event(self, t: float, kind: str, index: int, pre: FloatArray, post: FloatArray,
               mode_from: int, mode_to: int, S: FloatArray | None = None) -> None:
@@ -192,8 +233,9 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
         extra = runner(system, x0, run, options)
     except NscontrolError as exc:
         traj = run.finish(status=-1, message=str(exc))
-        if run.on_failure == "return" and not isinstance(exc, ModelError):
+        if run.on_failure == "return" and not isinstance(exc, ModelError | DimensionError |
+                                                         InadmissibleStateError):
             return traj
         exc.trajectory = traj
         raise
-    return run.finish(extra=extra)
+    return run.finish(status=run.status, message=run.message, extra=extra)

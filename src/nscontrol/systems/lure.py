@@ -26,27 +26,29 @@ from ..errors import DimensionError, ModelError
 __all__ = ["LureSystem"]
 
 
-def _input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
-    """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
+class _ConstantInput:
+    """A constant signal as a vectorised function ``t -> (len(t), size)`` (picklable)."""
 
-    Accepts ``None``, an :class:`~nscontrol.numerics.lti.Exosystem` (anything with a ``u``
-    method), a callable ``t -> vector``, or a constant vector.
+    def __init__(self, value: FloatArray) -> None:
+        self.value = value
+
+    def __call__(self, t: Any) -> FloatArray:
+        return np.broadcast_to(self.value, (np.size(t), self.value.shape[0])).copy()
+
+
+class _SampledInput:
+    """A function of time (or an Exosystem's ``u``) vectorised to ``t -> (len(t), size)``.
+
+    A module-level class rather than a closure, so that systems holding it can be pickled
+    (process pools, Dask) whenever the user's function can; pickling a lambda or a local
+    function raises :class:`~nscontrol.errors.ModelError` naming the input and the way out.
     """
-    if value is None:
-        return None
-    if hasattr(value, "u") and callable(value.u):
-        fn = value.u
-    elif callable(value):
-        fn = value
-    else:
-        const = as_vector(name, value, size)
-        return lambda t: np.broadcast_to(const, (np.size(t), size)).copy()
-    probe = np.atleast_1d(np.asarray(fn(0.0), dtype=float)).ravel()
-    if probe.shape[0] != size:
-        raise DimensionError(f"{name}: expected {name}(t) to have length {size}, got "
-                             f"length {probe.shape[0]}")
 
-    def sampled(t: Any) -> FloatArray:
+    def __init__(self, name: str, fn: Callable[[Any], Any], size: int) -> None:
+        self.name, self.fn, self.size = name, fn, size
+
+    def __call__(self, t: Any) -> FloatArray:
+        fn, size = self.fn, self.size
         t = np.atleast_1d(np.asarray(t, dtype=float))
         try:
             out = np.asarray(fn(t), dtype=float)
@@ -61,7 +63,40 @@ def _input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatAr
         return np.array([np.atleast_1d(np.asarray(fn(float(s)), dtype=float)).ravel()
                          for s in t]).reshape(t.size, size)
 
-    return sampled
+    def __getstate__(self) -> dict[str, Any]:
+        import pickle
+
+        try:
+            pickle.dumps(self.fn)
+        except (pickle.PicklingError, AttributeError, TypeError) as exc:
+            raise ModelError(
+                f"{self.name}: the input {self.name}(t) = {self.fn!r} cannot be pickled ({exc}), "
+                f"so this system cannot be sent to another process (process pools, Dask). Pass "
+                f"an Exosystem, a constant, or a function defined at module level instead of a "
+                f"lambda or a local function") from None
+        return dict(self.__dict__)
+
+
+def _input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
+    """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
+
+    Accepts ``None``, an :class:`~nscontrol.numerics.lti.Exosystem` (anything with a ``u``
+    method), a callable ``t -> vector``, or a constant vector. The result is picklable when
+    the given function is.
+    """
+    if value is None:
+        return None
+    if hasattr(value, "u") and callable(value.u):
+        fn = value.u
+    elif callable(value):
+        fn = value
+    else:
+        return _ConstantInput(as_vector(name, value, size))
+    probe = np.atleast_1d(np.asarray(fn(0.0), dtype=float)).ravel()
+    if probe.shape[0] != size:
+        raise DimensionError(f"{name}: expected {name}(t) to have length {size}, got "
+                             f"length {probe.shape[0]}")
+    return _SampledInput(name, fn, size)
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,19 +131,40 @@ class LureSystem:
     DimensionError
         Shapes disagree (the message names the matrix and the expected shape).
     ModelError
-        ``D + Dᵀ`` is not positive semidefinite, or ``law`` is not monotone (the message names
-        the loop transformation that restores monotonicity).
+        ``D + Dᵀ`` is not positive semidefinite, or ``law`` is not monotone (the message gives
+        the loop-transformed system to build instead:
+        ``lt = law.loop_transformation()``,
+        ``LureSystem(lt.transform_A(A, G, H), G, H, lt.monotone_part, ...)``).
 
     Notes
     -----
     With ``D + Dᵀ ⪰ 0`` the map ``w ↦ -φ(Hx + Dw)`` is again maximal monotone and the
     implicit Euler step is a uniquely solvable monotone inclusion whenever the step matrix
-    ``D_h = h H (I - hθA)^{-1} G + D`` is positive definite (checked by the integrator).
+    ``D_h = h H (I - hθA)^{-1} G + D`` is positive definite, or block triangular (a plant and
+    its observer) with positive definite diagonal blocks (checked by the integrator).
+
+    A system whose inputs are an Exosystem, constants or module-level functions can be
+    pickled (process pools, Dask); pickling one with a lambda input raises ``ModelError``.
 
     References
     ----------
     SICONOS D5.3, chapter 8; B. Brogliato, W.P.M.H. Heemels, "Observer design for Lur'e
     systems with multivalued mappings: a passivity approach", IEEE TAC 54(8), 2009.
+
+    Examples
+    --------
+    Siconos' relay example ``x1' = x2``, ``x2' = w``, ``w ∈ -Sign(x1 + x2)`` reaches the sliding
+    surface at ``√3 - 1`` and stays on it (``z`` exactly zero):
+
+    >>> from nscontrol import simulate
+    >>> from nscontrol.laws.relay import Relay
+    >>> lure = LureSystem([[0, 1], [0, 0]], [[0], [1]], [[1, 1]], Relay(1.0))
+    >>> lure.n_states, lure.n_multipliers, lure.has_input
+    (2, 1, False)
+    >>> tr = simulate(lure, [1.0, 0.0], (0.0, 2.0), h=1e-3)
+    >>> k = int(np.argmax(tr.signal("z")[:, 0] == 0.0))
+    >>> bool(abs(tr.t[k] - (np.sqrt(3) - 1)) <= 1e-3), bool(np.all(tr.signal("z")[k:] == 0.0))
+    (True, True)
     """
 
     A: FloatArray
@@ -164,33 +220,65 @@ class LureSystem:
     def _require_monotone(self) -> None:
         from ..laws.base import require_monotone
 
-        # a non-monotone law is refused with the way out (loop transformation) named: build
-        # LureSystem(lt.transform_A(A, G, H), G, H, lt.monotone_part) with
-        # lt = law.loop_transformation()
-        require_monotone(self.law, who="LureSystem")
+        try:
+            require_monotone(self.law, who="LureSystem")
+        except ModelError:
+            if getattr(self.law, "monotone", True):
+                raise
+            raise ModelError(
+                f"law: LureSystem requires a maximal monotone law, got the non-monotone "
+                f"{self.law!r}. Way out (loop transformation, ch08 §2.6): "
+                f"lt = law.loop_transformation(); LureSystem(lt.transform_A(A, G, H), G, H, "
+                f"lt.monotone_part, B=B, C=C, u=u, g=g) -- the slope moves into A; valid with "
+                f"D = 0 (a feedthrough D changes under the transformation too)") from None
 
     # -- sizes and signals ---------------------------------------------------------------
     @property
     def n_states(self) -> int:
+        """Dimension ``n`` of the state ``x``."""
         return int(self.A.shape[0])
 
     @property
     def n_multipliers(self) -> int:
+        """Dimension ``m`` of the multiplier ``w`` (and of the law's argument ``z``)."""
         return int(self.G.shape[1])
 
     @property
     def n_inputs(self) -> int:
+        """Dimension ``q`` of the external input ``u`` (0 without ``B``)."""
         return 0 if self.B is None else int(self.B.shape[1])
 
     def input_at(self, t: Any) -> FloatArray:
-        """``u`` sampled at the times ``t``, shape ``(len(t), q)`` (zeros without input)."""
+        """The external input sampled at given times.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time or times.
+
+        Returns
+        -------
+        ndarray, shape (len(t), q)
+            ``u(t)`` row by row (zeros when the system has no input).
+        """
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if self._u_fn is None:  # type: ignore[attr-defined]
             return np.zeros((t.size, self.n_inputs))
         return self._u_fn(t)  # type: ignore[attr-defined]
 
     def shift_at(self, t: Any) -> FloatArray:
-        """``g`` sampled at the times ``t``, shape ``(len(t), m)`` (zeros without shift)."""
+        """The known shift ``g`` of the law's argument sampled at given times.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time or times.
+
+        Returns
+        -------
+        ndarray, shape (len(t), m)
+            ``g(t)`` row by row (zeros when the system has no shift).
+        """
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if self._g_fn is None:  # type: ignore[attr-defined]
             return np.zeros((t.size, self.n_multipliers))
@@ -198,8 +286,10 @@ class LureSystem:
 
     @property
     def has_input(self) -> bool:
+        """Whether an external input ``u(t)`` was given."""
         return self._u_fn is not None  # type: ignore[attr-defined]
 
     @property
     def has_shift(self) -> bool:
+        """Whether a shift ``g(t)`` of the law's argument was given."""
         return self._g_fn is not None  # type: ignore[attr-defined]

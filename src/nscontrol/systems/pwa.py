@@ -78,11 +78,33 @@ class PiecewiseAffineSystem:
 
     Notes
     -----
-    Overlap is decided exactly (an LP finds the largest ball inside ``Λ_i ∩ Λ_j``, overlap if
-    its radius exceeds ``1e-9`` relative). The cover is checked by stepping ``1e-7`` relative
-    outside ``24`` random points of every facet (within ``|x| <= 1e3`` times the data scale): a
-    gap's boundary consists of facets of the regions, so it shows there. Continuity is checked
-    at the same points, ``|f_i - f_j| <= 1e-9 (|f_i| + |A_i| |x| + |b_i|)``.
+    Overlap is decided exactly on all of ``R^n`` (an LP finds the largest ball inside
+    ``Λ_i ∩ Λ_j`` with a free centre, radius capped at the data scale, overlap if it exceeds
+    ``1e-9`` relative; an unbounded intersection reaches the cap). The cover is checked by
+    stepping ``1e-7`` relative outside ``24`` random points of every facet (within
+    ``|x| <= 1e3`` times the data scale): a gap's boundary consists of facets of the regions,
+    so it shows there. Continuity is checked at the same points,
+    ``|f_i - f_j| <= 1e-9 (|f_i| + |A_i| |x| + |b_i|)``.
+
+    With a ``domain``, ``simulate`` refuses an ``x0`` outside it
+    (``InadmissibleStateError``) and stops with ``status = 1`` and a ``domain_exit`` event
+    where a trajectory leaves it.
+
+    A system whose input is an Exosystem, a constant or a module-level function can be
+    pickled (process pools, Dask); pickling one with a lambda input raises ``ModelError``.
+
+    Examples
+    --------
+    A one-sided spring (stiffness 6 for ``q < 0``, 1 otherwise): continuous, two regions.
+
+    >>> from nscontrol import simulate
+    >>> pwa = PiecewiseAffineSystem.bimodal([[0, 1], [-6, -0.1]], [[0, 1], [-1, -0.1]],
+    ...                                     [1.0, 0.0])
+    >>> pwa.n_regions, pwa.mode([-1.0, 0.0]), pwa.mode([1.0, 0.0])
+    (2, 0, 1)
+    >>> tr = simulate(pwa, [1.0, 0.0], (0.0, 5.0))
+    >>> [e.kind for e in tr.events][:2], tr.events[0].mode_from, tr.events[0].mode_to
+    (['crossing', 'crossing'], 1, 0)
     """
 
     A: Sequence[Any]
@@ -151,7 +173,28 @@ class PiecewiseAffineSystem:
         """Two modes split by a hyperplane: ``A1 x + b1`` on ``cᵀx <= d``, ``A2 x + b2`` on
         ``cᵀx >= d``.
 
-        For a continuous field ``A1 - A2 = g cᵀ`` and ``b1 - b2 = -g d`` for some ``g``.
+        Parameters
+        ----------
+        A1, A2 : (n, n) array_like
+            State matrices of region 0 (``cᵀx <= d``) and region 1 (``cᵀx >= d``).
+        c : (n,) array_like
+            Normal of the switching hyperplane (nonzero).
+        d : float, optional
+            Offset of the hyperplane.
+        b1, b2 : (n,) array_like, optional
+            Offsets of the two fields (default zeros).
+        E, u, C, continuous, state_names
+            As in the class.
+
+        Returns
+        -------
+        PiecewiseAffineSystem
+
+        Raises
+        ------
+        ModelError
+            ``c = 0``, or a discontinuous field declared continuous (for a continuous field
+            ``A1 - A2 = g cᵀ`` and ``b1 - b2 = -g d`` for some ``g``).
         """
         c = as_vector("c", c)
         if not np.any(c):
@@ -167,7 +210,22 @@ class PiecewiseAffineSystem:
     def conewise(cls, A: Sequence[Any], H: Sequence[Any], *, E: Any = None, u: Any = None,
                  C: Any = None, continuous: bool = True,
                  state_names: tuple[str, ...] = ()) -> PiecewiseAffineSystem:
-        """Conewise linear system: ``x' = A_i x`` on the cone ``{x : H_i x <= 0}``."""
+        """Conewise linear system: ``x' = A_i x`` on the cone ``{x : H_i x <= 0}``.
+
+        Parameters
+        ----------
+        A : sequence of (n, n) array_like
+            One matrix per cone.
+        H : sequence of (k_i, n) array_like
+            Cone ``i`` is ``{x : H_i x <= 0}``.
+        E, u, C, continuous, state_names
+            As in the class.
+
+        Returns
+        -------
+        PiecewiseAffineSystem
+            Homogeneous of degree one (``is_pwl``) when there is no input.
+        """
         regions = tuple((Hi, np.zeros(np.shape(Hi)[0])) for Hi in H)
         return cls(A=A, b=None, regions=regions, E=E, u=u, C=C, continuous=continuous,
                    state_names=state_names)
@@ -175,10 +233,12 @@ class PiecewiseAffineSystem:
     # -- queries --------------------------------------------------------------------------
     @property
     def n_states(self) -> int:
+        """Dimension ``n`` of the state."""
         return int(self.A[0].shape[0])
 
     @property
     def n_regions(self) -> int:
+        """Number ``N`` of regions."""
         return len(self.A)
 
     @property
@@ -193,20 +253,65 @@ class PiecewiseAffineSystem:
         return self._neighbours
 
     def contains(self, i: int, x: Any, tol: float = 1e-9) -> bool:
-        """Whether ``x`` lies in region ``i`` (relative tolerance ``tol``)."""
+        """Whether a state lies in a region.
+
+        Parameters
+        ----------
+        i : int
+            Region index.
+        x : (n,) array_like
+            State.
+        tol : float, optional
+            Relative tolerance on ``H_i x <= h_i`` (to ``1 + |h_i| + |H_i||x|``).
+
+        Returns
+        -------
+        bool
+        """
         H, h = self.regions[i]
         x = np.asarray(x, float)
         return bool(np.all(H @ x - h <= tol * (1.0 + np.abs(h) + np.abs(H) @ np.abs(x))))
 
     def mode(self, x: Any, tol: float = 1e-9) -> int:
-        """Index of the first region containing ``x`` (``-1`` when none does)."""
+        """The region of a state.
+
+        Parameters
+        ----------
+        x : (n,) array_like
+            State.
+        tol : float, optional
+            Relative tolerance (see :meth:`contains`).
+
+        Returns
+        -------
+        int
+            Index of the first region containing ``x`` (``-1`` when none does; on a shared
+            facet the lower index).
+        """
         for i in range(self.n_regions):
             if self.contains(i, x, tol):
                 return i
         return -1
 
     def field(self, i: int, x: Any, t: float = 0.0, u: Any = None) -> FloatArray:
-        """The vector field of region ``i`` at ``(t, x)`` (``u`` overrides the input)."""
+        """The vector field of one region.
+
+        Parameters
+        ----------
+        i : int
+            Region index.
+        x : (n,) array_like
+            State.
+        t : float, optional
+            Time (for the input).
+        u : Exosystem or callable or array_like, optional
+            Input overriding the system's default.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``A_i x + b_i + E u(t)``.
+        """
         x = np.asarray(x, float)
         f = self.A[i] @ x + self.b[i]
         if self.E is not None:
@@ -216,7 +321,25 @@ class PiecewiseAffineSystem:
         return f
 
     def input_at(self, t: float, u: Any = None) -> FloatArray | None:
-        """The input ``u(t)`` (``u`` overrides the system's default)."""
+        """The input at one time.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        u : Exosystem or callable or array_like, optional
+            Input overriding the system's default.
+
+        Returns
+        -------
+        ndarray, shape (q,) or None
+            ``u(t)``; ``None`` without input.
+
+        Raises
+        ------
+        ModelError
+            ``u`` given for a system without an input matrix ``E``.
+        """
         if u is None:
             fn = self._u_fn  # type: ignore[attr-defined]
         elif self.E is None:
@@ -229,6 +352,24 @@ class PiecewiseAffineSystem:
     def _scale(self) -> float:
         hs = [np.max(np.abs(h), initial=0.0) for _, h in self.regions]
         return max(1.0, *hs)
+
+    def in_domain(self, x: Any, tol: float = 1e-9) -> bool:
+        """Whether a state lies in the ``domain`` (always True without one).
+
+        Parameters
+        ----------
+        x : (n,) array_like
+            State.
+        tol : float, optional
+            Relative tolerance (see :meth:`contains`).
+
+        Returns
+        -------
+        bool
+        """
+        if self.domain is None:
+            return True
+        return _in_poly(*self.domain, np.asarray(x, float), tol)
 
     def _check_partition(self) -> None:
         self._check_overlaps()
@@ -280,7 +421,7 @@ class PiecewiseAffineSystem:
                 H = np.vstack([self.regions[i][0], self.regions[j][0]])
                 h = np.concatenate([self.regions[i][1], self.regions[j][1]])
                 r, x = _chebyshev(H, h, self._scale())
-                if r > 1e-9 * self._scale():
+                if r > 1e-9 * self._scale():   # at least that: the cap is the scale
                     raise ModelError(
                         f"regions: regions {i} and {j} overlap: the ball of radius {r:.3g} "
                         f"around x = {np.array2string(x, precision=6)} lies in both. Regions "
@@ -317,17 +458,19 @@ def _in_poly(H: FloatArray, h: FloatArray, x: FloatArray, tol: float) -> bool:
     return bool(np.all(H @ x - h <= tol * (1.0 + np.abs(h) + np.abs(H) @ np.abs(x))))
 
 
-def _chebyshev(H: FloatArray, h: FloatArray, scale: float) -> tuple[float, FloatArray]:
-    """Largest ball (radius, centre) inside ``{Hx <= h}`` ∩ box ``|x| <= 1e3·scale``."""
+def _chebyshev(H: FloatArray, h: FloatArray, cap: float) -> tuple[float, FloatArray]:
+    """Largest ball (radius, centre) inside ``{Hx <= h}``, the radius capped at ``cap``.
+
+    The centre is free (no bounding box), so an intersection that is thin near the origin but
+    opens up far away is still found; a radius equal to ``cap`` means "at least ``cap``"
+    (unbounded polyhedra included). ``(-1, 0)`` when the polyhedron is empty.
+    """
     from scipy.optimize import linprog
 
     n = H.shape[1]
-    box = _BOX * scale
-    Hb = np.vstack([H, np.eye(n), -np.eye(n)])
-    hb = np.concatenate([h, np.full(2 * n, box)])
-    norms = np.linalg.norm(Hb, axis=1)
-    res = linprog(np.r_[np.zeros(n), -1.0], A_ub=np.c_[Hb, norms], b_ub=hb,
-                  bounds=[(None, None)] * n + [(0.0, box)], method="highs")
+    norms = np.linalg.norm(H, axis=1)
+    res = linprog(np.r_[np.zeros(n), -1.0], A_ub=np.c_[H, norms], b_ub=h,
+                  bounds=[(None, None)] * n + [(0.0, cap)], method="highs")
     if res.status != 0:
         return -1.0, np.zeros(n)
     return float(res.x[-1]), res.x[:n]

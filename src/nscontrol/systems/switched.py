@@ -61,10 +61,31 @@ class FilippovSystem:
     ``F_s = (σ⁺F⁻ - σ⁻F⁺)/(σ⁺ - σ⁻)``, left when ``σ⁻`` or ``σ⁺`` reaches zero; repelling
     sliding (``σ⁻ < 0 < σ⁺``) has no unique forward solution and is refused.
 
+    Raises
+    ------
+    DimensionError
+        ``n_states`` not a positive integer, or ``field``/``gradients`` of the wrong shape.
+    ModelError
+        No surface, or non-callable surfaces/field.
+
     References
     ----------
     A.F. Filippov, *Differential equations with discontinuous righthand sides*, 1988;
     SICONOS D5.3 chapter 12 (switching control of limit cycles) for the conventions.
+
+    Examples
+    --------
+    Relay feedback ``x1' = x2``, ``x2' = -sign(x1 + x2)``: sliding on ``x1 + x2 = 0`` from
+    ``t = √3 - 1``:
+
+    >>> from nscontrol import simulate
+    >>> c = np.array([1.0, 1.0])
+    >>> f = FilippovSystem.two_sided(lambda t, x: np.array([x[1], 1.0]),
+    ...                              lambda t, x: np.array([x[1], -1.0]),
+    ...                              lambda x: float(c @ x), 2, gradient=lambda x: c)
+    >>> tr = simulate(f, [1.0, 0.0], (0.0, 2.0))
+    >>> [e.kind for e in tr.events], bool(abs(tr.events[0].time - (np.sqrt(3) - 1)) < 1e-10)
+    (['sliding_start'], True)
     """
 
     n_states: int
@@ -77,7 +98,12 @@ class FilippovSystem:
     default_method = "switching"
 
     def __post_init__(self) -> None:
-        if isinstance(self.n_states, bool) or int(self.n_states) < 1:
+        ok = not isinstance(self.n_states, bool | np.bool_)
+        try:
+            ok = ok and float(self.n_states) == int(self.n_states) >= 1
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
             raise DimensionError(f"n_states: expected a positive integer, got "
                                  f"{self.n_states!r}")
         object.__setattr__(self, "n_states", int(self.n_states))
@@ -93,28 +119,88 @@ class FilippovSystem:
         if probe.shape != (self.n_states,):
             raise DimensionError(f"field: expected field(t, x, signs) of shape "
                                  f"({self.n_states},), got {probe.shape}")
+        if self.gradients is not None:
+            if not all(callable(g) for g in self.gradients):
+                raise ModelError("gradients: expected callables grad_j(x) -> (n_states,) array")
+            for j in range(len(self.gradients)):
+                self.gradient(j, np.zeros(self.n_states))   # shape check
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise ModelError("jacobian: expected a callable jacobian(t, x, signs) -> (n, n)")
         if self.state_names and len(self.state_names) != self.n_states:
-            raise DimensionError(f"state_names: expected {self.n_states} names")
+            raise DimensionError(f"state_names: expected {self.n_states} names, got "
+                                 f"{len(self.state_names)}")
 
     @property
     def n_surfaces(self) -> int:
+        """Number ``J`` of switching surfaces."""
         return len(self.surfaces)
 
     def h(self, x: FloatArray) -> FloatArray:
-        """All surface functions at ``x``."""
+        """All surface functions at a state.
+
+        Parameters
+        ----------
+        x : (n,) array_like
+            State.
+
+        Returns
+        -------
+        ndarray, shape (J,)
+            ``h_j(x)`` for every surface.
+        """
         return np.array([float(h(x)) for h in self.surfaces])
 
     def gradient(self, j: int, x: FloatArray) -> FloatArray:
-        """``∇h_j(x)``."""
+        """The gradient of surface ``j``.
+
+        Parameters
+        ----------
+        j : int
+            Surface index.
+        x : (n,) array_like
+            State.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``∇h_j(x)`` (the user's gradient, or central differences of ``h_j``).
+
+        Raises
+        ------
+        DimensionError
+            The user's gradient does not return ``n_states`` numbers.
+        """
         if self.gradients is not None:
-            return np.asarray(self.gradients[j](x), float)
-        return _fd_gradient(self.surfaces[j], x)
+            g = np.asarray(self.gradients[j](x), float)
+            if g.shape != (self.n_states,):
+                if g.size == self.n_states:
+                    return g.reshape(self.n_states)
+                raise DimensionError(f"gradients[{j}]: expected grad_{j}(x) of shape "
+                                     f"({self.n_states},), got shape {g.shape}")
+            return g
+        return _fd_gradient(self.surfaces[j], np.asarray(x, float))
 
     def jac(self, t: float, x: FloatArray, signs: tuple[int, ...]) -> FloatArray:
-        """``∂field/∂x`` (user-given or central differences)."""
+        """The Jacobian of the field on one side.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        x : (n,) array_like
+            State.
+        signs : tuple of ±1
+            The side of every surface (selects the smooth field).
+
+        Returns
+        -------
+        ndarray, shape (n, n)
+            ``∂field/∂x`` (the user's ``jacobian``, or central differences).
+        """
         if self.jacobian is not None:
             return np.asarray(self.jacobian(t, x, signs), float)
-        return _fd_jacobian(lambda xx: np.asarray(self.field(t, xx, signs), float), x)
+        return _fd_jacobian(lambda xx: np.asarray(self.field(t, xx, signs), float),
+                            np.asarray(x, float))
 
     @classmethod
     def two_sided(cls, f_minus: Callable[[float, FloatArray], FloatArray],
@@ -122,15 +208,48 @@ class FilippovSystem:
                   h: Callable[[FloatArray], float], n_states: int, *,
                   gradient: Callable[[FloatArray], FloatArray] | None = None,
                   state_names: tuple[str, ...] = ()) -> FilippovSystem:
-        """One surface ``h(x) = 0``: ``f_minus(t, x)`` where ``h < 0``, ``f_plus`` where
-        ``h > 0``."""
-        return cls(n_states, (h,), lambda t, x, s: f_plus(t, x) if s[0] > 0 else f_minus(t, x),
+        """One surface ``h(x) = 0`` with a smooth field on each side.
+
+        Parameters
+        ----------
+        f_minus, f_plus : callable ``(t, x) -> (n,) array``
+            The fields where ``h(x) < 0`` and ``h(x) > 0``.
+        h : callable ``x -> float``
+            The switching surface.
+        n_states : int
+            State dimension.
+        gradient : callable ``x -> (n,) array``, optional
+            ``∇h`` (default: central differences).
+        state_names : tuple of str, optional
+
+        Returns
+        -------
+        FilippovSystem
+        """
+        return cls(n_states, (h,), _TwoSided(f_minus, f_plus),
                    gradients=None if gradient is None else (gradient,), state_names=state_names)
 
     @classmethod
     def from_pwa(cls, pwa: Any) -> FilippovSystem:
-        """The Filippov form of a bimodal :class:`~.pwa.PiecewiseAffineSystem` (two regions
-        split by one hyperplane), for discontinuous fields with sliding."""
+        """The Filippov form of a bimodal piecewise-affine system, for discontinuous fields with
+        sliding.
+
+        Parameters
+        ----------
+        pwa : PiecewiseAffineSystem
+            Two regions split by one hyperplane (as built by ``PiecewiseAffineSystem.bimodal``);
+            region 0 ``cᵀx <= d`` becomes the side ``h = cᵀx - d < 0``.
+
+        Returns
+        -------
+        FilippovSystem
+            One surface ``h(x) = cᵀx - d`` with the exact gradient ``c`` and Jacobians ``A_i``.
+
+        Raises
+        ------
+        ModelError
+            ``pwa`` is not bimodal.
+        """
         if pwa.n_regions != 2 or any(H.shape[0] != 1 for H, _ in pwa.regions):
             raise ModelError("pwa: from_pwa handles bimodal systems (two half-spaces); got "
                              f"{pwa.n_regions} regions")
@@ -145,6 +264,18 @@ class FilippovSystem:
 
         return cls(pwa.n_states, (lambda x: float(c @ x) - d,), field,
                    gradients=(lambda x: c,), jacobian=jac, state_names=pwa.state_names)
+
+
+class _TwoSided:
+    """``field(t, x, signs)`` of :meth:`FilippovSystem.two_sided` (picklable when the two
+    fields are)."""
+
+    def __init__(self, f_minus: Callable[[float, FloatArray], FloatArray],
+                 f_plus: Callable[[float, FloatArray], FloatArray]) -> None:
+        self.f_minus, self.f_plus = f_minus, f_plus
+
+    def __call__(self, t: float, x: FloatArray, signs: tuple[int, ...]) -> FloatArray:
+        return self.f_plus(t, x) if signs[0] > 0 else self.f_minus(t, x)
 
 
 def _fd_jacobian(f: Callable[[FloatArray], FloatArray], x: FloatArray) -> FloatArray:
@@ -166,14 +297,26 @@ class PWMController:
     Parameters
     ----------
     period : float
-        Sampling (and PWM) period ``T``.
+        Sampling (and PWM) period ``T``; the sampling instants are ``t_k = t0 + kT``.
     duty : callable ``duty(t_k, x_k) -> float``
-        Time spent in ``on_mode`` during ``[t_k, t_k + T)``.
+        Time spent in ``on_mode`` during ``[t_k, t_k + T)``, computed from the sampled state.
     on_mode, off_mode : int
-        Mode indices of the switched system.
+        Distinct mode indices of the switched system.
     pattern : {"centered", "leading", "trailing"}
         ``centered``: on for ``d/2``, off, on for the last ``d/2`` (ch10); ``leading``: on
         first; ``trailing``: on last.
+
+    Raises
+    ------
+    ModelError
+        ``period`` not finite and positive, ``duty`` not callable, ``on_mode == off_mode``, or
+        an unknown ``pattern``.
+
+    Examples
+    --------
+    >>> pwm = PWMController(0.5, lambda t, x: 0.125, pattern="leading")
+    >>> pwm.schedule(0.0, np.zeros(2))
+    (0.125, [(0.125, 1), (0.375, 0)])
     """
 
     period: float
@@ -186,22 +329,100 @@ class PWMController:
         object.__setattr__(self, "period", check_positive("period", self.period))
         if not callable(self.duty):
             raise ModelError("duty: expected a callable duty(t_k, x_k) -> float")
+        for name in ("on_mode", "off_mode"):
+            k = getattr(self, name)
+            if isinstance(k, bool) or not isinstance(k, int | np.integer):
+                raise ModelError(f"{name}: expected a mode index (int), got {k!r}")
+        if self.on_mode == self.off_mode:
+            raise ModelError(f"on_mode, off_mode: expected two different modes, got both "
+                             f"{self.on_mode}")
         if self.pattern not in ("centered", "leading", "trailing"):
             raise ModelError(f"pattern: expected 'centered', 'leading' or 'trailing', got "
                              f"{self.pattern!r}")
 
-    def schedule(self, t_k: float, x_k: FloatArray) -> tuple[float, list[tuple[float, int]]]:
-        """``(d_k, [(duration, mode), ...])`` for the period starting at ``t_k``."""
+    def offsets(self, d: float) -> list[tuple[float, int]]:
+        """The switching offsets of one period for a duty ``d``.
+
+        Parameters
+        ----------
+        d : float
+            Duty time in ``[0, T]``.
+
+        Returns
+        -------
+        list of (offset, mode)
+            Start of each nonempty piece within the period (``0 <= offset < T``, increasing)
+            and its mode. The period's instants are ``t_k + offset``, computed from the exact
+            ``t_k = t0 + kT`` so that they do not drift over long runs.
+        """
         T = self.period
-        d = float(np.clip(float(self.duty(t_k, x_k)), 0.0, T))
         on, off = self.on_mode, self.off_mode
         if self.pattern == "centered":
-            pieces = [(d / 2, on), (T - d, off), (d / 2, on)]
+            starts = [(0.0, on), (d / 2, off), (T - d / 2, on)]
         elif self.pattern == "leading":
-            pieces = [(d, on), (T - d, off)]
+            starts = [(0.0, on), (d, off)]
         else:
-            pieces = [(T - d, off), (d, on)]
-        return d, [(s, m) for s, m in pieces if s > 0.0]
+            starts = [(0.0, off), (T - d, on)]
+        ends = [o for o, _ in starts[1:]] + [T]
+        return [(o, m) for (o, m), e in zip(starts, ends, strict=True) if e > o]
+
+    def duty_at(self, t_k: float, x_k: FloatArray) -> float:
+        """The duty time of the period starting at ``t_k``.
+
+        Parameters
+        ----------
+        t_k : float
+            Sampling instant.
+        x_k : (n,) ndarray
+            Sampled state ``x(t_k)``.
+
+        Returns
+        -------
+        float
+            ``duty(t_k, x_k)`` clipped to ``[0, T]``.
+
+        Raises
+        ------
+        ModelError
+            The duty function returned a non-number, NaN or an infinity.
+        """
+        try:
+            raw = float(self.duty(t_k, x_k))
+        except (TypeError, ValueError) as exc:
+            raise ModelError(f"duty: expected duty(t_k, x_k) to return a number, at t_k = "
+                             f"{t_k:.12g} it failed with {exc}") from None
+        if not np.isfinite(raw):
+            raise ModelError(f"duty: expected a finite duty time, got {raw!r} at t_k = "
+                             f"{t_k:.12g} (x_k = {np.array2string(np.asarray(x_k), precision=6)});"
+                             f" check the duty law for a division by zero or a NaN state")
+        return float(np.clip(raw, 0.0, self.period))
+
+    def schedule(self, t_k: float, x_k: FloatArray) -> tuple[float, list[tuple[float, int]]]:
+        """The duty and the pieces of the period starting at ``t_k``.
+
+        Parameters
+        ----------
+        t_k : float
+            Sampling instant.
+        x_k : (n,) ndarray
+            Sampled state ``x(t_k)``.
+
+        Returns
+        -------
+        d_k : float
+            Duty time, clipped to ``[0, T]``.
+        pieces : list of (duration, mode)
+            The nonempty pieces of the period in order (durations add up to ``T``).
+
+        Raises
+        ------
+        ModelError
+            A non-finite duty (see :meth:`duty_at`).
+        """
+        d = self.duty_at(t_k, x_k)
+        offs = self.offsets(d)
+        ends = [o for o, _ in offs[1:]] + [self.period]
+        return d, [(e - o, m) for (o, m), e in zip(offs, ends, strict=True)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,13 +432,38 @@ class SwitchedAffineSystem:
     Parameters
     ----------
     modes : sequence of (A, b)
-        One affine field per mode.
-    controller : PWMController, optional
-        Sampled controller setting the mode (``simulate(..., controller=...)`` is not needed
-        when given here).
+        One affine field per mode (at least two).
+    controller : PWMController
+        Sampled controller setting the mode; required by ``simulate`` (it is part of the
+        model, not a simulation option).
     C : (p, n) array_like, optional
         Output ``y = C x`` (recorded as a signal).
     state_names : tuple of str
+
+    Raises
+    ------
+    DimensionError
+        Inconsistent shapes.
+    ModelError
+        Fewer than two modes, or a controller that is not a ``PWMController`` or names a mode
+        that does not exist.
+
+    Notes
+    -----
+    Each mode is affine, so it is propagated exactly by the flow of the augmented matrix
+    ``[[A_σ, b_σ], [0, 0]]`` (:meth:`flow`, a shared :class:`~nscontrol.numerics.lti.LTIFlow`).
+
+    Examples
+    --------
+    A buck converter (normalised) with a constant duty 0.6 of the period 0.25:
+
+    >>> from nscontrol import simulate
+    >>> A = np.array([[0.0, 1.0], [-1.0, -0.5]])
+    >>> buck = SwitchedAffineSystem(((A, [0.0, 0.0]), (A, [0.0, 1.0])),
+    ...                             PWMController(0.25, lambda t, x: 0.15))
+    >>> tr = simulate(buck, [0.0, 0.0], (0.0, 1.0))
+    >>> tr.event_times("switch")[:2].round(12).tolist()
+    [0.075, 0.175]
     """
 
     modes: Sequence[tuple[Any, Any]]
@@ -253,22 +499,78 @@ class SwitchedAffineSystem:
                                      f"[0, {len(mats)}), got {k}")
         if self.C is not None:
             object.__setattr__(self, "C", as_matrix("C", self.C, cols=n))
+        if self.state_names and len(self.state_names) != n:
+            raise DimensionError(f"state_names: expected {n} names, got "
+                                 f"{len(self.state_names)}")
 
     @property
     def n_states(self) -> int:
+        """Dimension ``n`` of the state."""
         return int(self.modes[0][0].shape[0])
 
+    @property
+    def n_modes(self) -> int:
+        """Number of modes."""
+        return len(self.modes)
+
     def field(self, mode: int, x: FloatArray) -> FloatArray:
-        """The field of ``mode`` at ``x``."""
+        """The vector field of one mode.
+
+        Parameters
+        ----------
+        mode : int
+            Mode index.
+        x : (n,) array_like
+            State.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``A_mode x + b_mode``.
+        """
         A, b = self.modes[mode]
         return A @ np.asarray(x, float) + b
 
-    def propagate(self, mode: int, x: Any, t: float) -> FloatArray:
-        """Exact solution of mode ``mode`` after time ``t`` from ``x`` (augmented ``expm``)."""
-        from scipy.linalg import expm
+    def flow(self, mode: int) -> Any:
+        """The exact flow of one mode on the augmented state ``[x; 1]``.
+
+        Parameters
+        ----------
+        mode : int
+            Mode index.
+
+        Returns
+        -------
+        LTIFlow
+            ``LTIFlow.shared([[A, b], [0, 0]])`` (decomposition reused across runs).
+        """
+        from ..numerics.lti import LTIFlow
 
         A, b = self.modes[mode]
         n = A.shape[0]
         M = np.zeros((n + 1, n + 1))
         M[:n, :n], M[:n, n] = A, b
-        return (expm(M * t) @ np.r_[np.asarray(x, float), 1.0])[:n]
+        return LTIFlow.shared(M)
+
+    def propagate(self, mode: int, x: Any, t: Any) -> FloatArray:
+        """Exact solution of one mode.
+
+        Parameters
+        ----------
+        mode : int
+            Mode index.
+        x : (n,) array_like
+            State at time 0.
+        t : float or array_like
+            Time(s) after which the state is wanted.
+
+        Returns
+        -------
+        ndarray
+            ``x(t)``: ``(n,)`` for a scalar ``t``, ``(len(t), n)`` otherwise (from
+            :meth:`flow`).
+        """
+        n = self.n_states
+        xi = np.r_[as_vector("x", x, n), 1.0]
+        out = self.flow(mode).propagate(xi, t)
+        return out[..., :n]

@@ -1,0 +1,68 @@
+"""Option checks shared by the set-valued integrators (``implicit_euler``, ``switching``).
+
+Each names the option, says what was expected and what was received (``ModelError``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from ..errors import ModelError
+
+__all__ = ["check_count", "check_on_failure", "check_signals"]
+
+
+def check_count(name: str, value: Any, minimum: int) -> int:
+    """An integer ``>= minimum`` (a float with an integral value is accepted, ``bool`` is not).
+
+    Raises
+    ------
+    ModelError
+        Not an integer, or below ``minimum``.
+    """
+    ok = not isinstance(value, bool | np.bool_)
+    try:
+        v = int(value)
+        ok = ok and float(value) == v
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or v < minimum:
+        raise ModelError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    return v
+
+
+def check_on_failure(value: Any) -> str:
+    """``"raise"`` or ``"return"``.
+
+    Raises
+    ------
+    ModelError
+        Any other value.
+    """
+    if value not in ("raise", "return"):
+        raise ModelError(f"on_failure: expected 'raise' or 'return', got {value!r}")
+    return str(value)
+
+
+def check_signals(value: Any, offered: tuple[str, ...]) -> tuple[str, ...] | None:
+    """A subset of the signal names an integrator offers (``None``: all of them).
+
+    Raises
+    ------
+    ModelError
+        A single string instead of a collection, or a name the integrator does not offer.
+    """
+    if value is None:
+        return None
+    if isinstance(value, str) or not isinstance(value, Iterable):
+        raise ModelError(f"signals: expected a collection of names from {list(offered)}, got "
+                         f"{value!r}")
+    names = tuple(value)
+    unknown = [s for s in names if s not in offered]
+    if unknown:
+        raise ModelError(f"signals: unknown signal name(s) {unknown}; this integrator records "
+                         f"{list(offered)}")
+    return names
