@@ -139,10 +139,12 @@ def periodic_steady_state(system: Any, period: float, *, u: Any = None, x0: Any 
     tol
         Newton stops when ``|φ_T(x) - x| <= tol·max(1, |x|)``.
     max_iter
-        Newton iterations per start (the linear guess, then zeros) before the fallback.
+        Newton iterations per start (the linear guess, then zeros) before the fallback;
+        ``0`` goes straight to the fallback.
     fallback
         When Newton fails, iterate ``x ← φ_T(x)`` (converges for convergent systems, by
-        ``e^{-σT}`` per period) for up to ``max_periods`` periods, then polish by Newton.
+        ``e^{-σT}`` per period) for up to ``max_periods`` periods, then polish by Newton
+        (``max(max_iter, 6)`` iterations).
     n_samples
         Uniform samples of the returned period.
     **options
@@ -201,8 +203,8 @@ def periodic_steady_state(system: Any, period: float, *, u: Any = None, x0: Any 
     if not ok and fallback:
         x, periods = _fixed_point(system, x if np.all(np.isfinite(x)) else np.zeros(n),
                                   period, method, u, tol, max_periods, options)
-        x, traj, more, ok = _newton(system, x, period, method, u, t_eval, tol, max_iter,
-                                    options)
+        x, traj, more, ok = _newton(system, x, period, method, u, t_eval, tol,
+                                    max(int(max_iter), 6), options)
         iters += more
         iters += periods
         how = "fixed_point+newton"
@@ -323,6 +325,20 @@ def check_uniqueness(system: Any, period: float, *, u: Any = None, n_guesses: in
     ------
     SolverError
         Shooting failed from one of the guesses.
+
+    Notes
+    -----
+    Hypothesis of the property tested: the system is uniformly convergent for the input
+    class (ch11 §2.1), so its bounded solution — here the ``T``-periodic one (P1) — is unique
+    and every solution converges to it (P3). Agreement from finitely many guesses is
+    evidence, not a proof; a non-convergent system may have several periodic solutions, and
+    Newton may find any of them (stable or not).
+
+    References
+    ----------
+    D5.3 chapter 11 (§3.3 of our spec: ≥ 5 guesses spread ~5× the response, 1e-8 relative);
+    A. Pavlov, A. Pogromsky, N. van de Wouw, H. Nijmeijer, "Convergent dynamics, a tribute to
+    Boris Pavlovich Demidovich", Systems & Control Letters 52, 2004.
     """
     ref = periodic_steady_state(system, period, u=u, method=method, **options)
     size = max(float(np.max(np.abs(ref.trajectory.x))), 1e-12)
@@ -352,12 +368,33 @@ class BruteForceResult:
         periodic within ``6T``.
     x_end
         Final state (to continue a sweep from).
+    period, samples_per_period, t0
+        ``T``, uniform samples per period and the start of the recorded window.
     """
 
     trajectory: Any
     poincare: FloatArray
     multiplicity: int
     x_end: FloatArray
+    period: float = np.nan
+    samples_per_period: int = 0
+    t0: float = 0.0
+
+    def uniform_samples(self, n_periods: int | None = None) -> tuple[FloatArray, FloatArray]:
+        """``(t, x)`` on the uniform grid of the last ``n_periods`` recorded periods (default:
+        the whole window), event instants removed, without the final endpoint (periodic
+        wrap)."""
+        n_rec = self.poincare.shape[0] - 1
+        k = n_rec if n_periods is None else int(n_periods)
+        if not 1 <= k <= n_rec:
+            raise ModelError(f"n_periods: expected 1..{n_rec} (the recorded periods), got "
+                             f"{n_periods!r}")
+        n = self.samples_per_period
+        grid = self.t0 + np.linspace(0.0, n_rec * self.period, n_rec * n + 1)
+        grid = grid[(n_rec - k) * n:-1]
+        tr = self.trajectory
+        idx = np.clip(np.searchsorted(tr.t, grid, side="left"), 0, len(tr.t) - 1)
+        return tr.t[idx], tr.x[idx]
 
 
 def period_multiplicity(poincare: Any, *, rtol: float = 1e-3, max_p: int = 6) -> int:
@@ -380,10 +417,38 @@ def brute_force_steady_state(system: Any, period: float, *, u: Any = None, x0: A
     """Simulate ``n_transient`` periods, then record ``n_record`` more and find the period
     multiplicity — for models that are not (known to be) convergent.
 
+    The recorded window is sampled at ``samples_per_period`` uniform times per period (plus
+    the event instants; :meth:`BruteForceResult.uniform_samples` returns the uniform ones).
+
     Raises
     ------
     ModelError
         Non-positive period or negative counts.
+
+    Notes
+    -----
+    No hypothesis on the system beyond existence of solutions: that is the point of brute
+    force. What the result means does depend on one: the transient must have died out, i.e.
+    ``n_transient·T`` must exceed several of the slowest decay times of the attractor reached
+    (ch11 §3.3 uses at least 7); otherwise a slow transient shows as multiplicity 0.
+    Multiplicity ``p`` is the smallest ``p <= 6`` with
+    ``max_k |x((k+p)T) - x(kT)| <= rtol·max|x|`` on the ``n_record + 1`` Poincaré samples.
+
+    References
+    ----------
+    D5.3 chapter 11 (§3.3 of our spec, brute force and period multiplicity).
+
+    Examples
+    --------
+    The open loop of ch11 §4.1 at ω = 2.9 settles on a 2T-periodic orbit (check 7):
+
+    >>> import numpy as np
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> from nscontrol.numerics.lti import Exosystem
+    >>> bf = brute_force_steady_state(one_sided_oscillator(0.1), 2 * np.pi / 2.9,
+    ...                               u=Exosystem.sinusoid(1.0, 2.9), n_transient=300)
+    >>> bf.multiplicity, round(float(np.max(np.abs(bf.trajectory.x[:, 0]))), 2)
+    (2, 1.22)
     """
     from ..simulate import simulate
 
@@ -391,6 +456,8 @@ def brute_force_steady_state(system: Any, period: float, *, u: Any = None, x0: A
     if int(n_transient) < 0 or int(n_record) < 1:
         raise ModelError(f"n_transient, n_record: expected >= 0 and >= 1, got {n_transient}, "
                          f"{n_record}")
+    if int(samples_per_period) < 3:
+        raise ModelError(f"samples_per_period: expected >= 3, got {samples_per_period!r}")
     n = int(system.n_states)
     x = np.zeros(n) if x0 is None else as_vector("x0", x0, n)
     opts = dict(options)
@@ -408,7 +475,8 @@ def brute_force_steady_state(system: Any, period: float, *, u: Any = None, x0: A
     idx = np.clip(np.searchsorted(rec.t, marks - 1e-12 * period, side="left"), 0,
                   len(rec.t) - 1)
     poinc = rec.x[idx]
-    return BruteForceResult(rec, poinc, period_multiplicity(poinc, rtol=rtol), rec.x[-1])
+    return BruteForceResult(rec, poinc, period_multiplicity(poinc, rtol=rtol), rec.x[-1],
+                            period, int(samples_per_period), t0)
 
 
 # -- frequency response ----------------------------------------------------------------------
@@ -454,9 +522,14 @@ class HarmonicResponse:
     multiplicity
         1 for a shot orbit; the detected multiplicity for brute force.
     n_crossings
-        Mode changes per period.
+        Mode changes per period of the response (per ``pT`` for a brute-force response of
+        multiplicity ``p``).
     x0
         Steady state at ``t = 0``.
+    state_peak
+        ``max_t |x̄(t)|`` (refined peak; the quantity the ISC bound ``γ_ISC·a`` bounds).
+    effort
+        ``max_t |u(t)|`` of the control law given as ``control`` (``nan`` without one).
     """
 
     omega: float
@@ -468,6 +541,8 @@ class HarmonicResponse:
     multiplicity: int
     n_crossings: int
     x0: FloatArray
+    state_peak: float = np.nan
+    effort: float = np.nan
 
 
 def _output_matrix(system: Any, output: Any) -> FloatArray:
@@ -483,21 +558,42 @@ def _output_matrix(system: Any, output: Any) -> FloatArray:
     return Cz
 
 
+def _check_control(control: Any) -> None:
+    if control is not None and not callable(control):
+        raise ModelError(f"control: expected a callable x -> u on time-major states (e.g. "
+                         f"ConvergentStateFeedback.control), got {type(control).__name__}")
+
+
+def _effort(control: Any, x: FloatArray) -> FloatArray | None:
+    """``|u|`` per row of the time-major ``x`` (None without a control law)."""
+    if control is None:
+        return None
+    u = np.asarray(control(x), float).reshape(x.shape[0], -1)
+    return np.linalg.norm(u, axis=1)
+
+
 def harmonic_response(orbit: PeriodicOrbit, *, amplitude: float, output: Any = None,
-                      system: Any = None, n_harmonics: int = 5) -> HarmonicResponse:
-    """Generalized-Bode figures of a shot orbit: refined ``γ_a``, RMS gain, harmonics."""
+                      system: Any = None, n_harmonics: int = 5,
+                      control: Any = None) -> HarmonicResponse:
+    """Generalized-Bode figures of a shot orbit: refined ``γ_a``, RMS gain, harmonics, peak
+    state and (with ``control``, a callable ``x -> u`` on time-major states) the effort
+    ``max|u|``."""
     n = orbit.x0.shape[0]
     Cz = _output_matrix(system, output) if system is not None else \
         (np.eye(1, n) if output is None else np.reshape(output, (-1, n)))
+    _check_control(control)
     _, x = orbit.uniform_samples()
     z = x @ Cz.T
     mag = np.linalg.norm(z, axis=1)
     a = check_positive("amplitude", amplitude)
+    u = _effort(control, x)
     return HarmonicResponse(
         omega=2 * np.pi / orbit.period, amplitude=a, gamma=refined_peak(mag) / a,
         rms_gain=float(np.sqrt(np.mean(mag**2))) / (a / np.sqrt(2.0)),
         harmonics=dft_harmonics(z[:, 0], n_harmonics) / a, max_floquet=orbit.max_multiplier,
-        multiplicity=1, n_crossings=orbit.n_crossings, x0=orbit.x0)
+        multiplicity=1, n_crossings=orbit.n_crossings, x0=orbit.x0,
+        state_peak=refined_peak(np.linalg.norm(x, axis=1)),
+        effort=np.nan if u is None else refined_peak(u))
 
 
 @dataclass(frozen=True)
@@ -511,6 +607,7 @@ class _ShootPoint:
     n_harmonics: int
     method: str
     options: dict[str, Any] = field(default_factory=dict)
+    control: Any = None
 
     def __call__(self, omega: float) -> HarmonicResponse:
         from ..numerics.lti import Exosystem
@@ -520,7 +617,8 @@ class _ShootPoint:
                                       method=self.method, n_samples=self.n_samples + 1,
                                       **self.options)
         return harmonic_response(orbit, amplitude=self.amplitude, output=self.output,
-                                 system=self.system, n_harmonics=self.n_harmonics)
+                                 system=self.system, n_harmonics=self.n_harmonics,
+                                 control=self.control)
 
 
 @dataclass(frozen=True)
@@ -535,12 +633,17 @@ class FrequencyResponse:
         ``(n_ω, K)`` first-harmonic and superharmonic gains ``|Z_k|/a``.
     multiplicity, n_crossings
         Integer arrays (``-1`` where a point failed).
+    state_peak
+        ``max_t |x̄(t)|`` per frequency.
+    effort
+        Control effort ``max_t |u(t)|`` per frequency (NaN when no control law was given).
     direction
         ``"independent"`` (shooting, every point on its own), ``"up"`` or ``"down"``.
     amplitude
         Input amplitude ``a``.
     errors
-        Per-point :class:`~nscontrol.sweep.PointError` or ``None``.
+        Per-point :class:`~nscontrol.sweep.PointError` or ``None`` (one entry per frequency,
+        its ``index`` the position in :attr:`omega`).
     """
 
     omega: FloatArray
@@ -550,6 +653,8 @@ class FrequencyResponse:
     max_floquet: FloatArray
     multiplicity: NDArray[np.int64]
     n_crossings: NDArray[np.int64]
+    state_peak: FloatArray
+    effort: FloatArray
     direction: str
     amplitude: float
     errors: tuple[Any, ...] = ()
@@ -565,8 +670,8 @@ class FrequencyResponse:
                    np.array([p.harmonics if p is not None else np.full(n_harmonics, np.nan)
                              for p in points]),
                    col("max_floquet", np.nan), col("multiplicity", -1).astype(np.int64),
-                   col("n_crossings", -1).astype(np.int64), direction, float(amplitude),
-                   tuple(errors))
+                   col("n_crossings", -1).astype(np.int64), col("state_peak", np.nan),
+                   col("effort", np.nan), direction, float(amplitude), tuple(errors))
 
 
 def _omega_grid(omegas: Any) -> FloatArray:
@@ -579,11 +684,13 @@ def _omega_grid(omegas: Any) -> FloatArray:
 
 def frequency_response(system: Any, omegas: Any, *, amplitude: float = 1.0,
                        output: Any = None, n_samples: int = 1000, n_harmonics: int = 5,
-                       method: str = "switching", executor: Any = "serial",
-                       progress: bool | None = None, **options: Any) -> FrequencyResponse:
+                       method: str = "switching", control: Any = None,
+                       executor: Any = "auto", progress: bool | None = None,
+                       **options: Any) -> FrequencyResponse:
     """Generalized Bode plot of a convergent system: shoot the steady state at each ``ω``
-    under ``a sin(ωt)`` and measure ``γ_a(ω)``, the RMS gain, harmonics and Floquet
-    multipliers; frequencies run independently through :func:`nscontrol.sweep.run`.
+    under ``a sin(ωt)`` and measure ``γ_a(ω)``, the RMS gain, harmonics, the peak state,
+    the control effort and Floquet multipliers; frequencies run independently through
+    :func:`nscontrol.sweep.run`.
 
     Parameters
     ----------
@@ -597,44 +704,126 @@ def frequency_response(system: Any, omegas: Any, *, amplitude: float = 1.0,
         Performance output matrix ``C_z`` (default: the model's ``C``, else the first state).
     n_samples
         Uniform samples per period for the peak and the DFT (``>= 64·n_harmonics``).
+    method
+        Integrator (default ``"switching"``).
+    control
+        The feedback law the loop was built from, as a callable ``x -> u`` on time-major
+        states: ``ConvergentStateFeedback.control``, ``PWAStateFeedback.control``, or
+        ``EstimateFeedback(feedback, n)`` for an observer-based loop
+        (:mod:`nscontrol.design.convergent_pwa`); gives :attr:`FrequencyResponse.effort`
+        ``= max_t|u|``. Must be picklable for process executors (those are).
     executor
-        As in :func:`nscontrol.sweep.run` (default ``"serial"``; ``None`` for local
-        processes, a Dask client or address for a cluster — the system must be picklable).
+        As in :func:`nscontrol.sweep.run`. Default ``"auto"``: the first frequency runs
+        here, timed, and the rest go to a local process pool only when the predicted serial
+        time exceeds :data:`nscontrol.sweep.AUTO_PARALLEL_SECONDS` — measured on the
+        project's 2-core machine, a chapter-11 point costs 0.01–0.02 s and a pool ~0.035 s,
+        so grids of more than ~15–25 points go parallel (60 points: 0.83 s serial, 0.46 s
+        in two processes). ``"serial"``, ``None`` (always processes) or a Dask
+        client/address — the system must then be picklable.
     progress
         Progress bar on stderr (see :func:`nscontrol.sweep.run`).
+    **options
+        Passed to :func:`periodic_steady_state` (and on to the integrator).
 
     Returns
     -------
     FrequencyResponse
         ``direction="independent"``; failed points are NaN with their error recorded.
 
+    Raises
+    ------
+    ModelError
+        Bad frequency grid or ``control``.
+    DimensionError
+        ``output`` of the wrong width.
+
     Notes
     -----
     Only meaningful for convergent systems (ch11 §2.6): the steady state is then unique and
     equals ``α(v(t), ω)``; for PWL systems ``γ_a`` does not depend on ``a`` (P5). The peak is
     refined by a parabola through the three largest samples (plain maxima are biased low by
-    ``(π/N)²/2``).
+    ``(π/N)²/2``). Convergence is not checked here: run
+    :func:`~nscontrol.analysis.convergence.quadratic_convergence` first, and read
+    :attr:`FrequencyResponse.max_floquet` (``< 1`` everywhere for a convergent system, P6).
 
     References
     ----------
     A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency response functions for nonlinear
     convergent systems", IEEE TAC 52(6), 2007; D5.3 chapter 11.
+
+    Examples
+    --------
+    A linear oscillator (``k_s = 0``) gives ``|G(iω)|``; the effort of ``u = Kx`` comes
+    with it:
+
+    >>> import numpy as np
+    >>> from nscontrol.design.convergent_pwa import design_state_feedback
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> linear = one_sided_oscillator(0.1, ks=0.0)
+    >>> frf = frequency_response(linear, [0.5, 1.0, 2.0], progress=False)
+    >>> G = [abs(1 / (1 - w**2 + 0.1j * w)) for w in (0.5, 1.0, 2.0)]
+    >>> bool(np.allclose(frf.gamma, G, rtol=1e-6))
+    True
+    >>> plant = one_sided_oscillator(0.1)
+    >>> sf = design_state_feedback(plant, sigma=0.3)
+    >>> frf = frequency_response(sf.closed_loop(plant), [2.9], control=sf.control,
+    ...                          progress=False)
+    >>> round(float(frf.gamma[0]), 4), bool(frf.effort[0] > 0)
+    (0.1892, True)
     """
     from .. import sweep
 
     w = _omega_grid(omegas)
     _output_matrix(system, output)  # bad shapes fail here, not once per point
+    _check_control(control)
     task = _ShootPoint(system, float(check_positive("amplitude", amplitude)), output,
-                       int(n_samples), int(n_harmonics), method, dict(options))
+                       int(n_samples), int(n_harmonics), method, dict(options), control)
     res = sweep.run(task, list(w), executor=executor, progress=progress, desc="FRF")
     return FrequencyResponse.from_points(w, res.values, direction="independent",
                                          amplitude=amplitude, n_harmonics=n_harmonics,
                                          errors=res.errors)
 
 
+def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: FloatArray,
+                    n_harmonics: int, control: Any) -> HarmonicResponse:
+    """Figures of a brute-force window on its *uniform* grid (event rows removed). For
+    multiplicity ``p >= 1`` over the last ``p`` periods (peaks refined cyclically, harmonics
+    of ω at DFT bins ``p, 2p, ...``); for ``p = 0`` plain maxima over the whole window, RMS
+    over the window and harmonics over the last period."""
+    p = int(bf.multiplicity)
+    k = max(p, 1)
+    _, x = bf.uniform_samples(k)
+    z = x @ Cz.T
+    mag = np.linalg.norm(z, axis=1)
+    u = _effort(control, x)
+    Z = np.abs(np.fft.rfft(z[:, 0]) * (2.0 / z.shape[0]))
+    harmonics = Z[k * np.arange(1, int(n_harmonics) + 1)] / amplitude
+    if p >= 1:
+        gamma, peak = refined_peak(mag), refined_peak(np.linalg.norm(x, axis=1))
+        effort = np.nan if u is None else refined_peak(u)
+        rms = float(np.sqrt(np.mean(mag**2)))
+    else:  # not periodic: every recorded row, and the RMS of the whole window
+        xa = bf.trajectory.x
+        gamma = float(np.max(np.linalg.norm(xa @ Cz.T, axis=1)))
+        peak = float(np.max(np.linalg.norm(xa, axis=1)))
+        ua = _effort(control, xa)
+        effort = np.nan if ua is None else float(np.max(ua))
+        _, xw = bf.uniform_samples()
+        rms = float(np.sqrt(np.mean(np.linalg.norm(xw @ Cz.T, axis=1)**2)))
+    t_end = bf.t0 + (bf.poincare.shape[0] - 1) * bf.period
+    times = bf.trajectory.event_times()
+    crossings = int(np.count_nonzero((times >= t_end - k * bf.period) & (times < t_end)))
+    return HarmonicResponse(omega=float(omega), amplitude=amplitude, gamma=gamma / amplitude,
+                            rms_gain=rms / (amplitude / np.sqrt(2.0)), harmonics=harmonics,
+                            max_floquet=np.nan, multiplicity=p, n_crossings=crossings,
+                            x0=bf.poincare[-1], state_peak=peak, effort=effort)
+
+
 @dataclass(frozen=True)
 class _SweepBranch:
-    """Picklable task: brute-force continuation over a frequency list, in the given order."""
+    """Picklable task: brute-force continuation over ``(direction, ((index, ω), ...))``, in
+    the given order; a failing frequency is that frequency's error and the branch goes on
+    from the last good state."""
 
     system: Any
     amplitude: float
@@ -642,68 +831,140 @@ class _SweepBranch:
     n_transient: int
     n_record: int
     n_harmonics: int
+    samples_per_period: int
     method: str
     options: dict[str, Any] = field(default_factory=dict)
+    control: Any = None
 
-    def __call__(self, omegas: tuple[float, ...]) -> list[HarmonicResponse]:
+    def __call__(self, branch: tuple[str, tuple[tuple[int, float], ...]]) -> list[Any]:
+        import traceback
+
         from ..numerics.lti import Exosystem
+        from ..sweep import PointError
 
+        direction, points = branch
         Cz = _output_matrix(self.system, self.output)
         x = np.zeros(int(self.system.n_states))
-        out = []
-        for w in omegas:
-            T = 2 * np.pi / w
-            bf = brute_force_steady_state(self.system, T, u=Exosystem.sinusoid(self.amplitude, w),
-                                          x0=x, n_transient=self.n_transient,
-                                          n_record=self.n_record, method=self.method,
-                                          **self.options)
+        out: list[Any] = []
+        for i, w in points:
+            try:
+                bf = brute_force_steady_state(
+                    self.system, 2 * np.pi / w, u=Exosystem.sinusoid(self.amplitude, w), x0=x,
+                    n_transient=self.n_transient, n_record=self.n_record,
+                    samples_per_period=self.samples_per_period, method=self.method,
+                    **self.options)
+                out.append(_brute_response(bf, w, self.amplitude, Cz, self.n_harmonics,
+                                           self.control))
+            except Exception as exc:  # this frequency's error; the branch continues
+                out.append(PointError(int(i), type(exc).__name__,
+                                      f"ω = {w:g} ({direction} sweep): {exc}",
+                                      traceback.format_exc()))
+                continue
             x = bf.x_end
-            z = bf.trajectory.x @ Cz.T
-            mag = np.linalg.norm(z, axis=1)
-            last = z[-201:-1, 0]  # the last period (200 uniform samples)
-            out.append(HarmonicResponse(
-                omega=float(w), amplitude=self.amplitude,
-                gamma=float(mag.max()) / self.amplitude,
-                rms_gain=float(np.sqrt(np.mean(mag**2))) / (self.amplitude / np.sqrt(2.0)),
-                harmonics=dft_harmonics(last, self.n_harmonics) / self.amplitude,
-                max_floquet=np.nan, multiplicity=bf.multiplicity,
-                n_crossings=len(bf.trajectory.events), x0=bf.poincare[-1]))
         return out
 
 
 def frequency_sweep(system: Any, omegas: Any, *, amplitude: float = 1.0, output: Any = None,
                     directions: Sequence[str] = ("up", "down"), n_transient: int = 100,
-                    n_record: int = 12, n_harmonics: int = 5, method: str = "switching",
-                    executor: Any = "serial", progress: bool | None = None,
+                    n_record: int = 12, n_harmonics: int = 5, samples_per_period: int = 200,
+                    method: str = "switching", control: Any = None, executor: Any = "auto",
+                    progress: bool | None = None,
                     **options: Any) -> dict[str, FrequencyResponse]:
     """Brute-force frequency sweeps with continuation (each point starts from the previous
     point's final state), up and/or down in frequency; the directions run in parallel
     through :func:`nscontrol.sweep.run`. Differences between the branches reveal coexisting
     steady states (hysteresis) of non-convergent models.
 
+    Parameters
+    ----------
+    system, omegas, amplitude, output, n_harmonics, method, control, progress
+        As in :func:`frequency_response`.
+    directions
+        ``"up"`` and/or ``"down"``.
+    n_transient, n_record, samples_per_period
+        Per frequency, as in :func:`brute_force_steady_state`.
+    executor
+        As in :func:`nscontrol.sweep.run`. Default ``"auto"``: local processes when two
+        directions run on a machine with two or more CPUs (a branch costs
+        ``n_ω·(n_transient + n_record)`` simulated periods — 0.05–0.3 s per frequency for the
+        ch11 oscillator at the defaults, against ~0.035 s to start a pool), else serial.
+    **options
+        Passed to the integrator.
+
     Returns
     -------
     dict of str to FrequencyResponse
-        One per direction, on the increasing frequency grid; ``gamma`` is ``max|z|/a`` over
-        the recorded window, ``multiplicity`` the detected period multiplicity (0: not
-        periodic within 6T). A failed branch is all-NaN with its error in ``errors``.
+        One per direction, on the increasing frequency grid; ``gamma`` is ``max|z|/a`` of
+        the recorded response (refined over its last ``p`` periods when its multiplicity is
+        ``p >= 1``), ``multiplicity`` the detected period multiplicity (0: not periodic
+        within 6T). A failing frequency is NaN with its own error in ``errors`` (index and
+        frequency); the branch continues from the last good state.
+
+    Raises
+    ------
+    ModelError
+        Bad frequency grid, direction or ``control``.
+
+    Notes
+    -----
+    Continuation is sequential within a direction: the point of sweeping up *and* down is
+    that each frequency starts on the attractor the previous one ended on, so a coexisting
+    branch is followed until it disappears (a fold) and the jump shows where it does.
+    Splitting a direction into segments seeded from a coarse pass would be exact except
+    where it matters — near folds the landing attractor depends on the seed — and on two
+    CPUs it gains nothing over running the two directions side by side (coarse pass
+    ``n/s`` plus ``n/2`` fine points per worker versus ``n``: a gain only with more than two
+    workers). Only the directions run in parallel.
+
+    References
+    ----------
+    D5.3 chapter 11 (§3.4 of our spec); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
+    response functions for nonlinear convergent systems", IEEE TAC 52(6), 2007 (FRFs exist
+    only for convergent systems; hence brute force here).
+
+    Examples
+    --------
+    The open loop of ch11 §4.1 is period-2 at ω = 2.9 in both directions:
+
+    >>> from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    >>> res = frequency_sweep(one_sided_oscillator(0.1), [2.8, 2.9], n_transient=150,
+    ...                       n_record=6, executor="serial", progress=False)
+    >>> [int(res[d].multiplicity[1]) for d in ("up", "down")]
+    [2, 2]
     """
+    import os
+
     from .. import sweep
 
     w = np.sort(_omega_grid(omegas))
     for d in directions:
         if d not in ("up", "down"):
             raise ModelError(f"directions: expected 'up' and/or 'down', got {d!r}")
+    _output_matrix(system, output)
+    _check_control(control)
     options.setdefault("progress", False)  # one bar for the sweep, not one per simulation
     task = _SweepBranch(system, float(check_positive("amplitude", amplitude)), output,
-                        int(n_transient), int(n_record), int(n_harmonics), method,
-                        dict(options))
-    grids = [tuple(w) if d == "up" else tuple(w[::-1]) for d in directions]
+                        int(n_transient), int(n_record), int(n_harmonics),
+                        int(samples_per_period), method, dict(options), control)
+    order = np.arange(w.size)
+    grids = [(d, tuple((int(i), float(w[i])) for i in (order if d == "up" else order[::-1])))
+             for d in directions]
+    if isinstance(executor, str) and executor == "auto":
+        executor = None if len(grids) > 1 and (os.cpu_count() or 1) > 1 else "serial"
     res = sweep.run(task, grids, executor=executor, progress=progress, desc="sweep")
     out = {}
-    for d, pts, err in zip(directions, res.values, res.errors, strict=True):
-        pts = [None] * w.size if pts is None else (pts if d == "up" else pts[::-1])
-        out[d] = FrequencyResponse.from_points(w, pts, direction=d, amplitude=amplitude,
-                                               n_harmonics=n_harmonics,
-                                               errors=(err,) * w.size if err else ())
+    for (d, pts), values, err in zip(grids, res.values, res.errors, strict=True):
+        resp: list[HarmonicResponse | None] = [None] * w.size
+        errs: list[Any] = [None] * w.size
+        for (i, wi), v in zip(pts, values if values is not None else [None] * len(pts),
+                              strict=True):
+            if isinstance(v, HarmonicResponse):
+                resp[i] = v
+            elif v is not None:
+                errs[i] = v
+            else:  # the whole branch task failed (lost worker, unpicklable system...)
+                errs[i] = sweep.PointError(i, err.type, f"ω = {wi:g}: the {d} sweep failed "
+                                           f"as a whole: {err.message}", err.traceback)
+        out[d] = FrequencyResponse.from_points(w, resp, direction=d, amplitude=amplitude,
+                                               n_harmonics=n_harmonics, errors=errs)
     return out
