@@ -105,31 +105,33 @@ def test_random_p_matrices_are_solved(n, seed):
     rng = np.random.default_rng(seed)
     M = random_p_matrix(n, rng)
     q = rng.standard_normal(n)
-    results = [solve_lcp(M, q, method=m) for m in ("lemke", "auto")]
-    for res in results:
-        assert_is_solution(res, M, q)
-    # Unique solution: both agree.
-    np.testing.assert_allclose(results[0].z, results[1].z, atol=1e-9)
+    # Non-symmetric and not a Z-matrix: of the methods only Lemke applies (and auto picks it).
+    res = solve_lcp(M, q, method="lemke")
+    assert_is_solution(res, M, q)
+    auto = solve_lcp(M, q)
+    assert_is_solution(auto, M, q)
+    assert auto.method == "lemke"
 
 
 @PROPERTY
 @given(n=st.integers(1, 30), seed=st.integers(0, 2**32 - 1))
-def test_all_methods_agree_on_symmetric_positive_definite(n, seed):
+def test_lemke_and_pgs_agree_on_symmetric_positive_definite(n, seed):
     rng = np.random.default_rng(seed)
     B = rng.standard_normal((n, n))
     M = B @ B.T / n + np.eye(n)  # well conditioned: PGS converges quickly
     q = rng.standard_normal(n)
-    ref = solve_lcp(M, q, method="lemke")
-    assert_is_solution(ref, M, q)
-    for method in ("pgs", "auto"):
-        res = solve_lcp(M, q, method=method, max_iter=20_000)
+    lemke = solve_lcp(M, q, method="lemke")
+    pgs = solve_lcp(M, q, method="pgs", max_iter=20_000)
+    for res in (lemke, pgs):
         assert_is_solution(res, M, q)
-        np.testing.assert_allclose(res.z, ref.z, atol=1e-9)
+    assert (lemke.method, pgs.method) == ("lemke", "pgs")
+    # unique solution (P-matrix); PGS's z carries the polish's round-off only
+    np.testing.assert_allclose(pgs.z, lemke.z, atol=1e-9)
 
 
 @PROPERTY
 @given(n=st.integers(2, 60), seed=st.integers(0, 2**32 - 1))
-def test_all_methods_agree_on_tridiagonal_m_matrices(n, seed):
+def test_lemke_pgs_and_banded_agree_on_tridiagonal_m_matrices(n, seed):
     rng = np.random.default_rng(seed)
     off = -rng.uniform(0.0, 1.0, n - 1)
     diag = rng.uniform(0.1, 1.0, n) + np.abs(np.r_[off, 0]) + np.abs(np.r_[0, off])
@@ -137,12 +139,17 @@ def test_all_methods_agree_on_tridiagonal_m_matrices(n, seed):
     q = rng.standard_normal(n)
     ref = solve_lcp(M, q, method="lemke")
     assert_is_solution(ref, M, q)
-    for method, matrix in (("banded", M), ("banded", sp.csr_matrix(M)), ("auto", M)):
-        res = solve_lcp(matrix, q, method=method)
+    runs = {"banded dense": solve_lcp(M, q, method="banded"),
+            "banded sparse": solve_lcp(sp.csr_matrix(M), q, method="banded"),
+            "pgs": solve_lcp(M, q, method="pgs", max_iter=100_000)}
+    for label, res in runs.items():
         assert_is_solution(res, M, q)
-        np.testing.assert_allclose(res.z, ref.z, atol=1e-10)
-        # Howard's iteration on an M-matrix: at most n + 1 active-set solves (Bokanowski et al.)
-        assert res.method == "lemke" or res.iterations <= n + 1
+        assert res.method == label.split()[0]
+        np.testing.assert_allclose(res.z, ref.z, atol=1e-9 if label == "pgs" else 1e-10)
+    # Howard's iteration on an M-matrix: at most n + 1 active-set solves (Bokanowski et al.)
+    assert runs["banded dense"].iterations <= n + 1
+    if n > 2:
+        assert solve_lcp(M, q).method == "banded"
 
 
 @PROPERTY
@@ -154,9 +161,14 @@ def test_banded_on_pentadiagonal_m_matrices_uses_sparse_lu_and_agrees(n, seed):
     M += np.diag(np.abs(M).sum(axis=1) + rng.uniform(0.1, 1.0, n))  # strictly dominant
     q = rng.standard_normal(n)
     ref = solve_lcp(M, q, method="lemke")
-    res = solve_lcp(sp.csr_matrix(M), q, method="banded")
-    assert_is_solution(res, M, q)
-    np.testing.assert_allclose(res.z, ref.z, atol=1e-10)
+    banded = solve_lcp(sp.csr_matrix(M), q, method="banded")
+    pgs = solve_lcp(M, q, method="pgs", max_iter=100_000)
+    auto = solve_lcp(sp.csr_matrix(M), q)
+    for res in (ref, banded, pgs, auto):
+        assert_is_solution(res, M, q)
+    assert (banded.method, pgs.method, auto.method) == ("banded", "pgs", "banded")
+    np.testing.assert_allclose(banded.z, ref.z, atol=1e-10)
+    np.testing.assert_allclose(pgs.z, ref.z, atol=1e-9)
 
 
 def _infeasible(M, q) -> bool:
@@ -241,6 +253,101 @@ def test_result_is_frozen():
         res.z[0] = 5.0
 
 
+def _propagating_impact(n: int) -> tuple[sp.csr_matrix, np.ndarray]:
+    """Stack Delassus matrix with an impact at one end and small positive gaps elsewhere:
+    Howard's iteration from z = 0 adds one contact per iteration (n iterations for
+    n <= 1000, where the impact reaches the end of the chain)."""
+    M = stack_delassus(n).M
+    q = np.full(n, 1e-3)
+    q[0] = -1.0
+    return M, q
+
+
+@pytest.mark.parametrize("n", [10, 1000, 10_000])
+def test_banded_starting_sweeps_solve_a_propagating_impact_without_iterating(n):
+    M, q = _propagating_impact(n)
+    res = solve_lcp(M, q, method="banded")
+    assert_is_solution(res, M, q)
+    assert res.iterations == 0                     # from z = 0 Howard needs n iterations
+    z0 = solve_lcp(M, q, method="banded", z0=np.zeros(n))   # the plain iteration, warm start 0
+    # one contact per iteration, as deep as the impact reaches (about 1 / 1e-3 contacts)
+    assert z0.success and z0.iterations == min(n, 1000)
+    # two direct solves of one system whose condition number grows like n^2
+    np.testing.assert_allclose(res.z, z0.z, rtol=1e-15 * n ** 2, atol=1e-15)
+    # the impact at the other end, and in the middle
+    # the impact at the other end, and in the middle: exact starts while the impact reaches
+    # an end of the chain (one free boundary); a region inside a long chain has two, and
+    # costs about half its depth in iterations (documented in docs/lcp.md)
+    for where in (n - 1, n // 2):
+        q2 = np.full(n, 1e-3)
+        q2[where] = -1.0
+        res2 = solve_lcp(M, q2, method="banded")
+        assert_is_solution(res2, M, q2)
+        assert res2.iterations <= (1 if where == n - 1 or n <= 1000 else 600)
+
+
+def test_howard_does_not_stop_at_a_feasible_but_not_complementary_start():
+    prob = stack_delassus(20, sparse=False)
+    z0 = 2.0 * prob.z                        # feasible: w = -q >= 0, but z0[0] w[0] > 0
+    assert np.all(prob.M @ z0 + prob.q >= -1e-15) and (prob.M @ z0 + prob.q)[0] > 0.0
+    for M in (prob.M, sp.csr_matrix(prob.M) + sp.diags(np.full(18, -1e-3), 2)
+              + sp.diags(np.full(18, -1e-3), -2)):
+        res = solve_lcp(M, prob.q, method="banded", z0=z0)
+        assert_is_solution(res, M, prob.q)
+        assert res.iterations >= 1
+
+
+def test_sparse_howard_detects_a_cycle_and_auto_falls_back():
+    # Pentadiagonal matrices that are not Z-matrices: Howard's iteration may cycle between
+    # active sets; the repetition is detected at once (not after max_iter sparse
+    # factorisations) and reported as max_iter; auto hands over to Lemke.
+    rng = np.random.default_rng(4)
+    cycles = 0
+    for _ in range(300):
+        n = int(rng.integers(3, 9))
+        M = np.eye(n) * rng.uniform(0.5, 2.0)
+        for k in (1, 2):
+            M += np.diag(rng.uniform(-2, 2, n - k), k) + np.diag(rng.uniform(-2, 2, n - k), -k)
+        q = rng.standard_normal(n)
+        res = solve_lcp(sp.csr_matrix(M), q, method="banded", max_iter=1000)
+        if res.status != "max_iter":
+            continue
+        cycles += 1
+        assert res.iterations <= 2 ** n             # stopped at the first repeated set
+        auto = solve_lcp(sp.csr_matrix(M), q)
+        assert auto.message.startswith("banded: max_iter")
+        if auto.success:
+            assert auto.method == "lemke"
+            assert_is_solution(auto, M, q)
+    assert cycles >= 10
+
+
+def test_auto_dispatch_by_structure():
+    rng = np.random.default_rng(2)
+    n = 300
+    off1, off2 = -rng.uniform(0, 1, n - 1), -rng.uniform(0, 1, n - 2)
+    P = np.diag(off1, 1) + np.diag(off1, -1) + np.diag(off2, 2) + np.diag(off2, -2)
+    P += np.diag(np.abs(P).sum(axis=1) + 0.5)
+    q = rng.standard_normal(n)
+    assert solve_lcp(sp.csr_matrix(P), q).method == "banded"    # sparse: no densifying
+    assert solve_lcp(P, q).method == "banded"                   # dense with a narrow band
+    B = rng.standard_normal((500, 500))
+    S = B @ B.T / 500 + np.eye(500)
+    qs = rng.standard_normal(500)
+    res = solve_lcp(S, qs)
+    assert_is_solution(res, S, qs)
+    assert res.method == "pgs" and res.message.startswith("pgs: solved")
+    # symmetric, positive diagonal, but indefinite and PGS does not converge: Lemke takes over
+    A = rng.standard_normal((450, 450))
+    Ind = np.diag(np.full(450, 1.0)) + 3.0 * (A + A.T)
+    Ind[np.diag_indices(450)] = np.abs(np.diag(Ind)) + 0.1
+    qi = -np.abs(rng.standard_normal(450))
+    res = solve_lcp(Ind, qi)
+    assert res.message.split(";")[0].startswith("pgs: ")
+    if res.success:
+        assert_is_solution(res, Ind, qi)
+
+
 # ----------------------------------------------------------------------------- bad input
 
 
@@ -259,6 +366,17 @@ def test_result_is_frozen():
     (np.eye(2), np.ones(2), {"omega": 2.5}, ModelError, "omega"),
     (np.eye(2), np.ones(2), {"max_iter": 0}, ModelError, "max_iter"),
     ([["a", "b"], ["c", "d"]], np.ones(2), {}, ModelError, "M"),
+    (np.eye(2) * (1 + 1j), np.ones(2), {}, ModelError, "M"),
+    (np.eye(2), np.array([1.0, 1.0j]), {}, ModelError, "q"),
+    (sp.csr_matrix(np.eye(2) * 1j), np.ones(2), {}, ModelError, "M"),
+    (np.eye(2), np.ones(2), {"z0": [1j, 0.0]}, ModelError, "z0"),
+    (np.eye(2), np.ones(2), {"tol": "small"}, ModelError, "tol"),
+    (np.eye(2), np.ones(2), {"tol": None}, ModelError, "tol"),
+    (np.eye(2), np.ones(2), {"omega": "fast"}, ModelError, "omega"),
+    (np.eye(2), np.ones(2), {"omega": 0.0}, ModelError, "omega"),
+    (np.eye(2), np.ones(2), {"max_iter": 2.7}, ModelError, "max_iter"),
+    (np.eye(2), np.ones(2), {"max_iter": "10"}, ModelError, "max_iter"),
+    (np.eye(2), np.ones(2), {"max_iter": True}, ModelError, "max_iter"),
 ])
 def test_bad_input_raises_its_specific_error(M, q, kwargs, error, names):
     with pytest.raises(error, match=f"^{names}: expected"):

@@ -409,6 +409,70 @@ def _tridiag_w(lower, diag, upper, q, z, w):
 
 
 @njit(cache=True)
+def _projected_thomas(lower, diag, upper, q, z, dp, rp, reverse):
+    """One projected Thomas sweep (Brennan–Schwartz): eliminate in one direction without
+    pivoting, back-substitute in the other with ``z_i = max(0, ...)``.
+
+    Exact for an M-matrix when the solution's zero set lies at the end where the
+    back-substitution starts (one free boundary, the American-option structure); elsewhere a
+    guess. ``reverse=True`` runs bottom-up. Returns False on a non-positive or non-finite
+    pivot (``M`` is not an M-matrix), leaving ``z`` unspecified.
+    """
+    n = q.shape[0]
+    for k in range(n):
+        i = n - 1 - k if reverse else k
+        d = diag[i]
+        r = -q[i]
+        if k > 0:
+            j = i + 1 if reverse else i - 1                 # the row eliminated before
+            a = upper[i] if reverse else lower[i - 1]       # M[i, j]
+            c = lower[i] if reverse else upper[i - 1]       # M[j, i]
+            m = a / dp[j]
+            d -= m * c
+            r -= m * rp[j]
+        if not (d > 0.0) or not np.isfinite(d):
+            return False
+        dp[i] = d
+        rp[i] = r
+    for k in range(n - 1, -1, -1):
+        i = n - 1 - k if reverse else k
+        r = rp[i]
+        if k < n - 1:
+            j = i - 1 if reverse else i + 1
+            r -= (lower[j] if reverse else upper[i]) * z[j]
+        v = r / dp[i]
+        z[i] = v if v > 0.0 else 0.0
+    return True
+
+
+@njit(cache=True)
+def tridiagonal_start(lower, diag, upper, q, z):
+    """Starting point for Howard's iteration: the larger of the two projected Thomas sweeps.
+
+    Each sweep (:func:`_projected_thomas`) is exact when the solution has a single free
+    boundary on its side (an impact travelling down a chain or up a stack, a stack at rest),
+    where Howard's iteration from ``z = 0`` moves the boundary by one index per iteration
+    (``n`` iterations); their componentwise maximum is a good start when there are several.
+    O(n); ``z = 0`` when neither sweep applies (not an M-matrix).
+    """
+    n = q.shape[0]
+    dp = np.empty(n)
+    rp = np.empty(n)
+    up = np.empty(n)
+    ok_down = _projected_thomas(lower, diag, upper, q, z, dp, rp, False)
+    ok_up = _projected_thomas(lower, diag, upper, q, up, dp, rp, True)
+    for i in range(n):
+        if ok_down and ok_up:
+            z[i] = max(z[i], up[i])
+        elif ok_up:
+            z[i] = up[i]
+        elif not ok_down:
+            z[i] = 0.0
+        if not np.isfinite(z[i]):
+            z[i] = 0.0
+
+
+@njit(cache=True)
 def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
     """LCP with tridiagonal ``M`` by Howard's policy iteration (semismooth Newton on
     ``min(z, M z + q) = 0``) with Thomas solves: O(n) per iteration.
@@ -430,20 +494,22 @@ def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
 
     Notes
     -----
-    Start from ``z = 0``. Each iteration picks, for every ``i``, the branch of
-    ``min(z_i, w_i)`` that is smaller at the current iterate (``w_i <= z_i``: impose
-    ``w_i = 0``, i.e. ``i`` active; else ``z_i = 0``), solves the principal system on the
-    active set by a Thomas sweep restarted at each run of consecutive active indices, and
-    stops as soon as ``z >= 0`` and ``w >= 0`` (to ``1e-13 (1 + max|q|) + 64 eps ||M|| max|z|``).
+    Start from :func:`tridiagonal_start` (two projected Thomas sweeps, O(n)). Each iteration
+    picks, for every ``i``, the branch of ``min(z_i, w_i)`` that is smaller at the current
+    iterate (``w_i <= z_i``: impose ``w_i = 0``, i.e. ``i`` active; else ``z_i = 0``), solves
+    the principal system on the active set by a Thomas sweep restarted at each run of
+    consecutive active indices, and stops as soon as ``z >= 0``, ``w >= 0`` and
+    ``min(z, w) = 0`` (to ``1e-13 (1 + max|q|) + 64 eps ||M|| max|z|``).
 
     *When it is exact.* For an M-matrix ``M`` (positive diagonal, non-positive off-diagonals,
     positive definite or diagonally dominant — e.g. the Delassus matrix ``W^T M^{-1} W`` of a
-    chain or stack of masses with contacts between neighbours) the iterates decrease
-    monotonically to the unique solution in at most ``n`` iterations (Bokanowski, Maroso &
-    Zidani 2009, Thm. 2.1) and every Thomas pivot is positive; the result is exact up to
-    round-off of the final direct solve. A stack at rest under gravity converges in one
-    iteration (all contacts active from the start); a single impact propagating through a
-    chain may take up to ``n`` iterations (O(n^2) worst case).
+    chain or stack of masses with contacts between neighbours) the iteration converges to the
+    unique solution in at most ``n`` iterations from any start (Bokanowski, Maroso & Zidani
+    2009, Thm. 2.1) and every Thomas pivot is positive; the result is exact up to round-off of
+    the final direct solve. *Cost.* O(n) per iteration, so O(n^2) in the worst case; the
+    starting sweeps are exact for a stack at rest and for a single impact travelling through
+    a chain (0 iterations where ``z = 0`` needed ``n``), and leave a few iterations for
+    scattered impacts (see ``docs/lcp.md`` for the measured counts).
 
     *When it fails.* For other tridiagonal matrices the iteration may cycle or meet a
     non-positive pivot; it then stops with status 2 (iteration limit) or 3 (pivot), never
@@ -452,11 +518,13 @@ def tridiagonal_lcp_kernel(lower, diag, upper, q, z_out, w_out, max_iter):
     References
     ----------
     O. Bokanowski, S. Maroso, H. Zidani, "Some convergence results for Howard's algorithm",
-    SIAM J. Numer. Anal. 47(4):3001–3026, 2009.
+    SIAM J. Numer. Anal. 47(4):3001–3026, 2009. M. J. Brennan, E. S. Schwartz, "The valuation
+    of American put options", J. Finance 32(2):449–462, 1977 (the projected sweep).
     """
     n = q.shape[0]
-    for i in range(n):
-        z_out[i] = 0.0
+    if n == 0:
+        return SOLVED, 0
+    tridiagonal_start(lower, diag, upper, q, z_out)
     return tridiagonal_howard(lower, diag, upper, q, z_out, w_out, max_iter)
 
 
@@ -493,12 +561,14 @@ def tridiagonal_howard(lower, diag, upper, q, z, w, max_iter):
         for i in range(n):
             zmax = max(zmax, abs(z[i]))
         eps = 1e-13 * (1.0 + qmax) + 64.0 * _EPS * row_max * zmax
-        feasible = True
+        # a solution: feasible and complementary (Howard's own iterates are complementary by
+        # construction, a warm start or the starting sweeps need not be)
+        solved = True
         for i in range(n):
-            if z[i] < -eps or w[i] < -eps:
-                feasible = False
+            if z[i] < -eps or w[i] < -eps or min(z[i], w[i]) > eps:
+                solved = False
                 break
-        if feasible:
+        if solved:
             return SOLVED, it
         if it == max_iter:
             break
@@ -524,6 +594,47 @@ def is_tridiagonal(M):
         for j in range(n):
             if (j > i + 1 or j < i - 1) and M[i, j] != 0.0:
                 return False
+    return True
+
+
+@njit(cache=True)
+def half_bandwidth(M, limit):
+    """Largest ``|i - j|`` with ``M[i, j] != 0`` for a dense ``M``, or ``limit + 1`` as soon as
+    it exceeds ``limit`` (early exit: O(n limit) for banded matrices)."""
+    n = M.shape[0]
+    b = 0
+    for i in range(n):
+        for j in range(n):
+            if M[i, j] != 0.0 and abs(i - j) > b:
+                b = abs(i - j)
+                if b > limit:
+                    return limit + 1
+    return b
+
+
+@njit(cache=True)
+def is_symmetric(M, atol):
+    """True when ``|M[i, j] - M[j, i]| <= atol`` for all ``i, j`` (early exit, no copies)."""
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not (abs(M[i, j] - M[j, i]) <= atol):
+                return False
+    return True
+
+
+@njit(cache=True)
+def nonnegative_diagonally_dominant(M):
+    """True when ``M[i, i] >= sum_{j != i} |M[i, j]|`` for every row: with ``M`` symmetric this
+    makes it positive semidefinite (Gershgorin's theorem)."""
+    n = M.shape[0]
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            if j != i:
+                s += abs(M[i, j])
+        if not (M[i, i] >= s):
+            return False
     return True
 
 

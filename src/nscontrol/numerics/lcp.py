@@ -9,10 +9,12 @@ One verb, :func:`solve_lcp`, with four methods:
   iterative (stops on the residual ``tol``), warm-startable with ``z0``.
 - ``"banded"``: Howard's policy iteration (semismooth Newton on ``min(z, Mz + q) = 0``) with
   direct solves on the active set: O(n) per iteration for tridiagonal ``M`` (Thomas sweeps,
-  numba) and sparse LU for other sparse/banded ``M``. Exact in at most ``n`` iterations for
-  M-matrices such as the Delassus matrix of a chain or stack of contacts.
-- ``"auto"``: banded for tridiagonal ``M``, Lemke for small or general ``M``, PGS for large
-  symmetric positive semidefinite ``M``; the residual is verified and Lemke is the fallback.
+  numba, started from two projected Thomas sweeps) and sparse LU for other sparse/banded
+  ``M``. Exact in at most ``n`` iterations for M-matrices such as the Delassus matrix of a
+  chain or stack of contacts (so O(n^2) in the worst case; see ``docs/lcp.md``).
+- ``"auto"``: banded for sparse or banded ``M``, Lemke for small or general ``M``, PGS for
+  large symmetric ``M`` that turns out positive semidefinite; the residual is verified and
+  Lemke is the fallback.
 
 The numba kernels behind the methods live in :mod:`nscontrol.numerics._lcp_kernels` and can
 be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and figures.
@@ -20,7 +22,8 @@ be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -48,6 +51,10 @@ STATUSES = ("solved", "ray_termination", "max_iter", "numerical_failure")
 AUTO_PGS_MIN_SIZE = 400
 #: ``auto`` does not fall back to dense Lemke above this size (memory n^2, time n^3).
 AUTO_LEMKE_MAX_SIZE = 3000
+#: Sweeps of ``auto``'s PGS before it pays for a definiteness test (see ``_run_pgs_auto``).
+AUTO_PGS_PROBE_SWEEPS = 100
+#: ``auto`` tries ``banded`` first on dense matrices this large with a narrow band.
+AUTO_BANDED_MIN_SIZE = 64
 
 
 @dataclass(frozen=True)
@@ -106,8 +113,8 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     Parameters
     ----------
     M : (n, n) array_like or scipy.sparse matrix
-        Finite square matrix. Sparse input is kept sparse by ``"banded"`` (and ``"auto"`` when
-        it is tridiagonal) and densified by ``"lemke"`` and ``"pgs"``.
+        Finite square matrix. Sparse input is kept sparse by ``"banded"`` (where ``"auto"``
+        sends it first) and densified by ``"lemke"`` and ``"pgs"``.
     q : (n,) array_like
         Finite vector.
     method : {"auto", "lemke", "pgs", "banded"}
@@ -144,10 +151,14 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
 
     Notes
     -----
-    ``"auto"``: tridiagonal ``M`` (dense or sparse) → ``"banded"``; otherwise symmetric
-    positive semidefinite ``M`` with ``n > 400`` → ``"pgs"``; otherwise ``"lemke"``. When the
-    first choice fails (status or residual), Lemke runs on the dense matrix if
-    ``n <= 3000``. A result is never marked solved without passing the residual test.
+    ``"auto"``: for ``n > 2``, tridiagonal ``M`` (dense or sparse), any other scipy.sparse
+    ``M`` and dense ``M`` with ``n >= 64`` and half-bandwidth ``<= sqrt(n)`` → ``"banded"``;
+    otherwise symmetric ``M`` with a positive diagonal and ``n > 400`` → ``"pgs"``, which
+    gets 100 sweeps before ``M`` is tested for positive semidefiniteness (diagonal dominance,
+    else a Cholesky factorisation of ``M + 1e-12 max|M| I``) and continues only if it
+    passes; otherwise ``"lemke"``. When a choice fails (status or residual) the next one
+    runs: after ``"banded"``, PGS under the same conditions, then Lemke on the dense matrix
+    if ``n <= 3000``. A result is never marked solved without passing the residual test.
 
     Lemke is guaranteed to find a solution for P-matrices (unique solution) and, for
     copositive-plus ``M``, ends in a ray only when the LCP is infeasible. PGS converges for
@@ -180,7 +191,7 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     result: LCPResult | None = None
     for name in chain:
         result = _RUNNERS[name](problem, tol, max_iter, omega)
-        tried.append(f"{name}: {result.status} (residual {result.residual:.3g})")
+        tried.append(f"{result.method}: {result.status} (residual {result.residual:.3g})")
         if result.success:
             break
     assert result is not None
@@ -269,28 +280,64 @@ def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
     return lower, diag, upper
 
 
-def _method_chain(problem: _Problem, method: str) -> list[str]:
+def _method_chain(problem: _Problem, method: str) -> Iterator[str]:
+    """The methods to try in order (``auto``'s fallbacks are decided only when reached)."""
     if method != "auto":
-        return [method]
+        yield method
+        return
     n = problem.n
-    if problem.bands is not None and n > 2:
-        first = "banded"
-    elif n > AUTO_PGS_MIN_SIZE and _symmetric_psd(problem):
-        first = "pgs"
+
+    def large_symmetric() -> bool:    # densifies sparse M: only evaluated when reached
+        return n > AUTO_PGS_MIN_SIZE and _symmetric_positive_diagonal(problem)
+
+    if n > 2 and (problem.bands is not None or problem.sparse or _is_banded(problem)):
+        yield "banded"
+        if large_symmetric():
+            yield "pgs_auto"
+    elif large_symmetric():
+        yield "pgs_auto"
     else:
-        first = "lemke"
-    chain = [first]
-    if first != "lemke" and n <= AUTO_LEMKE_MAX_SIZE:
-        chain.append("lemke")
-    return chain
+        yield "lemke"
+        return
+    if n <= AUTO_LEMKE_MAX_SIZE:
+        yield "lemke"
+
+
+def _symmetric_positive_diagonal(problem: _Problem) -> bool:
+    M = problem.dense()
+    scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
+    return bool(np.all(np.diagonal(M) > 0.0) and kernels.is_symmetric(M, 1e-12 * scale))
+
+
+def _is_banded(problem: _Problem) -> bool:
+    """Dense ``M`` with a narrow band (half-bandwidth ``<= sqrt(n)``, ``n >= 64``): worth
+    Howard's iteration with sparse LU (O(n b^2) per step) before dense pivoting."""
+    n = problem.n
+    if problem.sparse or n < AUTO_BANDED_MIN_SIZE:
+        return False
+    limit = max(2, int(np.sqrt(n)))
+    return bool(kernels.half_bandwidth(problem.M, limit) <= limit)
 
 
 def _symmetric_psd(problem: _Problem) -> bool:
+    """Symmetric (to 1e-12 relative) and positive semidefinite, tested without eigenvalues:
+    a diagonally dominant matrix with a nonnegative diagonal is PSD (Gershgorin), otherwise
+    an attempted Cholesky factorisation of ``M + tiny I`` decides (``tiny`` = 1e-12 relative,
+    above the round-off of the factorisation). The residual test after the solve keeps a
+    borderline answer honest."""
     M = problem.dense()
+    n = problem.n
     scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
-    if float(np.max(np.abs(M - M.T), initial=0.0)) > 1e-12 * scale:
+    if not kernels.is_symmetric(M, 1e-12 * scale):
         return False
-    return bool(np.linalg.eigvalsh(M)[0] >= -1e-12 * scale)
+    if kernels.nonnegative_diagonally_dominant(M):
+        return True
+    tiny = max(1e-12, 8.0 * n * np.finfo(np.float64).eps) * scale
+    try:
+        np.linalg.cholesky(M + tiny * np.eye(n))
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 # ----------------------------------------------------------------------------- runners
@@ -346,7 +393,11 @@ def _run_banded(problem: _Problem, tol: float, max_iter: int | None, omega: floa
     if problem.bands is not None:
         lower, diag, upper = problem.bands
         w = np.empty(n)
-        code, its = kernels.tridiagonal_howard(lower, diag, upper, problem.q, z, w, limit)
+        if problem.z0 is None:    # start from the projected Thomas sweeps
+            code, its = kernels.tridiagonal_lcp_kernel(lower, diag, upper, problem.q, z, w,
+                                                       limit)
+        else:
+            code, its = kernels.tridiagonal_howard(lower, diag, upper, problem.q, z, w, limit)
     else:
         code, its, z = _sparse_howard(problem, z, limit)
     return _result(problem, z, code, its, "banded", tol)
@@ -358,6 +409,9 @@ def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int
 
     The same iteration as :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard`;
     each step factors ``M[a, a]`` with SuperLU, so banded ``M`` costs O(n b^2) per step.
+    The next iterate depends only on the active set, so a repeated active set is a cycle:
+    it stops at once with ``"max_iter"`` (instead of running to the limit) and ``auto`` falls
+    back to the next method.
     """
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
@@ -366,12 +420,17 @@ def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int
     q = problem.q
     eps = 1e-13 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
     w = M @ z + q
+    seen: set[bytes] = set()
     for it in range(limit + 1):
-        if np.all(z >= -eps) and np.all(w >= -eps):
+        if np.all(z >= -eps) and np.all(w >= -eps) and np.all(np.minimum(z, w) <= eps):
             return kernels.SOLVED, it, z
         if it == limit:
             break
         active = w <= z
+        key = np.packbits(active).tobytes()
+        if key in seen:                      # Howard's iteration is cycling
+            return kernels.MAX_ITER, it, z
+        seen.add(key)
         z = np.zeros_like(z)
         idx = np.flatnonzero(active)
         if idx.size:
@@ -386,7 +445,24 @@ def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int
     return kernels.MAX_ITER, limit, z
 
 
-_RUNNERS = {"lemke": _run_lemke, "pgs": _run_pgs, "banded": _run_banded}
+def _run_pgs_auto(problem: _Problem, tol: float, max_iter: int | None,
+                  omega: float) -> LCPResult:
+    """``auto``'s PGS: a probe of :data:`AUTO_PGS_PROBE_SWEEPS` sweeps first (a
+    well-conditioned problem is solved there, and no definiteness test is paid); only if it
+    has not converged is ``M`` tested for positive semidefiniteness (:func:`_symmetric_psd`,
+    a Cholesky factorisation), and PGS continues from the probe's iterate for PSD ``M`` only
+    (where it converges). Otherwise the probe's failure hands over to Lemke."""
+    total = int(max_iter or 10_000)
+    probe = min(AUTO_PGS_PROBE_SWEEPS, total)
+    first = _run_pgs(problem, tol, probe, omega)
+    if first.success or probe == total or not _symmetric_psd(problem):
+        return first
+    rest = _run_pgs(replace(problem, z0=np.array(first.z)), tol, total - probe, omega)
+    return replace(rest, iterations=probe + rest.iterations)
+
+
+_RUNNERS = {"lemke": _run_lemke, "pgs": _run_pgs, "banded": _run_banded,
+            "pgs_auto": _run_pgs_auto}
 
 
 # ----------------------------------------------------------------------------- verification
