@@ -132,10 +132,11 @@ class _Guarded:
 
 #: ``executor="auto"`` goes parallel when the pilot point predicts more serial work than this
 #: (seconds) for the rest of the grid. Measured on the project's 2-core machine (fork start
-#: method): a local pool starts, runs one task and shuts down in ~0.035 s, and a chapter-11
-#: shooting point costs 0.01–0.02 s, so 2 processes win from ~15 points on; 0.25 s keeps the
-#: pool for grids where it saves at least about a tenth of a second.
-AUTO_PARALLEL_SECONDS = 0.25
+#: method, best of 3): a local pool starts, runs a task and shuts down in ~0.035 s; a
+#: chapter-11 shooting point (400 samples) costs ~8 ms; serial vs two processes: 10 points
+#: 0.091/0.085 s, 15 points 0.136/0.112 s, 60 points 0.462/0.320 s — break-even near 10
+#: points (~0.09 s of work). 0.15 s leaves a margin for a busy second core.
+AUTO_PARALLEL_SECONDS = 0.15
 
 
 def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,

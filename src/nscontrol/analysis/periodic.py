@@ -715,11 +715,11 @@ def frequency_response(system: Any, omegas: Any, *, amplitude: float = 1.0,
     executor
         As in :func:`nscontrol.sweep.run`. Default ``"auto"``: the first frequency runs
         here, timed, and the rest go to a local process pool only when the predicted serial
-        time exceeds :data:`nscontrol.sweep.AUTO_PARALLEL_SECONDS` — measured on the
-        project's 2-core machine, a chapter-11 point costs 0.01–0.02 s and a pool ~0.035 s,
-        so grids of more than ~15–25 points go parallel (60 points: 0.83 s serial, 0.46 s
-        in two processes). ``"serial"``, ``None`` (always processes) or a Dask
-        client/address — the system must then be picklable.
+        time exceeds :data:`nscontrol.sweep.AUTO_PARALLEL_SECONDS` (0.15 s) — measured on
+        the project's 2-core machine, a chapter-11 point costs ~8 ms (400 samples) and a
+        pool ~0.035 s: break-even near 10 points, 60 points take 0.46 s serial and 0.32 s in
+        two processes. ``"serial"``, ``None`` (always processes) or a Dask client/address —
+        the system must then be picklable.
     progress
         Progress bar on stderr (see :func:`nscontrol.sweep.run`).
     **options
