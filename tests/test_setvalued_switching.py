@@ -6,7 +6,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from nscontrol import simulate
-from nscontrol.numerics.lti import Exosystem
+from nscontrol.errors import ModelError, SolverError
+from nscontrol.numerics.lti import Exosystem, LTIFlow
 from nscontrol.systems.pwa import PiecewiseAffineSystem
 from nscontrol.systems.switched import FilippovSystem, PWMController, SwitchedAffineSystem
 from nscontrol.testing import setvalued_problems as sp
@@ -163,7 +164,7 @@ def test_discontinuous_pwa_with_sliding_goes_through_filippov_form():
     # relay feedback on x1 + x2 as a discontinuous bimodal PWA
     pwa = PiecewiseAffineSystem.bimodal(A, A, [1.0, 1.0], b1=[0.0, 1.0], b2=[0.0, -1.0],
                                         continuous=False)
-    with pytest.raises(Exception, match="FilippovSystem.from_pwa") as info:
+    with pytest.raises(ModelError, match="FilippovSystem.from_pwa") as info:
         simulate(pwa, [1.0, 0.0], (0.0, 3.0))
     assert info.value.trajectory is not None
     tr = simulate(FilippovSystem.from_pwa(pwa), [1.0, 0.0], (0.0, 3.0))
@@ -220,9 +221,159 @@ def test_sliding_ends_where_another_surface_is_crossed():
         return np.array([1.0, 1.0])
 
     f = FilippovSystem(2, (lambda x: x[1], lambda x: x[0] - 1.0), field)
-    tr = simulate(f, [0.0, 0.5], (0.0, 3.0))
+    tr = simulate(f, [0.0, 0.5], (0.0, 3.0), sensitivity=True)
     assert [(e.kind, e.index) for e in tr.events] == [
         ("sliding_start", 0), ("crossing", 1), ("sliding_exit", 0)]
     assert np.allclose(tr.event_times(), [0.5, 1.0, 1.0], atol=1e-10)
     assert np.max(np.abs(tr.x[(tr.t > 0.5) & (tr.t < 1.0), 1])) <= 1e-12
     assert np.allclose(tr.x[-1], [3.0, 2.0], atol=1e-9)
+    # one saltation matrix per crossing / sliding start / sliding exit, in event order
+    S = tr.stats["saltation_matrices"]
+    assert S.shape == (len(tr.events), 2, 2)
+    np.testing.assert_array_equal(S[2], np.eye(2))       # the crossing's S covers the exit
+    # and the product with the flows is the sensitivity of the end state (x0 = (0, 0.5) +
+    # perturbations: reaching x2 = 0 a little earlier or later, leaving at x1 = 1)
+    def end(x0):
+        return simulate(f, x0, (0.0, 3.0), n_samples=2).x[-1]
+
+    fd = np.column_stack([(end([0.0, 0.5] + d) - end([0.0, 0.5] - d)) / 2e-6
+                          for d in (np.array([1e-6, 0.0]), np.array([0.0, 1e-6]))])
+    assert np.max(np.abs(tr.stats["state_transition"] - fd)) <= 1e-6
+
+
+def _buck(duty, pattern="centered", T=0.25, delta=0.5):
+    A = np.array([[0.0, 1.0], [-1.0, -delta]])
+    return A, SwitchedAffineSystem(((A, [0.0, -1.0]), (A, [0.0, 1.0])),
+                                   PWMController(T, duty, pattern=pattern))
+
+
+def _constant_duty(t, x):
+    return 0.15
+
+
+def test_pwm_instants_do_not_drift_over_20000_periods():
+    T, d, N = 0.25, 0.15, 20000
+    A, buck = _buck(_constant_duty, T=T)
+    tr = simulate(buck, [0.0, 0.0], (0.0, N * T), n_samples=2)
+    sw = np.array([e.time for e in tr.events_of("switch")])
+    k = np.arange(N)
+    expected = np.sort(np.concatenate([k * T + d / 2, k * T + T - d / 2]))
+    assert sw.size == expected.size == 2 * N
+    assert np.max(np.abs(sw - expected) / expected) <= 1e-12   # accumulated: 1.3e-9 before
+    assert tr.stats["periods"] == N and np.all(tr.stats["duty"] == d)
+
+
+class _SampledDuty:
+    """``d_k = T (0.5 - 0.4 x1(t_k))`` clipped by the controller: a feedback duty."""
+
+    def __init__(self, T):
+        self.T, self.calls = T, []
+
+    def __call__(self, t, x):
+        self.calls.append((t, np.array(x, float)))
+        return self.T * (0.5 - 0.4 * x[0])
+
+
+def test_pwm_duty_from_the_sampled_state():
+    T, N = 0.25, 400
+    duty = _SampledDuty(T)
+    A, buck = _buck(duty, pattern="leading", T=T)
+    tr = simulate(buck, [0.3, 0.0], (0.0, N * T), n_samples=2)
+    times = np.array([c[0] for c in duty.calls])
+    np.testing.assert_array_equal(times, np.arange(N) * T)   # sampled at t_k = kT exactly
+    d = tr.stats["duty"]
+    on_off = np.array([e.time for e in tr.events_of("switch") if e.mode_to == 0])
+    np.testing.assert_allclose(on_off, np.arange(N) * T + d, rtol=1e-12, atol=0.0)
+    # an independent reference: period by period with the augmented exponential
+    from scipy.linalg import expm
+
+    def step(x, b, tau):
+        M = np.zeros((3, 3))
+        M[:2, :2], M[:2, 2] = A, b
+        return (expm(M * tau) @ np.r_[x, 1.0])[:2]
+
+    x = np.array([0.3, 0.0])
+    for k in range(N):
+        dk = float(np.clip(T * (0.5 - 0.4 * x[0]), 0.0, T))
+        np.testing.assert_allclose(duty.calls[k][1], x, atol=1e-12)
+        assert abs(dk - d[k]) <= 1e-12
+        x = step(step(x, np.array([0.0, 1.0]), dk), np.array([0.0, -1.0]), T - dk)
+    assert np.max(np.abs(tr.x[-1] - x)) <= 1e-10
+    # the modes propagate through the shared LTIFlow of [[A, b], [0, 0]]
+    M = np.zeros((3, 3))
+    M[:2, :2], M[:2, 2] = A, [0.0, 1.0]
+    assert buck.flow(1) is LTIFlow.shared(M)
+    np.testing.assert_allclose(buck.propagate(1, [0.3, 0.0], 0.2),
+                               step(np.array([0.3, 0.0]), np.array([0.0, 1.0]), 0.2),
+                               atol=1e-14)
+
+
+def test_grazing_without_sign_change_is_flagged_on_the_ode_paths():
+    # x = (sin t, cos t) touches x1 = 1 at pi/2 + 2k pi without crossing it
+    rot = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    f = FilippovSystem.two_sided(lambda t, x: rot @ x, lambda t, x: rot @ x,
+                                 lambda x: float(x[0]) - 1.0, 2,
+                                 gradient=lambda x: np.array([1.0, 0.0]))
+    tr = simulate(f, [0.0, 1.0], (0.0, 10.0))
+    assert [e.kind for e in tr.events] == ["grazing", "grazing"]
+    np.testing.assert_allclose(tr.event_times(), [np.pi / 2, 5 * np.pi / 2], atol=1e-9)
+    assert all(e.mode_from == e.mode_to == 0 for e in tr.events)
+    # a PWA system with a function input (DOP853 path): the same touch
+    pwa = PiecewiseAffineSystem.bimodal(rot, rot, [1.0, 0.0], d=1.0, E=[[0.0], [1.0]],
+                                        u=lambda t: np.zeros((np.size(t), 1)))
+    tr = simulate(pwa, [0.0, 1.0], (0.0, 10.0))
+    assert tr.stats["propagation"] == "dop853"
+    assert [e.kind for e in tr.events] == ["grazing", "grazing"]
+    np.testing.assert_allclose(tr.event_times(), [np.pi / 2, 5 * np.pi / 2], atol=1e-9)
+    # a near miss is not a grazing: the circle of radius 1 - 1e-6
+    tr = simulate(f, [0.0, 1.0 - 1e-6], (0.0, 10.0))
+    assert tr.events == ()
+
+
+def test_filippov_sliding_stays_on_a_curved_surface():
+    # inside |x| = 1 the field pushes out, outside it pushes in: sliding on the unit circle
+    rot = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    f = FilippovSystem.two_sided(lambda t, x: rot @ x + x, lambda t, x: rot @ x - x,
+                                 lambda x: float(x @ x) - 1.0, 2, gradient=lambda x: 2 * x)
+    tr = simulate(f, [0.5, 0.0], (0.0, 200.0))
+    (ev,) = tr.events
+    assert ev.kind == "sliding_start" and abs(ev.time - np.log(2.0)) <= 1e-9
+    after = tr.t > ev.time
+    assert np.max(np.abs(np.sum(tr.x[after] ** 2, axis=1) - 1.0)) <= 1e-12
+    # x turns at unit rate throughout (the radial parts only change |x|), and on the circle
+    # the Filippov field is the rotation alone: x = (cos t, -sin t) after reaching
+    s = tr.t[after]
+    assert np.max(np.abs(tr.x[after] - np.column_stack([np.cos(s), -np.sin(s)]))) <= 1e-8
+
+
+@pytest.mark.parametrize("input_kind", ["none", "function"])
+def test_leaving_the_pwa_domain_stops_the_run(input_kind):
+    # a continuous field on the box |x| <= 1 split at x1 = 0; the flow drifts out at x1 = 1
+    A = np.array([[0.0, 0.0], [0.0, 0.0]])
+    box = ([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]], [1.0, 1.0, 1.0, 1.0])
+    kw = {} if input_kind == "none" else {"E": [[1.0], [0.0]],
+                                          "u": lambda t: np.zeros((np.size(t), 1))}
+    pwa = PiecewiseAffineSystem((A, A), b=([1.0, 0.0], [1.0, 0.0]),
+                                regions=(([[1.0, 0.0]], [0.0]), ([[-1.0, 0.0]], [0.0])),
+                                domain=box, **kw)
+    tr = simulate(pwa, [-0.5, 0.2], (0.0, 5.0))
+    assert tr.status == 1 and "left the domain" in tr.message
+    assert [e.kind for e in tr.events] == ["crossing", "domain_exit"]
+    exit_ = tr.events[1]
+    assert exit_.index == 0 and exit_.mode_from == 1 and exit_.mode_to == -1
+    assert abs(exit_.time - 1.5) <= 1e-9 and abs(tr.t[-1] - 1.5) <= 1e-9
+    np.testing.assert_allclose(tr.x[-1], [1.0, 0.2], atol=1e-9)
+
+
+def test_dop853_failure_is_a_solver_error_with_the_partial_trajectory():
+    # x' = x^2 from 1 blows up at t = 1
+    f = FilippovSystem.two_sided(lambda t, x: x**2, lambda t, x: x**2,
+                                 lambda x: float(x[0]) + 10.0, 1)
+    with pytest.raises(SolverError, match="DOP853 failed") as info:
+        simulate(f, [1.0], (0.0, 2.0))
+    part = info.value.trajectory
+    assert part.status == -1 and 0.9 < part.t[-1] <= 1.0
+    np.testing.assert_allclose(part.x[part.t < 0.9, 0], 1.0 / (1.0 - part.t[part.t < 0.9]),
+                               rtol=1e-8)
+    ret = simulate(f, [1.0], (0.0, 2.0), on_failure="return")
+    assert ret.status == -1 and "DOP853 failed" in ret.message

@@ -1,4 +1,5 @@
-"""Option checks shared by the set-valued integrators (``implicit_euler``, ``switching``).
+"""Option checks shared by the set-valued integrators (``implicit_euler``, ``switching``),
+beside the general helpers of :mod:`nscontrol._validation`.
 
 Each names the option, says what was expected and what was received (``ModelError``).
 """
@@ -8,30 +9,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-import numpy as np
-
 from ..errors import ModelError
 
-__all__ = ["check_count", "check_on_failure", "check_signals"]
-
-
-def check_count(name: str, value: Any, minimum: int) -> int:
-    """An integer ``>= minimum`` (a float with an integral value is accepted, ``bool`` is not).
-
-    Raises
-    ------
-    ModelError
-        Not an integer, or below ``minimum``.
-    """
-    ok = not isinstance(value, bool | np.bool_)
-    try:
-        v = int(value)
-        ok = ok and float(value) == v
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok or v < minimum:
-        raise ModelError(f"{name}: expected an integer >= {minimum}, got {value!r}")
-    return v
+__all__ = ["check_on_failure", "check_signals"]
 
 
 def check_on_failure(value: Any) -> str:

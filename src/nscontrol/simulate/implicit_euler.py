@@ -66,9 +66,9 @@ from typing import Any
 import numpy as np
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_vector, check_in_interval, check_positive
+from .._validation import FloatArray, as_vector, check_in_interval, check_integer, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
-from ._setvalued_options import check_count, check_on_failure, check_signals
+from ._setvalued_options import check_on_failure, check_signals
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
@@ -542,8 +542,9 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
         States at the step times and signals ``z`` (law argument), ``w`` (multiplier) and
         ``y = C x``; ``stats`` has ``steps``, ``h``, ``theta``, ``solver`` (``closed_form``,
         ``lcp`` or ``python``), ``structure`` of ``D_h`` (``diagonal``, ``triangular``,
-        ``block_triangular`` or ``full``), ``blocks`` and ``input`` (``exact_mean`` or
-        ``samples``).
+        ``block_triangular`` or ``full``), ``blocks``, ``input`` (``exact_mean``, ``samples``
+        or ``none``) and, for the LCP and Python paths, ``max_residual`` (the largest accepted
+        per-step residual).
 
     Raises
     ------
@@ -579,7 +580,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
     on_failure = check_on_failure(options.get("on_failure", "raise"))
-    every = check_count("record_every", options.get("record_every", 1), 1)
+    every = check_integer("record_every", options.get("record_every", 1), minimum=1)
     signals = check_signals(options.get("signals"), _SIGNALS)
     n = system.n_states
     x0 = as_vector("x0", x0, n)
@@ -597,9 +598,12 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     done = 0
 
     def stats(steps: int) -> dict[str, Any]:
-        return {"steps": int(steps), "h": float(h), "theta": float(theta),
-                "solver": plan.solver, "structure": plan.structure,
-                "blocks": max(1, len(plan.blocks)), "input": stepper.input_mode}
+        out = {"steps": int(steps), "h": float(h), "theta": float(theta),
+               "solver": plan.solver, "structure": plan.structure,
+               "blocks": max(1, len(plan.blocks)), "input": stepper.input_mode}
+        if plan.solver != "closed_form":
+            out["max_residual"] = stepper.worst
+        return out
 
     with TimeProgress(t0, tf, desc="implicit_euler", enable=options.get("progress")) as bar:
         while done < n_steps:
@@ -661,6 +665,7 @@ class _Stepper:
 
     def __init__(self, system: Any, mats: StepMatrices, plan: _Plan) -> None:
         self.system, self.m, self.plan = system, mats, plan
+        self.worst = 0.0   # largest accepted per-step residual (LCP / Python paths)
         u = system.u
         self.exo = None
         if system.has_input and all(hasattr(u, a) for a in ("S", "Cu", "w0", "w")):
@@ -707,12 +712,16 @@ class _Stepper:
             done, status, res = lcp_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, M3, Qa3,
                                           q03, T3, s3, comp, nv, mg, x, ubar, gnext, X, Z, W,
                                           LCP_TOL)
-            if status != 0:
-                why = (f"Lemke status {status}" if status != _RESIDUAL_FAILURE else
-                       f"a natural residual {res:.3g} above {LCP_TOL:g}")
-                err = SolverError(f"implicit_euler: the LCP of step {done} (t = "
-                                  f"{times[done + 1]:.6g}) failed: {why}; the step matrix may "
-                                  f"be badly conditioned (reduce h)", status=str(status))
+            if status == 0:
+                self.worst = max(self.worst, float(res))
+            else:
+                name = _LEMKE_STATUS.get(int(status), str(status))
+                why = (f"Lemke stopped with status {name!r}" if status != _RESIDUAL_FAILURE
+                       else f"its natural residual {res:.3g} is above {LCP_TOL:g}")
+                err = SolverError(f"implicit_euler: the one-step LCP at t = "
+                                  f"{times[done + 1]:.6g} has no verified solution: {why}; the "
+                                  f"step matrix may be badly conditioned (reduce h)",
+                                  status=name)
                 err.partial = (X[:done], Z[:done], W[:done])  # type: ignore[attr-defined]
                 raise err
             return X, Z, W
@@ -725,8 +734,9 @@ class _Stepper:
             try:
                 for blk in plan.blocks:   # in dependency order: earlier blocks are solved
                     ag = a[blk.idx] + D[blk.idx] @ w   # w of this and later blocks is 0
-                    zg, wg, _ = _solve_inclusion_python(blk.law, ag, blk.D)
+                    zg, wg, res = _solve_inclusion_python(blk.law, ag, blk.D)
                     w[blk.idx], z[blk.idx] = wg, zg
+                    self.worst = max(self.worst, res)
             except SolverError as exc:
                 exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]
                 raise
@@ -736,3 +746,4 @@ class _Stepper:
 
 
 _RESIDUAL_FAILURE = 3  # NUMERICAL_FAILURE of the LCP kernels: residual check failed
+_LEMKE_STATUS = {1: "ray_termination", 2: "max_iter", 3: "residual"}

@@ -48,9 +48,9 @@ from typing import Any
 import numpy as np
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_float_array, as_vector, check_positive
+from .._validation import FloatArray, as_float_array, as_vector, check_integer, check_positive
 from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolError, ZenoError
-from ._setvalued_options import check_count, check_on_failure
+from ._setvalued_options import check_on_failure
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "saltation_matrix"]
@@ -114,7 +114,7 @@ class _Run:
         self.n = x0.shape[0]
         self.t0, self.tf = t_span
         t_eval = options.get("t_eval")
-        n_samples = check_count("n_samples", options.get("n_samples", 1001), 2)
+        n_samples = check_integer("n_samples", options.get("n_samples", 1001), minimum=2)
         if t_eval is None:
             t_eval = np.linspace(self.t0, self.tf, n_samples)
         t_eval = as_float_array("t_eval", t_eval)
@@ -129,7 +129,8 @@ class _Run:
         self.sensitivity = bool(sens)
         self.rtol = check_positive("rtol", options.get("rtol", 1e-11))
         self.atol = check_positive("atol", options.get("atol", 1e-13))
-        self.max_events = check_count("max_events", options.get("max_events", 1_000_000), 0)
+        self.max_events = check_integer("max_events", options.get("max_events", 1_000_000),
+                                        minimum=0)
         self.on_failure = check_on_failure(options.get("on_failure", "raise"))
         self.status, self.message = 0, None
         self.rec = Recorder(self.n)

@@ -77,6 +77,14 @@ class _SampledInput:
         return dict(self.__dict__)
 
 
+def _check_picklable(system: Any) -> None:
+    """Raise the clear :class:`ModelError` of an input function that cannot be pickled."""
+    for key in ("_u_fn", "_g_fn"):
+        fn = getattr(system, key, None)
+        if isinstance(fn, _SampledInput):
+            fn.__getstate__()
+
+
 def _input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
     """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
 
@@ -216,6 +224,14 @@ class LureSystem:
             object.__setattr__(self, key, value)
         object.__setattr__(self, "_u_fn", u_fn)
         object.__setattr__(self, "_g_fn", g_fn)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the input functions are checked first, so that a lambda input is reported by name
+        # with the way out instead of pickle's "Can't pickle local object"
+        from .lure import _check_picklable
+
+        _check_picklable(self)
+        return dict(self.__dict__)
 
     def _require_monotone(self) -> None:
         from ..laws.base import require_monotone

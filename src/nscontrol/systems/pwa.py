@@ -164,6 +164,14 @@ class PiecewiseAffineSystem:
                            else None)
         self._check_partition()
 
+    def __getstate__(self) -> dict[str, Any]:
+        # the input functions are checked first, so that a lambda input is reported by name
+        # with the way out instead of pickle's "Can't pickle local object"
+        from .lure import _check_picklable
+
+        _check_picklable(self)
+        return dict(self.__dict__)
+
     # -- construction helpers -----------------------------------------------------------
     @classmethod
     def bimodal(cls, A1: Any, A2: Any, c: Any, *, d: float = 0.0, b1: Any = None,

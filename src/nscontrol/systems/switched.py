@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .._validation import FloatArray, as_matrix, as_square, as_vector, check_positive
+from .._validation import FloatArray, as_matrix, as_square, as_vector, check_integer, check_positive
 from ..errors import DimensionError, ModelError
 
 __all__ = ["FilippovSystem", "SwitchedAffineSystem", "PWMController"]
@@ -98,15 +98,8 @@ class FilippovSystem:
     default_method = "switching"
 
     def __post_init__(self) -> None:
-        ok = not isinstance(self.n_states, bool | np.bool_)
-        try:
-            ok = ok and float(self.n_states) == int(self.n_states) >= 1
-        except (TypeError, ValueError, OverflowError):
-            ok = False
-        if not ok:
-            raise DimensionError(f"n_states: expected a positive integer, got "
-                                 f"{self.n_states!r}")
-        object.__setattr__(self, "n_states", int(self.n_states))
+        object.__setattr__(self, "n_states", check_integer("n_states", self.n_states, minimum=1,
+                                                           error=DimensionError))
         if len(self.surfaces) == 0:
             raise ModelError("surfaces: expected at least one switching surface h_j(x)")
         if not all(callable(h) for h in self.surfaces) or not callable(self.field):
@@ -330,9 +323,7 @@ class PWMController:
         if not callable(self.duty):
             raise ModelError("duty: expected a callable duty(t_k, x_k) -> float")
         for name in ("on_mode", "off_mode"):
-            k = getattr(self, name)
-            if isinstance(k, bool) or not isinstance(k, int | np.integer):
-                raise ModelError(f"{name}: expected a mode index (int), got {k!r}")
+            object.__setattr__(self, name, check_integer(name, getattr(self, name), minimum=0))
         if self.on_mode == self.off_mode:
             raise ModelError(f"on_mode, off_mode: expected two different modes, got both "
                              f"{self.on_mode}")

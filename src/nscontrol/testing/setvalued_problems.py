@@ -93,7 +93,7 @@ def relay_scalar(amplitude: float = 0.5, x0: float = 1.0, T: float = 4.0,
     --------
     >>> p = relay_scalar()
     >>> round(p.facts["reaching_time"], 6)
-    2.393184
+    1.429672
     """
     from scipy.optimize import brentq
 
