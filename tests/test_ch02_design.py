@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from nscontrol.analysis.observability import (
     alpha_limit,
+    certified_rate,
     jury_second_order,
     reconstructibility,
     search_epsilon,
@@ -36,19 +37,25 @@ def example_bodies(m3=1.0, e=1.0, E=None, k12=6.0):
                                         {(0, 0): 4.0 * m3}, E=E, restitution=e)
 
 
-def test_docstring_examples():
+@pytest.mark.parametrize("module, minimum", [
+    ("nscontrol.analysis.observability", 40),
+    ("nscontrol.design.impact_observer", 25),
+    ("nscontrol.systems.impacting_bodies", 4),
+])
+def test_docstring_examples(module, minimum):
     import doctest
+    import importlib
 
-    import nscontrol.analysis.observability as obs
-
-    failures, tried = doctest.testmod(obs, optionflags=doctest.ELLIPSIS)
-    assert tried >= 4 and failures == 0
+    failures, tried = doctest.testmod(importlib.import_module(module),
+                                      optionflags=doctest.ELLIPSIS)
+    assert tried >= minimum and failures == 0
 
 
 # -- restitution (Newton, Remark 1) ----------------------------------------------------------
 @settings(max_examples=200, deadline=None)
-@given(m1=st.floats(0.05, 20.0), m2=st.floats(0.05, 20.0), e=st.floats(0.0, 1.0),
-       v1=st.floats(-10.0, 10.0), dv=st.floats(0.01, 10.0))
+@given(m1=st.floats(0.05, 20.0), m2=st.floats(0.05, 20.0),
+       e=st.floats(0.0, 1.0, exclude_min=True), v1=st.floats(-10.0, 10.0),
+       dv=st.floats(0.01, 10.0))
 def test_restitution_conserves_momentum_and_scales_relative_velocity(m1, m2, e, v1, dv):
     bodies = ImpactingBodies([m1], [[1.0]], [m2], [[1.0]], restitution=e)
     M = bodies.restitution_matrix
@@ -63,15 +70,30 @@ def test_restitution_conserves_momentum_and_scales_relative_velocity(m1, m2, e, 
         assert kin(v_plus) == pytest.approx(kin(v_minus), rel=1e-12, abs=1e-12)
     else:
         assert kin(v_plus) < kin(v_minus) + 1e-12 * kin(v_minus)
-    assert abs(M[1, 1]) < 1.0 or e == 0.0 and m1 == m2
+    assert abs(M[1, 1]) < 1.0
 
 
 # -- Theorem 1 -------------------------------------------------------------------------------
 def test_theorem1_yes_for_the_example():
     res = theorem1_test(*_mats(example_bodies()))
     assert res.observable and res.transfer_nonzero and res.pair_observable
-    assert res.markov_relative > 1e-3 and res.pbh_margin > 1e-3
+    assert res.krylov_dimension == 4                     # the input reaches every state
+    assert res.contact_projection == pytest.approx(1.0, abs=1e-12)
+    assert res.pbh_margin > 0.1                          # measured 0.339
     assert "observable" in res.reason
+    # W(s) at a test point, from the Markov parameters' own definition: not zero
+    p = impact_plant(example_bodies())
+    s0 = 0.37 + 1.1j
+    W = p.C_contact @ np.linalg.solve(s0 * np.eye(4) - p.A_a, p.B_a)
+    assert abs(W) > 1e-2
+
+
+def test_theorem1_no_when_no_input_reaches_the_contact_mass():
+    # E = 0 with k12 != 0: W(s) = 0 while (C_a, A_a) IS observable -- condition (1) alone
+    res = theorem1_test(*_mats(example_bodies(E=[0.0, 0.0])))
+    assert not res.observable and not res.transfer_nonzero and res.pair_observable
+    assert res.krylov_dimension == 0 and res.contact_projection == 0.0
+    assert res.reason.startswith("condition (1) fails")
 
 
 def test_theorem1_no_when_input_cannot_reach_the_contact_mass():
@@ -79,7 +101,7 @@ def test_theorem1_no_when_input_cannot_reach_the_contact_mass():
     # unobservable; condition (1) is reported first
     res = theorem1_test(*_mats(example_bodies(k12=0.0)))
     assert not res.observable and not res.transfer_nonzero
-    assert res.markov_relative == 0.0
+    assert res.krylov_dimension == 2 and res.contact_projection == 0.0   # mass 1 only
     assert "condition (1)" in res.reason
 
 
@@ -94,6 +116,48 @@ def test_theorem1_no_when_pair_unobservable():
 def _mats(bodies):
     p = impact_plant(bodies)
     return p.A_a, p.B_a, p.C_a, p.C_contact
+
+
+def _chain(n_a, k=10.0):
+    springs = {(0, 0): k}
+    springs.update({(i, i + 1): k for i in range(n_a - 1)})
+    return ImpactingBodies.from_springs([1.0] * n_a, [1.0], springs, {(0, 0): k})
+
+
+def _rescaled(c, how, m3=1.0, k12=6.0, **kw):
+    """The example with time scaled by 1/c: springs x c^2, or masses x 1/c^2."""
+    k, m = (c * c, 1.0) if how == "springs" else (1.0, 1.0 / (c * c))
+    return ImpactingBodies.from_springs([m, m], [m3 * m], {(0, 0): 4.0 * k, (0, 1): k12 * k},
+                                        {(0, 0): 4.0 * m3 * k}, **kw)
+
+
+@pytest.mark.parametrize("c", [1e2, 1e3, 1e-2])
+@pytest.mark.parametrize("how", ["springs", "masses"])
+def test_theorem1_verdict_does_not_depend_on_units(c, how):
+    """Springs x 1e4 / 1e6 (or masses x 1e-4 / 1e-6) are the worked example in other units:
+    same verdict, same margins up to the powers of two of the balancing."""
+    ref = theorem1_test(*_mats(example_bodies()))
+    res = theorem1_test(*_mats(_rescaled(c, how)))
+    assert res.observable and res.krylov_dimension == 4
+    assert res.contact_projection == pytest.approx(ref.contact_projection, rel=1e-9)
+    assert 0.5 < res.pbh_margin / ref.pbh_margin < 2.0
+    # the truly unobservable cases stay unobservable, with their reasons
+    no_w = theorem1_test(*_mats(_rescaled(c, how, E=[0.0, 0.0])))
+    assert not no_w.transfer_nonzero and no_w.pair_observable
+    assert no_w.reason.startswith("condition (1) fails")
+    no_pair = theorem1_test(*_mats(_rescaled(c, how, k12=0.0, E=[0.0, 1.0])))
+    assert no_pair.transfer_nonzero and not no_pair.pair_observable
+    assert no_pair.reason.startswith("condition (2) fails") and len(no_pair.unobservable_modes) == 2
+
+
+@pytest.mark.parametrize("n_a", [5, 12])
+def test_theorem1_long_chain_is_observable(n_a):
+    # force on mass 1 of an n_a-mass chain (all springs k = 10): W(s) != 0 (the first non-zero
+    # Markov parameter is ~ k^(n_a-1) against ||A||^(2 n_a - 1), which the old relative test
+    # called zero for n_a = 5) and (C_a, A_a) observable
+    res = theorem1_test(*_mats(_chain(n_a)))
+    assert res.observable and res.krylov_dimension == 2 * n_a
+    assert res.contact_projection > 0.5 and res.pbh_margin > 1e-3   # 0.033 (5), 0.0052 (12)
 
 
 def test_reconstructibility_needs_an_impact_and_an_observable_pair():
@@ -125,14 +189,86 @@ def test_jury_second_order_matches_root_moduli(rng):
 def test_place_scaled_spectrum_and_scaled_realisation(eps):
     p = impact_plant(example_bodies())
     sp = place_scaled(p.A_a, p.C_a, LAMBDA1, eps)
-    # the scaled flow matrix is exactly companion(Lambda1)/eps and similar to A_a - G C_a
+    # the scaled flow matrix is companion(Lambda1)/eps and similar to A_a - G C_a
     A_O = p.A_a - np.outer(sp.G, p.C_a)
     similar = np.linalg.solve(sp.T, A_O @ sp.T)
     assert np.max(np.abs(similar - sp.F / eps)) <= 1e-9 * np.max(np.abs(sp.F / eps))
     assert np.allclose(np.sort(np.linalg.eigvals(sp.F)).real, np.sort(LAMBDA1), atol=1e-12)
     assert np.allclose(np.linalg.solve(sp.T, sp.G), sp.g_scaled, rtol=1e-9)
-    assert sp.conditioning.spectrum_error_scaled < 1e-12
-    assert sp.conditioning.spectrum_error_original < 1e-8
+    assert np.allclose(sp.T_inv @ sp.T, np.eye(4), atol=1e-12)
+    # canonical form: P^-1 A P = companion(a), C P = e1, a = char. poly of A_a
+    Pinv_A_P = np.linalg.solve(sp.P, p.A_a @ sp.P)
+    assert np.allclose(Pinv_A_P[:, 0], -sp.a, rtol=1e-12, atol=1e-12)
+    assert np.allclose(p.C_a @ sp.P, [1.0, 0.0, 0.0, 0.0], atol=1e-14)
+    assert np.allclose(sp.a, np.poly(p.A_a)[1:], rtol=1e-12)
+    # the realised error matrix T^-1 A_a T - g C_a T, recomputed here
+    realised = sp.T_inv @ p.A_a @ sp.T - np.outer(sp.g_scaled, p.C_a @ sp.T)
+    mu = np.sort_complex(np.linalg.eigvals(realised))
+    assert np.allclose(mu.real, np.sort(LAMBDA1) / eps, rtol=1e-11) and np.allclose(mu.imag, 0)
+    assert sp.conditioning.spectrum_error < 1e-10          # measured 2.9e-11 (eps = 1) .. 1e-13
+    assert sp.conditioning.spectrum_error_original < 1e-9
+
+
+def _long_chain(n_a):
+    springs = {(0, 0): 4.0}
+    springs.update({(i, i + 1): 6.0 for i in range(n_a - 1)})
+    return ImpactingBodies.from_springs([1.0] * n_a, [1.0], springs, {(0, 0): 4.0})
+
+
+@pytest.mark.parametrize("n_a, eps, bound", [(4, 0.1, 1e-8), (4, 0.01, 1e-8), (6, 0.1, 1e-6),
+                                             (6, 0.01, 1e-6)])
+def test_place_scaled_realised_spectrum_of_longer_chains(n_a, eps, bound):
+    """The true error matrix of the realisation, T^-1 A_a T - g C_a T: with P = O^-1 O_c from
+    matrix powers its spectrum error was 1.8e-8 / 2.1e-4 (n_a = 4) and 6.5e-2 / 5.0 (n_a = 6)
+    at eps = 0.1 / 0.01; now 3.5e-10 / 1.0e-9 and 4.4e-7 / 2.2e-7 (companion floor 1.2e-7)."""
+    import warnings
+
+    lam = -(0.5 + 0.1 * np.arange(2 * n_a))
+    p = impact_plant(_long_chain(n_a))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                      # below the warning threshold
+        sp = place_scaled(p.A_a, p.C_a, lam, eps)
+    realised = sp.T_inv @ p.A_a @ sp.T - np.outer(sp.g_scaled, p.C_a @ sp.T)
+    mu = np.linalg.eigvals(realised)
+    err = max(np.min(np.abs(mu - w)) / abs(w) for w in lam / eps)
+    assert err < bound and sp.conditioning.spectrum_error < bound
+
+
+def test_place_scaled_warns_when_the_realised_spectrum_is_inaccurate():
+    from nscontrol.errors import InaccurateCertificateWarning
+
+    p = impact_plant(_long_chain(4))
+    lam = -(0.5 + 0.01 * np.arange(8))                     # clustered: companion floor 3e-5
+    with pytest.warns(InaccurateCertificateWarning, match="misses Lambda1/eps") as rec:
+        sp = place_scaled(p.A_a, p.C_a, lam, 0.1)
+    assert sp.conditioning.spectrum_error > 1e-6
+    assert "companion form of Lambda1 alone" in str(rec[0].message)
+
+
+@pytest.mark.parametrize("how", ["springs", "masses"])
+def test_design_behaviour_does_not_depend_on_units(how):
+    """Time scaled by 1/c (c = 1e3): Lambda1, alpha x c, dwell bounds / c. Same placement
+    accuracy, same certified eps, alpha_L x c; at k = 1e6 the old PBH test said
+    'unobservable' and the design raised."""
+    c = 1e3
+    lam = np.array(LAMBDA1)
+    for m3, alpha in ((1.0, 0.3), (0.7, 0.3)):
+        ref = design_impact_observer(example_bodies(m3=m3), lam, alpha=alpha, delta_min=0.6,
+                                     delta_max=2.3)
+        new = design_impact_observer(_rescaled(c, how, m3=m3), lam * c, alpha=alpha * c,
+                                     delta_min=0.6 / c, delta_max=2.3 / c)
+        assert new.eps == pytest.approx(ref.eps, rel=1e-6)
+        assert new.certificate.spectral_radius == pytest.approx(ref.certificate.spectral_radius,
+                                                                rel=1e-6)
+        if m3 != 1.0:
+            assert new.alpha_L == pytest.approx(c * ref.alpha_L, rel=1e-12)
+        assert new.conditioning.spectrum_error < 1e-11
+        assert new.observability.observable
+        for eps in (0.25, 0.01):
+            a = design_impact_observer(example_bodies(m3=m3), lam, eps).placement
+            b = design_impact_observer(_rescaled(c, how, m3=m3), lam * c, eps).placement
+            assert b.conditioning.spectrum_error < 1e-11
+            assert 0.5 < b.conditioning.cond_P / a.conditioning.cond_P < 2.0
 
 
 def test_gain_grows_like_eps_to_minus_N():
@@ -196,6 +332,17 @@ def test_bad_lambda_and_eps_raise_specific_errors():
     for eps in (0.0, -0.1, 1.5, np.nan):
         with pytest.raises(ModelError, match=r"eps: expected a value in \(0, 1\]"):
             design_impact_observer(b, LAMBDA1, eps)
+    for eps in (True, "0.5", 0.5 + 0j, [0.5, 0.25]):
+        with pytest.raises(ModelError, match="eps: expected a real number"):
+            design_impact_observer(b, LAMBDA1, eps)
+    with pytest.raises(DimensionError, match=r"Lambda1: expected a 1-D .* shape \(2, 2\)"):
+        design_impact_observer(b, [[-0.5, -0.6], [-0.7, -0.8]], 0.5)
+
+
+def test_restitution_zero_is_refused():
+    with pytest.raises(ModelError, match=r"restitution: expected a value in \(0, 1\], got 0.*"
+                                         "sustained contact"):
+        example_bodies(e=0.0)
 
 
 def test_unobservable_pair_is_an_infeasible_design():
@@ -206,33 +353,54 @@ def test_unobservable_pair_is_an_infeasible_design():
 
 def test_inadmissible_initial_state_is_rejected():
     d = design_impact_observer(example_bodies(), LAMBDA1, 0.5)
-    with pytest.raises(InadmissibleStateError, match="penetrates"):
+    with pytest.raises(InadmissibleStateError, match="^x_plant0: body a penetrates"):
         d.initial_state([0.0, 1.0, 0, 0, 0.5, 0.0], np.zeros(6))     # q2 > q3
-    with pytest.raises(InadmissibleStateError, match="approach"):
+    with pytest.raises(InadmissibleStateError, match="^x_plant0: the bodies touch and approach"):
         d.initial_state([0.0, 0.5, 0, 1.0, 0.5, 0.0], np.zeros(6))   # touching, closing
 
 
-def test_certified_eps_is_the_largest_independent_recheck():
+@pytest.mark.parametrize("velocity_scale", [1.0, 2.0])
+def test_certified_eps_is_the_largest_independent_recheck(velocity_scale):
     """Re-derive the Theorem-4 comparison matrix in the original coordinates (scipy expm of
-    A_a - G_eps C_a): it certifies just below the returned eps and fails just above it."""
+    A_a - G_eps C_a, norms of [q; v / velocity_scale]): it certifies just below the returned
+    eps and fails just above it."""
     from scipy.linalg import expm
 
     p = impact_plant(example_bodies(m3=0.7))
     d_min, d_max = 0.6, 2.3
     alpha = 0.3
-    cert = search_epsilon(*_scaled(p), p.A_b, p.M, d_min, d_max, alpha)
+    cert = search_epsilon(*_scaled(p), p.A_b, p.M, d_min, d_max, alpha,
+                          velocity_scale=velocity_scale)
+    assert cert.velocity_scale == velocity_scale
     deltas = np.linspace(d_min, d_max, 64)
-    Phis = [expm(p.A_b * d) for d in deltas]
+    wb, wa = np.array([1.0, 1.0 / velocity_scale]), np.repeat([1.0, 1.0 / velocity_scale], 2)
+    Phis = [wb[:, None] * expm(p.A_b * d) / wb[None, :] for d in deltas]
     r = max(np.hypot(P[1, 0], P[1, 1] * p.M[1, 0]) for P in Phis)
     gamma = abs(p.M[1, 1]) * max(abs(P[1, 1]) for P in Phis)
 
     def radius(eps):
         G = place_scaled(p.A_a, p.C_a, LAMBDA1, eps).G
         A_O = p.A_a - np.outer(G, p.C_a)
-        beta = max(np.linalg.norm(expm(A_O * d), 2) for d in deltas)
+        beta = max(np.linalg.norm(wa[:, None] * expm(A_O * d) / wa[None, :], 2)
+                   for d in deltas)
         comp = np.array([[beta, beta * abs(p.M[0, 1])], [r, gamma]])
         return np.max(np.abs(np.linalg.eigvals(comp)))
 
     rho = np.exp(-alpha * d_max)
     assert cert.rho == pytest.approx(rho)
     assert radius(0.97 * cert.eps) < rho < radius(1.03 * cert.eps)
+
+
+def test_certified_rate_is_the_converse_of_search_epsilon():
+    """At the eps search_epsilon returns for alpha, certified_rate gives back alpha (the
+    certificate's boundary), for both theorems."""
+    for m3 in (1.0, 0.7):
+        p = impact_plant(example_bodies(m3=m3))
+        F, P = _scaled(p)
+        cert = search_epsilon(F, P, p.A_b, p.M, 0.6, 2.3, 0.3)
+        assert certified_rate(F, P, p.A_b, p.M, 0.6, 2.3, cert.eps) == pytest.approx(0.3,
+                                                                                     rel=1e-3)
+        assert certified_rate(F, P, p.A_b, p.M, 0.6, 2.3, 1.0) == 0.0     # nothing certified
+    p = impact_plant(example_bodies(m3=0.7))
+    alpha_L = alpha_limit(p.M[1, 1], 2.3)
+    assert 0.0 < certified_rate(*_scaled(p), p.A_b, p.M, 0.6, 2.3, 1e-3) <= alpha_L

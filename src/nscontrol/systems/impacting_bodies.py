@@ -43,19 +43,43 @@ class ImpactingBodies:
     E : array_like (n_a,), optional
         Where the scalar input acts on body a (default: on the first mass).
     restitution : float
-        Newton coefficient ``e`` in ``[0, 1]`` (the chapter uses ``e = 1``).
+        Newton coefficient ``e`` in ``(0, 1]`` (the chapter uses ``e = 1``).
 
     Raises
     ------
     ModelError
-        Non-positive masses, non-symmetric ``K``, ``e`` outside ``[0, 1]``.
+        Non-positive masses, non-symmetric ``K``, ``e`` outside ``(0, 1]``.
     DimensionError
         Shapes that disagree.
+
+    Notes
+    -----
+    Chapter 2 assumes no sustained contact (Assumption 1). A plastic impact (``e = 0``) makes
+    the colliding masses leave with the same velocity, and with the springs pulling them
+    together they stay in contact: the event-driven integrator then sees an accumulation of
+    impacts (``ZenoError``). ``e = 0`` is therefore refused here; model a plastic contact as a
+    :class:`~nscontrol.systems.lagrangian.LagrangianSystem` and integrate it with ``moreau_jean``.
 
     References
     ----------
     Martinelli, Menini, Tornambè, ASME J. Dyn. Sys. Meas. Control 125(4), 2003; spec
     ``ch02-impact-observer.md`` §1.
+
+    Examples
+    --------
+    The worked example of the spec (§6): masses 1 and 2 joined by ``k12 = 6``, mass 1 tied to
+    the origin by ``k11 = 4``, mass 3 tied by ``k33 = 4``:
+
+    >>> plant = ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 4.0, (0, 1): 6.0},
+    ...                                      {(0, 0): 4.0})
+    >>> plant.n_a, plant.n_b, plant.state_names
+    (2, 1, ('q1', 'q2', 'v1', 'v2', 'q3', 'v3'))
+    >>> plant.K_a.tolist(), plant.restitution_matrix.tolist()    # e = 1, equal masses: swap
+    ([[10.0, -6.0], [-6.0, 6.0]], [[0.0, 1.0], [1.0, 0.0]])
+    >>> plant.check_state([0.0, 0.6, 0.0, 0.0, 0.5, 0.0])   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.InadmissibleStateError: x0: body a penetrates body b, q_3 - q_2 = -0.1 ...
     """
 
     H_a: Any
@@ -80,7 +104,13 @@ class ImpactingBodies:
             set_(self, f"n_{body}", int(H.shape[0]))
         E = np.eye(self.n_a)[0] if self.E is None else as_vector("E", self.E, self.n_a)
         set_(self, "E", E)
-        set_(self, "restitution", check_in_interval("restitution", self.restitution, 0.0, 1.0))
+        e = check_in_interval("restitution", self.restitution, 0.0, 1.0)
+        if e == 0.0:
+            raise ModelError("restitution: expected a value in (0, 1], got 0: a plastic impact "
+                             "leaves the bodies in sustained contact, which chapter 2 excludes "
+                             "(Assumption 1); use a LagrangianSystem with method='moreau_jean' "
+                             "for plastic contact")
+        set_(self, "restitution", e)
 
     @classmethod
     def from_springs(cls, masses_a: Any, masses_b: Any,
@@ -140,32 +170,46 @@ class ImpactingBodies:
         """``q_na+1 - q_na`` (>= 0 when admissible)."""
         return float(x[2 * self.n_a] - x[self.n_a - 1])
 
-    def check_state(self, x0: Any, *, tol: float = 1e-12) -> FloatArray:
+    def check_state(self, x0: Any, *, tol: float = 1e-12, name: str = "x0") -> FloatArray:
         """Validate ``x0 = [x_a; x_b]`` against the admissible set of ch02 §1.
+
+        Parameters
+        ----------
+        x0 : (2 n,) array_like
+            The state.
+        tol : float
+            Relative tolerance on the gap and the relative velocity.
+        name : str
+            The argument's name in the caller, used in the error messages.
+
+        Returns
+        -------
+        ndarray
+            ``x0`` as a float vector.
 
         Raises
         ------
         InadmissibleStateError
             Penetration ``q_na > q_na+1``, or contact with approaching velocities.
         """
-        x0 = as_vector("x0", x0, self.n_states)
+        x0 = as_vector(name, x0, self.n_states)
         scale = max(1.0, float(np.max(np.abs(x0), initial=0.0)))
         g = self.gap(x0)
         if g < -tol * scale:
             raise InadmissibleStateError(
-                f"x0: body a penetrates body b, q_{self.n_a + 1} - q_{self.n_a} = {g:.3g} < 0; "
-                "start with q_na <= q_na+1")
+                f"{name}: body a penetrates body b, q_{self.n_a + 1} - q_{self.n_a} = {g:.3g} "
+                "< 0; start with q_na <= q_na+1")
         rel = float(x0[2 * self.n_a + self.n_b] - x0[2 * self.n_a - 1])
         if abs(g) <= tol * scale and rel < -tol * scale:
             raise InadmissibleStateError(
-                f"x0: the bodies touch and approach (v_{self.n_a + 1} - v_{self.n_a} = "
+                f"{name}: the bodies touch and approach (v_{self.n_a + 1} - v_{self.n_a} = "
                 f"{rel:.3g} < 0); apply the restitution map first")
         return x0
 
     # -- conversions ---------------------------------------------------------------------
     def lagrangian(self) -> Any:
-        """The same plant as a :class:`~nscontrol.systems.LagrangianSystem` (coordinates
-        ``[q_a; q_b]``, input through ``[E; 0]``)."""
+        """The same plant as a :class:`~nscontrol.systems.lagrangian.LagrangianSystem`
+        (coordinates ``[q_a; q_b]``, input through ``[E; 0]``)."""
         from .lagrangian import LagrangianSystem
 
         n, na = self.n, self.n_a
