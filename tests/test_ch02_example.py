@@ -18,7 +18,18 @@ def test_ch02_example_runs_and_passes(tmp_path):
     assert metrics["observable"] is True and metrics["impacts"] >= 10
     assert len(metrics["decay_rate_equal_masses"]) == 4
     assert all(v < 1e-9 for v in metrics["deadbeat_error_after"].values())
-    assert len(payload["checks"]) >= 12
+    assert all(metrics["theorem1_other_units"].values())
+    assert "guarantees for the worst dwell" in metrics["alpha_L_note"]
+    assert metrics["alpha_at_alpha_L"] == "alpha_unreachable"
+    assert metrics["impact_counts_0_20s"]["exact"] == metrics["impact_counts_0_20s"]["dop853"]
+    assert metrics["restitution"]["m3_0.7_e0.8"]["energy_change_max"] < 0.0
+    names = {c["name"] for c in payload["checks"]}
+    for name in ("restitution_momentum_rel_err", "impact_count_exact_minus_dop853",
+                 "unequal_masses_alpha_L_refused_status", "realised_observer_spectrum_error",
+                 "equal_masses_certified_run_rate_over_alpha",
+                 "theorem1_observable_in_other_units"):
+        assert name in names
+    assert len(payload["checks"]) >= 20
     assert sorted(p.name for p in result.figures) == sorted(
         f"ch02_{n}.png" for n in ("positions", "unobserved_mass", "error_norm", "rate_vs_eps",
                                   "impacts_prevented"))
