@@ -120,9 +120,10 @@ def test_integrator_options_are_validated():
     from nscontrol.testing.setvalued_problems import bimodal_oscillator, relay_feedback
 
     lure = LureSystem(A, G, H, Relay(1.0))
-    with pytest.raises(ModelError, match=r"signals: unknown signal name\(s\) \['foo'\]"):
+    with pytest.raises(ModelError, match=r"signals: unknown name\(s\) \['foo'\]; this "
+                                         r"integrator records \['w', 'y', 'z'\]"):
         simulate(lure, [1.0, 0.0], (0.0, 1.0), h=1e-2, signals=["foo"])
-    with pytest.raises(ModelError, match="signals: expected a collection"):
+    with pytest.raises(ModelError, match="signals: expected a sequence of signal names"):
         simulate(lure, [1.0, 0.0], (0.0, 1.0), h=1e-2, signals="z")
     with pytest.raises(ModelError, match="record_every: expected an integer >= 1"):
         simulate(lure, [1.0, 0.0], (0.0, 1.0), h=1e-2, record_every=0)

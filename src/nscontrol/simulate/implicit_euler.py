@@ -66,9 +66,8 @@ from typing import Any
 import numpy as np
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_vector, check_in_interval, check_integer, check_positive
+from .._validation import FloatArray, as_vector, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
-from ._setvalued_options import check_on_failure, check_signals
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
@@ -579,10 +578,12 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
                          "method='implicit_euler', h=1e-3)")
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
-    on_failure = check_on_failure(options.get("on_failure", "raise"))
-    every = check_integer("record_every", options.get("record_every", 1), minimum=1)
-    signals = check_signals(options.get("signals"), _SIGNALS)
+    on_failure = options.get("on_failure", "raise")
+    if on_failure not in ("raise", "return"):
+        raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
     n = system.n_states
+    rec = Recorder(n, every=options.get("record_every", 1), signals=options.get("signals"),
+                   offered=_SIGNALS)
     x0 = as_vector("x0", x0, n)
     t0, tf = t_span
     n_steps = max(1, math.ceil((tf - t0) / h_req - 1e-9))
@@ -590,8 +591,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     mats = StepMatrices(system, h, theta)
     plan = _plan(system, mats.Dh, h)
     z0, w0 = _initial_multiplier(system, x0, t0)
-
-    rec = Recorder(n, every=every, signals=signals)
     rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
     stepper = _Stepper(system, mats, plan)
     x = x0

@@ -3,20 +3,23 @@
 Accepted systems:
 
 * :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem` — between crossings the flow is affine
-  with an exosystem input, propagated exactly by matrix exponentials of the augmented system
-  ``[x; ω; 1]``; crossings are located by :func:`nscontrol.numerics.lti.first_event` (machine
-  precision, grazing detected). With an input that is an arbitrary function of time, each piece
-  is integrated by DOP853 with one direction-aware event per facet.
+  with an exosystem input, propagated exactly by the shared
+  :class:`~nscontrol.numerics.lti.LTIFlow` of the augmented system ``[x; ω; 1]``; crossings are
+  located by :func:`nscontrol.numerics.lti.first_event` (machine precision, grazing detected).
+  With an input that is an arbitrary function of time, each piece is integrated by DOP853 with
+  one direction-aware event per facet and a grazing event per facet. With a ``domain``, an
+  ``x0`` outside it is refused and leaving it stops the run (``status = 1``).
 * :class:`~nscontrol.systems.switched.FilippovSystem` — smooth fields on the sides of switching
-  surfaces ``h_j(x) = 0``; DOP853 with event location; attracting sliding by the Filippov
-  (equivalent) vector field with exit detection; repelling sliding raises ``ModelError``.
+  surfaces ``h_j(x) = 0``; DOP853 with event location and grazing detection; attracting
+  sliding by the Filippov (equivalent) vector field with exit detection, the state projected
+  back onto the surface; repelling sliding raises ``ModelError``.
 * :class:`~nscontrol.systems.switched.SwitchedAffineSystem` with a PWM controller — the
-  switching instants follow from the sampled state in closed form and each sub-interval is
-  propagated exactly.
+  switching instants ``t_k + o_j`` follow from the state sampled at the exact ``t_k = t0 + kT``
+  in closed form, and each sub-interval is propagated exactly by the mode's ``LTIFlow``.
 
-Event kinds: ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"grazing"`` (and
-``"switch"`` for PWM instants), each with ``mode_from`` / ``mode_to`` and the surface/facet in
-``index``.
+Event kinds: ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"grazing"``,
+``"domain_exit"`` (PWA with a domain) and ``"switch"`` (PWM instants), each with ``mode_from``
+/ ``mode_to`` and the surface/facet (or domain row) in ``index``.
 
 Options
 -------
@@ -50,7 +53,6 @@ import numpy as np
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_float_array, as_vector, check_integer, check_positive
 from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolError, ZenoError
-from ._setvalued_options import check_on_failure
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "saltation_matrix"]
@@ -108,8 +110,11 @@ class _Run:
                  options: dict[str, Any]) -> None:
         unknown = set(options) - _OPTIONS
         if unknown:
+            hint = ("; a PWM controller is part of the model: build "
+                    "SwitchedAffineSystem(modes, controller=PWMController(period, duty))"
+                    if "controller" in unknown else "")
             raise ModelError(f"switching: unknown option(s) {sorted(unknown)}; accepted: "
-                             f"{sorted(_OPTIONS)}")
+                             f"{sorted(_OPTIONS)}{hint}")
         self.system = system
         self.n = x0.shape[0]
         self.t0, self.tf = t_span
@@ -131,9 +136,12 @@ class _Run:
         self.atol = check_positive("atol", options.get("atol", 1e-13))
         self.max_events = check_integer("max_events", options.get("max_events", 1_000_000),
                                         minimum=0)
-        self.on_failure = check_on_failure(options.get("on_failure", "raise"))
+        self.on_failure = options.get("on_failure", "raise")
+        if self.on_failure not in ("raise", "return"):
+            raise ModelError(f"on_failure: expected 'raise' or 'return', got "
+                             f"{self.on_failure!r}")
         self.status, self.message = 0, None
-        self.rec = Recorder(self.n)
+        self.rec = Recorder(self.n, offered=())   # states and events only, no signals
         self.Phi = np.eye(self.n)
         self.saltations: list[FloatArray] = []
         self.counts: dict[str, int] = {}
@@ -205,15 +213,28 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     Trajectory
         Samples at ``t_eval`` and at every event; the event table; ``stats`` with event
         counts and, with ``sensitivity=True``, ``state_transition`` and
-        ``saltation_matrices``.
+        ``saltation_matrices``. ``status = 1`` when a PWA trajectory left its ``domain``.
 
     Raises
     ------
     ModelError
-        Unsupported system, unknown option, repelling sliding, or (PWA) a sliding motion on a
-        facet of a discontinuous PWA system (use ``FilippovSystem.from_pwa``).
+        Unsupported system, unknown or invalid option, repelling sliding, a non-finite PWM
+        duty, or (PWA) a sliding motion on a facet of a discontinuous PWA system (use
+        ``FilippovSystem.from_pwa``).
+    InadmissibleStateError
+        ``x0`` outside a PWA system's domain or in no region.
     ZenoError
         Accumulation of events; ``err.trajectory`` holds the computed part.
+    SolverError
+        DOP853 failed (e.g. a field that blows up); ``err.trajectory`` holds the computed part.
+
+    Examples
+    --------
+    >>> from nscontrol.testing.setvalued_problems import relay_feedback
+    >>> p = relay_feedback(T=2.0)
+    >>> tr = integrate(p.switched, p.x0, p.t_span, sensitivity=True)
+    >>> [e.kind for e in tr.events], tr.stats["saltation_matrices"].shape
+    (['sliding_start'], (1, 2, 2))
     """
     from ..systems.pwa import PiecewiseAffineSystem
     from ..systems.switched import FilippovSystem, SwitchedAffineSystem
