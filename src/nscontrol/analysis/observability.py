@@ -475,6 +475,8 @@ def alpha_limit(M22: float, delta_max: float) -> float:
 def _velocity_weights(n: int, velocity_scale: float) -> FloatArray:
     """Diagonal of ``W`` for a mechanical state ``[q; v]`` of size ``n``: 1 on the positions,
     ``1/velocity_scale`` on the velocities (``||W x||`` is unit-consistent)."""
+    if velocity_scale == 1.0:
+        return np.ones(n)
     if n % 2:
         raise ModelError(f"velocity_scale: a mechanical state [q; v] has an even size, got {n}")
     return np.concatenate([np.ones(n // 2), np.full(n // 2, 1.0 / velocity_scale)])
