@@ -1,9 +1,14 @@
 """LCP solver speed: nscontrol's methods against Siconos's Lemke and PGS, in the same run.
 
 Scenarios: random P-matrices (n = 10, 100; Lemke and auto), random symmetric positive
-definite matrices (n = 10, 100; PGS), and the tridiagonal Delassus matrix of a stack of N unit
+definite matrices (n = 10, 100; PGS), the tridiagonal Delassus matrix of a stack of N unit
 masses at rest (N = 10, 100, 1000, 10000; banded, auto, Lemke, PGS) whose impulses are known
-(``nscontrol.testing.lcp_problems.stack_delassus``). Siconos gets the same dense matrices
+(``nscontrol.testing.lcp_problems.stack_delassus``), and the same matrix with a propagating
+impact, ``q = (-1, 1e-3, ..., 1e-3)`` at contact 0 (``impact``) and at the middle contact
+(``impact-mid``): Howard's worst case from ``z = 0`` (one contact per iteration, N = 1000
+iterations), which the projected Thomas sweeps that start ``banded`` solve outright when the
+impact reaches an end of the chain (N <= 1000) and only partly in the middle of a long one
+(N = 10000: about 500 iterations). Siconos gets the same dense matrices
 through temporary ``.npy`` files; its Lemke is skipped above N = 1000 (dense n^2 tableau:
 seconds at N = 1000, minutes at 10000) and its PGS above N = 100 (10^4 sweeps of O(N^2)).
 
@@ -72,6 +77,12 @@ def cases(quick: bool) -> list[Case]:
         methods = ("banded", "auto") + (("lemke",) if n <= OURS_DENSE_MAX else ()) + (
             ("pgs",) if n <= SICONOS_PGS_MAX else ())
         out.append(Case("stack", n, prob.M, prob.q, methods, prob.z))
+    for family, where in (("impact", lambda n: 0), ("impact-mid", lambda n: n // 2)):
+        for n in (10, 100) if quick else (10, 100, 1000, 10_000):
+            q = np.full(n, 1e-3)
+            q[where(n)] = -1.0
+            methods = ("banded", "auto") + (("lemke",) if n <= 100 else ())
+            out.append(Case(family, n, stack_delassus(n).M, q, methods))
     return out
 
 
@@ -102,7 +113,7 @@ def kernel_time(case: Case, method: str, budget: float) -> float | None:
     n = case.size
     z, w = np.empty(n), np.empty(n)
     q = case.q
-    if method == "banded" and case.family == "stack":
+    if method == "banded" and case.family in ("stack", "impact", "impact-mid"):
         lower, diag, upper = (np.asarray(case.M.diagonal(k), dtype=np.float64)
                               for k in (-1, 0, 1))
         return _seconds_per_call(

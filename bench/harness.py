@@ -49,9 +49,10 @@ def siconos_available() -> tuple[bool, str]:
     proc = subprocess.run([SICONOS_PYTHON, "-c", "import siconos.kernel, siconos.numerics"],
                           capture_output=True, text=True, timeout=60)
     if proc.returncode != 0:
+        lines = proc.stderr.strip().splitlines()
         return False, ("python3-siconos not importable by /usr/bin/python3 (install: apt-get "
-                       "install -y python3-siconos python3-scipy): "
-                       + proc.stderr.strip().splitlines()[-1] if proc.stderr else "")
+                       "install -y python3-siconos python3-scipy)"
+                       + (f": {lines[-1]}" if lines else ""))
     return True, ""
 
 

@@ -136,3 +136,31 @@ def test_scalar_and_integer_checks():
             v.check_integer("n", bad, minimum=1)
     with pytest.raises(errors.DimensionError, match=r"^dim: expected an integer >= 1, got 0"):
         v.check_integer("dim", 0, minimum=1, error=errors.DimensionError)
+
+
+BENCH_KEYS = {"scenario", "size", "ours_s_per_solve", "reference", "reference_s_per_solve",
+              "ratio", "accuracy"}
+
+
+def test_bench_lcp_quick_json_is_one_object_per_line():
+    # ~20 s with Siconos installed (its subprocess included), numba cache warm
+    result = CliRunner().invoke(main, ["bench", "lcp", "--json", "--quick"])
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.stdout.splitlines() if line.strip()]
+    records = [json.loads(line) for line in lines]          # every stdout line is JSON
+    assert len(records) >= 10
+    scenarios = set()
+    for r in records:
+        assert isinstance(r, dict) and BENCH_KEYS <= set(r), set(r) ^ BENCH_KEYS
+        assert isinstance(r["scenario"], str) and r["scenario"].startswith("lcp/")
+        assert isinstance(r["size"], int) and r["ours_s_per_solve"] > 0.0
+        assert isinstance(r["accuracy"], dict) and r["accuracy"]["ours_status"] == "solved"
+        if r["reference"] is None:
+            assert r["ratio"] is None and r["reference_s_per_solve"] is None
+        else:
+            assert r["ratio"] == pytest.approx(r["reference_s_per_solve"]
+                                               / r["ours_s_per_solve"])
+        scenarios.add(r["scenario"])
+    assert {"lcp/stack/banded", "lcp/impact/banded", "lcp/impact-mid/banded"} <= scenarios
+    impact = [r for r in records if r["scenario"] == "lcp/impact/banded"]
+    assert all(r["accuracy"]["ours_iterations"] == 0 for r in impact)

@@ -27,6 +27,7 @@ class TimeProgress:
         self._last = 0
 
     def update(self, t: float) -> None:
+        """Advance the bar to simulated time ``t`` (cheap; redraws at most 1000 times)."""
         if self._bar is None:
             return
         k = int(1000 * (t - self.t0) / (self.tf - self.t0))
@@ -36,6 +37,7 @@ class TimeProgress:
             self._last = min(k, 1000)
 
     def close(self) -> None:
+        """Remove the bar (idempotent)."""
         if self._bar is not None:
             self._bar.close()
             self._bar = None

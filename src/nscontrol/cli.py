@@ -87,6 +87,8 @@ def bench(name: str | None, as_json: bool, quick: bool) -> None:
     available = sorted(p.stem[len("bench_"):] for p in folder.glob("bench_*.py"))
     if name is not None and name not in available:
         raise click.UsageError(f"no benchmark {name!r}; available: {', '.join(available)}")
+    from ._progress import progress_iter
+
     sys.path.insert(0, str(folder))
     for bname in [name] if name else available:
         spec = importlib.util.spec_from_file_location(f"bench_{bname}",
@@ -94,7 +96,8 @@ def bench(name: str | None, as_json: bool, quick: bool) -> None:
         assert spec and spec.loader
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
-        for record in module.run(quick=quick):
+        # one tick per scenario, on stderr (stdout stays one JSON object per line)
+        for record in progress_iter(module.run(quick=quick), desc=f"bench {bname}"):
             if as_json:
                 click.echo(json.dumps(record))
             else:

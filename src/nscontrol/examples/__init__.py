@@ -26,7 +26,19 @@ _OPS: dict[str, Callable[[Any, Any], bool]] = {
 
 @dataclass(frozen=True)
 class Check:
-    """One measured claim: ``value <op> threshold``."""
+    """One measured claim: ``value <op> threshold``.
+
+    Attributes
+    ----------
+    name
+        The claim, in words (what ``nscontrol report`` shows).
+    value, threshold
+        The measured figure and the bound it is compared with.
+    passed
+        Whether ``value <op> threshold`` held (build it with :func:`check`).
+    op
+        One of ``"<="``, ``"<"``, ``">="``, ``">"``, ``"=="``.
+    """
 
     name: str
     value: Any
@@ -35,13 +47,23 @@ class Check:
     op: str = "<="
 
     def to_json(self) -> dict[str, Any]:
+        """``{"name", "value", "threshold", "op", "passed"}`` with JSON-compatible values
+        (numpy scalars and arrays converted, non-finite floats as strings)."""
         return {"name": self.name, "value": _jsonable(self.value),
                 "threshold": _jsonable(self.threshold), "op": self.op,
                 "passed": bool(self.passed)}
 
 
 def check(name: str, value: Any, threshold: Any, op: str = "<=") -> Check:
-    """Build a :class:`Check` by comparing ``value`` with ``threshold`` using ``op``."""
+    """Build a :class:`Check` by comparing ``value`` with ``threshold`` using ``op``.
+
+    A comparison that cannot be made (incomparable types) is a failed check, not an error.
+
+    Examples
+    --------
+    >>> check("residual", 1e-13, 1e-10).passed, check("events", 3, 4, ">=").passed
+    (True, False)
+    """
     if op not in _OPS:
         raise ValueError(f"op: expected one of {sorted(_OPS)}, got {op!r}")
     try:
@@ -53,7 +75,21 @@ def check(name: str, value: Any, threshold: Any, op: str = "<=") -> Check:
 
 @dataclass
 class ExampleResult:
-    """What an example measured: metrics, checks and the figures it wrote."""
+    """What an example measured: metrics, checks and the figures it wrote.
+
+    Attributes
+    ----------
+    example
+        The example's name.
+    metrics
+        Named figures (numbers, lists, strings) reported as they are.
+    checks
+        The claims tested against thresholds.
+    figures
+        Paths of the figures written.
+    summary
+        One paragraph for the report.
+    """
 
     example: str
     metrics: dict[str, Any] = field(default_factory=dict)
@@ -63,9 +99,13 @@ class ExampleResult:
 
     @property
     def passed(self) -> bool:
+        """True when every check passed (``nscontrol run`` exits 0 exactly then)."""
         return all(c.passed for c in self.checks)
 
     def to_json(self) -> dict[str, Any]:
+        """The stable JSON of ``nscontrol run NAME --json``:
+        ``{"example": NAME, "metrics": {...}, "checks": [{"name", "value", "threshold",
+        "op", "passed"}, ...]}``."""
         return {"example": self.example,
                 "metrics": {k: _jsonable(v) for k, v in self.metrics.items()},
                 "checks": [c.to_json() for c in self.checks]}
@@ -73,7 +113,17 @@ class ExampleResult:
 
 @dataclass(frozen=True)
 class Example:
-    """A named, runnable scenario."""
+    """A named, runnable scenario.
+
+    Attributes
+    ----------
+    name
+        Unique name (``nscontrol run NAME``).
+    title, chapter
+        What it shows and where it comes from.
+    run
+        ``run(out_dir) -> ExampleResult``; writes figures into ``out_dir`` when it is given.
+    """
 
     name: str
     title: str

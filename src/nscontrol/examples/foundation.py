@@ -132,6 +132,7 @@ def _lti_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     flow = LTIFlow(A)
     ts = np.linspace(0.0, T, 1501)
     X = flow.propagate(X0, ts)
+    _event_times(flow, X0, c, T)          # warm-up: loads the compiled kernels before timing
     events, per_call = _event_times(flow, X0, c, T)
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
@@ -169,8 +170,9 @@ def _lti_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     metrics = {"lti_max_state_difference": float(prop_err.max()),
                "lti_events": len(events), "lti_max_event_time_difference": event_err,
                "lti_max_guard_residual": float(np.abs(g_at).max()),
-               "first_event_seconds_per_call": per_call}
-    checks = [check("exact propagation agrees with DOP853", float(prop_err.max()), 1e-9),
+               "first_event_seconds_per_call": per_call}   # warm: after one untimed pass
+    checks = [check("exact propagation agrees with DOP853", float(prop_err.max()),
+                    1e-10),
               check("same number of level crossings as DOP853", len(events),
                     len(ivp_events), "=="),
               check("crossing times agree with DOP853 event location", event_err, 1e-8),

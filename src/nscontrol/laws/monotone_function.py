@@ -247,6 +247,7 @@ class PiecewiseLinearFunction(SetValuedLaw):
         return self._eval(z)
 
     def complementarity_form(self) -> ComplementarityForm:
+        """The segment-filling encoding of the Notes (exact; PSD LCP for PSD steps)."""
         b, fv, m = self.breakpoints, self.values, self.dim
         cols: list[tuple[str, float, Any]] = []      # one template per piece: (kind, slope, data)
         if self.slope_left > 0.0:

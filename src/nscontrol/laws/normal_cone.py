@@ -102,6 +102,7 @@ class NormalConeBox(SetValuedLaw):
         return np.zeros(self.dim)
 
     def complementarity_form(self) -> ComplementarityForm:
+        """``w = a - b``, ``0 <= a ⟂ z - lower >= 0``, ``0 <= b ⟂ upper - z >= 0`` (Notes)."""
         m = self.dim
         low_rows = [i for i in range(m) if np.isfinite(self.lower[i])]
         up_rows = [i for i in range(m) if np.isfinite(self.upper[i])]

@@ -83,6 +83,7 @@ class Product(SetValuedLaw):
         return self._resolvent(x, g)
 
     def complementarity_form(self) -> ComplementarityForm:
+        """The parts' forms side by side (``ModelError`` if a part has none)."""
         return ComplementarityForm.block_diagonal([p.complementarity_form() for p in self.parts])
 
     def loop_transformation(self, sigma: Any = None) -> LoopTransformation:

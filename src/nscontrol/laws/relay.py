@@ -84,6 +84,7 @@ class Relay(SetValuedLaw):
         return self.bound * np.sign(z)
 
     def complementarity_form(self) -> ComplementarityForm:
+        """``w = -c + s``, ``0 <= s ⟂ z + b >= 0``, ``0 <= b ⟂ 2c - s >= 0`` (Notes)."""
         m = self.dim
         eye, zero = np.eye(m), np.zeros((m, m))
         return ComplementarityForm(
