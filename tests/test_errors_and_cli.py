@@ -164,3 +164,4 @@ def test_bench_lcp_quick_json_is_one_object_per_line():
     assert {"lcp/stack/banded", "lcp/impact/banded", "lcp/impact-mid/banded"} <= scenarios
     impact = [r for r in records if r["scenario"] == "lcp/impact/banded"]
     assert all(r["accuracy"]["ours_iterations"] == 0 for r in impact)
+    assert "bench lcp" in result.stderr                  # the progress bar (after 2 s)
