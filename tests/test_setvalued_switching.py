@@ -346,15 +346,22 @@ def test_filippov_sliding_stays_on_a_curved_surface():
     assert np.max(np.abs(tr.x[after] - np.column_stack([np.cos(s), -np.sin(s)]))) <= 1e-8
 
 
+@pytest.mark.parametrize("regions", ["half_planes", "boxes"])
 @pytest.mark.parametrize("input_kind", ["none", "function"])
-def test_leaving_the_pwa_domain_stops_the_run(input_kind):
-    # a continuous field on the box |x| <= 1 split at x1 = 0; the flow drifts out at x1 = 1
+def test_leaving_the_pwa_domain_stops_the_run(input_kind, regions):
+    # a continuous field on the box |x| <= 1 split at x1 = 0; the flow drifts out at x1 = 1.
+    # "boxes": bounded regions whose outer facets lie on the domain's boundary (this used to
+    # end in the misleading "sliding ... use FilippovSystem.from_pwa" error)
     A = np.array([[0.0, 0.0], [0.0, 0.0]])
     box = ([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]], [1.0, 1.0, 1.0, 1.0])
+    if regions == "half_planes":
+        parts = (([[1.0, 0.0]], [0.0]), ([[-1.0, 0.0]], [0.0]))
+    else:
+        parts = ((box[0], [0.0, 1.0, 1.0, 1.0]),
+                 ([[-1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, -1.0]], [0.0, 1.0, 1.0, 1.0]))
     kw = {} if input_kind == "none" else {"E": [[1.0], [0.0]],
                                           "u": lambda t: np.zeros((np.size(t), 1))}
-    pwa = PiecewiseAffineSystem((A, A), b=([1.0, 0.0], [1.0, 0.0]),
-                                regions=(([[1.0, 0.0]], [0.0]), ([[-1.0, 0.0]], [0.0])),
+    pwa = PiecewiseAffineSystem((A, A), b=([1.0, 0.0], [1.0, 0.0]), regions=parts,
                                 domain=box, **kw)
     tr = simulate(pwa, [-0.5, 0.2], (0.0, 5.0))
     assert tr.status == 1 and "left the domain" in tr.message

@@ -49,8 +49,9 @@ def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2,
 
     ``ubar[k]``, ``gnext[k]`` are the input mean and the shift used by step ``k``; outputs
     ``X[k]``, ``Z[k]``, ``Wout[k]`` are the state, law argument and multiplier after step
-    ``k``. ``Z`` is the resolvent's value (a stuck relay has ``z_i == 0.0``), a sliding relay
-    has ``w_i = ∓c_i`` exactly. When component ``i`` sits at a kink of its law (stuck, or
+    ``k``. ``Z`` is the resolvent's value (a relay on its kink -- sticking, or sliding on
+    ``z_i = 0`` -- has ``z_i == 0.0``), and a relay off its kink has ``w_i = -c_i sign(z_i)``
+    exactly. When component ``i`` sits at a kink of its law (stuck, or
     clipped to a bound) and ``z_i = H[i, j] x_j + g_i`` involves one state only
     (``ucol[i] = j >= 0``), ``x_j`` is set to ``(z_i - g_i)/H[i, j]``: the active constraint
     holds exactly on the state instead of up to the round-off of ``Φx + G_h w``.
@@ -78,13 +79,13 @@ def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2,
             kink = False
             if kind[i] == KIND_SOFT:
                 thr = d * p1[i]
-                if ai > thr:          # sliding: the multiplier sits on its bound exactly
+                if ai > thr:          # off the kink: the multiplier sits on its bound exactly
                     zi = ai - thr
                     wi = -p1[i]
                 elif ai < -thr:
                     zi = ai + thr
                     wi = p1[i]
-                else:                 # stuck
+                else:                 # on the kink: z = 0 (sticking / sliding on z = 0)
                     zi = 0.0
                     wi = -ai / d
                     kink = True

@@ -312,6 +312,10 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         hit = [k for k, te in enumerate(sol.t_events) if te.size and kinds[k][0] != "graze"
                and float(te[-1]) >= t_end]
         dom = [kinds[k][1] for k in hit if kinds[k][0] == "domain"]
+        if not dom and system.domain is not None:   # a facet on the domain's boundary
+            Hd, hd = system.domain                   # fired first: is the flow leaving?
+            on = np.abs(hd - Hd @ x) <= 1e-9 * (1.0 + np.abs(hd) + np.abs(Hd) @ np.abs(x))
+            dom = [int(r) for r in np.flatnonzero(on & (Hd @ field(i, t, x) > 0.0))]
         if dom:
             _domain_exit(run, t, dom[0], x, i)
             break
