@@ -223,16 +223,18 @@ def test_listeners_see_every_impact_in_time_order() -> None:
     ball = BouncingBall(restitution=0.9)
     seen = []
     traj = simulate(ball.system(), ball.x0, (0.0, 10.0),
-                    listeners=[lambda t, xm, xp, idx: seen.append((t, xm, xp, list(idx)))])
+                    listeners=[lambda t, xm, xp, idx, p: seen.append((t, xm, xp, list(idx), p))])
     impacts = traj.events_of("impact")
     assert len(seen) == len(impacts) > 20
     assert [s[0] for s in seen] == [e.time for e in impacts]
     assert all(s[3] == [0] for s in seen)
-    for (_t, xm, xp, _), ev in zip(seen, impacts, strict=True):
+    for (_t, xm, xp, _, _p), ev in zip(seen, impacts, strict=True):
         assert np.array_equal(xm, ev.pre) and np.array_equal(xp, ev.post)
-    for _, xm, xp, _ in seen[:-1]:  # the last one closes the accumulation plastically
+    for _, xm, xp, _, p in seen[:-1]:  # the last one closes the accumulation plastically
         assert xp[1] == pytest.approx(-0.9 * xm[1], rel=1e-14)
+        assert p[0] == pytest.approx(xp[1] - xm[1], rel=1e-14)  # unit mass: P = Δv
     assert seen[-1][2][1] == 0.0
+    assert np.array_equal(traj.stats["impulses"], np.array([s[4] for s in seen]))
 
 
 def test_samples_on_the_grid_are_exact() -> None:
@@ -265,3 +267,144 @@ def test_record_every_and_selected_signals() -> None:
         simulate(ball.system(), ball.x0, (0.0, 1.0), signals=["gapp"])
     with pytest.raises(ModelError, match=r"^record_every: expected an integer >= 1"):
         simulate(ball.system(), ball.x0, (0.0, 1.0), record_every=0)
+
+
+def test_accumulation_does_not_depend_on_the_time_span() -> None:
+    ball = BouncingBall(restitution=0.9)
+    short = simulate(ball.system(), ball.x0, (0.0, 10.0), dt=10.0)
+    long = simulate(ball.system(), ball.x0, (0.0, 1000.0), dt=1000.0)
+    ts, tl = short.event_times("impact"), long.event_times("impact")
+    assert ts.size == tl.size > 50
+    assert np.max(np.abs(ts - tl)) < 1e-12
+    assert long.event_times("accumulation")[0] == pytest.approx(ball.accumulation_time,
+                                                                abs=1e-9)
+    assert np.max(np.abs(long.x[long.t > 9.0])) < 1e-12  # resting until t = 1000
+
+
+def _ball_under_a_ball() -> LagrangianSystem:
+    # ball 0 bounces on the ground (q0 >= 0), ball 1 falls onto it (q1 - q0 >= 0)
+    return LagrangianSystem(np.eye(2), constant_force=[-9.81, -9.81],
+                            gap_matrix=[[1.0, 0.0], [-1.0, 1.0]], restitution=[0.9, 0.5])
+
+
+def test_an_early_accumulation_still_watches_the_other_contacts() -> None:
+    # a huge horizon declares the accumulation of ball 0 at once; while it is held on the
+    # ground up to t∞ the falling ball 1 must still hit it, not pass through
+    traj = simulate(_ball_under_a_ball(), [1.0, 176.0, 0.0, 0.0], (0.0, 12.0), dt=0.01,
+                    zeno_horizon=10.0)
+    assert np.min(traj.signals["gap"]) >= -1e-9
+    hits = [e for e in traj.events_of("impact") if e.index == 1]
+    assert hits and hits[0].time == pytest.approx(np.sqrt(2 * 176.0 / 9.81), rel=1e-9)
+    assert traj.events_of("accumulation") == ()  # interrupted before t∞
+
+
+def test_a_contact_force_touching_zero_keeps_the_contact() -> None:
+    # a unit mass pressed on the ground by u = -(1 - t)²: the contact force (1 - t)² only
+    # touches zero at t = 1
+    system = LagrangianSystem(np.eye(1), gap_matrix=[[1.0]], restitution=0.0,
+                              actuation=[[1.0]])
+    traj = simulate(system, [0.0, 0.0], (0.0, 2.0), u=Exosystem.polynomial([-1.0, 2.0, -1.0]))
+    assert [e.kind for e in traj.events] == ["contact_start", "grazing"]
+    assert traj.events_of("grazing")[0].time == pytest.approx(1.0, abs=1e-6)
+    assert np.max(np.abs(traj.x)) < 1e-12
+
+
+def test_input_runs_in_absolute_time_like_moreau_jean() -> None:
+    from nscontrol.testing.mechanics_problems import impact_oscillator
+
+    system = impact_oscillator(stiffness=1.0, damping=0.0, wall=0.3, restitution=0.8)
+    u = Exosystem.sinusoid(0.9, 1.7)
+    ed = simulate(system, [0.0, 0.0], (5.0, 30.0), u=u)
+    mj = simulate(system, [0.0, 0.0], (5.0, 30.0), u=u, method="moreau_jean", h=1e-4)
+    te, tm = ed.event_times("impact"), mj.event_times("impact")
+    assert te.size == tm.size >= 2
+    assert np.max(np.abs(te - tm)) < 2e-3
+
+
+def test_pre_and_post_impact_samples() -> None:
+    ball = BouncingBall(restitution=0.9)
+    traj = simulate(ball.system(), ball.x0, (0.0, 1.0))
+    t1 = ball.impact_times(1)[0]
+    at = np.flatnonzero(traj.t == t1)
+    assert at.size == 2
+    assert traj.x[at[0], 1] == pytest.approx(-ball.impact_velocity(0), rel=1e-12)
+    assert traj.x[at[1], 1] == pytest.approx(0.9 * ball.impact_velocity(0), rel=1e-12)
+
+
+def test_failed_runs_keep_their_part_in_the_callers_state_order() -> None:
+    plant = _ch02_plant()
+    u = Exosystem.sinusoid(2.0, 1.3)
+    with pytest.raises(ZenoError) as err:
+        simulate(plant, [0.0, 0.0, 0.0, 0.0, 0.3, 0.0], (0.0, 20.0), u=u, max_events=2)
+    part = err.value.trajectory
+    assert part.state_names == plant.state_names and part.status == -1
+    assert len(part.events_of("impact")) == 2
+    # an error raised inside the run (a controller that returns NaN) keeps the run too
+    from nscontrol.errors import ModelError
+
+    ball = BouncingBall()
+    with pytest.raises(ModelError, match=r"^controller: expected a finite input") as err2:
+        simulate(ball.system(), ball.x0, (0.0, 2.0),
+                 controller=lambda t, q, v: np.array([np.nan if t > 0.5 else 0.0]))
+    assert err2.value.trajectory is not None and err2.value.trajectory.t[-1] > 0.4
+
+
+def test_linear_state_feedback_stays_exact() -> None:
+    # u = -K [q; v] on a free mass is the spring-damper k = 4, c = 0.3: same impacts
+    free = LagrangianSystem(np.eye(1), gap_matrix=[[-1.0]], gap_offset=[0.5],
+                            restitution=0.7, actuation=[[1.0]], constant_force=[2.0])
+    spring = LagrangianSystem(np.eye(1), stiffness=[[4.0]], damping=[[0.3]],
+                              gap_matrix=[[-1.0]], gap_offset=[0.5], restitution=0.7,
+                              constant_force=[2.0])
+    a = simulate(free, [0.0, 0.0], (0.0, 20.0), controller=[[4.0, 0.3]])
+    b = simulate(spring, [0.0, 0.0], (0.0, 20.0))
+    ta, tb = a.event_times("impact"), b.event_times("impact")
+    assert ta.size == tb.size >= 3
+    assert np.max(np.abs(ta - tb)) < 1e-12
+    # the same feedback as a callable takes the DOP853 path
+    c = simulate(free, [0.0, 0.0], (0.0, 20.0),
+                 controller=lambda t, q, v: -4.0 * q - 0.3 * v)
+    tc = c.event_times("impact")[: ta.size]
+    assert np.max(np.abs(tc - ta)) < 1e-7
+
+
+def test_bad_options_each_their_error() -> None:
+    from nscontrol.errors import DimensionError, ModelError
+
+    ball = BouncingBall()
+    s, x0 = ball.system(), ball.x0
+    with pytest.raises(ModelError, match=r"^max_events: expected an integer >= 1"):
+        simulate(s, x0, (0.0, 1.0), max_events=2.5)
+    with pytest.raises(ModelError, match=r"^min_interval: expected a finite number >= 0"):
+        simulate(s, x0, (0.0, 1.0), min_interval=-1.0)
+    with pytest.raises(ModelError, match=r"^rtol: expected a finite number > 0"):
+        simulate(s, x0, (0.0, 1.0), rtol=-1.0)
+    with pytest.raises(ModelError, match=r"^listeners\[0\]: expected a callable"):
+        simulate(s, x0, (0.0, 1.0), listeners=[3])
+    with pytest.raises(ModelError, match=r"^u: event_driven needs the input as an Exosystem"):
+        simulate(s, x0, (0.0, 1.0), u=lambda t: 0.0)
+    with pytest.raises(DimensionError, match=r"^u: expected an Exosystem with 1 input"):
+        simulate(s, x0, (0.0, 1.0), u=Exosystem.constant([1.0, 2.0]))
+    with pytest.raises(DimensionError, match=r"^controller"):
+        simulate(s, x0, (0.0, 1.0), controller=[[1.0, 2.0, 3.0]])
+    # the model: a zero gap row, a jacobian with the wrong sign
+    with pytest.raises(ModelError, match=r"^gap_matrix: row 1 is zero"):
+        LagrangianSystem(np.eye(1), gap_matrix=[[1.0], [0.0]])
+    from nscontrol.errors import NscontrolWarning
+
+    with pytest.warns(NscontrolWarning, match=r"^jacobian: disagrees"):
+        LagrangianSystem(lambda q: np.eye(1), gap=lambda q: q + 1.0,
+                         jacobian=lambda q: -np.eye(1), names=("x",))
+
+
+def test_mass_matrix_losing_definiteness_during_the_run() -> None:
+    from nscontrol.errors import ModelError
+
+    # M(q) = diag(1, 1 - q0) is positive definite at q0 = 0, singular once coordinate 0,
+    # moving at unit speed, reaches 1 (coordinate 1 is at rest and unforced: no blow-up)
+    system = LagrangianSystem(lambda q: np.diag([1.0, 1.0 - q[0]]), names=("a", "b"),
+                              gap=lambda q: q[:1] + 10.0, jacobian=lambda q: np.eye(1, 2))
+    for method, opts in (("event_driven", {}), ("moreau_jean", {"h": 1e-3})):
+        with pytest.raises(ModelError, match=r"^mass: M\(q\) is not positive definite") as err:
+            simulate(system, [0.0, 0.0, 1.0, 0.0], (0.0, 5.0), method=method, **opts)
+        assert err.value.trajectory.t[-1] >= 0.85  # up to the last window before t = 1

@@ -84,6 +84,26 @@ def test_impact_oscillator_periodic_orbit_agrees_with_event_driven() -> None:
     v_ed = np.array([e.pre[1] for e in ed.events_of("impact")[-3:]])
     v_mj = np.array([e.pre[1] for e in mj.events_of("impact")[-3:]])
     assert np.allclose(v_mj, v_ed, rtol=5e-3)
+    # the orbit itself: fixed point of the exact stroboscopic map by Newton (shooting), a
+    # stable one, and both long runs sit on it at the strobe instants
+    def strobe(x: np.ndarray) -> np.ndarray:
+        return simulate(system, x, (0.0, period), u=u, dt=period).x[-1]
+
+    x = strobe(np.array([0.0, 0.0]))
+    for _ in range(30):
+        x = strobe(x)  # transient first
+    for _ in range(6):
+        r = strobe(x) - x
+        J = np.column_stack([(strobe(x + 1e-7 * e) - strobe(x - 1e-7 * e)) / 2e-7
+                             for e in np.eye(2)])
+        x = x - np.linalg.solve(J - np.eye(2), r)
+    assert np.max(np.abs(strobe(x) - x)) < 1e-10
+    assert np.max(np.abs(np.linalg.eigvals(J))) < 1.0  # |μ| = 0.616: stable
+    k = np.arange(24, 29)  # strobe instants after the transient
+    exact = simulate(system, [0.0, 0.0], (0.0, 150.0), u=u, dt=period)  # samples at k T
+    dist = np.max(np.abs(exact.at(k * period) - x), axis=1)
+    assert dist[-1] < 2e-6 and np.all(np.diff(dist) < 0)  # converging onto the orbit
+    assert np.max(np.abs(mj.at(k * period) - x)) < 2e-3  # first order: within ~2h
 
 
 def test_controller_hook_and_jump_listener() -> None:
@@ -93,7 +113,7 @@ def test_controller_hook_and_jump_listener() -> None:
     seen = []
     traj = simulate(system, [0.0, 0.0], (0.0, 10.0), method="moreau_jean", h=1e-3,
                     controller=lambda t, q, v: -4.0 * (q - 0.5) - 1.0 * v,
-                    listeners=[lambda t, xm, xp, p, c: seen.append((t, xm, xp, p))])
+                    listeners=[lambda t, xm, xp, c, p: seen.append((t, xm, xp, p))])
     assert len(seen) == len(traj.events_of("impact")) >= 1
     t, xm, xp, p = seen[0]
     assert xm[1] > 0 and xp[1] < 0 and p[0] > 0
@@ -120,9 +140,9 @@ def test_impacting_bodies_moreau_jean_keeps_state_order() -> None:
     x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])
     seen_ed, seen_mj = [], []
     ed = simulate(plant, x0, (0.0, 10.0), u=u,
-                  listeners=[lambda t, xm, xp, idx: seen_ed.append(xp)])
+                  listeners=[lambda t, xm, xp, c, p: seen_ed.append(xp)])
     mj = simulate(plant, x0, (0.0, 10.0), method="moreau_jean", h=1e-4, u=u,
-                  listeners=[lambda t, xm, xp, p, c: seen_mj.append(xp)])
+                  listeners=[lambda t, xm, xp, c, p: seen_mj.append(xp)])
     assert mj.state_names == plant.state_names
     # listeners see the chapter's [x_a; x_b] order, like the trajectories
     assert np.allclose(seen_ed[0], ed.events_of("impact")[0].post)
@@ -131,3 +151,57 @@ def test_impacting_bodies_moreau_jean_keeps_state_order() -> None:
     tj, tm = ed.event_times("impact"), mj.event_times("impact")
     assert len(tj) == len(tm) >= 2
     assert np.max(np.abs(tj - tm)) < 1e-3
+
+
+def test_the_last_step_ends_exactly_at_the_end_of_the_span() -> None:
+    ball = BouncingBall()
+    traj = simulate(ball.system(), ball.x0, (0.0, 1.0), method="moreau_jean", h=0.3)
+    assert traj.t[-1] == 1.0 and np.all(traj.t <= 1.0)
+    assert np.allclose(np.diff(traj.t)[:3], 0.3) and np.diff(traj.t)[-1] == pytest.approx(0.1)
+    # free fall with a shorter last step is still the θ = ½ (exact for constant force) flight
+    free = simulate(ball.system(), [10.0, 0.0], (0.0, 1.0), method="moreau_jean", h=0.3)
+    assert free.x[-1] == pytest.approx([10.0 - 9.81 / 2, -9.81], rel=1e-12)
+
+
+def test_redundant_contacts_fall_back_to_lemke() -> None:
+    # the same ground contact twice: a singular (positive semi-definite) Delassus matrix
+    ball = LagrangianSystem(np.eye(1), constant_force=[-9.81], gap_matrix=[[1.0], [1.0]],
+                            restitution=[0.0, 0.0])
+    traj = simulate(ball, [0.0, 0.0], (0.0, 0.01), method="moreau_jean", h=1e-3)
+    assert traj.stats["path"] == "tridiagonal+dense"
+    assert np.max(np.abs(traj.x)) < 1e-12
+    assert traj.signals["impulse"][-1].sum() == pytest.approx(9.81e-3, rel=1e-12)
+
+
+def test_listeners_do_not_change_the_run() -> None:
+    # listeners observe after each compiled chunk: same trajectory, one call per impact step
+    system = impact_oscillator()
+    u = Exosystem.sinusoid(1.0, 1.2)
+    seen = []
+    a = simulate(system, [0.0, 0.0], (0.0, 30.0), method="moreau_jean", h=1e-3, u=u)
+    b = simulate(system, [0.0, 0.0], (0.0, 30.0), method="moreau_jean", h=1e-3, u=u,
+                 listeners=[lambda t, xm, xp, c, p: seen.append((t, c.tolist(), p[0]))])
+    assert np.array_equal(a.x, b.x)
+    assert len(seen) == len(a.events_of("impact")) > 5
+    assert all(c == [0] and p > 0 for _, c, p in seen)
+
+
+def test_bad_moreau_jean_options_each_their_error() -> None:
+    from nscontrol.errors import DimensionError, ModelError
+
+    ball = BouncingBall()
+    s, x0 = ball.system(), ball.x0
+    with pytest.raises(ModelError, match=r"^activation: expected a finite number >= 0"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, activation=np.nan)
+    with pytest.raises(DimensionError, match=r"^u: expected an Exosystem with 1 input"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
+                 u=Exosystem.constant([1.0, 2.0]))
+    with pytest.raises(ModelError, match=r"^listeners\[0\]: expected a callable"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, listeners=["no"])
+    with pytest.raises(ModelError, match=r"^signals: unknown name\(s\) \['impulses'\]"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, signals=["impulses"])
+    with pytest.raises(ModelError, match=r"^controller: expected a finite input of length 1"
+                       ) as err:
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
+                 controller=lambda t, q, v: np.nan if t > 0.5 else 0.0)
+    assert err.value.trajectory.t[-1] == pytest.approx(0.5, abs=2e-3)

@@ -194,6 +194,19 @@ def _critical_points(da, m, bern_d, s_end, out, stack_b, stack_lo, stack_hi, wor
 
 
 @njit(cache=True)
+def _touches_at_end(a, K1, v, tol):  # pragma: no cover - compiled
+    """Whether ``P`` (decreasing to ``|P(1)| <= tol`` at the cell's end) only touches zero
+    there: the minimum of its quadratic expansion at ``σ = 1`` stays within ``tol`` (the
+    same test as for an interior minimum, whose critical point lies in the next cell)."""
+    d1 = 0.0
+    d2 = 0.0
+    for j in range(1, K1):
+        d1 += j * a[j]
+        d2 += j * (j - 1) * a[j]
+    return d2 > 0.0 and v - d1 * d1 / (2.0 * d2) >= -tol
+
+
+@njit(cache=True)
 def _walk(a, K1, s_end, tol, skip_start, bern_d, crit, stack_b, stack_lo, stack_hi, work,
           da):  # pragma: no cover - compiled
     """First zero of ``P(σ) = Σ a_j σ^j`` on ``[0, s_end]``: ``(found, σ, grazing)``.
@@ -219,6 +232,8 @@ def _walk(a, K1, s_end, tol, skip_start, bern_d, crit, stack_b, stack_lo, stack_
         v = _horner(a, K1, x)
         if j < ncrit and abs(v) <= tol:
             return True, x, True
+        if j == ncrit and s_end == 1.0 and abs(v) <= tol and _touches_at_end(a, K1, v, tol):
+            return True, 1.0, True  # a touch on the cell boundary: its minimum is next door
         if v <= 0.0:
             return True, _root(a, K1, prev_x, x, prev_v, v), False
         prev_x = x

@@ -35,15 +35,16 @@ _CLOSED_TOL = 1e-9  # relative: a guard this close to zero counts as closed
 
 
 @njit(cache=True)
-def zeno_status(hist, count, slot, t, geometric, ratio_tol, horizon, min_interval
-                ):  # pragma: no cover - compiled
+def zeno_status(hist, count, first, slot, t, geometric, ratio_tol, horizon, rel,
+                min_interval):  # pragma: no cover - compiled
     """Whether an event of history row ``slot`` at ``t`` belongs to an accumulation.
 
     Returns ``(ZENO_CLOSE, 0)`` when it is closer than ``min_interval`` to the previous one,
     ``(ZENO_DUE, t_acc)`` when (``geometric``) it ends five or six event times whose
     intervals shrink with ratios equal within ``ratio_tol`` and the remaining time
-    ``Δ r / (1 - r)`` is below ``horizon`` (``t_acc = t + Δ r / (1 - r)``), else
-    ``(ZENO_NONE, 0)``. The history itself is not changed (see :func:`zeno_push`).
+    ``Δ r / (1 - r)`` is below ``horizon`` — or, when ``horizon < 0``, below ``rel`` times
+    the duration ``t_acc - first[slot]`` of the sequence (``t_acc = t + Δ r / (1 - r)``) —
+    else ``(ZENO_NONE, 0)``. The history itself is not changed (see :func:`zeno_push`).
     """
     m = count[slot]
     if m > 0 and t - hist[slot, m - 1] < min_interval:
@@ -71,15 +72,19 @@ def zeno_status(hist, count, slot, t, geometric, ratio_tol, horizon, min_interva
     if r_max - r_min > ratio_tol * r_last:
         return ZENO_NONE, 0.0
     remaining = d[k - 1] * r_last / (1.0 - r_last)
-    if remaining <= horizon:
+    limit = horizon if horizon >= 0.0 else rel * (t + remaining - first[slot])
+    if remaining <= limit:
         return ZENO_DUE, t + remaining
     return ZENO_NONE, 0.0
 
 
 @njit(cache=True)
-def zeno_push(hist, count, slot, t):  # pragma: no cover - compiled
-    """Append ``t`` to history row ``slot`` (the last six times are kept)."""
+def zeno_push(hist, count, first, slot, t):  # pragma: no cover - compiled
+    """Append ``t`` to history row ``slot`` (the last six times are kept; ``first[slot]`` is
+    the first time since the row was last emptied)."""
     m = count[slot]
+    if m == 0:
+        first[slot] = t
     if m == hist.shape[1]:
         for j in range(m - 1):
             hist[slot, j] = hist[slot, j + 1]
@@ -92,8 +97,8 @@ def zeno_push(hist, count, slot, t):  # pragma: no cover - compiled
 @njit(cache=True)
 def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, bern_d,
                      kind, lam, V, Vinv, T, d, h,
-                     J, jump_ok, zeno_slot, hist, count, geometric, ratio_tol, horizon,
-                     min_interval, budget,
+                     J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
+                     horizon, rel, min_interval, budget,
                      x, t, tf, dt, t_grid0, sample_pre,
                      s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze):  # pragma: no cover
     """Flow from ``(t, x)`` and settle the simple events until ``tf`` or a hand-off.
@@ -180,8 +185,8 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, 
         if closed_elsewhere:
             return HANDOFF, t, n_s, n_e
         slot = zeno_slot[i]
-        status, _ = zeno_status(hist, count, slot, t, geometric, ratio_tol, horizon,
-                                min_interval)
+        status, _ = zeno_status(hist, count, first, slot, t, geometric, ratio_tol, horizon,
+                                rel, min_interval)
         if status != ZENO_NONE:
             return HANDOFF, t, n_s, n_e
         # the jump, and does the guard leave its surface afterwards?
@@ -195,7 +200,7 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, 
         _coefficients(W, g0, i, y, a)
         if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
             return HANDOFF, t, n_s, n_e
-        zeno_push(hist, count, slot, t)
+        zeno_push(hist, count, first, slot, t)
         e_t[n_e] = t
         e_i[n_e] = i
         e_pre[n_e] = x

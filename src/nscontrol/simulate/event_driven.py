@@ -52,21 +52,29 @@ from typing import Any
 import numpy as np
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, check_positive
-from ..errors import ModelError, SolverError, ZenoError, ZenoWarning
-from ..numerics.lti import LTIFlow
+from .._validation import FloatArray, as_matrix, check_integer, check_positive
+from ..errors import (
+    DimensionError,
+    ModelError,
+    NscontrolError,
+    SolverError,
+    ZenoError,
+    ZenoWarning,
+)
+from ..numerics.lti import Exosystem, LTIFlow
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate"]
 
 
 def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = None,
-              dt: float | None = None, max_events: int = 100_000,
+              controller: Any = None, dt: float | None = None, max_events: int = 100_000,
               min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
-              zeno_horizon: float | None = None, on_zeno: str = "raise",
-              listeners: Sequence[Callable[..., None]] = (), rtol: float = 1e-10,
-              atol: float = 1e-12, record_every: int = 1, signals: Sequence[str] | None = None,
-              progress: bool | None = None) -> Trajectory:
+              zeno_horizon: float | None = None, zeno_rel: float = 1e-3,
+              on_zeno: str = "raise", listeners: Sequence[Callable[..., None]] = (),
+              rtol: float = 1e-10, atol: float = 1e-12, record_every: int = 1,
+              signals: Sequence[str] | None = None, progress: bool | None = None
+              ) -> Trajectory:
     """Event-driven simulation from ``x0`` over ``t_span`` (see the module docstring).
 
     Parameters
@@ -76,8 +84,13 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
         Admissible initial state (``[q; v]``, ``[x_a; x_b]`` or the hybrid state).
     t_span : (float, float)
     u : Exosystem, optional
-        Input of a Lagrangian system or of :class:`ImpactingBodies` (through its actuation);
-        its state is propagated exactly with the plant.
+        Input of a Lagrangian system or of :class:`ImpactingBodies` (through its actuation),
+        ``u(t) = Cu w(t)`` with ``w(0) = w0`` (absolute time, as in every integrator); its
+        state is propagated exactly with the plant.
+    controller : (m, 2 n) array_like or callable ``(t, q, v) -> u``, optional
+        State feedback added to ``u`` through the actuation. A matrix ``K`` means
+        ``u = -K [q; v]``: linear, so the closed loop stays exact. A callable makes the flow
+        nonlinear: the run uses DOP853 with event location (no persistent contact there).
     dt : float, optional
         Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
         event adds its pre- and post-event samples.
@@ -88,13 +101,19 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     zeno_ratio_tol : float
         Tolerance on successive interval ratios to call the shrinking geometric.
     zeno_horizon : float, optional
-        Accumulate once the predicted remaining time is below this (default
-        ``1e-3 (tf - t0)``).
+        Accumulate once the predicted remaining time is below this many seconds. Default:
+        relative, see ``zeno_rel``.
+    zeno_rel : float
+        Without ``zeno_horizon``, accumulate once the predicted remaining time is below
+        ``zeno_rel`` times the duration of the bouncing sequence (from its first impact to
+        the accumulation point): the same bounces are resolved whatever ``t_span``.
     on_zeno : {"raise", "warn"}
         An unresolvable accumulation raises :class:`ZenoError` or warns
         (:class:`ZenoWarning`) and returns the partial trajectory with ``status = -1``.
-    listeners : sequence of callables ``(t, x_minus, x_plus, indices)``
-        Called after every jump / impact.
+    listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
+        Called after every jump / impact with the event's states, the indices of the guards
+        or contacts involved and the contact impulses (``None`` for hybrid jumps). The same
+        signature as :mod:`~nscontrol.simulate.moreau_jean`'s.
     rtol, atol : float
         Tolerances of DOP853 (nonlinear systems only).
     record_every : int
@@ -108,7 +127,9 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     Returns
     -------
     Trajectory
-        ``signals``: the system's outputs (hybrid), ``gap`` and ``energy`` (mechanics).
+        ``signals``: the system's outputs (hybrid), ``gap`` and ``energy`` (mechanics);
+        ``stats["impulses"]`` (mechanics): one row of contact impulses per ``"impact"``
+        event, in the order of ``traj.events_of("impact")``.
 
     Raises
     ------
@@ -117,7 +138,29 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     InadmissibleStateError
         ``x0`` violates a constraint.
     ZenoError
-        Unresolvable accumulation of events; ``err.trajectory`` holds the run so far.
+        Unresolvable accumulation of events; ``err.trajectory`` holds the run so far (every
+        error raised during the run carries it).
+
+    Notes
+    -----
+    Exact for flows that are linear between events: the state is propagated by the matrix
+    exponential and events are the first zeros of the guards on the exact solution
+    (:func:`nscontrol.numerics.lti.first_event`); impacts apply Newton's law on all closed
+    contacts at once. Accumulations are resolved as described in the module docstring.
+
+    References
+    ----------
+    Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer 2008,
+    ch. 8 (event-driven schemes); D5.3 chapter 2, section 5.
+
+    Examples
+    --------
+    >>> import nscontrol as nsc
+    >>> from nscontrol.testing.mechanics_problems import BouncingBall
+    >>> ball = BouncingBall(restitution=0.9)
+    >>> traj = nsc.simulate(ball.system(), ball.x0, (0.0, 10.0))
+    >>> bool(abs(traj.event_times("accumulation")[0] - ball.accumulation_time) < 1e-9)
+    True
     """
     from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
@@ -125,37 +168,112 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
 
     if on_zeno not in ("raise", "warn"):
         raise ModelError(f"on_zeno: expected 'raise' or 'warn', got {on_zeno!r}")
-    t0, tf = t_span
+    t0, tf = (float(t) for t in t_span)
+    for i, fn in enumerate(listeners):
+        if not callable(fn):
+            raise ModelError(f"listeners[{i}]: expected a callable (t, x_minus, x_plus, "
+                             f"contacts, impulse), got {type(fn).__name__}")
     opts = _Options(t0=t0, dt=check_positive("dt", dt) if dt is not None else (tf - t0) / 1000,
-                    max_events=int(max_events), min_interval=float(min_interval),
+                    max_events=check_integer("max_events", max_events, minimum=1),
+                    min_interval=check_positive("min_interval", min_interval, allow_zero=True),
                     ratio_tol=check_positive("zeno_ratio_tol", zeno_ratio_tol),
                     horizon=(check_positive("zeno_horizon", zeno_horizon)
-                             if zeno_horizon is not None else 1e-3 * (tf - t0)),
-                    on_zeno=on_zeno, listeners=tuple(listeners), rtol=rtol, atol=atol,
+                             if zeno_horizon is not None else -1.0),
+                    rel=check_positive("zeno_rel", zeno_rel),
+                    on_zeno=on_zeno, listeners=tuple(listeners),
+                    rtol=check_positive("rtol", rtol), atol=check_positive("atol", atol),
                     every=record_every, signals=signals, progress=progress)
     if isinstance(system, LinearHybridSystem):
-        if u is not None:
-            raise ModelError("u: a LinearHybridSystem carries its input generator in its state; "
-                             "stack the exosystem into A instead of passing u")
-        return _HybridRun(system, system.check_state(x0), t0, tf, opts).run()
+        for name, value in (("u", u), ("controller", controller)):
+            if value is not None:
+                raise ModelError(f"{name}: a LinearHybridSystem carries its input generator "
+                                 "and controller in its state; stack them into A instead")
+        return _guarded(_HybridRun(system, system.check_state(x0), t0, tf, opts))
     if isinstance(system, ImpactingBodies):
         x0 = system.check_state(x0)
         perm = system.lagrangian_permutation()
         back = np.argsort(perm)
-        traj = integrate(system.lagrangian(), x0[perm], t_span, u=u, dt=dt,
-                         max_events=max_events, min_interval=min_interval,
-                         zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon,
-                         on_zeno=on_zeno, listeners=reorder_listeners(listeners, back),
-                         rtol=rtol, atol=atol, record_every=record_every, signals=signals,
-                         progress=progress)
+        try:
+            traj = integrate(system.lagrangian(), x0[perm], t_span, u=u,
+                             controller=_permuted_gain(controller, perm), dt=dt,
+                             max_events=max_events, min_interval=min_interval,
+                             zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon,
+                             zeno_rel=zeno_rel, on_zeno=on_zeno,
+                             listeners=reorder_listeners(listeners, back), rtol=rtol,
+                             atol=atol, record_every=record_every, signals=signals,
+                             progress=progress)
+        except NscontrolError as err:  # the partial run in the chapter's state order too
+            if isinstance(err.trajectory, Trajectory):
+                err.trajectory = reorder_states(err.trajectory, back, system.state_names)
+            raise
         return reorder_states(traj, back, system.state_names)
     if isinstance(system, LagrangianSystem):
         x0 = system.check_state(x0)
-        if system.is_linear:
-            return _LinearMechanicsRun(system, x0, t0, tf, u, opts).run()
-        return _NonlinearMechanicsRun(system, x0, t0, tf, u, opts).run()
+        u = _check_input(system, u)
+        if controller is not None and not callable(controller):
+            return _guarded(_LinearMechanicsRun(system, x0, t0, tf, u, opts,
+                                                gain=_check_gain(system, controller))
+                            if system.is_linear else _NonlinearMechanicsRun(
+                                system, x0, t0, tf, u, opts,
+                                controller=_linear_controller(system, controller)))
+        if system.is_linear and controller is None:
+            return _guarded(_LinearMechanicsRun(system, x0, t0, tf, u, opts))
+        return _guarded(_NonlinearMechanicsRun(system, x0, t0, tf, u, opts,
+                                               controller=controller))
     raise ModelError(f"event_driven: integrates LinearHybridSystem, LagrangianSystem and "
                      f"ImpactingBodies, got {type(system).__name__}")
+
+
+def _guarded(run: Any) -> Trajectory:
+    """Run; an error raised mid-run carries the trajectory computed so far."""
+    try:
+        return run.run()
+    except NscontrolError as err:
+        if err.trajectory is None:
+            err.trajectory = run.samples.finish(status=-1, message=str(err),
+                                                method="event_driven",
+                                                state_names=run.s.state_names)
+        raise
+
+
+def _check_input(system: Any, u: Any) -> Any:
+    """``u`` must be an :class:`Exosystem` with one output per actuator column."""
+    if u is None:
+        return None
+    if not isinstance(u, Exosystem):
+        raise ModelError(f"u: event_driven needs the input as an Exosystem (constant, "
+                         f"polynomial, sinusoid or a sum: exact flow), got "
+                         f"{type(u).__name__}; for another function of time use "
+                         f"method='moreau_jean', or write it as a time-dependent force")
+    m = system.n_dof if system.actuation is None else system.actuation.shape[1]
+    if u.n_inputs != m:
+        raise DimensionError(f"u: expected an Exosystem with {m} input(s) (the actuation's "
+                             f"columns), got {u.n_inputs}")
+    return u
+
+
+def _check_gain(system: Any, K: Any) -> FloatArray:
+    """A state-feedback gain ``K`` (``u = -K [q; v]``) of the right shape."""
+    m = system.n_dof if system.actuation is None else system.actuation.shape[1]
+    return as_matrix("controller", K, rows=m, cols=2 * system.n_dof)
+
+
+def _linear_controller(system: Any, K: Any) -> Callable[..., FloatArray]:
+    K = _check_gain(system, K)
+    return lambda t, q, v: -K @ np.concatenate([q, v])
+
+
+def _permuted_gain(controller: Any, perm: np.ndarray) -> Any:
+    """A gain on ``[x_a; x_b]`` as a gain on the Lagrangian ``[q; v]`` (callables pass)."""
+    if controller is None or callable(controller):
+        return controller
+    K = np.atleast_2d(np.asarray(controller, dtype=float))
+    if K.shape[-1] != perm.size:
+        raise DimensionError(f"controller: expected {perm.size} columns (the state), got "
+                             f"shape {K.shape}")
+    out = np.empty_like(K)
+    out[:, np.arange(perm.size)] = K[:, perm]
+    return out
 
 
 class _Options:
@@ -215,6 +333,7 @@ class _Zeno:
         self.opts = opts
         self.hist = np.zeros((max(n_slots, 1), 6))
         self.count = np.zeros(max(n_slots, 1), dtype=np.int64)
+        self.first = np.zeros(max(n_slots, 1))
         self.n_events = 0
 
     def reset(self, j: int) -> None:
@@ -224,8 +343,8 @@ class _Zeno:
         from ._event_kernels import zeno_status
 
         o = self.opts
-        return zeno_status(self.hist, self.count, j, t, geometric, o.ratio_tol, o.horizon,
-                           o.min_interval)
+        return zeno_status(self.hist, self.count, self.first, j, t, geometric, o.ratio_tol,
+                           o.horizon, o.rel, o.min_interval)
 
     def too_close(self, j: int, t: float) -> bool:
         from ._event_kernels import ZENO_CLOSE
@@ -235,7 +354,7 @@ class _Zeno:
     def push(self, j: int, t: float) -> None:
         from ._event_kernels import zeno_push
 
-        zeno_push(self.hist, self.count, j, t)
+        zeno_push(self.hist, self.count, self.first, j, t)
 
     def add(self, j: int, t: float) -> float | None:
         """Record an impact; return the accumulation time when it is due."""
@@ -246,11 +365,21 @@ class _Zeno:
         return t_acc if code == ZENO_DUE else None
 
 
+def _caller_level() -> int:
+    """``stacklevel`` pointing at the first frame outside nscontrol (the user's call)."""
+    import sys
+
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_globals.get("__name__", "").startswith("nscontrol"):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
                ) -> Trajectory:
     traj = rec.finish(status=-1, message=message, **finish)
     if opts.on_zeno == "warn":
-        warnings.warn(message, ZenoWarning, stacklevel=4)
+        warnings.warn(message, ZenoWarning, stacklevel=_caller_level())
         return traj
     raise ZenoError(message + "; pass on_zeno='warn' to keep the partial trajectory, or use "
                     "method='moreau_jean' which passes through accumulations", time=t,
@@ -315,8 +444,8 @@ class _Flight:
             code, t, n_s, n_e = run_linear_jumps(
                 self.W, self.g0, self.row_norm, 1e-12, 1e-12, _REMAINDER, ctx.phi, ctx.bern,
                 ctx.bern_d, ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
-                self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, geometric,
-                opts.ratio_tol, opts.horizon, opts.min_interval, budget,
+                self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, zeno.first, geometric,
+                opts.ratio_tol, opts.horizon, opts.rel, opts.min_interval, budget,
                 x, t, tf, opts.dt, opts.t0, sample_pre,
                 s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze)
             zeno.n_events += n_e
@@ -336,7 +465,8 @@ class _Flight:
                 raise InadmissibleStateError(
                     f"event_driven: guard {int(np.argmin(g))} is negative at t = {t:.12g} "
                     f"(g = {g.min():.3g}); the state left the admissible set")
-            assert code == HANDOFF
+            if code != HANDOFF:
+                raise SolverError(f"event_driven: unexpected event-loop status {code}")
             idx = tuple(int(i) for i in np.flatnonzero(hit[:p]))
             return t, x, GuardEvent(0.0, idx, bool(graze[list(idx)].all()))
 
@@ -372,7 +502,7 @@ class _HybridRun:
         for t, i, xm, xp in zip(times, idx, pre, post, strict=True):
             self.rec.event(float(t), "jump", int(i), xm, xp)
             for listener in self.opts.listeners:
-                listener(float(t), xm.copy(), xp.copy(), np.array([i]))
+                listener(float(t), xm.copy(), xp.copy(), np.array([i]), None)
 
     def run(self) -> Trajectory:
         s, t, x = self.s, self.t0, self.x
@@ -404,7 +534,7 @@ class _HybridRun:
                 for i in idx:
                     self.rec.event(t, "jump", int(i), x, x_plus)
                 for listener in self.opts.listeners:
-                    listener(t, x.copy(), x_plus.copy(), idx)
+                    listener(t, x.copy(), x_plus.copy(), idx, None)
                 x = x_plus
                 self._sample(np.array([t]), x[None])
         return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
@@ -415,7 +545,7 @@ class _LinearMechanicsRun:
     """Exact simulation of a Lagrangian system that is linear between events."""
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
-                 opts: _Options) -> None:
+                 opts: _Options, gain: FloatArray | None = None) -> None:
         from ..laws.impact import NewtonImpactLaw
 
         s = system
@@ -431,16 +561,19 @@ class _LinearMechanicsRun:
         D = np.zeros((n, n)) if s.damping is None else s.damping
         F = np.zeros((n, N))
         F[:, :n], F[:, n:2 * n], F[:, 2 * n] = -K, -D, s.constant_force
+        S = np.eye(n) if s.actuation is None else s.actuation
         if u is not None:
-            S = np.eye(n) if s.actuation is None else s.actuation
             F[:, 2 * n + 1:] = S @ u.Cu
+        if gain is not None:  # u = -K [q; v]: still a linear flow
+            F[:, :2 * n] -= S @ gain
         self.Minv = np.linalg.inv(self.M)
         self.Afree = self.Minv @ F  # accelerations, (n, N)
         self.base = np.zeros((N, N))
         self.base[:n, n:2 * n] = np.eye(n)
         if u is not None:
             self.base[2 * n + 1:, 2 * n + 1:] = u.S
-        self.z = np.concatenate([x0, [1.0], [] if u is None else u.w0])
+        # the exosystem runs in absolute time, w(0) = w0, like every integrator's input
+        self.z = np.concatenate([x0, [1.0], [] if u is None else u.w(t0)])
         self.n, self.N = n, N
         self.flows: dict[frozenset[int], tuple[_Flight, np.ndarray]] = {}
         self.samples = _Samples(2 * n, opts, ("gap", "energy"))
@@ -448,6 +581,7 @@ class _LinearMechanicsRun:
         self.zeno = _Zeno(opts, s.n_contacts)
         self.contact: set[int] = set()
         self.n_impacts = 0
+        self.impulses: list[FloatArray] = []  # one row per "impact" event
 
     # -- modes ---------------------------------------------------------------------------
     def _mode(self, C: frozenset[int]) -> tuple[_Flight, np.ndarray]:
@@ -501,17 +635,26 @@ class _LinearMechanicsRun:
 
     def _bounced(self, ids: np.ndarray) -> Callable[..., None]:
         """Record the impacts settled by the compiled loop (``ids``: guard -> contact)."""
-        m = 2 * self.n
+        n, m = self.n, 2 * self.n
 
         def record(times: FloatArray, idx: np.ndarray, pre: FloatArray,
                    post: FloatArray) -> None:
             for t, i, zm, zp in zip(times, idx, pre, post, strict=True):
                 j = int(ids[i])
-                self.rec.event(float(t), "impact", j, zm[:m], zp[:m])
-                for listener in self.opts.listeners:
-                    listener(float(t), zm[:m].copy(), zp[:m].copy(), np.array([j]))
-            self.n_impacts += len(times)
+                P = np.zeros(self.s.n_contacts)  # G_j (v+ - v-) = W_jj P_j
+                Gj = self.G[j]
+                P[j] = Gj @ (zp[n:m] - zm[n:m]) / float(Gj @ self.Minv @ Gj)
+                self._impacted(float(t), [j], zm[:m], zp[:m], P)
         return record
+
+    def _impacted(self, t: float, contacts: list[int], x_minus: FloatArray,
+                  x_plus: FloatArray, impulse: FloatArray) -> None:
+        for j in contacts:
+            self.rec.event(t, "impact", j, x_minus, x_plus)
+            self.impulses.append(impulse)
+        for listener in self.opts.listeners:
+            listener(t, x_minus.copy(), x_plus.copy(), np.array(contacts), impulse.copy())
+        self.n_impacts += len(contacts)
 
     def _persistent(self, z: FloatArray, candidates: Sequence[int]) -> set[int]:
         """Contacts among ``candidates`` (closed, zero normal velocity) with a positive
@@ -559,15 +702,16 @@ class _LinearMechanicsRun:
             while t < self.tf:
                 flight, ids = self._mode(frozenset(self.contact))
                 t, z, ev = flight.run(z, t, self.tf, self.zeno, True, self.opts,
-                                      sample_pre=False, on_samples=self._sample,
+                                      sample_pre=True, on_samples=self._sample,
                                       on_events=self._bounced(ids))
                 bar.update(t)
                 if ev is None:
                     break
                 hit = ids[list(ev.indices)]
-                if ev.grazing and np.all(hit >= 0):
+                if ev.grazing:  # a gap or a contact force touching zero: nothing changes
                     for j in hit:
-                        self.rec.event(t, "grazing", int(j), z[:2 * self.n], z[:2 * self.n])
+                        self.rec.event(t, "grazing", int(j if j >= 0 else -1 - j),
+                                       z[:2 * self.n], z[:2 * self.n])
                     continue
                 self.zeno.n_events += 1
                 if self.zeno.n_events > self.opts.max_events:
@@ -581,12 +725,11 @@ class _LinearMechanicsRun:
                     if isinstance(out, Trajectory):
                         return out
                     t, z = out
-                    self.n_impacts += len(impacts)
                 else:
                     remaining = self.contact - set(ended)
-                    self._sample(np.array([t]), z[None])
                     self._set_mode(t, z, self._persistent(z, sorted(remaining)))
-        stats = {"events": self.zeno.n_events, "impacts": self.n_impacts}
+        stats = {"events": self.zeno.n_events, "impacts": self.n_impacts,
+                 "impulses": np.array(self.impulses).reshape(-1, self.s.n_contacts)}
         return self.samples.finish(status=0, stats=stats, **finish)
 
     def _impact(self, t: float, z: FloatArray, impacts: list[int]) -> Any:
@@ -597,12 +740,11 @@ class _LinearMechanicsRun:
         closed = sorted(set(self._closed(z).tolist()) | set(impacts) | self.contact)
         for j in impacts:
             if self.zeno.too_close(j, t):
-                return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contact {j} "
-                                  f"accumulate near t = {t:.12g} without a geometric pattern",
-                                  t, **finish)
-        t_acc = None
-        for j in impacts:
-            t_acc = self.zeno.add(j, t) if t_acc is None else t_acc
+                return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contact "
+                                  f"{j} accumulate near t = {t:.12g} without a geometric "
+                                  "pattern", t, **finish)
+        due = [self.zeno.add(j, t) for j in impacts]
+        t_acc = min((ta for ta in due if ta is not None), default=None)
         law = self.law
         if t_acc is not None:
             from ..laws.impact import NewtonImpactLaw
@@ -614,27 +756,24 @@ class _LinearMechanicsRun:
         z_minus = z.copy()
         z = z.copy()
         z[n:2 * n] = res.v_plus
-        for j in impacts:
-            self.rec.event(t, "impact", j, z_minus[:2 * n], z[:2 * n])
-        for listener in self.opts.listeners:
-            listener(t, z_minus[:2 * n].copy(), z[:2 * n].copy(), np.array(impacts))
+        self._impacted(t, impacts, z_minus[:2 * n], z[:2 * n], res.impulse)
         new = self._persistent(z, self._resting(z, np.array(closed, dtype=np.int64)))
+        self._sample(np.array([t]), z[None])
         if t_acc is not None:
             if not set(impacts) <= new:
                 return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
                                   f"{impacts} accumulate at t = {t_acc:.12g} but the contact "
                                   "force there would be negative", t, **finish)
-            self._sample(np.array([t]), z[None])
-            self.contact = new - set(impacts) | (self.contact & new)
-            flow = self._mode(frozenset(new))[0].flow
-            grid = _sample_times(t, t_acc, self.opts.dt, self.t0)
-            if grid.size:
-                self._sample(grid, _propagate(flow, z, grid - t))
-            z = _propagate(flow, z, t_acc - t)[0]
-            t = t_acc
-            for j in impacts:
-                self.rec.event(t, "accumulation", j, z[:2 * n], z[:2 * n])
-        self._sample(np.array([t]), z[None])
+            # the remaining bounces (shorter than the horizon) are replaced by the contact held
+            # closed; that flow is still watched by every other guard up to t_acc
+            flight, ids = self._mode(frozenset(new))
+            t_end, z, ev = flight.run(z, t, min(t_acc, self.tf), self.zeno, True, self.opts,
+                                      sample_pre=True, on_samples=self._sample,
+                                      on_events=self._bounced(ids))
+            if ev is None and t_end == t_acc:
+                for j in impacts:
+                    self.rec.event(t_end, "accumulation", j, z[:2 * n], z[:2 * n])
+            t = t_end
         self._set_mode(t, z, new)
         return t, z
 
@@ -643,20 +782,39 @@ class _NonlinearMechanicsRun:
     """DOP853 with event location for ``M(q)``, nonlinear forces or gaps."""
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
-                 opts: _Options) -> None:
+                 opts: _Options, controller: Callable[..., Any] | None = None) -> None:
         from ..laws.impact import NewtonImpactLaw
 
         self.s, self.x, self.t0, self.tf, self.u, self.opts = system, x0, t0, tf, u, opts
+        self.controller = controller
+        self.m = system.n_dof if system.actuation is None else system.actuation.shape[1]
         self.law = NewtonImpactLaw(system.restitution)
         self.samples = _Samples(system.n_states, opts, ("gap", "energy"))
         self.rec = self.samples.rec
         self.zeno = _Zeno(opts, system.n_contacts)
+        self.impulses: list[FloatArray] = []
+
+    def _input(self, t: float, q: FloatArray, v: FloatArray) -> FloatArray | None:
+        uu = None if self.u is None else self.u.u(t)
+        if self.controller is not None:
+            c = np.asarray(self.controller(t, q, v), dtype=float).reshape(-1)
+            if c.shape != (self.m,) or not np.all(np.isfinite(c)):
+                raise ModelError(f"controller: expected a finite input of length {self.m} "
+                                 f"from controller(t, q, v), got {c!r} at t = {t:.6g}")
+            uu = c if uu is None else uu + c
+        return uu
 
     def _rhs(self, t: float, x: FloatArray) -> FloatArray:
         s, n = self.s, self.s.n_dof
         q, v = x[:n], x[n:]
-        uu = None if self.u is None else self.u.u(t)
-        return np.concatenate([v, np.linalg.solve(s.mass_matrix(q), s.forces(t, q, v, uu))])
+        M = s.mass_matrix(q)
+        try:  # M(q) must stay positive definite along the motion, not only at q0
+            L = np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            raise ModelError(f"mass: M(q) is not positive definite at t = {t:.6g}, q = {q!r}; "
+                             "the model is only valid where the mass matrix is") from None
+        y = np.linalg.solve(L, s.forces(t, q, v, self._input(t, q, v)))
+        return np.concatenate([v, np.linalg.solve(L.T, y)])
 
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
         n = self.s.n_dof
@@ -675,31 +833,40 @@ class _NonlinearMechanicsRun:
         finish = dict(method="event_driven", state_names=s.state_names)
         self._sample(np.array([t]), x[None])
         events = [self._gap_event(j) for j in range(s.n_contacts)]
-        while t < self.tf:
-            # a contact closed and separating at t is not re-detected: only falling crossings
-            # (direction -1) count
-            watch = events
-            grid = _sample_times(t, self.tf, self.opts.dt, self.t0)
-            sol = solve_ivp(self._rhs, (t, self.tf), x, method="DOP853", rtol=self.opts.rtol,
-                            atol=self.opts.atol, events=watch or None, dense_output=True)
-            if not sol.success:
-                raise SolverError(f"event_driven: DOP853 failed at t = {sol.t[-1]:.6g}: "
-                                  f"{sol.message}", trajectory=self.samples.finish(
-                                      status=-1, **finish))
-            t_end = float(sol.t[-1])
-            grid = grid[grid < t_end]
-            if grid.size:
-                self._sample(grid, sol.sol(grid).T)
-            x = sol.y[:, -1].copy()
-            t = t_end
-            self._sample(np.array([t]), x[None])
-            if sol.status != 1:
-                break
-            out = self._impact(t, x)
-            if isinstance(out, Trajectory):
-                return out
-            x = out
-        return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
+        # windows of at most 1/50 of the span: an error raised inside the model (a controller
+        # returning NaN, M(q) losing definiteness) loses one window, never the run
+        window = max(self.opts.dt, (self.tf - self.t0) / 50)
+        with TimeProgress(self.t0, self.tf, desc="event_driven",
+                          enable=self.opts.progress) as bar:
+            while t < self.tf:
+                # a contact closed and separating at t is not re-detected: only falling
+                # crossings (direction -1) count
+                t_stop = min(self.tf, t + window)
+                grid = _sample_times(t, t_stop, self.opts.dt, self.t0)
+                sol = solve_ivp(self._rhs, (t, t_stop), x, method="DOP853",
+                                rtol=self.opts.rtol, atol=self.opts.atol,
+                                events=events or None, dense_output=True)
+                if not sol.success:
+                    raise SolverError(f"event_driven: DOP853 failed at t = {sol.t[-1]:.6g}: "
+                                      f"{sol.message}")
+                t_end = float(sol.t[-1])
+                grid = grid[grid < t_end]
+                if grid.size:
+                    self._sample(grid, sol.sol(grid).T)
+                x = sol.y[:, -1].copy()
+                t = t_end
+                self._sample(np.array([t]), x[None])
+                bar.update(t)
+                if sol.status != 1:
+                    continue
+                out = self._impact(t, x)
+                if isinstance(out, Trajectory):
+                    return out
+                x = out
+        stats = {"events": self.zeno.n_events,
+                 "impacts": sum(e.kind == "impact" for e in self.rec.events),
+                 "impulses": np.array(self.impulses).reshape(-1, s.n_contacts)}
+        return self.samples.finish(status=0, stats=stats, **finish)
 
     def _gap_event(self, j: int) -> Callable[[float, FloatArray], float]:
         def event(t: float, x: FloatArray) -> float:
@@ -732,7 +899,8 @@ class _NonlinearMechanicsRun:
         xp = np.concatenate([q, res.v_plus])
         for j in hitting:
             self.rec.event(t, "impact", j, x, xp)
+            self.impulses.append(res.impulse)
         for listener in self.opts.listeners:
-            listener(t, x.copy(), xp.copy(), np.array(hitting))
+            listener(t, x.copy(), xp.copy(), np.array(hitting), res.impulse.copy())
         self._sample(np.array([t]), xp[None])
         return xp

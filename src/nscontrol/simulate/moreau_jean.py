@@ -33,13 +33,15 @@ import numpy as np
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_in_interval, check_positive
-from ..errors import ModelError, SolverError
+from ..errors import DimensionError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate"]
 
 _LCP_STATUS = {1: "ray termination (no solution)", 2: "iteration limit",
                3: "numerical failure"}
+#: Status of a step loop stopped by the model itself (e.g. M(q) no longer definite).
+_MODEL_ERROR = -2
 #: Floats per chunk of the compiled loop (bounds memory for large systems).
 _CHUNK_FLOATS = 2_000_000
 
@@ -79,8 +81,11 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         Open-loop input (through the system's actuation ``S``).
     controller : callable ``(t, q, v) -> u``, optional
         Feedback evaluated at the start of every step (zero-order hold); added to ``u``.
-    listeners : sequence of callables ``(t, x_minus, x_plus, impulse, contacts)``
-        Called after every step that contains an impact (observer resets).
+    listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
+        Called for every step that contains an impact (observer resets), with the states at
+        the step's start and end, the impacting contacts and the step's impulses; ``t`` is
+        the step's end. The same signature as the event-driven integrator's. Listeners
+        observe: they are called in step order once each compiled chunk is done.
     record_every : int
         Keep every k-th step (events are always kept).
     signals : sequence of str, optional
@@ -88,7 +93,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     progress : bool, optional
         Progress bar (default: shown after 2 s).
     activation : float, optional
-        Threshold of the active set test ``g + γ h u <= activation``. Default
+        Threshold (``>= 0``) of the active set test ``g + γ h u <= activation``. Default
         ``1e-12 (1 + max|q0|)``: contacts closed up to round-off stay active (a threshold of 0
         would drop a resting contact whose gap rounds to ``+1e-19``).
     on_failure : {"raise", "return"}
@@ -98,17 +103,44 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     Returns
     -------
     Trajectory
-        ``stats``: ``steps``, ``path`` (``"tridiagonal"``, ``"dense"`` or ``"python"``),
-        ``max_penetration``.
+        Samples at ``t0 + k h`` and at ``tf`` (when ``h`` does not divide the span the last
+        step is shortened to end there). ``stats``: ``steps``, ``path`` (``"tridiagonal"``,
+        ``"dense"`` or ``"python"``; ``"tridiagonal+dense"`` when a singular Delassus matrix
+        — redundant contacts — sent the run to Lemke), ``max_penetration``.
 
     Raises
     ------
     ModelError
-        Unsupported system or option value.
+        Unsupported system or option value; a controller returning a non-finite input or
+        one of the wrong length.
+    DimensionError
+        An input ``u`` of the wrong size.
     InadmissibleStateError
         ``x0`` penetrates or approaches a closed contact.
     SolverError
         An LCP failed.
+
+    Notes
+    -----
+    Event-capturing: impacts are not located; Newton's law holds at velocity level on the
+    contacts of the step, so impact times are exact to ``O(h)`` and a landing penetrates by
+    at most ``h |u⁻|``; with ``θ = ½`` the discrete energy does not increase at impacts
+    (Acary & Brogliato, Prop. 10.1 for linear systems).
+
+    References
+    ----------
+    Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer 2008,
+    ch. 10; specs ch03 §3.1 and ch04 §3.
+
+    Examples
+    --------
+    >>> import nscontrol as nsc
+    >>> from nscontrol.testing.mechanics_problems import RestingStack
+    >>> stack = RestingStack(5)
+    >>> traj = nsc.simulate(stack.system(), stack.x0, (0.0, 0.01), method="moreau_jean",
+    ...                     h=1e-3)
+    >>> bool(np.allclose(traj.signals["impulse"][-1], stack.impulses(1e-3), rtol=1e-12))
+    True
     """
     from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
@@ -117,15 +149,21 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         raise ModelError("h: Moreau-Jean time-stepping needs a step, e.g. h=1e-3 (impacts are "
                          "captured to O(h), penetration <= h |u-|)")
     if isinstance(system, ImpactingBodies):
+        from ..errors import NscontrolError
         from .event_driven import reorder_listeners, reorder_states
 
         perm = system.lagrangian_permutation()
         back = np.argsort(perm)
-        traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
-                         theta=theta, gamma=gamma, u=u, controller=controller,
-                         listeners=reorder_listeners(listeners, back),
-                         record_every=record_every, signals=signals, progress=progress,
-                         activation=activation, on_failure=on_failure)
+        try:
+            traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
+                             theta=theta, gamma=gamma, u=u, controller=controller,
+                             listeners=reorder_listeners(listeners, back),
+                             record_every=record_every, signals=signals, progress=progress,
+                             activation=activation, on_failure=on_failure)
+        except NscontrolError as err:  # the partial run in the chapter's state order too
+            if isinstance(err.trajectory, Trajectory):
+                err.trajectory = reorder_states(err.trajectory, back, system.state_names)
+            raise
         return reorder_states(traj, back, system.state_names)
     if not isinstance(system, LagrangianSystem):
         raise ModelError(f"moreau_jean: integrates LagrangianSystem and ImpactingBodies, got "
@@ -137,36 +175,68 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
     if controller is not None and not callable(controller):
         raise ModelError("controller: expected a callable (t, q, v) -> u")
+    for i, fn in enumerate(listeners):
+        if not callable(fn):
+            raise ModelError(f"listeners[{i}]: expected a callable (t, x_minus, x_plus, "
+                             f"contacts, impulse), got {type(fn).__name__}")
+    _check_input(system, u)
     x0 = system.check_state(x0)
     if activation is None:
         activation = 1e-12 * (1.0 + float(np.max(np.abs(x0[: system.n_dof]), initial=0.0)))
-    t0, tf = t_span
-    n_steps = int(np.ceil((tf - t0) / h - 1e-9))
-    rec = Recorder(system.n_states, every=record_every, signals=signals)
+    activation = check_positive("activation", activation, allow_zero=True)
+    t0, tf = (float(t) for t in t_span)
+    # whole steps of h, then one shorter step so that the run ends exactly at tf
+    n_full = int(np.floor((tf - t0) / h + 1e-9))
+    h_last = (tf - t0) - n_full * h
+    n_steps = n_full + (1 if h_last > 1e-9 * h else 0)
+    rec = Recorder(system.n_states, every=record_every, signals=signals,
+                   offered=("impulse", "gap", "energy"))
     _sample_initial(rec, system, t0, x0)
     setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller))
     runner = _choose_runner(system, setup, activation)
+    path = runner.path
     state = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
              "p_prev": np.zeros(system.n_contacts), "k": 0, "t0": t0}
-    per_step = controller is not None or bool(listeners)
+    per_step = controller is not None
     status, message = 0, None
     with TimeProgress(t0, tf, desc="moreau_jean", enable=progress) as bar:
         while state["k"] < n_steps:
             k = state["k"]
-            chunk = 1 if per_step else max(1, min(n_steps - k, 20_000, _CHUNK_FLOATS // max(
-                1, 2 * system.n_dof + system.n_contacts)))
-            times = t0 + h * np.arange(k, k + chunk)
-            fext = _external_force(setup, u, controller, times, state)
+            if k == n_full:  # the shortened last step
+                runner = _choose_runner(system, _Setup(system, h_last, theta, gamma,
+                                                       setup.Sinput), activation)
+                times, step = np.array([t0 + h * k]), h_last
+            else:
+                chunk = 1 if per_step else max(1, min(n_full - k, 20_000, _CHUNK_FLOATS // max(
+                    1, 2 * system.n_dof + system.n_contacts)))
+                times, step = t0 + h * np.arange(k, k + chunk), h
+            try:
+                fext = _external_force(setup, u, controller, times, state)
+            except ModelError as err:
+                err.trajectory = rec.finish(status=-1, message=str(err), method="moreau_jean",
+                                            state_names=system.state_names)
+                raise
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
-            done, code, q_out, v_out, p_out = runner(state, fext, chunk)
+            done, code, q_out, v_out, p_out = runner(state, fext, times.size)
+            if code and runner.path == "tridiagonal":
+                # a singular Delassus matrix (redundant contacts): the tridiagonal solve has
+                # no pivot; Lemke handles positive semi-definite W. Redo from the failed step.
+                runner = _DenseRunner(system, setup, activation)
+                path = "tridiagonal+dense"
+                code = 0
             if done:
-                _record_chunk(rec, system, times[:done] + h, q_out[:done], v_out[:done],
-                              p_out[:done], state, q_pre, v_pre, listeners, h)
+                _record_chunk(rec, system, times[:done] + step, q_out[:done], v_out[:done],
+                              p_out[:done], state, q_pre, v_pre, listeners, step)
             state["k"] = k + done
             if done:
-                state["last"] = (times[done - 1] + h, q_out[done - 1], v_out[done - 1],
+                state["last"] = (times[done - 1] + step, q_out[done - 1], v_out[done - 1],
                                  p_out[done - 1])
             bar.update(t0 + h * state["k"])
+            if code == _MODEL_ERROR:
+                message = state["model_error"]
+                raise ModelError(message, trajectory=rec.finish(
+                    status=-1, message=message, method="moreau_jean",
+                    state_names=system.state_names))
             if code:
                 status = -1
                 message = (f"moreau_jean: the LCP of step {state['k']} (t = "
@@ -177,7 +247,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         sig = _signals(system, q_l[None], v_l[None], p_l[None], rec)
         rec.sample(t_last, np.concatenate([q_l, v_l]), force=True,
                    **{k: val[0] for k, val in sig.items()})
-    stats = {"steps": int(state["k"]), "path": runner.path, "h": h, "theta": theta}
+    stats = {"steps": int(state["k"]), "path": path, "h": h, "theta": theta}
     traj = rec.finish(status=status, message=message, method="moreau_jean", stats=stats,
                       state_names=system.state_names)
     if "gap" in traj.signals and traj.signals["gap"].size:
@@ -208,9 +278,28 @@ def _external_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
         vals = u.u(times) if hasattr(u, "u") else np.array([np.atleast_1d(u(t)) for t in times])
         total += np.asarray(vals, float).reshape(times.shape[0], -1)
     if controller is not None:  # one step per chunk in closed loop
-        total[0] += np.atleast_1d(np.asarray(controller(float(times[0]), state["q"].copy(),
-                                                        state["v"].copy()), float))
+        c = np.asarray(controller(float(times[0]), state["q"].copy(), state["v"].copy()),
+                       dtype=float).reshape(-1)
+        if c.shape != (S.shape[1],) or not np.all(np.isfinite(c)):
+            raise ModelError(f"controller: expected a finite input of length {S.shape[1]} "
+                             f"from controller(t, q, v), got {c!r} at t = {times[0]:.6g}")
+        total[0] += c
     return total @ S.T
+
+
+def _check_input(system: Any, u: Any) -> None:
+    """An :class:`Exosystem` input must have one output per actuator column."""
+    from ..numerics.lti import Exosystem
+
+    if u is None or callable(u) and not isinstance(u, Exosystem):
+        return
+    if not isinstance(u, Exosystem):
+        raise ModelError(f"u: expected an Exosystem or a callable t -> u, got "
+                         f"{type(u).__name__}")
+    m = system.n_dof if system.actuation is None else system.actuation.shape[1]
+    if u.n_inputs != m:
+        raise DimensionError(f"u: expected an Exosystem with {m} input(s) (the actuation's "
+                             f"columns), got {u.n_inputs}")
 
 
 def _choose_runner(system: Any, setup: _Setup, activation: float) -> Any:
@@ -319,6 +408,14 @@ class _PythonRunner:
         for k in range(chunk):
             t = state.get("t0", 0.0) + h * (state["k"] + k)
             M = s.mass_matrix(q)
+            try:  # M(q) must stay positive definite along the motion, not only at q0
+                np.linalg.cholesky(M)
+            except np.linalg.LinAlgError:
+                state["q"], state["v"] = q, v
+                state["model_error"] = (f"mass: M(q) is not positive definite at t = {t:.6g}, "
+                                        f"q = {q!r}; the model is only valid where the mass "
+                                        "matrix is")
+                return k, _MODEL_ERROR, q_out, v_out, p_out
             f = s.forces(t, q, v) + fext[min(k, fext.shape[0] - 1)]
             v_free = v + h * np.linalg.solve(M, f)
             G = np.asarray(s.gap_jacobian(q), float)
@@ -390,5 +487,5 @@ def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
         for j, tj in zip(contacts, tau, strict=True):
             rec.event(times[k] - h + tj, "impact", int(j), x_minus, x_plus)
         for listener in listeners:
-            listener(float(times[k]), x_minus, x_plus, p[k].copy(), contacts)
+            listener(float(times[k]), x_minus, x_plus, contacts, p[k].copy())
     state["p_prev"] = p[-1].copy()

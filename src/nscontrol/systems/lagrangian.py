@@ -162,7 +162,8 @@ class LagrangianSystem:
                           "analytic jacobian for accuracy and speed)", NscontrolWarning,
                           stacklevel=4)
         else:
-            as_matrix("jacobian(q)", self.jacobian(np.zeros(n)), rows=m, cols=n)
+            J = as_matrix("jacobian(q)", self.jacobian(np.zeros(n)), rows=m, cols=n)
+            _warn_if_jacobian_disagrees(self.gap, J, n)
         return int(m)
 
     # -- structure ----------------------------------------------------------------------
@@ -438,15 +439,41 @@ def two_link_arm_gravity(q: FloatArray, *, g: float, l1: float, l2: float, m1: f
 
 
 def _as_gap_matrix(value: Any, n: int) -> Any:
-    """A dense (m, n) array, or a scipy.sparse CSR matrix kept sparse (large chains)."""
+    """A dense (m, n) array, or a scipy.sparse CSR matrix kept sparse (large chains); no zero
+    row (a contact that no motion opens or closes has no normal direction)."""
     if hasattr(value, "tocsr"):
         G = value.tocsr().astype(np.float64)
         if G.shape[1] != n:
             raise DimensionError(f"gap_matrix: expected {n} columns, got shape {G.shape}")
         if not np.all(np.isfinite(G.data)):
             raise ModelError("gap_matrix: expected finite entries, got NaN or infinite ones")
-        return G
-    return as_matrix("gap_matrix", value, cols=n)
+        row_norms = np.asarray(abs(G).sum(axis=1)).ravel()
+    else:
+        G = as_matrix("gap_matrix", value, cols=n)
+        row_norms = np.abs(G).sum(axis=1)
+    zero = np.flatnonzero(row_norms == 0.0)
+    if zero.size:
+        raise ModelError(f"gap_matrix: row {int(zero[0])} is zero; every contact needs a "
+                         "normal direction (drop the row, or give the coordinates it constrains)")
+    return G
+
+
+def _warn_if_jacobian_disagrees(gap: Callable[[FloatArray], Any], J: FloatArray,
+                                n: int) -> None:
+    """Compare the given jacobian with central differences of ``gap`` at ``q = 0``; a wrong
+    sign or a transposed row would silently reverse impacts."""
+    step = 1e-6
+    fd = np.empty_like(J)
+    for i in range(n):
+        dq = np.zeros(n)
+        dq[i] = step
+        fd[:, i] = (np.asarray(gap(dq), float) - np.asarray(gap(-dq), float)) / (2 * step)
+    scale = np.abs(fd).max(initial=0.0) + np.abs(J).max(initial=0.0)
+    err = float(np.abs(fd - J).max(initial=0.0))
+    if scale > 0.0 and err > 1e-4 * scale:
+        warnings.warn(f"jacobian: disagrees with central differences of gap at q = 0 (max "
+                      f"difference {err:.3g}, scale {scale:.3g}); check its signs and layout "
+                      "(row j = gradient of gap j)", NscontrolWarning, stacklevel=5)
 
 
 def _infer_dof(system: LagrangianSystem) -> int:
