@@ -28,6 +28,19 @@ class BouncingBall:
     ``t_k = t_0 + (2 v_0 / g) e (1 - e^k) / (1 - e)`` and the impacts accumulate at
     ``t_∞ = t_0 + (2 v_0 / g) e / (1 - e)`` (8.578949 s for ``e = 0.9, q0 = 1, g = 9.81``),
     after which the ball rests on the ground.
+
+    Parameters
+    ----------
+    restitution, height, g, mass : float
+        Coefficient ``e``, drop height ``q0``, gravity and mass.
+
+    Examples
+    --------
+    >>> ball = BouncingBall()
+    >>> round(ball.accumulation_time, 6)
+    8.578949
+    >>> bool(np.allclose(ball.impact_times(2), [0.451524, 1.264267], atol=1e-6))
+    True
     """
 
     restitution: float = 0.9
@@ -36,10 +49,12 @@ class BouncingBall:
     mass: float = 1.0
 
     def system(self) -> LagrangianSystem:
+        """The ball as a :class:`~nscontrol.systems.LagrangianSystem`."""
         return LagrangianSystem.bouncing_ball(self.restitution, self.g, self.mass)
 
     @property
     def x0(self) -> FloatArray:
+        """Initial state ``(height, 0)``."""
         return np.array([check_positive("height", self.height), 0.0])
 
     def impact_times(self, count: int) -> FloatArray:
@@ -53,6 +68,7 @@ class BouncingBall:
 
     @property
     def accumulation_time(self) -> float:
+        """``t_∞``, where the impacts accumulate (``inf`` for ``e = 1``)."""
         e = self.restitution
         t0 = np.sqrt(2.0 * self.height / self.g)
         return float(t0 + 2.0 * t0 * e / (1.0 - e)) if e < 1.0 else np.inf
@@ -69,6 +85,18 @@ class RestingStack:
     With Moreau–Jean at step ``h`` every contact stays active and the impulse of contact
     ``k`` (under mass ``k``, counting from the ground) is the weight it carries over one step:
     ``P_k = (n - k) m g h``.
+
+    Parameters
+    ----------
+    n : int
+        Number of masses.
+    mass, g : float
+        Mass of each body and gravity.
+
+    Examples
+    --------
+    >>> RestingStack(3).impulses(1e-3)
+    array([0.02943, 0.01962, 0.00981])
     """
 
     n: int
@@ -76,13 +104,16 @@ class RestingStack:
     g: float = 9.81
 
     def system(self) -> LagrangianSystem:
+        """The stack as a :class:`~nscontrol.systems.LagrangianSystem` (sparse gaps)."""
         return LagrangianSystem.stack(self.n, mass=self.mass, g=self.g)
 
     @property
     def x0(self) -> FloatArray:
+        """At rest on the ground: all positions and velocities zero."""
         return np.zeros(2 * self.n)
 
     def impulses(self, h: float) -> FloatArray:
+        """Moreau–Jean impulses of a step ``h``: ``(n - k) m g h`` for contact ``k``."""
         return (self.n - np.arange(self.n)) * self.mass * self.g * h
 
 
@@ -94,6 +125,18 @@ class NewtonsCradle:
     (between beads ``j`` and ``j + 1``) closes at ``t_j = (j + 1) spacing / velocity``; at the
     end only the last bead moves, with ``velocity``. Momentum ``m v`` and kinetic energy
     ``m v² / 2`` are conserved at every impact.
+
+    Parameters
+    ----------
+    n : int
+        Number of beads.
+    spacing, velocity, mass : float
+        Initial distance of neighbours, striker speed, bead mass.
+
+    Examples
+    --------
+    >>> NewtonsCradle(4).impact_times()
+    array([0.01, 0.02, 0.03])
     """
 
     n: int
@@ -102,15 +145,18 @@ class NewtonsCradle:
     mass: float = 1.0
 
     def system(self) -> LagrangianSystem:
+        """The beads as a :class:`~nscontrol.systems.LagrangianSystem` (``e = 1``)."""
         return LagrangianSystem.newtons_cradle(self.n, mass=self.mass, restitution=1.0)
 
     @property
     def x0(self) -> FloatArray:
+        """Beads ``spacing`` apart, bead 0 moving at ``velocity``."""
         v = np.zeros(self.n)
         v[0] = self.velocity
         return np.concatenate([self.spacing * np.arange(self.n), v])
 
     def impact_times(self) -> FloatArray:
+        """Closing times of the ``n - 1`` contacts, in order."""
         return self.spacing * np.arange(1, self.n) / self.velocity
 
     @property
@@ -124,6 +170,24 @@ def impact_oscillator(*, mass: float = 1.0, stiffness: float = 1.0, damping: flo
     """A mass on a spring (and damper) hitting a wall at ``q = wall``: gap ``wall - q >= 0``.
 
     Drive it with ``u=Exosystem.sinusoid(F, omega)`` (the input acts on the mass).
+
+    Parameters
+    ----------
+    mass, stiffness, damping : float
+        ``m q'' + c q' + k q = u`` between impacts.
+    wall : float
+        Position of the wall.
+    restitution : float
+        Newton coefficient at the wall.
+
+    Returns
+    -------
+    LagrangianSystem
+
+    Examples
+    --------
+    >>> impact_oscillator(wall=0.3).gaps(np.array([0.1]))
+    array([0.2])
     """
     return LagrangianSystem(np.array([[mass]]), stiffness=[[stiffness]], damping=[[damping]],
                             gap_matrix=[[-1.0]], gap_offset=[wall], restitution=restitution,
