@@ -1009,7 +1009,11 @@ def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
     B_cl = u_cl = g_cl = None
     if getattr(plant, "B", None) is not None:
         B_cl = np.vstack([plant.B, plant.B])
-        u_cl = plant.input_at if plant.has_input else None
+        from ..numerics.lti import Exosystem
+
+        # an exosystem input is passed as such: implicit Euler then uses its exact step mean
+        u_cl = (plant.u if isinstance(plant.u, Exosystem)
+                else plant.input_at if plant.has_input else None)
     if plant.has_shift:
         def g_cl(t: Any) -> FloatArray:
             g = plant.shift_at(t)
