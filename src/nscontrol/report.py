@@ -74,7 +74,8 @@ def _html(rows: list[dict[str, Any]], out: Path) -> str:
                      "<th>result</th></tr>")
         for c in res.checks:
             cls = "pass" if c.passed else "fail"
-            parts.append(f"<tr><td>{esc(c.name)}</td><td>{esc(_fmt(c.value))}</td>"
+            name = esc(c.name) + (f"<br><small>{esc(c.note)}</small>" if c.note else "")
+            parts.append(f"<tr><td>{name}</td><td>{esc(_fmt(c.value))}</td>"
                          f"<td>{esc(c.op)}</td><td>{esc(_fmt(c.threshold))}</td>"
                          f"<td class={cls}>{'pass' if c.passed else 'FAIL'}</td></tr>")
         parts.append("</table><h3>metrics</h3><table>")

@@ -38,6 +38,8 @@ class Check:
         Whether ``value <op> threshold`` held (build it with :func:`check`).
     op
         One of ``"<="``, ``"<"``, ``">="``, ``">"``, ``"=="``.
+    note
+        Why the claim is checked this way (e.g. where it deviates from the spec), or ``""``.
     """
 
     name: str
@@ -45,16 +47,21 @@ class Check:
     threshold: Any
     passed: bool
     op: str = "<="
+    note: str = ""
 
     def to_json(self) -> dict[str, Any]:
-        """``{"name", "value", "threshold", "op", "passed"}`` with JSON-compatible values
-        (numpy scalars and arrays converted, non-finite floats as strings)."""
-        return {"name": self.name, "value": _jsonable(self.value),
-                "threshold": _jsonable(self.threshold), "op": self.op,
-                "passed": bool(self.passed)}
+        """``{"name", "value", "threshold", "op", "passed"}`` (plus ``"note"`` when there is
+        one) with JSON-compatible values (numpy scalars and arrays converted, non-finite
+        floats as strings)."""
+        out = {"name": self.name, "value": _jsonable(self.value),
+               "threshold": _jsonable(self.threshold), "op": self.op,
+               "passed": bool(self.passed)}
+        if self.note:
+            out["note"] = self.note
+        return out
 
 
-def check(name: str, value: Any, threshold: Any, op: str = "<=") -> Check:
+def check(name: str, value: Any, threshold: Any, op: str = "<=", note: str = "") -> Check:
     """Build a :class:`Check` by comparing ``value`` with ``threshold`` using ``op``.
 
     A comparison that cannot be made (incomparable types) is a failed check, not an error.
@@ -70,7 +77,7 @@ def check(name: str, value: Any, threshold: Any, op: str = "<=") -> Check:
         passed = bool(_OPS[op](value, threshold))
     except TypeError:
         passed = False
-    return Check(name, value, threshold, passed, op)
+    return Check(name, value, threshold, passed, op, note)
 
 
 @dataclass
