@@ -86,6 +86,32 @@ def test_restitution_law_for_random_masses_and_velocities(rng: np.random.Generat
         assert 0.5 * m @ post**2 <= 0.5 * m @ pre**2 * (1 + 1e-14)
 
 
+def test_restitution_on_random_chains_with_several_contacts(rng: np.random.Generator) -> None:
+    # 3 to 6 beads of random masses and coefficients, random velocities: at every impact
+    # (single or simultaneous) momentum is kept, every contact that was closed and approaching
+    # leaves with u+ >= -e u- (= where its impulse is positive), and energy never grows
+    for _ in range(10):
+        n = int(rng.integers(3, 7))
+        m = rng.uniform(0.2, 5.0, n)
+        e = rng.uniform(0.0, 1.0, n - 1)
+        x0 = np.concatenate([np.cumsum(rng.uniform(0.05, 0.3, n)), rng.normal(size=n)])
+        chain = LagrangianSystem.chain(m, restitution=e)
+        traj = simulate(chain, x0, (0.0, 2.0), on_zeno="warn", dt=2.0)
+        impacts = traj.events_of("impact")
+        assert impacts
+        P = traj.stats["impulses"]
+        for ev, p in zip(impacts, P, strict=True):
+            vm, vp = ev.pre[n:], ev.post[n:]
+            assert m @ vp == pytest.approx(m @ vm, rel=1e-12, abs=1e-12)
+            assert 0.5 * m @ vp**2 <= 0.5 * m @ vm**2 * (1 + 1e-13) + 1e-15
+            um, up = np.diff(vm), np.diff(vp)  # normal velocities of the n - 1 contacts
+            assert np.all(p >= 0.0)
+            hit = p > 1e-14
+            assert up[hit] == pytest.approx(-e[hit] * um[hit], rel=1e-9, abs=1e-12)
+            assert m * (vp - vm) == pytest.approx(
+                np.concatenate([[0.0], p]) - np.concatenate([p, [0.0]]), abs=1e-12)
+
+
 def _ch02_plant() -> ImpactingBodies:
     return ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 1.0, (0, 1): 1.0},
                                         {(0, 0): 1.0}, restitution=1.0)
