@@ -49,7 +49,7 @@ def ball_mj(sc):
             "final": [float(ball.q()[0]), float(ball.velocity()[0])]}
 
 
-def ball_ed(sc):
+def _ball_ed_once(sc):
     T = sc["T"]
     nsds, ball, inter = _ball(sc["e"], sc["g"], sc["q0"])
     nsds.setT(T)
@@ -67,8 +67,20 @@ def ball_ed(sc):
         sim.processEvents()
         events += 1
     seconds = time.perf_counter() - start
-    return {"steps": events, "seconds": seconds, "impacts": impacts,
-            "final": [float(ball.q()[0]), float(ball.velocity()[0])]}
+    return events, seconds, impacts, [float(ball.q()[0]), float(ball.velocity()[0])]
+
+
+def ball_ed(sc):
+    """The whole run, repeated within the budget (a run takes milliseconds): the median time
+    of the time loop, as the other side's median of batches."""
+    runs, start = [], time.perf_counter()
+    while len(runs) < 3 or (time.perf_counter() - start < min(sc["budget"], 2.0)
+                            and len(runs) < 200):
+        runs.append(_ball_ed_once(sc))
+    events, _, impacts, final = runs[-1]
+    seconds = sorted(r[1] for r in runs)[len(runs) // 2]
+    return {"steps": events, "seconds": seconds, "impacts": impacts, "final": final,
+            "repeats": len(runs)}
 
 
 def _chain(n, positions, velocities, ground, e):

@@ -46,6 +46,7 @@ Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"`
 from __future__ import annotations
 
 import warnings
+import weakref
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -283,21 +284,33 @@ class _Options:
 
 class _Samples:
     """The run's :class:`Recorder` (``record_every``, selected signals) and the last sample
-    offered, so that the final state is kept whatever ``record_every`` drops."""
+    offered, so that the final state is kept whatever ``record_every`` drops.
 
-    def __init__(self, n: int, opts: _Options, offered: Sequence[str]) -> None:
+    The signals of these integrators are functions of the state (outputs, gaps, energy):
+    ``derive(X) -> {name: values}`` computes them once, on the recorded samples, at the end.
+    """
+
+    def __init__(self, n: int, opts: _Options, offered: Sequence[str],
+                 derive: Callable[[FloatArray], dict[str, FloatArray]]) -> None:
         self.rec = Recorder(n, every=opts.every, signals=opts.signals, offered=offered)
-        self.last: tuple[float, FloatArray, dict[str, FloatArray]] | None = None
+        self.derive = derive
+        self.last: tuple[float, FloatArray] | None = None
 
-    def extend(self, times: FloatArray, X: FloatArray, **signals: FloatArray) -> None:
-        self.rec.extend(times, X, **signals)
-        self.last = (float(times[-1]), X[-1], {k: v[-1] for k, v in signals.items()})
+    def extend(self, times: FloatArray, X: FloatArray) -> None:
+        self.rec.extend(times, X)
+        self.last = (float(times[-1]), X[-1])
 
     def finish(self, **kw: Any) -> Trajectory:
+        from dataclasses import replace
+
         if self.last is not None and self.rec.last_time < self.last[0]:
-            t, x, sig = self.last
-            self.rec.sample(t, x, force=True, **sig)
-        return self.rec.finish(**kw)
+            self.rec.sample(*self.last, force=True)
+        traj = self.rec.finish(**kw)
+        wanted = [k for k in self.rec.offered or () if self.rec.wants(k)]
+        if not wanted:
+            return traj
+        signals = self.derive(traj.x)
+        return replace(traj, signals={k: signals[k] for k in wanted})
 
 
 def reorder_listeners(listeners: Sequence[Callable[..., None]], order: np.ndarray
@@ -451,9 +464,8 @@ class _Flight:
             zeno.n_events += n_e
             if n_s:
                 on_samples(s_t[:n_s].copy(), s_x[:n_s].copy())
-            if n_e:
-                on_events(e_t[:n_e].copy(), e_i[:n_e].copy(), e_pre[:n_e].copy(),
-                          e_post[:n_e].copy())
+            if n_e:  # views: the callbacks copy what they keep
+                on_events(e_t[:n_e], e_i[:n_e], e_pre[:n_e], e_post[:n_e])
             if code == FULL:
                 continue
             if code == DONE:
@@ -489,13 +501,13 @@ class _HybridRun:
         J = system.jump_matrices
         self.flight = _Flight(self.flow, system.G, system.g0, J,
                               np.full(p, J is not None), np.arange(p))
-        self.samples = _Samples(system.n_states, opts, tuple(system.outputs))
+        self.samples = _Samples(system.n_states, opts, tuple(system.outputs), lambda X: {
+            k: X @ C.T for k, C in system.outputs.items()})
         self.rec = self.samples.rec
         self.zeno = _Zeno(opts, p)
 
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
-        sig = {k: X @ C.T for k, C in self.s.outputs.items() if self.rec.wants(k)}
-        self.samples.extend(times, X, **sig)
+        self.samples.extend(times, X)
 
     def _jumped(self, times: FloatArray, idx: np.ndarray, pre: FloatArray,
                 post: FloatArray) -> None:
@@ -541,20 +553,29 @@ class _HybridRun:
 
 
 # ------------------------------------------------------------------------------ mechanics
-class _LinearMechanicsRun:
-    """Exact simulation of a Lagrangian system that is linear between events."""
+class _LinearModel:
+    """What every run of a linear Lagrangian system needs, prepared once: the augmented flow
+    ``z = [q; v; 1; w]`` (gravity and the input generator inside), the free accelerations,
+    the Delassus diagonal and the modes built so far. It depends on the (immutable) system,
+    the input's generator and the feedback gain only, so runs of the same closed loop
+    (sweeps, benchmarks) share it."""
 
-    def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
-                 opts: _Options, gain: FloatArray | None = None) -> None:
-        from ..laws.impact import NewtonImpactLaw
+    _cache: weakref.WeakKeyDictionary[Any, dict[Any, _LinearModel]] = \
+        weakref.WeakKeyDictionary()
 
-        s = system
+    @classmethod
+    def of(cls, system: Any, u: Any, gain: FloatArray | None) -> _LinearModel:
+        key = (None if u is None else (u.S.shape, u.S.tobytes(), u.Cu.tobytes()),
+               None if gain is None else gain.tobytes())
+        models = cls._cache.setdefault(system, {})
+        if key not in models:
+            models[key] = cls(system, u, gain)
+        return models[key]
+
+    def __init__(self, s: Any, u: Any, gain: FloatArray | None) -> None:
         n = s.n_dof
-        self.s, self.t0, self.tf, self.opts = s, t0, tf, opts
         self.M = s.mass_matrix()
         self.G = s.dense_gap_matrix()
-        self.law = NewtonImpactLaw(s.restitution)
-        # augmented state z = [q; v; 1; w]
         nw = 0 if u is None else u.n_states
         N = 2 * n + 1 + nw
         K = np.zeros((n, n)) if s.stiffness is None else s.stiffness
@@ -567,16 +588,33 @@ class _LinearMechanicsRun:
         if gain is not None:  # u = -K [q; v]: still a linear flow
             F[:, :2 * n] -= S @ gain
         self.Minv = np.linalg.inv(self.M)
+        self.W_diag = np.einsum("jn,nm,jm->j", self.G, self.Minv, self.G)  # Delassus diagonal
         self.Afree = self.Minv @ F  # accelerations, (n, N)
         self.base = np.zeros((N, N))
         self.base[:n, n:2 * n] = np.eye(n)
         if u is not None:
             self.base[2 * n + 1:, 2 * n + 1:] = u.S
-        # the exosystem runs in absolute time, w(0) = w0, like every integrator's input
-        self.z = np.concatenate([x0, [1.0], [] if u is None else u.w(t0)])
         self.n, self.N = n, N
         self.flows: dict[frozenset[int], tuple[_Flight, np.ndarray]] = {}
-        self.samples = _Samples(2 * n, opts, ("gap", "energy"))
+
+
+class _LinearMechanicsRun:
+    """Exact simulation of a Lagrangian system that is linear between events."""
+
+    def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
+                 opts: _Options, gain: FloatArray | None = None) -> None:
+        s = system
+        self.s, self.t0, self.tf, self.opts = s, t0, tf, opts
+        self.model = model = _LinearModel.of(s, u, gain)
+        self.M, self.G, self.Minv = model.M, model.G, model.Minv
+        self.W_diag, self.Afree, self.base = model.W_diag, model.Afree, model.base
+        self.n, self.N = model.n, model.N
+        self.flows = model.flows
+        # the exosystem runs in absolute time, w(0) = w0, like every integrator's input
+        self.z = np.concatenate([x0, [1.0], [] if u is None else u.w(t0)])
+        G, g0 = self.G, s.gap_offset
+        self.samples = _Samples(2 * self.n, opts, ("gap", "energy"), lambda X: {
+            "gap": X[:, :self.n] @ G.T + g0, "energy": s.energy(X)})
         self.rec = self.samples.rec
         self.zeno = _Zeno(opts, s.n_contacts)
         self.contact: set[int] = set()
@@ -622,16 +660,8 @@ class _LinearMechanicsRun:
         self.flows[C] = (_Flight(LTIFlow.shared(A), gmat, g0, J, jump_ok, slots), guard_ids)
         return self.flows[C]
 
-    def _signals(self, Z: FloatArray) -> dict[str, FloatArray]:
-        out = {}
-        if self.rec.wants("gap"):
-            out["gap"] = Z[:, : self.n] @ self.G.T + self.s.gap_offset
-        if self.rec.wants("energy"):
-            out["energy"] = self.s.energy(Z[:, :2 * self.n])
-        return out
-
     def _sample(self, times: FloatArray, Z: FloatArray) -> None:
-        self.samples.extend(times, Z[:, :2 * self.n], **self._signals(Z))
+        self.samples.extend(times, Z[:, :2 * self.n])
 
     def _bounced(self, ids: np.ndarray) -> Callable[..., None]:
         """Record the impacts settled by the compiled loop (``ids``: guard -> contact)."""
@@ -639,12 +669,17 @@ class _LinearMechanicsRun:
 
         def record(times: FloatArray, idx: np.ndarray, pre: FloatArray,
                    post: FloatArray) -> None:
-            for t, i, zm, zp in zip(times, idx, pre, post, strict=True):
-                j = int(ids[i])
-                P = np.zeros(self.s.n_contacts)  # G_j (v+ - v-) = W_jj P_j
-                Gj = self.G[j]
-                P[j] = Gj @ (zp[n:m] - zm[n:m]) / float(Gj @ self.Minv @ Gj)
-                self._impacted(float(t), [j], zm[:m], zp[:m], P)
+            js = ids[idx]
+            P = np.zeros((times.size, self.s.n_contacts))  # G_j (v+ - v-) = W_jj P_j
+            P[np.arange(times.size), js] = np.einsum(
+                "kn,kn->k", self.G[js], post[:, n:m] - pre[:, n:m]) / self.W_diag[js]
+            self.rec.events_block(times, "impact", js, pre[:, :m], post[:, :m])
+            self.impulses.extend(P)
+            self.n_impacts += times.size
+            for k in range(times.size) if self.opts.listeners else ():
+                for listener in self.opts.listeners:
+                    listener(float(times[k]), pre[k, :m].copy(), post[k, :m].copy(),
+                             np.array([js[k]]), P[k].copy())
         return record
 
     def _impacted(self, t: float, contacts: list[int], x_minus: FloatArray,
@@ -652,8 +687,10 @@ class _LinearMechanicsRun:
         for j in contacts:
             self.rec.event(t, "impact", j, x_minus, x_plus)
             self.impulses.append(impulse)
-        for listener in self.opts.listeners:
-            listener(t, x_minus.copy(), x_plus.copy(), np.array(contacts), impulse.copy())
+        if self.opts.listeners:
+            for listener in self.opts.listeners:
+                listener(t, x_minus.copy(), x_plus.copy(), np.array(contacts),
+                         impulse.copy())
         self.n_impacts += len(contacts)
 
     def _persistent(self, z: FloatArray, candidates: Sequence[int]) -> set[int]:
@@ -665,10 +702,13 @@ class _LinearMechanicsRun:
 
         idx = list(candidates)
         Gc = self.G[idx]
-        W = Gc @ self.Minv @ Gc.T
-        res = solve_lcp(W, Gc @ (self.Afree @ z), strict=True)
-        scale = 1e-12 * (1.0 + float(np.max(np.abs(res.z), initial=0.0)))
-        return {j for j, lam in zip(idx, res.z, strict=True) if lam > scale}
+        q = Gc @ (self.Afree @ z)
+        if len(idx) == 1:  # the one-dimensional LCP: λ = max(0, -q / W)
+            lam = np.maximum(0.0, -q / self.W_diag[idx])
+        else:
+            lam = solve_lcp(Gc @ self.Minv @ Gc.T, q, strict=True).z
+        scale = 1e-12 * (1.0 + float(np.max(np.abs(lam), initial=0.0)))
+        return {j for j, lj in zip(idx, lam, strict=True) if lj > scale}
 
     def _closed(self, z: FloatArray) -> np.ndarray:
         q = z[: self.n]
@@ -745,18 +785,23 @@ class _LinearMechanicsRun:
                                   "pattern", t, **finish)
         due = [self.zeno.add(j, t) for j in impacts]
         t_acc = min((ta for ta in due if ta is not None), default=None)
-        law = self.law
+        e = self.s.restitution.copy()
         if t_acc is not None:
-            from ..laws.impact import NewtonImpactLaw
-
-            e = self.s.restitution.copy()
             e[impacts] = 0.0  # close the accumulating contact plastically
-            law = NewtonImpactLaw(e)
-        res = law.apply(self.M, self.G.T, z[n:2 * n], closed)
         z_minus = z.copy()
         z = z.copy()
-        z[n:2 * n] = res.v_plus
-        self._impacted(t, impacts, z_minus[:2 * n], z[:2 * n], res.impulse)
+        v = z[n:2 * n]
+        if len(closed) == 1:  # one contact: Newton's law in closed form, P = -(1+e) u- / W
+            j = closed[0]
+            P = np.zeros(self.s.n_contacts)
+            P[j] = max(0.0, -(1.0 + e[j]) * float(self.G[j] @ v) / self.W_diag[j])
+            v += self.Minv @ (self.G[j] * P[j])
+        else:
+            from ..laws.impact import NewtonImpactLaw
+
+            res = NewtonImpactLaw(e).apply(self.M, self.G.T, v, closed)
+            v[:], P = res.v_plus, res.impulse
+        self._impacted(t, impacts, z_minus[:2 * n], z[:2 * n], P)
         new = self._persistent(z, self._resting(z, np.array(closed, dtype=np.int64)))
         self._sample(np.array([t]), z[None])
         if t_acc is not None:
@@ -789,7 +834,10 @@ class _NonlinearMechanicsRun:
         self.controller = controller
         self.m = system.n_dof if system.actuation is None else system.actuation.shape[1]
         self.law = NewtonImpactLaw(system.restitution)
-        self.samples = _Samples(system.n_states, opts, ("gap", "energy"))
+        n = system.n_dof
+        self.samples = _Samples(system.n_states, opts, ("gap", "energy"), lambda X: {
+            "gap": np.array([system.gaps(x[:n]) for x in X]).reshape(len(X), -1),
+            "energy": system.energy(X)})
         self.rec = self.samples.rec
         self.zeno = _Zeno(opts, system.n_contacts)
         self.impulses: list[FloatArray] = []
@@ -817,13 +865,7 @@ class _NonlinearMechanicsRun:
         return np.concatenate([v, np.linalg.solve(L.T, y)])
 
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
-        n = self.s.n_dof
-        sig = {}
-        if self.rec.wants("gap"):
-            sig["gap"] = np.array([self.s.gaps(x[:n]) for x in X])
-        if self.rec.wants("energy"):
-            sig["energy"] = self.s.energy(X)
-        self.samples.extend(times, X, **sig)
+        self.samples.extend(times, X)
 
     def run(self) -> Trajectory:
         from scipy.integrate import solve_ivp

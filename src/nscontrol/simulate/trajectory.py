@@ -552,6 +552,16 @@ class Recorder:
         self.events.append(Event(float(time), kind, int(index), np.array(pre, float),
                                  np.array(post, float), int(mode_from), int(mode_to)))
 
+    def events_block(self, times: Any, kind: str, indices: Any, pre: Any, post: Any) -> None:
+        """Record a block of events of one ``kind`` at once (as produced by a compiled
+        kernel): ``times`` and ``indices`` of length ``k``, ``pre``/``post`` of shape
+        ``(k, n)`` (copied once for the whole block)."""
+        pre = np.array(pre, dtype=np.float64)
+        post = np.array(post, dtype=np.float64)
+        self.events.extend(Event(t, kind, i, a, b) for t, i, a, b in zip(
+            np.asarray(times, dtype=np.float64).tolist(),
+            np.asarray(indices, dtype=np.int64).tolist(), pre, post, strict=True))
+
     @property
     def last_time(self) -> float:
         """Time of the last recorded sample (``-inf`` before the first one)."""
