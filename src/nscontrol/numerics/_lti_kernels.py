@@ -207,18 +207,21 @@ def _touches_at_end(a, K1, v, tol):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _walk(a, K1, s_end, tol, skip_start, bern_d, crit, stack_b, stack_lo, stack_hi, work,
+def _walk(a, K1, s_end, tol, skip_start, bern, crit, stack_b, stack_lo, stack_hi, work,
           da):  # pragma: no cover - compiled
-    """First zero of ``P(σ) = Σ a_j σ^j`` on ``[0, s_end]``: ``(found, σ, grazing)``.
+    """First zero of ``P(σ) = Σ_{j<K1} a_j σ^j`` on ``[0, s_end]``: ``(found, σ, grazing)``
+    (``bern[d]``: the Bernstein matrix of degree ``d``).
 
     The critical points of ``P`` cut the cell into monotone pieces; walking them left to
     right, the first piece whose right end has ``P <= 0`` holds the first root; a local
     minimum with ``|P| <= tol`` is a tangential touch (reported at the minimum).
     """
-    for j in range(K1 - 1):
-        da[j] = (j + 1) * a[j + 1]
-    ncrit = _critical_points(da, K1 - 1, bern_d, s_end, crit, stack_b, stack_lo, stack_hi,
-                             work)
+    ncrit = 0
+    if K1 >= 3:  # a linear P has no critical point
+        for j in range(K1 - 1):
+            da[j] = (j + 1) * a[j + 1]
+        ncrit = _critical_points(da, K1 - 1, bern[K1 - 2], s_end, crit, stack_b, stack_lo,
+                                 stack_hi, work)
     start = 0
     if skip_start:  # flat start of a guard leaving zero: not a touch
         while start < ncrit and _horner(a, K1, crit[start]) <= tol:
@@ -334,10 +337,12 @@ def propagate(kind, lam, V, Vinv, phi, T, d, h, x, t, out):  # pragma: no cover 
 
 
 @njit(cache=True)
-def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, bern_d, y0, h, t_max,
+def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_max,
            kind, lam, V, Vinv, T, d, hit_out, graze_out):  # pragma: no cover - compiled
     """The first event of the guards ``g_i(t) = (W[0] e^{Ab t} y0)_i + g0_i`` in
-    ``(0, t_max]`` (balanced coordinates, cells of width ``h``).
+    ``(0, t_max]`` (balanced coordinates, cells of width ``h``; ``bern[d]`` is the Bernstein
+    matrix of degree ``d``). A polynomial whose top coefficients are exactly zero (a flow
+    with a nilpotent part: free flight is a parabola) is handled at its own degree.
 
     Returns ``(code, t, index)``: ``NO_EVENT``; ``EVENT`` with the event time ``t`` and
     ``hit_out[i] = 1`` for every guard at zero then (``graze_out[i] = 1`` when it only
@@ -395,15 +400,18 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, bern_d, y0
             if not active[i]:
                 continue
             _coefficients(W, g0, i, y, a)
+            m = K1
+            while m > 1 and a[m - 1] == 0.0:
+                m -= 1
             scale = row_norm[i] * ynorm + abs(g0[i])
             tol = graze_tol * scale
-            _bernstein(bern, a, K1, work)
+            _bernstein(bern[m - 1], a, m, work)
             bmin = np.inf
-            for r in range(K1):
+            for r in range(m):
                 bmin = min(bmin, work[r])
             if bmin > tol + remainder * scale:
                 continue  # certified: no zero of this guard on the cell
-            found, s, grazing = _walk(a, K1, sigma_end, tol, skip0[i] and k == 0, bern_d,
+            found, s, grazing = _walk(a, m, sigma_end, tol, skip0[i] and k == 0, bern,
                                       crit, stack_b, stack_lo, stack_hi, work, da)
             if found:
                 hit_out[i] = 1

@@ -384,15 +384,16 @@ class GuardEvent:
 
 
 @cache
-def _bernstein_matrix(K: int) -> FloatArray:
-    """``b = M a``: Bernstein coefficients on [0, 1] of ``Σ_j a_j σ^j`` (degree K); a
-    constant, computed once (read-only)."""
-    M = np.zeros((K + 1, K + 1))
-    for k in range(K + 1):
-        for j in range(k + 1):
-            M[k, j] = math.comb(k, j) / math.comb(K, j)
-    M.setflags(write=False)
-    return M
+def _bernstein_matrices(K: int) -> FloatArray:
+    """``B[d]`` for ``d = 0..K``: ``b = B[d][:d+1, :d+1] a`` are the Bernstein coefficients
+    on [0, 1] of ``Σ_{j<=d} a_j σ^j`` (degree ``d``); constants, computed once (read-only)."""
+    B = np.zeros((K + 1, K + 1, K + 1))
+    for d in range(K + 1):
+        for k in range(d + 1):
+            for j in range(k + 1):
+                B[d, k, j] = math.comb(k, j) / math.comb(d, j)
+    B.setflags(write=False)
+    return B
 
 
 class _GuardContext:
@@ -412,8 +413,7 @@ class _GuardContext:
         self.Ab = Ab
         self.phi = np.ascontiguousarray(scipy.linalg.expm(Ab * self.h)) if n else np.eye(0)
         K = TAYLOR_DEGREE
-        self.bern = _bernstein_matrix(K)
-        self.bern_d = _bernstein_matrix(K - 1)
+        self.bern = _bernstein_matrices(K)
         M = Ab * self.h
         T = [np.eye(n)]
         for j in range(1, K + 1):
@@ -523,7 +523,7 @@ def _search(ctx: _GuardContext, x0: FloatArray, G: FloatArray, g0: FloatArray, t
     p = G.shape[0]
     hit, graze = np.zeros(p, dtype=np.int8), np.zeros(p, dtype=np.int8)
     code, t, index = search(W, g0, row_norm, graze_tol, simultaneous_tol, _REMAINDER, ctx.phi,
-                            ctx.bern, ctx.bern_d, x0 / ctx.d, ctx.h, t_max, ctx.kind, ctx.lam,
+                            ctx.bern, x0 / ctx.d, ctx.h, t_max, ctx.kind, ctx.lam,
                             ctx.V, ctx.Vinv, ctx.taylor, ctx.d, hit, graze)
     if code == NEGATIVE:
         value = float(G[index] @ x0 + g0[index])

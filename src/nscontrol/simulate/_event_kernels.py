@@ -95,7 +95,7 @@ def zeno_push(hist, count, first, slot, t):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, bern_d,
+def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
                      kind, lam, V, Vinv, T, d, h,
                      J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
                      horizon, rel, min_interval, budget,
@@ -125,7 +125,7 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, 
             y[j] = x[j] / d[j]
         if p:
             code, tau, _ = search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
-                                  bern_d, y, h, tf - t, kind, lam, V, Vinv, T, d, hit, graze)
+                                  y, h, tf - t, kind, lam, V, Vinv, T, d, hit, graze)
         else:
             code, tau = 0, 0.0
         if code == NEGATIVE:

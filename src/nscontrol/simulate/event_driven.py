@@ -456,7 +456,7 @@ class _Flight:
             budget = opts.max_events - zeno.n_events
             code, t, n_s, n_e = run_linear_jumps(
                 self.W, self.g0, self.row_norm, 1e-12, 1e-12, _REMAINDER, ctx.phi, ctx.bern,
-                ctx.bern_d, ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
+                ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
                 self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, zeno.first, geometric,
                 opts.ratio_tol, opts.horizon, opts.rel, opts.min_interval, budget,
                 x, t, tf, opts.dt, opts.t0, sample_pre,
