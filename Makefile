@@ -30,3 +30,4 @@ lint: $(STAMP)
 
 clean:
 	rm -rf $(OUT) .pytest_cache build src/*.egg-info
+	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
