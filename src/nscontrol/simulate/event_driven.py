@@ -399,19 +399,6 @@ def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: 
                     trajectory=traj)
 
 
-def _propagate(flow: LTIFlow, x: FloatArray, taus: Any) -> FloatArray:
-    """``e^{A τ} x`` for each ``τ >= 0`` of ``taus`` (time-major), by the same compiled
-    propagation as the event loop."""
-    from ..numerics._lti_kernels import propagate
-
-    args = flow.guard_context().flow_args()
-    ts = np.atleast_1d(np.asarray(taus, float))
-    out = np.empty((ts.size, x.size))
-    for k, tau in enumerate(ts):
-        propagate(*args, x, float(tau), out[k])
-    return out
-
-
 class _Flight:
     """One flow (mode) prepared for the compiled event loop: guards, and the linear jump
     ``x+ = J_i x`` of each guard that has one (``jump_ok``); others are handed back.
