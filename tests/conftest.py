@@ -11,3 +11,22 @@ import pytest  # noqa: E402
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def clarabel_fails(monkeypatch) -> list:
+    """Make every CVXPY solve with Clarabel raise a SolverError (other solvers run as usual);
+    the list records the solvers asked for, in order."""
+    import cvxpy as cp
+
+    original = cp.Problem.solve
+    attempts: list = []
+
+    def clarabel_breaks(self, *args, **kwargs):
+        attempts.append(kwargs.get("solver"))
+        if kwargs.get("solver") == "CLARABEL":
+            raise cp.error.SolverError("Clarabel made to fail by the test")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cp.Problem, "solve", clarabel_breaks)
+    return attempts

@@ -223,19 +223,8 @@ def test_misspelt_solver_is_bad_input_not_an_infeasible_design():
                              solver="auto").certificate.solver == "CLARABEL"
 
 
-def test_clarabel_failure_falls_back_to_scs(monkeypatch):
-    import cvxpy as cp
-
-    original = cp.Problem.solve
-    attempts = []
-
-    def clarabel_breaks(self, *args, **kwargs):
-        attempts.append(kwargs.get("solver"))
-        if kwargs.get("solver") == "CLARABEL":
-            raise cp.error.SolverError("Clarabel made to fail by the test")
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(cp.Problem, "solve", clarabel_breaks)
+def test_clarabel_failure_falls_back_to_scs(clarabel_fails):
+    attempts = clarabel_fails
     s = ex.coulomb_oscillator(0.1)
     d = lure_observer_lmi(**s.matrices, variant="basic", alpha=0.05)
     assert attempts == ["CLARABEL", "SCS"]
