@@ -51,11 +51,14 @@ from typing import Any
 import numpy as np
 
 from ...errors import ModelError, NscontrolError
+from ...systems.impacting_bodies import ImpactingBodies
+from ...systems.lagrangian import LagrangianSystem
+from ..hybrid import LinearHybridSystem
 from ..trajectory import Trajectory
 from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
 from ._recording import _guarded, reorder_listeners, reorder_states
 from .hybrid_run import HybridRun
-from .linear_mechanics import LinearMechanicsRun
+from .linear_mechanics import LinearMechanicsRun, checked_state
 from .nonlinear_mechanics import NonlinearMechanicsRun
 
 __all__ = ["integrate", "reorder_listeners", "reorder_states"]
@@ -156,10 +159,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     >>> bool(abs(traj.event_times("accumulation")[0] - ball.accumulation_time) < 1e-9)
     True
     """
-    from ...systems.impacting_bodies import ImpactingBodies
-    from ...systems.lagrangian import LagrangianSystem
-    from ..hybrid import LinearHybridSystem
-
     t0, tf = (float(t) for t in t_span)
     opts = _Options.checked(
         t0, tf, dt=dt, max_events=max_events, min_interval=min_interval,
@@ -182,7 +181,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
                                            atol=atol, record_every=record_every,
                                            signals=signals, progress=progress)
     if isinstance(system, LagrangianSystem):
-        return _guarded(_mechanics_run(system, system.check_state(x0), t0, tf,
+        return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
                                        _check_input(system, u), controller, opts))
     raise ModelError(f"event_driven: integrates LinearHybridSystem, LagrangianSystem and "
                      f"ImpactingBodies, got {type(system).__name__}")

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import NamedTuple
 
 import numpy as np
 
 from ..._validation import FloatArray
-from ...errors import SolverError
-from ...numerics.lti import LTIFlow
+from ...errors import InadmissibleStateError, SolverError
+from ...numerics.lti import _REMAINDER, TAYLOR_DEGREE, LTIFlow
+from .._event_kernels import DONE, FULL, HANDOFF, INADMISSIBLE, run_linear_jumps
 from ._options import _Options
+from ._recording import _Samples
 from ._zeno import _Zeno
 
 
@@ -19,17 +21,12 @@ class _Flight:
     ``x+ = J_i x`` of each guard that has one (``jump_ok``); others are handed back.
 
     :meth:`run` flows from ``(t, x)``, settles the simple events in compiled code (see
-    :mod:`nscontrol.simulate._event_kernels`), passes their samples and events to the
-    callbacks and returns ``(t, x, event)`` at ``tf`` (``event`` None) or at the first event
-    Python must handle.
+    :mod:`nscontrol.simulate._event_kernels`), and returns ``(t, x, event)`` at ``tf``
+    (``event`` None) or at the first event Python must handle.
     """
-
-    SAMPLES, EVENTS = 4096, 512
 
     def __init__(self, flow: LTIFlow, G: FloatArray, g0: FloatArray, J: FloatArray | None,
                  jump_ok: np.ndarray, slots: np.ndarray) -> None:
-        from ...numerics.lti import TAYLOR_DEGREE
-
         self.flow = flow
         self.ctx = ctx = flow.guard_context()
         n, p = flow.n, len(g0)
@@ -44,46 +41,94 @@ class _Flight:
         self.slots = np.asarray(slots, dtype=np.int64).reshape(p)
 
     def run(self, x: FloatArray, t: float, tf: float, zeno: _Zeno, geometric: bool,
-            opts: _Options, *, sample_pre: bool, on_samples: Callable[..., None],
-            on_events: Callable[..., None]) -> tuple[float, FloatArray, Any]:
-        from ...numerics.lti import _REMAINDER, GuardEvent
-        from .._event_kernels import DONE, FULL, HANDOFF, INADMISSIBLE, run_linear_jumps
-
-        ctx, n, p = self.ctx, self.flow.n, len(self.g0)
+            opts: _Options, samples: _Samples, ws: _Workspace, *, sample_pre: bool,
+            on_events: Callable[..., None]) -> tuple[float, FloatArray, _Handoff | None]:
+        """Flow from ``(t, x)`` to ``tf`` or to the first event Python must handle; samples
+        go into ``samples``, settled events (in time order) to ``on_events(t, i, pre,
+        post)`` (views of ``ws``: the callback copies what it keeps)."""
+        ctx = self.ctx
         x = np.array(x, dtype=float)
-        s_t, s_x = np.empty(self.SAMPLES), np.empty((self.SAMPLES, n))
-        e_t, e_i = np.empty(self.EVENTS), np.empty(self.EVENTS, dtype=np.int64)
-        e_pre, e_post = np.empty((self.EVENTS, n)), np.empty((self.EVENTS, n))
-        hit, graze = np.zeros(max(p, 1), dtype=np.int8), np.zeros(max(p, 1), dtype=np.int8)
         while True:
-            budget = opts.max_events - zeno.n_events
+            s_t, s_x = samples.free()
             code, t, n_s, n_e = run_linear_jumps(
                 self.W, self.g0, self.row_norm, 1e-12, 1e-12, _REMAINDER, ctx.phi, ctx.bern,
                 ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
                 self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, zeno.first, geometric,
-                opts.ratio_tol, opts.horizon, opts.rel, opts.min_interval, budget,
-                x, t, tf, opts.dt, opts.t0, sample_pre,
-                s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze)
+                opts.ratio_tol, opts.horizon, opts.rel, opts.min_interval,
+                opts.max_events - zeno.n_events, x, t, tf, opts.dt, opts.t0, sample_pre,
+                s_t, s_x, ws.e_t, ws.e_i, ws.e_pre, ws.e_post, ws.hit, ws.graze)
             zeno.n_events += n_e
-            if n_s:
-                on_samples(s_t[:n_s].copy(), s_x[:n_s].copy())
-            if n_e:  # views: the callbacks copy what they keep
-                on_events(e_t[:n_e], e_i[:n_e], e_pre[:n_e], e_post[:n_e])
+            samples.wrote(n_s)
+            if n_e:
+                on_events(ws.e_t[:n_e], ws.e_i[:n_e], ws.e_pre[:n_e], ws.e_post[:n_e])
             if code == FULL:
+                samples.flush()
                 continue
             if code == DONE:
                 return t, x, None
+            if code == HANDOFF:
+                return t, x, self._handoff(ws)
             if code == INADMISSIBLE:
-                from ...errors import InadmissibleStateError
-
                 g = self.G @ x + self.g0
                 raise InadmissibleStateError(
                     f"event_driven: guard {int(np.argmin(g))} is negative at t = {t:.12g} "
                     f"(g = {g.min():.3g}); the state left the admissible set")
-            if code != HANDOFF:
-                raise SolverError(f"event_driven: unexpected event-loop status {code}")
-            idx = tuple(int(i) for i in np.flatnonzero(hit[:p]))
-            return t, x, GuardEvent(0.0, idx, bool(graze[list(idx)].all()))
+            raise SolverError(f"event_driven: unexpected event-loop status {code}")
+
+    def _handoff(self, ws: _Workspace) -> _Handoff:
+        p = len(self.g0)
+        hit = ws.hit[:p].tolist()
+        idx = [i for i in range(p) if hit[i]]
+        graze = ws.graze[:p].tolist()
+        return _Handoff(idx, all(graze[i] for i in idx))
+
+
+class _Handoff(NamedTuple):
+    """The event the compiled loop hands back: the guards at zero (ascending) and whether
+    they all only touch zero."""
+
+    indices: list[int]
+    grazing: bool
+
+
+class _Workspace:
+    """The arrays a run writes into: samples, the events the compiled loop settles (read
+    after each call), the guards of the event it hands back, contact flags, impulses and the
+    Zeno history. Allocating them costs more than a short run's Python otherwise does, so a
+    system's runs share them: :meth:`lend` takes a free one from a pool (a new one when all
+    are in use, e.g. by a run started from a listener) and :meth:`give_back` returns it."""
+
+    SAMPLES, EVENTS = _Samples.CAPACITY, 512
+
+    def __init__(self, n: int, p: int, n_slots: int) -> None:
+        self.s_t = np.empty(self.SAMPLES)
+        self.s_x = np.empty((self.SAMPLES, n))
+        self.e_t = np.empty(self.EVENTS)
+        self.e_i = np.empty(self.EVENTS, dtype=np.int64)
+        self.e_pre = np.empty((self.EVENTS, n))
+        self.e_post = np.empty((self.EVENTS, n))
+        self.hit = np.zeros(max(p, 1), dtype=np.int8)
+        self.graze = np.zeros(max(p, 1), dtype=np.int8)
+        self.closed = np.empty(max(n_slots, 1), dtype=np.int64)
+        self.still = np.empty(max(n_slots, 1), dtype=np.bool_)
+        self.contacts = np.empty(self.EVENTS, dtype=np.int64)
+        self.impulses = np.empty((self.EVENTS, max(n_slots, 1)))
+        self.zeno = (np.zeros((max(n_slots, 1), 6)), np.zeros(max(n_slots, 1), dtype=np.int64),
+                     np.zeros(max(n_slots, 1)))
+        self.shape = (n, p, n_slots)
+
+    @classmethod
+    def lend(cls, pool: list[_Workspace], n: int, p: int, n_slots: int) -> _Workspace:
+        try:
+            ws = pool.pop()
+        except IndexError:
+            return cls(n, p, n_slots)
+        ws.zeno[1][:] = 0  # an empty history (rows are read up to their count)
+        return ws
+
+    def give_back(self, pool: list[_Workspace]) -> None:
+        if len(pool) < 4:
+            pool.append(self)
 
 
 def _sample_times(t: float, t_next: float, dt: float, t0: float) -> FloatArray:

@@ -74,12 +74,32 @@ class _Options:
     progress: bool | None
 
     @classmethod
-    def checked(cls, t0: float, tf: float, *, dt: float | None, max_events: int,
-                min_interval: float, zeno_ratio_tol: float, zeno_horizon: float | None,
-                zeno_rel: float, on_zeno: str, listeners: Sequence[Callable[..., None]],
-                rtol: float, atol: float, record_every: int, signals: Sequence[str] | None,
-                progress: bool | None) -> _Options:
-        """The user's options, each checked (``ModelError`` naming the option)."""
+    def checked(cls, t0: float, tf: float, **options: Any) -> _Options:
+        """The user's options (the keywords of :meth:`_check`), each checked; the result of
+        the same options, without listeners, is reused (a sweep or a benchmark checks its
+        options once, not at every run)."""
+        key = None
+        if not options["listeners"]:  # a cached listener would stay alive with its closure
+            try:
+                key = (t0, tf, *((type(v), v) for v in options.values()))
+                hit = _CHECKED.get(key)
+            except TypeError:  # an unhashable option (a list of signals): no reuse
+                key = hit = None
+            if hit is not None:
+                return hit
+        opts = cls._check(t0, tf, **options)
+        if key is not None:
+            if len(_CHECKED) >= 64:
+                _CHECKED.clear()
+            _CHECKED[key] = opts
+        return opts
+
+    @classmethod
+    def _check(cls, t0: float, tf: float, *, dt: float | None, max_events: int,
+               min_interval: float, zeno_ratio_tol: float, zeno_horizon: float | None,
+               zeno_rel: float, on_zeno: str, listeners: Sequence[Callable[..., None]],
+               rtol: float, atol: float, record_every: int, signals: Sequence[str] | None,
+               progress: bool | None) -> _Options:
         if on_zeno not in ("raise", "warn"):
             raise ModelError(f"on_zeno: expected 'raise' or 'warn', got {on_zeno!r}")
         for i, fn in enumerate(listeners):
@@ -96,3 +116,7 @@ class _Options:
                    listeners=tuple(listeners), rtol=check_positive("rtol", rtol),
                    atol=check_positive("atol", atol), every=record_every, signals=signals,
                    progress=progress)
+
+
+#: Checked options by ``(t0, tf, (type, value) of each option)``.
+_CHECKED: dict[tuple[Any, ...], _Options] = {}

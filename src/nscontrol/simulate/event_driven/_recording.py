@@ -5,45 +5,118 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from ..._validation import FloatArray
 from ...errors import NscontrolError, ZenoError, ZenoWarning
-from ..trajectory import Recorder, Trajectory
+from ..trajectory import Event, Recorder, Trajectory
 from ._options import _Options
 
 
 class _Samples:
-    """The run's :class:`Recorder` (``record_every``, selected signals) and the last sample
-    offered, so that the final state is kept whatever ``record_every`` drops.
+    """The run's :class:`Recorder` (``record_every``, selected signals) behind one buffer.
+
+    The compiled loop writes its samples straight into the free part of the buffer
+    (:meth:`free`, :meth:`wrote`); Python adds samples with :meth:`add` and :meth:`extend`.
+    The buffer goes to the recorder in one block when it is full and at the end
+    (:meth:`flush`): the recorder sees the same rows in the same order as sample by sample,
+    so ``record_every`` thins them alike, while a run pays one recorder call instead of one
+    per flight. The buffer may hold more columns than are recorded (the augmented state of
+    the mechanics: the first ``n`` are kept). The last sample offered is kept whatever
+    ``record_every`` drops.
 
     The signals of these integrators are functions of the state (outputs, gaps, energy):
-    ``derive(X) -> {name: values}`` computes them once, on the recorded samples, at the end.
+    ``derive(X) -> {name: values}`` computes them per flushed block, so the recorder builds
+    the trajectory with its signals at once.
     """
 
+    CAPACITY = 4096
+
     def __init__(self, n: int, opts: _Options, offered: Sequence[str],
-                 derive: Callable[[FloatArray], dict[str, FloatArray]]) -> None:
+                 derive: Callable[[FloatArray], dict[str, FloatArray]],
+                 buffer: tuple[FloatArray, FloatArray] | None = None) -> None:
         self.rec = Recorder(n, every=opts.every, signals=opts.signals, offered=offered)
+        self.wanted = [k for k in offered if self.rec.wants(k)]
         self.derive = derive
+        self.n = n
+        self.t, self.x = ((np.empty(self.CAPACITY), np.empty((self.CAPACITY, n)))
+                          if buffer is None else buffer)
+        self.size = 0
         self.last: tuple[float, FloatArray] | None = None
 
+    def free(self) -> tuple[FloatArray, FloatArray]:
+        """The unused rows of the buffer (views for the compiled loop to write into)."""
+        return self.t[self.size:], self.x[self.size:]
+
+    def wrote(self, k: int) -> None:
+        """``k`` rows were written into :meth:`free`'s views."""
+        self.size += k
+
+    def add(self, t: float, x: FloatArray) -> None:
+        """One sample (a buffer row; ``x`` may be longer than the recorded state)."""
+        if self.size == self.CAPACITY:
+            self.flush()
+        self.t[self.size] = t
+        self.x[self.size] = x[: self.x.shape[1]]
+        self.size += 1
+
     def extend(self, times: FloatArray, X: FloatArray) -> None:
-        self.rec.extend(times, X)
-        self.last = (float(times[-1]), X[-1])
+        """A block of samples (after the buffered ones)."""
+        k = len(times)
+        if self.size + k > self.CAPACITY:
+            self.flush()
+            if k > self.CAPACITY:
+                self._record(np.asarray(times, dtype=float), np.asarray(X, dtype=float))
+                return
+        self.t[self.size:self.size + k] = times
+        self.x[self.size:self.size + k] = X
+        self.size += k
+
+    def flush(self) -> None:
+        """Hand the buffered rows to the recorder."""
+        if self.size:
+            self._record(self.t[:self.size], self.x[:self.size, :self.n])
+            self.size = 0
+
+    def _record(self, times: FloatArray, X: FloatArray) -> None:
+        self.rec.extend(times, X, **self._signals(X))
+        self.last = (float(times[-1]), X[-1].copy())
+
+    def _signals(self, X: FloatArray) -> dict[str, FloatArray]:
+        if not self.wanted:
+            return {}
+        signals = self.derive(X)
+        return {k: signals[k] for k in self.wanted}
 
     def finish(self, **kw: Any) -> Trajectory:
-        from dataclasses import replace
-
+        self.flush()
         if self.last is not None and self.rec.last_time < self.last[0]:
-            self.rec.sample(*self.last, force=True)
-        traj = self.rec.finish(**kw)
-        wanted = [k for k in self.rec.offered or () if self.rec.wants(k)]
-        if not wanted:
-            return traj
-        signals = self.derive(traj.x)
-        return replace(traj, signals={k: signals[k] for k in wanted})
+            t, x = self.last
+            self.rec.sample(t, x, force=True,
+                            **{k: v[0] for k, v in self._signals(x[None]).items()})
+        return self.rec.finish(**kw)
+
+
+def append_events(rec: Recorder, times: FloatArray, kind: str, indices: np.ndarray,
+                  pre: FloatArray, post: FloatArray) -> None:
+    """Record a block of events (``pre``/``post`` copied once for the block).
+
+    The same :class:`Event` objects as ``Event(t, kind, i, a, b)``, built without the frozen
+    dataclass's ``__init__`` (seven ``object.__setattr__`` calls, half the cost of a
+    bouncing ball's run in Python): the attributes go into the instance dictionary at once.
+    """
+    pre = np.array(pre, dtype=np.float64)
+    post = np.array(post, dtype=np.float64)
+    block = [object.__new__(Event) for _ in range(len(pre))]
+    for ev, t, i, a, b in zip(block, np.asarray(times, dtype=np.float64).tolist(),
+                              np.asarray(indices, dtype=np.int64).tolist(), pre, post,
+                              strict=True):
+        ev.__dict__.update({"time": t, "kind": kind, "index": i, "pre": a, "post": b,
+                            "mode_from": -1, "mode_to": -1})
+    rec.events.extend(block)
 
 
 def reorder_listeners(listeners: Sequence[Callable[..., None]], order: np.ndarray
@@ -59,10 +132,6 @@ def reorder_listeners(listeners: Sequence[Callable[..., None]], order: np.ndarra
 
 def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) -> Trajectory:
     """The same trajectory with its state columns (and event states) permuted by ``order``."""
-    from dataclasses import replace
-
-    from ..trajectory import Event
-
     events = tuple(Event(e.time, e.kind, e.index,
                          e.pre[order] if e.pre.size == order.size else e.pre,
                          e.post[order] if e.post.size == order.size else e.post,
