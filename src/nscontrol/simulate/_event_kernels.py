@@ -95,6 +95,19 @@ def zeno_push(hist, count, first, slot, t):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _grid_count(t, t_next, t_grid0, dt, k):  # pragma: no cover - compiled
+    """Number of grid points ``t_grid0 + j dt`` (``j >= k``) strictly inside ``(t, t_next)``."""
+    count = 0
+    while True:
+        tg = t_grid0 + dt * k
+        if tg >= t_next:
+            return count
+        if tg > t:
+            count += 1
+        k += 1
+
+
+@njit(cache=True)
 def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
                      kind, lam, V, Vinv, T, d, h,
                      J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
@@ -107,7 +120,10 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
     returned ``t`` (pre-event state for ``HANDOFF``, with ``hit``/``graze`` describing the
     event). Samples written: grid points ``t_grid0 + k dt`` strictly inside each flight, the
     pre-event state when ``sample_pre``, the post-jump state of every settled event and the
-    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``.
+    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
+    the start of the flight whose samples did not fit (the run is then the same as with a
+    larger buffer), or, when even an empty buffer is too small for one flight, the last grid
+    point written.
     """
     n = x.shape[0]
     p = g0.shape[0]
@@ -133,6 +149,10 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
         t_next = tf if code != EVENT else t + tau
         # grid samples strictly inside (t, t_next)
         k = int(np.floor((t - t_grid0) / dt)) + 1
+        if n_s and n_s + _grid_count(t, t_next, t_grid0, dt, k) + 3 > cap_s:
+            # this flight's samples do not fit: hand the buffer back first and redo the flight
+            # from the same state, so that emptying the buffer changes nothing
+            return FULL, t, n_s, n_e
         while True:
             tg = t_grid0 + dt * k
             if tg >= t_next:
