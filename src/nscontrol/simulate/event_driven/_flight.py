@@ -135,5 +135,5 @@ def _sample_times(t: float, t_next: float, dt: float, t0: float) -> FloatArray:
     """Regular grid points strictly inside ``(t, t_next)``."""
     k0 = int(np.floor((t - t0) / dt)) + 1
     k1 = int(np.ceil((t_next - t0) / dt))
-    grid = t0 + dt * np.arange(k0, k1)
-    return grid[(grid > t) & (grid < t_next)]
+    grid = t0 + dt * np.arange(k0, k1, dtype=np.float64)
+    return np.asarray(grid[(grid > t) & (grid < t_next)], dtype=np.float64)

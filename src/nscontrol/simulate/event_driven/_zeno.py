@@ -19,7 +19,9 @@ class _Zeno:
         if arrays is None:  # (times, count, first time) per slot; count zero: empty history
             arrays = (np.zeros((max(n_slots, 1), 6)), np.zeros(max(n_slots, 1), dtype=np.int64),
                       np.zeros(max(n_slots, 1)))
-        self.hist, self.count, self.first = arrays
+        self.hist: np.ndarray = arrays[0]
+        self.count: np.ndarray = arrays[1]
+        self.first: np.ndarray = arrays[2]
         self.n_events = 0
 
     def reset(self, j: int) -> None:

@@ -37,10 +37,13 @@ class _LinearModel:
     def of(cls, system: Any, u: Any, gain: FloatArray | None) -> _LinearModel:
         key = (None if u is None else (u.S.shape, u.S.tobytes(), u.Cu.tobytes()),
                None if gain is None else gain.tobytes())
-        models = cls._cache.setdefault(system, {})
-        if key not in models:
-            models[key] = cls(system, u, gain)
-        return models[key]
+        models = cls._cache.get(system)
+        if models is None:
+            models = cls._cache[system] = {}
+        model = models.get(key)
+        if model is None:
+            model = models[key] = cls(system, u, gain)
+        return model
 
     def __init__(self, s: Any, u: Any, gain: FloatArray | None) -> None:
         n = s.n_dof
@@ -201,8 +204,8 @@ class LinearMechanicsRun:
         a_free = self.Afree @ z
         if len(candidates) == 1:  # the one-dimensional LCP: λ = max(0, -G a_free / W)
             j = int(candidates[0])
-            lam = max(0.0, -float(self.G[j] @ a_free) / float(self.W_diag[j]))
-            return {j} if lam > 1e-12 * (1.0 + lam) else set()
+            lam_j = max(0.0, -float(self.G[j] @ a_free) / float(self.W_diag[j]))
+            return {j} if lam_j > 1e-12 * (1.0 + lam_j) else set()
         idx = list(candidates)
         Gc = self.G[idx]
         lam = solve_lcp(Gc @ self.Minv @ Gc.T, Gc @ a_free, strict=True).z
@@ -280,8 +283,9 @@ class LinearMechanicsRun:
         for j in impacts:
             self.zeno.push(j, t)
         t_acc = min((ta for _, ta in checks if ta is not None), default=None)
-        e = self.s.restitution.copy()
+        e = self.s.restitution
         if t_acc is not None:
+            e = e.copy()
             e[impacts] = 0.0  # close the accumulating contact plastically
         z_minus, (z, P) = z, self._newton(z, closed, e)
         self._impacted(t, impacts, z_minus[:2 * self.n], z[:2 * self.n], P)
