@@ -71,6 +71,7 @@ class _LinearModel:
         self.flows: dict[frozenset[int], tuple[_Flight, np.ndarray]] = {}
         self.workspaces: list[_Workspace] = []  # lent to one run at a time
         self.system = s
+        self.finish_kw = {"method": "event_driven", "state_names": s.state_names}
 
     def signals(self, X: FloatArray) -> dict[str, FloatArray]:
         """The recorded signals of states ``X = [q; v]`` (rows): ``gap`` and ``energy``."""
@@ -103,7 +104,7 @@ class LinearMechanicsRun:
         self.contact: set[int] = set()
         self.n_impacts = 0
         self.impulses: list[FloatArray] = []  # blocks of rows, one row per "impact" event
-        self.finish_kw = {"method": "event_driven", "state_names": s.state_names}
+        self.finish_kw = model.finish_kw
 
     # -- modes ---------------------------------------------------------------------------
     def _mode(self, C: frozenset[int]) -> tuple[_Flight, np.ndarray]:
