@@ -107,6 +107,71 @@ def _grid_count(t, t_next, t_grid0, dt, k):  # pragma: no cover - compiled
         k += 1
 
 
+@njit(cache=True, inline="always")  # a named part of the loop, at no call cost
+def _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next, t_grid0, dt, k, s_t, s_x,
+                 n_s, xn):  # pragma: no cover - compiled
+    """Write the exact states at the grid points ``t_grid0 + j dt`` (``j >= k``) strictly
+    inside ``(t, t_next)`` from ``n_s`` on. Returns ``(n_s, full, t_full)``: ``full`` when the
+    buffer ran out, after the grid point ``t_full`` (its state then copied into ``x``)."""
+    cap_s = s_t.shape[0]
+    while True:
+        tg = t_grid0 + dt * k
+        if tg >= t_next:
+            return n_s, False, 0.0
+        if tg > t:
+            full = n_s + 3 > cap_s
+            propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
+            s_t[n_s] = tg
+            s_x[n_s] = xn
+            n_s += 1
+            if full:
+                x[:] = xn
+                return n_s, True, tg
+        k += 1
+
+
+@njit(cache=True, inline="always")
+def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, geometric,
+                 ratio_tol, horizon, rel, min_interval, x, t, hit, graze, xn, y, a
+                 ):  # pragma: no cover - compiled
+    """The guard of an event at ``(t, x)`` that the loop settles itself — the only one hit,
+    crossing, with a linear jump, no other guard closed, no accumulation, and leaving its
+    surface after the jump ``xn = J_i x`` — or ``-1`` (hand the event back)."""
+    n = x.shape[0]
+    p = g0.shape[0]
+    i = -1
+    n_hit = 0
+    for j in range(p):
+        if hit[j]:
+            n_hit += 1
+            i = j
+    if n_hit != 1 or graze[i] or not jump_ok[i]:
+        return -1
+    for j in range(n):
+        y[j] = x[j] / d[j]
+    ynorm = np.sqrt(np.sum(y * y))
+    for j in range(p):
+        if j != i:
+            _coefficients(W, g0, j, y, a)
+            if a[0] <= _CLOSED_TOL * (row_norm[j] * ynorm + abs(g0[j])):
+                return -1  # a contact closed elsewhere: the multi-contact law decides
+    status, _ = zeno_status(hist, count, first, zeno_slot[i], t, geometric, ratio_tol,
+                            horizon, rel, min_interval)
+    if status != ZENO_NONE:
+        return -1
+    for r in range(n):
+        s = 0.0
+        for c in range(n):
+            s += J[i, r, c] * x[c]
+        xn[r] = s
+    for j in range(n):
+        y[j] = xn[j] / d[j]
+    _coefficients(W, g0, i, y, a)
+    if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
+        return -1  # it would not leave its surface (rest, persistent contact)
+    return i
+
+
 @njit(cache=True)
 def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
                      kind, lam, V, Vinv, T, d, h,
@@ -153,24 +218,10 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
             # this flight's samples do not fit: hand the buffer back first and redo the flight
             # from the same state, so that emptying the buffer changes nothing
             return FULL, t, n_s, n_e
-        while True:
-            tg = t_grid0 + dt * k
-            if tg >= t_next:
-                break
-            if tg > t:
-                if n_s + 3 > cap_s:
-                    # resume from this grid point: exact state there
-                    propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
-                    s_t[n_s] = tg
-                    s_x[n_s] = xn
-                    n_s += 1
-                    x[:] = xn
-                    return FULL, tg, n_s, n_e
-                propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
-                s_t[n_s] = tg
-                s_x[n_s] = xn
-                n_s += 1
-            k += 1
+        n_s, full, t_full = _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next,
+                                         t_grid0, dt, k, s_t, s_x, n_s, xn)
+        if full:  # resume from the last grid point written: its exact state is in x
+            return FULL, t_full, n_s, n_e
         if t_next > t:
             propagate(kind, lam, V, Vinv, phi, T, d, h, x, t_next - t, xn)
             x[:] = xn
@@ -184,43 +235,14 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
             s_t[n_s] = t
             s_x[n_s] = x
             n_s += 1
-        # -- is it a simple event? -------------------------------------------------------
-        i = -1
-        n_hit = 0
-        for j in range(p):
-            if hit[j]:
-                n_hit += 1
-                i = j
-        if n_hit != 1 or graze[i] or not jump_ok[i] or budget <= n_e:
+        if budget <= n_e:
             return HANDOFF, t, n_s, n_e
-        for j in range(n):
-            y[j] = x[j] / d[j]
-        ynorm = np.sqrt(np.sum(y * y))
-        closed_elsewhere = False
-        for j in range(p):
-            if j != i:
-                _coefficients(W, g0, j, y, a)
-                if a[0] <= _CLOSED_TOL * (row_norm[j] * ynorm + abs(g0[j])):
-                    closed_elsewhere = True
-        if closed_elsewhere:
+        i = _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first,
+                         geometric, ratio_tol, horizon, rel, min_interval, x, t, hit, graze,
+                         xn, y, a)
+        if i < 0:
             return HANDOFF, t, n_s, n_e
-        slot = zeno_slot[i]
-        status, _ = zeno_status(hist, count, first, slot, t, geometric, ratio_tol, horizon,
-                                rel, min_interval)
-        if status != ZENO_NONE:
-            return HANDOFF, t, n_s, n_e
-        # the jump, and does the guard leave its surface afterwards?
-        for r in range(n):
-            s = 0.0
-            for c in range(n):
-                s += J[i, r, c] * x[c]
-            xn[r] = s
-        for j in range(n):
-            y[j] = xn[j] / d[j]
-        _coefficients(W, g0, i, y, a)
-        if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
-            return HANDOFF, t, n_s, n_e
-        zeno_push(hist, count, first, slot, t)
+        zeno_push(hist, count, first, zeno_slot[i], t)
         e_t[n_e] = t
         e_i[n_e] = i
         e_pre[n_e] = x

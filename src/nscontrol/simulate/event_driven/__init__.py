@@ -41,6 +41,12 @@ returns (they observe, they cannot alter the run).
 
 Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"``,
 ``"contact_end"`` (mechanics), ``"jump"`` and ``"grazing"`` (linear hybrid systems).
+
+The package: :func:`integrate` here chooses the runner — :mod:`.hybrid_run`,
+:mod:`.linear_mechanics` or :mod:`.nonlinear_mechanics` — which share the options
+(``_options``), the recording (``_recording``: one sample buffer in front of the
+:class:`~nscontrol.simulate.trajectory.Recorder`), the Zeno history (``_zeno``) and the
+compiled flights with the arrays a run writes into (``_flight``).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""One flow prepared for the compiled event loop, and the regular sample grid."""
+"""One flow prepared for the compiled event loop, the arrays a run lends to it, and the
+regular sample grid."""
 
 from __future__ import annotations
 
