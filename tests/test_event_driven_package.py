@@ -144,3 +144,28 @@ def test_a_closed_gap_takes_the_full_check_and_rests() -> None:
     traj = simulate(system, np.array([0.0, 0.0]), (0.0, 1.0), progress=False)
     assert [e.kind for e in traj.events] == ["contact_start"]
     assert np.all(traj.x == 0.0)
+
+
+def test_a_listener_error_leaves_every_sample_in_the_recorder(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    recorders: list[Recorder] = []
+    init = Recorder.__init__
+
+    def keep(self: Recorder, *args: object, **kwargs: object) -> None:
+        init(self, *args, **kwargs)  # type: ignore[arg-type]
+        recorders.append(self)
+
+    monkeypatch.setattr(Recorder, "__init__", keep)
+    seen: list[float] = []
+
+    def listener(t: float, *_: object) -> None:
+        seen.append(t)
+        if len(seen) == 10:
+            raise RuntimeError("listener failed")
+
+    ball = BouncingBall()
+    with pytest.raises(RuntimeError, match="listener failed"):
+        simulate(ball.system(), ball.x0, (0.0, 10.0), progress=False, listeners=[listener])
+    # the samples of the compiled block (up to the accumulation, after the 10th impact) were
+    # handed to the recorder, not left in the run's buffer
+    assert recorders[-1].last_time >= seen[-1]

@@ -161,7 +161,9 @@ def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: 
 
 
 def _guarded(run: Any) -> Trajectory:
-    """Run; an error raised mid-run carries the trajectory computed so far."""
+    """Run; an error raised mid-run carries the trajectory computed so far. Any other
+    exception (a listener's own error, an interrupt) leaves every sample computed in the
+    recorder, where a caller holding it (the run's driver) finds them."""
     try:
         return run.run()
     except NscontrolError as err:
@@ -169,4 +171,10 @@ def _guarded(run: Any) -> Trajectory:
             err.trajectory = run.samples.finish(status=-1, message=str(err),
                                                 method="event_driven",
                                                 state_names=run.s.state_names)
+        raise
+    except BaseException:
+        try:
+            run.samples.flush()
+        except Exception:  # noqa: BLE001 - the original exception is the one to report
+            pass
         raise
