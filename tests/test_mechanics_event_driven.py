@@ -96,7 +96,7 @@ def test_restitution_on_random_chains_with_several_contacts(rng: np.random.Gener
         e = rng.uniform(0.0, 1.0, n - 1)
         x0 = np.concatenate([np.cumsum(rng.uniform(0.05, 0.3, n)), rng.normal(size=n)])
         chain = LagrangianSystem.chain(m, restitution=e)
-        traj = simulate(chain, x0, (0.0, 2.0), on_zeno="warn", dt=2.0)
+        traj = simulate(chain, x0, (0.0, 2.0), on_failure="warn", dt=2.0)
         impacts = traj.events_of("impact")
         assert impacts
         P = traj.stats["impulses"]
@@ -181,7 +181,7 @@ def test_zeno_warning_option_keeps_the_run() -> None:
     ball = LinearHybridSystem(A, [[1.0, 0.0, 0.0]], [0.0],
                               lambda t, x, idx: np.array([x[0], -0.9 * x[1], x[2]]))
     with pytest.warns(ZenoWarning, match="accumulation"):
-        traj = simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=10, on_zeno="warn")
+        traj = simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=10, on_failure="warn")
     assert traj.status == -1
     assert np.max(np.abs(traj.event_times("jump") - BouncingBall().impact_times(10))) < 1e-12
 
