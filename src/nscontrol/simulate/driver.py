@@ -235,11 +235,14 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
     lowered = None
     if isinstance(system, CompositeSystem):
         lowered = system.lower(cls, x0)
-        clash = sorted(set(lowered.options) & set(options))
+        clash = sorted(set(lowered.options) & set(options) - {"listeners"})
         if clash:
             raise ModelError(f"{clash[0]}: set by the closed loop's parts; do not pass it to "
                              "simulate as well")
-        system, x0, options = lowered.system, lowered.x0, {**options, **lowered.options}
+        merged = {**options, **lowered.options}
+        if "listeners" in options and "listeners" in lowered.options:  # the loop's first
+            merged["listeners"] = [*lowered.options["listeners"], *options["listeners"]]
+        system, x0, options = lowered.system, lowered.x0, merged
     if not cls.supports(system):
         raise ModelError(f"{cls.name}: integrates {cls.systems()}, got "
                          f"{type(system).__name__}")
