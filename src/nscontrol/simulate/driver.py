@@ -247,6 +247,8 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
         raise ModelError(f"{cls.name}: integrates {cls.systems()}, got "
                          f"{type(system).__name__}")
     common, own = _split_options(cls, options)
+    if "time_stepping" in cls.capabilities and own.get("h") is not None:
+        own["h"] = _check_step(own["h"], t_span)
     with run_context(RunContext(cls.name)) as ctx:
         traj = _run_guarded(cls, ctx, system, x0, t_span, common, own)
     if lowered is not None:
@@ -289,6 +291,26 @@ def _split_options(cls: type[Integrator], options: dict[str, Any]
                                (name == "t_eval" and "t_eval" in cls.capabilities)):
             own[name] = common[name]
     return common, own
+
+
+#: More steps than this is refused up front (it would run for hours and fill the memory).
+MAX_STEPS = 10**9
+
+
+def _check_step(h: Any, t_span: tuple[float, float]) -> float:
+    """A step ``0 < h <= tf - t0`` that implies a feasible number of steps."""
+    from .._validation import check_positive
+
+    h = check_positive("h", h)
+    span = t_span[1] - t_span[0]
+    if h > span * (1 + 1e-12):
+        raise ModelError(f"h: the step {h:.6g} is longer than the span {span:.6g}; use "
+                         f"h <= {span:.6g} (a few hundred steps per time constant is typical)")
+    steps = span / h
+    if steps > MAX_STEPS:
+        raise ModelError(f"h: {h:.3g} on a span of {span:.6g} means {steps:.3g} steps (more "
+                         f"than {MAX_STEPS:.0e}); take a larger step or a shorter span")
+    return h
 
 
 def _with_capability(name: str) -> list[str]:
@@ -337,7 +359,37 @@ def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
             except (AttributeError, TypeError):  # pragma: no cover - exotic exceptions
                 pass
         raise
+    traj = _stop_at_non_finite(traj, on_failure)
     return _post_process(cls, traj, common)
+
+
+def _stop_at_non_finite(traj: Trajectory, on_failure: str) -> Trajectory:
+    """A run whose state became infinite or NaN is a failure, not a success: cut it at the
+    first non-finite sample and raise (or return it with ``status = -1``)."""
+    from ..errors import NonFiniteStateError
+
+    finite = np.isfinite(traj.x).all(axis=1)
+    if finite.all():
+        return traj
+    i = int(np.argmin(finite))
+    j = int(np.argmin(np.isfinite(traj.x[i])))
+    name = traj.state_names[j] if j < len(traj.state_names) else f"x[{j}]"
+    where = (f"at t = {traj.t[i]:.6g}" if i == 0 else
+             f"between t = {traj.t[i - 1]:.6g} (last finite sample) and t = {traj.t[i]:.6g}")
+    message = (f"{traj.method or 'simulate'}: state {name} became {traj.x[i, j]} {where}; the "
+               f"model is unstable there, or a force, input or field returned a non-finite "
+               f"value (evaluate them at the last finite state, err.trajectory.x[-1])")
+    keep = np.arange(len(traj.t)) < i
+    partial = replace(traj, t=traj.t[keep], x=traj.x[keep],
+                      signals={k: np.asarray(v)[keep] for k, v in traj.signals.items()},
+                      events=tuple(e for e in traj.events if e.time < traj.t[i]),
+                      status=-1, message=message)
+    if on_failure == "raise":
+        raise NonFiniteStateError(message, time=float(traj.t[i]), state=name,
+                                  trajectory=partial)
+    if on_failure == "warn":
+        warnings.warn(message, NscontrolWarning, stacklevel=4)
+    return partial
 
 
 def _is_run_failure(err: NscontrolError) -> bool:
