@@ -51,11 +51,10 @@ its active set (see :func:`integrate`).
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
-
-import inspect
 
 import numpy as np
 
@@ -317,7 +316,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     if "gap" in traj.signals and traj.signals["gap"].size:
         traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
     if status < 0 and on_failure == "raise":
-        raise SolverError(message, status=_LCP_STATUS.get(code, "singular iteration matrix"),
+        raise SolverError(str(message), status=_LCP_STATUS.get(code, "singular iteration matrix"),
                           trajectory=traj)
     return traj
 
@@ -499,8 +498,11 @@ class _PythonRunner:
     path = "python"
 
     def __init__(self, system: Any, setup: _Setup, activation: float) -> None:
+        from ..numerics._lcp_kernels import lemke_kernel
+
         self.system, self.setup, self.activation = system, setup, float(activation)
         self.analytic = system.force is None or system.force_jacobian is not None
+        self.lemke = lemke_kernel
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The contacts predicted to close, ``g + γ h G v <= activation``."""
@@ -534,18 +536,17 @@ class _PythonRunner:
     def _step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
               p_row: FloatArray) -> tuple[int, FloatArray, FloatArray]:
         """One step from ``(q, v)`` at ``t``; writes the impulses into ``p_row``."""
-        from ..numerics._lcp_kernels import lemke_kernel
-
         s, st = self.system, self.setup
         h, th = st.h, st.theta
         M = s.mass_matrix(q)
         if not s.constant_mass:  # M(q) must stay positive definite along the motion
             _check_mass(M, t, q)
         if st.forces == "implicit":
-            Mhat, hf = self._linearised(t, q, v, M, fext)
+            Mhat, scale, hf = self._linearised(t, q, v, M, fext)
         else:
             Mhat, hf = M, h * (_checked_force(s, t, q, v) + fext)
-        Minv = _inverse(Mhat, t, st.forces)
+            scale = _norm1(M)
+        Minv = _inverse(Mhat, scale, t, st.forces)
         v_free = v + Minv @ hf
         G = np.asarray(s.gap_jacobian(q), float)
         un = G @ v
@@ -556,17 +557,21 @@ class _PythonRunner:
             MinvGt = Minv @ GA.T
             W = GA @ MinvGt
             qa = GA @ v_free + s.restitution[active] * un[active]
-            z, w = np.empty(active.size), np.empty(active.size)
-            code, _ = lemke_kernel(np.ascontiguousarray(W), qa, z, w, 0)
-            if code:
-                return code, q, v
+            if active.size == 1:  # closed form, as in the compiled paths
+                z = np.maximum(-qa / W[0], 0.0)
+            else:
+                z, w = np.empty(active.size), np.empty(active.size)
+                code, _ = self.lemke(np.ascontiguousarray(W), qa, z, w, 0)
+                if code:
+                    return code, q, v
             v_new = v_free + MinvGt @ z
             p_row[active] = z
         return 0, q + h * ((1 - th) * v + th * v_new), v_new
 
     def _linearised(self, t: float, q: FloatArray, v: FloatArray, M: FloatArray,
-                    fext: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """``M̂`` and ``h f̃`` of the linearised θ-method (module docstring), at ``t + θh``."""
+                    fext: FloatArray) -> tuple[FloatArray, float, FloatArray]:
+        """``M̂``, the norm of its terms and ``h f̃`` of the linearised θ-method (module
+        docstring), at ``t + θh``."""
         s, st = self.system, self.setup
         h, th = st.h, st.theta
         tm = t + th * h
@@ -581,7 +586,8 @@ class _PythonRunner:
                                f"{tm:.6g}, q = {q!r}, v = {v!r}; give force_jacobian or "
                                "keep the force finite near the motion")
         Mhat = M - h * th * Jv - (h * th) ** 2 * Jq
-        return Mhat, h * (f + fext + h * th * (Jq @ v))
+        scale = _norm1(M) + h * th * _norm1(Jv) + (h * th) ** 2 * _norm1(Jq)
+        return Mhat, scale, h * (f + fext + h * th * (Jq @ v))
 
 
 class _StepFailure(Exception):
@@ -610,12 +616,19 @@ def _checked_force(system: Any, t: float, q: FloatArray, v: FloatArray) -> Float
     return f
 
 
-def _inverse(Mhat: FloatArray, t: float, forces: str) -> FloatArray:
-    """``M̂⁻¹``, refused when ``M̂`` is singular to working precision (``rcond < n ε``)."""
+def _norm1(A: np.ndarray) -> float:
+    return float(np.abs(A).sum(axis=0).max())
+
+
+def _inverse(Mhat: FloatArray, scale: float, t: float, forces: str) -> np.ndarray:
+    """``M̂⁻¹``, refused when ``M̂`` is singular to working precision: ``rcond < n ε`` with
+    ``rcond = 1 / (scale ‖M̂⁻¹‖₁)`` and ``scale`` the 1-norm of the terms summed into ``M̂``
+    (cancellation between ``M`` and ``h²θ² ∂f/∂q`` is measured against the terms, not
+    against the result: a 1 x 1 ``M̂`` is never ill-conditioned by itself)."""
     n = Mhat.shape[0]
     try:
         Minv = np.linalg.inv(Mhat)
-        rcond = 1.0 / (np.abs(Mhat).sum(axis=0).max() * np.abs(Minv).sum(axis=0).max())
+        rcond = 1.0 / (scale * _norm1(Minv))
     except np.linalg.LinAlgError:
         rcond = 0.0
     if not rcond >= n * np.finfo(float).eps:  # also catches NaN
