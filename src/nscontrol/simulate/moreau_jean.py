@@ -71,6 +71,8 @@ _LCP_STATUS = {1: "ray termination (no solution)", 2: "iteration limit",
 _MODEL_ERROR = -2
 #: Status of a step loop stopped by a singular iteration matrix M̂.
 _SINGULAR = -3
+#: Unit roundoff.
+_EPS = float(np.finfo(float).eps)
 #: Floats per chunk of the compiled loop (bounds memory for large systems).
 _CHUNK_FLOATS = 2_000_000
 
@@ -499,10 +501,14 @@ class _PythonRunner:
 
     def __init__(self, system: Any, setup: _Setup, activation: float) -> None:
         from ..numerics._lcp_kernels import lemke_kernel
+        from ._mj_linearised_kernel import mj_linearised_kernel
 
         self.system, self.setup, self.activation = system, setup, float(activation)
         self.analytic = system.force is None or system.force_jacobian is not None
-        self.lemke = lemke_kernel
+        self.lemke, self.matrices = lemke_kernel, mj_linearised_kernel
+        n = system.n_dof
+        self.zeros = np.zeros((n, n))  # the Jacobians of explicit forces
+        self.minv, self.dv = np.empty((n, n)), np.empty(n)
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The contacts predicted to close, ``g + γ h G v <= activation``."""
@@ -542,12 +548,16 @@ class _PythonRunner:
         if not s.constant_mass:  # M(q) must stay positive definite along the motion
             _check_mass(M, t, q)
         if st.forces == "implicit":
-            Mhat, scale, hf = self._linearised(t, q, v, M, fext)
+            tm = t + th * h  # the θ-weighted time (module docstring)
+            f = _checked_force(s, tm, q, v)
+            Jq, Jv = self._jacobians(tm, q, v)
         else:
-            Mhat, hf = M, h * (_checked_force(s, t, q, v) + fext)
-            scale = _norm1(M)
-        Minv = _inverse(Mhat, scale, t, st.forces)
-        v_free = v + Minv @ hf
+            f, Jq, Jv = _checked_force(s, t, q, v), self.zeros, self.zeros
+        rcond = self.matrices(np.ascontiguousarray(M), Jq, Jv, f, fext, v, h, th, self.minv,
+                              self.dv)
+        _check_rcond(rcond, s.n_dof, t, st.forces)
+        Minv = self.minv
+        v_free = v + self.dv
         G = np.asarray(s.gap_jacobian(q), float)
         un = G @ v
         active = np.flatnonzero(s.gaps(q) + st.gamma * h * un <= self.activation)
@@ -568,26 +578,19 @@ class _PythonRunner:
             p_row[active] = z
         return 0, q + h * ((1 - th) * v + th * v_new), v_new
 
-    def _linearised(self, t: float, q: FloatArray, v: FloatArray, M: FloatArray,
-                    fext: FloatArray) -> tuple[FloatArray, float, FloatArray]:
-        """``M̂``, the norm of its terms and ``h f̃`` of the linearised θ-method (module
-        docstring), at ``t + θh``."""
-        s, st = self.system, self.setup
-        h, th = st.h, st.theta
-        tm = t + th * h
-        f = _checked_force(s, tm, q, v)
+    def _jacobians(self, t: float, q: FloatArray, v: FloatArray
+                   ) -> tuple[FloatArray, FloatArray]:
+        """``∂f/∂q, ∂f/∂v`` at ``(t, q, v)``, finite (a ``_StepFailure`` otherwise)."""
         try:
-            Jq, Jv, _ = s.force_jacobians(tm, q, v)
+            Jq, Jv, _ = self.system.force_jacobians(t, q, v)
         except ModelError as err:
             raise _StepFailure(_MODEL_ERROR, "model_error", str(err)) from None
-        if not self.analytic and not (np.all(np.isfinite(Jq)) and np.all(np.isfinite(Jv))):
+        if not self.analytic and not (np.isfinite(Jq).all() and np.isfinite(Jv).all()):
             raise _StepFailure(_MODEL_ERROR, "model_error",
                                f"force: its central differences are not finite at t = "
-                               f"{tm:.6g}, q = {q!r}, v = {v!r}; give force_jacobian or "
+                               f"{t:.6g}, q = {q!r}, v = {v!r}; give force_jacobian or "
                                "keep the force finite near the motion")
-        Mhat = M - h * th * Jv - (h * th) ** 2 * Jq
-        scale = _norm1(M) + h * th * _norm1(Jv) + (h * th) ** 2 * _norm1(Jq)
-        return Mhat, scale, h * (f + fext + h * th * (Jq @ v))
+        return np.ascontiguousarray(Jq), np.ascontiguousarray(Jv)
 
 
 class _StepFailure(Exception):
@@ -609,35 +612,24 @@ def _check_mass(M: FloatArray, t: float, q: FloatArray) -> None:
 
 def _checked_force(system: Any, t: float, q: FloatArray, v: FloatArray) -> FloatArray:
     f = np.asarray(system.forces(t, q, v), float)
-    if f.shape != (system.n_dof,) or not np.all(np.isfinite(f)):
+    if f.shape != (system.n_dof,) or not np.isfinite(f).all():
         raise _StepFailure(_MODEL_ERROR, "model_error",
                            f"force: expected a finite vector of length {system.n_dof} at "
                            f"t = {t:.6g}, got {f!r} (q = {q!r}, v = {v!r})")
     return f
 
 
-def _norm1(A: np.ndarray) -> float:
-    return float(np.abs(A).sum(axis=0).max())
-
-
-def _inverse(Mhat: FloatArray, scale: float, t: float, forces: str) -> np.ndarray:
-    """``M̂⁻¹``, refused when ``M̂`` is singular to working precision: ``rcond < n ε`` with
-    ``rcond = 1 / (scale ‖M̂⁻¹‖₁)`` and ``scale`` the 1-norm of the terms summed into ``M̂``
-    (cancellation between ``M`` and ``h²θ² ∂f/∂q`` is measured against the terms, not
-    against the result: a 1 x 1 ``M̂`` is never ill-conditioned by itself)."""
-    n = Mhat.shape[0]
-    try:
-        Minv = np.linalg.inv(Mhat)
-        rcond = 1.0 / (scale * _norm1(Minv))
-    except np.linalg.LinAlgError:
-        rcond = 0.0
-    if not rcond >= n * np.finfo(float).eps:  # also catches NaN
+def _check_rcond(rcond: float, n: int, t: float, forces: str) -> None:
+    """Refuse an iteration matrix ``M̂`` singular to working precision: ``rcond < n ε``,
+    ``rcond = 1 / (scale ‖M̂⁻¹‖₁)`` with ``scale`` the 1-norm of the terms summed into
+    ``M̂`` (cancellation between ``M`` and ``h²θ² ∂f/∂q`` is measured against the terms,
+    not against the result: a 1 x 1 ``M̂`` is never ill-conditioned by itself)."""
+    if not rcond >= n * _EPS:  # also catches NaN
         what = ("M(q) - hθ ∂f/∂v - h²θ² ∂f/∂q" if forces == "implicit" else "M(q)")
         raise _StepFailure(_SINGULAR, "solver_error",
                            f"moreau_jean: the iteration matrix {what} is singular at "
                            f"t = {t:.6g} (reciprocal condition number {rcond:.3g}); a "
                            "negative stiffness of size M/(hθ)² does this: try a smaller h")
-    return Minv
 
 
 # -- recording -----------------------------------------------------------------------------

@@ -656,7 +656,7 @@ def _as_jacobian_pair(value: Any, n: int, where: str, *, runtime: bool = False
         cls = ModelError if runtime else DimensionError
         raise cls(f"force_jacobian: expected two ({n}, {n}) arrays (dforce/dq, dforce/dv) "
                   f"{where}, got shapes {shapes[0]} and {shapes[1]}")
-    if not (np.all(np.isfinite(Jq)) and np.all(np.isfinite(Jv))):
+    if not (np.isfinite(Jq).all() and np.isfinite(Jv).all()):
         raise ModelError(f"force_jacobian: returned non-finite entries {where}")
     return Jq, Jv
 

@@ -1,0 +1,81 @@
+"""Cost per step of Moreau–Jean's Python path (``M(q)``, nonlinear forces), in one run.
+
+1. the two-link arm of ch03 §4.1 falling onto the ground (h = 1e-3, T = 1.5, one impact):
+   implicit forces with the analytic ``force_jacobian``, implicit with central differences
+   (the same arm without it), explicit forces; reference: the explicit scheme (the Python
+   path's only scheme before implicit forces), ``ratio`` = our steps/s over its steps/s;
+2. a ball on a spring-damper bouncing on the ground (h = 1e-3, T = 10), the spring-damper
+   given as a ``force`` callable (Python path, implicit) against the same linear system on
+   the compiled path (reference); ``accuracy`` holds the largest state difference.
+
+Run: ``nscontrol bench mj_python --json``. With an older nscontrol on ``PYTHONPATH`` (no
+``forces`` option), only the explicit arm runs: its figure is the cost before implicit forces.
+"""
+
+import inspect
+import warnings
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from harness import time_per_call
+
+from nscontrol.simulate import moreau_jean, simulate
+from nscontrol.systems.lagrangian import LagrangianSystem
+
+H = 1e-3
+HAS_FORCES = "forces" in inspect.signature(moreau_jean.integrate).parameters
+
+
+def _rate(system: Any, x0: list, t_end: float, budget: float, **kw: Any) -> tuple[float, Any]:
+    out = {}
+
+    def call() -> None:
+        out["r"] = simulate(system, x0, (0.0, t_end), method="moreau_jean", h=H,
+                            progress=False, signals=(), record_every=10**9, **kw)
+
+    s = time_per_call(call, budget=budget, min_calls=2)
+    return out["r"].stats["steps"] / s, out["r"]
+
+
+def _record(scenario: str, ours: float, reference: str | None, ref: float | None,
+            accuracy: dict) -> dict:
+    return {"scenario": scenario, "size": "steps", "ours_steps_per_s": ours,
+            "ours_us_per_step": 1e6 / ours, "reference": reference,
+            "reference_steps_per_s": ref, "ratio": ours / ref if ref else None,
+            "accuracy": accuracy}
+
+
+def run(quick: bool = False) -> Iterator[dict]:
+    budget = 0.5 if quick else 2.0
+    arm = LagrangianSystem.two_link_arm()
+    x0 = [0.8, -1.2, 0.0, 0.0]
+    if not HAS_FORCES:
+        rate, traj = _rate(arm, x0, 1.5, budget)
+        yield _record("arm-explicit (before implicit forces)", rate, None, None,
+                      {"impacts": len(traj.events_of("impact"))})
+        return
+    explicit, _ = _rate(arm, x0, 1.5, budget, forces="explicit")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        arm_fd = LagrangianSystem(arm.mass, force=arm.force, gap=arm.gap,
+                                  jacobian=arm.jacobian, names=arm.names)
+    yield _record("arm-explicit", explicit, "explicit", explicit, {})
+    for name, system in (("arm-implicit-analytic", arm), ("arm-implicit-central-diff", arm_fd)):
+        rate, traj = _rate(system, x0, 1.5, budget)
+        yield _record(name, rate, "explicit", explicit,
+                      {"force_jacobian": traj.stats["force_jacobian"],
+                       "impacts": len(traj.events_of("impact"))})
+    k, c, g = 50.0, 0.5, 9.81
+    common = dict(constant_force=[-g], gap_matrix=[[1.0]], gap_offset=[0.1], restitution=0.7)
+    linear = LagrangianSystem(np.eye(1), stiffness=[[k]], damping=[[c]], **common)
+    python = LagrangianSystem(np.eye(1), force=lambda t, q, v: -k * q - c * v,
+                              force_jacobian=lambda t, q, v: (np.array([[-k]]),
+                                                              np.array([[-c]])), **common)
+    ref, _ = _rate(linear, [1.0, 0.0], 10.0, budget)
+    rate, _ = _rate(python, [1.0, 0.0], 10.0, budget)
+    a = simulate(linear, [1.0, 0.0], (0.0, 10.0), method="moreau_jean", h=H, progress=False)
+    b = simulate(python, [1.0, 0.0], (0.0, 10.0), method="moreau_jean", h=H, progress=False)
+    yield _record("ball-spring-python-vs-compiled", rate, "compiled tridiagonal path", ref,
+                  {"max_state_difference": float(np.max(np.abs(a.x - b.x))),
+                   "steps": b.stats["steps"]})
