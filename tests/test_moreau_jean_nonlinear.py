@@ -287,3 +287,32 @@ def test_forces_option_is_validated() -> None:
     with pytest.raises(ModelError, match=r"^forces: expected 'implicit' or 'explicit'"):
         simulate(LagrangianSystem.bouncing_ball(), [1.0, 0.0], (0.0, 0.1),
                  method="moreau_jean", h=1e-3, forces="semi")
+
+
+def test_linearised_kernel_inverts_and_measures_like_numpy(rng) -> None:
+    from nscontrol.simulate._mj_linearised_kernel import mj_linearised_kernel
+
+    for n in (1, 2, 6):
+        A = rng.standard_normal((n, n))
+        M = A @ A.T + n * np.eye(n)
+        Jq, Jv = rng.standard_normal((n, n)) * 50, rng.standard_normal((n, n))
+        f, fext, v = rng.standard_normal(n), rng.standard_normal(n), rng.standard_normal(n)
+        h, th = 0.05, 0.5
+        minv, dv = np.empty((n, n)), np.empty(n)
+        rcond = mj_linearised_kernel(M, Jq, Jv, f, fext, v, h, th, minv, dv)
+        Mhat = M - h * th * Jv - (h * th) ** 2 * Jq  # not symmetric: pivoting is exercised
+        ref = np.linalg.inv(Mhat)
+        kappa = np.linalg.cond(Mhat, 1)
+        # two inversions of the same matrix: each within κ n ε of the exact inverse
+        assert np.max(np.abs(minv - ref)) <= 2 * kappa * n * EPS * np.max(np.abs(ref))
+        hf = h * (f + fext + h * th * Jq @ v)
+        assert np.allclose(dv, ref @ hf, rtol=0, atol=2 * kappa * n * EPS * np.max(
+            np.abs(ref)) * np.max(np.abs(hf)) * n)
+        scale = sum(c * np.linalg.norm(X, 1) for c, X in ((1, M), (h * th, Jv),
+                                                            ((h * th) ** 2, Jq)))
+        assert rcond == pytest.approx(1 / (scale * np.linalg.norm(ref, 1)),
+                                      rel=2 * kappa * n * EPS)
+    # exactly singular: 0
+    minv, dv = np.empty((2, 2)), np.empty(2)
+    assert mj_linearised_kernel(np.eye(2), np.zeros((2, 2)), np.eye(2), np.zeros(2),
+                                np.zeros(2), np.zeros(2), 1.0, 1.0, minv, dv) == 0.0
