@@ -112,6 +112,22 @@ def test_implicit_forces_stay_stable_on_a_stiff_spring_where_explicit_ones_blow_
     q = explicit.x[:, 0]
     assert np.allclose(np.abs(q[11:] / q[10:-1]), rho, rtol=1e-12, atol=0.0)
     assert abs(q[-1]) > 1e10 * x0[0]
+    # explicit, θ = ½ at a small h ω = 0.5: the map [[1 - (hω)²/2, h], [-hω², 1]] has
+    # complex eigenvalues of modulus √det = √(1 + (hω)²/2) > 1 for every hω < 4: it grows.
+    # With A = V Λ V⁻¹ and |Λ| = ρ I, ρ^N / κ(V) <= ‖A^N x0‖ / ‖x0‖ <= κ(V) ρ^N exactly.
+    hw_small = 0.5
+    A = np.array([[1 - hw_small**2 / 2, h], [-(hw_small / h) ** 2 * h, 1.0]])
+    rho_half = np.sqrt(1 + hw_small**2 / 2)
+    assert np.allclose(np.abs(np.linalg.eigvals(A)), rho_half, rtol=1e-14)
+    kappa_v = np.linalg.cond(np.linalg.eig(A)[1])
+    soft = LagrangianSystem(np.eye(1), force=lambda t, q, v: -(hw_small / h) ** 2 * q, **FAR)
+    grows = simulate(soft, x0, (0.0, 1.0), method="moreau_jean", h=h, theta=0.5,
+                     forces="explicit")
+    n_steps = grows.stats["steps"]
+    gain = np.linalg.norm(grows.x[-1]) / np.linalg.norm(x0)
+    assert rho_half**n_steps / kappa_v <= gain * (1 + 1e-10) and \
+        gain <= kappa_v * rho_half**n_steps * (1 + 1e-10)  # 1e-10: roundoff over 100 steps
+    assert gain > 1e3
     # implicit, θ = 1: A-stable and damping: the energy never increases
     damped = simulate(spring, x0, span, method="moreau_jean", h=h, theta=1.0)
     E = damped.signals["energy"]

@@ -142,9 +142,9 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         ``"implicit"`` linearises them about the step's start (the θ-method of the module
         docstring; Jacobians from ``force_jacobian`` or central differences); ``"explicit"``
         evaluates ``f(t_k, q_k, v_k)`` only (the scheme before implicit forces: stable only
-        for ``θ = 1`` and ``h ω < 2``, weakly unstable for ``θ = ½``), and sends a linear
-        system to the Python path too, for comparison. Linear forces on the compiled paths
-        are always implicit.
+        for ``θ = 1`` and ``h ω < 2``; for ``θ = ½`` it grows by ``√(1 + (hω)²/2)`` per
+        step on a spring), and sends a linear system to the Python path too, for
+        comparison. Linear forces on the compiled paths are always implicit.
 
     Returns
     -------
