@@ -86,11 +86,34 @@ def test_order_of_the_linearised_theta_method(problem, theta: float, order: floa
     errs = [abs(simulate(system, x0, (0.0, T), method="moreau_jean", h=h, theta=theta,
                          signals=[]).x[-1, 0] - ref[0]) for h in hs]
     slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
-    # the error is C h^p (1 + O(h ω)): over h ω <= 0.04 (ω <= 2 the fastest frequency) the
-    # next term shifts each halving's slope by about h ω / (2 ln 2) <= 0.03; margin 0.1.
-    # The reference's error (1e-12) is far below the smallest error (> 1e-7).
+    # the error is C h^p (1 + c h + ...): the next term moves a halving's slope by about
+    # c h / (2 ln 2); margin 0.1 allows |c| up to 7 at h = 0.02, a few times the fastest
+    # frequency ω (3.1 for the pendulum, about 2 for the Duffing oscillator). The
+    # reference's error (1e-12) is far below the smallest error (> 1e-7).
     assert abs(slope - order) <= 0.1, (slope, errs)
     assert min(errs) > 1e3 * 1e-12
+
+
+@pytest.mark.parametrize("mass_at, order", [("start", 1.0), ("predicted", 2.0)])
+def test_order_with_a_configuration_dependent_mass(mass_at: str, order: float) -> None:
+    # m(q) = 1 + q², V = k q²/2: Lagrange's equation m q'' = -q q'² - k q. With M frozen at
+    # q_k, θ = ½ is first order; at the predicted q_k + θ h v_k second order again.
+    k = 4.0
+    system = LagrangianSystem(
+        lambda q: np.array([[1.0 + q[0] ** 2]]), force=lambda t, q, v: -q * v**2 - k * q,
+        force_jacobian=lambda t, q, v: (np.array([[-v[0] ** 2 - k]]),
+                                        np.array([[-2 * q[0] * v[0]]])),
+        names=("x",), **FAR)
+    x0, T = [1.0, 0.0], 2.0
+    ref = solve_ivp(lambda t, x: [x[1], (-x[0] * x[1] ** 2 - k * x[0]) / (1 + x[0] ** 2)],
+                    (0.0, T), x0, method="DOP853", rtol=1e-12, atol=1e-14).y[:, -1]
+    hs = 0.02 / 2.0 ** np.arange(5)
+    errs = [abs(simulate(system, x0, (0.0, T), method="moreau_jean", h=h, theta=0.5,
+                         mass_at=mass_at, signals=[]).x[-1, 0] - ref[0]) for h in hs]
+    slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    # as for constant M: the next term of the error, relative size c h with |c| a few times
+    # ω = 2, moves a halving's slope by c h / (2 ln 2); margin 0.1 (|c| <= 7 at h = 0.02)
+    assert abs(slope - order) <= 0.1, (slope, errs)
 
 
 # -- stability on a stiff spring --------------------------------------------------------------
@@ -299,10 +322,12 @@ def test_singular_iteration_matrix_is_a_solver_error_with_the_run() -> None:
     assert traj.status == -1 and "singular" in traj.message
 
 
-def test_forces_option_is_validated() -> None:
+def test_forces_and_mass_at_options_are_validated() -> None:
+    ball = LagrangianSystem.bouncing_ball()
     with pytest.raises(ModelError, match=r"^forces: expected 'implicit' or 'explicit'"):
-        simulate(LagrangianSystem.bouncing_ball(), [1.0, 0.0], (0.0, 0.1),
-                 method="moreau_jean", h=1e-3, forces="semi")
+        simulate(ball, [1.0, 0.0], (0.0, 0.1), method="moreau_jean", h=1e-3, forces="semi")
+    with pytest.raises(ModelError, match=r"^mass_at: expected 'start' or 'predicted'"):
+        simulate(ball, [1.0, 0.0], (0.0, 0.1), method="moreau_jean", h=1e-3, mass_at="end")
 
 
 def test_linearised_kernel_inverts_and_measures_like_numpy(rng) -> None:

@@ -26,7 +26,10 @@ linear forces ``J_q = -K``, ``J_v = -D``: ``M̂ = M + hθD + h²θ²K`` and
 and with constant ``M`` the step is a linearly implicit (Rosenbrock-type) θ-method: first
 order for ``θ = 1``, second order for ``θ = ½`` (the linearisation error
 ``O(|q_{k+1} - q_k|²) = O(h²)`` enters multiplied by ``h``), and A-stable on linear forces.
-With ``M(q)`` frozen at ``q_k`` it is first order whatever ``θ``. ``J_q, J_v`` come from
+With ``M(q)`` frozen at ``q_k`` it is first order whatever ``θ`` (the step is
+``h M(q_k)⁻¹ f̄`` where the trapezoidal rule needs ``M`` at ``q_{k+½}``: an ``O(h²)`` local
+error); ``mass_at="predicted"`` evaluates ``M`` at ``q_k + θ h v_k`` (within ``O(h²)`` of
+``q_{k+θ}``), which restores second order for ``θ = ½``. ``J_q, J_v`` come from
 the model's ``force_jacobian`` or from central differences (see
 :meth:`~nscontrol.systems.LagrangianSystem.force_jacobians`). ``forces="explicit"`` keeps
 ``M̂ = M(q_k)``, ``f̃ = f(t_k, q_k, v_k) + S u_k``.
@@ -87,6 +90,7 @@ class _Setup:
     gamma: float
     Sinput: FloatArray | None
     forces: str = "implicit"
+    mass_at: str = "start"
 
 
 def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | None = None,
@@ -95,7 +99,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
               listeners: Sequence[Callable[..., None]] = (), record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None,
               activation: float | None = None, on_failure: str = "raise",
-              forces: str = "implicit") -> Trajectory:
+              forces: str = "implicit", mass_at: str = "start") -> Trajectory:
     """Moreau–Jean time-stepping from ``x0 = [q0; v0]`` over ``t_span``.
 
     Parameters
@@ -145,6 +149,10 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         for ``θ = 1`` and ``h ω < 2``; for ``θ = ½`` it grows by ``√(1 + (hω)²/2)`` per
         step on a spring), and sends a linear system to the Python path too, for
         comparison. Linear forces on the compiled paths are always implicit.
+    mass_at : {"start", "predicted"}
+        Where a configuration-dependent ``M(q)`` is evaluated: at ``q_k`` (the scheme of the
+        module docstring; first order whatever θ), or at the predicted
+        ``q_k + θ h v_k`` (``O(h²)`` from ``q_{k+θ}``: second order for ``θ = ½``).
 
     Returns
     -------
@@ -208,7 +216,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                              theta=theta, gamma=gamma, u=u, controller=controller,
                              listeners=reorder_listeners(listeners, back),
                              record_every=record_every, signals=signals, progress=progress,
-                             activation=activation, on_failure=on_failure, forces=forces)
+                             activation=activation, on_failure=on_failure, forces=forces,
+                             mass_at=mass_at)
         except NscontrolError as err:  # the partial run in the chapter's state order too
             if isinstance(err.trajectory, Trajectory):
                 err.trajectory = reorder_states(err.trajectory, back, system.state_names)
@@ -224,6 +233,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
     if forces not in ("implicit", "explicit"):
         raise ModelError(f"forces: expected 'implicit' or 'explicit', got {forces!r}")
+    if mass_at not in ("start", "predicted"):
+        raise ModelError(f"mass_at: expected 'start' or 'predicted', got {mass_at!r}")
     if controller is not None and not callable(controller):
         raise ModelError("controller: expected a callable (t, q, v) -> u")
     reads = _controller_reads(controller)
@@ -244,7 +255,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     rec = Recorder(system.n_states, every=record_every, signals=signals,
                    offered=("impulse", "gap", "energy"))
     _sample_initial(rec, system, t0, x0)
-    setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces)
+    setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces,
+                   mass_at)
     runner = _choose_runner(system, setup, activation)
     path = runner.path
     state = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
@@ -257,7 +269,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
             k = state["k"]
             if k == n_full:  # the shortened last step
                 runner = _choose_runner(system, _Setup(system, h_last, theta, gamma,
-                                                       setup.Sinput, forces), activation)
+                                                       setup.Sinput, forces, mass_at),
+                                        activation)
                 times, step = np.array([t0 + h * k]), h_last
             else:
                 chunk = 1 if per_step else max(1, min(n_full - k, 20_000, _CHUNK_FLOATS // max(
@@ -544,9 +557,10 @@ class _PythonRunner:
         """One step from ``(q, v)`` at ``t``; writes the impulses into ``p_row``."""
         s, st = self.system, self.setup
         h, th = st.h, st.theta
-        M = s.mass_matrix(q)
+        qm = q + th * h * v if st.mass_at == "predicted" and not s.constant_mass else q
+        M = s.mass_matrix(qm)
         if not s.constant_mass:  # M(q) must stay positive definite along the motion
-            _check_mass(M, t, q)
+            _check_mass(M, t, qm)
         if st.forces == "implicit":
             tm = t + th * h  # the θ-weighted time (module docstring)
             f = _checked_force(s, tm, q, v)
