@@ -14,9 +14,16 @@
 
 Run: ``nscontrol bench mj_python --json``. With an older nscontrol on ``PYTHONPATH`` (no
 ``forces`` option), only the explicit arm runs: its figure is the cost before implicit forces.
+With ``MJ_BEFORE=/path/to/old/simulate/moreau_jean.py`` set, that older integrator is loaded
+beside the current one and the arm is timed with both, alternately, in the same run
+(``arm-now-vs-before``: ``ratio`` = our steps/s, implicit forces, over the old one's; the
+explicit scheme's ratio in ``accuracy``).
 """
 
+import importlib.util
 import inspect
+import os
+import sys
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -86,6 +93,36 @@ def run(quick: bool = False) -> Iterator[dict]:
                   {"max_state_difference": float(np.max(np.abs(a.x - b.x))),
                    "steps": b.stats["steps"]})
     yield from _orders(budget)
+    if os.environ.get("MJ_BEFORE"):
+        yield _before(arm, x0, budget, os.environ["MJ_BEFORE"])
+
+
+def _before(arm: Any, x0: list, budget: float, path: str) -> dict:
+    """The arm with the integrator at ``path`` (loaded as a sibling module) and ours."""
+    spec = importlib.util.spec_from_file_location("nscontrol.simulate._mj_before", path)
+    assert spec and spec.loader
+    old = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = old  # its dataclasses look their module up
+    spec.loader.exec_module(old)
+    rates: dict[str, list[float]] = {"now": [], "now_explicit": [], "before": []}
+    runs = (("now", moreau_jean.integrate, {}),
+            ("now_explicit", moreau_jean.integrate, {"forces": "explicit"}),
+            ("before", old.integrate, {}))
+    for _ in range(3):  # alternate, so that all see the same machine load
+        for key, integrate, kw in runs:
+            out: dict = {}
+
+            def call(integrate: Any = integrate, out: dict = out, kw: dict = kw) -> None:
+                out["r"] = integrate(arm, x0, (0.0, 1.5), h=H, progress=False, signals=(),
+                                     record_every=10**9, **kw)
+
+            seconds = time_per_call(call, budget=budget / 3, min_calls=2)
+            rates[key].append(out["r"].stats["steps"] / seconds)
+    now, before = float(np.median(rates["now"])), float(np.median(rates["before"]))
+    explicit = float(np.median(rates["now_explicit"]))
+    return _record("arm-now-vs-before", now, f"moreau_jean at {path}", before,
+                   {"explicit_now_over_before": explicit / before,
+                    **{f"steps_per_s_{k}": v for k, v in rates.items()}})
 
 
 def _orders(budget: float) -> Iterator[dict]:
