@@ -10,7 +10,8 @@
 3. orders of convergence without contact (pendulum with its analytic Jacobian, a forced
    damped Duffing oscillator by central differences): the slope of the error in ``q(T)``,
    T = 2, against DOP853 at rtol 1e-12, h = 0.02 halved 4 times, for θ = 1 and θ = ½; speed
-   of the smallest h, the explicit scheme's as reference.
+   of the smallest h, the explicit scheme's as reference; and ``m(q) = 1 + q²`` at θ = ½
+   with ``M`` at ``q_k`` (first order) and at the predicted ``q_k + θ h v_k`` (second).
 
 Run: ``nscontrol bench mj_python --json``. With an older nscontrol on ``PYTHONPATH`` (no
 ``forces`` option), only the explicit arm runs: its figure is the cost before implicit forces.
@@ -87,11 +88,14 @@ def run(quick: bool = False) -> Iterator[dict]:
                                                               np.array([[-c]])), **common)
     ref, _ = _rate(linear, [1.0, 0.0], 10.0, budget)
     rate, _ = _rate(python, [1.0, 0.0], 10.0, budget)
-    a = simulate(linear, [1.0, 0.0], (0.0, 10.0), method="moreau_jean", h=H, progress=False)
-    b = simulate(python, [1.0, 0.0], (0.0, 10.0), method="moreau_jean", h=H, progress=False)
+    python_fd = LagrangianSystem(np.eye(1), force=lambda t, q, v: -k * q - c * v, **common)
+    a, b, d = (simulate(sys_, [1.0, 0.0], (0.0, 10.0), method="moreau_jean", h=H,
+                        progress=False) for sys_ in (linear, python, python_fd))
     yield _record("ball-spring-python-vs-compiled", rate, "compiled tridiagonal path", ref,
                   {"max_state_difference": float(np.max(np.abs(a.x - b.x))),
-                   "steps": b.stats["steps"]})
+                   "max_state_difference_central_differences": float(np.max(np.abs(
+                       a.x - d.x))),
+                   "max_abs_state": float(np.max(np.abs(a.x))), "steps": b.stats["steps"]})
     yield from _orders(budget)
     if os.environ.get("MJ_BEFORE"):
         yield _before(arm, x0, budget, os.environ["MJ_BEFORE"])
@@ -141,16 +145,29 @@ def _orders(budget: float) -> Iterator[dict]:
                                    [1.0, 0.0]),
                 "duffing-order (central differences)": (
                     duffing, lambda t, x: [x[1], duffing_force(t, x[0], x[1])], [1.0, 0.5])}
+    k = 4.0  # m(q) = 1 + q², V = k q²/2: m q'' = -q q'² - k q
+    mass_q = LagrangianSystem(
+        lambda q: np.array([[1.0 + q[0] ** 2]]), force=lambda t, q, v: -q * v**2 - k * q,
+        force_jacobian=lambda t, q, v: (np.array([[-v[0] ** 2 - k]]),
+                                        np.array([[-2 * q[0] * v[0]]])), names=("x",), **far)
+    problems["mass-q-order"] = (
+        mass_q, lambda t, x: [x[1], (-x[0] * x[1] ** 2 - k * x[0]) / (1 + x[0] ** 2)],
+        [1.0, 0.0])
     hs = 0.02 / 2.0 ** np.arange(5)
     for name, (system, rhs, x0) in problems.items():
         ref = solve_ivp(rhs, (0.0, 2.0), x0, method="DOP853", rtol=1e-12, atol=1e-14).y[0, -1]
         acc = {}
-        for theta in (1.0, 0.5):
+        variants = ({"theta": 1.0}, {"theta": 0.5})
+        if name.startswith("mass-q"):
+            variants = ({"theta": 0.5}, {"theta": 0.5, "mass_at": "predicted"})
+        for kw in variants:
             errs = [abs(simulate(system, x0, (0.0, 2.0), method="moreau_jean", h=h,
-                                 theta=theta, signals=(), progress=False).x[-1, 0] - ref)
+                                 signals=(), progress=False, **kw).x[-1, 0] - ref)
                     for h in hs]
-            acc[f"slope_theta_{theta:g}"] = float(np.polyfit(np.log(hs), np.log(errs), 1)[0])
-            acc[f"error_theta_{theta:g}_h_{hs[-1]:g}"] = float(errs[-1])
+            tag = "_".join(f"{key}_{val:g}" if isinstance(val, float) else f"{key}_{val}"
+                           for key, val in kw.items())
+            acc[f"slope_{tag}"] = float(np.polyfit(np.log(hs), np.log(errs), 1)[0])
+            acc[f"error_{tag}_h_{hs[-1]:g}"] = float(errs[-1])
         rate, _ = _rate(system, x0, 2.0, budget, h=hs[-1])
         explicit, _ = _rate(system, x0, 2.0, budget, h=hs[-1], forces="explicit")
         yield _record(name, rate, "explicit", explicit, acc)
