@@ -522,11 +522,18 @@ class _PythonRunner:
         n = system.n_dof
         self.zeros = np.zeros((n, n))  # the Jacobians of explicit forces
         self.minv, self.dv = np.empty((n, n)), np.empty(n)
+        # affine gaps (possibly scipy.sparse): one dense matrix for the whole run
+        self.G = None if system.gap_matrix is None else system.dense_gap_matrix()
+
+    def gap_jacobian(self, q: FloatArray) -> np.ndarray:
+        if self.G is not None:
+            return self.G
+        return np.asarray(self.system.gap_jacobian(q), float)
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The contacts predicted to close, ``g + γ h G v <= activation``."""
         s, st = self.system, self.setup
-        un = np.asarray(s.gap_jacobian(q), float) @ v
+        un = self.gap_jacobian(q) @ v
         return np.flatnonzero(s.gaps(q) + st.gamma * st.h * un <= self.activation)
 
     def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
@@ -572,7 +579,7 @@ class _PythonRunner:
         _check_rcond(rcond, s.n_dof, t, st.forces)
         Minv = self.minv
         v_free = v + self.dv
-        G = np.asarray(s.gap_jacobian(q), float)
+        G = self.gap_jacobian(q)
         un = G @ v
         active = np.flatnonzero(s.gaps(q) + st.gamma * h * un <= self.activation)
         v_new = v_free
