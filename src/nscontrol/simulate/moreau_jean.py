@@ -198,6 +198,22 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     ...                     h=1e-3)
     >>> bool(np.allclose(traj.signals["impulse"][-1], stack.impulses(1e-3), rtol=1e-12))
     True
+
+    A controller reading the contact force: a unit mass on a spring ``k = 4`` pushed by
+    ``u = 2`` onto a wall at ``q = 0.3`` (gap ``0.3 - q``) rests there with the contact force
+    ``u - k q = 0.8``, which ``lam_hat`` reports once the contact is active:
+
+    >>> from nscontrol.systems.lagrangian import LagrangianSystem
+    >>> wall = LagrangianSystem(np.eye(1), stiffness=[[4.0]], gap_matrix=[[-1.0]],
+    ...                         gap_offset=[0.3])
+    >>> seen = []
+    >>> def push(t, q, v, *, lam_hat, active):
+    ...     seen.append((float(lam_hat[0]), active.tolist()))
+    ...     return 2.0 - 3.0 * v[0]
+    >>> traj = nsc.simulate(wall, [0.3, 0.0], (0.0, 0.01), method="moreau_jean", h=1e-3,
+    ...                     controller=push)
+    >>> seen[0], seen[-1][1], round(seen[-1][0], 12)
+    ((0.0, []), [0], 0.8)
     """
     from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
