@@ -30,4 +30,5 @@ def test_the_sampled_force_controller_of_the_architecture_page():
     # The integral loop contracts by (1 - T ki) = 0.8 a sample once in contact; after the
     # landing transient (< 1 s) 200 samples leave 0.8^200 ~ 4e-20 of the error: roundoff.
     assert abs(u[-1] - 3.0) < 1e-9 and abs(lam_hat[-1] - 3.0) < 1e-9
-    assert np.all(traj.x[:, 0] <= 1e-12)            # never through the wall (gap -q >= 0)
+    # Moreau–Jean captures the landing within a step: penetration <= h |v-| (landing speed)
+    assert np.max(traj.x[:, 0]) <= 1e-3 * np.max(np.abs(traj.x[:, 1]))

@@ -58,7 +58,7 @@ class MoreauJean(_ModuleIntegrator):
     module = "nscontrol.simulate.moreau_jean"
     capabilities = frozenset({"time_stepping", "listeners", "controller", "multipliers"})
     options: ClassVar[frozenset[str]] = frozenset(
-        {"h", "theta", "gamma", "u", "controller", "activation"})
+        {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:
