@@ -19,7 +19,7 @@ def test_bouncing_ball_impact_times_and_accumulation() -> None:
     assert np.max(np.abs(impacts[:20] - ball.impact_times(20))) < 1e-12
     acc = traj.events_of("accumulation")
     assert len(acc) == 1
-    assert abs(acc[0].time - 8.57895) < 5e-6
+    assert abs(acc[0].time - 8.57895) <= 5e-6    # the figure quoted to 6 digits: half a unit
     assert abs(acc[0].time - ball.accumulation_time) < 1e-9
     after = traj.t > acc[0].time
     assert np.all(np.abs(traj.x[after]) < 1e-12)  # at rest on the ground
