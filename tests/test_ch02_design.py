@@ -382,7 +382,8 @@ def test_gain_grows_like_eps_to_minus_N():
     p = impact_plant(example_bodies())
     norms = [place_scaled(p.A_a, p.C_a, LAMBDA1, e).conditioning.gain_norm
              for e in (1e-2, 1e-3)]
-    assert norms[1] / norms[0] == pytest.approx(1e4, rel=0.02)   # N = 4, lower terms
+    # G ~ eps^-N (1 + O(eps)): the lower powers change the ratio by O(1e-2), stated as 2 eps
+    assert norms[1] / norms[0] == pytest.approx(1e4, rel=2 * 1e-2)
 
 
 def test_observer_jump_equal_masses_swaps_the_velocity_estimates():
