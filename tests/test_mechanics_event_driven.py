@@ -19,7 +19,7 @@ def test_bouncing_ball_impact_times_and_accumulation() -> None:
     assert np.max(np.abs(impacts[:20] - ball.impact_times(20))) < 1e-12
     acc = traj.events_of("accumulation")
     assert len(acc) == 1
-    assert abs(acc[0].time - 8.57895) < 5e-6
+    assert abs(acc[0].time - 8.57895) <= 5e-6    # the figure quoted to 6 digits: half a unit
     assert abs(acc[0].time - ball.accumulation_time) < 1e-9
     after = traj.t > acc[0].time
     assert np.all(np.abs(traj.x[after]) < 1e-12)  # at rest on the ground
@@ -344,7 +344,9 @@ def test_input_runs_in_absolute_time_like_moreau_jean() -> None:
     mj = simulate(system, [0.0, 0.0], (5.0, 30.0), u=u, method="moreau_jean", h=1e-4)
     te, tm = ed.event_times("impact"), mj.event_times("impact")
     assert te.size == tm.size >= 2
-    assert np.max(np.abs(te - tm)) < 2e-3
+    # Moreau-Jean h = 1e-4: each impact on the grid within h, plus the O(h) phase drift of
+    # the flights over 25 s: 20 h (measured 1.9 h)
+    assert np.max(np.abs(te - tm)) < 20 * 1e-4
 
 
 def test_pre_and_post_impact_samples() -> None:
@@ -391,6 +393,7 @@ def test_linear_state_feedback_stays_exact() -> None:
     c = simulate(free, [0.0, 0.0], (0.0, 20.0),
                  controller=lambda t, q, v: -4.0 * q - 0.3 * v)
     tc = c.event_times("impact")[: ta.size]
+    # DOP853 at the default rtol = 1e-10 per step, hundreds of steps: 1e3 rtol (measured 7e-10)
     assert np.max(np.abs(tc - ta)) < 1e-7
 
 
