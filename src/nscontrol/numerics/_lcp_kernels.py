@@ -716,3 +716,69 @@ def all_finite(a):
         if not np.isfinite(a[i]):
             return False
     return True
+
+
+# --------------------------------------------------------------------------------- fused solves
+#: Status of the fused kernels below when ``q`` holds NaN or an infinite entry (the caller
+#: raises; the kernels themselves never do).
+Q_NOT_FINITE = -1
+
+
+@njit(cache=True)
+def lemke_verified(M, q, z_out, w_out, max_iter, row_sum_max):
+    """:func:`lemke_kernel` and its verification in one compiled call (a reusable solver's
+    per-call path: one dispatch instead of three).
+
+    ``row_sum_max`` is ``||M||_inf``, computed once by the caller. Returns
+    ``(status_code, iterations, residual, round-off floor)`` with ``w_out = M z + q``
+    recomputed from ``z_out``; status :data:`Q_NOT_FINITE` when ``q`` is not finite.
+    """
+    if not all_finite(q):
+        return Q_NOT_FINITE, 0, np.nan, np.nan
+    code, its = lemke_kernel(M, q, z_out, w_out, max_iter)
+    _matvec_plus(M, z_out, q, w_out)
+    res, floor = _residual_and_floor(z_out, w_out, q, row_sum_max)
+    return code, its, res, floor
+
+
+@njit(cache=True)
+def tridiagonal_verified(lower, diag, upper, q, z_inout, w_out, max_iter, warm):
+    """:func:`tridiagonal_lcp_kernel` (``warm=False``: from the projected Thomas sweeps) or
+    :func:`tridiagonal_howard` from ``z_inout`` (``warm=True``), then the verification of
+    :func:`verify_tridiagonal`, in one compiled call. Returns ``(status_code, iterations,
+    residual, round-off floor)``; :data:`Q_NOT_FINITE` when ``q`` is not finite."""
+    if not all_finite(q):
+        return Q_NOT_FINITE, 0, np.nan, np.nan
+    if warm:
+        code, its = tridiagonal_howard(lower, diag, upper, q, z_inout, w_out, max_iter)
+    else:
+        code, its = tridiagonal_lcp_kernel(lower, diag, upper, q, z_inout, w_out, max_iter)
+    res, floor = verify_tridiagonal(lower, diag, upper, q, z_inout, w_out)
+    return code, its, res, floor
+
+
+@njit(cache=True)
+def inf_norm(M):
+    """``||M||_inf = max_i sum_j |M[i, j]|`` of a dense matrix (no temporaries)."""
+    best = 0.0
+    for i in range(M.shape[0]):
+        s = 0.0
+        for j in range(M.shape[1]):
+            s += abs(M[i, j])
+        best = max(best, s)
+    return best
+
+
+@njit(cache=True)
+def tridiagonal_inf_norm(lower, diag, upper):
+    """``||M||_inf`` of the tridiagonal matrix with bands ``(lower, diag, upper)``."""
+    n = diag.shape[0]
+    best = 0.0
+    for i in range(n):
+        a = abs(diag[i])
+        if i > 0:
+            a += abs(lower[i - 1])
+        if i < n - 1:
+            a += abs(upper[i])
+        best = max(best, a)
+    return best
