@@ -274,8 +274,11 @@ class LCPSolver:
         if not isinstance(method, str) or method not in METHODS:
             raise ModelError(f"method: expected one of {list(METHODS)}, got {method!r}")
         self.method = method
-        self.tol = check_positive("tol", tol)
-        self.omega = check_in_interval("omega", omega, 0.0, 2.0, open_interval=True)
+        # plain floats in range skip the general checks (solve_lcp pays these per call)
+        self.tol = tol if type(tol) is float and 0.0 < tol < math.inf else check_positive(
+            "tol", tol)
+        self.omega = omega if type(omega) is float and 0.0 < omega < 2.0 else (
+            check_in_interval("omega", omega, 0.0, 2.0, open_interval=True))
         self.max_iter = None if max_iter is None else check_integer("max_iter", max_iter,
                                                                      minimum=1)
         self.strict = bool(strict)
@@ -430,7 +433,12 @@ class LCPSolver:
         return self.n > AUTO_PGS_MIN_SIZE and self._symmetric_positive_diagonal
 
     def _structured(self) -> bool:
-        return self.n > 2 and (self._bands is not None or self._sparse or self._banded_dense)
+        """Tridiagonal, sparse or narrow-band (``auto`` starts with ``banded``)."""
+        if self.n <= 2:
+            return False
+        if self._bands is not None or self._sparse:
+            return True
+        return self.n >= AUTO_BANDED_MIN_SIZE and self._banded_dense
 
     def _first_method(self) -> str:
         if self.method != "auto":
@@ -690,6 +698,8 @@ def _dense_block_solve(M: NDArray[np.float64], idx: NDArray[np.intp],
 
 def _as_lcp_matrix(M: Any) -> Any:
     """A finite square dense float array, or a finite square scipy.sparse CSR matrix."""
+    if _clean(M, 2) and M.shape[0] == M.shape[1]:
+        return M
     if hasattr(M, "tocsr") and not isinstance(M, np.ndarray):
         csr = M.tocsr()
         if csr.dtype != np.float64:
@@ -700,8 +710,6 @@ def _as_lcp_matrix(M: Any) -> Any:
             raise DimensionError(f"M: expected a square matrix, got shape {csr.shape}")
         check_finite("M", csr.data)
         return csr
-    if _clean(M, 2) and M.shape[0] == M.shape[1]:
-        return M
     if np.ndim(M) == 0:  # a scalar is a 1x1 LCP
         M = np.reshape(as_float_array("M", M), (1, 1))
     return np.ascontiguousarray(as_square("M", M))
