@@ -1,8 +1,11 @@
 """LCP solver speed: nscontrol's methods against Siconos's Lemke and PGS, in the same run.
 
-Scenarios: random P-matrices (n = 10, 100; Lemke and auto), random symmetric positive
-definite matrices (n = 10, 100; PGS), the tridiagonal Delassus matrix of a stack of N unit
-masses at rest (N = 10, 100, 1000, 10000; banded, auto, Lemke, PGS) whose impulses are known
+Scenarios: random P-matrices (n = 10, 100; Lemke and auto through ``solve_lcp``, and
+``reusable``: ``LCPSolver(M)`` built once outside the timing, then ``solver.solve(q)`` timed,
+the per-call cost of an application that solves with one ``M`` many times), random symmetric
+positive definite matrices (n = 10, 100; PGS, Lemke and ``reusable``), the tridiagonal
+Delassus matrix of a stack of N unit masses at rest (N = 10, 100, 1000, 10000; banded,
+auto, Lemke, PGS) whose impulses are known
 (``nscontrol.testing.lcp_problems.stack_delassus``), and the same matrix with a propagating
 impact, ``q = (-1, 1e-3, ..., 1e-3)`` at contact 0 (``impact``) and at the middle contact
 (``impact-mid``): Howard's worst case from ``z = 0`` (one contact per iteration, N = 1000
@@ -33,7 +36,7 @@ import numpy as np
 from harness import run_siconos, siconos_available, siconos_version, time_per_call
 
 from nscontrol.numerics import _lcp_kernels as kernels
-from nscontrol.numerics.lcp import solve_lcp
+from nscontrol.numerics.lcp import LCPSolver, solve_lcp
 from nscontrol.testing.lcp_problems import random_p_matrix, stack_delassus
 
 SICONOS_LEMKE_MAX = 1000
@@ -42,7 +45,8 @@ OURS_DENSE_MAX = 1000  # our dense Lemke/PGS on the stack: same limits as Sicono
 PGS_TOL = 1e-12
 PGS_MAX_ITER = 10_000
 #: Which Siconos solver each of our methods is compared with.
-COUNTERPART = {"lemke": "lemke", "auto": "lemke", "banded": "lemke", "pgs": "pgs"}
+COUNTERPART = {"lemke": "lemke", "auto": "lemke", "banded": "lemke", "pgs": "pgs",
+               "reusable": "lemke"}
 
 
 @dataclass(frozen=True)
@@ -67,11 +71,11 @@ def cases(quick: bool) -> list[Case]:
     out = []
     for n in (10,) if quick else (10, 100):
         out.append(Case("random-P", n, random_p_matrix(n, rng), rng.standard_normal(n),
-                        ("lemke", "auto")))
+                        ("lemke", "auto", "reusable")))
     for n in (10,) if quick else (10, 100):
         B = rng.standard_normal((n, n))
         out.append(Case("random-SPD", n, B @ B.T / n + np.eye(n), rng.standard_normal(n),
-                        ("pgs", "lemke")))
+                        ("pgs", "lemke", "reusable")))
     for n in (10, 100) if quick else (10, 100, 1000, 10_000):
         prob = stack_delassus(n)
         methods = ("banded", "auto") + (("lemke",) if n <= OURS_DENSE_MAX else ()) + (
@@ -119,7 +123,7 @@ def kernel_time(case: Case, method: str, budget: float) -> float | None:
         return _seconds_per_call(
             lambda: kernels.tridiagonal_lcp_kernel(lower, diag, upper, q, z, w, 0), budget)
     M = case.dense()
-    if method == "lemke":
+    if method in ("lemke", "reusable"):    # reusable: what auto picks for these (dense) M
         return _seconds_per_call(lambda: kernels.lemke_kernel(M, q, z, w, 0), budget)
     if method == "pgs":
         def pgs() -> None:
@@ -143,8 +147,13 @@ def record(case: Case, method: str, ref: dict | None, ref_note: str | None,
     M, q = case.M, case.q
     if method in ("lemke", "pgs"):
         M = case.dense()
-    res = solve_lcp(M, q, method=method)
-    ours = _seconds_per_call(lambda: solve_lcp(M, q, method=method), budget)
+    if method == "reusable":
+        solver = LCPSolver(M)       # validation and analysis of M: once, not timed
+        res = solver.solve(q)
+        ours = _seconds_per_call(lambda: solver.solve(q), budget)
+    else:
+        res = solve_lcp(M, q, method=method)
+        ours = _seconds_per_call(lambda: solve_lcp(M, q, method=method), budget)
     accuracy: dict[str, Any] = {"ours_status": res.status, "ours_method": res.method,
                                 "ours_residual": res.residual, "ours_iterations": res.iterations}
     if case.exact is not None:
