@@ -782,3 +782,24 @@ def tridiagonal_inf_norm(lower, diag, upper):
             a += abs(upper[i])
         best = max(best, a)
     return best
+
+
+@njit(cache=True)
+def dense_structure(M):
+    """One scan of a dense square matrix: ``(all entries finite, tridiagonal, ||M||_inf)``
+    (what :class:`~nscontrol.numerics.lcp.LCPSolver` needs of ``M`` before anything else)."""
+    n = M.shape[0]
+    finite = True
+    tridiagonal = True
+    best = 0.0
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            v = M[i, j]
+            if not np.isfinite(v):
+                finite = False
+            elif v != 0.0 and (j > i + 1 or j < i - 1):
+                tridiagonal = False
+            s += abs(v)
+        best = max(best, s)
+    return finite, tridiagonal, best

@@ -34,7 +34,7 @@ be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any, Literal
@@ -282,12 +282,21 @@ class LCPSolver:
         self.max_iter = None if max_iter is None else check_integer("max_iter", max_iter,
                                                                      minimum=1)
         self.strict = bool(strict)
-        self._M = _as_lcp_matrix(M)
+        if (type(M) is np.ndarray and M.dtype == np.float64 and M.ndim == 2
+                and M.flags.c_contiguous and M.flags.writeable and M.shape[0] == M.shape[1]):
+            # the common case in one compiled scan: finiteness, tridiagonality, ||M||_inf
+            finite, tridiagonal, self._row_sum_max = kernels.dense_structure(M)
+            if not finite:
+                check_finite("M", M)
+            self._M = self._dense = M
+            self._bands = _bands_of(M) if tridiagonal else None
+        else:
+            self._M = _as_lcp_matrix(M)
+            self._bands = _tridiagonal_bands(self._M)
+            self._row_sum_max = self._inf_norm()
         self.n: int = int(self._M.shape[0])
-        self._bands = _tridiagonal_bands(self._M)
-        self._row_sum_max = self._inf_norm()
         self.first_method: str = self._first_method()
-        self._run_first = _RUNNERS[self.first_method].__get__(self)
+        self._fused = self._fused_first_call()
         self._rescaled_solvers: dict[int, LCPSolver] = {}
 
     # ------------------------------------------------------------------ solve
@@ -319,12 +328,29 @@ class LCPSolver:
         if not (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1
                 and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == self.n):
             q = self._check_q(q)
-        z0v = None if z0 is None else as_vector("z0", z0, size=self.n)
-        z, w, status, its, res, method = self._run_first(q, z0v, self.max_iter)
-        if status == "solved":    # the common case, kept short: it is the per-call cost
+        if z0 is None and self._fused is not None:
+            # the per-call path of a reusable solver, kept short: one compiled call
+            n = self.n
+            z, w = np.empty(n), np.empty(n)
+            code, its, res, floor = self._fused(q, z, w)
+            if code == 0 and (res <= self.tol or res <= floor) and floor < math.inf:
+                z.setflags(write=False)
+                w.setflags(write=False)
+                method = self.first_method
+                return LCPResult(z, w, "solved", its, res, method,
+                                 f"{method}: solved (residual {res:.3g})")
+            if code == kernels.Q_NOT_FINITE:
+                check_finite("q", q)
+            first = self._outcome(z, w, code, its, res, floor, self.first_method)
+            z0v = None
+        else:
+            z0v = None if z0 is None else as_vector("z0", z0, size=self.n)
+            first = _RUNNERS[self.first_method](self, q, z0v, self.max_iter)
+        if first[2] == "solved":
+            z, w, status, its, res, method = first
             return LCPResult(z, w, status, its, res, method,
                              f"{method}: solved (residual {res:.3g})")
-        result = self._run_fallbacks(q, z0v, (z, w, status, its, res, method))
+        result = self._run_fallbacks(q, z0v, first)
         if result.status != "solved":
             result = self._retry_rescaled(q, z0v, result)
         if self.strict and result.status != "solved":
@@ -333,6 +359,22 @@ class LCPSolver:
                               f"copositive-plus, raise max_iter, or try another method",
                               status=result.status)
         return result
+
+    def _fused_first_call(self) -> Callable[..., tuple[int, int, float, float]] | None:
+        """``f(q, z, w) -> (code, iterations, residual, floor)``: the first method's kernel
+        fused with its verification, when it has one (Lemke, tridiagonal ``banded`` from
+        its own start); None otherwise."""
+        max_iter = self.max_iter
+        if self.first_method == "lemke":
+            M, norm = self._dense, self._row_sum_max
+            lemke = kernels.lemke_verified
+            return lambda q, z, w: lemke(M, q, z, w, max_iter or 0, norm)
+        if self.first_method == "banded" and self._bands is not None:
+            lower, diag, upper = self._bands
+            limit = int(max_iter or self.n + 2)
+            howard = kernels.tridiagonal_verified
+            return lambda q, z, w: howard(lower, diag, upper, q, z, w, limit, False)
+        return None
 
     def _run_fallbacks(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                        first: _Outcome) -> LCPResult:
@@ -375,7 +417,7 @@ class LCPSolver:
             return float(kernels.tridiagonal_inf_norm(lower, diag, upper))
         if isinstance(self._M, np.ndarray):
             return float(kernels.inf_norm(self._M))
-        if self.n == 0:
+        if self._M.shape[0] == 0:
             return 0.0
         return float(np.asarray(abs(self._M).sum(axis=1)).max())
 
@@ -728,15 +770,18 @@ def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
     """``(lower, diag, upper)`` when ``M`` is tridiagonal (no entry beyond the first
     off-diagonals), else None."""
     if isinstance(M, np.ndarray):
-        if not kernels.is_tridiagonal(M):
-            return None
-        return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
-                np.ascontiguousarray(np.diagonal(M, 1)))
+        return _bands_of(M) if kernels.is_tridiagonal(M) else None
     n = M.shape[0]
     lower, diag, upper = np.empty(max(n - 1, 0)), np.empty(n), np.empty(max(n - 1, 0))
     if not kernels.csr_tridiagonal_bands(M.indptr, M.indices, M.data, lower, diag, upper):
         return None
     return lower, diag, upper
+
+
+def _bands_of(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """``(lower, diag, upper)`` of a dense matrix, as contiguous copies."""
+    return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
+            np.ascontiguousarray(np.diagonal(M, 1)))
 
 
 # ----------------------------------------------------------------------------- PGS polish
