@@ -252,3 +252,16 @@ def test_extreme_but_representable_scales_are_solved():
     # an infeasible problem stays infeasible at any scale
     prob = no_solution()
     assert solve_lcp(prob.M, prob.q * 1e300).status == "ray_termination"
+
+
+def test_solver_pickles_and_keeps_solving():
+    import pickle
+
+    rng = np.random.default_rng(3)
+    M, q = random_p_matrix(8, rng), rng.standard_normal(8)
+    for matrix in (M, tridiagonal_m_matrix(8, rng), sp.csr_matrix(tridiagonal_m_matrix(8, rng))):
+        solver = LCPSolver(matrix)
+        solver.solve(q)                      # caches filled before pickling
+        clone = pickle.loads(pickle.dumps(solver))
+        assert_same_result(clone.solve(q), solver.solve(q))
+        assert repr(clone) == repr(solver)

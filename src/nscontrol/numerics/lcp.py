@@ -299,6 +299,21 @@ class LCPSolver:
         self._fused = self._fused_first_call()
         self._rescaled_solvers: dict[int, LCPSolver] = {}
 
+    def __getstate__(self) -> dict[str, Any]:
+        # the fused call is a closure (not picklable): rebuilt on unpickling
+        state = dict(self.__dict__)
+        del state["_fused"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._fused = self._fused_first_call()
+
+    def __repr__(self) -> str:
+        kind = "sparse" if self._sparse else "dense"
+        return (f"LCPSolver(n={self.n}, {kind}, method={self.method!r}, "
+                f"first_method={self.first_method!r}, tol={self.tol:g})")
+
     # ------------------------------------------------------------------ solve
 
     def solve(self, q: Any, *, z0: Any = None) -> LCPResult:
