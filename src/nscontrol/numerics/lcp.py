@@ -377,13 +377,18 @@ class LCPSolver:
 
     def _fused_first_call(self) -> Callable[..., tuple[int, int, float, float]] | None:
         """``f(q, z, w) -> (code, iterations, residual, floor)``: the first method's kernel
-        fused with its verification, when it has one (Lemke, tridiagonal ``banded`` from
-        its own start); None otherwise."""
+        fused with its verification, when it has one (Lemke, PGS with its polish from zero,
+        tridiagonal ``banded`` from its own start); None otherwise."""
         max_iter = self.max_iter
         if self.first_method == "lemke":
             M, norm = self._dense, self._row_sum_max
             lemke = kernels.lemke_verified
             return lambda q, z, w: lemke(M, q, z, w, max_iter or 0, norm)
+        if self.first_method == "pgs":
+            M, tol, omega = self._dense, self.tol, self.omega
+            sweeps = int(max_iter or 10_000)
+            pgs = kernels.pgs_verified
+            return lambda q, z, w: pgs(M, q, z, w, tol, sweeps, omega, True)
         if self.first_method == "banded" and self._bands is not None:
             lower, diag, upper = self._bands
             limit = int(max_iter or self.n + 2)
@@ -571,18 +576,14 @@ class LCPSolver:
 
     def _run_pgs(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                  max_iter: int | None) -> _Outcome:
-        check_finite("q", q)
-        M = self._dense
         n = self.n
-        z = np.zeros(n) if z0 is None else np.maximum(z0, 0.0)
+        z = np.zeros(n) if z0 is None else np.array(z0)   # the kernel clamps z0 to >= 0
         w = np.empty(n)
-        code, its = kernels.pgs_kernel(M, q, z, w, float(self.tol), int(max_iter or 10_000),
-                                       float(self.omega))
-        if code in (kernels.SOLVED, kernels.MAX_ITER):
-            polished = _polish(M, q, z, w)
-            if polished is not None:
-                return self._finish(q, polished, kernels.SOLVED, its, "pgs")
-        return self._finish(q, z, code, its, "pgs")
+        code, its, res, floor = kernels.pgs_verified(
+            self._dense, q, z, w, self.tol, int(max_iter or 10_000), self.omega, False)
+        if code == kernels.Q_NOT_FINITE:
+            check_finite("q", q)
+        return self._outcome(z, w, code, its, res, floor, "pgs")
 
     def _run_pgs_fallback(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                           max_iter: int | None) -> _Outcome:
@@ -799,27 +800,7 @@ def _bands_of(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
             np.ascontiguousarray(np.diagonal(M, 1)))
 
 
-# ----------------------------------------------------------------------------- PGS polish
-
-
-def _polish(M: NDArray[np.float64], q: NDArray[np.float64], z: NDArray[np.float64],
-            w: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """Direct solve on the active set an iterate has identified, if that solves the LCP.
-
-    PGS converges linearly, and its error in ``z`` is up to ``residual / lambda_min(M)``;
-    once the active set ``{z_i > w_i}`` is right, one solve of ``M[a, a] z_a = -q_a`` gives
-    the solution to round-off. Returns None when the polished point is not better.
-    """
-    active = np.flatnonzero(z > w)
-    polished = np.zeros_like(z)
-    if active.size:
-        try:
-            polished[active] = np.linalg.solve(M[np.ix_(active, active)], -q[active])
-        except np.linalg.LinAlgError:
-            return None
-    before = _natural_residual(z, M @ z + q, q)
-    after = _natural_residual(polished, M @ polished + q, q)
-    return polished if np.isfinite(after) and after < before else None
+# ----------------------------------------------------------------------------- residual
 
 
 def _natural_residual(z: NDArray[np.float64], w: NDArray[np.float64],
