@@ -348,6 +348,7 @@ class LCPSolver:
             n = self.n
             z, w = np.empty(n), np.empty(n)
             code, its, res, floor = self._fused(q, z, w)
+            # the acceptance test of _outcome, inlined
             if code == 0 and (res <= self.tol or res <= floor) and floor < math.inf:
                 z.setflags(write=False)
                 w.setflags(write=False)
@@ -369,7 +370,7 @@ class LCPSolver:
         if result.status != "solved":
             result = self._retry_rescaled(q, z0v, result)
         if self.strict and result.status != "solved":
-            raise SolverError(f"solve_lcp: no verified solution of the LCP of size {self.n} "
+            raise SolverError(f"no verified solution of the LCP of size {self.n} "
                               f"({result.message}); check that M is a P-matrix or "
                               f"copositive-plus, raise max_iter, or try another method",
                               status=result.status)
