@@ -265,3 +265,17 @@ def test_solver_pickles_and_keeps_solving():
         clone = pickle.loads(pickle.dumps(solver))
         assert_same_result(clone.solve(q), solver.solve(q))
         assert repr(clone) == repr(solver)
+
+
+def test_every_form_of_m_takes_the_same_path():
+    # the fast path (writeable C-contiguous float64) and the general conversion agree
+    rng = np.random.default_rng(5)
+    M, q = random_p_matrix(6, rng), rng.standard_normal(6)
+    frozen = M.copy()
+    frozen.setflags(write=False)
+    expected = solve_lcp(M, q)
+    for form in (M.tolist(), np.asfortranarray(M), frozen, M[:, ::-1][:, ::-1]):
+        assert_same_result(solve_lcp(form, q), expected)
+    integer = np.array([[2, 1], [1, 2]])
+    assert_same_result(solve_lcp(integer, [-5.0, -6.0]),
+                       solve_lcp(integer.astype(float), np.array([-5.0, -6.0])))
