@@ -747,7 +747,7 @@ def _sparse_block_solver(M: Any, idx: NDArray[np.intp], rhs: NDArray[np.float64]
 def _dense_block_solve(M: NDArray[np.float64], idx: NDArray[np.intp],
                        rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
     try:
-        return np.linalg.solve(M[np.ix_(idx, idx)], rhs)
+        return np.linalg.solve(M[np.ix_(idx, idx)], rhs).astype(np.float64, copy=False)
     except np.linalg.LinAlgError:
         return None
 
