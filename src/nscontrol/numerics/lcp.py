@@ -767,7 +767,8 @@ def _as_lcp_matrix(M: Any) -> Any:
             csr = csr.astype(np.float64)
         if csr.ndim != 2 or csr.shape[0] != csr.shape[1]:
             raise DimensionError(f"M: expected a square matrix, got shape {csr.shape}")
-        check_finite("M", csr.data)
+        if not kernels.all_finite(np.ascontiguousarray(csr.data)):
+            check_finite("M", csr.data)        # raises, with the count of bad entries
         return csr
     if np.ndim(M) == 0:  # a scalar is a 1x1 LCP
         M = np.reshape(as_float_array("M", M), (1, 1))
