@@ -115,9 +115,13 @@ def test_check7_plant_solver_refuses_singular_step():
 def test_check9_sticking_is_exact_and_step_independent(coulomb, coulomb_runs):
     s, plant, _, _ = coulomb
     v3, v4 = coulomb_runs[1e-3].x[:, 1], coulomb_runs[1e-4].x[:, 1]
-    frac3, frac4 = np.mean(np.abs(v3) <= 1e-3), np.mean(np.abs(v4) <= 1e-3)
+    slow3, slow4 = np.abs(v3) <= 1e-3, np.abs(v4) <= 1e-3
+    frac3, frac4 = np.mean(slow3), np.mean(slow4)
     assert 0.1 < frac4 < 0.5
-    assert abs(frac3 - frac4) <= 0.005
+    # each start or end of a slow phase is located within a step of each run: the fractions
+    # differ by at most (number of transitions) x (h3 + h4) / T (4.6e-4; measured 3.7e-5)
+    transitions = int(np.sum(np.diff(slow3.astype(int)) != 0))
+    assert abs(frac3 - frac4) <= transitions * (1e-3 + 1e-4) / 12.0
     # Stick steps, selected two independent ways: the plant's multiplier strictly inside
     # (-F_c, F_c) (then -w in F_c Sign(z) forces z = q' = 0), or |q'| <= 1e-12. In exact
     # arithmetic q' = 0 on both; in floating point the state update cancels to rounding, so
@@ -128,7 +132,9 @@ def test_check9_sticking_is_exact_and_step_independent(coulomb, coulomb_runs):
     stick = interior | near
     scale = max(1.0, float(np.max(np.abs(traj.x[:, :2]))))
     assert np.max(np.abs(v4[stick])) <= 1e-15 * scale
-    assert abs(int(near.sum()) - int(interior.sum())) <= 1e-3 * near.sum()
+    # the two selections can disagree only on the first and last step of a stick phase
+    phases = int(np.sum(np.diff(stick.astype(int)) != 0)) // 2 + 1
+    assert abs(int(near.sum()) - int(interior.sum())) <= 2 * phases
     # where it slips, the multiplier is on the boundary of F_c Sign (|w| = F_c)
     assert np.all(np.abs(w4[~stick]) >= 1.0 - 1e-9)
     # the plant alone: the same guarantee on its stick steps

@@ -19,7 +19,7 @@ def test_bouncing_ball_impact_times_and_accumulation() -> None:
     assert np.max(np.abs(impacts[:20] - ball.impact_times(20))) < 1e-12
     acc = traj.events_of("accumulation")
     assert len(acc) == 1
-    assert abs(acc[0].time - 8.57895) < 5e-6
+    assert abs(acc[0].time - 8.57895) <= 5e-6    # the figure quoted to 6 digits: half a unit
     assert abs(acc[0].time - ball.accumulation_time) < 1e-9
     after = traj.t > acc[0].time
     assert np.all(np.abs(traj.x[after]) < 1e-12)  # at rest on the ground
@@ -96,7 +96,7 @@ def test_restitution_on_random_chains_with_several_contacts(rng: np.random.Gener
         e = rng.uniform(0.0, 1.0, n - 1)
         x0 = np.concatenate([np.cumsum(rng.uniform(0.05, 0.3, n)), rng.normal(size=n)])
         chain = LagrangianSystem.chain(m, restitution=e)
-        traj = simulate(chain, x0, (0.0, 2.0), on_zeno="warn", dt=2.0)
+        traj = simulate(chain, x0, (0.0, 2.0), on_failure="warn", dt=2.0)
         impacts = traj.events_of("impact")
         assert impacts
         P = traj.stats["impulses"]
@@ -181,7 +181,7 @@ def test_zeno_warning_option_keeps_the_run() -> None:
     ball = LinearHybridSystem(A, [[1.0, 0.0, 0.0]], [0.0],
                               lambda t, x, idx: np.array([x[0], -0.9 * x[1], x[2]]))
     with pytest.warns(ZenoWarning, match="accumulation"):
-        traj = simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=10, on_zeno="warn")
+        traj = simulate(ball, [1.0, 0.0, 1.0], (0.0, 10.0), max_events=10, on_failure="warn")
     assert traj.status == -1
     assert np.max(np.abs(traj.event_times("jump") - BouncingBall().impact_times(10))) < 1e-12
 
@@ -344,7 +344,9 @@ def test_input_runs_in_absolute_time_like_moreau_jean() -> None:
     mj = simulate(system, [0.0, 0.0], (5.0, 30.0), u=u, method="moreau_jean", h=1e-4)
     te, tm = ed.event_times("impact"), mj.event_times("impact")
     assert te.size == tm.size >= 2
-    assert np.max(np.abs(te - tm)) < 2e-3
+    # Moreau-Jean h = 1e-4: each impact on the grid within h, plus the O(h) phase drift of
+    # the flights over 25 s: 20 h (measured 1.9 h)
+    assert np.max(np.abs(te - tm)) < 20 * 1e-4
 
 
 def test_pre_and_post_impact_samples() -> None:
@@ -391,6 +393,7 @@ def test_linear_state_feedback_stays_exact() -> None:
     c = simulate(free, [0.0, 0.0], (0.0, 20.0),
                  controller=lambda t, q, v: -4.0 * q - 0.3 * v)
     tc = c.event_times("impact")[: ta.size]
+    # DOP853 at the default rtol = 1e-10 per step, hundreds of steps: 1e3 rtol (measured 7e-10)
     assert np.max(np.abs(tc - ta)) < 1e-7
 
 

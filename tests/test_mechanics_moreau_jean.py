@@ -37,11 +37,16 @@ def test_bouncing_ball_impacts_within_two_steps_then_rest() -> None:
     rest = traj.t > ball.accumulation_time + 0.2
     assert np.all(np.abs(traj.x[rest, 1]) < 1e-12)
     assert np.all(np.abs(traj.x[rest, 0]) <= h * v_max)
-    # θ = 1/2, e < 1: the discrete energy does not grow, except by the drift of the Zeno phase
-    # (ch04 §3 measured up to 6e-8 E0 per step there)
+    # θ = 1/2: a free step keeps E = m (v²/2 + g q) exactly (midpoint rule, constant force); an
+    # impact step v+ = -e v- changes it by -(1 - e²) v-²/2 + g h (1 - e) v-/2, positive only
+    # in the Zeno phase (v- > 0, small, caught by the active set), at most
+    # (1 - e)/(1 + e) g² h²/8 = 6.5e-8 E0 at v- = g h / (2 (1 + e)) (measured 1.4e-8 E0);
+    # before it (t < 5) only the rounding of E, a few u E0 per step (measured 1.6 u E0)
+    e, g = ball.restitution, ball.g
     energy = traj.signals["energy"]
-    assert np.max(np.diff(energy)) <= 1e-7 * energy[0]
-    assert np.max(np.diff(energy[traj.t < 5.0])) <= 1e-12 * energy[0]
+    rounding = 16 * np.finfo(float).eps / 2 * energy[0]
+    assert np.max(np.diff(energy)) <= ball.mass * (1 - e) / (1 + e) * g**2 * h**2 / 8 + rounding
+    assert np.max(np.diff(energy[traj.t < 5.0])) <= rounding
 
 
 @pytest.mark.parametrize("n", [10, 1000, 10000])
@@ -74,16 +79,21 @@ def test_impact_oscillator_periodic_orbit_agrees_with_event_driven() -> None:
     system = impact_oscillator()
     u = Exosystem.sinusoid(1.0, 1.2)
     period = 2 * np.pi / 1.2
+    h, e = 1e-3, 0.8                                   # impact_oscillator's restitution
     ed = simulate(system, [0.0, 0.0], (0.0, 150.0), u=u)
-    mj = simulate(system, [0.0, 0.0], (0.0, 150.0), method="moreau_jean", h=1e-3, u=u)
+    mj = simulate(system, [0.0, 0.0], (0.0, 150.0), method="moreau_jean", h=h, u=u)
     ted, tmj = ed.event_times("impact"), mj.event_times("impact")
-    # a period-1 impacting orbit, reached by both methods
+    # a period-1 impacting orbit, reached by both methods; event-driven: still converging at
+    # rate |mu| = 0.62 per period (measured 5e-6 s off at t = 150); Moreau-Jean: its impact
+    # times lie on the grid, each within h of the orbit's (measured 7.6e-4 s)
     assert np.allclose(np.diff(ted[-4:]), period, rtol=1e-5)
-    assert np.allclose(np.diff(tmj[-4:]), period, atol=2e-3)
-    assert np.max(np.abs(ted[-3:] - tmj[-3:])) <= 3e-3
-    v_ed = np.array([e.pre[1] for e in ed.events_of("impact")[-3:]])
-    v_mj = np.array([e.pre[1] for e in mj.events_of("impact")[-3:]])
-    assert np.allclose(v_mj, v_ed, rtol=5e-3)
+    assert np.allclose(np.diff(tmj[-4:]), period, atol=2 * h)
+    assert np.max(np.abs(ted[-3:] - tmj[-3:])) <= 3 * h
+    v_ed = np.array([ev.pre[1] for ev in ed.events_of("impact")[-3:]])
+    v_mj = np.array([ev.pre[1] for ev in mj.events_of("impact")[-3:]])
+    # first order: an impact up to h late shifts the state by |v+ - v-| h = (1 + e) |v-| h,
+    # i.e. (1 + e) h relative to v- (measured 3.4e-4 against 1.8e-3)
+    assert np.allclose(v_mj, v_ed, rtol=(1 + e) * h)
     # the orbit itself: fixed point of the exact stroboscopic map by Newton (shooting), a
     # stable one, and both long runs sit on it at the strobe instants
     def strobe(x: np.ndarray) -> np.ndarray:
@@ -102,8 +112,14 @@ def test_impact_oscillator_periodic_orbit_agrees_with_event_driven() -> None:
     k = np.arange(24, 29)  # strobe instants after the transient
     exact = simulate(system, [0.0, 0.0], (0.0, 150.0), u=u, dt=period)  # samples at k T
     dist = np.max(np.abs(exact.at(k * period) - x), axis=1)
-    assert dist[-1] < 2e-6 and np.all(np.diff(dist) < 0)  # converging onto the orbit
-    assert np.max(np.abs(mj.at(k * period) - x)) < 2e-3  # first order: within ~2h
+    # converging onto the orbit at the linearised rate: ||V^-1 d|| shrinks by |mu| per period
+    # (V the eigenvectors of J), and the max norm is within sqrt(2) of the 2-norm in R^2
+    mu, V = np.linalg.eig(J)
+    contraction = np.sqrt(2) * np.linalg.cond(V) * np.max(np.abs(mu)) ** (k[-1] - k[0])
+    assert np.all(np.diff(dist) < 0) and dist[-1] <= contraction * dist[0]  # 8.3e-7 <= 2.6e-6
+    # first order: within the state shift of an impact located h late, (1 + e) |v-| h
+    # (3.1e-3; measured 9.9e-4)
+    assert np.max(np.abs(mj.at(k * period) - x)) <= (1 + e) * np.max(np.abs(v_ed)) * h
 
 
 def test_controller_hook_and_jump_listener() -> None:
@@ -117,10 +133,12 @@ def test_controller_hook_and_jump_listener() -> None:
     assert len(seen) == len(traj.events_of("impact")) >= 1
     t, xm, xp, p = seen[0]
     assert xm[1] > 0 and xp[1] < 0 and p[0] > 0
-    # in the end the controller presses the mass on the wall: resting at the wall,
-    # contact force P/h equal to the controller's push 4 (0.5 - 0.3)
-    assert traj.x[-1, 0] == pytest.approx(0.3, abs=2e-3)
-    assert traj.signals["impulse"][-1, 0] / 1e-3 == pytest.approx(0.8, rel=1e-2)
+    # in the end the controller presses the mass on the wall: resting at the wall, within the
+    # documented penetration h |u-| (u- the fastest approach, 0.71: 7e-4; measured 2.3e-7),
+    # contact force P/h equal to the controller's push 4 (0.5 - q): 0.8 within 4 h |u-| / 0.8
+    h, approach = 1e-3, max(ev.pre[1] for ev in traj.events_of("impact"))
+    assert traj.x[-1, 0] == pytest.approx(0.3, abs=h * approach)
+    assert traj.signals["impulse"][-1, 0] / h == pytest.approx(0.8, rel=5 * h * approach)
 
 
 def test_configuration_dependent_mass_path() -> None:
@@ -129,7 +147,14 @@ def test_configuration_dependent_mass_path() -> None:
     traj = simulate(arm, [0.8, -1.2, 0.0, 0.0], (0.0, 1.5), method="moreau_jean", h=h)
     assert traj.stats["path"] == "python"
     assert traj.events_of("impact")
-    assert traj.stats["max_penetration"] < 5e-3
+    # the documented h |u-| (u- = J v before the landing step), plus the gap's curvature over
+    # the step, h^2 max|g''| (g'' from the recorded flight; 3e-6): 9.56e-4, measured 9.45e-4
+    approach = max(np.abs(arm.gap_jacobian(ev.pre[:2]) @ ev.pre[2:]).max()
+                   for ev in traj.events_of("impact"))
+    gap = np.array([arm.gaps(x[:2]) for x in traj.x])[:, 0]
+    flight = traj.t < traj.events_of("impact")[0].time - 2 * h
+    curvature = np.max(np.abs(np.diff(gap[flight], 2))) / h**2
+    assert traj.stats["max_penetration"] <= h * approach + h**2 * curvature
     assert traj.signals["energy"][-1] < traj.signals["energy"][0]
 
 
@@ -150,7 +175,9 @@ def test_impacting_bodies_moreau_jean_keeps_state_order() -> None:
     assert plant.gap(seen_ed[0]) == pytest.approx(0.0, abs=1e-12)
     tj, tm = ed.event_times("impact"), mj.event_times("impact")
     assert len(tj) == len(tm) >= 2
-    assert np.max(np.abs(tj - tm)) < 1e-3
+    # each MJ impact time is on the grid, within h of where its flight ends, and the O(h)
+    # phase error of the flights adds up over the impacts: 10 h for these few
+    assert np.max(np.abs(tj - tm)) < 10 * 1e-4
 
 
 def test_the_last_step_ends_exactly_at_the_end_of_the_span() -> None:
@@ -204,4 +231,4 @@ def test_bad_moreau_jean_options_each_their_error() -> None:
                        ) as err:
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
                  controller=lambda t, q, v: np.nan if t > 0.5 else 0.0)
-    assert err.value.trajectory.t[-1] == pytest.approx(0.5, abs=2e-3)
+    assert err.value.trajectory.t[-1] == pytest.approx(0.5, abs=2e-3)   # the last step before

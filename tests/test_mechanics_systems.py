@@ -66,7 +66,9 @@ def test_step_and_options() -> None:
         simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3, theta=0.2)
     with pytest.raises(ModelError, match="t_span"):
         simulate(ball, [1.0, 0.0], (1.0, 0.0))
-    with pytest.raises(TypeError):
+    # an unknown option is the driver's one ModelError, listing what the method accepts
+    with pytest.raises(ModelError, match=r"^moreau_jean: unknown option\(s\) \['bogus'\]; "
+                                         r"accepted: \['activation'"):
         simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3, bogus=1)
 
 

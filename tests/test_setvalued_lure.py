@@ -81,12 +81,14 @@ def test_diode_circuit_clamps_with_known_solution():
     p = sp.diode_circuit()
     h = 1e-4
     tr = simulate(p.system, p.x0, p.t_span, h=h)
-    assert np.max(np.abs(tr.x - p.facts["exact"](tr.t))) <= 2e-4
+    # first order (backward Euler through one kink of the clamp): C h with C = 2 (measured
+    # 0.37 h on the state, 0.18 h on the current)
+    assert np.max(np.abs(tr.x - p.facts["exact"](tr.t))) <= 2 * h
     z, w = tr.signal("z")[:, 0], tr.signal("w")[:, 0]
     assert np.min(z) >= 0.0 and np.min(w) >= 0.0
     assert np.max(np.abs(z * w)) == 0.0                  # complementarity holds exactly
     away = np.abs(tr.t - p.facts["clamp_time"]) > 2 * h
-    assert np.max(np.abs(w[away] - p.facts["diode_current"](tr.t[away]))) <= 2e-4
+    assert np.max(np.abs(w[away] - p.facts["diode_current"](tr.t[away]))) <= 2 * h
 
 
 def test_lcp_path_matches_shared_inclusion_solver_on_coupled_relays():
@@ -144,8 +146,12 @@ def test_monotone_function_law_uses_its_resolvent():
     lure = LureSystem([[0.0]], [[1.0]], [[1.0]], law)
     tr = simulate(lure, [1.0], (0.0, 1.0), h=1e-3)
     assert tr.stats["solver"] == "python"
-    # x' = -x^3: x(t) = 1/sqrt(1 + 2t)
-    assert abs(tr.x[-1, 0] - 1 / np.sqrt(3.0)) <= 1e-3
+    # x' = -x^3: x(t) = 1/sqrt(1 + 2t). Backward Euler's global error at T = 1, to first
+    # order: (h/2) int_0^1 x''(s) Phi(1, s) ds with x'' = 3 x^5, Phi = ((1 + 2s)/3)^(3/2),
+    # = h ln 3 / (4 sqrt 3) = 1.586e-4 (measured 1.585e-4); the next term is O(h) relative
+    h = 1e-3
+    leading = h * np.log(3.0) / (4.0 * np.sqrt(3.0))
+    assert tr.x[-1, 0] - 1 / np.sqrt(3.0) == pytest.approx(leading, rel=10 * h)
 
 
 def _observer_loop(K):

@@ -32,7 +32,8 @@ __version__ = "0.1.0"
 
 _SUBPACKAGES = ("laws", "numerics", "systems", "design", "analysis", "testing",
                 "examples", "sweep")
-_LAZY = {"solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp")}
+_LAZY = {"solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp"),
+         "closed_loop": ("nscontrol.simulate.closed_loop", "closed_loop")}
 
 __all__ = ["errors", "NscontrolError", "ModelError", "DimensionError", "InadmissibleStateError",
            "InfeasibleDesignError", "SolverError", "ZenoError", "simulate", "Trajectory", *_LAZY,

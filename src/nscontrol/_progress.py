@@ -21,9 +21,10 @@ class TimeProgress:
             return
         from tqdm.auto import tqdm
 
+        # the simulated time goes into the description: tqdm prefixes a postfix with ", "
+        self._desc = desc
         self._bar = tqdm(total=1000, desc=desc, file=sys.stderr, delay=delay, leave=False,
-                         bar_format="{desc}: {percentage:3.0f}%|{bar}| t={postfix} "
-                                    "[{elapsed}<{remaining}]")
+                         bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
         self._last = 0
 
     def update(self, t: float) -> None:
@@ -32,7 +33,7 @@ class TimeProgress:
             return
         k = int(1000 * (t - self.t0) / (self.tf - self.t0))
         if k > self._last:
-            self._bar.set_postfix_str(f"{t:.4g}", refresh=False)
+            self._bar.set_description_str(f"{self._desc} t={t:.4g}", refresh=False)
             self._bar.update(min(k, 1000) - self._last)
             self._last = min(k, 1000)
 

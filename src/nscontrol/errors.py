@@ -20,6 +20,7 @@ __all__ = [
     "InadmissibleStateError",
     "InfeasibleDesignError",
     "SolverError",
+    "NonFiniteStateError",
     "ZenoError",
     "NscontrolWarning",
     "ZenoWarning",
@@ -72,6 +73,18 @@ class SolverError(NscontrolError, RuntimeError):
     def __init__(self, message: str, *, status: str | None = None, trajectory: Any = None):
         super().__init__(message, trajectory=trajectory)
         self.status = status
+
+
+class NonFiniteStateError(SolverError):
+    """The state became infinite or NaN during a run (an unstable model, a force or input that
+    returned NaN). ``time`` and ``state`` say where; ``err.trajectory`` holds every sample
+    before it."""
+
+    def __init__(self, message: str, *, time: float | None = None, state: str | None = None,
+                 trajectory: Any = None):
+        super().__init__(message, status="non_finite", trajectory=trajectory)
+        self.time = time
+        self.state = state
 
 
 class ZenoError(NscontrolError, RuntimeError):

@@ -114,6 +114,17 @@ def _shoot(system: Any, x0: FloatArray, period: float, method: str, u: Any,
                     sensitivity=True, **opts)
 
 
+def _require_sensitivity(system: Any, method: Any) -> None:
+    """Shooting needs the state-transition matrix: ask the integrator for the capability."""
+    from ..simulate.driver import METHODS, integrator_for
+
+    cls = integrator_for(system, method)
+    if "sensitivity" not in cls.capabilities:
+        able = sorted(k for k in METHODS if "sensitivity" in METHODS[k].capabilities)
+        raise ModelError(f"method: shooting needs sensitivities, which {cls.name!r} does not "
+                         f"compute; use one of {able}")
+
+
 def _scale(x: FloatArray) -> float:
     return max(1.0, float(np.linalg.norm(x)))
 
@@ -187,6 +198,7 @@ def periodic_steady_state(system: Any, period: float, *, u: Any = None, x0: Any 
     (-2.19, False)
     """
     period = check_positive("period", period)
+    _require_sensitivity(system, method)
     n = int(system.n_states)
     starts = [_linear_guess(system, u), np.zeros(n)] if x0 is None else \
         [as_vector("x0", x0, n)]

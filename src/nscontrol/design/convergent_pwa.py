@@ -207,6 +207,12 @@ class ConvergentStateFeedback:
         """The closed loop ``x' = (A_i + BK)x + b_i + Eu(t)`` as a PWA system."""
         return _with_feedback(system, self.B, *self.gains(len(system.A)))
 
+    def controller(self, n_regions: int) -> Any:
+        """This law as a block for :func:`nscontrol.closed_loop` (``input_matrix=self.B``)."""
+        from ..systems.feedback import PiecewiseStateFeedback
+
+        return PiecewiseStateFeedback(*self.gains(n_regions))
+
 
 @dataclass(frozen=True)
 class PWAStateFeedback:
@@ -264,6 +270,12 @@ class PWAStateFeedback:
     def closed_loop(self, system: Any) -> Any:
         """The closed loop ``x' = (A_i + BK_i)x + b_i + Bk_i + Eu(t)`` as a PWA system."""
         return _with_feedback(system, self.B, self.K, self.k)
+
+    def controller(self, n_regions: int = 2) -> Any:
+        """This law as a block for :func:`nscontrol.closed_loop` (``input_matrix=self.B``)."""
+        from ..systems.feedback import PiecewiseStateFeedback
+
+        return PiecewiseStateFeedback(self.K, self.k)
 
 
 @dataclass(frozen=True)
@@ -328,10 +340,10 @@ class EstimateFeedback:
 
 def _with_feedback(system: Any, B: FloatArray, Ks: Sequence[FloatArray],
                    ks: Sequence[FloatArray]) -> Any:
-    from dataclasses import replace
+    from ..simulate.closed_loop import closed_loop
+    from ..systems.feedback import PiecewiseStateFeedback
 
-    return replace(system, A=tuple(A + B @ K for A, K in zip(system.A, Ks, strict=True)),
-                   b=tuple(b + B @ k for b, k in zip(system.b, ks, strict=True)))
+    return closed_loop(system, PiecewiseStateFeedback(Ks, ks), input_matrix=B).stacked
 
 
 def output_feedback_loop(system: Any, observer: ConvergentObserver,

@@ -376,6 +376,22 @@ class LureObserverDesign:
         """
         return _closed_loop(self, plant)
 
+    def observer(self, plant: Any) -> Any:
+        """This observer as a block for :func:`nscontrol.closed_loop`.
+
+        ``xhat' = (A - L C) xhat + G what + B u + L y``,
+        ``zhat = (H - K C) xhat + K y + D what + g(t)``, ``what ∈ -φ(zhat)``: a
+        :class:`~nscontrol.systems.feedback.LinearObserver` with the plant's law, so the
+        composition stacks it with the plant into one Lur'e system (both inclusions solved
+        together, every step).
+
+        Parameters
+        ----------
+        plant : LureSystem
+            The plant the design was made for.
+        """
+        return _observer_block(self, plant)
+
     def observer_system(self, plant: Any, y: Any) -> Any:
         """The observer alone as a :class:`LureSystem` driven by a measured output ``y(t)``.
 
@@ -994,34 +1010,22 @@ def _check_same_plant(design: LureObserverDesign, mat: _Matrices) -> None:
 
 
 def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
-    from ..laws.set_valued import Product
-    from ..systems.lure import LureSystem
+    from ..simulate.closed_loop import closed_loop
+
+    return closed_loop(plant, observer=design.observer(plant)).stacked
+
+
+def _observer_block(design: LureObserverDesign, plant: Any) -> Any:
+    from ..systems.feedback import LinearObserver
 
     mat, law = _plant_matrices(plant)
     _check_same_plant(design, mat)
-    n, A, G, H, C = mat.n, mat.A, mat.G, mat.H, mat.C
-    L, K = design.L, design.K
-    zeros = np.zeros((n, n))
-    A_cl = np.block([[A, zeros], [L @ C, A - L @ C]])
-    G_cl = np.block([[G, np.zeros_like(G)], [np.zeros_like(G), G]])
-    H_cl = np.block([[H, np.zeros_like(H)], [K @ C, H - K @ C]])
-    D_cl = np.block([[mat.D, np.zeros_like(mat.D)], [np.zeros_like(mat.D), mat.D]])
-    B_cl = u_cl = g_cl = None
-    if getattr(plant, "B", None) is not None:
-        B_cl = np.vstack([plant.B, plant.B])
-        from ..numerics.lti import Exosystem
-
-        # an exosystem input is passed as such: implicit Euler then uses its exact step mean
-        u_cl = (plant.u if isinstance(plant.u, Exosystem)
-                else plant.input_at if plant.has_input else None)
-    if plant.has_shift:
-        def g_cl(t: Any) -> FloatArray:
-            g = plant.shift_at(t)
-            return np.hstack([g, g])
+    n = mat.n
     names = tuple(plant.state_names) or tuple(f"x{i}" for i in range(n))
-    return LureSystem(A_cl, G_cl, H_cl, Product(law, law), B=B_cl, C=np.hstack(
-        [np.eye(n), -np.eye(n)]), D=D_cl, u=u_cl, g=g_cl,
-        state_names=names + tuple(f"{s}_hat" for s in names))
+    B = plant.B if getattr(plant, "B", None) is not None else None
+    return LinearObserver(design.A_L, design.L, B=B, law=law, G=mat.G,
+                          H=mat.H - design.K @ mat.C, K=design.K, D=mat.D,
+                          names=tuple(f"{s}_hat" for s in names))
 
 
 def _observer_system(design: LureObserverDesign, plant: Any, y: Any) -> Any:

@@ -3,28 +3,58 @@
 Integrates :class:`~nscontrol.systems.LagrangianSystem` and
 :class:`~nscontrol.systems.ImpactingBodies` (through its Lagrangian form). One step is the
 θ-method on the smooth forces, Newton's impact law at velocity level on the contacts predicted
-to close (``g + γ h u <= 0``), and one LCP over those contacts (Acary & Brogliato 2008, §10.1;
-spec ch03 §3.1 and ch04 §3):
+to close (``g + γ h u <= 0``), and one LCP over those contacts (Acary & Brogliato 2008, §10.1):
 
     0 <= P ⟂ W P + G v_free + e u_k >= 0,   v_{k+1} = v_free + M̂⁻¹ Gᵀ P,
-    q_{k+1} = q_k + h((1-θ) v_k + θ v_{k+1}).
+    q_{k+1} = q_k + h((1-θ) v_k + θ v_{k+1}),   W = G M̂⁻¹ Gᵀ.
+
+**The θ-method with linearised forces.** With ``f(t, q, v) = f0 - K q - D v + force(t, q, v)``
+the smooth force, the θ-method reads
+``M(q_k)(v_{k+1} - v_k) = h[θ f_{k+1} + (1-θ) f_k] + S u_k h + Gᵀ P``. Linearising
+``f_{k+1} ≈ f(t_{k+1}, q_k, v_k) + J_q (q_{k+1} - q_k) + J_v (v_{k+1} - v_k)`` with
+``J_q = ∂f/∂q``, ``J_v = ∂f/∂v`` at ``(t_k + θh, q_k, v_k)`` and substituting
+``q_{k+1} - q_k = h v_k + hθ (v_{k+1} - v_k)``:
+
+    M̂ = M(q_k) - hθ J_v - h²θ² J_q,
+    f̃_k = f(t_k + θh, q_k, v_k) + hθ J_q v_k + S u_k,
+    v_free = v_k + M̂⁻¹ h f̃_k,
+
+where ``θ f(t_{k+1}, ·) + (1-θ) f(t_k, ·)`` is replaced by ``f(t_k + θh, ·)`` (equal for a
+force affine in ``t``, ``O(h²)`` otherwise: the order is kept, one evaluation saved). For
+linear forces ``J_q = -K``, ``J_v = -D``: ``M̂ = M + hθD + h²θ²K`` and
+``f̃ = f0 - K q_k - D v_k - hθ K v_k + S u_k``, the compiled paths' step. Without contact
+and with constant ``M`` the step is a linearly implicit (Rosenbrock-type) θ-method: first
+order for ``θ = 1``, second order for ``θ = ½`` (the linearisation error
+``O(|q_{k+1} - q_k|²) = O(h²)`` enters multiplied by ``h``), and A-stable on linear forces.
+With ``M(q)`` frozen at ``q_k`` it is first order whatever ``θ`` (the step is
+``h M(q_k)⁻¹ f̄`` where the trapezoidal rule needs ``M`` at ``q_{k+½}``: an ``O(h²)`` local
+error); ``mass_at="predicted"`` evaluates ``M`` at ``q_k + θ h v_k`` (within ``O(h²)`` of
+``q_{k+θ}``), which restores second order for ``θ = ½``. ``J_q, J_v`` come from
+the model's ``force_jacobian`` or from central differences (see
+:meth:`~nscontrol.systems.LagrangianSystem.force_jacobians`). ``forces="explicit"`` keeps
+``M̂ = M(q_k)``, ``f̃ = f(t_k, q_k, v_k) + S u_k``.
 
 Paths, chosen automatically:
 
 * constant diagonal ``M̂`` and contacts between neighbours (chains, stacks, cradles, the ball):
   a compiled O(n) loop with the shared tridiagonal LCP kernel;
 * any other constant ``M`` with affine gaps: a compiled loop with dense ``M̂⁻¹`` and Lemke;
-* configuration-dependent ``M(q)``, nonlinear forces or gaps: a Python loop around the compiled
-  Lemke kernel, forces explicit (ch03 §3.1: enough for these examples).
+* configuration-dependent ``M(q)``, nonlinear forces or gaps (or ``forces="explicit"``): a
+  Python loop around the compiled Lemke kernel, with ``M̂`` assembled at every step.
 
 Recorded: states ``[q; v]``, signals ``impulse`` (per step and contact, ``P``), ``gap`` and
 ``energy``; events ``"impact"`` (a contact whose impulse becomes positive while approaching).
 Impacts are captured within the step: impact times are exact to ``O(h)``, the position drift
 (penetration) at a landing is bounded by ``h |u⁻|``.
+
+A ``controller`` may read the contact: with keyword arguments ``lam_hat`` and ``active`` it
+receives the previous step's impulses over ``h`` (the mean contact force of that step) and
+its active set (see :func:`integrate`).
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -42,6 +72,10 @@ _LCP_STATUS = {1: "ray termination (no solution)", 2: "iteration limit",
                3: "numerical failure"}
 #: Status of a step loop stopped by the model itself (e.g. M(q) no longer definite).
 _MODEL_ERROR = -2
+#: Status of a step loop stopped by a singular iteration matrix M̂.
+_SINGULAR = -3
+#: Unit roundoff.
+_EPS = float(np.finfo(float).eps)
 #: Floats per chunk of the compiled loop (bounds memory for large systems).
 _CHUNK_FLOATS = 2_000_000
 
@@ -55,6 +89,8 @@ class _Setup:
     theta: float
     gamma: float
     Sinput: FloatArray | None
+    forces: str = "implicit"
+    mass_at: str = "start"
 
 
 def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | None = None,
@@ -62,7 +98,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
               controller: Callable[[float, FloatArray, FloatArray], Any] | None = None,
               listeners: Sequence[Callable[..., None]] = (), record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None,
-              activation: float | None = None, on_failure: str = "raise") -> Trajectory:
+              activation: float | None = None,
+              forces: str = "implicit", mass_at: str = "start") -> Trajectory:
     """Moreau–Jean time-stepping from ``x0 = [q0; v0]`` over ``t_span``.
 
     Parameters
@@ -80,7 +117,12 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     u : Exosystem or callable ``t -> u``, optional
         Open-loop input (through the system's actuation ``S``).
     controller : callable ``(t, q, v) -> u``, optional
-        Feedback evaluated at the start of every step (zero-order hold); added to ``u``.
+        Feedback evaluated at the start of every step (zero-order hold); added to ``u``. If
+        it accepts the keyword arguments ``lam_hat`` and/or ``active`` (or ``**kwargs``;
+        read once from its signature), it also receives ``lam_hat``, the previous step's
+        contact impulses divided by ``h`` (shape ``(m,)``, an estimate of the contact
+        force; zeros at the first step), and ``active``, the indices of the contacts in the
+        previous step's active set (an int array, empty at the first step).
     listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
         Called for every step that contains an impact (observer resets), with the states at
         the step's start and end, the impacting contacts and the step's impulses; ``t`` is
@@ -96,9 +138,18 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         Threshold (``>= 0``) of the active set test ``g + γ h u <= activation``. Default
         ``1e-12 (1 + max|q0|)``: contacts closed up to round-off stay active (a threshold of 0
         would drop a resting contact whose gap rounds to ``+1e-19``).
-    on_failure : {"raise", "return"}
-        What to do when an LCP fails: raise :class:`SolverError` (with ``err.trajectory``)
-        or return the partial trajectory with ``status = -1``.
+    forces : {"implicit", "explicit"}
+        Smooth forces of the Python path (``M(q)``, a ``force`` callable or nonlinear gaps):
+        ``"implicit"`` linearises them about the step's start (the θ-method of the module
+        docstring; Jacobians from ``force_jacobian`` or central differences); ``"explicit"``
+        evaluates ``f(t_k, q_k, v_k)`` only (the scheme before implicit forces: stable only
+        for ``θ = 1`` and ``h ω < 2``; for ``θ = ½`` it grows by ``√(1 + (hω)²/2)`` per
+        step on a spring), and sends a linear system to the Python path too, for
+        comparison. Linear forces on the compiled paths are always implicit.
+    mass_at : {"start", "predicted"}
+        Where a configuration-dependent ``M(q)`` is evaluated: at ``q_k`` (the scheme of the
+        module docstring; first order whatever θ), or at the predicted
+        ``q_k + θ h v_k`` (``O(h²)`` from ``q_{k+θ}``: second order for ``θ = ½``).
 
     Returns
     -------
@@ -106,19 +157,22 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         Samples at ``t0 + k h`` and at ``tf`` (when ``h`` does not divide the span the last
         step is shortened to end there). ``stats``: ``steps``, ``path`` (``"tridiagonal"``,
         ``"dense"`` or ``"python"``; ``"tridiagonal+dense"`` when a singular Delassus matrix
-        — redundant contacts — sent the run to Lemke), ``max_penetration``.
+        — redundant contacts — sent the run to Lemke), ``max_penetration``; on the Python
+        path ``forces`` and ``force_jacobian`` (``"analytic"`` or ``"central differences"``).
 
     Raises
     ------
     ModelError
         Unsupported system or option value; a controller returning a non-finite input or
-        one of the wrong length.
+        one of the wrong length; a non-finite ``force``, or a ``force_jacobian`` of the
+        wrong shape or non-finite, mid-run (naming the time; ``err.trajectory`` the run so
+        far).
     DimensionError
         An input ``u`` of the wrong size.
     InadmissibleStateError
         ``x0`` penetrates or approaches a closed contact.
     SolverError
-        An LCP failed.
+        An LCP failed, or the iteration matrix ``M̂`` is singular (``rcond(M̂) < n ε``).
 
     Notes
     -----
@@ -141,6 +195,22 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     ...                     h=1e-3)
     >>> bool(np.allclose(traj.signals["impulse"][-1], stack.impulses(1e-3), rtol=1e-12))
     True
+
+    A controller reading the contact force: a unit mass on a spring ``k = 4`` pushed by
+    ``u = 2`` onto a wall at ``q = 0.3`` (gap ``0.3 - q``) rests there with the contact force
+    ``u - k q = 0.8``, which ``lam_hat`` reports once the contact is active:
+
+    >>> from nscontrol.systems.lagrangian import LagrangianSystem
+    >>> wall = LagrangianSystem(np.eye(1), stiffness=[[4.0]], gap_matrix=[[-1.0]],
+    ...                         gap_offset=[0.3])
+    >>> seen = []
+    >>> def push(t, q, v, *, lam_hat, active):
+    ...     seen.append((float(lam_hat[0]), active.tolist()))
+    ...     return 2.0 - 3.0 * v[0]
+    >>> traj = nsc.simulate(wall, [0.3, 0.0], (0.0, 0.01), method="moreau_jean", h=1e-3,
+    ...                     controller=push)
+    >>> seen[0], seen[-1][1], round(seen[-1][0], 12)
+    ((0.0, []), [0], 0.8)
     """
     from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
@@ -159,7 +229,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                              theta=theta, gamma=gamma, u=u, controller=controller,
                              listeners=reorder_listeners(listeners, back),
                              record_every=record_every, signals=signals, progress=progress,
-                             activation=activation, on_failure=on_failure)
+                             activation=activation, forces=forces,
+                             mass_at=mass_at)
         except NscontrolError as err:  # the partial run in the chapter's state order too
             if isinstance(err.trajectory, Trajectory):
                 err.trajectory = reorder_states(err.trajectory, back, system.state_names)
@@ -171,10 +242,13 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     h = check_positive("h", h)
     theta = check_in_interval("theta", theta, 0.5, 1.0)
     gamma = check_in_interval("gamma", gamma, 0.0, 1.0)
-    if on_failure not in ("raise", "return"):
-        raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
+    if forces not in ("implicit", "explicit"):
+        raise ModelError(f"forces: expected 'implicit' or 'explicit', got {forces!r}")
+    if mass_at not in ("start", "predicted"):
+        raise ModelError(f"mass_at: expected 'start' or 'predicted', got {mass_at!r}")
     if controller is not None and not callable(controller):
         raise ModelError("controller: expected a callable (t, q, v) -> u")
+    reads = _controller_reads(controller)
     for i, fn in enumerate(listeners):
         if not callable(fn):
             raise ModelError(f"listeners[{i}]: expected a callable (t, x_minus, x_plus, "
@@ -192,11 +266,13 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     rec = Recorder(system.n_states, every=record_every, signals=signals,
                    offered=("impulse", "gap", "energy"))
     _sample_initial(rec, system, t0, x0)
-    setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller))
+    setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces,
+                   mass_at)
     runner = _choose_runner(system, setup, activation)
     path = runner.path
     state = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
-             "p_prev": np.zeros(system.n_contacts), "k": 0, "t0": t0}
+             "p_prev": np.zeros(system.n_contacts), "k": 0, "t0": t0, "h": h,
+             "reads": reads, "active_prev": np.zeros(0, dtype=np.int64)}
     per_step = controller is not None
     status, message = 0, None
     with TimeProgress(t0, tf, desc="moreau_jean", enable=progress) as bar:
@@ -204,7 +280,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
             k = state["k"]
             if k == n_full:  # the shortened last step
                 runner = _choose_runner(system, _Setup(system, h_last, theta, gamma,
-                                                       setup.Sinput), activation)
+                                                       setup.Sinput, forces, mass_at),
+                                        activation)
                 times, step = np.array([t0 + h * k]), h_last
             else:
                 chunk = 1 if per_step else max(1, min(n_full - k, 20_000, _CHUNK_FLOATS // max(
@@ -217,7 +294,10 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                                             state_names=system.state_names)
                 raise
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
+            active = runner.active_set(q_pre, v_pre) if "active" in reads else None
             done, code, q_out, v_out, p_out = runner(state, fext, times.size)
+            if done and active is not None:  # one step per chunk with a controller
+                state["active_prev"] = active
             if code and runner.path == "tridiagonal":
                 # a singular Delassus matrix (redundant contacts): the tridiagonal solve has
                 # no pivot; Lemke handles positive semi-definite W. Redo from the failed step.
@@ -237,10 +317,14 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                 raise ModelError(message, trajectory=rec.finish(
                     status=-1, message=message, method="moreau_jean",
                     state_names=system.state_names))
+            if code == _SINGULAR:
+                status, message = -1, state["solver_error"]
+                break
             if code:
                 status = -1
                 message = (f"moreau_jean: the LCP of step {state['k']} (t = "
-                           f"{t0 + h * state['k']:.6g}) failed: {_LCP_STATUS.get(code, code)}")
+                           f"{t0 + h * state['k']:.6g}) failed: {_LCP_STATUS.get(code, code)}"
+                           "; try a smaller h, or check the constraints for redundancy")
                 break
     if "last" in state and rec.last_time < state["last"][0]:  # always keep the final state
         t_last, q_l, v_l, p_l = state["last"]
@@ -248,13 +332,18 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         rec.sample(t_last, np.concatenate([q_l, v_l]), force=True,
                    **{k: val[0] for k, val in sig.items()})
     stats = {"steps": int(state["k"]), "path": path, "h": h, "theta": theta}
+    if path == "python":
+        stats["forces"] = forces
+        stats["force_jacobian"] = ("analytic" if system.force is None
+                                   or system.force_jacobian is not None
+                                   else "central differences")
     traj = rec.finish(status=status, message=message, method="moreau_jean", stats=stats,
                       state_names=system.state_names)
     if "gap" in traj.signals and traj.signals["gap"].size:
         traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
-    if status < 0 and on_failure == "raise":
-        raise SolverError(message + "; try a smaller h, or check the constraints for "
-                          "redundancy", status=_LCP_STATUS.get(code), trajectory=traj)
+    if status < 0:   # the driver returns the partial run under on_failure="return"
+        raise SolverError(str(message), status=_LCP_STATUS.get(code, "singular iteration matrix"),
+                          trajectory=traj)
     return traj
 
 
@@ -278,13 +367,33 @@ def _external_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
         vals = u.u(times) if hasattr(u, "u") else np.array([np.atleast_1d(u(t)) for t in times])
         total += np.asarray(vals, float).reshape(times.shape[0], -1)
     if controller is not None:  # one step per chunk in closed loop
-        c = np.asarray(controller(float(times[0]), state["q"].copy(), state["v"].copy()),
-                       dtype=float).reshape(-1)
+        kwargs = {}
+        if "lam_hat" in state["reads"]:  # the previous step's impulse over its length h
+            kwargs["lam_hat"] = state["p_prev"] / state["h"]
+        if "active" in state["reads"]:
+            kwargs["active"] = state["active_prev"].copy()
+        c = np.asarray(controller(float(times[0]), state["q"].copy(), state["v"].copy(),
+                                  **kwargs), dtype=float).reshape(-1)
         if c.shape != (S.shape[1],) or not np.all(np.isfinite(c)):
             raise ModelError(f"controller: expected a finite input of length {S.shape[1]} "
                              f"from controller(t, q, v), got {c!r} at t = {times[0]:.6g}")
         total[0] += c
     return total @ S.T
+
+
+def _controller_reads(controller: Any) -> frozenset[str]:
+    """Which of ``lam_hat`` and ``active`` the controller accepts as keyword arguments."""
+    if controller is None:
+        return frozenset()
+    try:
+        params = inspect.signature(controller).parameters.values()
+    except (TypeError, ValueError):  # some builtins have no signature: (t, q, v) only
+        return frozenset()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return frozenset(("lam_hat", "active"))
+    keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return frozenset(p.name for p in params
+                     if p.name in ("lam_hat", "active") and p.kind in keyword)
 
 
 def _check_input(system: Any, u: Any) -> None:
@@ -304,7 +413,7 @@ def _check_input(system: Any, u: Any) -> None:
 
 def _choose_runner(system: Any, setup: _Setup, activation: float) -> Any:
     """The fastest correct step loop for this system (see the module docstring)."""
-    if system.is_linear:
+    if system.is_linear and setup.forces == "implicit":
         K = system.stiffness
         D = system.damping
         diag = system.mass_diagonal
@@ -344,6 +453,18 @@ class _PairwiseRunner:
         self.system, self.setup, self.activation = system, setup, float(activation)
         self.kernel = mj_pairwise_kernel
 
+    def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
+        """The kernel's active set at ``(q, v)``, with its operations in its order (the
+        same floating-point results)."""
+        ia, ib, ca, cb = self.pairs
+        two = ib >= 0
+        gap = self.system.gap_offset + ca * q[ia]
+        un = ca * v[ia]
+        gap = np.where(two, gap + cb * q[ib], gap)
+        un = np.where(two, un + cb * v[ib], un)
+        st = self.setup
+        return np.flatnonzero(gap + st.gamma * st.h * un <= self.activation)
+
     def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
         s, st = self.system, self.setup
         q_out = np.empty((chunk, s.n_dof))
@@ -375,6 +496,15 @@ class _DenseRunner:
         self.system, self.setup, self.activation = system, setup, float(activation)
         self.kernel = mj_dense_kernel
 
+    def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
+        """The kernel's active set at ``(q, v)``: its sums are sequential, as ``cumsum``'s
+        (the same floating-point results)."""
+        G, g0 = self.G, self.system.gap_offset
+        gap = np.cumsum(np.column_stack([g0, G * q]), axis=1)[:, -1]
+        un = np.cumsum(np.column_stack([np.zeros_like(g0), G * v]), axis=1)[:, -1]
+        st = self.setup
+        return np.flatnonzero(gap + st.gamma * st.h * un <= self.activation)
+
     def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
         s, st = self.system, self.setup
         q_out = np.empty((chunk, s.n_dof))
@@ -388,56 +518,150 @@ class _DenseRunner:
 
 
 class _PythonRunner:
-    """``M(q)`` or nonlinear forces/gaps: explicit forces, the LCP by the compiled Lemke."""
+    """``M(q)`` or nonlinear forces/gaps: the θ-method with linearised (implicit) or explicit
+    forces, the LCP by the compiled Lemke kernel."""
 
     path = "python"
 
     def __init__(self, system: Any, setup: _Setup, activation: float) -> None:
+        from ..numerics._lcp_kernels import lemke_kernel
+        from ._mj_linearised_kernel import mj_linearised_kernel
+
         self.system, self.setup, self.activation = system, setup, float(activation)
+        self.analytic = system.force is None or system.force_jacobian is not None
+        self.lemke, self.matrices = lemke_kernel, mj_linearised_kernel
+        n = system.n_dof
+        self.zeros = np.zeros((n, n))  # the Jacobians of explicit forces
+        self.minv, self.dv = np.empty((n, n)), np.empty(n)
+        # affine gaps (possibly scipy.sparse): one dense matrix for the whole run
+        self.G = None if system.gap_matrix is None else system.dense_gap_matrix()
+
+    def gap_jacobian(self, q: FloatArray) -> np.ndarray:
+        if self.G is not None:
+            return self.G
+        return np.asarray(self.system.gap_jacobian(q), float)
+
+    def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
+        """The contacts predicted to close, ``g + γ h G v <= activation``."""
+        s, st = self.system, self.setup
+        un = self.gap_jacobian(q) @ v
+        return np.flatnonzero(s.gaps(q) + st.gamma * st.h * un <= self.activation)
 
     def __call__(self, state: dict[str, Any], fext: FloatArray, chunk: int) -> tuple:
-        from ..numerics._lcp_kernels import lemke_kernel
-
-        s, st = self.system, self.setup
-        h, th = st.h, st.theta
+        s = self.system
         q, v = state["q"], state["v"]
         q_out = np.empty((chunk, s.n_dof))
         v_out = np.empty((chunk, s.n_dof))
         p_out = np.zeros((chunk, s.n_contacts))
-        t = 0.0  # the nonlinear force sees the step's start time
         for k in range(chunk):
-            t = state.get("t0", 0.0) + h * (state["k"] + k)
-            M = s.mass_matrix(q)
-            try:  # M(q) must stay positive definite along the motion, not only at q0
-                np.linalg.cholesky(M)
-            except np.linalg.LinAlgError:
+            t = state.get("t0", 0.0) + self.setup.h * (state["k"] + k)
+            try:
+                code, q_new, v_new = self._step(t, q, v, fext[min(k, fext.shape[0] - 1)],
+                                                p_out[k])
+            except _StepFailure as failure:
                 state["q"], state["v"] = q, v
-                state["model_error"] = (f"mass: M(q) is not positive definite at t = {t:.6g}, "
-                                        f"q = {q!r}; the model is only valid where the mass "
-                                        "matrix is")
-                return k, _MODEL_ERROR, q_out, v_out, p_out
-            f = s.forces(t, q, v) + fext[min(k, fext.shape[0] - 1)]
-            v_free = v + h * np.linalg.solve(M, f)
-            G = np.asarray(s.gap_jacobian(q), float)
-            un = G @ v
-            active = np.flatnonzero(s.gaps(q) + st.gamma * h * un <= self.activation)
-            v_new = v_free
-            if active.size:
-                GA = G[active]
-                MinvGt = np.linalg.solve(M, GA.T)
-                W = GA @ MinvGt
-                qa = GA @ v_free + s.restitution[active] * un[active]
-                z, w = np.empty(active.size), np.empty(active.size)
-                code, _ = lemke_kernel(np.ascontiguousarray(W), qa, z, w, 0)
-                if code:
-                    return k, code, q_out, v_out, p_out
-                v_new = v_free + MinvGt @ z
-                p_out[k, active] = z
-            q = q + h * ((1 - th) * v + th * v_new)
-            v = v_new
+                state[failure.key] = failure.message
+                return k, failure.code, q_out, v_out, p_out
+            if code:
+                state["q"], state["v"] = q, v
+                return k, code, q_out, v_out, p_out
+            q, v = q_new, v_new
             q_out[k], v_out[k] = q, v
         state["q"], state["v"] = q, v
         return chunk, 0, q_out, v_out, p_out
+
+    def _step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
+              p_row: FloatArray) -> tuple[int, FloatArray, FloatArray]:
+        """One step from ``(q, v)`` at ``t``; writes the impulses into ``p_row``."""
+        s, st = self.system, self.setup
+        h, th = st.h, st.theta
+        qm = q + th * h * v if st.mass_at == "predicted" and not s.constant_mass else q
+        M = s.mass_matrix(qm)
+        if not s.constant_mass:  # M(q) must stay positive definite along the motion
+            _check_mass(M, t, qm)
+        if st.forces == "implicit":
+            tm = t + th * h  # the θ-weighted time (module docstring)
+            f = _checked_force(s, tm, q, v)
+            Jq, Jv = self._jacobians(tm, q, v)
+        else:
+            f, Jq, Jv = _checked_force(s, t, q, v), self.zeros, self.zeros
+        rcond = self.matrices(np.ascontiguousarray(M), Jq, Jv, f, fext, v, h, th, self.minv,
+                              self.dv)
+        _check_rcond(rcond, s.n_dof, t, st.forces)
+        Minv = self.minv
+        v_free = v + self.dv
+        G = self.gap_jacobian(q)
+        un = G @ v
+        active = np.flatnonzero(s.gaps(q) + st.gamma * h * un <= self.activation)
+        v_new = v_free
+        if active.size:
+            GA = G[active]
+            MinvGt = Minv @ GA.T
+            W = GA @ MinvGt
+            qa = GA @ v_free + s.restitution[active] * un[active]
+            if active.size == 1:  # closed form, as in the compiled paths
+                z = np.maximum(-qa / W[0], 0.0)
+            else:
+                z, w = np.empty(active.size), np.empty(active.size)
+                code, _ = self.lemke(np.ascontiguousarray(W), qa, z, w, 0)
+                if code:
+                    return code, q, v
+            v_new = v_free + MinvGt @ z
+            p_row[active] = z
+        return 0, q + h * ((1 - th) * v + th * v_new), v_new
+
+    def _jacobians(self, t: float, q: FloatArray, v: FloatArray
+                   ) -> tuple[FloatArray, FloatArray]:
+        """``∂f/∂q, ∂f/∂v`` at ``(t, q, v)``, finite (a ``_StepFailure`` otherwise)."""
+        try:
+            Jq, Jv, _ = self.system.force_jacobians(t, q, v)
+        except ModelError as err:
+            raise _StepFailure(_MODEL_ERROR, "model_error", str(err)) from None
+        if not self.analytic and not (np.isfinite(Jq).all() and np.isfinite(Jv).all()):
+            raise _StepFailure(_MODEL_ERROR, "model_error",
+                               f"force: its central differences are not finite at t = "
+                               f"{t:.6g}, q = {q!r}, v = {v!r}; give force_jacobian or "
+                               "keep the force finite near the motion")
+        return np.ascontiguousarray(Jq), np.ascontiguousarray(Jv)
+
+
+class _StepFailure(Exception):
+    """A step stopped by the model (``_MODEL_ERROR``) or a singular ``M̂`` (``_SINGULAR``)."""
+
+    def __init__(self, code: int, key: str, message: str) -> None:
+        super().__init__(message)
+        self.code, self.key, self.message = code, key, message
+
+
+def _check_mass(M: FloatArray, t: float, q: FloatArray) -> None:
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise _StepFailure(_MODEL_ERROR, "model_error",
+                           f"mass: M(q) is not positive definite at t = {t:.6g}, q = {q!r}; "
+                           "the model is only valid where the mass matrix is") from None
+
+
+def _checked_force(system: Any, t: float, q: FloatArray, v: FloatArray) -> FloatArray:
+    f = np.asarray(system.forces(t, q, v), float)
+    if f.shape != (system.n_dof,) or not np.isfinite(f).all():
+        raise _StepFailure(_MODEL_ERROR, "model_error",
+                           f"force: expected a finite vector of length {system.n_dof} at "
+                           f"t = {t:.6g}, got {f!r} (q = {q!r}, v = {v!r})")
+    return f
+
+
+def _check_rcond(rcond: float, n: int, t: float, forces: str) -> None:
+    """Refuse an iteration matrix ``M̂`` singular to working precision: ``rcond < n ε``,
+    ``rcond = 1 / (scale ‖M̂⁻¹‖₁)`` with ``scale`` the 1-norm of the terms summed into
+    ``M̂`` (cancellation between ``M`` and ``h²θ² ∂f/∂q`` is measured against the terms,
+    not against the result: a 1 x 1 ``M̂`` is never ill-conditioned by itself)."""
+    if not rcond >= n * _EPS:  # also catches NaN
+        what = ("M(q) - hθ ∂f/∂v - h²θ² ∂f/∂q" if forces == "implicit" else "M(q)")
+        raise _StepFailure(_SINGULAR, "solver_error",
+                           f"moreau_jean: the iteration matrix {what} is singular at "
+                           f"t = {t:.6g} (reciprocal condition number {rcond:.3g}); a "
+                           "negative stiffness of size M/(hθ)² does this: try a smaller h")
 
 
 # -- recording -----------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from .._validation import check_integer
 from ..errors import DimensionError, ModelError
+from ._run_context import register_recorder
 
 __all__ = ["Event", "Trajectory", "Recorder", "STATUS_MESSAGES"]
 
@@ -173,12 +174,48 @@ class Trajectory:
     def at(self, t: float | FloatArray) -> FloatArray:
         """States linearly interpolated at time(s) ``t`` (right-continuous at events)."""
         tq = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        out = self._interpolate(self.x, *self._weights(tq))
+        return out[0] if np.ndim(t) == 0 else out
+
+    def resample(self, t_eval: Any) -> Trajectory:
+        """The trajectory sampled at ``t_eval`` (states and signals linearly interpolated,
+        right-continuous at events; the event table and stats kept).
+
+        This is how ``simulate(..., t_eval=...)`` samples a method that cannot stop at
+        requested times (time-stepping schemes): the interpolation error, ``O(h²)`` times the
+        second derivative between steps, is below the scheme's own ``O(h)`` error. Times
+        outside ``[t[0], t[-1]]`` are refused.
+
+        Raises
+        ------
+        ModelError
+            ``t_eval`` outside the recorded span, or this trajectory has fewer than 2 samples.
+        """
+        tq = np.atleast_1d(np.asarray(t_eval, dtype=np.float64))
+        if len(self.t) < 2:
+            raise ModelError("t_eval: the run recorded fewer than 2 samples; nothing to "
+                             "interpolate")
+        scale = 1e-12 * max(1.0, float(np.max(np.abs(self.t))))   # roundoff of the end times
+        if tq.min() < self.t[0] - scale or tq.max() > self.t[-1] + scale:
+            raise ModelError(f"t_eval: times must lie in the simulated span [{self.t[0]:.6g}, "
+                             f"{self.t[-1]:.6g}], got [{tq.min():.6g}, {tq.max():.6g}]")
+        weights = self._weights(tq)
+        signals = {k: self._interpolate(np.asarray(v, dtype=np.float64), *weights)
+                   for k, v in self.signals.items()}
+        stats = {**self.stats, "t_eval": "interpolated"}
+        return replace(self, t=tq.copy(), x=self._interpolate(self.x, *weights),
+                       signals=signals, stats=stats)
+
+    def _weights(self, tq: FloatArray) -> tuple[np.ndarray, FloatArray]:
         idx = np.clip(np.searchsorted(self.t, tq, side="right") - 1, 0, len(self.t) - 2)
         t_a, t_b = self.t[idx], self.t[idx + 1]
         span = np.where(t_b > t_a, t_b - t_a, 1.0)
-        w = np.clip((tq - t_a) / span, 0.0, 1.0)[:, None]
-        out = (1.0 - w) * self.x[idx] + w * self.x[idx + 1]
-        return out[0] if np.ndim(t) == 0 else out
+        return idx, np.clip((tq - t_a) / span, 0.0, 1.0)
+
+    @staticmethod
+    def _interpolate(values: np.ndarray, idx: np.ndarray, w: FloatArray) -> np.ndarray:
+        w = w.reshape((-1,) + (1,) * (values.ndim - 1))
+        return (1.0 - w) * values[idx] + w * values[idx + 1]
 
     # -- persistence ----------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
@@ -486,6 +523,17 @@ class Recorder:
         self._n = 0
         self._calls = 0
         self.events: list[Event] = []
+        register_recorder(self)   # the driver keeps the samples of a run that fails
+
+    def __len__(self) -> int:
+        """Number of samples recorded so far."""
+        return self._n
+
+    def snapshot(self, *, status: int = -1, message: str | None = None,
+                 method: str = "") -> Trajectory:
+        """The samples and events recorded so far as a :class:`Trajectory` (the recorder goes
+        on; used for the partial trajectory of a run that fails)."""
+        return self._freeze(status, message, method, {}, ())
 
     def wants(self, name: str) -> bool:
         """Whether signal ``name`` is to be recorded (integrators may skip computing it)."""

@@ -32,9 +32,11 @@ from .._validation import (
 from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolWarning
 
 __all__ = ["LagrangianSystem", "two_link_arm_mass", "two_link_arm_coriolis",
-           "two_link_arm_gravity"]
+           "two_link_arm_gravity", "two_link_arm_force_jacobian"]
 
 ForceFn = Callable[[float, FloatArray, FloatArray], FloatArray]
+#: ε^(1/3): the central-difference step (relative) balancing truncation and roundoff.
+_CBRT_EPS = float(np.finfo(float).eps) ** (1.0 / 3.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,6 +53,11 @@ class LagrangianSystem:
         Constant generalised force ``f0`` (gravity).
     force : callable ``(t, q, v) -> (n,)``, optional
         Any further (nonlinear) generalised force, e.g. ``-C(q, v) v - ∇V(q)``.
+    force_jacobian : callable ``(t, q, v) -> (∂force/∂q, ∂force/∂v)``, optional
+        Analytic derivatives of ``force`` (two ``(n, n)`` arrays; the linear terms ``-K q - D v``
+        are added by :meth:`force_jacobians`). Used by the implicit forces of Moreau–Jean;
+        central differences when missing. Probed at ``(0, 0, 0)`` here: shapes checked,
+        a warning when it disagrees with central differences of ``force`` there.
     gap_matrix, gap_offset : array_like (m, n) and (m,), optional
         Affine gaps ``g(q) = gap_matrix @ q + gap_offset``.
     gap : callable ``q -> (m,)``, optional
@@ -71,9 +78,10 @@ class LagrangianSystem:
     ------
     ModelError
         Non-symmetric or indefinite mass matrix, restitution outside ``[0, 1]``, neither or both
-        of ``gap_matrix`` and ``gap``.
+        of ``gap_matrix`` and ``gap``, ``force_jacobian`` without ``force`` or not a pair of
+        finite matrices.
     DimensionError
-        Shapes that disagree with ``n`` or ``m``.
+        Shapes that disagree with ``n`` or ``m`` (``force_jacobian``'s too).
 
     Notes
     -----
@@ -113,6 +121,8 @@ class LagrangianSystem:
     actuation: FloatArray | None = None
     potential: Callable[[FloatArray], float] | None = None
     names: Sequence[str] = ()
+    force_jacobian: Callable[[float, FloatArray, FloatArray],
+                             tuple[FloatArray, FloatArray]] | None = None
     n_dof: int = field(init=False)
     n_contacts: int = field(init=False)
 
@@ -155,6 +165,31 @@ class LagrangianSystem:
         if len(names) != n:
             raise DimensionError(f"names: expected {n} coordinate names, got {len(names)}")
         set_(self, "names", names)
+        self._check_force_jacobian(n)
+
+    def _check_force_jacobian(self, n: int) -> None:
+        """Probe ``force_jacobian`` at ``(t, q, v) = (0, 0, 0)``: shapes, and agreement with
+        central differences of ``force`` (a transposed or sign-flipped Jacobian would make
+        the implicit forces wrong without any error)."""
+        if self.force_jacobian is None:
+            return
+        if self.force is None:
+            raise ModelError("force_jacobian: given without force; it holds the derivatives "
+                             "of force (the linear terms -K q - D v are known)")
+        if not callable(self.force_jacobian):
+            raise ModelError("force_jacobian: expected a callable (t, q, v) -> (dforce/dq, "
+                             f"dforce/dv), got {type(self.force_jacobian).__name__}")
+        zero = np.zeros(n)
+        Jq, Jv = _as_jacobian_pair(self.force_jacobian(0.0, zero, zero.copy()), n, "at t = 0")
+        fd_q, fd_v = _central_force_jacobians(self.force, 0.0, zero, zero.copy())
+        for label, J, fd in (("dforce/dq", Jq, fd_q), ("dforce/dv", Jv, fd_v)):
+            scale = np.abs(fd).max(initial=0.0) + np.abs(J).max(initial=0.0)
+            err = float(np.abs(fd - J).max(initial=0.0))
+            if scale > 0.0 and err > 1e-6 * scale:  # central differences: ~eps^(2/3) = 4e-11
+                warnings.warn(f"force_jacobian: its {label} disagrees with central differences "
+                              f"of force at (t, q, v) = 0 (max difference {err:.3g}, scale "
+                              f"{scale:.3g}); check signs and layout (row i = gradient of "
+                              "force_i)", NscontrolWarning, stacklevel=5)
 
     def _check_constraints(self, n: int) -> int:
         set_ = object.__setattr__
@@ -235,6 +270,33 @@ class LagrangianSystem:
             f += (np.asarray(u, float) if self.actuation is None
                   else self.actuation @ np.atleast_1d(u))
         return f
+
+    def force_jacobians(self, t: float, q: FloatArray, v: FloatArray
+                        ) -> tuple[FloatArray, FloatArray, bool]:
+        """``(∂f/∂q, ∂f/∂v, analytic)`` of the smooth force ``f = f0 - K q - D v + force``.
+
+        The derivatives of ``force`` come from ``force_jacobian`` when given (``analytic``
+        true), otherwise from central differences with the step ``δ = ε^(1/3) (1 + ‖x‖∞)``
+        (``ε`` the unit roundoff, ``x`` = ``q`` or ``v``: the step balancing truncation
+        ``O(δ²)`` and roundoff ``O(ε/δ)``, relative error about ``ε^(2/3) ≈ 4e-11``;
+        ``4 n`` evaluations of ``force``). Shapes of an analytic pair are checked
+        (``ModelError`` naming ``force_jacobian`` and ``t``).
+        """
+        n = self.n_dof
+        if self.force is None:
+            Jq, Jv, analytic = np.zeros((n, n)), np.zeros((n, n)), True
+        elif self.force_jacobian is not None:
+            Jq, Jv = _as_jacobian_pair(self.force_jacobian(t, q, v), n, f"at t = {t:.6g}",
+                                       runtime=True)
+            analytic = True
+        else:
+            Jq, Jv = _central_force_jacobians(self.force, t, q, v)
+            analytic = False
+        if self.stiffness is not None:
+            Jq = Jq - self.stiffness
+        if self.damping is not None:
+            Jv = Jv - self.damping
+        return Jq, Jv, analytic
 
     def gaps(self, q: FloatArray) -> FloatArray:
         """``g(q)``, shape ``(m,)``."""
@@ -526,9 +588,13 @@ class LagrangianSystem:
             return float(g * (m1 * l1 / 2 * np.sin(q[0])
                               + m2 * (l1 * np.sin(q[0]) + l2 / 2 * np.sin(q[0] + q[1]))))
 
+        def force_jacobian(t: float, q: FloatArray, v: FloatArray
+                           ) -> tuple[FloatArray, FloatArray]:
+            return two_link_arm_force_jacobian(q, v, g=g, **p)
+
         return cls(lambda q: two_link_arm_mass(q, **p), force=force, gap=gap,
                    jacobian=jacobian, restitution=restitution, potential=potential,
-                   names=("theta1", "theta2"))
+                   names=("theta1", "theta2"), force_jacobian=force_jacobian)
 
 
 def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: float,
@@ -553,6 +619,65 @@ def two_link_arm_gravity(q: FloatArray, *, g: float, l1: float, l2: float, m1: f
     c12 = np.cos(q[0] + q[1])
     return np.array([g / 2 * (l1 * (m1 + 2 * m2) * np.cos(q[0]) + m2 * l2 * c12),
                      m2 * g * l2 / 2 * c12])
+
+
+def two_link_arm_force_jacobian(q: FloatArray, v: FloatArray, *, g: float, l1: float,
+                                l2: float, m1: float, m2: float, I1: float, I2: float
+                                ) -> tuple[FloatArray, FloatArray]:
+    """``(∂f/∂θ, ∂f/∂θ')`` of the two-link arm's force ``f = -C(θ, θ')θ' - G(θ)``.
+
+    With ``c = m2 l1 l2 / 2``: ``-C θ' = c sin θ2 (2 θ1'θ2' + θ2'², -θ1'²)``.
+    """
+    c = m2 * l1 * l2 / 2
+    s2, c2 = c * np.sin(q[1]), c * np.cos(q[1])
+    s1, s12 = np.sin(q[0]), np.sin(q[0] + q[1])
+    dq = np.array([[g / 2 * (l1 * (m1 + 2 * m2) * s1 + m2 * l2 * s12),
+                    g / 2 * m2 * l2 * s12 + c2 * (2 * v[0] * v[1] + v[1] ** 2)],
+                   [m2 * g * l2 / 2 * s12, m2 * g * l2 / 2 * s12 - c2 * v[0] ** 2]])
+    dv = np.array([[2 * s2 * v[1], 2 * s2 * (v[0] + v[1])], [-2 * s2 * v[0], 0.0]])
+    return dq, dv
+
+
+def _as_jacobian_pair(value: Any, n: int, where: str, *, runtime: bool = False
+                      ) -> tuple[FloatArray, FloatArray]:
+    """Two finite ``(n, n)`` arrays from what ``force_jacobian`` returned; the error names
+    ``force_jacobian`` and ``where`` (a shape error is a ``ModelError`` during a run)."""
+    shapes = None
+    try:
+        Jq, Jv = value
+        Jq, Jv = np.asarray(Jq, dtype=float), np.asarray(Jv, dtype=float)
+        shapes = (Jq.shape, Jv.shape)
+    except (TypeError, ValueError):
+        pass
+    if shapes is None:
+        raise ModelError(f"force_jacobian: expected a pair (dforce/dq, dforce/dv) of real "
+                         f"({n}, {n}) arrays {where}, got {type(value).__name__}")
+    if shapes != ((n, n), (n, n)):
+        cls = ModelError if runtime else DimensionError
+        raise cls(f"force_jacobian: expected two ({n}, {n}) arrays (dforce/dq, dforce/dv) "
+                  f"{where}, got shapes {shapes[0]} and {shapes[1]}")
+    if not (np.isfinite(Jq).all() and np.isfinite(Jv).all()):
+        raise ModelError(f"force_jacobian: returned non-finite entries {where}")
+    return Jq, Jv
+
+
+def _central_force_jacobians(force: ForceFn, t: float, q: FloatArray, v: FloatArray
+                             ) -> tuple[FloatArray, FloatArray]:
+    """Central differences of ``force`` in ``q`` and ``v``, step ``ε^(1/3) (1 + ‖x‖∞)``."""
+    n = q.shape[0]
+    out = []
+    for x, other_first in ((q, True), (v, False)):
+        step = _CBRT_EPS * (1.0 + float(np.max(np.abs(x), initial=0.0)))
+        J = np.empty((n, n))
+        for i in range(n):
+            xp, xm = x.copy(), x.copy()
+            xp[i] += step
+            xm[i] -= step
+            fp = force(t, xp, v) if other_first else force(t, q, xp)
+            fm = force(t, xm, v) if other_first else force(t, q, xm)
+            J[:, i] = (np.asarray(fp, float) - np.asarray(fm, float)) / (xp[i] - xm[i])
+        out.append(J)
+    return out[0], out[1]
 
 
 def _as_gap_matrix(value: Any, n: int) -> Any:

@@ -1,0 +1,117 @@
+"""The built-in integrators as a family: what each integrates, can do and accepts.
+
+Each class declares its facts for the driver (:mod:`nscontrol.simulate.driver`); the work is
+the ``integrate`` function of the module named in ``module``, whose docstring holds the
+algorithm.
+
+=================  ==========================================  ============================
+method             systems                                     capabilities
+=================  ==========================================  ============================
+``event_driven``   LinearHybridSystem, LagrangianSystem,       events, exact flow,
+                   ImpactingBodies                             listeners, controller
+``moreau_jean``    LagrangianSystem, ImpactingBodies           time stepping, listeners,
+                                                               controller, multipliers
+``implicit_euler`` LureSystem                                  time stepping, multipliers
+``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
+                   SwitchedAffineSystem                        sensitivity, t_eval
+=================  ==========================================  ============================
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from .driver import _ModuleIntegrator
+
+__all__ = ["EventDriven", "MoreauJean", "ImplicitEuler", "Switching"]
+
+
+class EventDriven(_ModuleIntegrator):
+    """Flow until the next event, apply the jump (:mod:`nscontrol.simulate.event_driven`)."""
+
+    name = "event_driven"
+    module = "nscontrol.simulate.event_driven"
+    capabilities = frozenset({"events", "exact_flow", "listeners", "controller",
+                              "multipliers"})
+    options: ClassVar[frozenset[str]] = frozenset(
+        {"u", "controller", "dt", "max_events", "min_interval", "zeno_ratio_tol",
+         "zeno_horizon", "zeno_rel", "rtol", "atol"})
+
+    @classmethod
+    def supports(cls, system: Any) -> bool:
+        from ..systems.impacting_bodies import ImpactingBodies
+        from ..systems.lagrangian import LagrangianSystem
+        from .hybrid import LinearHybridSystem
+
+        return isinstance(system, LinearHybridSystem | LagrangianSystem | ImpactingBodies)
+
+    @classmethod
+    def systems(cls) -> str:
+        return "LinearHybridSystem, LagrangianSystem and ImpactingBodies"
+
+
+class MoreauJean(_ModuleIntegrator):
+    """Event-capturing time-stepping with one LCP a step
+    (:mod:`nscontrol.simulate.moreau_jean`)."""
+
+    name = "moreau_jean"
+    module = "nscontrol.simulate.moreau_jean"
+    capabilities = frozenset({"time_stepping", "listeners", "controller", "multipliers"})
+    options: ClassVar[frozenset[str]] = frozenset(
+        {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at"})
+
+    @classmethod
+    def supports(cls, system: Any) -> bool:
+        from ..systems.impacting_bodies import ImpactingBodies
+        from ..systems.lagrangian import LagrangianSystem
+
+        return isinstance(system, LagrangianSystem | ImpactingBodies)
+
+    @classmethod
+    def systems(cls) -> str:
+        return "LagrangianSystem and ImpactingBodies"
+
+
+class ImplicitEuler(_ModuleIntegrator):
+    """The θ-method on a Lur'e system, one inclusion a step
+    (:mod:`nscontrol.simulate.implicit_euler`)."""
+
+    name = "implicit_euler"
+    module = "nscontrol.simulate.implicit_euler"
+    capabilities = frozenset({"time_stepping", "multipliers"})
+    options: ClassVar[frozenset[str]] = frozenset({"h", "theta"})
+
+    @classmethod
+    def supports(cls, system: Any) -> bool:
+        from ..systems.lure import LureSystem
+
+        return isinstance(system, LureSystem)
+
+    @classmethod
+    def systems(cls) -> str:
+        return ("LureSystem (for PWA/Filippov/switched systems use method='switching', for "
+                "mechanics 'moreau_jean')")
+
+
+class Switching(_ModuleIntegrator):
+    """Switched and piecewise-affine systems with located switchings
+    (:mod:`nscontrol.simulate.switching`)."""
+
+    name = "switching"
+    module = "nscontrol.simulate.switching"
+    capabilities = frozenset({"events", "exact_flow", "sensitivity", "t_eval"})
+    options: ClassVar[frozenset[str]] = frozenset(
+        {"u", "n_samples", "rtol", "atol", "max_events"})
+    pass_through: ClassVar[frozenset[str]] = frozenset({"progress"})
+
+    @classmethod
+    def supports(cls, system: Any) -> bool:
+        from ..systems.pwa import PiecewiseAffineSystem
+        from ..systems.switched import FilippovSystem, SwitchedAffineSystem
+
+        return isinstance(system, PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem)
+
+    @classmethod
+    def systems(cls) -> str:
+        return ("PiecewiseAffineSystem, FilippovSystem and SwitchedAffineSystem (for Lur'e "
+                "systems use method='implicit_euler')")

@@ -1,0 +1,279 @@
+"""The integrator family behind one driver: names and classes, a user's own integrator, one
+option check, one failure policy, partial trajectories whatever ends the run."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import nscontrol as nsc
+from nscontrol.errors import ModelError, NscontrolWarning, ZenoError, ZenoWarning
+from nscontrol.simulate import METHODS, Integrator, Trajectory, register_method
+from nscontrol.simulate.methods import EventDriven, ImplicitEuler, MoreauJean, Switching
+from nscontrol.simulate.trajectory import Recorder
+from nscontrol.systems.lagrangian import LagrangianSystem
+
+G = 9.81
+
+
+@pytest.fixture
+def ball():
+    return LagrangianSystem.bouncing_ball(restitution=0.9)
+
+
+def test_methods_map_names_to_classes_and_a_class_is_a_method(ball):
+    assert {k: METHODS[k] for k in METHODS} == {
+        "event_driven": EventDriven, "moreau_jean": MoreauJean,
+        "implicit_euler": ImplicitEuler, "switching": Switching}
+    by_name = nsc.simulate(ball, [1.0, 0.0], (0.0, 3.0), method="moreau_jean", h=1e-3)
+    by_class = nsc.simulate(ball, [1.0, 0.0], (0.0, 3.0), method=MoreauJean, h=1e-3)
+    # the same code runs both ways: bitwise equal
+    np.testing.assert_array_equal(by_name.x, by_class.x)
+    for cls in (EventDriven, MoreauJean, ImplicitEuler, Switching):
+        assert cls.capabilities, cls
+
+
+class ExplicitEuler(Integrator):
+    """A user's integrator of ``x' = A x``: the smallest thing that keeps the contract."""
+
+    name = "user_explicit_euler"
+    capabilities = frozenset()
+    options = frozenset({"h"})
+
+    @classmethod
+    def supports(cls, system):
+        return isinstance(system, LinearODE)
+
+    @classmethod
+    def systems(cls):
+        return "LinearODE"
+
+    def integrate(self, system, x0, t_span, *, h=1e-3, record_every=1, signals=None,
+                  progress=None):
+        rec = Recorder(len(x0), every=record_every, signals=signals, offered=("norm",))
+        t0, tf = t_span
+        x = np.asarray(x0, float)
+        n = int(round((tf - t0) / h))
+        for k in range(n + 1):
+            rec.sample(t0 + k * h, x, force=k == n, norm=np.linalg.norm(x))
+            if system.on_step is not None:
+                system.on_step(t0 + k * h)
+            x = x + h * (system.A @ x)
+        return rec.finish(method=self.name)
+
+
+class LinearODE:
+    default_method = None
+
+    def __init__(self, A, on_step=None):
+        self.A = np.asarray(A, float)
+        self.on_step = on_step
+
+
+def test_a_user_integrator_plugs_in_by_class_and_by_registered_name():
+    rot = LinearODE([[0.0, 1.0], [-1.0, 0.0]])
+    h = 1e-4
+    tr = nsc.simulate(rot, [1.0, 0.0], (0.0, 1.0), method=ExplicitEuler, h=h,
+                      t_eval=[0.25, 0.5, 1.0])
+    # explicit Euler's global error on the rotation is <= t h |A|^2 e^{t|A|} |x0| / 2 (+ the
+    # O(h^2) interpolation, zero at grid points): 1 * 1e-4 * e / 2 < 1.4e-4
+    exact = np.array([[np.cos(t), -np.sin(t)] for t in (0.25, 0.5, 1.0)])
+    assert np.max(np.abs(tr.x - exact)) < 0.5 * h * np.e
+    assert tr.stats["t_eval"] == "interpolated"
+    register_method(ExplicitEuler)
+    try:
+        by_name = nsc.simulate(rot, [1.0, 0.0], (0.0, 1.0), method="user_explicit_euler", h=h)
+        assert by_name.method == "user_explicit_euler"
+    finally:
+        METHODS._paths.pop("user_explicit_euler")
+        METHODS._classes.pop("user_explicit_euler")
+    with pytest.raises(ModelError, match=r"^method: expected a method name or an Integrator"):
+        nsc.simulate(rot, [1.0, 0.0], (0.0, 1.0), method=object)
+    with pytest.raises(ModelError, match=r"^user_explicit_euler: integrates LinearODE, got"):
+        nsc.simulate(LagrangianSystem.bouncing_ball(), [1.0, 0.0], (0.0, 1.0),
+                     method=ExplicitEuler)
+
+
+@pytest.mark.parametrize("method, system_kind", [
+    ("event_driven", "ball"), ("moreau_jean", "ball"), ("implicit_euler", "lure"),
+    ("switching", "pwa")])
+def test_every_method_refuses_an_unknown_option_with_one_message(method, system_kind, ball):
+    from nscontrol.testing.setvalued_problems import bimodal_oscillator, relay_feedback
+
+    system, x0 = {"ball": (ball, [1.0, 0.0]),
+                  "lure": (relay_feedback().system, [1.0, 0.0]),
+                  "pwa": (bimodal_oscillator().system, bimodal_oscillator().x0)}[system_kind]
+    with pytest.raises(ModelError, match=rf"^{method}: unknown option\(s\) \['stepsize'\]; "
+                                         r"accepted: \[.*'on_failure'.*'t_eval'"):
+        nsc.simulate(system, x0, (0.0, 1.0), method=method, stepsize=1e-3)
+
+
+def test_a_user_callback_error_keeps_the_run_so_far(ball):
+    def controller(t, q, v):
+        if t > 0.5:
+            raise RuntimeError("sensor unplugged")
+        return np.zeros(1)
+
+    with pytest.raises(RuntimeError, match="sensor unplugged") as info:
+        nsc.simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3,
+                     controller=controller)
+    partial = info.value.trajectory
+    assert isinstance(partial, Trajectory) and partial.status == -1
+    # the controller is called at each step's start: the last recorded step ends at 0.501
+    assert 0.5 <= partial.t[-1] <= 0.5 + 2e-3
+    assert "err.trajectory" in info.value.__notes__[0]
+
+
+def test_keyboard_interrupt_keeps_the_run_so_far():
+    def stop(t):
+        if t >= 0.3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as info:
+        nsc.simulate(LinearODE(np.zeros((1, 1)), on_step=stop), [1.0], (0.0, 1.0),
+                     method=ExplicitEuler, h=0.1)
+    assert info.value.trajectory.t[-1] == pytest.approx(0.3)
+
+
+def test_a_user_force_error_on_the_event_driven_path_keeps_the_run(ball):
+    def controller(t, q, v):      # a callable controller: the DOP853 path
+        if q[0] < 0.5:
+            raise ValueError("actuator saturated")
+        return np.zeros(1)
+
+    with pytest.raises(ValueError) as info:
+        nsc.simulate(ball, [1.0, 0.0], (0.0, 2.0), controller=controller)
+    assert info.value.trajectory.x[-1, 0] >= 0.5 - 1e-9 and len(info.value.trajectory.t) > 1
+
+
+def _zeno_run(ball, **kw):
+    return nsc.simulate(ball, [1.0, 0.0], (0.0, 10.0), max_events=10, **kw)
+
+
+def test_one_failure_policy_for_every_method(ball):
+    with pytest.raises(ZenoError) as info:
+        _zeno_run(ball)
+    assert info.value.trajectory.status == -1
+    returned = _zeno_run(ball, on_failure="return")
+    assert returned.status == -1 and len(returned.events_of("impact")) == 10
+    np.testing.assert_array_equal(returned.t, info.value.trajectory.t)
+    with pytest.warns(ZenoWarning):
+        warned = _zeno_run(ball, on_failure="warn")
+    assert warned.status == -1
+    with pytest.raises(ModelError, match=r"^on_failure: expected 'raise', 'return' or 'warn'"):
+        _zeno_run(ball, on_failure="ignore")
+    assert issubclass(ZenoWarning, NscontrolWarning)
+
+
+def test_a_model_error_is_raised_whatever_the_failure_policy(ball):
+    with pytest.raises(nsc.InadmissibleStateError):
+        nsc.simulate(ball, [-0.1, 0.0], (0.0, 1.0), on_failure="return")
+
+
+def test_capabilities_are_asked_for_not_assumed(ball):
+    with pytest.raises(ModelError, match=r"^sensitivity: method 'event_driven' does not "
+                                         r"compute sensitivities; use one of \['switching'\]"):
+        nsc.simulate(ball, [1.0, 0.0], (0.0, 1.0), sensitivity=True)
+    from nscontrol.analysis.periodic import periodic_steady_state
+
+    with pytest.raises(ModelError, match="shooting needs sensitivities"):
+        periodic_steady_state(ball, 1.0, method="moreau_jean", h=1e-3)
+
+
+def test_t_eval_on_a_time_stepping_method_is_within_the_interpolation_bound(ball):
+    """Free fall before the first impact: Moreau–Jean with theta = 1/2 is exact at the steps
+    for a constant force (the trapezoid rule on a linear velocity), so the only error at
+    t_eval is linear interpolation of the parabola between steps: g h^2 / 8."""
+    h = 1e-2
+    t_eval = np.linspace(0.0, 0.4, 37)      # off the step grid
+    tr = nsc.simulate(ball, [1.0, 0.0], (0.0, 0.4), method="moreau_jean", h=h, theta=0.5,
+                      t_eval=t_eval)
+    np.testing.assert_array_equal(tr.t, t_eval)
+    exact_q = 1.0 - 0.5 * G * t_eval ** 2
+    # bound g h^2 / 8, plus 10 ulps of the positions for the arithmetic
+    assert np.max(np.abs(tr.x[:, 0] - exact_q)) <= G * h * h / 8 + 10 * np.finfo(float).eps
+    np.testing.assert_allclose(tr.x[:, 1], -G * t_eval, rtol=0, atol=1e-12)  # v is linear
+    with pytest.raises(ModelError, match=r"^t_eval: times must lie in the simulated span"):
+        nsc.simulate(ball, [1.0, 0.0], (0.0, 0.4), method="moreau_jean", h=h,
+                     t_eval=[0.5])
+
+
+def test_record_every_and_signals_mean_the_same_for_every_method():
+    from nscontrol.testing.setvalued_problems import bimodal_oscillator
+
+    p = bimodal_oscillator()
+    full = nsc.simulate(p.system, p.x0, (0.0, 5.0))
+    thin = nsc.simulate(p.system, p.x0, (0.0, 5.0), record_every=10)
+    np.testing.assert_array_equal(thin.t[:-1], full.t[::10][:len(thin.t) - 1])
+    assert thin.t[-1] == full.t[-1]
+    with pytest.raises(ModelError, match=r"^signals: unknown name"):
+        nsc.simulate(p.system, p.x0, (0.0, 5.0), signals=["gap"])
+
+
+def test_listeners_are_called_by_every_method():
+    from nscontrol.testing.setvalued_problems import bimodal_oscillator
+
+    p = bimodal_oscillator()
+    seen = []
+    tr = nsc.simulate(p.system, p.x0, (0.0, 5.0),
+                      listeners=[lambda t, xm, xp, idx, imp: seen.append(t)])
+    assert seen == list(tr.event_times()) and len(seen) > 0
+    with pytest.raises(ModelError, match=r"^listeners: expected a sequence of callables"):
+        nsc.simulate(p.system, p.x0, (0.0, 5.0), listeners=print)
+
+
+def test_no_recorder_no_partial_but_the_error_still_reaches_the_caller():
+    class Broken(Integrator):
+        name = "broken"
+
+        def integrate(self, system, x0, t_span, **options):
+            raise ArithmeticError("before any sample")
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ArithmeticError) as info:
+            nsc.simulate(LinearODE(np.eye(1)), [1.0], (0.0, 1.0), method=Broken)
+    assert getattr(info.value, "trajectory", None) is None
+
+
+def test_a_run_that_blows_up_is_a_failure_cut_at_the_first_non_finite_sample():
+    from nscontrol.errors import NonFiniteStateError
+    from nscontrol.laws.relay import Relay
+    from nscontrol.systems.lure import LureSystem
+
+    unstable = LureSystem([[50.0]], [[1.0]], [[1.0]], Relay(1.0), state_names=("x",))
+    with pytest.raises(NonFiniteStateError, match=r"^implicit_euler: state x became inf "
+                                                   r"between t = ") as info:
+        nsc.simulate(unstable, [1.0], (0.0, 100.0), h=1e-2)
+    partial = info.value.trajectory
+    # implicit Euler's growth (1 - 50 h)^{-k} = 2^k at h = 1e-2 overflows after ~1024 steps:
+    # every kept sample is finite, the next one is not
+    assert np.all(np.isfinite(partial.x)) and partial.status == -1
+    assert info.value.time > partial.t[-1] and info.value.state == "x"
+    returned = nsc.simulate(unstable, [1.0], (0.0, 100.0), h=1e-2, on_failure="return")
+    np.testing.assert_array_equal(returned.t, partial.t)
+    spring = LagrangianSystem([[1.0]], stiffness=[[-400.0]], gap_matrix=[[1.0]],
+                              gap_offset=[10.0])          # negative stiffness: e^{20 t}
+    for method, opts in (("event_driven", {}), ("moreau_jean", {"h": 1e-3})):
+        with pytest.raises(NonFiniteStateError):
+            nsc.simulate(spring, [0.1, 0.0], (0.0, 100.0), method=method, **opts)
+
+
+@pytest.mark.parametrize("h, match", [
+    (10.0, r"^h: the step 10 is longer than the span 1; use h <= 1"),
+    (1e-12, r"^h: 1e-12 on a span of 1 means 1e\+12 steps"),
+    ("1e-3", r"^h: expected a real number"),
+    (-1e-3, r"^h: expected a finite number > 0")])
+def test_steps_are_checked_once_for_every_time_stepping_method(ball, h, match):
+    for method, system, x0 in (("moreau_jean", ball, [1.0, 0.0]),
+                               ("implicit_euler", _relay(), [1.0, 0.0])):
+        with pytest.raises(ModelError, match=match):
+            nsc.simulate(system, x0, (0.0, 1.0), method=method, h=h)
+
+
+def _relay():
+    from nscontrol.testing.setvalued_problems import relay_feedback
+
+    return relay_feedback().system
