@@ -1,8 +1,10 @@
 """The event-driven package's shortcuts change nothing: fast event objects, pooled arrays,
 block-wise recording, reused options and the open-gap shortcut of the ``x0`` check.
 
-Every comparison below is between two runs doing the same floating-point operations in the
-same order, so they agree bit for bit (``array_equal``), not to a tolerance.
+The comparisons are between two runs doing the same floating-point operations in the same
+order, so they agree bit for bit (``array_equal``), not to a tolerance — except a flight
+longer than the whole sample buffer, which resumes from a propagated grid state (its bound
+is stated where it is asserted).
 """
 
 import importlib
