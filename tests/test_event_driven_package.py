@@ -124,8 +124,8 @@ def test_reused_options_are_still_checked() -> None:
         simulate(system, ball.x0, (0.0, 1.0), dt=-0.1, progress=False)
     with pytest.raises(ModelError, match="max_events"):
         simulate(system, ball.x0, (0.0, 1.0), dt=0.1, max_events=True, progress=False)
-    with pytest.raises(ModelError, match="on_zeno"):
-        simulate(system, ball.x0, (0.0, 1.0), dt=0.1, on_zeno="ignore", progress=False)
+    with pytest.raises(ModelError, match="on_failure"):
+        simulate(system, ball.x0, (0.0, 1.0), dt=0.1, on_failure="ignore", progress=False)
 
 
 @pytest.mark.parametrize("x0, error", [

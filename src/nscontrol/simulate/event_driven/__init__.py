@@ -29,7 +29,7 @@ event ``"accumulation"`` is recorded at ``t∞`` (our choice: the samples in ``[
 follow the constrained flow, an error of the order of the remaining bounce heights). An
 accumulation that cannot be resolved that way (no geometric pattern, a contact force that
 would be negative, more than ``max_events`` events) raises :class:`ZenoError` with the
-trajectory computed so far (or warns and returns it, ``on_zeno="warn"``).
+trajectory computed so far (``simulate(..., on_failure="warn")`` warns and returns it).
 
 Speed: the flow between events, the event search and every event of a single guard with a
 linear jump (a free contact bouncing with nothing else closed; a :class:`LinearHybridSystem`
@@ -74,7 +74,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
               controller: Any = None, dt: float | None = None, max_events: int = 100_000,
               min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
               zeno_horizon: float | None = None, zeno_rel: float = 1e-3,
-              on_zeno: str = "raise", listeners: Sequence[Callable[..., None]] = (),
+              listeners: Sequence[Callable[..., None]] = (),
               rtol: float = 1e-10, atol: float = 1e-12, record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None
               ) -> Trajectory:
@@ -110,9 +110,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
         Without ``zeno_horizon``, accumulate once the predicted remaining time is below
         ``zeno_rel`` times the duration of the bouncing sequence (from its first impact to
         the accumulation point): the same bounces are resolved whatever ``t_span``.
-    on_zeno : {"raise", "warn"}
-        An unresolvable accumulation raises :class:`ZenoError` or warns
-        (:class:`ZenoWarning`) and returns the partial trajectory with ``status = -1``.
     listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
         Called after every jump / impact with the event's states, the indices of the guards
         or contacts involved and the contact impulses (``None`` for hybrid jumps). The same
@@ -169,7 +166,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
     opts = _Options.checked(
         t0, tf, dt=dt, max_events=max_events, min_interval=min_interval,
         zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
-        on_zeno=on_zeno, listeners=listeners, rtol=rtol, atol=atol, record_every=record_every,
+        listeners=listeners, rtol=rtol, atol=atol, record_every=record_every,
         signals=signals, progress=progress)
     if isinstance(system, LinearHybridSystem):
         for name, value in (("u", u), ("controller", controller)):
@@ -183,7 +180,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = Non
                                            min_interval=min_interval,
                                            zeno_ratio_tol=zeno_ratio_tol,
                                            zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
-                                           on_zeno=on_zeno, listeners=listeners, rtol=rtol,
+                                           listeners=listeners, rtol=rtol,
                                            atol=atol, record_every=record_every,
                                            signals=signals, progress=progress)
     if isinstance(system, LagrangianSystem):

@@ -65,7 +65,6 @@ class _Options:
     ratio_tol: float
     horizon: float  # < 0: relative criterion (``rel``)
     rel: float
-    on_zeno: str
     listeners: tuple[Callable[..., None], ...]
     rtol: float
     atol: float
@@ -97,11 +96,9 @@ class _Options:
     @classmethod
     def _check(cls, t0: float, tf: float, *, dt: float | None, max_events: int,
                min_interval: float, zeno_ratio_tol: float, zeno_horizon: float | None,
-               zeno_rel: float, on_zeno: str, listeners: Sequence[Callable[..., None]],
+               zeno_rel: float, listeners: Sequence[Callable[..., None]],
                rtol: float, atol: float, record_every: int, signals: Sequence[str] | None,
                progress: bool | None) -> _Options:
-        if on_zeno not in ("raise", "warn"):
-            raise ModelError(f"on_zeno: expected 'raise' or 'warn', got {on_zeno!r}")
         for i, fn in enumerate(listeners):
             if not callable(fn):
                 raise ModelError(f"listeners[{i}]: expected a callable (t, x_minus, x_plus, "
@@ -112,7 +109,7 @@ class _Options:
                    ratio_tol=check_positive("zeno_ratio_tol", zeno_ratio_tol),
                    horizon=(check_positive("zeno_horizon", zeno_horizon)
                             if zeno_horizon is not None else -1.0),
-                   rel=check_positive("zeno_rel", zeno_rel), on_zeno=on_zeno,
+                   rel=check_positive("zeno_rel", zeno_rel),
                    listeners=tuple(listeners), rtol=check_positive("rtol", rtol),
                    atol=check_positive("atol", atol), every=record_every, signals=signals,
                    progress=progress)

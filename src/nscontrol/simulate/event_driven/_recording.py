@@ -3,7 +3,6 @@ the partial trajectory of a failed run, and the reordering of states for another
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
@@ -11,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..._validation import FloatArray
-from ...errors import NscontrolError, ZenoError, ZenoWarning
+from ...errors import NscontrolError, ZenoError
 from ..trajectory import Event, Recorder, Trajectory
 from ._options import _Options
 
@@ -139,25 +138,12 @@ def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) ->
     return replace(traj, x=traj.x[:, order], events=events, state_names=tuple(names))
 
 
-def _caller_level() -> int:
-    """``stacklevel`` pointing at the first frame outside nscontrol (the user's call)."""
-    import sys
-
-    frame, level = sys._getframe(1), 1
-    while frame is not None and frame.f_globals.get("__name__", "").startswith("nscontrol"):
-        frame, level = frame.f_back, level + 1
-    return level
-
-
 def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
                ) -> Trajectory:
     traj = rec.finish(status=-1, message=message, **finish)
-    if opts.on_zeno == "warn":
-        warnings.warn(message, ZenoWarning, stacklevel=_caller_level())
-        return traj
-    raise ZenoError(message + "; pass on_zeno='warn' to keep the partial trajectory, or use "
-                    "method='moreau_jean' which passes through accumulations", time=t,
-                    trajectory=traj)
+    raise ZenoError(message + "; pass on_failure='return' (or 'warn') to keep the partial "
+                    "trajectory, or use method='moreau_jean' which passes through "
+                    "accumulations", time=t, trajectory=traj)
 
 
 def _guarded(run: Any) -> Trajectory:
