@@ -220,10 +220,11 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                          "captured to O(h), penetration <= h |u-|)")
     if isinstance(system, ImpactingBodies):
         from ..errors import NscontrolError
-        from .event_driven import reorder_listeners, reorder_states
+        from .event_driven import partial_in_caller_order, reorder_listeners, reorder_states
 
         perm = system.lagrangian_permutation()
         back = np.argsort(perm)
+        partial_in_caller_order(back, system.state_names)
         try:
             traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
                              theta=theta, gamma=gamma, u=u, controller=controller,

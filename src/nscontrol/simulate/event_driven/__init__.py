@@ -62,12 +62,12 @@ from ...systems.lagrangian import LagrangianSystem
 from ..hybrid import LinearHybridSystem
 from ..trajectory import Trajectory
 from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
-from ._recording import _guarded, reorder_listeners, reorder_states
+from ._recording import _guarded, partial_in_caller_order, reorder_listeners, reorder_states
 from .hybrid_run import HybridRun
 from .linear_mechanics import LinearMechanicsRun, checked_state
 from .nonlinear_mechanics import NonlinearMechanicsRun
 
-__all__ = ["integrate", "reorder_listeners", "reorder_states"]
+__all__ = ["integrate", "reorder_listeners", "reorder_states", "partial_in_caller_order"]
 
 
 def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = None,
@@ -198,6 +198,7 @@ def _integrate_impacting_bodies(system: Any, x0: Any, t_span: tuple[float, float
     x0 = system.check_state(x0)
     perm = system.lagrangian_permutation()
     back = np.argsort(perm)
+    partial_in_caller_order(back, system.state_names)
     try:
         traj = integrate(system.lagrangian(), x0[perm], t_span,
                          controller=_permuted_gain(controller, perm),
