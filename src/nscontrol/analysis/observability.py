@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_matrix, as_square, as_vector, check_positive
+from .._validation import as_matrix, as_square, as_vector, check_positive, check_t_span
 from ..errors import InfeasibleDesignError, ModelError
 
 __all__ = [
@@ -408,7 +408,7 @@ def reconstructibility(A_a: Any, C_a: Any, impacts: Any, t_span: Sequence[float]
     >>> reconstructibility(A, C, [], (0.0, 10.0)).reason.split(":")[0]
     'no impact in [0, 10)'
     """
-    t0, tf = float(t_span[0]), float(t_span[1])
+    t0, tf = check_t_span(t_span)
     if hasattr(impacts, "event_times"):
         impacts = impacts.event_times("impact")
     times = np.sort(np.asarray(impacts, dtype=float).ravel())
@@ -533,7 +533,8 @@ def observer_flow_norms(F: Any, P: Any, eps: float, deltas: Any, *,
     P = as_square("P", P, flow.n)
     velocity_scale = check_positive("velocity_scale", velocity_scale)
     w = _velocity_weights(flow.n, velocity_scale)
-    powers = float(eps) ** np.arange(flow.n)
+    eps = check_positive("eps", eps)
+    powers = eps ** np.arange(flow.n)
     T = w[:, None] * P / powers[None, :]
     Tinv = np.linalg.inv(P) * powers[:, None] / w[None, :]
     E = flow.expm(np.atleast_1d(np.asarray(deltas, float)) / float(eps))
