@@ -184,3 +184,18 @@ def test_hdf5_file_of_another_kind(tmp_path):
 def test_missing_file_is_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError, match="path: no trajectory file"):
         Trajectory.load(tmp_path / "nope.h5")
+
+
+def test_recorder_puts_a_late_forced_sample_in_time_order():
+    """An integrator that finds a root after sampling its piece (the switching method's
+    grazings) records it late; the finished trajectory is in time order, signals with it."""
+    from nscontrol.simulate.trajectory import Recorder
+
+    rec = Recorder(1)
+    for tk in (0.0, 1.0, 1.0, 2.0):
+        rec.sample(tk, [tk], gap=[10 * tk])
+    rec.sample(0.5, [0.5], force=True, gap=[5.0])
+    traj = rec.finish()
+    assert traj.t.tolist() == [0.0, 0.5, 1.0, 1.0, 2.0]
+    assert traj.x[:, 0].tolist() == traj.t.tolist()
+    assert traj.signal("gap")[:, 0].tolist() == [0.0, 5.0, 10.0, 10.0, 20.0]

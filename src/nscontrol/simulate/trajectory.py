@@ -768,9 +768,16 @@ class Recorder:
     def _freeze(self, status: int, message: str | None, method: str,
                 stats: Mapping[str, Any] | None, state_names: Sequence[str]) -> Trajectory:
         n = self._n
+        t, x = self._t[:n].copy(), self._x[:n].copy()
+        signals = {k: v[:n].copy() for k, v in self._sig.items()}
+        if n > 1 and np.any(np.diff(t) < 0.0):
+            # a forced sample at a root found after its piece was sampled (the switching
+            # method's grazings): put it in time order; stable, so pre/post pairs keep theirs
+            order = np.argsort(t, kind="stable")
+            t, x = t[order], x[order]
+            signals = {k: v[order] for k, v in signals.items()}
         return Trajectory(
-            t=self._t[:n].copy(), x=self._x[:n].copy(),
-            signals={k: v[:n].copy() for k, v in self._sig.items()},
+            t=t, x=x, signals=signals,
             events=tuple(sorted(self.events, key=lambda e: e.time)),
             stats=dict(stats or {}), status=status,
             message=STATUS_MESSAGES[status] if message is None else message,
