@@ -139,6 +139,31 @@ def test_lyapunov_decay_refused_before_cvxpy(decay):
         .reconstructibility(np.eye(2), [1.0, 0.0], [], "01"), "t_span"),
     (lambda: __import__("nscontrol.laws.set_valued", fromlist=["x"]).Relay(1.0).in_domain(
         [0.0], tol="0"), "tol"),
+    (lambda: _traj().resample(["0.5"]), "t_eval"),
+    (lambda: _traj().resample([0.5j]), "t_eval"),
+    (lambda: _traj().at("0.5"), "t"),
+    (lambda: _traj().slice("0", 1.0), "t0"),
+    (lambda: _mod("nscontrol.analysis.convergence").verify_cqlf([-np.eye(2)], np.eye(2),
+                                                                decay="0.1"), "decay"),
+    (lambda: _mod("nscontrol.analysis.convergence").verify_cqlf([-np.eye(2)], np.eye(2),
+                                                                tol=1j), "tol"),
+    (lambda: _mod("nscontrol.analysis.convergence").bisect_boundary(bool, "0", 1.0), "lo"),
+    (lambda: _mod("nscontrol.analysis.observability").reconstructibility(
+        np.eye(2), [1.0, 0.0], ["0.5"], (0, 1)), "impacts"),
+    (lambda: _mod("nscontrol.analysis.observability").reconstructibility(
+        np.eye(2), [1.0, 0.0], [0.5], (0, 1), min_dwell="1e-9"), "min_dwell"),
 ])
 def test_other_public_scalars_refused(call, name):
     assert_refused(call, name)
+
+
+def _mod(name: str):
+    import importlib
+
+    return importlib.import_module(name)
+
+
+def _traj():
+    from nscontrol.simulate.trajectory import Trajectory
+
+    return Trajectory(t=[0.0, 1.0, 2.0], x=np.zeros((3, 1)))

@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import (
+    as_float_array,
     as_matrix,
     as_square,
     as_vector,
@@ -418,8 +419,9 @@ def reconstructibility(A_a: Any, C_a: Any, impacts: Any, t_span: Sequence[float]
     t0, tf = check_t_span(t_span)
     if hasattr(impacts, "event_times"):
         impacts = impacts.event_times("impact")
-    times = np.sort(np.asarray(impacts, dtype=float).ravel())
+    times = np.sort(as_float_array("impacts", impacts).ravel())
     times = times[(times >= t0) & (times < tf)]
+    min_dwell = check_positive("min_dwell", min_dwell, allow_zero=True)
     A = as_square("A_a", A_a)
     pair_ok, margin, modes = pbh_observability(A, np.reshape(C_a, (1, -1)))
     dwell = float(np.min(np.diff(times))) if times.size > 1 else np.inf

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_integer
+from .._validation import as_float_array, as_real_scalar, check_integer
 from ..errors import DimensionError, ModelError
 from ._run_context import register_recorder
 
@@ -163,8 +163,10 @@ class Trajectory:
 
     def slice(self, t0: float | None = None, t1: float | None = None) -> Trajectory:
         """The part of the trajectory with ``t0 <= t <= t1`` (events included likewise)."""
-        lo = -np.inf if t0 is None else t0
-        hi = np.inf if t1 is None else t1
+        lo = -np.inf if t0 is None else as_real_scalar("t0", t0)
+        hi = np.inf if t1 is None else as_real_scalar("t1", t1)
+        if np.isnan(lo) or np.isnan(hi):
+            raise ModelError(f"t0, t1: expected times (or None), got ({t0!r}, {t1!r})")
         keep = (self.t >= lo) & (self.t <= hi)
         return replace(
             self,
@@ -176,7 +178,7 @@ class Trajectory:
 
     def at(self, t: float | FloatArray) -> FloatArray:
         """States linearly interpolated at time(s) ``t`` (right-continuous at events)."""
-        tq = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        tq = np.atleast_1d(as_float_array("t", t))
         out = self._interpolate(self.x, *self._weights(tq))
         return out[0] if np.ndim(t) == 0 else out
 
@@ -194,7 +196,7 @@ class Trajectory:
         ModelError
             ``t_eval`` outside the recorded span, or this trajectory has fewer than 2 samples.
         """
-        tq = np.atleast_1d(np.asarray(t_eval, dtype=np.float64))
+        tq = np.atleast_1d(as_float_array("t_eval", t_eval))
         if len(self.t) < 2:
             raise ModelError("t_eval: the run recorded fewer than 2 samples; nothing to "
                              "interpolate")
