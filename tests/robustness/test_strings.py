@@ -139,6 +139,10 @@ def test_lyapunov_decay_refused_before_cvxpy(decay):
         .reconstructibility(np.eye(2), [1.0, 0.0], [], "01"), "t_span"),
     (lambda: __import__("nscontrol.laws.set_valued", fromlist=["x"]).Relay(1.0).in_domain(
         [0.0], tol="0"), "tol"),
+    (lambda: _mod("nscontrol.design.convergent_pwa").certificate_residual(
+        [-np.eye(2)], np.eye(2), decay="0.1"), "decay"),
+    (lambda: _mod("nscontrol.design.impact_observer").place_scaled(
+        np.eye(2), [[1.0, 0.0]], [-1, -2], 0.1j), "eps"),
     (lambda: _traj().resample(["0.5"]), "t_eval"),
     (lambda: _traj().resample([0.5j]), "t_eval"),
     (lambda: _traj().at("0.5"), "t"),

@@ -43,11 +43,12 @@ LMI_MARGIN = 1e-6
 
 def certificate_residual(As: Sequence[Any], P: Any, decay: float = 0.0) -> float:
     """``max_i λ_max(A_iᵀP + PA_i + 2σP)/‖P‖`` — ≤ 1e-8 passes the re-check (spec check 3)."""
-    P = np.asarray(P, float)
+    P = as_square("P", P)
     P = 0.5 * (P + P.T)
+    decay = as_real_scalar("decay", decay)
     worst = -np.inf
-    for A in As:
-        A = np.asarray(A, float)
+    for i, A in enumerate(As):
+        A = as_square(f"As[{i}]", A, P.shape[0])
         M = A.T @ P + P @ A + 2.0 * decay * P
         worst = max(worst, float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]))
     return worst / float(np.linalg.norm(P, 2))
