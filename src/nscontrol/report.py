@@ -96,7 +96,7 @@ def write_report(out: Path, names: list[str] | None = None, *, progress: bool | 
     for ex in progress_iter(examples, total=len(examples), desc="examples", enable=progress):
         result, error, seconds = run_example(ex, out / ex.name)
         rows.append({"example": ex, "result": result, "error": error, "seconds": seconds})
-    summary = {
+    summary: dict[str, Any] = {
         "examples": [
             {**(r["result"].to_json() if r["result"] else {"example": r["example"].name}),
              "title": r["example"].title, "chapter": r["example"].chapter,

@@ -472,13 +472,13 @@ def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], va
     points = dict(todo)
     for f in as_completed(futures):
         i = futures[f]
-        exc = f.exception()
-        if isinstance(exc, BrokenProcessPool):
+        failure = f.exception()
+        if isinstance(failure, BrokenProcessPool):
             lost.append((i, points[i]))
             continue
-        if isinstance(exc, KeyboardInterrupt):
-            raise exc
-        if diagnosis is None and exc is not None:
+        if isinstance(failure, KeyboardInterrupt):
+            raise failure
+        if diagnosis is None and failure is not None:
             diagnosis = _pickling_problem(call, dask=dask) or _transit_problem(i, points[i])
         _store(i, f, values, errors, diagnosis or "")
         _tick(i, bar, done)

@@ -98,7 +98,8 @@ def test_restitution_refused(e):
 def test_restitution_vector_of_strings_refused():
     from nscontrol.systems.lagrangian import LagrangianSystem
 
-    assert_refused(lambda: LagrangianSystem.chain([1.0, 1.0, 1.0], restitution=["1", "1"]), "restitution")
+    assert_refused(lambda: LagrangianSystem.chain([1.0, 1.0, 1.0], restitution=["1", "1"]),
+                   "restitution")
 
 
 @pytest.fixture(scope="module")

@@ -534,7 +534,7 @@ def _load_stats(r: _Reader) -> dict[str, Any]:
     group = r.group("stats")
     out: dict[str, Any] = {}
     for name in sorted(group, key=int):
-        raw = r.data(f"stats/{name}")
+        raw: Any = r.data(f"stats/{name}")
         encoding = group[name].attrs["encoding"]
         if encoding == "array":
             value = raw

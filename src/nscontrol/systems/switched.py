@@ -167,8 +167,8 @@ class FilippovSystem:
             if self.jacobian is not None:
                 _require_finite("jacobian", self.jacobian(0.0, x, tuple(signs)),
                                 f"{where}, signs = {tuple(signs)}")
-        for j in range(J if self.gradients is not None else 0):
-            _require_finite(f"gradients[{j}]", self.gradients[j](x), where)
+        for j, grad in enumerate(self.gradients or ()):
+            _require_finite(f"gradients[{j}]", grad(x), where)
 
     @property
     def n_surfaces(self) -> int:
