@@ -199,3 +199,12 @@ def test_recorder_puts_a_late_forced_sample_in_time_order():
     assert traj.t.tolist() == [0.0, 0.5, 1.0, 1.0, 2.0]
     assert traj.x[:, 0].tolist() == traj.t.tolist()
     assert traj.signal("gap")[:, 0].tolist() == [0.0, 5.0, 10.0, 10.0, 20.0]
+
+
+def test_save_into_missing_folder_or_onto_a_folder(tmp_path):
+    traj = sample_trajectory()
+    with pytest.raises(FileNotFoundError, match="path: folder .* does not exist"):
+        traj.save(tmp_path / "missing" / "run.h5")
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        traj.save(tmp_path)
+    assert os.listdir(tmp_path) == []

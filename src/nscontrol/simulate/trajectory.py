@@ -247,6 +247,11 @@ class Trajectory:
         for name in self.signals:
             _check_signal_name(name)
         path = Path(path)
+        if not path.parent.is_dir():
+            raise FileNotFoundError(f"path: folder {str(path.parent)!r} does not exist; create "
+                                    "it first (e.g. Path(...).mkdir(parents=True))")
+        if path.is_dir():
+            raise IsADirectoryError(f"path: {str(path)!r} is a folder; pass a file name")
         tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
         try:
             self._write(tmp)
