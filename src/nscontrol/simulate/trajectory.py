@@ -427,6 +427,9 @@ _FORMAT = "nscontrol.Trajectory/3"
 _FORMAT_V2 = "nscontrol.Trajectory/2"      # stats as variable-length JSON strings
 _FORMAT_V1 = "nscontrol.Trajectory/1"      # stats as attributes
 
+#: Target size of a checksummed chunk (bytes).
+_CHUNK_BYTES = 1 << 20
+
 #: First bytes of every HDF5 file (its superblock signature).
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
@@ -460,7 +463,12 @@ def _put(group: Any, name: str, data: np.ndarray) -> Any:
     data = np.asarray(data)
     if data.ndim == 0 or data.size == 0:
         return group.create_dataset(name, data=data)
-    return group.create_dataset(name, data=data, fletcher32=True, chunks=True)
+    # chunks of whole rows, ~1 MiB (h5py's automatic ones are tens of KB: more chunk
+    # lookups). Checking the sums costs: 200000 x 6 states load in ~0.022 s, ~0.006 s unchecked
+    row_bytes = max(1, data.itemsize * int(np.prod(data.shape[1:])))
+    rows = int(min(data.shape[0], max(1, _CHUNK_BYTES // row_bytes)))
+    return group.create_dataset(name, data=data, fletcher32=True,
+                                chunks=(rows,) + data.shape[1:])
 
 
 def _unreadable_reason(path: Path) -> str:
