@@ -938,7 +938,7 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-1
 
     >>> import numpy as np
     >>> from nscontrol.simulate import simulate
-    >>> from nscontrol.simulate.hybrid import LinearHybridSystem
+    >>> from nscontrol.systems.hybrid import LinearHybridSystem
     >>> A = [[-0.5, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]]
     >>> J = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]       # tau <- 1
     >>> clock = LinearHybridSystem(A, [[0.0, 1.0, 0.0]], [0.0], J)

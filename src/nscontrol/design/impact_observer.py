@@ -8,7 +8,7 @@ body b is invisible between impacts. This module designs
   of the plant, the jumps (7c)-(7g) with the restitution matrix of coefficient ``e``
   (Remark 1) -- :func:`design_impact_observer`, returning an :class:`ImpactObserverDesign`
   that builds the closed loop "plant + observer + exosystem" as one
-  :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`;
+  :class:`~nscontrol.systems.hybrid.LinearHybridSystem`;
 * dead-beat observers built from the constructive proofs (**our choice**, the seed is
   truncated): :func:`deadbeat_n1` (finite-window reconstruction of body a, restarted at each
   impact, plus the impact formula for the free mass) and :func:`deadbeat_1n` (body b of n-1
