@@ -89,7 +89,9 @@ __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "G
 EIG_COND_LIMIT = 1e5
 #: Taylor degree per cell; with ||Ab h|| = 1 the remainder is below e/(K+1)! ≈ 2e-17.
 TAYLOR_DEGREE = 18
-_REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
+#: Bound ``e/(K+1)!`` of the Taylor remainder on one cell (``||Ab h|| = 1``), passed to the
+#: compiled search by every caller.
+TAYLOR_REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
 
 
 # --------------------------------------------------------------------------- exosystem
@@ -528,7 +530,7 @@ def _search(ctx: _GuardContext, x0: FloatArray, G: FloatArray, g0: FloatArray, t
     W, row_norm = ctx.guard_data(G)
     p = G.shape[0]
     hit, graze = np.zeros(p, dtype=np.int8), np.zeros(p, dtype=np.int8)
-    code, t, index = search(W, g0, row_norm, graze_tol, simultaneous_tol, _REMAINDER, ctx.phi,
+    code, t, index = search(W, g0, row_norm, graze_tol, simultaneous_tol, TAYLOR_REMAINDER, ctx.phi,
                             ctx.bern, x0 / ctx.d, ctx.h, t_max, ctx.kind, ctx.lam,
                             ctx.V, ctx.Vinv, ctx.taylor, ctx.d, hit, graze)
     if code == NEGATIVE:
