@@ -104,4 +104,9 @@ def test_lyapunov_recheck_numbers_and_verdicts():
     assert chk.holds() and chk.residual == -1.5
     assert not recheck_lyapunov([A], np.eye(2), decay=1.5).holds(LYAPUNOV_RECHECK_RTOL)
     assert not recheck_lyapunov([A], -np.eye(2)).holds()              # P not positive
-    assert not recheck_lyapunov([A], np.full((2, 2), np.nan)).holds()
+    with pytest.raises(ModelError, match="P"):
+        recheck_lyapunov([A], np.full((2, 2), np.nan))
+    with pytest.raises(DimensionError, match=r"As\[0\]"):
+        recheck_lyapunov([np.eye(3)], np.eye(2))
+    with pytest.raises(ModelError, match="decay"):
+        recheck_lyapunov([A], np.eye(2), decay="0.1")
