@@ -30,7 +30,7 @@ extensions = [
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
-exclude_patterns = ["_build", "_generated_gallery_figures/README.md"]
+exclude_patterns = ["_build"]
 templates_path = ["_templates"]
 html_static_path = ["_static"]
 html_theme = "furo"
@@ -43,14 +43,11 @@ autosummary_generate = True
 autosummary_imported_members = False
 autodoc_default_options = {"members": True, "show-inheritance": False}
 autodoc_typehints = "none"          # numpydoc shows the documented types
-autodoc_mock_imports: list[str] = []
 
 numpydoc_show_class_members = False  # autosummary lists members; no duplicate tables
 numpydoc_class_members_toctree = False
 numpydoc_validation_checks: set[str] = set()
 numpydoc_xref_param_type = False
 
-# Docstrings written for readers of the source sometimes repeat a name that a re-export also
-# documents; the API pages link each object once, from the module that defines it.
-suppress_warnings = ["autosummary.import_cycle"]
+# Unresolvable type names in docstrings (``array_like``, ``callable``) are prose, not links.
 nitpicky = False
