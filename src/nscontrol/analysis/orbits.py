@@ -1,0 +1,450 @@
+"""Periodic orbits of forced non-smooth systems by multiple shooting, with saltation matrices.
+
+* :class:`Forced` — a system, its ``T``-periodic input and ``T`` (what a continuation factory
+  returns).
+* :func:`stroboscopic_map` — ``P(x0) = x(T)`` (or ``x(kT)``) and its Jacobian, the state
+  transition through every event: flows' transition matrices times saltation matrices
+  (:mod:`~nscontrol.analysis.saltation`).
+* :func:`find_orbit` — Newton on the multiple-shooting equations ``P(x_i) = x_{i+1}``
+  (``i = 0..k-1``, ``x_k = x_0``) for a ``kT``-periodic orbit; the monodromy is the product
+  of the nodes' Jacobians and its eigenvalues are the Floquet multipliers.
+
+Where the Jacobian comes from
+-----------------------------
+* Methods with the ``sensitivity`` capability (``switching``: PWA, Filippov with sliding
+  segments, PWM) return ``stats["state_transition"]``, assembled by the integrator from the
+  flows and the saltation matrices of facet crossings and sliding entry/exit.
+* Linear mechanical systems (:class:`~nscontrol.systems.lagrangian.LagrangianSystem` with
+  constant mass, linear forces and affine gaps) integrated by ``event_driven``: between
+  events the flow is ``x' = A x + B u(t) + c``, so the transition over a free-flight interval
+  ``Δ`` is ``e^{AΔ}`` (:class:`~nscontrol.numerics.lti.LTIFlow`); at each impact of the event
+  table the saltation matrix of Newton's law is applied. Nothing is differentiated
+  numerically.
+
+Grazing monitors
+----------------
+An orbit records its **event signature** (the kinds and contacts of its events in order) and
+two distances to a grazing: the smallest approach speed at its impacts and, for mechanical
+systems, the smallest gap over its free flight (refined on the exact flow). Continuation
+locates a grazing where the signature changes and these distances go to zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray, as_vector, check_integer, check_positive
+from ..errors import DimensionError, ModelError, SolverError
+from .saltation import impact_jump_jacobian, saltation_matrix
+
+__all__ = ["Forced", "MapResult", "Orbit", "stroboscopic_map", "find_orbit",
+           "floquet_multipliers"]
+
+
+@dataclass(frozen=True, eq=False)
+class Forced:
+    """A ``period``-periodically forced system: what a continuation factory returns.
+
+    Attributes
+    ----------
+    system
+        The model (any system :func:`nscontrol.simulate` integrates).
+    u
+        The periodic input passed as ``simulate(..., u=u)`` (``None``: autonomous... but
+        sampled with ``period``).
+    period
+        The input's period ``T``.
+    method
+        Integrator name (``None``: the system's default).
+    options
+        Extra ``simulate`` options, as a tuple of ``(name, value)`` pairs (hashable).
+    """
+
+    system: Any
+    u: Any
+    period: float
+    method: str | None = None
+    options: tuple[tuple[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        check_positive("period", self.period)
+
+    @property
+    def n_states(self) -> int:
+        return int(self.system.n_states)
+
+    def simulate(self, x0: Any, t_span: tuple[float, float], **extra: Any) -> Any:
+        """``simulate(system, x0, t_span, method=..., u=..., **options, **extra)``."""
+        from ..simulate import simulate
+
+        opts = dict(self.options)
+        opts.update(extra)
+        if self.u is not None:
+            opts["u"] = self.u
+        return simulate(self.system, x0, t_span, method=self.method, **opts)
+
+
+@dataclass(frozen=True, eq=False)
+class MapResult:
+    """``P(x0)``, its Jacobian and what happened on the way.
+
+    Attributes
+    ----------
+    x
+        The state after ``n_periods`` periods.
+    jacobian
+        ``∂x/∂x0``.
+    trajectory
+        The run (:class:`~nscontrol.simulate.Trajectory`).
+    signature
+        ``((kind, index), ...)`` of the events in order.
+    min_impact_speed
+        Smallest approach speed at an impact (``inf`` when none).
+    """
+
+    x: FloatArray
+    jacobian: FloatArray
+    trajectory: Any
+    signature: tuple[tuple[str, int], ...]
+    min_impact_speed: float
+
+
+def _is_linear_mechanics(system: Any) -> bool:
+    from ..systems.lagrangian import LagrangianSystem
+
+    return isinstance(system, LagrangianSystem) and system.is_linear
+
+
+def _has_sensitivity(forced: Forced) -> bool:
+    from ..simulate.driver import integrator_for
+
+    return "sensitivity" in integrator_for(forced.system, forced.method).capabilities
+
+
+@dataclass(frozen=True, eq=False)
+class _LinearMechanics:
+    """``x' = A x + B u + c`` of a linear :class:`LagrangianSystem` and its exact flow."""
+
+    A: FloatArray
+    B: FloatArray | None
+    c: FloatArray
+    M: FloatArray
+    G: FloatArray
+    g0: FloatArray
+    restitution: FloatArray
+    flow: Any
+
+    @classmethod
+    def of(cls, system: Any) -> _LinearMechanics:
+        from ..numerics.lti import LTIFlow
+
+        n = system.n_dof
+        M = system.mass_matrix()
+        Minv = np.linalg.inv(M)
+        K = system.stiffness if system.stiffness is not None else np.zeros((n, n))
+        C = system.damping if system.damping is not None else np.zeros((n, n))
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]])
+        B = None if system.actuation is None else np.vstack([np.zeros_like(system.actuation),
+                                                             Minv @ system.actuation])
+        c = np.concatenate([np.zeros(n), Minv @ system.constant_force])
+        return cls(A, B, c, M, system.dense_gap_matrix(), np.asarray(system.gap_offset, float),
+                   system.restitution, LTIFlow(A))
+
+    def field(self, x: FloatArray, t: float, u: Any) -> FloatArray:
+        f = self.A @ x + self.c
+        if self.B is not None and u is not None:
+            f = f + self.B @ np.atleast_1d(u.u(t) if hasattr(u, "u") else u)
+        return f
+
+    def impact_saltation(self, event: Any, u: Any) -> tuple[FloatArray, float]:
+        n = self.M.shape[0]
+        w = self.G[event.index]
+        J = impact_jump_jacobian(self.M, w, self.restitution[event.index])
+        grad = np.concatenate([w, np.zeros(n)])
+        fm = self.field(np.asarray(event.pre, float), event.time, u)
+        fp = self.field(np.asarray(event.post, float), event.time, u)
+        speed = -float(w @ np.asarray(event.pre, float)[n:])
+        return saltation_matrix(J, fm, fp, grad), speed
+
+
+def _mechanics_transition(model: _LinearMechanics, tr: Any, t0: float, tf: float,
+                          u: Any) -> tuple[FloatArray, float]:
+    """Product of flow exponentials and impact saltation matrices along ``tr``."""
+    Phi = np.eye(model.A.shape[0])
+    t_last, min_speed = t0, np.inf
+    for ev in tr.events:
+        if ev.kind != "impact":
+            raise ModelError(f"system: the orbit has a {ev.kind!r} event at t = {ev.time:.6g}; "
+                             f"saltation through it is implemented for impacts only (a "
+                             f"sustained contact has no isolated event)")
+        S, speed = model.impact_saltation(ev, u)
+        Phi = S @ model.flow.expm(ev.time - t_last) @ Phi
+        t_last, min_speed = ev.time, min(min_speed, speed)
+    return model.flow.expm(tf - t_last) @ Phi, min_speed
+
+
+def stroboscopic_map(forced: Forced, x0: Any, *, n_periods: int = 1,
+                     t0: float = 0.0) -> MapResult:
+    """``x(t0 + kT)`` from ``x(t0) = x0`` and its Jacobian ``∂x(t0 + kT)/∂x0``.
+
+    Raises
+    ------
+    ModelError
+        A system whose transition can be neither asked from its integrator (capability
+        ``sensitivity``) nor assembled from an event table (linear mechanics).
+    SolverError
+        A grazing impact on the way (no saltation matrix), or the integrator's failure.
+    """
+    k = check_integer("n_periods", n_periods, minimum=1)
+    x0 = as_vector("x0", x0, forced.n_states)
+    tf = t0 + k * forced.period
+    if _has_sensitivity(forced):
+        tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]), sensitivity=True)
+        J = np.asarray(tr.stats["state_transition"], float)
+        speed = np.inf
+    elif _is_linear_mechanics(forced.system):
+        tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]))
+        J, speed = _mechanics_transition(_model_of(forced.system), tr, t0, tf, forced.u)
+    else:
+        raise ModelError(f"system: no state transition for {type(forced.system).__name__} "
+                         f"with method {forced.method!r}; use a method with the "
+                         f"'sensitivity' capability or a linear LagrangianSystem")
+    sig = tuple((e.kind, int(e.index)) for e in tr.events)
+    return MapResult(np.asarray(tr.x[-1], float), J, tr, sig, speed)
+
+
+_MODELS: dict[int, tuple[Any, _LinearMechanics]] = {}
+
+
+def _model_of(system: Any) -> _LinearMechanics:
+    """Cache the flow per system object (continuation calls the map many times)."""
+    hit = _MODELS.get(id(system))
+    if hit is None or hit[0] is not system:
+        if len(_MODELS) > 64:
+            _MODELS.clear()
+        hit = (system, _LinearMechanics.of(system))
+        _MODELS[id(system)] = hit
+    return hit[1]
+
+
+def floquet_multipliers(monodromy: Any) -> np.ndarray:
+    """Eigenvalues of the monodromy matrix, by decreasing modulus."""
+    mu = np.linalg.eigvals(np.asarray(monodromy, float))
+    return mu[np.argsort(-np.abs(mu), kind="stable")]
+
+
+@dataclass(frozen=True, eq=False)
+class Orbit:
+    """A ``kT``-periodic orbit of a forced system.
+
+    Attributes
+    ----------
+    nodes
+        ``(k, n)`` shooting nodes: the state at ``t = 0, T, ..., (k-1)T``.
+    period
+        ``T`` of the input (the orbit's period is ``n_periods·T``).
+    n_periods
+        ``k``.
+    monodromy
+        ``∂x(kT)/∂x(0)``.
+    multipliers
+        Its eigenvalues by decreasing modulus.
+    signature
+        Events of one orbit period, ``((kind, index), ...)``.
+    min_impact_speed, min_gap
+        Distances to a grazing (``inf`` when not applicable).
+    iterations
+        Newton iterations used.
+    residual
+        Final ``max_i |P(x_i) - x_{i+1}|``.
+    """
+
+    nodes: FloatArray
+    period: float
+    n_periods: int
+    monodromy: FloatArray
+    multipliers: np.ndarray
+    signature: tuple[tuple[str, int], ...]
+    min_impact_speed: float = np.inf
+    min_gap: float = np.inf
+    iterations: int = 0
+    residual: float = 0.0
+    node_jacobians: tuple[FloatArray, ...] = field(default=(), repr=False)
+
+    @property
+    def x0(self) -> FloatArray:
+        """State at ``t = 0``."""
+        return self.nodes[0]
+
+    @property
+    def stable(self) -> bool:
+        """All multipliers strictly inside the unit circle."""
+        return bool(np.all(np.abs(self.multipliers) < 1.0))
+
+    @property
+    def n_impacts(self) -> int:
+        return sum(1 for k, _ in self.signature if k == "impact")
+
+
+def _shooting_system(forced: Forced, X: FloatArray
+                     ) -> tuple[FloatArray, FloatArray, list[MapResult]]:
+    """Residual ``P(x_i) - x_{i+1}`` and its block-bidiagonal Jacobian over all nodes."""
+    k, n = X.shape
+    maps = [stroboscopic_map(forced, X[i]) for i in range(k)]
+    R = np.concatenate([maps[i].x - X[(i + 1) % k] for i in range(k)])
+    J = np.zeros((k * n, k * n))
+    for i in range(k):
+        j = (i + 1) % k
+        J[i * n:(i + 1) * n, i * n:(i + 1) * n] += maps[i].jacobian
+        J[i * n:(i + 1) * n, j * n:(j + 1) * n] -= np.eye(n)
+    return R, J, maps
+
+
+def find_orbit(forced: Forced, x0: Any, *, n_periods: int = 1, tol: float = 1e-11,
+               max_iter: int = 30) -> Orbit:
+    """Newton on the multiple-shooting equations of a ``kT``-periodic orbit.
+
+    Parameters
+    ----------
+    forced
+        System, input and period.
+    x0 : (n,) or (k, n) array_like
+        Initial guess: one state (the other nodes are generated by the map) or all nodes.
+    n_periods
+        ``k``: look for an orbit of period ``kT``.
+    tol
+        Stop when ``max_i |P(x_i) - x_{i+1}| <= tol·max(1, |x|)``.
+    max_iter
+        Newton iterations (each a damped step: halved until the residual decreases).
+
+    Raises
+    ------
+    SolverError
+        No convergence within ``max_iter`` iterations (message with the last residual).
+    """
+    k = check_integer("n_periods", n_periods, minimum=1)
+    n = forced.n_states
+    X = _initial_nodes(forced, x0, k, n)
+    for it in range(int(max_iter) + 1):
+        R, J, maps = _shooting_system(forced, X)
+        res = float(np.max(np.abs(R)))
+        if res <= tol * max(1.0, float(np.max(np.abs(X)))):
+            return make_orbit(forced, X, maps, it, res)
+        if it == max_iter:
+            break
+        X = _damped_step(forced, X, R, J, res)
+    raise SolverError(f"x0: shooting did not converge in {max_iter} Newton iterations "
+                      f"(residual {res:.3g}); start closer to the orbit (e.g. from a "
+                      f"brute-force run) or check that a {k}T-periodic orbit exists")
+
+
+def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
+    arr = np.asarray(x0, float)
+    if arr.ndim == 2:
+        if arr.shape != (k, n):
+            raise DimensionError(f"x0: expected shape ({k}, {n}) for {k} nodes, got {arr.shape}")
+        return arr.copy()
+    X = [as_vector("x0", x0, n)]
+    for _ in range(k - 1):
+        X.append(stroboscopic_map(forced, X[-1]).x)
+    return np.array(X)
+
+
+def _damped_step(forced: Forced, X: FloatArray, R: FloatArray, J: FloatArray,
+                 res: float) -> FloatArray:
+    try:
+        dx = np.linalg.solve(J, -R).reshape(X.shape)
+    except np.linalg.LinAlgError as exc:
+        raise SolverError(f"x0: singular shooting Jacobian ({exc}); the orbit is at a fold "
+                          f"or a multiplier is 1") from exc
+    lam = 1.0
+    for _ in range(8):
+        trial = X + lam * dx
+        try:
+            R2 = _shooting_system(forced, trial)[0]
+            if float(np.max(np.abs(R2))) < res:
+                return trial
+        except SolverError:
+            pass
+        lam /= 2
+    return X + lam * dx
+
+
+def make_orbit(forced: Forced, X: FloatArray, maps: list[MapResult], iterations: int,
+               residual: float) -> Orbit:
+    """Assemble an :class:`Orbit` from converged nodes and their maps."""
+    Mono = np.eye(X.shape[1])
+    for m in maps:
+        Mono = m.jacobian @ Mono
+    sig = tuple(s for m in maps for s in m.signature)
+    speed = min((m.min_impact_speed for m in maps), default=np.inf)
+    gap = min_gap(forced, X, maps) if _is_linear_mechanics(forced.system) else np.inf
+    return Orbit(X.copy(), float(forced.period), X.shape[0], Mono, floquet_multipliers(Mono),
+                 sig, float(speed), float(gap), iterations, residual,
+                 tuple(m.jacobian for m in maps))
+
+
+def min_gap(forced: Forced, X: FloatArray, maps: list[MapResult] | None = None,
+            samples: int = 64) -> float:
+    """Smallest local minimum of the gaps over the free flight of the orbit through nodes
+    ``X`` (linear mechanics; minima at impacts excluded, ``inf`` when there is none).
+
+    The gaps are sampled on ``samples`` points per period of the exact flow, and each sampled
+    local minimum is refined by Newton on ``ġ(t) = 0`` (state propagated exactly by the
+    augmented flow of plant and input), so a grazing distance is exact to rounding.
+    """
+    from ..numerics.lti import LTIFlow, augment
+
+    model = _model_of(forced.system)
+    sysm = forced.system
+    n = sysm.n_dof
+    u = forced.u
+    A_aug = augment(model.A, model.B, u) if (u is not None and model.B is not None) else model.A
+    flow = LTIFlow(A_aug)
+    best = np.inf
+    T = forced.period
+    for x_node in X:
+        tr = forced.simulate(x_node, (0.0, T), t_eval=np.linspace(0.0, T, samples + 1))
+        for j in range(sysm.n_contacts):
+            best = min(best, _min_gap_contact(tr, j, model, flow, u, n))
+    return best
+
+
+def _min_gap_contact(tr: Any, j: int, model: _LinearMechanics, flow: Any, u: Any,
+                     n: int) -> float:
+    w, g0 = model.G[j], float(model.g0[j])
+    t, x = tr.t, tr.x
+    g = x[:, :n] @ w + g0
+    t_imp = tr.event_times()
+    best = np.inf
+    for i in range(1, len(t) - 1):
+        lo, hi = t[i - 1], t[i + 1]
+        if g[i] <= g[i - 1] and g[i] <= g[i + 1] and not np.any((t_imp >= lo) & (t_imp <= hi)):
+            best = min(best, _refine_min(t[i], x[i], w, g0, model, flow, u, n, hi - lo))
+    return best
+
+
+def _refine_min(ts: float, xs: FloatArray, w: FloatArray, g0: float, model: _LinearMechanics,
+                flow: Any, u: Any, n: int, width: float) -> float:
+    """Newton on ``ġ(t) = wᵀv(t) = 0`` near a sampled minimum, on the exact flow (kept
+    within ``width`` of the sample; the sampled value when Newton leaves it)."""
+    X0 = np.concatenate([xs, u.w(ts)]) if flow.n > xs.shape[0] else xs.copy()
+    s = 0.0
+    for _ in range(20):
+        X = flow.propagate(X0, s)
+        x = X[: 2 * n]
+        gd = float(w @ x[n:])
+        gdd = float(w @ model.field(x, ts + s, u)[n:])
+        if gdd == 0.0:
+            break
+        ds = -gd / gdd
+        s += ds
+        if abs(ds) <= 4 * np.finfo(float).eps * max(1.0, abs(ts)):
+            break
+    if not abs(s) <= width:
+        return float(w @ xs[:n] + g0)
+    X = flow.propagate(X0, s)
+    return float(w @ X[:n] + g0)
