@@ -176,6 +176,11 @@ def _mechanics_transition(model: _LinearMechanics, tr: Any, t0: float, tf: float
     Phi = np.eye(model.A.shape[0])
     t_last, min_speed = t0, np.inf
     for ev in tr.events:
+        if ev.kind == "grazing":
+            # a tangential touch without impact: the map's one-sided derivative on the
+            # non-impacting side is the flow's; the orbit is exactly at a grazing
+            min_speed = 0.0
+            continue
         if ev.kind != "impact":
             raise ModelError(f"system: the orbit has a {ev.kind!r} event at t = {ev.time:.6g}; "
                              f"saltation through it is implemented for impacts only (a "
