@@ -235,6 +235,31 @@ def _model_of(system: Any) -> _LinearMechanics:
     return hit[1]
 
 
+def sample_on_grid(forced: Forced, x0: Any, dt: float, n: int) -> Any:
+    """Run ``(0, n·dt)`` with samples exactly at ``k·dt``: requested times for methods with
+    the ``t_eval`` capability, the ``dt`` sampling grid of ``event_driven`` (whose samples are
+    computed by the exact flow; ``t_eval`` there would interpolate linearly)."""
+    from ..simulate.driver import integrator_for
+
+    grid = dt * np.arange(n + 1, dtype=float)
+    cls = integrator_for(forced.system, forced.method)
+    if "t_eval" in cls.capabilities:
+        return forced.simulate(x0, (0.0, grid[-1]), t_eval=grid)
+    if "dt" in getattr(cls, "options", ()):
+        return forced.simulate(x0, (0.0, grid[-1]), dt=dt)
+    raise ModelError(f"system: method {cls.name!r} can sample neither at requested times nor "
+                     f"on a grid; use an exact-flow method")
+
+
+def at_times(tr: Any, times: Any) -> FloatArray:
+    """Rows of ``tr`` at ``times`` (right-continuous: the post-event state when an event falls
+    on a sample time); the times must be sample times of ``tr``."""
+    times = np.asarray(times, float)
+    tol = 1e-12 * max(1.0, float(np.max(np.abs(times))))   # roundoff of k·dt
+    idx = np.searchsorted(tr.t, times + tol, side="right") - 1
+    return np.asarray(tr.x[np.clip(idx, 0, len(tr.t) - 1)], float)
+
+
 def floquet_multipliers(monodromy: Any) -> np.ndarray:
     """Eigenvalues of the monodromy matrix, by decreasing modulus."""
     mu = np.linalg.eigvals(np.asarray(monodromy, float))
@@ -412,7 +437,7 @@ def min_gap(forced: Forced, X: FloatArray, maps: list[MapResult] | None = None,
     best = np.inf
     T = forced.period
     for x_node in X:
-        tr = forced.simulate(x_node, (0.0, T), t_eval=np.linspace(0.0, T, samples + 1))
+        tr = sample_on_grid(forced, x_node, T / samples, samples)
         for j in range(sysm.n_contacts):
             best = min(best, _min_gap_contact(tr, j, model, flow, u, n))
     return best
