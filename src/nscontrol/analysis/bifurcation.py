@@ -240,7 +240,7 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
     --------
     >>> from nscontrol.analysis.impact_oscillator import ImpactOscillator, OscillatorFamily
     >>> fam = OscillatorFamily(ImpactOscillator(omega=2.5, stop=0.1), "forcing")
-    >>> bd = bifurcation_diagram(fam, [0.3, 2.0], n_transient=100, n_sample=8,
+    >>> bd = bifurcation_diagram(fam, [0.3, 2.0], n_transient=200, n_sample=8,
     ...                          progress=False, directions=("up",))
     >>> bd.multiplicity.tolist()    # non-impacting, then the stable impacting period-1 orbit
     [[1, 1]]

@@ -48,7 +48,8 @@ matrix ``S = R + (f+ - R f-) ∇hᵀ / (∇hᵀ f-)`` with ``R = diag(1, -r)``,
 
     S = [[-r, 0], [(1 + r)(F cos ωt0 - k d)/(m v), -r]],
 
-and the monodromy over one period from just after... to just before is ``M = Φ(T) S``, whose
+and the monodromy over one period, from just before an impact to just before the next, is
+``M = Φ(T) S``, whose
 eigenvalues are the Floquet multipliers: ``det M = r² e^{-cT/m}`` and
 ``μ = tr M/2 ± sqrt(tr² M/4 - det M)``. The orbit flips where ``1 + tr M + det M = 0`` and
 folds where ``1 - tr M + det M = 0``; as ``v → 0`` (grazing) ``S21 → ∞`` and one multiplier
@@ -88,7 +89,7 @@ class OneImpactOrbit:
     impact_velocity
         ``v`` just before the impact (``> 0`` for a physical orbit).
     monodromy
-        ``Φ(T) S`` from just after... the impact to just before the next (2×2).
+        ``Φ(T) S``, from just before the impact to just before the next (2×2).
     multipliers
         Its eigenvalues, by decreasing modulus.
     admissible
@@ -129,7 +130,7 @@ class ImpactOscillator:
     --------
     >>> osc = ImpactOscillator(forcing=0.5, omega=1.5, stop=0.2)
     >>> round(osc.grazing_forcing(), 12)   # d·|k - mω² + icω|
-    0.25124689
+    0.25179356624
     """
 
     mass: float = 1.0

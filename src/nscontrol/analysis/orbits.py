@@ -53,8 +53,8 @@ class Forced:
     system
         The model (any system :func:`nscontrol.simulate` integrates).
     u
-        The periodic input passed as ``simulate(..., u=u)`` (``None``: autonomous... but
-        sampled with ``period``).
+        The periodic input passed as ``simulate(..., u=u)`` (``None``: no input; the orbit
+        is then a fixed point of the time-``period`` map).
     period
         The input's period ``T``.
     method
