@@ -86,8 +86,8 @@ class BifurcationDiagram:
             _, ax = plt.subplots()
         for i, d in enumerate(self.directions):
             P = self.points[i][:, :, component]
-            ax.plot(np.repeat(self.values, P.shape[1]), P.ravel(), ",", ms=size,
-                    color=f"C{i + 1}", alpha=0.6, label=f"brute force ({d})")
+            ax.plot(np.repeat(self.values, P.shape[1]), P.ravel(), ".", ms=size,
+                    color=("C2", "C1")[i % 2], alpha=0.5, label=f"brute force ({d})")
         names = self.state_names
         ax.set_xlabel(self.parameter_name)
         ax.set_ylabel(f"{names[component] if names else f'x{component}'} at t = 0 mod T")
