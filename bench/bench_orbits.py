@@ -93,7 +93,9 @@ def _release_time(t: float, F: float, w: float, kd: float) -> float:
 
 
 def _brute_bisection(lo: float, hi: float, rtol: float) -> tuple[float, int, float]:
-    """Bisection of the flip by brute force: period 1 above, not period 1 below."""
+    """Bisection of the flip by brute force: period 1 above, not period 1 below; each trial
+    starts on the attractor of the last period-1 trial (a cold start may reach the period-6
+    attractor coexisting there)."""
     fam = bifurcation_family("forcing")
     x = fam.oscillator(hi).admissible_orbit().x0
     trials, t0 = 0, time.perf_counter()
@@ -103,7 +105,7 @@ def _brute_bisection(lo: float, hi: float, rtol: float) -> tuple[float, int, flo
                                  directions=("up",), x0=x, progress=False)
         trials += 1
         if bd.multiplicity[0, 0] == 1:
-            hi = mid
+            hi, x = mid, bd.points[0, 0, -1]     # warm start from the last period-1 attractor
         else:
             lo = mid
     return 0.5 * (lo + hi), trials, time.perf_counter() - t0

@@ -74,3 +74,19 @@ def test_refusals():
         bifurcation_diagram(FAM, [0.3], directions=("sideways",))
     with pytest.raises(ModelError, match="chunk_size"):
         bifurcation_diagram(FAM, [0.3], chunk_size=0)
+
+
+def test_cli_writes_the_diagram_and_its_figure(tmp_path):
+    from click.testing import CliRunner
+
+    from nscontrol.cli import main
+
+    res = CliRunner().invoke(main, ["bifurcation", "impact-oscillator-bifurcation",
+                                    "--param", "forcing=0.3:2.0:3", "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    bd = BifurcationDiagram.load(tmp_path / "bifurcation.h5")
+    assert bd.parameter_name == "forcing" and bd.points.shape[:2] == (2, 3)
+    assert (tmp_path / "bifurcation.png").exists()
+    bad = CliRunner().invoke(main, ["bifurcation", "impact-oscillator-bifurcation",
+                                    "--param", "forcing=0.3"])
+    assert bad.exit_code != 0 and "NAME=START:STOP:N" in bad.output

@@ -34,7 +34,7 @@ from ..errors import ModelError
 from .orbits import Forced, at_times, sample_on_grid
 from .periodic import period_multiplicity
 
-__all__ = ["BifurcationDiagram", "bifurcation_diagram"]
+__all__ = ["BifurcationDiagram", "bifurcation_diagram", "parse_grid"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,3 +278,24 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
                                                  ()) or ())
     errors.sort(key=lambda e: (dirs.index(e[0]), e[1]))
     return BifurcationDiagram(parameter_name, vals, dirs, pts, mult, tuple(errors), cs, names)
+
+
+def parse_grid(spec: str) -> tuple[str, FloatArray]:
+    """``"NAME=START:STOP:N"`` -> ``(NAME, linspace(START, STOP, N))``.
+
+    Examples
+    --------
+    >>> parse_grid("forcing=0.2:2.2:3")
+    ('forcing', array([0.2, 1.2, 2.2]))
+    """
+    try:
+        name, rng = spec.split("=", 1)
+        start, stop, num = rng.split(":")
+        n = int(num)
+        values = np.linspace(float(start), float(stop), n)
+    except ValueError:
+        raise ValueError(f"param: expected NAME=START:STOP:N (e.g. forcing=0.2:2.2:200), got "
+                         f"{spec!r}") from None
+    if not name.strip() or n < 1 or not np.all(np.isfinite(values)):
+        raise ValueError(f"param: expected a name, finite bounds and N >= 1, got {spec!r}")
+    return name.strip(), values
