@@ -40,7 +40,8 @@ from .._validation import FloatArray, as_vector, check_integer, check_positive
 from ..errors import DimensionError, ModelError, SolverError
 from .saltation import impact_jump_jacobian, saltation_matrix
 
-__all__ = ["Forced", "MapResult", "Orbit", "stroboscopic_map", "find_orbit",
+__all__ = ["Forced", "MapResult", "Orbit", "stroboscopic_map", "find_orbit", "Cycle",
+           "find_cycle", "SectionReturn", "hyperplane_map",
            "floquet_multipliers"]
 
 
@@ -478,3 +479,199 @@ def _refine_min(ts: float, xs: FloatArray, w: FloatArray, g0: float, model: _Lin
         return float(w @ xs[:n] + g0)
     X = flow.propagate(X0, s)
     return float(w @ X[:n] + g0)
+
+
+# -- autonomous orbits and hyperplane sections -------------------------------------------------
+
+def _transition_run(system: Any, x0: FloatArray, tf: float, method: str | None,
+                    t_eval: FloatArray | None = None) -> Any:
+    """``simulate`` over ``(0, tf)`` with the state transition (capability ``sensitivity``)."""
+    from ..simulate import simulate
+    from ..simulate.driver import METHODS, integrator_for
+
+    cls = integrator_for(system, method)
+    if "sensitivity" not in cls.capabilities:
+        able = sorted(k for k in METHODS if "sensitivity" in METHODS[k].capabilities)
+        raise ModelError(f"method: autonomous orbits need the state transition, which "
+                         f"{cls.name!r} does not compute; use one of {able}")
+    te = np.array([0.0, tf]) if t_eval is None else t_eval
+    return simulate(system, x0, (0.0, tf), method=method, t_eval=te, sensitivity=True)
+
+
+def _flow_velocity(system: Any, tr: Any, tf: float, method: str | None) -> FloatArray:
+    """``ẋ(tf)`` by central differences of the flow (step ``δ = ε^{1/3}·tf``: truncation
+    ``O(δ²)`` against rounding ``O(ε/δ)``): ``x(tf - δ)`` from the run's samples, ``x(tf + δ)``
+    from a short continuation."""
+    from ..simulate import simulate
+
+    delta = float(np.finfo(float).eps) ** (1 / 3) * tf
+    x_minus = at_times(tr, [tf - delta])[0]
+    after = simulate(system, tr.x[-1], (0.0, delta), method=method,
+                     t_eval=np.array([0.0, delta]))
+    return (after.x[-1] - x_minus) / (2 * delta)
+
+
+@dataclass(frozen=True, eq=False)
+class Cycle:
+    """A periodic orbit of an autonomous system (period unknown).
+
+    Attributes
+    ----------
+    x0
+        A point of the orbit on the phase-condition hyperplane.
+    period
+        ``T``.
+    monodromy
+        ``∂φ_T/∂x0``.
+    multipliers
+        All eigenvalues of the monodromy by decreasing modulus.
+    trivial_index
+        Index in ``multipliers`` of the trivial multiplier 1 (eigenvector along the flow).
+    signature
+        Events of one period.
+    iterations, residual
+        Newton iterations and final ``|φ_T(x0) - x0|``.
+    """
+
+    x0: FloatArray
+    period: float
+    monodromy: FloatArray
+    multipliers: np.ndarray
+    trivial_index: int
+    signature: tuple[tuple[str, int], ...]
+    iterations: int
+    residual: float
+
+    @property
+    def nontrivial(self) -> np.ndarray:
+        """The multipliers without the trivial one."""
+        return np.delete(self.multipliers, self.trivial_index)
+
+    @property
+    def stable(self) -> bool:
+        """All non-trivial multipliers strictly inside the unit circle."""
+        return bool(np.all(np.abs(self.nontrivial) < 1.0))
+
+
+def _trivial_index(M: FloatArray, f: FloatArray) -> tuple[np.ndarray, int]:
+    """Multipliers by decreasing modulus and the index of the one whose eigenvector is most
+    nearly parallel to the flow ``f`` (``M f = f`` on a periodic orbit)."""
+    mu, V = np.linalg.eig(M)
+    order = np.argsort(-np.abs(mu), kind="stable")
+    mu, V = mu[order], V[:, order]
+    fn = f / np.linalg.norm(f)
+    align = np.abs(fn @ V) / np.linalg.norm(V, axis=0)
+    return mu, int(np.argmin(np.abs(mu - 1.0) + (1.0 - align)))
+
+
+def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: float | None = None,
+               method: str | None = None, tol: float = 1e-9, max_iter: int = 30) -> Cycle:
+    """Newton on ``φ_T(x0) = x0``, ``normal·x0 = offset`` for ``(x0, T)`` (single shooting).
+
+    The phase condition pins the point on a hyperplane the orbit crosses transversally
+    (default offset: ``normal·x0`` of the guess). The bordered Jacobian is
+    ``[[M - I, ẋ(T)], [normalᵀ, 0]]`` with ``M`` the integrator's state transition and
+    ``ẋ(T)`` a central difference of the flow in time. At the solution ``M ẋ(0) = ẋ(0)``:
+    the multiplier 1 with the flow as eigenvector is the trivial one (``trivial_index``).
+    The default ``tol = 1e-9`` sits above the residual floor of event-located flows (switch
+    instants found to ~1e-11 relative, times the field's jump).
+
+    Raises
+    ------
+    ModelError
+        A method without the ``sensitivity`` capability.
+    SolverError
+        No convergence (message with the residual).
+    """
+    n = int(system.n_states)
+    x = as_vector("x0", x0, n).copy()
+    T = check_positive("period", period)
+    nv = as_vector("normal", normal, n)
+    c = float(nv @ x) if offset is None else float(offset)
+    for it in range(int(max_iter) + 1):
+        delta = float(np.finfo(float).eps) ** (1 / 3) * T
+        tr = _transition_run(system, x, T, method, t_eval=np.array([0.0, T - delta, T]))
+        M = np.asarray(tr.stats["state_transition"], float)
+        r = np.append(tr.x[-1] - x, nv @ x - c)
+        res = float(np.max(np.abs(r)))
+        f = _flow_velocity(system, tr, T, method)
+        if res <= tol * max(1.0, float(np.max(np.abs(x)))):
+            mu, k = _trivial_index(M, f)
+            sig = tuple((e.kind, int(e.index)) for e in tr.events)
+            return Cycle(x, T, M, mu, k, sig, it, res)
+        if it == max_iter:
+            break
+        J = np.block([[M - np.eye(n), f[:, None]], [nv[None, :], np.zeros((1, 1))]])
+        step = np.linalg.solve(J, -r)
+        x, T = x + step[:n], T + float(step[n])
+        if T <= 0:
+            raise SolverError(f"period: Newton drove the period to {T:.3g} <= 0; start from a "
+                              f"better period guess")
+    raise SolverError(f"x0: cycle shooting did not converge in {max_iter} iterations "
+                      f"(residual {res:.3g}); improve the guesses of x0 and period")
+
+
+@dataclass(frozen=True, eq=False)
+class SectionReturn:
+    """First return to a hyperplane ``normal·x = offset``: point, time and the Poincaré map's
+    Jacobian ``(I - ẋ normalᵀ/(normal·ẋ)) ∂φ_τ/∂x0`` (the return time's dependence on ``x0``
+    folded in, as in a saltation matrix with ``J = 0`` jump and zero field after)."""
+
+    x: FloatArray
+    time: float
+    jacobian: FloatArray
+
+
+def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: float,
+                   method: str | None = None, direction: int = 1,
+                   samples: int = 2000) -> SectionReturn:
+    """Poincaré map of an autonomous system on the hyperplane ``normal·x = offset``.
+
+    The first crossing in ``direction`` (``+1``: ``normal·x`` increasing) after ``t = 0`` is
+    bracketed on ``samples`` exact-flow samples of ``(0, t_max)`` and refined by secant steps
+    on the flow from the bracket's start. Crossings within the first sample interval are not
+    returns (the start lies on the section, or within rounding of a perturbation of it).
+
+    Raises
+    ------
+    SolverError
+        No crossing within ``t_max``.
+    """
+    from ..simulate import simulate
+
+    n = int(system.n_states)
+    x0 = as_vector("x0", x0, n)
+    nv = as_vector("normal", normal, n)
+    grid = np.linspace(0.0, float(t_max), int(samples) + 1)
+    tr = simulate(system, x0, (0.0, float(t_max)), method=method, t_eval=grid)
+    X = at_times(tr, grid)
+    g = direction * (X @ nv - offset)
+    hits = np.flatnonzero((g[:-1] < 0) & (g[1:] >= 0))
+    hits = hits[hits > 0]       # a start on (or a hair off) the section is not a return
+    if not hits.size:
+        raise SolverError(f"t_max: no crossing of the section within {t_max}; increase t_max")
+    i = int(hits[0])
+    ta, xa = grid[i], X[i]
+
+    def gap(s: float) -> tuple[float, FloatArray]:
+        if s == 0.0:
+            return float(direction * (xa @ nv - offset)), xa
+        y = simulate(system, xa, (0.0, s), method=method, t_eval=np.array([0.0, s])).x[-1]
+        return float(direction * (y @ nv - offset)), y
+
+    s0, s1 = 0.0, grid[i + 1] - ta
+    g0, g1 = gap(s0)[0], gap(s1)[0]
+    for _ in range(60):
+        s2 = s1 - g1 * (s1 - s0) / (g1 - g0) if g1 != g0 else 0.5 * (s0 + s1)
+        g2 = gap(s2)[0]
+        s0, g0, s1, g1 = s1, g1, s2, g2
+        if abs(s1 - s0) <= 4 * np.finfo(float).eps * max(1.0, ta + s1):
+            break
+    tau = ta + s1
+    run = _transition_run(system, x0, tau, method,
+                          t_eval=np.array([0.0, tau - float(np.finfo(float).eps) ** (1 / 3) * tau,
+                                           tau]))
+    M = np.asarray(run.stats["state_transition"], float)
+    f = _flow_velocity(system, run, tau, method)
+    P = np.eye(n) - np.outer(f, nv) / float(nv @ f)
+    return SectionReturn(np.asarray(run.x[-1], float), float(tau), P @ M)
