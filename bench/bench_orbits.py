@@ -83,6 +83,11 @@ def _scipy_point(F: float, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return X[:-1], X[-1]
 
 
+def _warm_worker() -> None:
+    """Run a few points in this process (numba caches, imports) before timing."""
+    _diagram(np.linspace(0.2, 2.2, 4), chunk=2)
+
+
 def _release_time(t: float, F: float, w: float, kd: float) -> float:
     """First time after ``t`` with ``F cos(ωs) = kd`` and the force decreasing."""
     if F <= kd:
@@ -152,7 +157,7 @@ def run(quick: bool = False) -> Iterator[dict]:
         for workers in (1, 2):
             with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                               dashboard_address=None) as cluster, Client(cluster) as client:
-                _diagram(values[:4], executor=client, chunk=2)         # warm the workers
+                client.run(_warm_worker)      # every worker loads the compiled kernels
                 t0 = time.perf_counter()
                 bd_d = _diagram(values, executor=client)
                 times[workers] = time.perf_counter() - t0
