@@ -161,18 +161,20 @@ def as_real_scalar(name: str, value: Any) -> float:
 
     Not checked for finiteness; :func:`check_positive` and :func:`check_in_interval` do that.
     """
-    if isinstance(value, bool | np.bool_) or isinstance(value, str | bytes):
-        raise ModelError(f"{name}: expected a real number, got {value!r}")
-    if isinstance(value, complex | np.complexfloating):
-        raise ModelError(f"{name}: expected a real number, got the complex {value!r}")
     if isinstance(value, np.ndarray):
         if value.size != 1:        # a one-element array is accepted as its element
             raise ModelError(f"{name}: expected a real number, got an array of shape "
                              f"{value.shape}")
         value = value.reshape(()).item() if value.dtype.kind != "O" else value.flat[0]
-        if isinstance(value, complex | str | bytes | bool):
-            raise ModelError(f"{name}: expected a real number, got {value!r}")
-    elif np.ndim(value) != 0:
+    if isinstance(value, bool | np.bool_):
+        raise ModelError(f"{name}: expected a real number, got {value!r}; pass a number")
+    if isinstance(value, str | bytes | np.str_ | np.bytes_):
+        raise ModelError(f"{name}: expected a real number, got the string {value!r}; pass a "
+                         f"number, not text (e.g. float({value!r}) if that is meant)")
+    if isinstance(value, complex | np.complexfloating):
+        raise ModelError(f"{name}: expected a real number, got the complex {value!r}; pass its "
+                         ".real explicitly if that is meant")
+    if np.ndim(value) != 0:
         raise ModelError(f"{name}: expected a real number, got a sequence of shape "
                          f"{np.shape(value)}")
     try:
@@ -231,12 +233,50 @@ def check_integer(name: str, value: Any, *, minimum: int | None = None,
     return v
 
 
-def check_t_span(t_span: Any) -> tuple[float, float]:
-    """A pair ``(t0, tf)`` of finite times with ``tf > t0``."""
+def as_finite_scalar(name: str, value: Any) -> float:
+    """A finite real scalar (see :func:`as_real_scalar` for what counts as one) as a float.
+
+    Examples
+    --------
+    >>> as_finite_scalar("decay", 0.5)
+    0.5
+    >>> as_finite_scalar("decay", float("nan"))
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: decay: expected a finite real number, got nan
+    """
+    v = as_real_scalar(name, value)
+    if not np.isfinite(v):
+        raise ModelError(f"{name}: expected a finite real number, got {value!r}")
+    return v
+
+
+def check_t_span(t_span: Any, name: str = "t_span") -> tuple[float, float]:
+    """A pair ``(t0, tf)`` of finite real times with ``tf > t0``.
+
+    A string is not a pair of times (``"01"`` would otherwise unpack to ``0.0, 1.0``), and
+    neither are string or complex entries.
+
+    Examples
+    --------
+    >>> check_t_span((0, 2))
+    (0.0, 2.0)
+    >>> check_t_span("01")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: t_span: expected a pair of numbers (t0, tf), got the string ...
+    """
+    if isinstance(t_span, str | bytes):
+        raise ModelError(f"{name}: expected a pair of numbers (t0, tf), got the string "
+                         f"{t_span!r}; write e.g. (0.0, 1.0)")
     try:
-        t0, tf = (float(t) for t in t_span)
-    except (TypeError, ValueError):
-        raise DimensionError(f"t_span: expected a pair (t0, tf), got {t_span!r}") from None
+        items = list(t_span)
+    except TypeError:
+        raise DimensionError(f"{name}: expected a pair (t0, tf), got {t_span!r}") from None
+    if len(items) != 2:
+        raise DimensionError(f"{name}: expected a pair (t0, tf), got {len(items)} value(s): "
+                             f"{_short(t_span)}")
+    t0, tf = (as_real_scalar(f"{name}[{i}]", t) for i, t in enumerate(items))
     if not (np.isfinite(t0) and np.isfinite(tf)) or tf <= t0:
-        raise ModelError(f"t_span: expected finite t0 < tf, got ({t0}, {tf})")
+        raise ModelError(f"{name}: expected finite t0 < tf, got ({t0}, {tf})")
     return t0, tf

@@ -33,12 +33,18 @@ def list_examples() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object of metrics/checks.")
 def run(name: str, out: Path | None, as_json: bool) -> None:
     """Run one example; exit status 0 only when every check passed."""
+    from .errors import ModelError
     from .examples import get_example
+    from .report import check_output_folder
 
     try:
         example = get_example(name)
+        if out is not None:
+            check_output_folder(out, "--out")
     except KeyError as exc:
         raise click.UsageError(str(exc.args[0])) from None
+    except ModelError as exc:
+        raise click.UsageError(str(exc)) from None
     result = example.run(out)
     if as_json:
         click.echo(json.dumps(result.to_json()))
@@ -57,8 +63,14 @@ def run(name: str, out: Path | None, as_json: bool) -> None:
 @click.option("--only", multiple=True, help="Run only these examples (repeatable).")
 def report(out: Path, only: tuple[str, ...]) -> None:
     """Run every example and write OUT/index.html with figures, metrics and checks."""
-    from .report import write_report
+    from .errors import ModelError
+    from .report import check_output_folder, select_examples, write_report
 
+    try:                        # both refused before anything runs or is overwritten
+        select_examples(list(only) or None)
+        check_output_folder(out, "--out")
+    except ModelError as exc:
+        raise click.UsageError(str(exc).replace("only:", "--only:", 1)) from None
     summary = write_report(out, list(only) or None)
     for ex in summary["examples"]:
         mark = "pass" if ex["passed"] else "FAIL"

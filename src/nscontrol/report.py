@@ -4,12 +4,69 @@ from __future__ import annotations
 
 import html
 import json
+import os
+import tempfile
 import time
 import traceback
 from pathlib import Path
 from typing import Any
 
+from .errors import ModelError
 from .examples import Example, ExampleResult, all_examples
+
+
+def check_output_folder(out: Any, name: str = "out") -> Path:
+    """``out`` as a folder that exists (created if needed) and accepts a new file; checked
+    before any example runs, so a bad path fails in a second, not after the whole run.
+
+    Raises
+    ------
+    ModelError
+        ``out`` is a file, cannot be created (e.g. ``/dev/null/x``), or is not writable.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ModelError(f"{name}: {str(out)!r} is a file, not a folder; pass a folder path")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise ModelError(f"{name}: cannot write into folder {str(out)!r} ({exc.strerror or exc}); "
+                         "pass a writable folder") from None
+    return out
+
+
+def select_examples(names: list[str] | None) -> list[Example]:
+    """The examples called ``names`` (all when ``None``), in the catalogue's order.
+
+    Raises
+    ------
+    ModelError
+        A name that is no example (listing the known ones), or an empty selection.
+    """
+    examples = all_examples()
+    if names is None:
+        return examples
+    known = [e.name for e in examples]
+    unknown = [n for n in dict.fromkeys(names) if n not in known]
+    if unknown:
+        raise ModelError(f"only: unknown example name(s) {unknown}; known examples: "
+                         f"{', '.join(known)} (see `nscontrol list`)")
+    if not names:
+        raise ModelError("only: expected at least one example name; omit --only to run all")
+    return [e for e in examples if e.name in names]
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """``path`` replaced in one step: a failure leaves the previous file whole."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def run_example(example: Example, out_dir: Path | None) -> tuple[ExampleResult | None, str, float]:
@@ -25,16 +82,21 @@ def run_example(example: Example, out_dir: Path | None) -> tuple[ExampleResult |
 def write_report(out: Path, names: list[str] | None = None, *, progress: bool | None = None
                  ) -> dict[str, Any]:
     """Run the examples (all, or ``names``) into ``out``; write ``index.html`` and
-    ``report.json``. Returns the JSON summary."""
+    ``report.json``. Returns the JSON summary.
+
+    The names and the folder are checked before anything runs: an unknown name or an
+    unwritable folder raises :class:`~nscontrol.errors.ModelError` and leaves a previous
+    report untouched. Both files are replaced atomically.
+    """
     from ._progress import progress_iter
 
-    out.mkdir(parents=True, exist_ok=True)
-    examples = [e for e in all_examples() if names is None or e.name in names]
+    examples = select_examples(names)
+    out = check_output_folder(out)
     rows: list[dict[str, Any]] = []
     for ex in progress_iter(examples, total=len(examples), desc="examples", enable=progress):
         result, error, seconds = run_example(ex, out / ex.name)
         rows.append({"example": ex, "result": result, "error": error, "seconds": seconds})
-    summary = {
+    summary: dict[str, Any] = {
         "examples": [
             {**(r["result"].to_json() if r["result"] else {"example": r["example"].name}),
              "title": r["example"].title, "chapter": r["example"].chapter,
@@ -43,8 +105,8 @@ def write_report(out: Path, names: list[str] | None = None, *, progress: bool | 
             for r in rows],
     }
     summary["passed"] = all(e["passed"] for e in summary["examples"])
-    (out / "report.json").write_text(json.dumps(summary, indent=2))
-    (out / "index.html").write_text(_html(rows, out))
+    _write_atomically(out / "report.json", json.dumps(summary, indent=2))
+    _write_atomically(out / "index.html", _html(rows, out))
     return summary
 
 

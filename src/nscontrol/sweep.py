@@ -23,19 +23,26 @@ frequency-response helpers of :mod:`nscontrol.analysis.periodic`.
 
 from __future__ import annotations
 
+import difflib
 import os
+import pickle
+import re
+import shutil
 import sys
+import tempfile
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from .errors import ModelError, NscontrolError
 
-__all__ = ["run", "SweepResult", "PointError", "SweepError", "AUTO_PARALLEL_SECONDS"]
+__all__ = ["run", "SweepResult", "PointError", "SweepError", "AUTO_PARALLEL_SECONDS",
+           "MAX_POOL_RESTARTS"]
 
 
 class SweepError(NscontrolError, RuntimeError):
@@ -117,17 +124,65 @@ class SweepResult:
 @dataclass(frozen=True)
 class _Guarded:
     """Picklable wrapper running ``fn(point)`` in the worker and catching its exception there
-    (exception objects themselves need not be picklable)."""
+    (exception objects themselves need not be picklable).
+
+    Every exception but ``KeyboardInterrupt`` is the point's error, ``SystemExit`` included.
+    In local worker processes (``marks`` set) the wrapper leaves a file named after the point
+    in ``marks`` while it runs, so that after a worker dies the points it was running are
+    known, and pickles the value itself (``ship``), so that a value that cannot travel back is
+    reported as such for its point.
+    """
 
     fn: Callable[[Any], Any]
+    marks: str | None = None
+    ship: bool = False
 
     def __call__(self, indexed: tuple[int, Any]) -> tuple[bool, Any]:
         index, point = indexed
+        mark = None if self.marks is None else os.path.join(self.marks, str(index))
+        if mark is not None:
+            open(mark, "w").close()
         try:
-            return True, self.fn(point)
-        except Exception as exc:  # recorded per point, never swallowed: see SweepResult.errors
-            return False, PointError(index, type(exc).__name__, str(exc),
-                                     traceback.format_exc())
+            value = self.fn(point)
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # recorded per point: see SweepResult.errors
+            result = False, PointError(index, type(exc).__name__, _describe(exc),
+                                       traceback.format_exc())
+        else:
+            result = True, value
+            if self.ship:
+                result = _shipped(index, value)
+        if mark is not None:
+            os.unlink(mark)
+        return result
+
+
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, SystemExit):
+        return (f"fn called sys.exit({exc.code!r}) (SystemExit) instead of returning or "
+                "raising an Exception; the other points ran")
+    return str(exc)
+
+
+def _shipped(index: int, value: Any) -> tuple[bool, Any]:
+    """``(True, pickled value)``, or the point's error saying its value cannot be sent back."""
+    try:
+        return True, _Pickled(pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
+    except Exception as exc:
+        return False, PointError(
+            index, type(exc).__name__,
+            f"the value fn returned for point {index} (a {type(value).__name__}) cannot be "
+            f"sent back from the worker process ({exc}); return picklable data (numbers, "
+            f"arrays, tuples or dataclasses of them), or run with executor='serial' or a "
+            f"ThreadPoolExecutor", traceback.format_exc())
+
+
+@dataclass(frozen=True)
+class _Pickled:
+    """A value pickled in the worker (transport then copies bytes only)."""
+
+    data: bytes
 
 
 #: ``executor="auto"`` goes parallel when the pilot point predicts more serial work than this
@@ -175,10 +230,21 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         recorded as that point's :class:`PointError`; the message says which picklability
         rule was broken.
 
+    A worker process that dies (``os._exit``, a segfault, the OOM killer) breaks a local pool
+    and fails every point still queued on it; those points are re-run in a fresh pool. The
+    points the dead workers were running are re-run alone, each in its own process: one that
+    kills its process again is recorded as its own :class:`PointError` (``WorkerDied``), the
+    others keep their values. At most :data:`MAX_POOL_RESTARTS` fresh pools are started.
+
     Raises
     ------
     ModelError
-        ``fn`` is not callable, or ``executor`` is of an unsupported type.
+        ``fn`` is not callable, ``grid`` is not an iterable of points, or ``executor`` is of
+        an unsupported type or a string that is neither ``"serial"``, ``"auto"`` nor a
+        scheduler address (``tcp://host:port`` or ``host:port``).
+    KeyboardInterrupt
+        Re-raised after the points that finished are kept: ``err.sweep_result`` holds the
+        :class:`SweepResult` so far (unfinished points carry a ``KeyboardInterrupt`` error).
     ImportError
         A scheduler address was given but ``dask[distributed]`` is not installed.
 
@@ -193,52 +259,197 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     if not callable(fn):
         raise ModelError(f"fn: expected a callable taking one grid point, got "
                          f"{type(fn).__name__}")
-    points = tuple(grid)
+    points = _points(grid)
+    _check_executor(executor)
     if not points:
         return SweepResult((), (), ())
     call = _Guarded(fn)
     values: list[Any] = [None] * len(points)
     errors: list[PointError | None] = [None] * len(points)
+    done = [False] * len(points)
     todo = list(enumerate(points))
     bar = _bar(len(points), progress, desc)
     try:
         if isinstance(executor, str) and executor == "auto":
-            _run_auto(call, todo, values, errors, bar)
+            _run_auto(call, todo, values, errors, bar, done)
         else:
             with _executor_for(executor, len(points)) as ex:
-                _gather(ex, call, todo, values, errors, bar)
+                _dispatch(ex, call, todo, values, errors, bar, done)
+    except KeyboardInterrupt as exc:
+        for i, finished in enumerate(done):
+            if not finished:
+                errors[i] = PointError(i, "KeyboardInterrupt", "not run: the sweep was "
+                                       "interrupted")
+        exc.sweep_result = SweepResult(points, tuple(values), tuple(errors))  # type: ignore
+        exc.add_note(f"nscontrol.sweep: {sum(done)} of {len(points)} points finished; "
+                     "err.sweep_result holds them")
+        raise
     finally:
         if bar is not None:
             bar.close()
     return SweepResult(points, tuple(values), tuple(errors))
 
 
+#: Fresh local pools :func:`run` starts after worker processes died, before it records the
+#: points not yet run as errors.
+MAX_POOL_RESTARTS = 10
+
+_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ucx|ws|wss)://)?"
+                      r"(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9_.-]*[A-Za-z0-9])?)"
+                      r":(\d{1,5})$")
+_INPROC = re.compile(r"^inproc://\S+$")        # an in-process LocalCluster's scheduler
+_NAMES = ("serial", "auto")
+
+
+def _points(grid: Any) -> tuple[Any, ...]:
+    """The grid as a tuple; a string or a non-iterable is a mistake, not a grid."""
+    if isinstance(grid, str | bytes):
+        raise ModelError(f"grid: expected an iterable of points, got the string {grid!r}; "
+                         "pass a list of points (e.g. [0.1, 0.2])")
+    try:
+        return tuple(grid)
+    except TypeError:
+        raise ModelError(f"grid: expected an iterable of points (a list, a range, an array), "
+                         f"got {type(grid).__name__} {grid!r}; write [point] for a single "
+                         "point or range(n) for n points") from None
+
+
+def _check_executor(executor: Any) -> None:
+    """Refuse a string that is no executor name and no scheduler address (a typo such as
+    ``'seriall'`` would otherwise be dialled as a Dask address)."""
+    if not isinstance(executor, str) or executor in _NAMES:
+        return
+    match = _ADDRESS.match(executor)
+    if (match and 0 < int(match.group(1)) < 65536) or _INPROC.match(executor):
+        return
+    close = difflib.get_close_matches(executor, _NAMES, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    raise ModelError(f"executor: {executor!r} is neither 'serial', 'auto' nor a Dask scheduler "
+                     f"address (tcp://host:port or host:port){hint}")
+
+
 def _run_auto(call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
-              errors: list[PointError | None], bar: Any) -> None:
+              errors: list[PointError | None], bar: Any, done: list[bool]) -> None:
     """``executor="auto"``: a timed pilot point here, then processes only if they pay."""
     t = time.perf_counter()
-    _gather(None, call, todo[:1], values, errors, bar)
+    _gather(None, call, todo[:1], values, errors, bar, done)
     pilot = time.perf_counter() - t
     rest = todo[1:]
     workers = min(os.cpu_count() or 1, len(rest))
     if (workers > 1 and pilot * len(rest) > AUTO_PARALLEL_SECONDS
             and not _pickling_problem(call, dask=False)):
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            _gather(pool, call, rest, values, errors, bar)
+        with _owned_pool(workers) as pool:
+            _dispatch(pool, call, rest, values, errors, bar, done)
     else:
-        _gather(None, call, rest, values, errors, bar)
+        _gather(None, call, rest, values, errors, bar, done)
+
+
+def _dispatch(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]],
+              values: list[Any], errors: list[PointError | None], bar: Any,
+              done: list[bool]) -> None:
+    """Local process pools get crash recovery; other executors run as they are."""
+    if isinstance(ex, ProcessPoolExecutor):
+        _gather_recovering(ex, call, todo, values, errors, bar, done)
+    else:
+        _gather(ex, call, todo, values, errors, bar, done)
+
+
+def _gather_recovering(pool: ProcessPoolExecutor, call: _Guarded, todo: list[tuple[int, Any]],
+                       values: list[Any], errors: list[PointError | None], bar: Any,
+                       done: list[bool]) -> None:
+    """:func:`_gather` on a local pool, re-running the points a dead worker took with it.
+
+    After a crash the points whose marks remain (they were running) are re-run alone, each
+    in a fresh one-worker pool, so the culprit is identified; the points that never started
+    go to a fresh pool of the same size. Each round settles at least one point, and at most
+    :data:`MAX_POOL_RESTARTS` rounds run.
+    """
+    marks = tempfile.mkdtemp(prefix="nscontrol-sweep-")
+    call = replace(call, marks=marks, ship=True)
+    workers = getattr(pool, "_max_workers", None) or (os.cpu_count() or 1)
+    context = getattr(pool, "_mp_context", None)
+    try:
+        lost = _gather(pool, call, todo, values, errors, bar, done)
+        restarts = 0
+        while lost:
+            restarts += 1
+            running = {int(n) for n in os.listdir(marks)}
+            for n in os.listdir(marks):
+                os.unlink(os.path.join(marks, n))
+            # the points the dead workers held (the first few lost ones when no mark says)
+            suspects = [ip for ip in lost if ip[0] in running] or lost[:workers]
+            for i, p in suspects:
+                _run_alone(call, i, p, context, values, errors, bar, done)
+            lost = [ip for ip in lost if not done[ip[0]]]
+            if lost and restarts >= MAX_POOL_RESTARTS:
+                for i, _ in lost:
+                    _settle(i, PointError(i, "BrokenProcessPool", (
+                        f"not run: worker processes died {restarts} times in this sweep; "
+                        "run these points with executor='serial' to see why")),
+                        values, errors, bar, done)
+                return
+            if lost:
+                with _owned_pool(workers, context) as fresh:
+                    lost = _gather(fresh, call, lost, values, errors, bar, done)
+    finally:
+        shutil.rmtree(marks, ignore_errors=True)
+
+
+def _run_alone(call: _Guarded, i: int, p: Any, context: Any, values: list[Any],
+               errors: list[PointError | None], bar: Any, done: list[bool]) -> None:
+    """One point in a fresh one-worker pool: its value, its error, or its own crash."""
+    with _owned_pool(1, context) as solo:
+        fut = solo.submit(call, (i, p))
+        try:
+            fut.result()
+        except BrokenProcessPool:
+            _settle(i, PointError(i, "WorkerDied", (
+                f"the worker process died while running point {i} (os._exit, a segfault, the "
+                "OOM killer...); re-run alone in a fresh process it died again; the other "
+                "points were re-run in a fresh pool")), values, errors, bar, done)
+            return
+        except Exception:
+            pass
+        _store(i, fut, values, errors, "")
+        _tick(i, bar, done)
+
+
+def _settle(i: int, error: PointError, values: list[Any], errors: list[PointError | None],
+            bar: Any, done: list[bool]) -> None:
+    errors[i] = error
+    _tick(i, bar, done)
+
+
+def _tick(i: int, bar: Any, done: list[bool]) -> None:
+    done[i] = True
+    if bar is not None:
+        bar.update(1)
+
+
+@contextmanager
+def _owned_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecutor]:
+    """A local pool created (and shut down) here; on an interrupt or a crash it does not wait
+    for the queued points."""
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+    try:
+        yield pool
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
-            errors: list[PointError | None], bar: Any) -> None:
+            errors: list[PointError | None], bar: Any, done: list[bool]
+            ) -> list[tuple[int, Any]]:
     """Run the ``(index, point)`` pairs of ``todo`` on ``ex`` (in this process when None) and
-    store values and errors by index."""
+    store values and errors by index. Returns the pairs lost to a broken local pool (not
+    stored: the caller re-runs them)."""
     if ex is None:
         for i, p in todo:
             _store(i, _resolved(call, (i, p)), values, errors, "")
-            if bar is not None:
-                bar.update(1)
-        return
+            _tick(i, bar, done)
+        return []
     dask = type(ex).__module__.startswith("distributed")
     futures: dict[Future, int] = {}
     fn_problem = ""  # set once fn itself is known not to serialise: no more submits
@@ -255,16 +466,34 @@ def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], va
                     f"every grid point must be picklable", traceback.format_exc())
         else:
             errors[i] = PointError(i, "PicklingError", fn_problem)
-        if bar is not None:
-            bar.update(1)
+        _tick(i, bar, done)
     diagnosis: str | None = None
+    lost: list[tuple[int, Any]] = []
+    points = dict(todo)
     for f in as_completed(futures):
         i = futures[f]
-        if diagnosis is None and f.exception() is not None:
-            diagnosis = _pickling_problem(call, dask=dask)
+        failure = f.exception()
+        if isinstance(failure, BrokenProcessPool):
+            lost.append((i, points[i]))
+            continue
+        if isinstance(failure, KeyboardInterrupt):
+            raise failure
+        if diagnosis is None and failure is not None:
+            diagnosis = _pickling_problem(call, dask=dask) or _transit_problem(i, points[i])
         _store(i, f, values, errors, diagnosis or "")
-        if bar is not None:
-            bar.update(1)
+        _tick(i, bar, done)
+    return sorted(lost, key=lambda ip: ip[0])
+
+
+def _transit_problem(index: int, point: Any) -> str:
+    """Why a task whose ``fn`` pickles failed in transit: its point, or else its value."""
+    try:
+        pickle.dumps(point)
+    except Exception as exc:
+        return (f"point {index} cannot be pickled ({type(exc).__name__}: {exc}); with process "
+                "or cluster executors every grid point travels by pickle")
+    return (f"the point or the value fn returned for point {index} could not be sent between "
+            "processes; return picklable data, or run with executor='serial'")
 
 
 def _pickling_problem(call: _Guarded, *, dask: bool) -> str:
@@ -294,7 +523,14 @@ def _store(index: int, future: Future, values: list[Any], errors: list[PointErro
         errors[index] = PointError(index, type(exc).__name__,
                                    f"{exc}; {diagnosis}" if diagnosis else str(exc))
         return
-    if ok:
+    if ok and isinstance(payload, _Pickled):
+        try:
+            values[index] = pickle.loads(payload.data)
+        except Exception as exc:
+            errors[index] = PointError(index, type(exc).__name__, (
+                f"the value fn returned for point {index} could not be unpickled in this "
+                f"process ({exc}); its class must be importable here"), traceback.format_exc())
+    elif ok:
         values[index] = payload
     else:
         errors[index] = payload
@@ -321,7 +557,7 @@ def _executor_for(executor: Any, n_points: int) -> Iterator[Executor | None]:
     """Resolve the ``executor`` argument; shut down only what was created here."""
     if executor is None:
         workers = max(1, min(os.cpu_count() or 1, n_points))
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with _owned_pool(workers) as pool:
             yield pool
     elif isinstance(executor, str) and executor == "serial":
         yield None

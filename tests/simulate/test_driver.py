@@ -277,3 +277,28 @@ def _relay():
     from nscontrol.testing.setvalued_problems import relay_feedback
 
     return relay_feedback().system
+
+
+@pytest.mark.parametrize("method, opts", [("event_driven", {}), ("moreau_jean", {"h": 1e-3})])
+def test_a_user_error_on_impacting_bodies_keeps_the_partial_run_in_their_state_order(
+        method, opts):
+    """ImpactingBodies run through their Lagrangian form (another state order): a partial
+    run comes back in the bodies' own order [x_a; x_b], as a finished one does."""
+    from nscontrol.systems.impacting_bodies import ImpactingBodies
+
+    bodies = ImpactingBodies.from_springs([1.0, 2.0], [3.0], {(0, 0): 1.0, (0, 1): 0.5},
+                                          {(0, 0): -0.2}, restitution=0.7)
+    x0 = np.array([0.0, 0.1, 0.3, 0.0, 1.0, -0.5])
+    full = nsc.simulate(bodies, x0, (0.0, 0.5), method=method, **opts)
+
+    def stop(t, x_minus, x_plus, contacts, impulse):
+        raise RuntimeError("stop at the first impact")
+
+    try:
+        nsc.simulate(bodies, x0, (0.0, 5.0), method=method, listeners=[stop], **opts)
+    except RuntimeError as err:
+        partial = err.trajectory
+    else:   # no impact in the span: nothing to test with this configuration
+        pytest.fail("expected an impact within 5 s")
+    assert partial.state_names == full.state_names
+    np.testing.assert_array_equal(partial.x[0], x0)

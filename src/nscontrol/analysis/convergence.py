@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_matrix, as_square, check_positive
+from .._validation import as_finite_scalar, as_matrix, as_square, check_positive
 from ..errors import (
     DimensionError,
     InaccurateCertificateWarning,
@@ -214,7 +214,10 @@ def _max_margin_cqlf(As: Sequence[FloatArray], decay: float,
 def verify_cqlf(As: Sequence[Any], P: Any, *, decay: float = 0.0, tol: float = 1e-8) -> bool:
     """Re-check a certificate in NumPy: ``P > 0`` and
     ``max eig(A_iᵀP + PA_i + 2σP) <= tol·‖P‖`` for every mode (spec check 3)."""
-    P = np.asarray(P, dtype=float)
+    decay = as_finite_scalar("decay", decay)
+    tol = check_positive("tol", tol, allow_zero=True)
+    As = [as_square(f"As[{i}]", A) for i, A in enumerate(As)]
+    P = as_square("P", P)
     P = 0.5 * (P + P.T)
     norm = float(np.linalg.norm(P, 2))
     if not np.all(np.isfinite(P)) or np.linalg.eigvalsh(P)[0] <= 0.0:
@@ -411,6 +414,8 @@ def bisect_boundary(is_convergent: Callable[[float], bool], lo: float, hi: float
     ModelError
         Both ends give the same verdict (no boundary bracketed).
     """
+    lo, hi = as_finite_scalar("lo", lo), as_finite_scalar("hi", hi)
+    rtol = check_positive("rtol", rtol)
     f_lo, f_hi = bool(is_convergent(lo)), bool(is_convergent(hi))
     if f_lo == f_hi:
         raise ModelError(f"lo, hi: expected a bracket where the verdict changes, got "

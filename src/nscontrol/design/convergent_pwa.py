@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_matrix, as_square, check_positive
+from .._validation import as_matrix, as_real_scalar, as_square, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
 
 __all__ = [
@@ -43,11 +43,12 @@ LMI_MARGIN = 1e-6
 
 def certificate_residual(As: Sequence[Any], P: Any, decay: float = 0.0) -> float:
     """``max_i λ_max(A_iᵀP + PA_i + 2σP)/‖P‖`` — ≤ 1e-8 passes the re-check (spec check 3)."""
-    P = np.asarray(P, float)
+    P = as_square("P", P)
     P = 0.5 * (P + P.T)
+    decay = as_real_scalar("decay", decay)
     worst = -np.inf
-    for A in As:
-        A = np.asarray(A, float)
+    for i, A in enumerate(As):
+        A = as_square(f"As[{i}]", A, P.shape[0])
         M = A.T @ P + P @ A + 2.0 * decay * P
         worst = max(worst, float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]))
     return worst / float(np.linalg.norm(P, 2))
@@ -114,8 +115,10 @@ class Scaling:
         """``x = (q, q')``: ``S = diag(I, I/ω_ref)``, ``τ = ω_ref t``, forces in ``input_unit``
         (e.g. the static stiffness at the actuator), measurements in ``output_unit`` —
         ch11 §3.5, ch06 §2.4."""
+        omega_ref = check_positive("omega_ref", omega_ref)
         d = np.concatenate([np.ones(n_dof), np.full(n_dof, 1.0 / omega_ref)])
-        return cls(np.diag(d), float(omega_ref), float(input_unit), float(output_unit))
+        return cls(np.diag(d), omega_ref, check_positive("input_unit", input_unit),
+                   check_positive("output_unit", output_unit))
 
     @classmethod
     def auto(cls, As: Sequence[Any], B: Any = None, C: Any = None) -> Scaling:
@@ -673,7 +676,7 @@ def tune_pwa_state_feedback(system: Any, *, sigma: float, nu_bounds: tuple[float
     if B_.shape[1] != 1:
         raise ModelError(f"B: tune_pwa_state_feedback searches a scalar nu (one input); got "
                          f"{B_.shape[1]} inputs — call design_pwa_state_feedback per nu")
-    lo, hi = (float(v) for v in nu_bounds)
+    lo, hi = (as_real_scalar(f"nu_bounds[{i}]", v) for i, v in enumerate(nu_bounds))
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi) or int(n_grid) < 3:
         raise ModelError(f"nu_bounds, n_grid: expected finite lo < hi and n_grid >= 3, got "
                          f"{nu_bounds!r}, {n_grid!r}")

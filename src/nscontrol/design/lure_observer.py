@@ -25,7 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_matrix, check_positive
+from .._validation import as_matrix, check_in_interval, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
 
 __all__ = [
@@ -981,9 +981,10 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     (True, True)
     """
     mat, _ = _plant_matrices(plant)  # a LureSystem: its law is maximal monotone
-    frac = float(alpha_fraction)
-    if not 0.0 < frac <= 1.0:
-        raise ModelError(f"alpha_fraction: expected a value in (0, 1], got {alpha_fraction!r}")
+    frac = check_in_interval("alpha_fraction", alpha_fraction, 0.0, 1.0)
+    if frac == 0.0:
+        raise ModelError("alpha_fraction: expected a value in (0, 1], got 0; a zero rate "
+                         "gives no convergence guarantee: pass e.g. 0.5")
     kwargs: dict[str, Any] = {"D": mat.D, "variant": variant, "kappa": kappa, "eps": eps,
                               "eps_P": eps_P, "solver": solver, "precheck": precheck}
     if isinstance(alpha, str):

@@ -14,7 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, as_float_array, as_matrix, as_vector, check_integer
+from .._validation import (
+    FloatArray,
+    as_float_array,
+    as_matrix,
+    as_vector,
+    check_integer,
+    check_positive,
+)
 from ..errors import DimensionError, ModelError
 
 __all__ = [
@@ -228,7 +235,8 @@ class SetValuedLaw(ABC):
 
     def in_domain(self, z: Any, tol: float = 0.0) -> bool:
         """Whether ``phi(z)`` is nonempty, allowing a violation of the domain by ``tol``."""
-        return self._in_domain(as_vector("z", z, self.dim), float(tol))
+        return self._in_domain(as_vector("z", z, self.dim),
+                               check_positive("tol", tol, allow_zero=True))
 
     def select(self, z: Any) -> FloatArray:
         """The minimum-norm element of ``phi(z)``.

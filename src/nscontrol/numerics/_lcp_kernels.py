@@ -716,3 +716,184 @@ def all_finite(a):
         if not np.isfinite(a[i]):
             return False
     return True
+
+
+# --------------------------------------------------------------------------------- fused solves
+#: Status of the fused kernels below when ``q`` holds NaN or an infinite entry (the caller
+#: raises; the kernels themselves never do).
+Q_NOT_FINITE = -1
+
+
+@njit(cache=True)
+def lemke_verified(M, q, z_out, w_out, max_iter, row_sum_max):
+    """:func:`lemke_kernel` and its verification in one compiled call (a reusable solver's
+    per-call path: one dispatch instead of three).
+
+    ``row_sum_max`` is ``||M||_inf``, computed once by the caller. Returns
+    ``(status_code, iterations, residual, round-off floor)`` with ``w_out = M z + q``
+    recomputed from ``z_out``; status :data:`Q_NOT_FINITE` when ``q`` is not finite.
+    """
+    if not all_finite(q):
+        return Q_NOT_FINITE, 0, np.nan, np.nan
+    code, its = lemke_kernel(M, q, z_out, w_out, max_iter)
+    _matvec_plus(M, z_out, q, w_out)
+    res, floor = _residual_and_floor(z_out, w_out, q, row_sum_max)
+    return code, its, res, floor
+
+
+@njit(cache=True)
+def tridiagonal_verified(lower, diag, upper, q, z_inout, w_out, max_iter, warm):
+    """:func:`tridiagonal_lcp_kernel` (``warm=False``: from the projected Thomas sweeps) or
+    :func:`tridiagonal_howard` from ``z_inout`` (``warm=True``), then the verification of
+    :func:`verify_tridiagonal`, in one compiled call. Returns ``(status_code, iterations,
+    residual, round-off floor)``; :data:`Q_NOT_FINITE` when ``q`` is not finite."""
+    if not all_finite(q):
+        return Q_NOT_FINITE, 0, np.nan, np.nan
+    if warm:
+        code, its = tridiagonal_howard(lower, diag, upper, q, z_inout, w_out, max_iter)
+    else:
+        code, its = tridiagonal_lcp_kernel(lower, diag, upper, q, z_inout, w_out, max_iter)
+    res, floor = verify_tridiagonal(lower, diag, upper, q, z_inout, w_out)
+    return code, its, res, floor
+
+
+@njit(cache=True)
+def inf_norm(M):
+    """``||M||_inf = max_i sum_j |M[i, j]|`` of a dense matrix (no temporaries)."""
+    best = 0.0
+    for i in range(M.shape[0]):
+        s = 0.0
+        for j in range(M.shape[1]):
+            s += abs(M[i, j])
+        best = max(best, s)
+    return best
+
+
+@njit(cache=True)
+def tridiagonal_inf_norm(lower, diag, upper):
+    """``||M||_inf`` of the tridiagonal matrix with bands ``(lower, diag, upper)``."""
+    n = diag.shape[0]
+    best = 0.0
+    for i in range(n):
+        a = abs(diag[i])
+        if i > 0:
+            a += abs(lower[i - 1])
+        if i < n - 1:
+            a += abs(upper[i])
+        best = max(best, a)
+    return best
+
+
+@njit(cache=True)
+def dense_structure(M):
+    """One scan of a dense square matrix: ``(all entries finite, tridiagonal, ||M||_inf)``
+    (what :class:`~nscontrol.numerics.lcp.LCPSolver` needs of ``M`` before anything else)."""
+    n = M.shape[0]
+    finite = True
+    tridiagonal = True
+    best = 0.0
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            v = M[i, j]
+            if not np.isfinite(v):
+                finite = False
+            elif v != 0.0 and (j > i + 1 or j < i - 1):
+                tridiagonal = False
+            s += abs(v)
+        best = max(best, s)
+    return finite, tridiagonal, best
+
+
+# --------------------------------------------------------------------------------- PGS polish
+@njit(cache=True)
+def _solve_principal_block(M, q, idx, k, x):
+    """Solve ``M[a, a] x = -q[a]`` (``a = idx[:k]``) by Gaussian elimination with partial
+    pivoting (backward stable, as LAPACK's ``gesv``). False on a zero or non-finite pivot."""
+    A = np.empty((k, k))
+    b = np.empty(k)
+    for r in range(k):
+        i = idx[r]
+        b[r] = -q[i]
+        for c in range(k):
+            A[r, c] = M[i, idx[c]]
+    for col in range(k):
+        p = col
+        big = abs(A[col, col])
+        for r in range(col + 1, k):
+            if abs(A[r, col]) > big:
+                big = abs(A[r, col])
+                p = r
+        if not (big > 0.0) or not np.isfinite(big):
+            return False
+        if p != col:
+            for c in range(k):
+                A[p, c], A[col, c] = A[col, c], A[p, c]
+            b[p], b[col] = b[col], b[p]
+        inv = 1.0 / A[col, col]
+        for r in range(col + 1, k):
+            f = A[r, col] * inv
+            if f != 0.0:
+                for c in range(col + 1, k):
+                    A[r, c] -= f * A[col, c]
+                b[r] -= f * b[col]
+    for r in range(k - 1, -1, -1):
+        s = b[r]
+        for c in range(r + 1, k):
+            s -= A[r, c] * x[c]
+        x[r] = s / A[r, r]
+    return True
+
+
+@njit(cache=True)
+def pgs_polish(M, q, z, w):
+    """Replace ``z`` by the direct solution on the active set it has identified, if better.
+
+    PGS converges linearly, and its error in ``z`` is up to ``residual / lambda_min(M)``;
+    once the active set ``{z_i > w_i}`` is right, one solve of ``M[a, a] z_a = -q_a`` gives
+    the solution to round-off. ``w`` must hold ``M z + q``; both are overwritten when the
+    polished point has a smaller natural residual. Returns whether it did.
+    """
+    n = q.shape[0]
+    idx = np.empty(n, dtype=np.int64)
+    k = 0
+    for i in range(n):
+        if z[i] > w[i]:
+            idx[k] = i
+            k += 1
+    p = np.zeros(n)
+    if k > 0:
+        x = np.empty(k)
+        if not _solve_principal_block(M, q, idx, k, x):
+            return False
+        for r in range(k):
+            p[idx[r]] = x[r]
+    wp = np.empty(n)
+    _matvec_plus(M, p, q, wp)
+    after = natural_residual(p, wp, q)
+    if np.isfinite(after) and after < natural_residual(z, w, q):
+        for i in range(n):
+            z[i] = p[i]
+            w[i] = wp[i]
+        return True
+    return False
+
+
+@njit(cache=True)
+def pgs_verified(M, q, z_inout, w_out, tol, max_iter, omega, cold_start):
+    """:func:`pgs_kernel` (from zero with ``cold_start``, else from ``z_inout``), the
+    active-set polish of :func:`pgs_polish` (status solved when it improves the point) and
+    the verification of :func:`verify_dense`, in one compiled call. Returns
+    ``(status_code, sweeps, residual, round-off floor)``; :data:`Q_NOT_FINITE` when ``q`` is
+    not finite."""
+    if not all_finite(q):
+        return Q_NOT_FINITE, 0, np.nan, np.nan
+    if cold_start:
+        z_inout[:] = 0.0
+    code, its = pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega)
+    if code == SOLVED or code == MAX_ITER:
+        _matvec_plus(M, z_inout, q, w_out)
+        if pgs_polish(M, q, z_inout, w_out):
+            code = SOLVED
+    res, floor = verify_dense(M, q, z_inout, w_out)
+    return code, its, res, floor

@@ -1,6 +1,13 @@
 """Linear complementarity problems: ``w = M z + q,  0 <= z ⟂ w >= 0``.
 
-One verb, :func:`solve_lcp`, with four methods:
+Two entry points, one code path:
+
+- :class:`LCPSolver` validates and analyses ``M`` once (structure, method choice, norms)
+  and then solves for many right-hand sides: ``LCPSolver(M).solve(q)`` pays per call only
+  for a check of ``q``, the compiled kernel and the residual check.
+- :func:`solve_lcp` solves one problem: it is ``LCPSolver(M, ...).solve(q)``.
+
+Four methods:
 
 - ``"lemke"``: Lemke's complementary pivoting with lexicographic anti-cycling (dense, O(n^2)
   per pivot). Exact up to round-off; terminates on degenerate problems; a ray termination
@@ -13,8 +20,12 @@ One verb, :func:`solve_lcp`, with four methods:
   ``M``. Exact in at most ``n`` iterations for M-matrices such as the Delassus matrix of a
   chain or stack of contacts (so O(n^2) in the worst case; see ``docs/lcp.md``).
 - ``"auto"``: banded for sparse or banded ``M``, Lemke for small or general ``M``, PGS for
-  large symmetric ``M`` that turns out positive semidefinite; the residual is verified and
-  Lemke is the fallback.
+  large symmetric ``M`` that turns out positive semidefinite; then every other method that
+  applies, in a fixed order, until one returns a verified solution (:class:`LCPSolver`).
+
+A problem whose solution does not fit in float64 (``solve_lcp([[0.5]], [-1.7e308])``:
+``z = 3.4e308``) is reported with status ``"overflow"`` and a message naming the scale of
+``q``, not as infeasible.
 
 The numba kernels behind the methods live in :mod:`nscontrol.numerics._lcp_kernels` and can
 be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and figures.
@@ -22,8 +33,10 @@ be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
@@ -41,35 +54,46 @@ from .._validation import (
 from ..errors import DimensionError, ModelError, SolverError
 from . import _lcp_kernels as kernels
 
-__all__ = ["LCPResult", "solve_lcp", "residual"]
+__all__ = ["LCPResult", "LCPSolver", "solve_lcp", "residual"]
 
 Method = Literal["auto", "lemke", "pgs", "banded"]
 METHODS = ("auto", "lemke", "pgs", "banded")
-STATUSES = ("solved", "ray_termination", "max_iter", "numerical_failure")
+STATUSES = ("solved", "ray_termination", "max_iter", "numerical_failure", "overflow")
 
 #: ``auto`` uses PGS instead of Lemke for symmetric PSD problems larger than this.
 AUTO_PGS_MIN_SIZE = 400
-#: ``auto`` does not fall back to dense Lemke above this size (memory n^2, time n^3).
+#: ``auto`` does not fall back to dense Lemke or PGS above this size (memory n^2, time n^3).
 AUTO_LEMKE_MAX_SIZE = 3000
 #: Sweeps of ``auto``'s PGS before it pays for a definiteness test (see ``_run_pgs_auto``).
 AUTO_PGS_PROBE_SWEEPS = 100
+#: Sweeps of PGS as a fallback of ``auto`` on a matrix it is not known to converge for
+#: (a cost comparable to dense Lemke's O(n^3)).
+AUTO_PGS_FALLBACK_SWEEPS = 1000
 #: ``auto`` tries ``banded`` first on dense matrices this large with a narrow band.
 AUTO_BANDED_MIN_SIZE = 64
+#: ``auto`` falls back to Howard's iteration with dense LU (O(n^3) per iteration) up to here.
+AUTO_DENSE_HOWARD_MAX_SIZE = 200
+#: A failed solve is retried on the problem rescaled by powers of two (exact) when
+#: ``max|M|``, ``max|q|`` or their ratio lies outside ``2^(+-this)``: the scales at which
+#: the float64 arithmetic of a solver can overflow or underflow.
+RESCALE_EXPONENT = 64
 
 
 @dataclass(frozen=True)
 class LCPResult:
-    """Outcome of :func:`solve_lcp`.
+    """Outcome of :func:`solve_lcp` and :meth:`LCPSolver.solve`.
 
     Attributes
     ----------
     z, w : ndarray, shape (n,)
         The computed point and ``w = M z + q`` (recomputed from ``z``, never taken on trust).
-        On failure: the last iterate of the method that ran last.
-    status : {"solved", "ray_termination", "max_iter", "numerical_failure"}
+        On failure: the last iterate of the method that ran last; on ``"overflow"``: ``inf``
+        where the solution exceeds the float64 range.
+    status : {"solved", "ray_termination", "max_iter", "numerical_failure", "overflow"}
         ``"solved"`` only when :attr:`residual` passed the acceptance test (see
         :func:`solve_lcp`). ``"ray_termination"``: Lemke found no solution (for
-        copositive-plus ``M`` the LCP is infeasible).
+        copositive-plus ``M`` the LCP is infeasible). ``"overflow"``: the problem rescaled by
+        powers of two was solved, but its solution scaled back exceeds float64.
     iterations : int
         Pivots (Lemke), sweeps (PGS) or active-set iterations (banded) of the last method.
     residual : float
@@ -78,7 +102,8 @@ class LCPResult:
     method : str
         The method that produced ``z`` (for ``"auto"``: the one finally used).
     message : str
-        Why it stopped, and which methods were tried.
+        Why it stopped, and which methods were tried (``"name: status (residual r)"``
+        joined by ``"; "``, in the order they ran).
     """
 
     z: NDArray[np.float64]
@@ -110,6 +135,10 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
               omega: float = 1.0) -> LCPResult:
     """Solve the linear complementarity problem ``w = M z + q, 0 <= z ⟂ w >= 0``.
 
+    Equivalent to ``LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict,
+    omega=omega).solve(q, z0=z0)``; to solve with one ``M`` for many ``q``, keep the
+    :class:`LCPSolver`, which analyses ``M`` once.
+
     Parameters
     ----------
     M : (n, n) array_like or scipy.sparse matrix
@@ -125,8 +154,8 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
         round-off floor ``64 eps (||M||_inf ||z||_inf + ||q||_inf) / (1 + ||q||_inf)`` of
         evaluating ``M z + q``.
     max_iter : int, optional
-        Iteration limit of the chosen method. Defaults: Lemke ``50 (n + 1)`` pivots, PGS
-        ``10000`` sweeps, banded ``n + 2`` iterations.
+        Iteration limit of each method run. Defaults: Lemke ``50 (n + 1)`` pivots, PGS
+        ``10000`` sweeps (``1000`` as a fallback of ``auto``), banded ``n + 2`` iterations.
     strict : bool
         Raise :class:`~nscontrol.errors.SolverError` instead of returning a failed result.
     z0 : (n,) array_like, optional
@@ -151,25 +180,37 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
 
     Notes
     -----
-    ``"auto"``: for ``n > 2``, tridiagonal ``M`` (dense or sparse), any other scipy.sparse
-    ``M`` and dense ``M`` with ``n >= 64`` and half-bandwidth ``<= sqrt(n)`` → ``"banded"``;
-    otherwise symmetric ``M`` with a positive diagonal and ``n > 400`` → ``"pgs"``, which
-    gets 100 sweeps before ``M`` is tested for positive semidefiniteness (diagonal dominance,
-    else a Cholesky factorisation of ``M + 1e-12 max|M| I``) and continues only if it
-    passes; otherwise ``"lemke"``. When a choice fails (status or residual) the next one
-    runs: after ``"banded"``, PGS under the same conditions, then Lemke on the dense matrix
-    if ``n <= 3000``. A result is never marked solved without passing the residual test.
+    ``"auto"`` first picks by structure: for ``n > 2``, tridiagonal ``M`` (dense or sparse),
+    any other scipy.sparse ``M`` and dense ``M`` with ``n >= 64`` and half-bandwidth
+    ``<= sqrt(n)`` → ``"banded"``; otherwise symmetric ``M`` with a positive diagonal and
+    ``n > 400`` → ``"pgs"``, which gets 100 sweeps before ``M`` is tested for positive
+    semidefiniteness (diagonal dominance, else a Cholesky factorisation of
+    ``M + 1e-12 max|M| I``) and continues only if it passes; otherwise ``"lemke"``. Until a
+    result passes the residual test, it then falls back, each method at most once, to:
+    that PGS (after ``banded``), Lemke (``n <= 3000``), PGS on any matrix with a positive
+    diagonal (``n <= 3000``, 1000 sweeps: exact in one sweep for a lower-triangular ``M``,
+    where Lemke's path can be exponentially long), Howard's iteration with dense LU
+    (``n <= 200``). :attr:`LCPResult.message` lists every method tried with its status.
 
     Lemke is guaranteed to find a solution for P-matrices (unique solution) and, for
-    copositive-plus ``M``, ends in a ray only when the LCP is infeasible. PGS converges for
+    copositive-plus ``M``, ends in a ray only when the LCP is infeasible — but its path may
+    need up to ``2^n`` pivots (Murty's unit lower-triangular matrices with 2 below the
+    diagonal and ``q = -1``), beyond the default limit for ``n >= 9``. PGS converges for
     symmetric PSD ``M`` with positive diagonal. Banded is exact for M-matrices (e.g. the
     Delassus matrix of a stack); elsewhere it may stop with ``"max_iter"``.
+
+    A failed solve of a problem with extreme scales (``max|M|``, ``max|q|`` or their ratio
+    beyond ``2^64``) is retried on ``LCP(M / 2^a, q / 2^b)``, rescaled exactly by powers of
+    two, whose solution is ``z / 2^(b - a)``; when that one is solved but ``z`` exceeds the
+    float64 range, the status is ``"overflow"`` (not ``"ray_termination"``).
 
     References
     ----------
     R. W. Cottle, J.-S. Pang, R. E. Stone, *The Linear Complementarity Problem*, Academic
-    Press, 1992 (§4.4 Lemke, §5.2 PGS). O. Bokanowski, S. Maroso, H. Zidani, SIAM J. Numer.
-    Anal. 47(4), 2009 (Howard's algorithm).
+    Press, 1992 (§4.4 Lemke, §5.2 PGS). K. G. Murty, "Computational complexity of
+    complementary pivot methods", Math. Programming Study 7, 1978 (the exponential family).
+    O. Bokanowski, S. Maroso, H. Zidani, SIAM J. Numer. Anal. 47(4), 2009 (Howard's
+    algorithm).
 
     Examples
     --------
@@ -179,68 +220,545 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
-    if not isinstance(method, str) or method not in METHODS:
-        raise ModelError(f"method: expected one of {list(METHODS)}, got {method!r}")
-    tol = check_positive("tol", tol)
-    omega = check_in_interval("omega", omega, 0.0, 2.0, open_interval=True)
-    if max_iter is not None:
-        max_iter = check_integer("max_iter", max_iter, minimum=1)
-    problem = _Problem.build(M, q, z0)
-    chain = _method_chain(problem, method)
-    tried: list[str] = []
-    result: LCPResult | None = None
-    for name in chain:
-        result = _RUNNERS[name](problem, tol, max_iter, omega)
-        tried.append(f"{result.method}: {result.status} (residual {result.residual:.3g})")
-        if result.success:
-            break
-    assert result is not None
-    result = LCPResult(result.z, result.w, result.status, result.iterations, result.residual,
-                       result.method, "; ".join(tried))
-    if strict and not result.success:
-        raise SolverError(f"solve_lcp: no verified solution of the LCP of size {problem.n} "
-                          f"({result.message}); check that M is a P-matrix or copositive-plus, "
-                          f"raise max_iter, or try another method", status=result.status)
-    return result
+    solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict, omega=omega)
+    return solver.solve(q, z0=z0)
 
 
-# ----------------------------------------------------------------------------- problem
+# ----------------------------------------------------------------------------- the solver
+
+# One method run: (z, w, status, iterations, residual, method name).
+_Outcome = tuple[NDArray[np.float64], NDArray[np.float64], str, int, float, str]
 
 
-@dataclass(frozen=True)
-class _Problem:
-    """Validated input, with the structure ``auto`` dispatches on computed once."""
+class LCPSolver:
+    """An LCP solver for one matrix ``M`` and many right-hand sides ``q``.
 
-    M: Any  # dense ndarray or scipy.sparse matrix (CSR)
-    q: NDArray[np.float64]
-    z0: NDArray[np.float64] | None
-    bands: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None
+    The constructor validates ``M`` and the options, reads its structure (tridiagonal
+    bands, sparsity, bandwidth, symmetry where ``auto`` needs it), chooses ``auto``'s first
+    method and computes ``||M||_inf`` for the residual check. :meth:`solve` then checks
+    ``q`` (type, length, finiteness inside the compiled kernel), runs the kernel and
+    verifies the residual: on a dense ``n = 10`` problem a few microseconds above the bare
+    kernel (``docs/lcp.md`` has the figures). :func:`solve_lcp` is this class used once.
 
-    @property
-    def n(self) -> int:
-        return self.q.shape[0]
+    Parameters
+    ----------
+    M : (n, n) array_like or scipy.sparse matrix
+        Finite square matrix (copied only when it is not already a C-contiguous float64
+        array; do not modify it afterwards).
+    method, tol, max_iter, strict, omega
+        As in :func:`solve_lcp`.
 
-    @property
-    def sparse(self) -> bool:
-        return not isinstance(self.M, np.ndarray)
+    Attributes
+    ----------
+    n : int
+        The size of the problem.
+    method : str
+        The method asked for; :attr:`first_method` is the one ``solve`` runs first.
 
-    def dense(self) -> NDArray[np.float64]:
-        return self.M if isinstance(self.M, np.ndarray) else np.asarray(self.M.toarray())
+    Raises
+    ------
+    DimensionError, ModelError
+        As :func:`solve_lcp`, for ``M`` and the options.
 
-    @classmethod
-    def build(cls, M: Any, q: Any, z0: Any) -> _Problem:
-        if not _clean(q, 1):
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from nscontrol.numerics.lcp import LCPSolver
+    >>> solver = LCPSolver(np.array([[2.0, 1.0], [1.0, 2.0]]))
+    >>> [solver.solve(np.array([-5.0, q2])).z.round(12).tolist() for q2 in (-6.0, 6.0)]
+    [[1.333333333333, 2.333333333333], [2.5, 0.0]]
+    """
+
+    def __init__(self, M: Any, method: Method = "auto", *, tol: float = 1e-12,
+                 max_iter: int | None = None, strict: bool = False, omega: float = 1.0):
+        if not isinstance(method, str) or method not in METHODS:
+            raise ModelError(f"method: expected one of {list(METHODS)}, got {method!r}")
+        self.method = method
+        # plain floats in range skip the general checks (solve_lcp pays these per call)
+        self.tol = tol if type(tol) is float and 0.0 < tol < math.inf else check_positive(
+            "tol", tol)
+        self.omega = omega if type(omega) is float and 0.0 < omega < 2.0 else (
+            check_in_interval("omega", omega, 0.0, 2.0, open_interval=True))
+        self.max_iter = None if max_iter is None else check_integer("max_iter", max_iter,
+                                                                     minimum=1)
+        self.strict = bool(strict)
+        if (type(M) is np.ndarray and M.dtype == np.float64 and M.ndim == 2
+                and M.flags.c_contiguous and M.flags.writeable and M.shape[0] == M.shape[1]):
+            # the common case in one compiled scan: finiteness, tridiagonality, ||M||_inf
+            finite, tridiagonal, self._row_sum_max = kernels.dense_structure(M)
+            if not finite:
+                check_finite("M", M)
+            self._M = self._dense = M
+            self._bands = _bands_of(M) if tridiagonal else None
+        else:
+            self._M = _as_lcp_matrix(M)
+            self._bands = _tridiagonal_bands(self._M)
+            self._row_sum_max = self._inf_norm()
+        self.n: int = int(self._M.shape[0])
+        self.first_method: str = self._first_method()
+        self._fused = self._fused_first_call()
+        self._rescaled_solvers: dict[int, LCPSolver] = {}
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the fused call is a closure (not picklable): rebuilt on unpickling
+        state = dict(self.__dict__)
+        del state["_fused"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._fused = self._fused_first_call()
+
+    def __repr__(self) -> str:
+        kind = "sparse" if self._sparse else "dense"
+        return (f"LCPSolver(n={self.n}, {kind}, method={self.method!r}, "
+                f"first_method={self.first_method!r}, tol={self.tol:g})")
+
+    # ------------------------------------------------------------------ solve
+
+    def solve(self, q: Any, *, z0: Any = None) -> LCPResult:
+        """Solve ``w = M z + q, 0 <= z ⟂ w >= 0`` for this solver's ``M``.
+
+        Parameters
+        ----------
+        q : (n,) array_like
+            Finite vector (a C-contiguous float64 array takes the fast path: no copy).
+        z0 : (n,) array_like, optional
+            Warm start for ``"pgs"`` and ``"banded"``.
+
+        Returns
+        -------
+        LCPResult
+            The same result as :func:`solve_lcp` with this solver's options.
+
+        Raises
+        ------
+        DimensionError
+            ``q`` or ``z0`` not a vector of length :attr:`n`.
+        ModelError
+            ``q`` or ``z0`` with NaN, infinite, complex or string entries.
+        SolverError
+            With ``strict=True``, when no method reached a verified solution.
+        """
+        if not (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1
+                and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == self.n):
+            q = self._check_q(q)
+        if z0 is None and self._fused is not None:
+            # the per-call path of a reusable solver, kept short: one compiled call
+            n = self.n
+            z, w = np.empty(n), np.empty(n)
+            code, its, res, floor = self._fused(q, z, w)
+            # the acceptance test of _outcome, inlined
+            if code == 0 and (res <= self.tol or res <= floor) and floor < math.inf:
+                z.setflags(write=False)
+                w.setflags(write=False)
+                method = self.first_method
+                return LCPResult(z, w, "solved", its, res, method,
+                                 f"{method}: solved (residual {res:.3g})")
+            if code == kernels.Q_NOT_FINITE:
+                check_finite("q", q)
+            first = self._outcome(z, w, code, its, res, floor, self.first_method)
+            z0v = None
+        else:
+            z0v = None if z0 is None else as_vector("z0", z0, size=self.n)
+            first = _RUNNERS[self.first_method](self, q, z0v, self.max_iter)
+        if first[2] == "solved":
+            z, w, status, its, res, method = first
+            return LCPResult(z, w, status, its, res, method,
+                             f"{method}: solved (residual {res:.3g})")
+        result = self._run_fallbacks(q, z0v, first)
+        if result.status != "solved":
+            result = self._retry_rescaled(q, z0v, result)
+        if self.strict and result.status != "solved":
+            raise SolverError(f"no verified solution of the LCP of size {self.n} "
+                              f"({result.message}); check that M is a P-matrix or "
+                              f"copositive-plus, raise max_iter, or try another method",
+                              status=result.status)
+        return result
+
+    def _fused_first_call(self) -> Callable[..., tuple[int, int, float, float]] | None:
+        """``f(q, z, w) -> (code, iterations, residual, floor)``: the first method's kernel
+        fused with its verification, when it has one (Lemke, PGS with its polish from zero,
+        tridiagonal ``banded`` from its own start); None otherwise."""
+        max_iter = self.max_iter
+        if self.first_method == "lemke":
+            M, norm = self._dense, self._row_sum_max
+            lemke = kernels.lemke_verified
+            return lambda q, z, w: lemke(M, q, z, w, max_iter or 0, norm)
+        if self.first_method == "pgs":
+            M, tol, omega = self._dense, self.tol, self.omega
+            sweeps = int(max_iter or 10_000)
+            pgs = kernels.pgs_verified
+            return lambda q, z, w: pgs(M, q, z, w, tol, sweeps, omega, True)
+        if self.first_method == "banded" and self._bands is not None:
+            lower, diag, upper = self._bands
+            limit = int(max_iter or self.n + 2)
+            howard = kernels.tridiagonal_verified
+            return lambda q, z, w: howard(lower, diag, upper, q, z, w, limit, False)
+        return None
+
+    def _run_fallbacks(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                       first: _Outcome) -> LCPResult:
+        """Run ``auto``'s fallbacks after a failed first method until one is verified;
+        the message lists every method run, in order. When all fail, the result is Lemke's
+        ray termination if there was one (for copositive-plus ``M`` a certificate that the
+        LCP is infeasible), else the last method's."""
+        tried = [first]
+        for name in self._fallbacks():
+            tried.append(_RUNNERS[name](self, q, z0, self.max_iter))
+            if tried[-1][2] == "solved":
+                break
+        chosen = tried[-1]
+        if chosen[2] != "solved":
+            chosen = next((o for o in tried if o[2] == "ray_termination"), chosen)
+        z, w, status, its, res, method = chosen
+        message = "; ".join(f"{o[5]}: {o[2]} (residual {o[4]:.3g})" for o in tried)
+        return LCPResult(z, w, status, its, res, method, message)
+
+    def _check_q(self, q: Any) -> NDArray[np.float64]:
+        """``q`` as a writeable C-contiguous float64 vector of length n; finiteness is
+        checked here only off the fast path (the fused kernels check it, and the runners
+        raise)."""
+        if not (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1):
             q = as_vector("q", q)
-        M = _as_lcp_matrix(M)
-        if M.shape[0] != q.shape[0]:
-            raise DimensionError(f"q: expected a vector of length {M.shape[0]} (the size of "
+        elif not (q.flags.c_contiguous and q.flags.writeable):
+            # a copy is cheaper than a numba specialisation for read-only arrays (e.g. the
+            # read-only z of an earlier LCPResult passed as q)
+            q = np.array(q, order="C")
+        if q.shape[0] != self.n:
+            raise DimensionError(f"q: expected a vector of length {self.n} (the size of "
                                  f"M), got length {q.shape[0]}")
-        z0v = None if z0 is None else as_vector("z0", z0, size=q.shape[0])
-        return cls(M, q, z0v, _tridiagonal_bands(M))
+        return q
+
+    # ------------------------------------------------------------------ analysis
+
+    def _inf_norm(self) -> float:
+        if self._bands is not None:
+            lower, diag, upper = self._bands
+            return float(kernels.tridiagonal_inf_norm(lower, diag, upper))
+        if isinstance(self._M, np.ndarray):
+            return float(kernels.inf_norm(self._M))
+        if self._M.shape[0] == 0:
+            return 0.0
+        return float(np.asarray(abs(self._M).sum(axis=1)).max())
+
+    @property
+    def _sparse(self) -> bool:
+        return not isinstance(self._M, np.ndarray)
+
+    @cached_property
+    def _dense(self) -> NDArray[np.float64]:
+        """``M`` as a dense array (densified once, when a dense method first needs it)."""
+        return self._M if isinstance(self._M, np.ndarray) else np.asarray(self._M.toarray())
+
+    @cached_property
+    def _banded_dense(self) -> bool:
+        """Dense ``M`` with a narrow band (half-bandwidth ``<= sqrt(n)``, ``n >= 64``): worth
+        Howard's iteration with sparse LU (O(n b^2) per step) before dense pivoting."""
+        n = self.n
+        if self._sparse or n < AUTO_BANDED_MIN_SIZE:
+            return False
+        limit = max(2, int(np.sqrt(n)))
+        return bool(kernels.half_bandwidth(self._M, limit) <= limit)
+
+    @cached_property
+    def _symmetric_positive_diagonal(self) -> bool:
+        M = self._dense
+        scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
+        return bool(np.all(np.diagonal(M) > 0.0) and kernels.is_symmetric(M, 1e-12 * scale))
+
+    @cached_property
+    def _positive_diagonal(self) -> bool:
+        return bool(np.all(self._M.diagonal() > 0.0))
+
+    @cached_property
+    def _symmetric_psd(self) -> bool:
+        """Symmetric (to 1e-12 relative) and positive semidefinite, tested without
+        eigenvalues: a diagonally dominant matrix with a nonnegative diagonal is PSD
+        (Gershgorin), otherwise an attempted Cholesky factorisation of ``M + tiny I``
+        decides (``tiny`` = 1e-12 relative, above the round-off of the factorisation). The
+        residual test after the solve keeps a borderline answer honest."""
+        M = self._dense
+        n = self.n
+        scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
+        if not kernels.is_symmetric(M, 1e-12 * scale):
+            return False
+        if kernels.nonnegative_diagonally_dominant(M):
+            return True
+        tiny = max(1e-12, 8.0 * n * np.finfo(np.float64).eps) * scale
+        try:
+            np.linalg.cholesky(M + tiny * np.eye(n))
+        except np.linalg.LinAlgError:
+            return False
+        return True
+
+    def _large_symmetric(self) -> bool:  # densifies sparse M: only evaluated when reached
+        return self.n > AUTO_PGS_MIN_SIZE and self._symmetric_positive_diagonal
+
+    def _structured(self) -> bool:
+        """Tridiagonal, sparse or narrow-band (``auto`` starts with ``banded``)."""
+        if self.n <= 2:
+            return False
+        if self._bands is not None or self._sparse:
+            return True
+        return self.n >= AUTO_BANDED_MIN_SIZE and self._banded_dense
+
+    def _first_method(self) -> str:
+        if self.method != "auto":
+            return self.method
+        if self._structured():
+            return "banded"
+        if self._large_symmetric():
+            return "pgs_auto"
+        return "lemke"
+
+    def _fallbacks(self) -> Iterator[str]:
+        """``auto``'s methods after the first, each decided only when reached."""
+        if self.method != "auto":
+            return
+        n = self.n
+        tried = {self.first_method.removesuffix("_auto")}
+        candidates = (
+            ("pgs_auto", lambda: self._structured() and self._large_symmetric()),
+            ("lemke", lambda: n <= AUTO_LEMKE_MAX_SIZE),
+            ("pgs_fallback", lambda: n <= AUTO_LEMKE_MAX_SIZE and self._positive_diagonal),
+            ("banded", lambda: n <= AUTO_DENSE_HOWARD_MAX_SIZE),
+        )
+        for name, applies in candidates:
+            family = name.split("_")[0]
+            if family not in tried and applies():
+                tried.add(family)
+                yield name
+
+    # ------------------------------------------------------------------ runners
+
+    def _finish(self, q: NDArray[np.float64], z: NDArray[np.float64], code: int,
+                iterations: int, method: str) -> _Outcome:
+        """Recompute ``w`` from ``z`` and accept "solved" only if the residual passes."""
+        w, res, floor = self._verify(z, q)
+        return self._outcome(z, w, code, iterations, res, floor, method)
+
+    def _outcome(self, z: NDArray[np.float64], w: NDArray[np.float64], code: int,
+                 iterations: int, res: float, floor: float, method: str) -> _Outcome:
+        status = STATUSES[code]
+        # an infinite floor means z or w overflowed: nothing is certified then
+        if status == "solved" and not (res <= max(self.tol, floor) and floor < math.inf):
+            status = "numerical_failure"
+        z.setflags(write=False)
+        w.setflags(write=False)
+        return z, w, status, int(iterations), float(res), method
+
+    def _verify(self, z: NDArray[np.float64], q: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], float, float]:
+        """``w = M z + q`` recomputed, the residual and the round-off floor (see
+        :func:`solve_lcp`)."""
+        w = np.empty_like(z)
+        if self.n == 0:
+            return w, 0.0, 0.0
+        if self._bands is not None:
+            lower, diag, upper = self._bands
+            res, floor = kernels.verify_tridiagonal(lower, diag, upper, q, z, w)
+        elif isinstance(self._M, np.ndarray):
+            res, floor = kernels.verify_dense(self._M, q, z, w)
+        else:
+            w = np.asarray(self._M @ z + q, dtype=np.float64)
+            res, floor = kernels._residual_and_floor(z, w, q, self._row_sum_max)
+        return w, float(res), float(floor)
+
+    def _run_lemke(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                   max_iter: int | None) -> _Outcome:
+        n = self.n
+        z, w = np.empty(n), np.empty(n)
+        code, its, res, floor = kernels.lemke_verified(self._dense, q, z, w,
+                                                       max_iter or 0, self._row_sum_max)
+        if code == kernels.Q_NOT_FINITE:
+            check_finite("q", q)
+        return self._outcome(z, w, code, its, res, floor, "lemke")
+
+    def _run_pgs(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                 max_iter: int | None) -> _Outcome:
+        n = self.n
+        z = np.zeros(n) if z0 is None else np.array(z0)   # the kernel clamps z0 to >= 0
+        w = np.empty(n)
+        code, its, res, floor = kernels.pgs_verified(
+            self._dense, q, z, w, self.tol, int(max_iter or 10_000), self.omega, False)
+        if code == kernels.Q_NOT_FINITE:
+            check_finite("q", q)
+        return self._outcome(z, w, code, its, res, floor, "pgs")
+
+    def _run_pgs_fallback(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                          max_iter: int | None) -> _Outcome:
+        return self._run_pgs(q, z0, max_iter or AUTO_PGS_FALLBACK_SWEEPS)
+
+    def _run_pgs_auto(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                      max_iter: int | None) -> _Outcome:
+        """``auto``'s PGS: a probe of :data:`AUTO_PGS_PROBE_SWEEPS` sweeps first (a
+        well-conditioned problem is solved there, and no definiteness test is paid); only if
+        it has not converged is ``M`` tested for positive semidefiniteness (a Cholesky
+        factorisation), and PGS continues from the probe's iterate for PSD ``M`` only (where
+        it converges). Otherwise the probe's failure hands over to the fallbacks."""
+        total = int(max_iter or 10_000)
+        probe = min(AUTO_PGS_PROBE_SWEEPS, total)
+        first = self._run_pgs(q, z0, probe)
+        if first[2] == "solved" or probe == total or not self._symmetric_psd:
+            return first
+        z, w, status, its, res, method = self._run_pgs(q, np.array(first[0]), total - probe)
+        return z, w, status, probe + its, res, method
+
+    def _run_banded(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                    max_iter: int | None) -> _Outcome:
+        n = self.n
+        limit = int(max_iter or n + 2)
+        z = np.zeros(n) if z0 is None else z0.copy()
+        if self._bands is None:
+            check_finite("q", q)
+            code, its, z = self._howard(q, z, limit)
+            return self._finish(q, z, code, its, "banded")
+        lower, diag, upper = self._bands
+        w = np.empty(n)
+        code, its, res, floor = kernels.tridiagonal_verified(lower, diag, upper, q, z, w, limit,
+                                                             z0 is not None)
+        if code == kernels.Q_NOT_FINITE:
+            check_finite("q", q)
+        return self._outcome(z, w, code, its, res, floor, "banded")
+
+    @cached_property
+    def _howard_matrix(self) -> Any:
+        """``M`` for Howard's active-set solves: CSC for sparse or narrow-band ``M`` (SuperLU,
+        O(n b^2)), the dense array otherwise (LAPACK)."""
+        if self._sparse or self._banded_dense:
+            import scipy.sparse as sp
+            return sp.csc_matrix(self._M)
+        return self._M
+
+    def _howard(self, q: NDArray[np.float64], z: NDArray[np.float64], limit: int
+                ) -> tuple[int, int, NDArray[np.float64]]:
+        """Howard's policy iteration with a direct solve on the active set (non-tridiagonal M).
+
+        The same iteration as :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard`;
+        each step factors ``M[a, a]`` (SuperLU for sparse or banded ``M``: O(n b^2) per
+        step). The next iterate depends only on the active set, so a repeated active set is
+        a cycle: it stops at once with ``"max_iter"`` (instead of running to the limit) and
+        ``auto`` falls back to the next method.
+        """
+        M = self._howard_matrix
+        solve_block = _sparse_block_solver if not isinstance(M, np.ndarray) else _dense_block_solve
+        eps = 1e-13 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
+        w = M @ z + q
+        seen: set[bytes] = set()
+        for it in range(limit + 1):
+            if np.all(z >= -eps) and np.all(w >= -eps) and np.all(np.minimum(z, w) <= eps):
+                return kernels.SOLVED, it, z
+            if it == limit:
+                break
+            active = w <= z
+            key = np.packbits(active).tobytes()
+            if key in seen:                      # Howard's iteration is cycling
+                return kernels.MAX_ITER, it, z
+            seen.add(key)
+            z = np.zeros_like(z)
+            idx = np.flatnonzero(active)
+            if idx.size:
+                z_a = solve_block(M, idx, -q[idx])
+                if z_a is None:                  # singular principal block
+                    return kernels.NUMERICAL_FAILURE, it + 1, z
+                z[idx] = z_a
+            w = M @ z + q
+            if not np.all(np.isfinite(z)):
+                return kernels.NUMERICAL_FAILURE, it + 1, z
+        return kernels.MAX_ITER, limit, z
+
+    # ------------------------------------------------------------------ overflow
+
+    def _retry_rescaled(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                        failed: LCPResult) -> LCPResult:
+        """Retry a failed solve on ``LCP(M / 2^a, q / 2^b)`` when the scales are extreme
+        (see :data:`RESCALE_EXPONENT`); its solution times ``2^(b - a)`` solves the
+        original LCP. Report ``"overflow"`` when that product exceeds float64."""
+        m_max = float(np.max(np.abs(self._dense if not self._sparse else self._M.data),
+                             initial=0.0))
+        q_max = float(np.max(np.abs(q), initial=0.0))
+        if m_max == 0.0 or q_max == 0.0:
+            return failed
+        a, b = math.frexp(m_max)[1], math.frexp(q_max)[1]
+        if max(abs(a), abs(b), abs(b - a)) <= RESCALE_EXPONENT:
+            return failed
+        scaled = self._rescaled_solvers.get(a)
+        if scaled is None:
+            M = self._M * math.ldexp(1.0, -a)
+            scaled = LCPSolver(M, self.method, tol=self.tol, max_iter=self.max_iter,
+                               omega=self.omega)
+            self._rescaled_solvers[a] = scaled
+        r = scaled.solve(np.ldexp(q, -b), z0=None if z0 is None else np.ldexp(z0, a - b))
+        note = f"{failed.message}; rescaled by M / 2^{a}, q / 2^{b}: {r.message}"
+        if not r.success:
+            return _with_message(failed, note)
+        with np.errstate(over="ignore", invalid="ignore"):
+            z = np.ldexp(r.z, b - a)
+            w, res, floor = self._verify(z, q)
+        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(w))):
+            return self._overflow(z, w, r, (a, b), q_max, m_max, note)
+        status = "solved" if res <= max(self.tol, floor) else failed.status
+        z.setflags(write=False)
+        w.setflags(write=False)
+        return LCPResult(z, w, status, r.iterations, res, r.method, note)
+
+    def _overflow(self, z: NDArray[np.float64], w: NDArray[np.float64], scaled: LCPResult,
+                  exponents: tuple[int, int], q_max: float, m_max: float, note: str
+                  ) -> LCPResult:
+        """The ``"overflow"`` result: the rescaled problem ``LCP(M / 2^a, q / 2^b)`` was
+        solved by ``scaled``, but ``2^(b - a)`` times its solution exceeds float64."""
+        a, b = exponents
+        z_scaled = float(np.max(np.abs(scaled.z), initial=0.0))
+        log10_z = math.log10(z_scaled) + (b - a) * math.log10(2.0) if z_scaled else 0.0
+        factor = 10.0 ** max(1, math.ceil(log10_z - 300))
+        decade = math.floor(log10_z)
+        z_text = f"{10.0 ** (log10_z - decade):.2g}e+{decade}"
+        message = (f"q: the solution overflows float64 at this scale of q (max|q| = "
+                   f"{q_max:.3g}, max|M| = {m_max:.3g}): max z ≈ {z_text}, beyond "
+                   f"1.8e308. The LCP is feasible: LCP(M / 2^{a}, q / 2^{b}) is solved, and z "
+                   f"= 2^{b - a} times its solution. Rescale the problem, e.g. solve with "
+                   f"q / {factor:.0e} (z scales by the same factor). Tried: {note}")
+        z.setflags(write=False)
+        w.setflags(write=False)
+        return LCPResult(z, w, "overflow", scaled.iterations, math.inf, scaled.method,
+                         message)
+
+
+_RUNNERS = {"lemke": LCPSolver._run_lemke, "pgs": LCPSolver._run_pgs,
+            "banded": LCPSolver._run_banded, "pgs_auto": LCPSolver._run_pgs_auto,
+            "pgs_fallback": LCPSolver._run_pgs_fallback}
+
+
+def _with_message(result: LCPResult, message: str) -> LCPResult:
+    return LCPResult(result.z, result.w, result.status, result.iterations, result.residual,
+                     result.method, message)
+
+
+def _sparse_block_solver(M: Any, idx: NDArray[np.intp], rhs: NDArray[np.float64]
+                         ) -> NDArray[np.float64] | None:
+    from scipy.sparse.linalg import splu
+    try:
+        return splu(M[idx][:, idx].tocsc()).solve(rhs)
+    except RuntimeError:  # singular principal block
+        return None
+
+
+def _dense_block_solve(M: NDArray[np.float64], idx: NDArray[np.intp],
+                       rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    try:
+        return np.linalg.solve(M[np.ix_(idx, idx)], rhs).astype(np.float64, copy=False)
+    except np.linalg.LinAlgError:
+        return None
+
+
+# ----------------------------------------------------------------------------- input
 
 
 def _as_lcp_matrix(M: Any) -> Any:
     """A finite square dense float array, or a finite square scipy.sparse CSR matrix."""
+    if _clean(M, 2) and M.shape[0] == M.shape[1]:
+        return M
     if hasattr(M, "tocsr") and not isinstance(M, np.ndarray):
         csr = M.tocsr()
         if csr.dtype != np.float64:
@@ -249,30 +767,28 @@ def _as_lcp_matrix(M: Any) -> Any:
             csr = csr.astype(np.float64)
         if csr.ndim != 2 or csr.shape[0] != csr.shape[1]:
             raise DimensionError(f"M: expected a square matrix, got shape {csr.shape}")
-        check_finite("M", csr.data)
+        if not kernels.all_finite(np.ascontiguousarray(csr.data)):
+            check_finite("M", csr.data)        # raises, with the count of bad entries
         return csr
-    if _clean(M, 2) and M.shape[0] == M.shape[1]:
-        return M
     if np.ndim(M) == 0:  # a scalar is a 1x1 LCP
         M = np.reshape(as_float_array("M", M), (1, 1))
     return np.ascontiguousarray(as_square("M", M))
 
 
 def _clean(a: Any, ndim: int) -> bool:
-    """Fast path: already a C-contiguous finite float64 array of rank ``ndim`` (the checks of
-    ``nscontrol._validation`` run otherwise, and raise their specific errors)."""
-    return (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == ndim
-            and a.flags.c_contiguous and bool(kernels.all_finite(a.reshape(-1))))
+    """Fast path: already a writeable C-contiguous finite float64 array of rank ``ndim``
+    (the checks of ``nscontrol._validation`` run otherwise, and raise their specific errors;
+    a read-only array is copied rather than given its own numba specialisation)."""
+    return (type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == ndim
+            and a.flags.c_contiguous and a.flags.writeable
+            and bool(kernels.all_finite(a.reshape(-1))))
 
 
 def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
     """``(lower, diag, upper)`` when ``M`` is tridiagonal (no entry beyond the first
     off-diagonals), else None."""
     if isinstance(M, np.ndarray):
-        if not kernels.is_tridiagonal(M):
-            return None
-        return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
-                np.ascontiguousarray(np.diagonal(M, 1)))
+        return _bands_of(M) if kernels.is_tridiagonal(M) else None
     n = M.shape[0]
     lower, diag, upper = np.empty(max(n - 1, 0)), np.empty(n), np.empty(max(n - 1, 0))
     if not kernels.csr_tridiagonal_bands(M.indptr, M.indices, M.data, lower, diag, upper):
@@ -280,192 +796,13 @@ def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
     return lower, diag, upper
 
 
-def _method_chain(problem: _Problem, method: str) -> Iterator[str]:
-    """The methods to try in order (``auto``'s fallbacks are decided only when reached)."""
-    if method != "auto":
-        yield method
-        return
-    n = problem.n
-
-    def large_symmetric() -> bool:    # densifies sparse M: only evaluated when reached
-        return n > AUTO_PGS_MIN_SIZE and _symmetric_positive_diagonal(problem)
-
-    if n > 2 and (problem.bands is not None or problem.sparse or _is_banded(problem)):
-        yield "banded"
-        if large_symmetric():
-            yield "pgs_auto"
-    elif large_symmetric():
-        yield "pgs_auto"
-    else:
-        yield "lemke"
-        return
-    if n <= AUTO_LEMKE_MAX_SIZE:
-        yield "lemke"
+def _bands_of(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """``(lower, diag, upper)`` of a dense matrix, as contiguous copies."""
+    return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
+            np.ascontiguousarray(np.diagonal(M, 1)))
 
 
-def _symmetric_positive_diagonal(problem: _Problem) -> bool:
-    M = problem.dense()
-    scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
-    return bool(np.all(np.diagonal(M) > 0.0) and kernels.is_symmetric(M, 1e-12 * scale))
-
-
-def _is_banded(problem: _Problem) -> bool:
-    """Dense ``M`` with a narrow band (half-bandwidth ``<= sqrt(n)``, ``n >= 64``): worth
-    Howard's iteration with sparse LU (O(n b^2) per step) before dense pivoting."""
-    n = problem.n
-    if problem.sparse or n < AUTO_BANDED_MIN_SIZE:
-        return False
-    limit = max(2, int(np.sqrt(n)))
-    return bool(kernels.half_bandwidth(problem.M, limit) <= limit)
-
-
-def _symmetric_psd(problem: _Problem) -> bool:
-    """Symmetric (to 1e-12 relative) and positive semidefinite, tested without eigenvalues:
-    a diagonally dominant matrix with a nonnegative diagonal is PSD (Gershgorin), otherwise
-    an attempted Cholesky factorisation of ``M + tiny I`` decides (``tiny`` = 1e-12 relative,
-    above the round-off of the factorisation). The residual test after the solve keeps a
-    borderline answer honest."""
-    M = problem.dense()
-    n = problem.n
-    scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
-    if not kernels.is_symmetric(M, 1e-12 * scale):
-        return False
-    if kernels.nonnegative_diagonally_dominant(M):
-        return True
-    tiny = max(1e-12, 8.0 * n * np.finfo(np.float64).eps) * scale
-    try:
-        np.linalg.cholesky(M + tiny * np.eye(n))
-    except np.linalg.LinAlgError:
-        return False
-    return True
-
-
-# ----------------------------------------------------------------------------- runners
-
-
-def _run_lemke(problem: _Problem, tol: float, max_iter: int | None, omega: float) -> LCPResult:
-    M = problem.dense()
-    n = problem.n
-    z = np.zeros(n)
-    w = np.empty(n)
-    code, its = kernels.lemke_kernel(M, problem.q, z, w, int(max_iter or 0))
-    return _result(problem, z, code, its, "lemke", tol)
-
-
-def _run_pgs(problem: _Problem, tol: float, max_iter: int | None, omega: float) -> LCPResult:
-    M = problem.dense()
-    n = problem.n
-    z = np.zeros(n) if problem.z0 is None else np.maximum(problem.z0, 0.0)
-    w = np.empty(n)
-    code, its = kernels.pgs_kernel(M, problem.q, z, w, float(tol), int(max_iter or 10_000),
-                                   float(omega))
-    if code in (kernels.SOLVED, kernels.MAX_ITER):
-        polished = _polish(M, problem.q, z, w)
-        if polished is not None:
-            return _result(problem, polished, kernels.SOLVED, its, "pgs", tol)
-    return _result(problem, z, code, its, "pgs", tol)
-
-
-def _polish(M: NDArray[np.float64], q: NDArray[np.float64], z: NDArray[np.float64],
-            w: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """Direct solve on the active set an iterate has identified, if that solves the LCP.
-
-    PGS converges linearly, and its error in ``z`` is up to ``residual / lambda_min(M)``;
-    once the active set ``{z_i > w_i}`` is right, one solve of ``M[a, a] z_a = -q_a`` gives
-    the solution to round-off. Returns None when the polished point is not better.
-    """
-    active = np.flatnonzero(z > w)
-    polished = np.zeros_like(z)
-    if active.size:
-        try:
-            polished[active] = np.linalg.solve(M[np.ix_(active, active)], -q[active])
-        except np.linalg.LinAlgError:
-            return None
-    before = _natural_residual(z, M @ z + q, q)
-    after = _natural_residual(polished, M @ polished + q, q)
-    return polished if np.isfinite(after) and after < before else None
-
-
-def _run_banded(problem: _Problem, tol: float, max_iter: int | None, omega: float) -> LCPResult:
-    n = problem.n
-    limit = int(max_iter or n + 2)
-    z = np.zeros(n) if problem.z0 is None else problem.z0.copy()
-    if problem.bands is not None:
-        lower, diag, upper = problem.bands
-        w = np.empty(n)
-        if problem.z0 is None:    # start from the projected Thomas sweeps
-            code, its = kernels.tridiagonal_lcp_kernel(lower, diag, upper, problem.q, z, w,
-                                                       limit)
-        else:
-            code, its = kernels.tridiagonal_howard(lower, diag, upper, problem.q, z, w, limit)
-    else:
-        code, its, z = _sparse_howard(problem, z, limit)
-    return _result(problem, z, code, its, "banded", tol)
-
-
-def _sparse_howard(problem: _Problem, z: NDArray[np.float64], limit: int
-                   ) -> tuple[int, int, NDArray[np.float64]]:
-    """Howard's policy iteration with sparse LU on the active set (non-tridiagonal M).
-
-    The same iteration as :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard`;
-    each step factors ``M[a, a]`` with SuperLU, so banded ``M`` costs O(n b^2) per step.
-    The next iterate depends only on the active set, so a repeated active set is a cycle:
-    it stops at once with ``"max_iter"`` (instead of running to the limit) and ``auto`` falls
-    back to the next method.
-    """
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import splu
-
-    M = sp.csc_matrix(problem.M)
-    q = problem.q
-    eps = 1e-13 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
-    w = M @ z + q
-    seen: set[bytes] = set()
-    for it in range(limit + 1):
-        if np.all(z >= -eps) and np.all(w >= -eps) and np.all(np.minimum(z, w) <= eps):
-            return kernels.SOLVED, it, z
-        if it == limit:
-            break
-        active = w <= z
-        key = np.packbits(active).tobytes()
-        if key in seen:                      # Howard's iteration is cycling
-            return kernels.MAX_ITER, it, z
-        seen.add(key)
-        z = np.zeros_like(z)
-        idx = np.flatnonzero(active)
-        if idx.size:
-            try:
-                z_a = splu(M[idx][:, idx].tocsc()).solve(-q[idx])
-            except RuntimeError:  # singular principal block
-                return kernels.NUMERICAL_FAILURE, it + 1, z
-            z[idx] = z_a
-        w = M @ z + q
-        if not np.all(np.isfinite(z)):
-            return kernels.NUMERICAL_FAILURE, it + 1, z
-    return kernels.MAX_ITER, limit, z
-
-
-def _run_pgs_auto(problem: _Problem, tol: float, max_iter: int | None,
-                  omega: float) -> LCPResult:
-    """``auto``'s PGS: a probe of :data:`AUTO_PGS_PROBE_SWEEPS` sweeps first (a
-    well-conditioned problem is solved there, and no definiteness test is paid); only if it
-    has not converged is ``M`` tested for positive semidefiniteness (:func:`_symmetric_psd`,
-    a Cholesky factorisation), and PGS continues from the probe's iterate for PSD ``M`` only
-    (where it converges). Otherwise the probe's failure hands over to Lemke."""
-    total = int(max_iter or 10_000)
-    probe = min(AUTO_PGS_PROBE_SWEEPS, total)
-    first = _run_pgs(problem, tol, probe, omega)
-    if first.success or probe == total or not _symmetric_psd(problem):
-        return first
-    rest = _run_pgs(replace(problem, z0=np.array(first.z)), tol, total - probe, omega)
-    return replace(rest, iterations=probe + rest.iterations)
-
-
-_RUNNERS = {"lemke": _run_lemke, "pgs": _run_pgs, "banded": _run_banded,
-            "pgs_auto": _run_pgs_auto}
-
-
-# ----------------------------------------------------------------------------- verification
+# ----------------------------------------------------------------------------- residual
 
 
 def _natural_residual(z: NDArray[np.float64], w: NDArray[np.float64],
@@ -473,35 +810,3 @@ def _natural_residual(z: NDArray[np.float64], w: NDArray[np.float64],
     if z.size == 0:
         return 0.0
     return float(kernels.natural_residual(z, w, q))
-
-
-def _verify(problem: _Problem, z: NDArray[np.float64]) -> tuple[NDArray[np.float64], float,
-                                                                 float]:
-    """``w = M z + q`` recomputed, the residual and the round-off floor (see solve_lcp)."""
-    w = np.empty_like(z)
-    if problem.n == 0:
-        return w, 0.0, 0.0
-    if problem.bands is not None:
-        lower, diag, upper = problem.bands
-        res, floor = kernels.verify_tridiagonal(lower, diag, upper, problem.q, z, w)
-    elif isinstance(problem.M, np.ndarray):
-        res, floor = kernels.verify_dense(problem.M, problem.q, z, w)
-    else:
-        w = np.asarray(problem.M @ z + problem.q, dtype=np.float64)
-        row_sum_max = float(np.asarray(abs(problem.M).sum(axis=1)).max())
-        res, floor = kernels._residual_and_floor(z, w, problem.q, row_sum_max)
-    return w, float(res), float(floor)
-
-
-def _result(problem: _Problem, z: NDArray[np.float64], code: int, iterations: int,
-            method: str, tol: float) -> LCPResult:
-    """Recompute ``w`` from ``z`` and accept "solved" only if the residual passes."""
-    z = np.array(z, dtype=np.float64)
-    w, res, floor = _verify(problem, z)
-    status = STATUSES[int(code)]
-    if status == "solved" and not (res <= max(tol, floor)):
-        status = "numerical_failure"
-    z.setflags(write=False)
-    w.setflags(write=False)
-    return LCPResult(z=z, w=w, status=status, iterations=int(iterations), residual=res,
-                     method=method)

@@ -41,7 +41,7 @@ from typing import Any, Literal
 import numpy as np
 import scipy.linalg
 
-from .._validation import FloatArray, as_square, check_positive
+from .._validation import FloatArray, as_finite_scalar, as_real_scalar, as_square, check_positive
 from ..errors import InaccurateCertificateWarning, InfeasibleDesignError, ModelError
 
 __all__ = ["LMIProblem", "LMIResult", "Scaling", "BisectionResult", "bisect_max",
@@ -464,9 +464,10 @@ def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
     D5.3 chapter 11, section 3.5; Boyd et al. 1994, section 2.2.
     """
     A = as_square("A", A)
+    decay = as_finite_scalar("decay", decay)
     n = A.shape[0]
     sc = Scaling.for_matrices([A]) if scale else Scaling(np.ones(n), 1.0)
-    As, alpha = sc.matrix(A), float(decay) / sc.omega
+    As, alpha = sc.matrix(A), decay / sc.omega
     prob = LMIProblem(f"Lyapunov certificate (decay {decay:.6g})")
     P = prob.symmetric("P", n)
     prob.positive("P >= I", P, margin=1.0)
@@ -525,7 +526,7 @@ def bisect_max(feasible: Callable[[float], Any], lo: float, hi: float, *,
     InfeasibleDesignError
         Already infeasible at ``lo``.
     """
-    lo, hi = float(lo), float(hi)
+    lo, hi = as_real_scalar("lo", lo), as_real_scalar("hi", hi)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
         raise ModelError(f"lo, hi: expected finite lo < hi, got ({lo}, {hi})")
     check_positive("tol", tol)

@@ -71,7 +71,14 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.linalg
 
-from .._validation import FloatArray, as_matrix, as_square, as_vector, check_positive
+from .._validation import (
+    FloatArray,
+    as_finite_scalar,
+    as_matrix,
+    as_square,
+    as_vector,
+    check_positive,
+)
 from ..errors import DimensionError, InadmissibleStateError, ModelError
 
 __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "GuardEvent",
@@ -170,9 +177,7 @@ class Exosystem:
         m = max(amp.shape[0], off.shape[0])
         amp, off = np.broadcast_to(amp, (m,)), np.broadcast_to(off, (m,))
         w = check_positive("omega", omega, allow_zero=True)
-        ph = float(phase)
-        if not np.isfinite(ph):
-            raise ModelError(f"phase: expected a finite number, got {phase!r}")
+        ph = as_finite_scalar("phase", phase)
         S = np.array([[0.0, w], [-w, 0.0]])
         Cu = np.column_stack([amp, np.zeros(m)])
         w0 = np.array([np.sin(ph), np.cos(ph)])

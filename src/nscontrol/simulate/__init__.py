@@ -36,9 +36,10 @@ def simulate(system: Any, x0: Any, t_span: tuple[float, float], *,
         Initial state (admissible: no penetration, no approaching velocity at contact).
     t_span : (float, float)
         Start and end times, ``t0 < tf``.
-    method : {"event_driven", "moreau_jean", "implicit_euler", "switching"} or Integrator subclass, optional
-        The integrator, by name or class (your own :class:`Integrator` subclass too).
-        Default: the system's ``default_method``.
+    method : str or Integrator subclass, optional
+        The integrator: ``"event_driven"``, ``"moreau_jean"``, ``"implicit_euler"``,
+        ``"switching"``, or a class (your own :class:`Integrator` subclass too). Default: the
+        system's ``default_method``.
     **options
         The method's own options (``h``, ``theta``, ``rtol``, ``u`` ...: see
         :mod:`nscontrol.simulate.methods`) and the common ones every method takes:

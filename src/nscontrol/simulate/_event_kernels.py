@@ -95,6 +95,84 @@ def zeno_push(hist, count, first, slot, t):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _grid_count(t, t_next, t_grid0, dt, k):  # pragma: no cover - compiled
+    """Number of grid points ``t_grid0 + j dt`` (``j >= k``) strictly inside ``(t, t_next)``."""
+    count = 0
+    while True:
+        tg = t_grid0 + dt * k
+        if tg >= t_next:
+            return count
+        if tg > t:
+            count += 1
+        k += 1
+
+
+@njit(cache=True, inline="always")  # a named part of the loop, at no call cost
+def _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next, t_grid0, dt, k, s_t, s_x,
+                 n_s, xn):  # pragma: no cover - compiled
+    """Write the exact states at the grid points ``t_grid0 + j dt`` (``j >= k``) strictly
+    inside ``(t, t_next)`` from ``n_s`` on. Returns ``(n_s, full, t_full)``: ``full`` when the
+    buffer ran out, after the grid point ``t_full`` (its state then copied into ``x``)."""
+    cap_s = s_t.shape[0]
+    while True:
+        tg = t_grid0 + dt * k
+        if tg >= t_next:
+            return n_s, False, 0.0
+        if tg > t:
+            full = n_s + 3 > cap_s
+            propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
+            s_t[n_s] = tg
+            s_x[n_s] = xn
+            n_s += 1
+            if full:
+                x[:] = xn
+                return n_s, True, tg
+        k += 1
+
+
+@njit(cache=True, inline="always")
+def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, geometric,
+                 ratio_tol, horizon, rel, min_interval, x, t, hit, graze, xn, y, a
+                 ):  # pragma: no cover - compiled
+    """The guard of an event at ``(t, x)`` that the loop settles itself — the only one hit,
+    crossing, with a linear jump, no other guard closed, no accumulation, and leaving its
+    surface after the jump ``xn = J_i x`` — or ``-1`` (hand the event back)."""
+    n = x.shape[0]
+    p = g0.shape[0]
+    i = -1
+    n_hit = 0
+    for j in range(p):
+        if hit[j]:
+            n_hit += 1
+            i = j
+    if n_hit != 1 or graze[i] or not jump_ok[i]:
+        return -1
+    for j in range(n):
+        y[j] = x[j] / d[j]
+    ynorm = np.sqrt(np.sum(y * y))
+    for j in range(p):
+        if j != i:
+            _coefficients(W, g0, j, y, a)
+            if a[0] <= _CLOSED_TOL * (row_norm[j] * ynorm + abs(g0[j])):
+                return -1  # a contact closed elsewhere: the multi-contact law decides
+    status, _ = zeno_status(hist, count, first, zeno_slot[i], t, geometric, ratio_tol,
+                            horizon, rel, min_interval)
+    if status != ZENO_NONE:
+        return -1
+    for r in range(n):
+        s = 0.0
+        for c in range(n):
+            s += J[i, r, c] * x[c]
+        xn[r] = s
+    for j in range(n):
+        y[j] = xn[j] / d[j]
+    _coefficients(W, g0, i, y, a)
+    if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
+        return -1  # it would not leave its surface (rest, persistent contact)
+    return i
+
+
+@njit(cache=True)
 def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
                      kind, lam, V, Vinv, T, d, h,
                      J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
@@ -107,7 +185,10 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
     returned ``t`` (pre-event state for ``HANDOFF``, with ``hit``/``graze`` describing the
     event). Samples written: grid points ``t_grid0 + k dt`` strictly inside each flight, the
     pre-event state when ``sample_pre``, the post-jump state of every settled event and the
-    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``.
+    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
+    the start of the flight whose samples did not fit (the run is then the same as with a
+    larger buffer), or, when even an empty buffer is too small for one flight, the last grid
+    point written.
     """
     n = x.shape[0]
     p = g0.shape[0]
@@ -133,24 +214,14 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
         t_next = tf if code != EVENT else t + tau
         # grid samples strictly inside (t, t_next)
         k = int(np.floor((t - t_grid0) / dt)) + 1
-        while True:
-            tg = t_grid0 + dt * k
-            if tg >= t_next:
-                break
-            if tg > t:
-                if n_s + 3 > cap_s:
-                    # resume from this grid point: exact state there
-                    propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
-                    s_t[n_s] = tg
-                    s_x[n_s] = xn
-                    n_s += 1
-                    x[:] = xn
-                    return FULL, tg, n_s, n_e
-                propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
-                s_t[n_s] = tg
-                s_x[n_s] = xn
-                n_s += 1
-            k += 1
+        if n_s and n_s + _grid_count(t, t_next, t_grid0, dt, k) + 3 > cap_s:
+            # this flight's samples do not fit: hand the buffer back first and redo the flight
+            # from the same state, so that emptying the buffer changes nothing
+            return FULL, t, n_s, n_e
+        n_s, full, t_full = _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next,
+                                         t_grid0, dt, k, s_t, s_x, n_s, xn)
+        if full:  # resume from the last grid point written: its exact state is in x
+            return FULL, t_full, n_s, n_e
         if t_next > t:
             propagate(kind, lam, V, Vinv, phi, T, d, h, x, t_next - t, xn)
             x[:] = xn
@@ -164,43 +235,14 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
             s_t[n_s] = t
             s_x[n_s] = x
             n_s += 1
-        # -- is it a simple event? -------------------------------------------------------
-        i = -1
-        n_hit = 0
-        for j in range(p):
-            if hit[j]:
-                n_hit += 1
-                i = j
-        if n_hit != 1 or graze[i] or not jump_ok[i] or budget <= n_e:
+        if budget <= n_e:
             return HANDOFF, t, n_s, n_e
-        for j in range(n):
-            y[j] = x[j] / d[j]
-        ynorm = np.sqrt(np.sum(y * y))
-        closed_elsewhere = False
-        for j in range(p):
-            if j != i:
-                _coefficients(W, g0, j, y, a)
-                if a[0] <= _CLOSED_TOL * (row_norm[j] * ynorm + abs(g0[j])):
-                    closed_elsewhere = True
-        if closed_elsewhere:
+        i = _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first,
+                         geometric, ratio_tol, horizon, rel, min_interval, x, t, hit, graze,
+                         xn, y, a)
+        if i < 0:
             return HANDOFF, t, n_s, n_e
-        slot = zeno_slot[i]
-        status, _ = zeno_status(hist, count, first, slot, t, geometric, ratio_tol, horizon,
-                                rel, min_interval)
-        if status != ZENO_NONE:
-            return HANDOFF, t, n_s, n_e
-        # the jump, and does the guard leave its surface afterwards?
-        for r in range(n):
-            s = 0.0
-            for c in range(n):
-                s += J[i, r, c] * x[c]
-            xn[r] = s
-        for j in range(n):
-            y[j] = xn[j] / d[j]
-        _coefficients(W, g0, i, y, a)
-        if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
-            return HANDOFF, t, n_s, n_e
-        zeno_push(hist, count, first, slot, t)
+        zeno_push(hist, count, first, zeno_slot[i], t)
         e_t[n_e] = t
         e_i[n_e] = i
         e_pre[n_e] = x
@@ -211,3 +253,65 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
         s_x[n_s] = x
         n_s += 1
     return DONE, t, n_s, n_e
+
+
+@njit(cache=True)
+def contact_state(G, g0, z, n, closed, still):  # pragma: no cover - compiled
+    """Per contact ``j`` of the gaps ``G q + g0`` at the state ``z = [q; v; ...]``: whether it
+    is closed (``|g_j| <= 1e-12 (1 + max|q|)``) and whether its normal velocity is zero
+    (``|G_j v| <= 1e-12 (1 + max|v|)``, in ``still[j]``). Returns the number ``k`` of closed
+    contacts, their indices ascending in ``closed[:k]``. One call instead of a dozen small
+    numpy operations per event handled in Python."""
+    q_max = 0.0
+    v_max = 0.0
+    for c in range(n):
+        q_max = max(q_max, abs(z[c]))
+        v_max = max(v_max, abs(z[n + c]))
+    k = 0
+    for j in range(G.shape[0]):
+        g = 0.0
+        u = 0.0
+        for c in range(n):
+            g += G[j, c] * z[c]
+            u += G[j, c] * z[n + c]
+        if abs(g + g0[j]) <= 1e-12 * (1.0 + q_max):
+            closed[k] = j
+            k += 1
+        still[j] = abs(u) <= 1e-12 * (1.0 + v_max)
+    return k
+
+
+@njit(cache=True)
+def open_and_finite(G, g0, x, n):  # pragma: no cover - compiled
+    """Whether ``x = [q; v]`` is finite with every gap ``G q + g0`` open beyond
+    ``1e-12 max(1, max|q|)``: such a state is admissible whatever its velocity (the check of
+    ``LagrangianSystem.check_state`` accepts it), so the full check can be skipped."""
+    scale = 1.0
+    for k in range(x.shape[0]):
+        if not np.isfinite(x[k]):
+            return False
+    for k in range(n):
+        scale = max(scale, abs(x[k]))
+    for j in range(G.shape[0]):
+        g = g0[j]
+        for k in range(n):
+            g += G[j, k] * x[k]
+        if not g > 1e-12 * scale:
+            return False
+    return True
+
+
+@njit(cache=True)
+def bounce_impulses(G, W_diag, ids, idx, pre, post, n, js, P):  # pragma: no cover
+    """The contacts and impulses of the bounces settled by :func:`run_linear_jumps`: event
+    ``r`` of guard ``idx[r]`` is contact ``js[r] = ids[idx[r]]`` with impulse
+    ``P[r, j] = G_j (v+ - v-) / W_jj`` (``v`` = entries ``n..2n`` of the state; the other
+    entries of the row zero)."""
+    for r in range(idx.shape[0]):
+        j = ids[idx[r]]
+        js[r] = j
+        s = 0.0
+        for c in range(n):
+            s += G[j, c] * (post[r, n + c] - pre[r, n + c])
+        P[r, :] = 0.0
+        P[r, j] = s / W_diag[j]

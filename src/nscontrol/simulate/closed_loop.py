@@ -413,7 +413,6 @@ def _stack_lure(loop: ClosedLoop) -> Any:
     B = _input_matrix(loop, p.B, n) if loop.controller is not None else None
     Cy = _output_matrix(loop, p.C, n)
     net = _interconnect(loop, p.A, B, Cy)
-    N = net.A.shape[0]
     r, c = net.r, net.c
     mw = p.G.shape[1]
     pad = np.zeros

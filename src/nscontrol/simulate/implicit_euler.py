@@ -50,11 +50,11 @@ signals : iterable of str, optional
     Subset of ``("z", "w", "y")`` to record (other names raise ``ModelError``).
 progress : bool, optional
     Progress bar on stderr (default: shown after 2 s).
-on_failure : {"raise", "return"}
-    On a failed step raise :class:`~nscontrol.errors.SolverError` (with the partial
-    trajectory) or return it with ``status = -1``. A step fails when its one-step problem has
-    no verified solution: Lemke's status, or a natural residual above ``1e-10`` (LCP), or a
-    graph residual above ``1e-9 (1 + |a| + |w|)`` (Python path).
+
+A failed step raises :class:`~nscontrol.errors.SolverError` with the partial trajectory
+(``simulate(..., on_failure="return")`` returns it with ``status = -1``). A step fails when
+its one-step problem has no verified solution: Lemke's status, or a natural residual above
+``1e-10`` (LCP), or a graph residual above ``1e-9 (1 + |a| + |w|)`` (Python path).
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ from .trajectory import Recorder, Trajectory
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
 
 _CHUNK = 1 << 16
-_OPTIONS = {"h", "theta", "record_every", "signals", "progress", "on_failure"}
+_OPTIONS = {"h", "theta", "record_every", "signals", "progress"}
 _SIGNALS = ("z", "w", "y")
 #: Couplings of ``D_h`` below this fraction of ``max|D_h|`` are structural zeros.
 _STRUCTURAL_ZERO = 1e-14
@@ -533,7 +533,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
         Start and end times.
     **options
         ``h`` (required), ``theta`` (default 1), ``record_every``, ``signals``, ``progress``,
-        ``on_failure`` -- see the module docstring.
+        -- see the module docstring.
 
     Returns
     -------
@@ -578,9 +578,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
                          "method='implicit_euler', h=1e-3)")
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
-    on_failure = options.get("on_failure", "raise")
-    if on_failure not in ("raise", "return"):
-        raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
     n = system.n_states
     rec = Recorder(n, every=options.get("record_every", 1), signals=options.get("signals"),
                    offered=_SIGNALS)
@@ -616,8 +613,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
                 traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
                                   stats=stats(done + X.shape[0]),
                                   state_names=system.state_names)
-                if on_failure == "return":
-                    return traj
                 raise SolverError(str(exc), status=exc.status, trajectory=traj) from None
             _record_block(rec, system, times[1:], X, Z, W, last=k1 == n_steps)
             x = X[-1]

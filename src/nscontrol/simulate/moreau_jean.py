@@ -98,7 +98,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
               controller: Callable[[float, FloatArray, FloatArray], Any] | None = None,
               listeners: Sequence[Callable[..., None]] = (), record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None,
-              activation: float | None = None, on_failure: str = "raise",
+              activation: float | None = None,
               forces: str = "implicit", mass_at: str = "start") -> Trajectory:
     """Moreau–Jean time-stepping from ``x0 = [q0; v0]`` over ``t_span``.
 
@@ -138,9 +138,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
         Threshold (``>= 0``) of the active set test ``g + γ h u <= activation``. Default
         ``1e-12 (1 + max|q0|)``: contacts closed up to round-off stay active (a threshold of 0
         would drop a resting contact whose gap rounds to ``+1e-19``).
-    on_failure : {"raise", "return"}
-        What to do when an LCP fails or ``M̂`` is singular: raise :class:`SolverError` (with
-        ``err.trajectory``) or return the partial trajectory with ``status = -1``.
     forces : {"implicit", "explicit"}
         Smooth forces of the Python path (``M(q)``, a ``force`` callable or nonlinear gaps):
         ``"implicit"`` linearises them about the step's start (the θ-method of the module
@@ -223,16 +220,17 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                          "captured to O(h), penetration <= h |u-|)")
     if isinstance(system, ImpactingBodies):
         from ..errors import NscontrolError
-        from .event_driven import reorder_listeners, reorder_states
+        from .event_driven import partial_in_caller_order, reorder_listeners, reorder_states
 
         perm = system.lagrangian_permutation()
         back = np.argsort(perm)
+        partial_in_caller_order(back, system.state_names)
         try:
             traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
                              theta=theta, gamma=gamma, u=u, controller=controller,
                              listeners=reorder_listeners(listeners, back),
                              record_every=record_every, signals=signals, progress=progress,
-                             activation=activation, on_failure=on_failure, forces=forces,
+                             activation=activation, forces=forces,
                              mass_at=mass_at)
         except NscontrolError as err:  # the partial run in the chapter's state order too
             if isinstance(err.trajectory, Trajectory):
@@ -245,8 +243,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     h = check_positive("h", h)
     theta = check_in_interval("theta", theta, 0.5, 1.0)
     gamma = check_in_interval("gamma", gamma, 0.0, 1.0)
-    if on_failure not in ("raise", "return"):
-        raise ModelError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
     if forces not in ("implicit", "explicit"):
         raise ModelError(f"forces: expected 'implicit' or 'explicit', got {forces!r}")
     if mass_at not in ("start", "predicted"):
@@ -346,7 +342,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
                       state_names=system.state_names)
     if "gap" in traj.signals and traj.signals["gap"].size:
         traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
-    if status < 0 and on_failure == "raise":
+    if status < 0:   # the driver returns the partial run under on_failure="return"
         raise SolverError(str(message), status=_LCP_STATUS.get(code, "singular iteration matrix"),
                           trajectory=traj)
     return traj

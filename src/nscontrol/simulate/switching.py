@@ -38,10 +38,9 @@ rtol, atol : float
 max_events : int
     Zeno guard: more events than this raises :class:`~nscontrol.errors.ZenoError` (1e6).
 progress : bool, optional
-on_failure : {"raise", "return"}
-    On a failure during the run (``ZenoError``, ``SolverError``: DOP853 failed) raise with the
-    partial trajectory in ``err.trajectory``, or return it with ``status = -1``. Errors in the
-    model or its initial state are always raised.
+A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed) raises with the
+partial trajectory in ``err.trajectory`` (``simulate(..., on_failure="return")`` returns it
+with ``status = -1``); errors in the model or its initial state are always raised.
 """
 
 from __future__ import annotations
@@ -52,13 +51,13 @@ import numpy as np
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_float_array, as_vector, check_integer, check_positive
-from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolError, ZenoError
+from ..errors import ModelError, NscontrolError, ZenoError
 from .trajectory import Recorder, Trajectory
 
 __all__ = ["integrate", "saltation_matrix"]
 
 _OPTIONS = {"u", "t_eval", "n_samples", "sensitivity", "rtol", "atol", "max_events",
-            "progress", "on_failure"}
+            "progress"}
 
 
 def saltation_matrix(f_minus: Any, f_plus: Any, normal: Any) -> FloatArray:
@@ -136,10 +135,6 @@ class _Run:
         self.atol = check_positive("atol", options.get("atol", 1e-13))
         self.max_events = check_integer("max_events", options.get("max_events", 1_000_000),
                                         minimum=0)
-        self.on_failure = options.get("on_failure", "raise")
-        if self.on_failure not in ("raise", "return"):
-            raise ModelError(f"on_failure: expected 'raise' or 'return', got "
-                             f"{self.on_failure!r}")
         self.status, self.message = 0, None
         self.rec = Recorder(self.n, offered=())   # states and events only, no signals
         self.Phi = np.eye(self.n)
@@ -254,10 +249,6 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     try:
         extra = runner(system, x0, run, options)
     except NscontrolError as exc:
-        traj = run.finish(status=-1, message=str(exc))
-        if run.on_failure == "return" and not isinstance(exc, ModelError | DimensionError |
-                                                         InadmissibleStateError):
-            return traj
-        exc.trajectory = traj
+        exc.trajectory = run.finish(status=-1, message=str(exc))
         raise
     return run.finish(status=run.status, message=run.message, extra=extra)

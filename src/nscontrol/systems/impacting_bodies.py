@@ -19,6 +19,7 @@ import numpy as np
 
 from .._validation import (
     FloatArray,
+    as_finite_scalar,
     as_square,
     as_vector,
     check_in_interval,
@@ -280,7 +281,7 @@ def stiffness_from_springs(n: int, springs: Mapping[tuple[int, int], float],
     for (h, j), k in springs.items():
         if not (0 <= h < n and 0 <= j < n):
             raise DimensionError(f"{name}: spring ({h}, {j}) refers to a mass outside 0..{n - 1}")
-        k = float(k)
+        k = as_finite_scalar(f"{name}[({h}, {j})]", k)
         if h == j:
             K[h, h] += k
         else:

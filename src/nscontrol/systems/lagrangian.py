@@ -23,6 +23,7 @@ import numpy as np
 from .._validation import (
     FloatArray,
     as_matrix,
+    as_real_scalar,
     as_square,
     as_vector,
     check_in_interval,
@@ -154,7 +155,7 @@ class LagrangianSystem:
         set_(self, "constant_force", f0)
         m = self._check_constraints(n)
         set_(self, "n_contacts", m)
-        e = np.broadcast_to(np.asarray(self.restitution, float), (m,)).copy() \
+        e = np.full(m, as_real_scalar("restitution", self.restitution)) \
             if np.ndim(self.restitution) == 0 else as_vector("restitution", self.restitution, m)
         for j, ej in enumerate(e):
             check_in_interval(f"restitution[{j}]", ej, 0.0, 1.0)

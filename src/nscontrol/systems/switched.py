@@ -12,13 +12,22 @@ Both are integrated by ``simulate(..., method="switching")``.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
-from .._validation import FloatArray, as_matrix, as_square, as_vector, check_integer, check_positive
+from .._validation import (
+    FloatArray,
+    as_float_array,
+    as_matrix,
+    as_square,
+    as_vector,
+    check_integer,
+    check_positive,
+)
 from ..errors import DimensionError, ModelError
 
 __all__ = ["FilippovSystem", "SwitchedAffineSystem", "PWMController"]
@@ -32,6 +41,21 @@ def _fd_gradient(h: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
         e[k] = d
         g[k] = (h(x + e) - h(x - e)) / (2.0 * d)
     return g
+
+
+def _probe_state(n: int) -> FloatArray:
+    """A fixed generic state (distinct, non-zero, irrational-looking components)."""
+    return 0.1 + 0.37 * np.sqrt(np.arange(1.0, n + 1.0))
+
+
+def _require_finite(name: str, value: Any, where: str) -> None:
+    """Refuse a user callable's value that is not real, numeric and finite."""
+    arr = as_float_array(f"{name} (its value {where})", value, finite=False)
+    if not np.all(np.isfinite(arr)):
+        raise ModelError(f"{name}: returned non-finite values "
+                         f"{np.array2string(np.atleast_1d(arr), precision=4)} {where}; it must "
+                         "be finite wherever it is evaluated (extend it smoothly across the "
+                         "surfaces, guard divisions)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,8 +131,8 @@ class FilippovSystem:
         if self.gradients is not None and len(self.gradients) != len(self.surfaces):
             raise DimensionError(f"gradients: expected {len(self.surfaces)} gradients (one per "
                                  f"surface), got {len(self.gradients)}")
-        probe = np.asarray(self.field(0.0, np.zeros(self.n_states),
-                                      (1,) * len(self.surfaces)), float)
+        probe = as_float_array("field", self.field(0.0, _probe_state(self.n_states),
+                                                   (1,) * len(self.surfaces)), finite=False)
         if probe.shape != (self.n_states,):
             raise DimensionError(f"field: expected field(t, x, signs) of shape "
                                  f"({self.n_states},), got {probe.shape}")
@@ -116,12 +140,35 @@ class FilippovSystem:
             if not all(callable(g) for g in self.gradients):
                 raise ModelError("gradients: expected callables grad_j(x) -> (n_states,) array")
             for j in range(len(self.gradients)):
-                self.gradient(j, np.zeros(self.n_states))   # shape check
+                self.gradient(j, _probe_state(self.n_states))   # shape check
         if self.jacobian is not None and not callable(self.jacobian):
             raise ModelError("jacobian: expected a callable jacobian(t, x, signs) -> (n, n)")
         if self.state_names and len(self.state_names) != self.n_states:
             raise DimensionError(f"state_names: expected {self.n_states} names, got "
                                  f"{len(self.state_names)}")
+        self._probe_finite()
+
+    def _probe_finite(self) -> None:
+        """Evaluate every user callable once at a generic state and refuse non-finite (or
+        complex, or text) values: a NaN field would otherwise pass construction and poison
+        the run. A generic point rather than the origin, where a legitimate field (such as
+        ``x/|x|``) may be singular; the field is probed on every side (``2^J`` sign
+        patterns, the two extreme ones beyond 10 surfaces)."""
+        x = _probe_state(self.n_states)
+        where = f"at t = 0, x = {np.array2string(x, precision=4)}"
+        J = len(self.surfaces)
+        for j, h in enumerate(self.surfaces):
+            _require_finite(f"surfaces[{j}]", h(x), where)
+        sides = (itertools.product((-1, 1), repeat=J) if J <= 10
+                 else [(-1,) * J, (1,) * J])
+        for signs in sides:
+            _require_finite("field", self.field(0.0, x, tuple(signs)),
+                            f"{where}, signs = {tuple(signs)}")
+            if self.jacobian is not None:
+                _require_finite("jacobian", self.jacobian(0.0, x, tuple(signs)),
+                                f"{where}, signs = {tuple(signs)}")
+        for j, grad in enumerate(self.gradients or ()):
+            _require_finite(f"gradients[{j}]", grad(x), where)
 
     @property
     def n_surfaces(self) -> int:

@@ -1,0 +1,224 @@
+"""Event-driven integration: flow until the next event, apply the jump, repeat.
+
+Integrates
+
+* :class:`~nscontrol.simulate.hybrid.LinearHybridSystem` — exact: ``e^{At}`` between events,
+  events located on the exact solution by :func:`nscontrol.numerics.lti.first_event`;
+* :class:`~nscontrol.systems.LagrangianSystem` that is linear between events (constant ``M``,
+  linear forces, affine gaps), optionally driven by an exosystem input — exact as well: the
+  state is augmented by ``[1; w]`` so that constant forces (gravity) and the input are part
+  of one linear flow. Contacts in *persistent contact* change the flow (the constrained
+  acceleration is again linear in the state) and are left when their contact force, also
+  linear in the state, reaches zero;
+* :class:`~nscontrol.systems.ImpactingBodies` through its Lagrangian form (state order
+  ``[x_a; x_b]`` kept);
+* any other :class:`~nscontrol.systems.LagrangianSystem` (``M(q)``, nonlinear forces or gaps)
+  with scipy's DOP853 and event location (no persistent contact: an accumulation of impacts
+  there is reported as Zeno).
+
+Impacts go through Newton's multi-contact law (:class:`nscontrol.laws.NewtonImpactLaw`, one
+LCP on the Delassus matrix of the closed contacts), so simultaneous impacts are resolved
+together. After an impact the contacts that stay closed with zero normal velocity enter
+persistent contact when the contact-force LCP gives them a positive force.
+
+Accumulations (Zeno): when the impact intervals of a contact shrink geometrically (three
+successive ratios equal to ``zeno_ratio_tol``) and the remaining time ``Δ r / (1 - r)`` is
+below ``zeno_horizon``, the accumulation point ``t∞ = t_k + Δ_k r / (1 - r)`` is computed, the
+contact is closed plastically at ``t_k`` and the run continues in persistent contact; the
+event ``"accumulation"`` is recorded at ``t∞`` (our choice: the samples in ``[t_k, t∞]``
+follow the constrained flow, an error of the order of the remaining bounce heights). An
+accumulation that cannot be resolved that way (no geometric pattern, a contact force that
+would be negative, more than ``max_events`` events) raises :class:`ZenoError` with the
+trajectory computed so far (``simulate(..., on_failure="warn")`` warns and returns it).
+
+Speed: the flow between events, the event search and every event of a single guard with a
+linear jump (a free contact bouncing with nothing else closed; a :class:`LinearHybridSystem`
+whose ``jump`` is given as matrices, such as the chapter-2 plant with its observer) run in one
+compiled loop (:mod:`nscontrol.simulate._event_kernels`); any other event — simultaneous,
+grazing, a contact coming to rest, an accumulation — is handed back to the Python code below,
+unchanged. Listeners are called for the compiled events too, in time order, once the loop
+returns (they observe, they cannot alter the run).
+
+Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"``,
+``"contact_end"`` (mechanics), ``"jump"`` and ``"grazing"`` (linear hybrid systems).
+
+The package: :func:`integrate` here chooses the runner — :mod:`.hybrid_run`,
+:mod:`.linear_mechanics` or :mod:`.nonlinear_mechanics` — which share the options
+(``_options``), the recording (``_recording``: one sample buffer in front of the
+:class:`~nscontrol.simulate.trajectory.Recorder`), the Zeno history (``_zeno``) and the
+compiled flights with the arrays a run writes into (``_flight``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ...errors import ModelError, NscontrolError
+from ...systems.impacting_bodies import ImpactingBodies
+from ...systems.lagrangian import LagrangianSystem
+from ..hybrid import LinearHybridSystem
+from ..trajectory import Trajectory
+from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
+from ._recording import _guarded, partial_in_caller_order, reorder_listeners, reorder_states
+from .hybrid_run import HybridRun
+from .linear_mechanics import LinearMechanicsRun, checked_state
+from .nonlinear_mechanics import NonlinearMechanicsRun
+
+__all__ = ["integrate", "reorder_listeners", "reorder_states", "partial_in_caller_order"]
+
+
+def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = None,
+              controller: Any = None, dt: float | None = None, max_events: int = 100_000,
+              min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
+              zeno_horizon: float | None = None, zeno_rel: float = 1e-3,
+              listeners: Sequence[Callable[..., None]] = (),
+              rtol: float = 1e-10, atol: float = 1e-12, record_every: int = 1,
+              signals: Sequence[str] | None = None, progress: bool | None = None
+              ) -> Trajectory:
+    """Event-driven simulation from ``x0`` over ``t_span`` (see the module docstring).
+
+    Parameters
+    ----------
+    system : LinearHybridSystem, LagrangianSystem or ImpactingBodies
+    x0 : array_like
+        Admissible initial state (``[q; v]``, ``[x_a; x_b]`` or the hybrid state).
+    t_span : (float, float)
+    u : Exosystem, optional
+        Input of a Lagrangian system or of :class:`ImpactingBodies` (through its actuation),
+        ``u(t) = Cu w(t)`` with ``w(0) = w0`` (absolute time, as in every integrator); its
+        state is propagated exactly with the plant.
+    controller : (m, 2 n) array_like or callable ``(t, q, v) -> u``, optional
+        State feedback added to ``u`` through the actuation. A matrix ``K`` means
+        ``u = -K [q; v]``: linear, so the closed loop stays exact. A callable makes the flow
+        nonlinear: the run uses DOP853 with event location (no persistent contact there).
+    dt : float, optional
+        Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
+        event adds its pre- and post-event samples.
+    max_events : int
+        More events than this is reported as Zeno.
+    min_interval : float
+        Two events of the same guard closer than this (without a geometric pattern) is Zeno.
+    zeno_ratio_tol : float
+        Tolerance on successive interval ratios to call the shrinking geometric.
+    zeno_horizon : float, optional
+        Accumulate once the predicted remaining time is below this many seconds. Default:
+        relative, see ``zeno_rel``.
+    zeno_rel : float
+        Without ``zeno_horizon``, accumulate once the predicted remaining time is below
+        ``zeno_rel`` times the duration of the bouncing sequence (from its first impact to
+        the accumulation point): the same bounces are resolved whatever ``t_span``.
+    listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
+        Called after every jump / impact with the event's states, the indices of the guards
+        or contacts involved and the contact impulses (``None`` for hybrid jumps). The same
+        signature as :mod:`~nscontrol.simulate.moreau_jean`'s.
+    rtol, atol : float
+        Tolerances of DOP853 (nonlinear systems only).
+    record_every : int
+        Keep every ``record_every``-th sample (events, and the final state, are always kept).
+    signals : sequence of str, optional
+        Signals to record (default all: the system's outputs for a hybrid system, ``gap`` and
+        ``energy`` for mechanics); an empty sequence records states only.
+    progress : bool, optional
+        Progress bar (default: shown after 2 s).
+
+    Returns
+    -------
+    Trajectory
+        ``signals``: the system's outputs (hybrid), ``gap`` and ``energy`` (mechanics);
+        ``stats["impulses"]`` (mechanics): one row of contact impulses per ``"impact"``
+        event, in the order of ``traj.events_of("impact")``.
+
+    Raises
+    ------
+    ModelError
+        Unsupported system or option.
+    InadmissibleStateError
+        ``x0`` violates a constraint.
+    ZenoError
+        Unresolvable accumulation of events; ``err.trajectory`` holds the run so far (every
+        error raised during the run carries it).
+
+    Notes
+    -----
+    Exact for flows that are linear between events: the state is propagated by the matrix
+    exponential and events are the first zeros of the guards on the exact solution
+    (:func:`nscontrol.numerics.lti.first_event`); impacts apply Newton's law on all closed
+    contacts at once. Accumulations are resolved as described in the module docstring.
+
+    References
+    ----------
+    Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer 2008,
+    ch. 8 (event-driven schemes); D5.3 chapter 2, section 5.
+
+    Examples
+    --------
+    >>> import nscontrol as nsc
+    >>> from nscontrol.testing.mechanics_problems import BouncingBall
+    >>> ball = BouncingBall(restitution=0.9)
+    >>> traj = nsc.simulate(ball.system(), ball.x0, (0.0, 10.0))
+    >>> bool(abs(traj.event_times("accumulation")[0] - ball.accumulation_time) < 1e-9)
+    True
+    """
+    t0, tf = (float(t) for t in t_span)
+    opts = _Options.checked(
+        t0, tf, dt=dt, max_events=max_events, min_interval=min_interval,
+        zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
+        listeners=listeners, rtol=rtol, atol=atol, record_every=record_every,
+        signals=signals, progress=progress)
+    if isinstance(system, LinearHybridSystem):
+        for name, value in (("u", u), ("controller", controller)):
+            if value is not None:
+                raise ModelError(f"{name}: a LinearHybridSystem carries its input generator "
+                                 "and controller in its state; stack them into A instead")
+        return _guarded(HybridRun(system, system.check_state(x0), t0, tf, opts))
+    if isinstance(system, ImpactingBodies):
+        return _integrate_impacting_bodies(system, x0, t_span, u=u, controller=controller,
+                                           dt=dt, max_events=max_events,
+                                           min_interval=min_interval,
+                                           zeno_ratio_tol=zeno_ratio_tol,
+                                           zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
+                                           listeners=listeners, rtol=rtol,
+                                           atol=atol, record_every=record_every,
+                                           signals=signals, progress=progress)
+    if isinstance(system, LagrangianSystem):
+        return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
+                                       _check_input(system, u), controller, opts))
+    raise ModelError(f"event_driven: integrates LinearHybridSystem, LagrangianSystem and "
+                     f"ImpactingBodies, got {type(system).__name__}")
+
+
+def _integrate_impacting_bodies(system: Any, x0: Any, t_span: tuple[float, float], *,
+                                controller: Any, listeners: Sequence[Callable[..., None]],
+                                **options: Any) -> Trajectory:
+    """Integrate the Lagrangian form; results (and the partial run of an error) in the
+    chapter's ``[x_a; x_b]`` order."""
+    x0 = system.check_state(x0)
+    perm = system.lagrangian_permutation()
+    back = np.argsort(perm)
+    partial_in_caller_order(back, system.state_names)
+    try:
+        traj = integrate(system.lagrangian(), x0[perm], t_span,
+                         controller=_permuted_gain(controller, perm),
+                         listeners=reorder_listeners(listeners, back), **options)
+    except NscontrolError as err:
+        if isinstance(err.trajectory, Trajectory):
+            err.trajectory = reorder_states(err.trajectory, back, system.state_names)
+        raise
+    return reorder_states(traj, back, system.state_names)
+
+
+def _mechanics_run(system: Any, x0: Any, t0: float, tf: float, u: Any, controller: Any,
+                   opts: _Options) -> Any:
+    """The runner of a Lagrangian system: exact (linear flow, a gain ``K`` keeps it linear)
+    or DOP853 (nonlinear model, or a callable controller)."""
+    if controller is not None and not callable(controller):
+        if system.is_linear:
+            return LinearMechanicsRun(system, x0, t0, tf, u, opts,
+                                      gain=_check_gain(system, controller))
+        controller = _linear_controller(system, controller)
+    elif system.is_linear and controller is None:
+        return LinearMechanicsRun(system, x0, t0, tf, u, opts)
+    return NonlinearMechanicsRun(system, x0, t0, tf, u, opts, controller=controller)

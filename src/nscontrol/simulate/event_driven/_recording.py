@@ -1,0 +1,177 @@
+"""What a run records: samples thinned by ``record_every``, the signals derived at the end,
+the partial trajectory of a failed run, and the reordering of states for another convention."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ..._validation import FloatArray
+from ...errors import NscontrolError, ZenoError
+from ..trajectory import Event, Recorder, Trajectory
+from ._options import _Options
+
+
+class _Samples:
+    """The run's :class:`Recorder` (``record_every``, selected signals) behind one buffer.
+
+    The compiled loop writes its samples straight into the free part of the buffer
+    (:meth:`free`, :meth:`wrote`); Python adds samples with :meth:`add` and :meth:`extend`.
+    The buffer goes to the recorder in one block when it is full and at the end
+    (:meth:`flush`): the recorder sees the same rows in the same order as sample by sample,
+    so ``record_every`` thins them alike, while a run pays one recorder call instead of one
+    per flight. The buffer may hold more columns than are recorded (the augmented state of
+    the mechanics: the first ``n`` are kept). The last sample offered is kept whatever
+    ``record_every`` drops.
+
+    The signals of these integrators are functions of the state (outputs, gaps, energy):
+    ``derive(X) -> {name: values}`` computes them per flushed block, so the recorder builds
+    the trajectory with its signals at once.
+    """
+
+    CAPACITY = 4096
+
+    def __init__(self, n: int, opts: _Options, offered: Sequence[str],
+                 derive: Callable[[FloatArray], dict[str, FloatArray]],
+                 buffer: tuple[FloatArray, FloatArray] | None = None) -> None:
+        self.rec = Recorder(n, every=opts.every, signals=opts.signals, offered=offered)
+        self.wanted = [k for k in offered if self.rec.wants(k)]
+        self.derive = derive
+        self.n = n
+        self.t, self.x = ((np.empty(self.CAPACITY), np.empty((self.CAPACITY, n)))
+                          if buffer is None else buffer)
+        self.size = 0
+        self.last: tuple[float, FloatArray] | None = None
+
+    def free(self) -> tuple[FloatArray, FloatArray]:
+        """The unused rows of the buffer (views for the compiled loop to write into)."""
+        return self.t[self.size:], self.x[self.size:]
+
+    def wrote(self, k: int) -> None:
+        """``k`` rows were written into :meth:`free`'s views."""
+        self.size += k
+
+    def add(self, t: float, x: FloatArray) -> None:
+        """One sample (a buffer row; ``x`` may be longer than the recorded state)."""
+        if self.size == self.CAPACITY:
+            self.flush()
+        self.t[self.size] = t
+        self.x[self.size] = x[: self.x.shape[1]]
+        self.size += 1
+
+    def extend(self, times: FloatArray, X: FloatArray) -> None:
+        """A block of samples (after the buffered ones)."""
+        k = len(times)
+        if self.size + k > self.CAPACITY:
+            self.flush()
+            if k > self.CAPACITY:
+                self._record(np.asarray(times, dtype=float), np.asarray(X, dtype=float))
+                return
+        self.t[self.size:self.size + k] = times
+        self.x[self.size:self.size + k] = X
+        self.size += k
+
+    def flush(self) -> None:
+        """Hand the buffered rows to the recorder."""
+        if self.size:
+            self._record(self.t[:self.size], self.x[:self.size, :self.n])
+            self.size = 0
+
+    def _record(self, times: FloatArray, X: FloatArray) -> None:
+        self.rec.extend(times, X, **self._signals(X))
+        self.last = (float(times[-1]), X[-1].copy())
+
+    def _signals(self, X: FloatArray) -> dict[str, FloatArray]:
+        if not self.wanted:
+            return {}
+        signals = self.derive(X)
+        return {k: signals[k] for k in self.wanted}
+
+    def finish(self, **kw: Any) -> Trajectory:
+        self.flush()
+        if self.last is not None and self.rec.last_time < self.last[0]:
+            t, x = self.last
+            self.rec.sample(t, x, force=True,
+                            **{k: v[0] for k, v in self._signals(x[None]).items()})
+        return self.rec.finish(**kw)
+
+
+def append_events(rec: Recorder, times: FloatArray, kind: str, indices: np.ndarray,
+                  pre: FloatArray, post: FloatArray) -> None:
+    """Record a block of events (``pre``/``post`` copied once for the block).
+
+    The same :class:`Event` objects as ``Event(t, kind, i, a, b)``, built without the frozen
+    dataclass's ``__init__`` (seven ``object.__setattr__`` calls, half the cost of a
+    bouncing ball's run in Python): the attributes go into the instance dictionary at once.
+    """
+    pre = np.array(pre, dtype=np.float64)
+    post = np.array(post, dtype=np.float64)
+    block = [object.__new__(Event) for _ in range(len(pre))]
+    for ev, t, i, a, b in zip(block, np.asarray(times, dtype=np.float64).tolist(),
+                              np.asarray(indices, dtype=np.int64).tolist(), pre, post,
+                              strict=True):
+        ev.__dict__.update({"time": t, "kind": kind, "index": i, "pre": a, "post": b,
+                            "mode_from": -1, "mode_to": -1})
+    rec.events.extend(block)
+
+
+def reorder_listeners(listeners: Sequence[Callable[..., None]], order: np.ndarray
+                      ) -> list[Callable[..., None]]:
+    """Listeners that receive ``x_minus, x_plus`` permuted by ``order`` (the caller's state
+    convention, e.g. ``[x_a; x_b]`` of :class:`ImpactingBodies`)."""
+    def wrap(fn: Callable[..., None]) -> Callable[..., None]:
+        def call(t: float, x_minus: FloatArray, x_plus: FloatArray, *rest: Any) -> None:
+            fn(t, x_minus[order], x_plus[order], *rest)
+        return call
+    return [wrap(fn) for fn in listeners]
+
+
+def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) -> Trajectory:
+    """The same trajectory with its state columns (and event states) permuted by ``order``."""
+    events = tuple(Event(e.time, e.kind, e.index,
+                         e.pre[order] if e.pre.size == order.size else e.pre,
+                         e.post[order] if e.post.size == order.size else e.post,
+                         e.mode_from, e.mode_to) for e in traj.events)
+    return replace(traj, x=traj.x[:, order], events=events, state_names=tuple(names))
+
+
+def partial_in_caller_order(back: np.ndarray, names: Sequence[str]) -> None:
+    """A run that fails on any exception hands over its partial trajectory in the caller's
+    state order (``[x_a; x_b]`` of :class:`~nscontrol.systems.ImpactingBodies`), as a
+    finished run does (:func:`reorder_states`)."""
+    from .._run_context import current_run
+
+    ctx = current_run()
+    if ctx is not None:
+        ctx.partial_transform = lambda traj: reorder_states(traj, back, names)
+
+
+def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
+               ) -> Trajectory:
+    traj = rec.finish(status=-1, message=message, **finish)
+    raise ZenoError(message + "; pass on_failure='return' (or 'warn') to keep the partial "
+                    "trajectory, or use method='moreau_jean' which passes through "
+                    "accumulations", time=t, trajectory=traj)
+
+
+def _guarded(run: Any) -> Trajectory:
+    """Run; an error raised mid-run carries the trajectory computed so far. Any other
+    exception (a listener's own error, an interrupt) leaves every sample computed in the
+    recorder, where a caller holding it (the run's driver) finds them."""
+    try:
+        return run.run()
+    except NscontrolError as err:
+        if err.trajectory is None:
+            err.trajectory = run.samples.finish(status=-1, message=str(err),
+                                                method="event_driven",
+                                                state_names=run.s.state_names)
+        raise
+    except BaseException:
+        try:
+            run.samples.flush()
+        except Exception:  # noqa: BLE001 - the original exception is the one to report
+            pass
+        raise

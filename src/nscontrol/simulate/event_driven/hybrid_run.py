@@ -1,0 +1,78 @@
+"""Event-driven run of a :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`: exact flow,
+compiled events for matrix jumps, Python for callable jumps and grazing."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..._progress import TimeProgress
+from ..._validation import FloatArray
+from ...numerics.lti import LTIFlow
+from ..trajectory import Trajectory
+from ._flight import _Flight, _Workspace
+from ._options import _Options
+from ._recording import _fail_zeno, _Samples, append_events
+from ._zeno import _Zeno
+
+
+class HybridRun:
+    """Exact simulation of a :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`."""
+
+    def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float,
+                 opts: _Options) -> None:
+        self.s, self.x, self.t0, self.tf, self.opts = system, x0.copy(), t0, tf, opts
+        self.flow = LTIFlow.shared(system.A)
+        p = system.n_guards
+        J = system.jump_matrices
+        self.flight = _Flight(self.flow, system.G, system.g0, J,
+                              np.full(p, J is not None), np.arange(p))
+        self.ws = ws = _Workspace(system.n_states, p, p)
+        self.samples = _Samples(system.n_states, opts, tuple(system.outputs), lambda X: {
+            k: X @ C.T for k, C in system.outputs.items()}, buffer=(ws.s_t, ws.s_x))
+        self.rec = self.samples.rec
+        self.zeno = _Zeno(opts, p, ws.zeno)
+
+    def _jumped(self, times: FloatArray, idx: np.ndarray, pre: FloatArray,
+                post: FloatArray) -> None:
+        append_events(self.rec, times, "jump", idx, pre, post)
+        for t, i, xm, xp in zip(times, idx, pre, post, strict=True) if self.opts.listeners \
+                else ():
+            for listener in self.opts.listeners:
+                listener(float(t), xm.copy(), xp.copy(), np.array([i]), None)
+
+    def run(self) -> Trajectory:
+        s, t, x = self.s, self.t0, self.x
+        self.samples.add(t, x)
+        finish = dict(method="event_driven", state_names=s.state_names)
+        with TimeProgress(self.t0, self.tf, desc="event_driven",
+                          enable=self.opts.progress) as bar:
+            while t < self.tf:
+                t, x, ev = self.flight.run(x, t, self.tf, self.zeno, False, self.opts,
+                                           self.samples, self.ws, sample_pre=True,
+                                           on_events=self._jumped)
+                bar.update(t)
+                if ev is None:
+                    break
+                if ev.grazing:
+                    for i in ev.indices:
+                        self.rec.event(t, "grazing", i, x, x)
+                    continue
+                idx = np.asarray(ev.indices, dtype=np.int64)
+                self.zeno.n_events += 1
+                if self.zeno.n_events > self.opts.max_events or any(
+                        self.zeno.too_close(int(i), t) for i in idx):
+                    return _fail_zeno(self.opts, self.samples, f"event_driven: accumulation of "
+                                      f"events of guards {idx.tolist()} near t = {t:.12g}",
+                                      t, **finish)
+                for i in idx:
+                    self.zeno.push(int(i), t)
+                x_plus = np.asarray(s.apply_jump(t, x, idx), float)
+                for i in idx:
+                    self.rec.event(t, "jump", int(i), x, x_plus)
+                for listener in self.opts.listeners:
+                    listener(t, x.copy(), x_plus.copy(), idx, None)
+                x = x_plus
+                self.samples.add(t, x)
+        return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
