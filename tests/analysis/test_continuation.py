@@ -1,10 +1,13 @@
 """Continuation of the impact oscillator's orbits: grazing and flip against the closed forms."""
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
 from nscontrol.analysis.continuation import Branch, continue_orbit, switch_at_flip
 from nscontrol.analysis.impact_oscillator import ImpactOscillator, OscillatorFamily
+from nscontrol.analysis.orbits import Forced, find_orbit
 
 BASE = ImpactOscillator(omega=2.5, stop=0.1)
 FAM = OscillatorFamily(BASE, "forcing")
@@ -82,3 +85,41 @@ def test_branch_switch_at_flip_gives_the_period_two_orbit(impacting_branch):
     assert np.linalg.norm(b2.nodes[-1, 0] - b2.nodes[-1, 1]) > 1e-3
     # born stable below the flip (supercritical in decreasing F)
     assert np.all(b2.p[1:] < b2.p[0]) and np.all(b2.stable[1:])
+
+
+@dataclass(frozen=True)
+class _PwaFamily:
+    """The chapter-11 one-sided oscillator driven at frequency ``omega`` (picklable)."""
+
+    def __call__(self, omega):
+        from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+        from nscontrol.numerics.lti import Exosystem
+
+        return Forced(one_sided_oscillator(0.1), Exosystem.sinusoid(1.0, omega),
+                      2 * np.pi / omega, method="switching")
+
+
+@pytest.mark.slow
+def test_pwa_oscillator_flip_and_the_period_two_branch():
+    """ch11's oscillator: the period-1 orbit flips below ω = 2.9 (where its multiplier is
+    -2.188) and the switched branch is the 2T orbit brute force settles on."""
+    from nscontrol.analysis.periodic import brute_force_steady_state
+
+    fam = _PwaFamily()
+    x0 = find_orbit(fam(2.0), [0.0, 0.0]).x0
+    b = continue_orbit(fam, 2.0, x0, p_range=(1.5, 3.0), step=0.05, step_max=0.1, stop_at=(),
+                       parameter_name="omega")
+    (flip,) = b.special("flip")
+    assert 2.0 < flip.parameter < 2.9
+    assert np.min(np.abs(flip.multipliers + 1.0)) <= 1e-8
+    b2 = switch_at_flip(fam, b, p_range=(1.5, 3.0), step=0.01, step_max=0.1, max_steps=25,
+                        stop_at=())
+    w, nodes = b2.p[-1], b2.nodes[-1]
+    assert b2.stable[-1] and np.linalg.norm(nodes[0] - nodes[1]) > 1e-2
+    f = fam(w)
+    bf = brute_force_steady_state(f.system, f.period, u=f.u, n_transient=400)
+    assert bf.multiplicity == 2
+    # brute force ends on the same 2T orbit (up to its phase): the transient after 400 T is
+    # |μ|^200 of the 2T orbit's largest multiplier (< 0.9 here: 0.9^200 ~ 1e-9)
+    end = bf.trajectory.x[-1]
+    assert min(np.max(np.abs(end - nodes[0])), np.max(np.abs(end - nodes[1]))) <= 1e-6

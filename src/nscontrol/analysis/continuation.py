@@ -22,7 +22,8 @@ Detection and location
 Test functions on the multipliers ``μ`` of the monodromy: fold ``Re ∏(μ_i - 1)``, flip
 ``Re ∏(μ_i + 1)``, Neimark–Sacker ``Re ∏_{i<j}(μ_iμ_j - 1)`` (a sign change with a real
 pair — a neutral saddle — is discarded). **Grazing** is a change of the orbit's event
-signature; its monitor is the smallest free-flight gap of a non-impacting orbit and minus
+signature (reported as a **sliding** bifurcation when the number of sliding segments
+changes); its monitor is the smallest free-flight gap of a non-impacting orbit and minus
 the smallest impact speed of an impacting one, both of which go to zero at the grazing. A
 sign change between two points is located by the Illinois variant of regula falsi on the
 arclength, each trial point corrected onto the branch, until the parameter is known to
@@ -60,7 +61,7 @@ class SpecialPoint:
     Attributes
     ----------
     kind
-        ``"fold"``, ``"flip"``, ``"neimark_sacker"`` or ``"grazing"``.
+        ``"fold"``, ``"flip"``, ``"neimark_sacker"``, ``"grazing"`` or ``"sliding"``.
     parameter
         Where it is.
     index
@@ -173,7 +174,8 @@ class Branch:
                 ax.plot(self.p[seg], y[seg], "-" if self.stable[start] else "--", color=color,
                         label=label if start == 0 else None)
                 start = i
-        marks = {"fold": "s", "flip": "o", "neimark_sacker": "D", "grazing": "^"}
+        marks = {"fold": "s", "flip": "o", "neimark_sacker": "D", "grazing": "^",
+                 "sliding": "v"}
         for kind, mk in marks.items():
             pts = self.special(kind)
             if pts:
@@ -354,7 +356,7 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
                    step_min: float = 1e-6, step_max: float = 0.1, max_steps: int = 500,
                    direction: int = 1, tol: float = 1e-10, locate_tol: float = 1e-10,
                    detect: tuple[str, ...] = ("fold", "flip", "neimark_sacker", "grazing"),
-                   stop_at: tuple[str, ...] = ("grazing",), parameter_name: str = "p",
+                   stop_at: tuple[str, ...] = ("grazing", "sliding"), parameter_name: str = "p",
                    initial_tangent: Any = None, state_names: tuple[str, ...] = ()) -> Branch:
     """Continue the ``n_periods·T``-periodic orbit through ``x0`` at ``p0`` in ``p``.
 
@@ -381,8 +383,8 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
     detect
         Which test functions to watch.
     stop_at
-        Kinds after whose location the continuation stops (default: grazing, where the
-        event sequence and hence the map change).
+        Kinds after whose location the continuation stops (default: grazing and sliding
+        bifurcations, where the event sequence and hence the map change).
     parameter_name, state_names
         Labels kept in the :class:`Branch`.
     initial_tangent
@@ -451,6 +453,8 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
             sp = _locate(prob, pts[-1], t, h, kind, locate_tol)
             if sp is None or not _genuine(kind, sp.orbit):
                 continue
+            if kind == "grazing":
+                kind = _event_change_kind(pts[-1].orbit.signature, new.orbit.signature)
             pts.append(sp)
             special.append(_special(kind, sp, len(pts) - 1, prob))
             if kind in stop_at:
@@ -478,6 +482,16 @@ def _crossings(a: _Point, b: _Point, detect: tuple[str, ...]) -> list[str]:
     if "grazing" in detect and "grazing" not in out and a.orbit.signature != b.orbit.signature:
         out.append("grazing")
     return out
+
+
+def _event_change_kind(before: tuple[tuple[str, int], ...],
+                       after: tuple[tuple[str, int], ...]) -> str:
+    """``"sliding"`` when a sliding segment appears or vanishes between two event signatures
+    (a sliding bifurcation), ``"grazing"`` otherwise."""
+    def slides(sig: tuple[tuple[str, int], ...]) -> int:
+        return sum(1 for k, _ in sig if k.startswith("sliding"))
+
+    return "sliding" if slides(before) != slides(after) else "grazing"
 
 
 def _value(kind: str, pt: _Point, ref: _Point) -> float:
