@@ -49,7 +49,7 @@ def test_impacting_branch_locates_flip_then_grazing(impacting_branch):
     below = (b.p < F_flip * (1 - 1e-6)) & (b.n_impacts == 1)
     assert np.all(b.stable[above]) and not np.any(b.stable[below])
     # every branch point is the closed-form orbit (shooting error, see the oscillator tests)
-    for p, x in zip(b.p[::4], b.x0[::4]):
+    for p, x in zip(b.p[::4], b.x0[::4], strict=True):
         if p > FG * 1.01:
             assert np.allclose(x, BASE.with_(forcing=p).admissible_orbit().x0, atol=1e-9)
 

@@ -5,8 +5,7 @@ import pytest
 
 from nscontrol.analysis.orbits import Forced, find_orbit, stroboscopic_map
 from nscontrol.analysis.periodic import periodic_steady_state
-from nscontrol.analysis.saltation import (impact_jump_jacobian, saltation_matrix,
-                                          time_shift_term)
+from nscontrol.analysis.saltation import impact_jump_jacobian, saltation_matrix, time_shift_term
 from nscontrol.errors import SolverError
 from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
 from nscontrol.numerics.lti import Exosystem

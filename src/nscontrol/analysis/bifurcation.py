@@ -146,7 +146,7 @@ class BifurcationDiagram:
                 raise ModelError(f"path: {path} is not an nscontrol.BifurcationDiagram/1 file")
             errors = tuple((d.decode(), int(i), m.decode()) for d, i, m in
                            zip(f["error_direction"][()], f["error_index"][()],
-                               f["error_message"][()]))
+                               f["error_message"][()], strict=True))
             return cls(str(f.attrs["parameter_name"]), f["values"][()],
                        tuple(s.decode() for s in f.attrs["directions"]), f["points"][()],
                        f["multiplicity"][()], errors, int(f.attrs["chunk_size"]),
@@ -168,7 +168,7 @@ class _ChunkTask:
         direction, indices, values = chunk
         out: list[tuple[int, FloatArray | None, int, str]] = []
         x = None
-        for i, p in zip(indices, values):
+        for i, p in zip(indices, values, strict=True):
             try:
                 forced = self.factory(p)
                 x = self._start(forced) if x is None else x
@@ -263,7 +263,7 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
     pts = np.full((len(dirs), len(vals), ns, n), np.nan)
     mult = np.full((len(dirs), len(vals)), -1, dtype=int)
     errors: list[tuple[str, int, str]] = []
-    for chunk, value, err in zip(chunks, res.values, res.errors):
+    for chunk, value, err in zip(chunks, res.values, res.errors, strict=True):
         di = dirs.index(chunk[0])
         if err is not None:
             errors.extend((chunk[0], i, f"chunk lost: {err.type}: {err.message}")

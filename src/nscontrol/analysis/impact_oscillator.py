@@ -167,10 +167,11 @@ class ImpactOscillator:
         """The model as a :class:`~nscontrol.systems.lagrangian.LagrangianSystem`."""
         from ..systems.lagrangian import LagrangianSystem
 
-        return LagrangianSystem(np.array([[self.mass]]), stiffness=[[self.stiffness]],
-                                damping=[[self.damping]], gap_matrix=[[-1.0]],
-                                gap_offset=[self.stop], restitution=self.restitution,
-                                actuation=[[1.0]], names=("mass",))
+        return LagrangianSystem(np.array([[self.mass]]), stiffness=np.array([[self.stiffness]]),
+                                damping=np.array([[self.damping]]),
+                                gap_matrix=np.array([[-1.0]]), gap_offset=np.array([self.stop]),
+                                restitution=self.restitution, actuation=np.array([[1.0]]),
+                                names=("mass",))
 
     def input(self) -> Any:
         """The drive ``F cos(ωt)`` as an :class:`~nscontrol.numerics.lti.Exosystem`."""
@@ -232,7 +233,7 @@ class ImpactOscillator:
         return sorted(orbits, key=lambda o: not o.admissible)
 
     def _orbit_at(self, theta: float, Phi: FloatArray) -> OneImpactOrbit:
-        m, c, k, F, w = self.mass, self.damping, self.stiffness, self.forcing, self.omega
+        m, k, F, w = self.mass, self.stiffness, self.forcing, self.omega
         d, r, A, T = self.stop, self.restitution, self.amplitude(), self.period
         P, Q = d - A * math.cos(theta), -A * w * math.sin(theta)
         v = (Phi[1, 0] * P + (1 - Phi[1, 1]) * Q) / (1 + r * Phi[1, 1])

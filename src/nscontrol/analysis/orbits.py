@@ -67,7 +67,7 @@ class Forced:
     system: Any
     u: Any
     period: float
-    method: str | None = None
+    method: Any = None
     options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
@@ -483,7 +483,7 @@ def _refine_min(ts: float, xs: FloatArray, w: FloatArray, g0: float, model: _Lin
 
 # -- autonomous orbits and hyperplane sections -------------------------------------------------
 
-def _transition_run(system: Any, x0: FloatArray, tf: float, method: str | None,
+def _transition_run(system: Any, x0: FloatArray, tf: float, method: Any,
                     t_eval: FloatArray | None = None) -> Any:
     """``simulate`` over ``(0, tf)`` with the state transition (capability ``sensitivity``)."""
     from ..simulate import simulate
@@ -498,7 +498,7 @@ def _transition_run(system: Any, x0: FloatArray, tf: float, method: str | None,
     return simulate(system, x0, (0.0, tf), method=method, t_eval=te, sensitivity=True)
 
 
-def _flow_velocity(system: Any, tr: Any, tf: float, method: str | None) -> FloatArray:
+def _flow_velocity(system: Any, tr: Any, tf: float, method: Any) -> FloatArray:
     """``ẋ(tf)`` by central differences of the flow (step ``δ = ε^{1/3}·tf``: truncation
     ``O(δ²)`` against rounding ``O(ε/δ)``): ``x(tf - δ)`` from the run's samples, ``x(tf + δ)``
     from a short continuation."""
@@ -565,7 +565,7 @@ def _trivial_index(M: FloatArray, f: FloatArray) -> tuple[np.ndarray, int]:
 
 
 def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: float | None = None,
-               method: str | None = None, tol: float = 1e-9, max_iter: int = 30) -> Cycle:
+               method: Any = None, tol: float = 1e-9, max_iter: int = 30) -> Cycle:
     """Newton on ``φ_T(x0) = x0``, ``normal·x0 = offset`` for ``(x0, T)`` (single shooting).
 
     The phase condition pins the point on a hyperplane the orbit crosses transversally
@@ -623,7 +623,7 @@ class SectionReturn:
 
 
 def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: float,
-                   method: str | None = None, direction: int = 1,
+                   method: Any = None, direction: int = 1,
                    samples: int = 2000) -> SectionReturn:
     """Poincaré map of an autonomous system on the hyperplane ``normal·x = offset``.
 

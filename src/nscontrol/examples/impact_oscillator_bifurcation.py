@@ -166,7 +166,7 @@ def _node_view(branch: Any, node: int) -> Any:
 def _dedupe_legend(ax: Any) -> None:
     handles, labels = ax.get_legend_handles_labels()
     seen: dict[str, Any] = {}
-    for h, lab in zip(handles, labels):
+    for h, lab in zip(handles, labels, strict=True):
         seen.setdefault(lab, h)
     ax.legend(seen.values(), seen.keys(), loc="lower left", fontsize="small")
 
