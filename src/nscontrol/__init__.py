@@ -2,10 +2,11 @@
 
 Layers (a lower layer never imports a higher one)::
 
-    errors -> numerics -> laws -> systems -> simulate -> design -> analysis -> examples
+    errors, _validation, _progress, sweep -> numerics -> laws -> systems -> simulate
+    -> design -> analysis -> testing -> examples -> cli, report, this package root
 
 (``numerics`` sits below ``laws`` because the multi-contact impact law solves LCPs, while the
-solvers only ever see matrices.)
+solvers only ever see matrices; ``tests/test_layers.py`` enforces the order.)
 
 The public surface most users need is re-exported here lazily, so that ``import nscontrol``
 stays fast (numba, cvxpy and matplotlib load only when a function needs them).

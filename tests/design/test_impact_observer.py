@@ -38,7 +38,9 @@ def example_bodies(m3=1.0, e=1.0, E=None, k12=6.0):
 
 
 @pytest.mark.parametrize("module, minimum", [
-    ("nscontrol.analysis.observability", 40),
+    ("nscontrol.analysis.observability", 15),
+    ("nscontrol.design.impact_conditions", 25),
+    ("nscontrol.numerics.observability", 5),
     ("nscontrol.design.impact_observer", 25),
     ("nscontrol.systems.impacting_bodies", 4),
 ])

@@ -6,9 +6,9 @@ import pytest
 
 from nscontrol.design.lure_observer import (
     lure_observer_lmi,
-    max_decay_rate,
+    max_observer_decay_rate,
     observer_from_gains,
-    recheck_certificate,
+    recheck_lure_certificate,
     structural_infeasibility,
 )
 from nscontrol.errors import DimensionError, InfeasibleDesignError, ModelError
@@ -43,7 +43,7 @@ FEASIBLE = [
 @pytest.mark.parametrize(("scenario", "variant", "kappa"), FEASIBLE,
                          ids=[f"{s.name}-{v}" for s, v, _ in FEASIBLE])
 def test_check1_postconditions_at_half_alpha_max(scenario, variant, kappa):
-    best = max_decay_rate(**scenario.matrices, variant=variant, kappa=kappa, tol=1e-2)
+    best = max_observer_decay_rate(**scenario.matrices, variant=variant, kappa=kappa, tol=1e-2)
     assert best.alpha_max > 0
     design = lure_observer_lmi(**scenario.matrices, variant=variant, kappa=kappa,
                                alpha=0.5 * best.alpha_max)
@@ -101,24 +101,25 @@ def test_check2_undamped_coulomb_basic_infeasible_extended_feasible():
     with pytest.raises(InfeasibleDesignError):
         lure_observer_lmi(**s.matrices, variant="basic", precheck=False)
     assert structural_infeasibility(s.A, s.G, s.H, s.C, variant="extended") is None
-    d = max_decay_rate(**s.matrices, variant="extended", kappa=20.0)
+    d = max_observer_decay_rate(**s.matrices, variant="extended", kappa=20.0)
     assert 2.2 < d.alpha_max < 2.8  # spec: about 2.5 with ||Y|| <= 20
 
 
 def test_check3_rate_of_damped_coulomb_basic_is_c_over_m():
-    d = max_decay_rate(**ex.coulomb_oscillator(0.1).matrices, variant="basic")
+    d = max_observer_decay_rate(**ex.coulomb_oscillator(0.1).matrices, variant="basic")
     assert abs(d.alpha_max - 0.1) <= 0.02 * 0.1
 
 
 @pytest.mark.parametrize("variant", ["basic", "extended"])
 def test_check3_relay_zero_limits_rate_to_two(variant):
-    d = max_decay_rate(**ex.relay_relative_degree_one("z").matrices, variant=variant)
+    d = max_observer_decay_rate(**ex.relay_relative_degree_one("z").matrices, variant=variant)
     assert abs(d.alpha_max - 2.0) <= 0.02 * 2.0
 
 
 def test_extended_rate_grows_with_kappa():
     s = ex.coulomb_oscillator(0.0)
-    rates = [max_decay_rate(**s.matrices, kappa=k, tol=1e-2).alpha_max for k in (5.0, 20.0)]
+    rates = [max_observer_decay_rate(**s.matrices, kappa=k, tol=1e-2).alpha_max
+             for k in (5.0, 20.0)]
     assert rates[0] < rates[1]
 
 
@@ -142,7 +143,7 @@ def test_feedthrough_not_psd_is_refused():
 @pytest.mark.parametrize("kappa", [-1.0, 0.0, float("nan")])
 def test_bad_kappa_is_refused(kappa):
     with pytest.raises(ModelError, match="kappa"):
-        max_decay_rate(**ex.coulomb_oscillator(0.0).matrices, kappa=kappa)
+        max_observer_decay_rate(**ex.coulomb_oscillator(0.0).matrices, kappa=kappa)
 
 
 def test_bad_variant_and_alpha():
@@ -160,8 +161,8 @@ def test_infeasible_rate_says_what_to_do():
 
 def test_recheck_detects_a_wrong_certificate():
     s = ex.siconos_observer_lcs()
-    cert = recheck_certificate(s.A, s.G, s.H, s.C, 2 * np.eye(2), ex.SICONOS_L, np.zeros((1, 1)),
-                               1.0)
+    cert = recheck_lure_certificate(s.A, s.G, s.H, s.C, 2 * np.eye(2), ex.SICONOS_L,
+                                    np.zeros((1, 1)), 1.0)
     assert cert.equality_residual == pytest.approx(np.sqrt(2))
 
 
@@ -190,7 +191,7 @@ def test_unbounded_rate_without_kappa_warns_and_names_the_fix():
     from nscontrol.errors import InaccurateCertificateWarning
 
     with pytest.warns(InaccurateCertificateWarning, match="pass kappa"):
-        d = max_decay_rate(**ex.coulomb_oscillator(0.0).matrices, tol=1e-2)
+        d = max_observer_decay_rate(**ex.coulomb_oscillator(0.0).matrices, tol=1e-2)
     assert d.alpha_max >= 1e3 and d.certificate.gain_norm > 1e6  # huge gains: why kappa exists
 
 
@@ -200,7 +201,7 @@ def test_misspelt_solver_is_bad_input_not_an_infeasible_design():
 
     s = ex.coulomb_oscillator(0.1)
     calls = (lambda: lure_observer_lmi(**s.matrices, variant="basic", solver="BOGUS"),
-             lambda: max_decay_rate(**s.matrices, variant="basic", solver="BOGUS"),
+             lambda: max_observer_decay_rate(**s.matrices, variant="basic", solver="BOGUS"),
              lambda: design_lure_observer(s.plant(), variant="basic", solver="BOGUS"),
              # found before the structural pre-check would report infeasibility
              lambda: lure_observer_lmi(**ex.not_passifiable().matrices, solver="BOGUS"))

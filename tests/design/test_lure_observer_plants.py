@@ -11,7 +11,7 @@ from nscontrol.design.lure_observer import (
     design_lure_observer,
     loop_transformed_lure_system,
     lure_from_statespace,
-    max_decay_rate,
+    max_observer_decay_rate,
 )
 from nscontrol.errors import DimensionError, ModelError
 from nscontrol.examples import ch08_lure_observer as ex
@@ -109,7 +109,7 @@ def test_rotor_infeasible_cases_of_the_spec(output, variant):
 
     s = ex.rotor_standin(output)
     with pytest.raises(InfeasibleDesignError, match="structural"):
-        max_decay_rate(**s.matrices, variant=variant, kappa=1000.0)
+        max_observer_decay_rate(**s.matrices, variant=variant, kappa=1000.0)
 
 
 def test_statespace_plant_gives_the_same_design():

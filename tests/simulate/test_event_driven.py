@@ -6,7 +6,7 @@ import pytest
 from nscontrol.errors import ZenoError
 from nscontrol.numerics.lti import Exosystem
 from nscontrol.simulate import simulate
-from nscontrol.simulate.hybrid import LinearHybridSystem
+from nscontrol.systems.hybrid import LinearHybridSystem
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
 from nscontrol.testing.mechanics_problems import BouncingBall, NewtonsCradle

@@ -6,7 +6,7 @@ import pytest
 from nscontrol.errors import DimensionError, InadmissibleStateError, ModelError
 from nscontrol.laws.impact import restitution_matrix
 from nscontrol.simulate import simulate
-from nscontrol.simulate.hybrid import LinearHybridSystem
+from nscontrol.systems.hybrid import LinearHybridSystem
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
 

@@ -21,7 +21,7 @@ from nscontrol.laws.set_valued import (
     Relay,
     Stribeck,
 )
-from nscontrol.simulate.hybrid import LinearHybridSystem
+from nscontrol.systems.hybrid import LinearHybridSystem
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
 from nscontrol.systems.lure import LureSystem

@@ -31,7 +31,7 @@ from ..errors import (
 )
 
 __all__ = [
-    "ConvergenceCertificate", "quadratic_convergence", "verify_cqlf", "decay_rate",
+    "ConvergenceCertificate", "quadratic_convergence", "decay_rate",
     "BimodalTests", "bimodal_tests", "product_test", "circle_test", "circle_criterion_minimum",
     "most_negative_real_eigenvalue", "bisect_boundary",
     "SteadyStateBound", "isc_gain", "peak_to_peak_bound", "incremental_l2_bound", "equilibrium",
@@ -122,7 +122,7 @@ def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4
         Bound on ``κ(P̃)`` in normalised coordinates (``I <= P̃ <= p_max I``).
     normalise
         Solve in balanced, time-normalised coordinates
-        (:meth:`nscontrol.numerics.lmi.Scaling.for_matrices`).
+        (:meth:`nscontrol.numerics.scaling.Scaling.balanced`).
 
     Returns
     -------
@@ -144,7 +144,9 @@ def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4
     is quadratically convergent iff (CQLF) holds. Hypotheses: continuity (checked by the model
     at construction and refused here when ``continuous`` is False); regions convex (by
     construction of the model). Strictness is handled by maximising the margin ``t``; the
-    system is certified when ``t* > 1e-7`` and the returned ``P`` passes :func:`verify_cqlf`.
+    system is certified when ``t* > 1e-7`` and the returned ``P`` passes the NumPy re-check
+    :func:`~nscontrol.numerics.lmi.recheck_lyapunov` (``P > 0``, ``max eig(A_iᵀP + PA_i +
+    2σP) <= 1e-8‖P‖``).
 
     References
     ----------
@@ -166,9 +168,10 @@ def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4
     As = _mode_matrices(system)
     decay = check_positive("decay", decay, allow_zero=True)
     n = As[0].shape[0]
-    from ..numerics.lmi import Scaling
+    from ..numerics.lmi import LYAPUNOV_RECHECK_RTOL, recheck_lyapunov
+    from ..numerics.scaling import Scaling
 
-    sc = Scaling.for_matrices(As) if normalise else Scaling(np.ones(n), 1.0)
+    sc = Scaling.balanced(As) if normalise else Scaling.identity(n)
     try:
         P_s, margin, status = _max_margin_cqlf([sc.matrix(A) for A in As], decay / sc.omega,
                                                p_max)
@@ -181,7 +184,7 @@ def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4
         return ConvergenceCertificate(False, None, margin, decay, np.nan, np.nan, np.nan, status,
                                       f"no common quadratic Lyapunov function: best margin "
                                       f"{margin:.3g} <= {MARGIN_TOL:g}")
-    if not verify_cqlf(As, P, decay=decay):
+    if not recheck_lyapunov(As, P, decay).holds(LYAPUNOV_RECHECK_RTOL):
         return ConvergenceCertificate(False, None, margin, decay, np.nan, np.nan, np.nan, status,
                                       "the solver's certificate failed the NumPy re-check "
                                       "(numerically undecided; rescale the model)")
@@ -209,20 +212,6 @@ def _max_margin_cqlf(As: Sequence[FloatArray], decay: float,
         prob.negative(f"mode {i}", A.T @ P + P @ A + 2 * decay * P, margin=t)
     res = prob.solve(maximize=t)
     return res["P"], float(res["t"]), res.status
-
-
-def verify_cqlf(As: Sequence[Any], P: Any, *, decay: float = 0.0, tol: float = 1e-8) -> bool:
-    """Re-check a certificate in NumPy: ``P > 0`` and
-    ``max eig(A_iᵀP + PA_i + 2σP) <= tol·‖P‖`` for every mode (spec check 3)."""
-    decay = as_finite_scalar("decay", decay)
-    tol = check_positive("tol", tol, allow_zero=True)
-    As = [as_square(f"As[{i}]", A) for i, A in enumerate(As)]
-    P = as_square("P", P)
-    P = 0.5 * (P + P.T)
-    norm = float(np.linalg.norm(P, 2))
-    if not np.all(np.isfinite(P)) or np.linalg.eigvalsh(P)[0] <= 0.0:
-        return False
-    return all(float(np.linalg.eigvalsh(_lyap(A, P, decay))[-1]) <= tol * norm for A in As)
 
 
 def _lyap(A: Any, P: FloatArray, decay: float) -> FloatArray:

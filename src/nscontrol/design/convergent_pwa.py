@@ -8,8 +8,9 @@
 * :func:`design_observer` — piecewise-linear observer with the mode chosen by the estimate
   (OBS-σ), gain-bounded; :func:`output_feedback_loop` — plant + observer + feedback.
 
-Every design is solved in scaled coordinates (:class:`Scaling`), mapped back, and its
-certificate re-checked in NumPy in the original coordinates before it is returned; an
+Every design is solved in scaled coordinates (:class:`~nscontrol.numerics.scaling.Scaling`),
+mapped back, and its certificate re-checked in NumPy in the original coordinates
+(:func:`~nscontrol.numerics.lmi.recheck_lyapunov`) before it is returned; an
 infeasible problem raises :class:`~nscontrol.errors.InfeasibleDesignError` carrying the
 solver's status.
 """
@@ -23,14 +24,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import as_matrix, as_real_scalar, as_square, check_positive
+from .._validation import as_matrix, as_real_scalar, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
+from ..numerics.scaling import Scaling
 
 __all__ = [
-    "Scaling", "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
+    "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
     "EstimateFeedback", "design_state_feedback", "design_pwa_state_feedback",
     "tune_pwa_state_feedback", "design_observer", "output_feedback_loop",
-    "certificate_residual",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -41,110 +42,19 @@ LMI_MARGIN = 1e-6
 
 # -- certificate re-check ---------------------------------------------------------------------
 
-def certificate_residual(As: Sequence[Any], P: Any, decay: float = 0.0) -> float:
-    """``max_i λ_max(A_iᵀP + PA_i + 2σP)/‖P‖`` — ≤ 1e-8 passes the re-check (spec check 3)."""
-    P = as_square("P", P)
-    P = 0.5 * (P + P.T)
-    decay = as_real_scalar("decay", decay)
-    worst = -np.inf
-    for i, A in enumerate(As):
-        A = as_square(f"As[{i}]", A, P.shape[0])
-        M = A.T @ P + P @ A + 2.0 * decay * P
-        worst = max(worst, float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]))
-    return worst / float(np.linalg.norm(P, 2))
-
-
 def _recheck(As: Sequence[FloatArray], P: FloatArray, decay: float, *, who: str,
              status: str) -> None:
     """Raise InfeasibleDesignError unless P > 0 and the decay LMI holds (to 1e-8·‖P‖)."""
-    lam_min = float(np.linalg.eigvalsh(0.5 * (P + P.T))[0])
-    res = certificate_residual(As, P, decay)
-    if not (lam_min > 0 and res <= 1e-8):
+    from ..numerics.lmi import LYAPUNOV_RECHECK_RTOL, recheck_lyapunov
+
+    check = recheck_lyapunov(As, P, decay)
+    if not check.holds(LYAPUNOV_RECHECK_RTOL):
         raise InfeasibleDesignError(
             f"{who}: the solver returned {status!r} but its certificate fails the NumPy "
-            f"re-check (min eig P = {lam_min:.3g}, max eig(AᵢᵀP + PAᵢ + 2σP)/‖P‖ = {res:.3g} > "
-            f"1e-8); rescale the model (scale=Scaling.mechanical(...) or 'auto') or lower sigma",
+            f"re-check (min eig P = {check.P_min_eig:.3g}, max eig(AᵢᵀP + PAᵢ + 2σP)/‖P‖ = "
+            f"{check.residual:.3g} > {LYAPUNOV_RECHECK_RTOL:g}); rescale the model "
+            f"(scale=Scaling.mechanical(...) or 'auto') or lower sigma",
             status="certificate_check_failed")
-
-
-# -- scaling -----------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Scaling:
-    """Coordinates in which the LMIs are solved: ``x̃ = S x``, ``τ = ω t``, ``u = f ũ``,
-    ``y = g ỹ``.
-
-    Then ``Ã_i = S A_i S⁻¹/ω``, ``B̃ = S B f/ω``, ``C̃ = C S⁻¹/g``; gains map back as
-    ``K = f K̃ S``, ``L = ω S⁻¹ L̃/g`` and certificates as ``P = Sᵀ P̃ S``. Gain bounds reported
-    by designs are in the scaled units (that is what makes them comparable across models).
-
-    Attributes
-    ----------
-    S
-        State scaling (invertible).
-    omega
-        Time scale (1/s).
-    input_unit
-        Input unit ``f`` (e.g. a reference stiffness for forces).
-    output_unit
-        Output unit ``g`` of the measured output (observer designs).
-    """
-
-    S: FloatArray
-    omega: float = 1.0
-    input_unit: float = 1.0
-    output_unit: float = 1.0
-
-    def __post_init__(self) -> None:
-        S = as_square("Scaling.S", self.S)
-        if abs(np.linalg.det(S)) == 0.0:
-            raise ModelError("Scaling.S: expected an invertible matrix, got a singular one")
-        object.__setattr__(self, "S", S)
-        check_positive("Scaling.omega", self.omega)
-        check_positive("Scaling.input_unit", self.input_unit)
-        check_positive("Scaling.output_unit", self.output_unit)
-
-    @classmethod
-    def identity(cls, n: int) -> Scaling:
-        """No scaling."""
-        return cls(np.eye(n))
-
-    @classmethod
-    def mechanical(cls, n_dof: int, omega_ref: float, input_unit: float = 1.0,
-                   output_unit: float = 1.0) -> Scaling:
-        """``x = (q, q')``: ``S = diag(I, I/ω_ref)``, ``τ = ω_ref t``, forces in ``input_unit``
-        (e.g. the static stiffness at the actuator), measurements in ``output_unit`` —
-        ch11 §3.5, ch06 §2.4."""
-        omega_ref = check_positive("omega_ref", omega_ref)
-        d = np.concatenate([np.ones(n_dof), np.full(n_dof, 1.0 / omega_ref)])
-        return cls(np.diag(d), omega_ref, check_positive("input_unit", input_unit),
-                   check_positive("output_unit", output_unit))
-
-    @classmethod
-    def auto(cls, As: Sequence[Any], B: Any = None, C: Any = None) -> Scaling:
-        """Balanced diagonal similarity, time scale ``max‖Ã_i‖``, input unit making
-        ``‖B̃‖ = 1`` and output unit making ``‖C̃‖ = 1`` — for badly scaled models."""
-        return _auto_scaling([np.asarray(A, float) for A in As],
-                             None if B is None else np.asarray(B, float),
-                             None if C is None else np.asarray(C, float))
-
-
-def _auto_scaling(As: Sequence[FloatArray], B: FloatArray | None,
-                  C: FloatArray | None = None) -> Scaling:
-    """The shared balancing of :class:`nscontrol.numerics.lmi.Scaling` (``x̃ = D⁻¹x``,
-    ``τ = ωt``) plus an input unit making ``‖B̃‖ = 1`` and an output unit making
-    ``‖C̃‖ = 1``: every block of the design LMIs is then O(1) (without the output unit the
-    beam's ``C̃`` is ~4e-3 and the observer LMI fails its re-check)."""
-    from ..numerics.lmi import Scaling as Balancing
-
-    bal = Balancing.for_matrices(As)
-    S = np.diag(1.0 / bal.d)
-    f = g = 1.0
-    if B is not None and np.linalg.norm(B) > 0:
-        f = bal.omega / float(np.linalg.norm(S @ B, 2))
-    if C is not None and np.linalg.norm(C) > 0:
-        g = float(np.linalg.norm(C @ np.diag(bal.d), 2))
-    return Scaling(S, bal.omega, f, g)
 
 
 def _resolve_scaling(scale: Scaling | str | None, As: Sequence[FloatArray],
@@ -155,7 +65,7 @@ def _resolve_scaling(scale: Scaling | str | None, As: Sequence[FloatArray],
     if isinstance(scale, str):
         if scale != "auto":
             raise ModelError(f"scale: expected None, 'auto' or a Scaling, got {scale!r}")
-        return _auto_scaling(As, B, C)
+        return Scaling.auto(As, B, C)
     if not isinstance(scale, Scaling):
         raise ModelError(f"scale: expected None, 'auto' or a Scaling, got {type(scale).__name__}")
     if scale.S.shape != (n, n):

@@ -8,7 +8,7 @@ body b is invisible between impacts. This module designs
   of the plant, the jumps (7c)-(7g) with the restitution matrix of coefficient ``e``
   (Remark 1) -- :func:`design_impact_observer`, returning an :class:`ImpactObserverDesign`
   that builds the closed loop "plant + observer + exosystem" as one
-  :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`;
+  :class:`~nscontrol.systems.hybrid.LinearHybridSystem`;
 * dead-beat observers built from the constructive proofs (**our choice**, the seed is
   truncated): :func:`deadbeat_n1` (finite-window reconstruction of body a, restarted at each
   impact, plus the impact formula for the free mass) and :func:`deadbeat_1n` (body b of n-1
@@ -46,20 +46,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import as_real_scalar, as_square, as_vector, check_positive
-from ..analysis.observability import (
-    EpsilonCertificate,
-    Theorem1Result,
-    _balance,
-    alpha_limit,
-    pbh_observability,
-    search_epsilon,
-    theorem1_test,
-)
 from ..errors import (
     DimensionError,
     InaccurateCertificateWarning,
     InfeasibleDesignError,
     ModelError,
+)
+from ..numerics.observability import pbh_observability
+from ..numerics.scaling import balanced_unit_norm
+from .impact_conditions import (
+    EpsilonCertificate,
+    Theorem1Result,
+    alpha_limit,
+    search_epsilon,
+    theorem1_test,
 )
 
 __all__ = [
@@ -319,7 +319,7 @@ def _observer_canonical(A: FloatArray, C: FloatArray
     from scipy.linalg import hessenberg, solve_triangular
 
     n = A.shape[0]
-    An, d, omega = _balance(A)
+    An, d, omega = balanced_unit_norm(A)
     c = C * d
     sigma = float(np.linalg.norm(c))
     v = c.copy()
@@ -516,11 +516,11 @@ class ImpactObserverDesign:
     placement
         :class:`ScaledPlacement` (scaled realisation and conditioning).
     observability
-        :class:`~nscontrol.analysis.observability.Theorem1Result` of the plant.
+        :class:`~nscontrol.design.impact_conditions.Theorem1Result` of the plant.
     alpha_L
         Rate limit ``-ln|M22| / delta_max`` (``inf`` for equal masses or unknown ``delta_max``).
     certificate
-        :class:`~nscontrol.analysis.observability.EpsilonCertificate` when a target rate was
+        :class:`~nscontrol.design.impact_conditions.EpsilonCertificate` when a target rate was
         given, else ``None``.
     """
 
@@ -712,7 +712,7 @@ def design_impact_observer(bodies: Any, Lambda1: Any, eps: float | None = None, 
     alpha : float, optional
         Target decay rate: ``eps`` is then the largest value meeting the sufficient conditions
         of Theorem 3 (equal masses) or 4 (unequal), see
-        :func:`~nscontrol.analysis.observability.search_epsilon`. Needs ``delta_min`` and
+        :func:`~nscontrol.design.impact_conditions.search_epsilon`. Needs ``delta_min`` and
         ``delta_max``.
     delta_min, delta_max : float, optional
         Dwell-time bounds of Assumption 2 (``alpha_L`` is reported when ``delta_max`` is given).

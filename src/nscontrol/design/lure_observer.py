@@ -33,12 +33,12 @@ __all__ = [
     "LureObserverDesign",
     "structural_infeasibility",
     "lure_observer_lmi",
-    "max_decay_rate",
+    "max_observer_decay_rate",
     "design_lure_observer",
     "lure_from_statespace",
     "loop_transformed_lure_system",
     "observer_from_gains",
-    "recheck_certificate",
+    "recheck_lure_certificate",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -421,7 +421,7 @@ class _ObserverLMI:
     Not built on :class:`nscontrol.numerics.lmi.LMIProblem`, which compiles a new CVXPY
     problem per solve: with the rate as a parameter a bisection step costs 2.7 ms instead of
     15.5 ms (measured on 5.2). The re-check is the problem-specific one of
-    :func:`recheck_certificate` (equality residual, Hurwitz ``A - L C``, gain bound).
+    :func:`recheck_lure_certificate` (equality residual, Hurwitz ``A - L C``, gain bound).
     """
 
     def __init__(self, mat: _Matrices, variant: str, kappa: float | None, eps: float,
@@ -491,9 +491,9 @@ class _ObserverLMI:
         Y = np.asarray(self.Y.value, float)
         if not (np.all(np.isfinite(P)) and np.all(np.isfinite(Y))):
             return None, {}
-        cert = recheck_certificate(mat.A, mat.G, mat.H, mat.C, P,
-                                   np.linalg.solve(P, Y) if _is_pd(P) else Y, K, alpha,
-                                   solver=solver, solver_status=status)
+        cert = recheck_lure_certificate(mat.A, mat.G, mat.H, mat.C, P,
+                                        np.linalg.solve(P, Y) if _is_pd(P) else Y, K, alpha,
+                                        solver=solver, solver_status=status)
         scale = max(1.0, float(np.linalg.norm(mat.H)))
         ok = (cert.P_min_eig >= 0.5 * self.eps_P and cert.lmi_max_eig <= -0.5 * self.eps
               and cert.equality_residual <= EQUALITY_RTOL * scale
@@ -508,9 +508,9 @@ def _is_pd(P: FloatArray) -> bool:
     return bool(np.linalg.eigvalsh(P)[0] > 0.0)
 
 
-def recheck_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any, alpha: float,
-                        *, solver: str = "given", solver_status: str = "given"
-                        ) -> LureObserverCertificate:
+def recheck_lure_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any,
+                             alpha: float, *, solver: str = "given",
+                             solver_status: str = "given") -> LureObserverCertificate:
     """Re-check observer gains ``(P, L, K)`` against (1)–(2) of spec §2.2 in NumPy.
 
     Useful for certificates from elsewhere (a paper, the Siconos example's ``P = I``). It
@@ -551,8 +551,8 @@ def recheck_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any, 
     --------
     ``P = 2 I`` breaks the equality of the Siconos example (``Gᵀ P = 2 H``):
 
-    >>> c = recheck_certificate([[1, 1], [3, 1]], [[-1], [1]], [[-1, 1]], [[2, 2]],
-    ...                         P=[[2, 0], [0, 2]], L=[[1], [1]], K=[[0]], alpha=1.0)
+    >>> c = recheck_lure_certificate([[1, 1], [3, 1]], [[-1], [1]], [[-1, 1]], [[2, 2]],
+    ...                              P=[[2, 0], [0, 2]], L=[[1], [1]], K=[[0]], alpha=1.0)
     >>> round(c.equality_residual, 12), c.lmi_max_eig
     (1.414213562373, 0.0)
     """
@@ -700,7 +700,7 @@ def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
 
     The equality is eliminated: ``(P, K)`` ranges over its affine solution set (particular
     solution plus null-space basis computed by SVD), so it holds to round-off. Every returned
-    point is re-checked in NumPy (:func:`recheck_certificate`): equality residual
+    point is re-checked in NumPy (:func:`recheck_lure_certificate`): equality residual
     ``<= 1e-7 max(1, ||H||_F)``, Lyapunov matrix ``<= -eps/2``, ``P >= eps_P/2``, ``A - L C``
     Hurwitz. Hypotheses of the theorem (spec §2.5) not checked here: maximal monotonicity of
     ``φ`` (checked by :func:`design_lure_observer` through the law) and well-posedness of the
@@ -734,11 +734,11 @@ def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     return _design(mat, lmi, cert, gains, alpha_v, None)
 
 
-def max_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
-                   variant: Variant = "extended", kappa: float | None = None,
-                   eps: float | None = None, eps_P: float | None = None,
-                   solver: str | None = None, tol: float = 1e-3,
-                   precheck: bool = True) -> LureObserverDesign:
+def max_observer_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
+                            variant: Variant = "extended", kappa: float | None = None,
+                            eps: float | None = None, eps_P: float | None = None,
+                            solver: str | None = None, tol: float = 1e-3,
+                            precheck: bool = True) -> LureObserverDesign:
     """Maximise the certified decay rate by bisection; the design at ``alpha_max``.
 
     Parameters
@@ -790,8 +790,8 @@ def max_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     --------
     Relay feedback with the multivalued input measured (``C = H``, spec 5.5): the rate is 2.
 
-    >>> d = max_decay_rate([[0, 1], [-3, -4]], [[0], [1]], [[2, 1]], [[2, 1]],
-    ...                    variant="basic", tol=1e-2)
+    >>> d = max_observer_decay_rate([[0, 1], [-3, -4]], [[0], [1]], [[2, 1]], [[2, 1]],
+    ...                             variant="basic", tol=1e-2)
     >>> bool(abs(d.alpha_max - 2.0) < 0.02), d.alpha == d.alpha_max
     (True, True)
     """
@@ -866,7 +866,7 @@ def observer_from_gains(A: Any, G: Any, H: Any, C: Any, *, L: Any, P: Any, alpha
     mat = _matrices(A, G, H, C, D)
     alpha_v = check_positive("alpha", alpha, allow_zero=True)
     K = np.zeros((mat.m, mat.p)) if K is None else as_matrix("K", K, rows=mat.m, cols=mat.p)
-    cert = recheck_certificate(mat.A, mat.G, mat.H, mat.C, P, L, K, alpha_v)
+    cert = recheck_lure_certificate(mat.A, mat.G, mat.H, mat.C, P, L, K, alpha_v)
     P_arr, L_arr = as_matrix("P", P), as_matrix("L", L)
     scale = max(1.0, float(np.linalg.norm(mat.H)))
     failures = []
@@ -937,7 +937,7 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     kappa : float, optional
         Bound on ``||P L||_2`` (without it the extended observer's rate may be unbounded).
     eps, eps_P, solver, tol, precheck
-        As in :func:`lure_observer_lmi` and :func:`max_decay_rate`.
+        As in :func:`lure_observer_lmi` and :func:`max_observer_decay_rate`.
 
     Returns
     -------
@@ -990,7 +990,7 @@ def design_lure_observer(plant: Any, *, variant: Variant = "extended",
     if isinstance(alpha, str):
         if alpha != "max":
             raise ModelError(f"alpha: expected a rate >= 0 or 'max', got {alpha!r}")
-        best = max_decay_rate(mat.A, mat.G, mat.H, mat.C, tol=tol, **kwargs)
+        best = max_observer_decay_rate(mat.A, mat.G, mat.H, mat.C, tol=tol, **kwargs)
         design = lure_observer_lmi(mat.A, mat.G, mat.H, mat.C, alpha=frac * best.alpha, **kwargs)
         alpha_max: float | None = best.alpha
     else:

@@ -312,29 +312,29 @@ def _simulate(s: Scenario, design: Any, h: float, T: float | None = None) -> _Ru
 
 
 def _infeasible(s: Scenario, variant: str, kappa: float | None = None) -> dict[str, Any]:
-    from ..design.lure_observer import max_decay_rate
+    from ..design.lure_observer import max_observer_decay_rate
     from ..errors import InfeasibleDesignError
 
     try:
-        d = max_decay_rate(**s.matrices, variant=variant, kappa=kappa, tol=1e-2)
+        d = max_observer_decay_rate(**s.matrices, variant=variant, kappa=kappa, tol=1e-2)
     except InfeasibleDesignError as exc:
         return {"feasible": False, "variant": variant, "status": exc.status, "reason": str(exc)}
     return {"feasible": True, "variant": variant, "alpha_max": d.alpha_max}
 
 
 def _run_siconos_lcs(ctx: dict[str, Any]) -> dict[str, Any]:
-    from ..design.lure_observer import max_decay_rate, observer_from_gains
+    from ..design.lure_observer import max_observer_decay_rate, observer_from_gains
 
     s = siconos_observer_lcs()
     design = observer_from_gains(**s.matrices, L=SICONOS_L, P=np.eye(2), alpha=1.0)
     run = _simulate(s, design, 1e-3)
     ctx["5.1"] = run
-    best = max_decay_rate(**s.matrices, variant="basic", kappa=100.0, tol=1e-2)
+    best = max_observer_decay_rate(**s.matrices, variant="basic", kappa=100.0, tol=1e-2)
     ctx["5.1_lmi"] = best
     out = run.summary(best.alpha_max)
     out["error_at_T"] = float(np.linalg.norm(run.traj.signal("y")[-1]))
     out["certificate"] = "P = I, L = [1, 1]^T, K = 0 (public example), alpha = 1"
-    out["alpha_max_extended_kappa100"] = max_decay_rate(**s.matrices, kappa=100.0,
+    out["alpha_max_extended_kappa100"] = max_observer_decay_rate(**s.matrices, kappa=100.0,
                                                         tol=1e-2).alpha_max
     ctx["per_example"].setdefault("5.1", []).append(check(
         "1. 5.1: bisected (kappa = 100) design fails a post-condition",
@@ -374,7 +374,7 @@ def _stick_statistics(traj: Any, friction: float) -> dict[str, Any]:
 
 
 def _run_coulomb(ctx: dict[str, Any]) -> dict[str, Any]:
-    from ..design.lure_observer import design_lure_observer, max_decay_rate
+    from ..design.lure_observer import design_lure_observer, max_observer_decay_rate
 
     s = coulomb_oscillator(0.0)
     design = design_lure_observer(s.plant(), variant="extended", kappa=20.0)
@@ -398,7 +398,7 @@ def _run_coulomb(ctx: dict[str, Any]) -> dict[str, Any]:
     out["state_diff_h1e-3_vs_h1e-4"] = float(np.max(np.abs(coarse - fine)))
     st = _stick_statistics(runs[1e-4].traj, friction=1.0)
     out["sticking_h1e-4"] = st
-    damped = max_decay_rate(**coulomb_oscillator(0.1).matrices, variant="basic", tol=5e-3)
+    damped = max_observer_decay_rate(**coulomb_oscillator(0.1).matrices, variant="basic", tol=5e-3)
     out["alpha_max_basic_c0.1"] = damped.alpha_max
     ctx["per_example"].setdefault("5.2", []).append(check(
         "1. 5.2: design fails a post-condition", _postcondition_failures(design), 0, "=="))
@@ -487,17 +487,17 @@ def _run_diode(ctx: dict[str, Any]) -> dict[str, Any]:
 
 
 def _run_relay(ctx: dict[str, Any]) -> dict[str, Any]:
-    from ..design.lure_observer import design_lure_observer, max_decay_rate
+    from ..design.lure_observer import design_lure_observer, max_observer_decay_rate
 
     s = relay_relative_degree_one("z")
-    rates = {v: max_decay_rate(**s.matrices, variant=v, tol=5e-3).alpha_max
+    rates = {v: max_observer_decay_rate(**s.matrices, variant=v, tol=5e-3).alpha_max
              for v in ("basic", "extended")}
     design = design_lure_observer(s.plant(), variant="basic", tol=1e-2)
     run = _simulate(s, design, 1e-3)
     ctx["5.5"] = run
     out = run.summary(rates["basic"])
     out["alpha_max_extended"] = rates["extended"]
-    out["alpha_max_extended_y_x1_kappa100"] = max_decay_rate(
+    out["alpha_max_extended_y_x1_kappa100"] = max_observer_decay_rate(
         **relay_relative_degree_one("x1").matrices, kappa=100.0, tol=1e-2).alpha_max
     _run_checks(ctx, "5.5", run)
     _add(ctx, check("3. 5.5 (C = H): max |alpha_max - 2| / 2 over both variants",
@@ -672,13 +672,13 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
 
 
 def _alpha_vs_kappa(out_dir: Path | None, figures: list[Path]) -> None:
-    from ..design.lure_observer import max_decay_rate
+    from ..design.lure_observer import max_observer_decay_rate
     from ._figures import new_figure, save_figure
 
     kappas = np.array([2.0, 5.0, 10.0, 20.0, 50.0, 100.0])
     fig, ax = new_figure(figsize=(6, 4))
     for s in (coulomb_oscillator(0.0), diode_circuit()):
-        rates = [max_decay_rate(**s.matrices, kappa=k, tol=1e-2).alpha_max for k in kappas]
+        rates = [max_observer_decay_rate(**s.matrices, kappa=k, tol=1e-2).alpha_max for k in kappas]
         ax.semilogx(kappas, rates, "o-", label=s.name + " (extended)")
     ax.set_xlabel("κ (bound on ||P L||)")
     ax.set_ylabel("α_max")

@@ -245,7 +245,7 @@ def _walk(a, K1, s_end, tol, skip_start, bern, crit, stack_b, stack_lo, stack_hi
 
 
 @njit(cache=True)
-def _coefficients(W, g0, i, y, a):  # pragma: no cover - compiled
+def guard_taylor_coefficients(W, g0, i, y, a):  # pragma: no cover - compiled
     """Taylor coefficients on a cell of guard ``i`` from the cell-start state ``y``."""
     K1, _, n = W.shape
     for j in range(K1):
@@ -366,7 +366,7 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
     ynorm = np.sqrt(np.sum(y0 * y0))
     falling = False
     for i in range(p):
-        _coefficients(W, g0, i, y0, a)
+        guard_taylor_coefficients(W, g0, i, y0, a)
         tol = graze_tol * (row_norm[i] * ynorm + abs(g0[i]))
         if a[0] > tol:
             continue
@@ -399,7 +399,7 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
         for i in range(p):
             if not active[i]:
                 continue
-            _coefficients(W, g0, i, y, a)
+            guard_taylor_coefficients(W, g0, i, y, a)
             m = K1
             while m > 1 and a[m - 1] == 0.0:
                 m -= 1
@@ -434,7 +434,7 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
             y[l] = x_start[l] / d[l]
         for i in range(p):
             if hit_out[i]:
-                _coefficients(W, g0, i, y, a)
+                guard_taylor_coefficients(W, g0, i, y, a)
                 sigma[i] = polish(a, sigma[i], graze_out[i] == 1)
     s_first = np.inf
     for i in range(p):
@@ -449,7 +449,7 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
     for i in range(p):
         if hit_out[i] or not active[i] or (skip0[i] and k == 0):
             continue
-        _coefficients(W, g0, i, y, a)
+        guard_taylor_coefficients(W, g0, i, y, a)
         if _horner(a, K1, s_first + delta) <= 0.0:
             hit_out[i] = 1
             graze_out[i] = 0

@@ -19,11 +19,13 @@ Decisions, in order:
 * a block that passes but with less than 0.9 of its requested margin, or a solution from an
   ``*_inaccurate`` status -> :class:`~nscontrol.errors.InaccurateCertificateWarning`.
 
-Badly scaled data (mechanical models with stiffnesses ~1e5) is handled by :class:`Scaling`: a
-diagonal similarity (``scipy.linalg.matrix_balance`` on ``Σ|A_i|``) and a time scale
-``ω = max ||Ã_i||``, under which Lyapunov-type LMIs are invariant (``P = D^{-1} P̃ D^{-1}``,
-decay rates ``α = ω α̃``). :func:`bisect_max` maximises a scalar (a decay rate) over a
-quasi-convex family of problems.
+Badly scaled data (mechanical models with stiffnesses ~1e5) is handled by
+:class:`~nscontrol.numerics.scaling.Scaling`: a diagonal similarity and a time scale
+``ω = max ||Ã_i||``, under which Lyapunov-type LMIs are invariant (``P = Sᵀ P̃ S``, decay
+rates ``α = ω α̃``). :func:`recheck_lyapunov` is the one NumPy re-check of a quadratic
+Lyapunov certificate ``A_iᵀP + PA_i + 2σP ⪯ 0`` that every design and analysis uses.
+:func:`bisect_max` maximises a scalar (a decay rate) over a quasi-convex family of problems;
+:func:`max_lyapunov_decay_rate` is its self-check on a single matrix.
 
 References
 ----------
@@ -39,18 +41,25 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-import scipy.linalg
 
 from .._validation import FloatArray, as_finite_scalar, as_real_scalar, as_square, check_positive
 from ..errors import InaccurateCertificateWarning, InfeasibleDesignError, ModelError
+from .scaling import Scaling
 
-__all__ = ["LMIProblem", "LMIResult", "Scaling", "BisectionResult", "bisect_max",
-           "lyapunov_certificate", "max_decay_rate", "sym", "SDP_SOLVERS", "solver_order",
+__all__ = ["LMIProblem", "LMIResult", "BisectionResult", "LyapunovCheck",
+           "LYAPUNOV_RECHECK_RTOL", "bisect_max", "lyapunov_certificate",
+           "max_lyapunov_decay_rate", "recheck_lyapunov", "sym", "SDP_SOLVERS", "solver_order",
            "solver_options"]
 
 SolverName = Literal["auto", "CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT"]
 _ACCEPTED = ("optimal", "optimal_inaccurate")
 _SCS_OPTIONS = {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 20_000}
+
+#: Relative threshold of :meth:`LyapunovCheck.holds` for a certificate that was solved in
+#: scaled coordinates and mapped back: ``λ_max(A_iᵀP + PA_i + 2σP) <= 1e-8·‖P‖₂``. It sits far
+#: above the rounding of forming ``A_iᵀP + PA_i`` (about ``n·u·‖A_i‖‖P‖``) for the well-scaled
+#: closed loops the designs return, and far below the strictness margins they ask for.
+LYAPUNOV_RECHECK_RTOL = 1e-8
 
 #: CVXPY solvers that handle the semidefinite cones of an LMI problem (CVXPY's spelling).
 SDP_SOLVERS = ("CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT")
@@ -383,50 +392,87 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating))
 
 
-# ----------------------------------------------------------------------------- scaling
+# ----------------------------------------------------------------------------- Lyapunov
 @dataclass(frozen=True)
-class Scaling:
-    """State and time scaling ``x̃ = D^{-1} x``, ``τ = ω t``: ``Ã = D^{-1} A D / ω``.
+class LyapunovCheck:
+    """NumPy re-check of a quadratic Lyapunov certificate ``A_iᵀP + PA_i + 2σP ⪯ 0``, ``P ≻ 0``.
 
     Attributes
     ----------
-    d : ndarray
-        Diagonal of ``D`` (powers of two, from balancing: exact in floating point).
-    omega : float
-        Time scale.
+    P_min_eig : float
+        Smallest eigenvalue of ``sym(P)``.
+    lyap_max_eig : float
+        ``max_i λ_max(sym(A_iᵀP + PA_i + 2σP))`` over the matrices checked.
+    P_norm : float
+        ``‖P‖₂``.
     """
 
-    d: FloatArray
-    omega: float
+    P_min_eig: float
+    lyap_max_eig: float
+    P_norm: float
 
-    @classmethod
-    def for_matrices(cls, As: Sequence[Any]) -> Scaling:
-        """A common balancing similarity and time scale for the matrices ``As``."""
-        mats = [as_square(f"As[{i}]", A) for i, A in enumerate(As)]
-        if not mats:
-            raise ModelError("As: expected at least one matrix, got none")
-        _, (d, _) = scipy.linalg.matrix_balance(sum(np.abs(A) for A in mats), permute=False,
-                                                separate=True)
-        d = d.astype(float)
-        norms = [np.linalg.norm(A * (1.0 / d)[:, None] * d[None, :], 2) for A in mats]
-        omega = max(max(norms), 1e-300)
-        return cls(d, float(omega))
+    @property
+    def residual(self) -> float:
+        """``lyap_max_eig / ‖P‖₂``: the inequality's violation relative to the certificate."""
+        return self.lyap_max_eig / self.P_norm
 
-    def matrix(self, A: Any) -> FloatArray:
-        """``D^{-1} A D / ω``."""
-        return np.asarray(A, dtype=float) / self.d[:, None] * self.d[None, :] / self.omega
-
-    def quadratic_back(self, P_scaled: Any) -> FloatArray:
-        """``P = D^{-1} P̃ D^{-1}`` so that ``x̃ᵀ P̃ x̃ = xᵀ P x``."""
-        return np.asarray(P_scaled, dtype=float) / self.d[:, None] / self.d[None, :]
+    def holds(self, rtol: float = 0.0) -> bool:
+        """``P ≻ 0`` and ``lyap_max_eig <= rtol·‖P‖₂`` (``rtol`` from the caller's rounding
+        estimate, e.g. ``1e-8`` for a solver's certificate mapped back from scaled data)."""
+        rtol = check_positive("rtol", rtol, allow_zero=True)
+        return bool(self.P_min_eig > 0.0 and self.lyap_max_eig <= rtol * self.P_norm)
 
 
-# ----------------------------------------------------------------------------- Lyapunov
+def recheck_lyapunov(As: Sequence[Any], P: Any, decay: float = 0.0) -> LyapunovCheck:
+    """Re-check ``P`` as a common quadratic Lyapunov function of the matrices ``As``.
+
+    Parameters
+    ----------
+    As : sequence of (n, n) array_like
+        The matrices (modes, or closed loops) the certificate must hold for.
+    P : (n, n) array_like
+        The certificate (symmetrised before use).
+    decay : float
+        Rate ``σ``: ``V = xᵀPx`` must satisfy ``V' <= -2σV`` along every ``x' = A_i x``.
+
+    Returns
+    -------
+    LyapunovCheck
+        Its numbers; :meth:`LyapunovCheck.holds` decides.
+
+    Raises
+    ------
+    ModelError, DimensionError
+        ``P`` or an ``A_i`` not a finite square matrix of the same size; ``decay`` not a
+        finite real number.
+
+    Examples
+    --------
+    >>> A = np.array([[-1.0, 2.0], [0.0, -3.0]])
+    >>> chk = recheck_lyapunov([A], np.eye(2))
+    >>> chk.P_min_eig, round(chk.lyap_max_eig, 6), chk.holds()
+    (1.0, -1.171573, True)
+    >>> recheck_lyapunov([A], np.eye(2), decay=1.0).holds()
+    False
+    """
+    P = as_square("P", P)
+    P = 0.5 * (P + P.T)
+    decay = as_finite_scalar("decay", decay)
+    worst = -np.inf
+    for i, A in enumerate(As):
+        A = as_square(f"As[{i}]", A, P.shape[0])
+        M = A.T @ P + P @ A + 2.0 * decay * P
+        worst = max(worst, float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]))
+    return LyapunovCheck(float(np.linalg.eigvalsh(P)[0]), float(worst),
+                         float(np.linalg.norm(P, 2)))
+
+
 def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
                          scale: bool = True, solver: SolverName = "auto") -> LMIResult:
     """A quadratic Lyapunov function proving ``Re λ(A) < -decay``.
 
-    Solves ``P ⪰ I``, ``AᵀP + PA + 2·decay·P ⪯ -margin·I`` (after :class:`Scaling` when
+    Solves ``P ⪰ I``, ``AᵀP + PA + 2·decay·P ⪯ -margin·I`` (after
+    :meth:`Scaling.balanced <nscontrol.numerics.scaling.Scaling.balanced>` when
     ``scale``), maps ``P`` back to the original coordinates and checks the unscaled
     inequalities once more (``P ≻ 0``, ``λ_max(AᵀP + PA + 2·decay·P) < 0``).
 
@@ -466,7 +512,7 @@ def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
     A = as_square("A", A)
     decay = as_finite_scalar("decay", decay)
     n = A.shape[0]
-    sc = Scaling.for_matrices([A]) if scale else Scaling(np.ones(n), 1.0)
+    sc = Scaling.balanced([A]) if scale else Scaling.identity(n)
     As, alpha = sc.matrix(A), decay / sc.omega
     prob = LMIProblem(f"Lyapunov certificate (decay {decay:.6g})")
     P = prob.symmetric("P", n)
@@ -476,16 +522,14 @@ def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
     res = prob.solve(solver=solver)
     P_orig = sc.quadratic_back(res["P"])
     # re-verify the returned P itself; eigenvalues are taken on the congruent form
-    # D (AᵀP + PA + 2αP) D / ω (D powers of two: exact), which has the same inertia and is
+    # S⁻ᵀ(AᵀP + PA + 2αP)S⁻¹ / ω (S powers of two: exact), which has the same inertia and is
     # well conditioned even when A is not
-    Pc = P_orig * sc.d[:, None] * sc.d[None, :]
-    lyap = As.T @ Pc + Pc @ As + 2.0 * alpha * Pc
-    lam_max = float(np.linalg.eigvalsh(0.5 * (lyap + lyap.T))[-1])
-    if not (np.linalg.eigvalsh(Pc)[0] > 0.0 and lam_max < 0.0):
+    check = recheck_lyapunov([As], sc.quadratic_scaled(P_orig), alpha)
+    if not (check.P_min_eig > 0.0 and check.lyap_max_eig < 0.0):
         raise InfeasibleDesignError(
             f"A: the certificate does not hold in the original coordinates "
-            f"(λ_max of the scaled AᵀP + PA + 2αP = {lam_max:.3g}); decay {decay} is too close "
-            "to the spectral abscissa", status="recheck_failed")
+            f"(λ_max of the scaled AᵀP + PA + 2αP = {check.lyap_max_eig:.3g}); decay {decay} "
+            "is too close to the spectral abscissa", status="recheck_failed")
     return LMIResult({"P": P_orig}, res.status, res.solver, res.margins, res.required,
                      res.residuals, res.objective)
 
@@ -558,8 +602,8 @@ def bisect_max(feasible: Callable[[float], Any], lo: float, hi: float, *,
     return BisectionResult(lo, hi, best, iterations)
 
 
-def max_decay_rate(A: Any, *, tol: float = 1e-4, margin: float = 1e-6,
-                   solver: SolverName = "CLARABEL") -> BisectionResult:
+def max_lyapunov_decay_rate(A: Any, *, tol: float = 1e-4, margin: float = 1e-6,
+                            solver: SolverName = "CLARABEL") -> BisectionResult:
     """Largest ``α`` with a Lyapunov certificate ``AᵀP + PA + 2αP ≺ 0`` (bisection).
 
     For a constant ``A`` it approaches minus the spectral abscissa ``-max Re λ(A)`` from

@@ -21,7 +21,7 @@ A guard is ``g_i(t) = G_i e^{At} x0 + g0_i``. The search never samples ``g`` alo
 on a certified local representation of ``g`` and of ``g'``.
 
 1. *Balance and grid.* ``A`` is balanced by a diagonal similarity ``A = D Ab D^{-1}``
-   (``scipy.linalg.matrix_balance``) and the horizon is cut into cells of width
+   (:func:`~nscontrol.numerics.scaling.balance`) and the horizon is cut into cells of width
    ``h = 1/||Ab||_2``. Cell start states are ``y_{k+1} = Φ y_k`` with ``Φ = e^{Ab h}``
    (computed once per flow and cached). The whole search (steps 2-6) is one numba kernel
    (:func:`nscontrol.numerics._lti_kernels.search`), which integrators also call from their
@@ -80,6 +80,7 @@ from .._validation import (
     check_positive,
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError
+from .scaling import balance
 
 __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "GuardEvent",
            "first_event"]
@@ -88,7 +89,9 @@ __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "G
 EIG_COND_LIMIT = 1e5
 #: Taylor degree per cell; with ||Ab h|| = 1 the remainder is below e/(K+1)! ≈ 2e-17.
 TAYLOR_DEGREE = 18
-_REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
+#: Bound ``e/(K+1)!`` of the Taylor remainder on one cell (``||Ab h|| = 1``), passed to the
+#: compiled search by every caller.
+TAYLOR_REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
 
 
 # --------------------------------------------------------------------------- exosystem
@@ -411,10 +414,10 @@ class _GuardContext:
 
         A = flow.A
         n = A.shape[0]
-        Ab, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
-        self.d = np.ascontiguousarray(scale, dtype=float)
-        norm = float(np.linalg.norm(Ab, 2)) if n else 0.0
-        self.h = 1.0 / norm if norm > 0.0 else 1.0
+        d, omega = balance([A])
+        Ab = A / d[:, None] * d[None, :]
+        self.d = np.ascontiguousarray(d, dtype=float)
+        self.h = 1.0 / omega
         self.Ab = Ab
         self.phi = np.ascontiguousarray(scipy.linalg.expm(Ab * self.h)) if n else np.eye(0)
         K = TAYLOR_DEGREE
@@ -527,7 +530,7 @@ def _search(ctx: _GuardContext, x0: FloatArray, G: FloatArray, g0: FloatArray, t
     W, row_norm = ctx.guard_data(G)
     p = G.shape[0]
     hit, graze = np.zeros(p, dtype=np.int8), np.zeros(p, dtype=np.int8)
-    code, t, index = search(W, g0, row_norm, graze_tol, simultaneous_tol, _REMAINDER, ctx.phi,
+    code, t, index = search(W, g0, row_norm, graze_tol, simultaneous_tol, TAYLOR_REMAINDER, ctx.phi,
                             ctx.bern, x0 / ctx.d, ctx.h, t_max, ctx.kind, ctx.lam,
                             ctx.V, ctx.Vinv, ctx.taylor, ctx.d, hit, graze)
     if code == NEGATIVE:

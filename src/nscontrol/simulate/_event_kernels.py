@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lti_kernels import EVENT, NEGATIVE, _coefficients, propagate, search
+from ..numerics._lti_kernels import EVENT, NEGATIVE, guard_taylor_coefficients, propagate, search
 
 #: Return codes of :func:`run_linear_jumps`.
 DONE, HANDOFF, FULL, INADMISSIBLE = 0, 1, 2, 3
@@ -152,7 +152,7 @@ def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, 
     ynorm = np.sqrt(np.sum(y * y))
     for j in range(p):
         if j != i:
-            _coefficients(W, g0, j, y, a)
+            guard_taylor_coefficients(W, g0, j, y, a)
             if a[0] <= _CLOSED_TOL * (row_norm[j] * ynorm + abs(g0[j])):
                 return -1  # a contact closed elsewhere: the multi-contact law decides
     status, _ = zeno_status(hist, count, first, zeno_slot[i], t, geometric, ratio_tol,
@@ -166,7 +166,7 @@ def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, 
         xn[r] = s
     for j in range(n):
         y[j] = xn[j] / d[j]
-    _coefficients(W, g0, i, y, a)
+    guard_taylor_coefficients(W, g0, i, y, a)
     if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
         return -1  # it would not leave its surface (rest, persistent contact)
     return i

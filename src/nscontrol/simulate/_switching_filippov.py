@@ -34,7 +34,7 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..errors import ModelError, SolverError
-from ..systems.switched import _fd_jacobian
+from ..numerics.differences import central_difference_jacobian
 from .switching import saltation_matrix
 
 _GRAZE_FACTOR = 100.0
@@ -70,7 +70,7 @@ class _Fields:
         if sliding < 0:
             return lambda t, x: self.s.jac(t, x, signs)
         f = self.rhs(signs, sliding)
-        return lambda t, x: _fd_jacobian(lambda xx: f(t, xx), x)
+        return lambda t, x: central_difference_jacobian(lambda xx: f(t, xx), x)
 
 
 def _mode_code(signs: tuple[int, ...], sliding: int) -> int:

@@ -239,9 +239,9 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     from scipy.integrate import solve_ivp
 
     u = options.get("u", system.u)
-    from ..systems.lure import _input_function
+    from ..systems.lure import as_input_function
 
-    ufn = _input_function("u", u, system.E.shape[1])
+    ufn = as_input_function("u", u, system.E.shape[1])
 
     def field(i: int, t: float, x: FloatArray) -> FloatArray:
         return system.A[i] @ x + system.b[i] + system.E @ ufn(t)[0]

@@ -217,11 +217,11 @@ class ClosedLoop:
 # -- stacking linear blocks -------------------------------------------------------------------
 def _stack(loop: ClosedLoop) -> Any:
     """The loop as one model of the plant's family, or ``None`` (blocks run in Python)."""
+    from ..systems.hybrid import LinearHybridSystem
     from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
     from ..systems.lure import LureSystem
     from ..systems.pwa import PiecewiseAffineSystem
-    from .hybrid import LinearHybridSystem
 
     plant, ctrl, obs = loop.plant, loop.controller, loop.observer
     linear_blocks = (_is_linear_block(ctrl, "controller") and
@@ -354,7 +354,7 @@ def _controller_maps(ctrl: Any, Px: FloatArray, Xhat: FloatArray, Pc: FloatArray
 
 
 def _stack_hybrid(loop: ClosedLoop) -> Any:
-    from .hybrid import LinearHybridSystem
+    from ..systems.hybrid import LinearHybridSystem
 
     p = loop._plant_model()
     n = p.n_states

@@ -39,9 +39,9 @@ class EventDriven(_ModuleIntegrator):
 
     @classmethod
     def supports(cls, system: Any) -> bool:
+        from ..systems.hybrid import LinearHybridSystem
         from ..systems.impacting_bodies import ImpactingBodies
         from ..systems.lagrangian import LagrangianSystem
-        from .hybrid import LinearHybridSystem
 
         return isinstance(system, LinearHybridSystem | LagrangianSystem | ImpactingBodies)
 

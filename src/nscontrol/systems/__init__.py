@@ -1,2 +1,2 @@
-"""Models, validated at construction: mechanical systems with impacts, Lur'e systems,
-piecewise-affine, Filippov and switched affine systems."""
+"""Models, validated at construction: mechanical systems with impacts, linear hybrid systems,
+Lur'e systems, piecewise-affine, Filippov and switched affine systems."""

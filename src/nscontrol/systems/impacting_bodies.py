@@ -27,6 +27,7 @@ from .._validation import (
     check_symmetric,
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError
+from .hybrid import LinearHybridSystem
 
 __all__ = ["ImpactingBodies", "stiffness_from_springs"]
 
@@ -231,8 +232,8 @@ class ImpactingBodies:
         qb, vb = 2 * na + np.arange(nb), 2 * na + nb + np.arange(nb)
         return np.concatenate([qa, qb, va, vb])
 
-    def hybrid(self, u: Any = None) -> Any:
-        """The plant as a :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`.
+    def hybrid(self, u: Any = None) -> LinearHybridSystem:
+        """The plant as a :class:`~nscontrol.systems.hybrid.LinearHybridSystem`.
 
         Parameters
         ----------
@@ -246,8 +247,6 @@ class ImpactingBodies:
             Flow ``blockdiag(A_a, A_b, S)`` with ``B_a Cu`` coupling, guard
             ``q_na+1 - q_na >= 0``, jump = restitution map, outputs ``y`` and ``u``.
         """
-        from ..simulate.hybrid import LinearHybridSystem
-
         na2, nb2 = 2 * self.n_a, 2 * self.n_b
         S = np.zeros((0, 0)) if u is None else np.atleast_2d(np.asarray(u.S, float))
         Cu = np.zeros((1, 0)) if u is None else np.atleast_2d(np.asarray(u.Cu, float))

@@ -85,7 +85,7 @@ def _check_picklable(system: Any) -> None:
             fn.__getstate__()
 
 
-def _input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
+def as_input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
     """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
 
     Accepts ``None``, an :class:`~nscontrol.numerics.lti.Exosystem` (anything with a ``u``
@@ -214,8 +214,8 @@ class LureSystem:
             B = as_matrix("B", self.B, rows=n)
         if self.u is not None and B is None:
             raise ModelError("u: an input u(t) was given but B is None; pass B (n, q)")
-        u_fn = None if B is None else _input_function("u", self.u, B.shape[1])
-        g_fn = _input_function("g", self.g, m)
+        u_fn = None if B is None else as_input_function("u", self.u, B.shape[1])
+        g_fn = as_input_function("g", self.g, m)
         if self.state_names and len(self.state_names) != n:
             raise DimensionError(f"state_names: expected {n} names, got "
                                  f"{len(self.state_names)}")

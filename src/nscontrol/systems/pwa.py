@@ -25,7 +25,7 @@ import numpy as np
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
-from .lure import _input_function
+from .lure import as_input_function
 
 __all__ = ["PiecewiseAffineSystem", "CONTINUITY_RTOL"]
 
@@ -160,7 +160,7 @@ class PiecewiseAffineSystem:
                            ("domain", dom), ("state_names", tuple(self.state_names))):
             object.__setattr__(self, key, value)
         object.__setattr__(self, "_u_fn", None if E is None else
-                           _input_function("u", self.u, E.shape[1]) if self.u is not None
+                           as_input_function("u", self.u, E.shape[1]) if self.u is not None
                            else None)
         self._check_partition()
 
@@ -353,7 +353,7 @@ class PiecewiseAffineSystem:
         elif self.E is None:
             raise ModelError("u: this system has no input matrix E")
         else:
-            fn = _input_function("u", u, self.E.shape[1])
+            fn = as_input_function("u", u, self.E.shape[1])
         return None if fn is None else fn(t)[0]
 
     # -- partition checks -----------------------------------------------------------------

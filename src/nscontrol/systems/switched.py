@@ -29,18 +29,9 @@ from .._validation import (
     check_positive,
 )
 from ..errors import DimensionError, ModelError
+from ..numerics.differences import central_difference_gradient, central_difference_jacobian
 
 __all__ = ["FilippovSystem", "SwitchedAffineSystem", "PWMController"]
-
-
-def _fd_gradient(h: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
-    g = np.empty_like(x)
-    for k in range(x.shape[0]):
-        d = 1e-7 * (1.0 + abs(x[k]))
-        e = np.zeros_like(x)
-        e[k] = d
-        g[k] = (h(x + e) - h(x - e)) / (2.0 * d)
-    return g
 
 
 def _probe_state(n: int) -> FloatArray:
@@ -218,7 +209,7 @@ class FilippovSystem:
                 raise DimensionError(f"gradients[{j}]: expected grad_{j}(x) of shape "
                                      f"({self.n_states},), got shape {g.shape}")
             return g
-        return _fd_gradient(self.surfaces[j], np.asarray(x, float))
+        return central_difference_gradient(self.surfaces[j], np.asarray(x, float))
 
     def jac(self, t: float, x: FloatArray, signs: tuple[int, ...]) -> FloatArray:
         """The Jacobian of the field on one side.
@@ -239,8 +230,8 @@ class FilippovSystem:
         """
         if self.jacobian is not None:
             return np.asarray(self.jacobian(t, x, signs), float)
-        return _fd_jacobian(lambda xx: np.asarray(self.field(t, xx, signs), float),
-                            np.asarray(x, float))
+        return central_difference_jacobian(
+            lambda xx: np.asarray(self.field(t, xx, signs), float), np.asarray(x, float))
 
     @classmethod
     def two_sided(cls, f_minus: Callable[[float, FloatArray], FloatArray],
@@ -316,17 +307,6 @@ class _TwoSided:
 
     def __call__(self, t: float, x: FloatArray, signs: tuple[int, ...]) -> FloatArray:
         return self.f_plus(t, x) if signs[0] > 0 else self.f_minus(t, x)
-
-
-def _fd_jacobian(f: Callable[[FloatArray], FloatArray], x: FloatArray) -> FloatArray:
-    n = x.shape[0]
-    J = np.empty((n, n))
-    for k in range(n):
-        d = 1e-6 * (1.0 + abs(x[k]))
-        e = np.zeros(n)
-        e[k] = d
-        J[:, k] = (f(x + e) - f(x - e)) / (2.0 * d)
-    return J
 
 
 @dataclass(frozen=True, eq=False)

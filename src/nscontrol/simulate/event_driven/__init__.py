@@ -2,7 +2,7 @@
 
 Integrates
 
-* :class:`~nscontrol.simulate.hybrid.LinearHybridSystem` — exact: ``e^{At}`` between events,
+* :class:`~nscontrol.systems.hybrid.LinearHybridSystem` — exact: ``e^{At}`` between events,
   events located on the exact solution by :func:`nscontrol.numerics.lti.first_event`;
 * :class:`~nscontrol.systems.LagrangianSystem` that is linear between events (constant ``M``,
   linear forces, affine gaps), optionally driven by an exosystem input — exact as well: the
@@ -57,9 +57,9 @@ from typing import Any
 import numpy as np
 
 from ...errors import ModelError, NscontrolError
+from ...systems.hybrid import LinearHybridSystem
 from ...systems.impacting_bodies import ImpactingBodies
 from ...systems.lagrangian import LagrangianSystem
-from ..hybrid import LinearHybridSystem
 from ..trajectory import Trajectory
 from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
 from ._recording import _guarded, partial_in_caller_order, reorder_listeners, reorder_states

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..._validation import FloatArray
 from ...errors import InadmissibleStateError, SolverError
-from ...numerics.lti import _REMAINDER, TAYLOR_DEGREE, LTIFlow
+from ...numerics.lti import TAYLOR_DEGREE, TAYLOR_REMAINDER, LTIFlow
 from .._event_kernels import DONE, FULL, HANDOFF, INADMISSIBLE, run_linear_jumps
 from ._options import _Options
 from ._recording import _Samples
@@ -52,7 +52,7 @@ class _Flight:
         while True:
             s_t, s_x = samples.free()
             code, t, n_s, n_e = run_linear_jumps(
-                self.W, self.g0, self.row_norm, 1e-12, 1e-12, _REMAINDER, ctx.phi, ctx.bern,
+                self.W, self.g0, self.row_norm, 1e-12, 1e-12, TAYLOR_REMAINDER, ctx.phi, ctx.bern,
                 ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
                 self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, zeno.first, geometric,
                 opts.ratio_tol, opts.horizon, opts.rel, opts.min_interval,

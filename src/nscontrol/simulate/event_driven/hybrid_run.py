@@ -1,4 +1,4 @@
-"""Event-driven run of a :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`: exact flow,
+"""Event-driven run of a :class:`~nscontrol.systems.hybrid.LinearHybridSystem`: exact flow,
 compiled events for matrix jumps, Python for callable jumps and grazing."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from ._zeno import _Zeno
 
 
 class HybridRun:
-    """Exact simulation of a :class:`~nscontrol.simulate.hybrid.LinearHybridSystem`."""
+    """Exact simulation of a :class:`~nscontrol.systems.hybrid.LinearHybridSystem`."""
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float,
                  opts: _Options) -> None:
