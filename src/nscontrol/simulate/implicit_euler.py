@@ -579,11 +579,12 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
     n = system.n_states
-    rec = Recorder(n, every=options.get("record_every", 1), signals=options.get("signals"),
-                   offered=_SIGNALS)
-    x0 = as_vector("x0", x0, n)
     t0, tf = t_span
     n_steps = max(1, math.ceil((tf - t0) / h_req - 1e-9))
+    every = options.get("record_every", 1)
+    rec = Recorder(n, every=every, signals=options.get("signals"), offered=_SIGNALS,
+                   capacity=Recorder.capacity_for(n_steps + 2, every))
+    x0 = as_vector("x0", x0, n)
     h = (tf - t0) / n_steps
     mats = StepMatrices(system, h, theta)
     plan = _plan(system, mats.Dh, h)

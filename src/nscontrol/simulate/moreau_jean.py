@@ -265,7 +265,8 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     h_last = (tf - t0) - n_full * h
     n_steps = n_full + (1 if h_last > 1e-9 * h else 0)
     rec = Recorder(system.n_states, every=record_every, signals=signals,
-                   offered=("impulse", "gap", "energy"))
+                   offered=("impulse", "gap", "energy"),
+                   capacity=Recorder.capacity_for(n_steps + 2, record_every))
     _sample_initial(rec, system, t0, x0)
     setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces,
                    mass_at)

@@ -679,6 +679,14 @@ class Recorder:
         on; used for the partial trajectory of a run that fails)."""
         return self._freeze(status, message, method, {}, ())
 
+    @staticmethod
+    def capacity_for(n_samples: int, every: Any = 1) -> int:
+        """An initial ``capacity`` for about ``n_samples`` offered samples kept one in
+        ``every`` (so a run of known length never regrows its buffers), bounded by 2**20 rows
+        (past that the buffers double as needed)."""
+        k = every if isinstance(every, int) and every >= 1 else 1
+        return int(min(max(n_samples, 0) // k + 4, 2**20))
+
     def wants(self, name: str) -> bool:
         """Whether signal ``name`` is to be recorded (integrators may skip computing it)."""
         return self.keep is None or name in self.keep
