@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_vector, check_positive
 from ..errors import DimensionError, ModelError, SolverError
@@ -241,7 +241,7 @@ def _linear_guess(system: Any, u: Any) -> FloatArray:
     n = int(system.n_states)
     A_list = getattr(system, "A", None)
     exo = u if u is not None else getattr(system, "u", None)
-    if not isinstance(A_list, (list, tuple)) or not hasattr(exo, "S"):
+    if not isinstance(A_list, (list, tuple)) or exo is None or not hasattr(exo, "S"):
         return np.zeros(n)
     try:
         A = sum(np.asarray(a, float) for a in A_list) / len(A_list)
@@ -672,7 +672,7 @@ class FrequencyResponse:
     errors: tuple[Any, ...] = ()
 
     @classmethod
-    def from_points(cls, omegas: Sequence[float], points: Sequence[HarmonicResponse | None],
+    def from_points(cls, omegas: ArrayLike, points: Sequence[HarmonicResponse | None],
                     *, direction: str, amplitude: float, n_harmonics: int,
                     errors: Sequence[Any] = ()) -> FrequencyResponse:
         def col(attr: str, fill: Any) -> np.ndarray:
@@ -974,7 +974,7 @@ def frequency_sweep(system: Any, omegas: Any, *, amplitude: float = 1.0, output:
                 resp[i] = v
             elif v is not None:
                 errs[i] = v
-            else:  # the whole branch task failed (lost worker, unpicklable system...)
+            elif err is not None:  # the whole branch task failed (lost worker, pickling...)
                 errs[i] = sweep.PointError(i, err.type, f"ω = {wi:g}: the {d} sweep failed "
                                            f"as a whole: {err.message}", err.traceback)
         out[d] = FrequencyResponse.from_points(w, resp, direction=d, amplitude=amplitude,

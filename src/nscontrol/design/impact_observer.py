@@ -885,7 +885,7 @@ class _WindowReconstructor:
                 f"window: the samples determine only {rank} of {na2} states of body a "
                 f"(singular values {sv[0]:.3g} .. {sv[-1]:.3g}); lengthen the window",
                 status="rank_deficient")
-        return sol
+        return np.asarray(sol, dtype=float)
 
     def before(self, ts: FloatArray, ys: FloatArray, t: float, window: float) -> FloatArray:
         """``x_a(t)`` from the samples in ``(t - window, t]``."""

@@ -35,8 +35,8 @@ class Coulomb(Relay):
     """
 
     bound: Any = field(init=False, default=None)     # derived: mu * normal_force
-    mu: FloatArray = field(default=None)  # type: ignore[assignment]
-    normal_force: FloatArray = field(default=None)  # type: ignore[assignment]
+    mu: FloatArray = field(init=False)            # set by the own __init__ below
+    normal_force: FloatArray = field(init=False)  # set by the own __init__ below
 
     def __init__(self, mu: Any, normal_force: Any = 1.0, dim: int | None = None) -> None:
         if dim is not None:
@@ -154,6 +154,9 @@ class Stribeck(SetValuedLaw):
     delta: Any = 2.0
     viscous: Any = 0.0
     dim: int = field(default=None)  # type: ignore[assignment]
+    # slope constants, derived in __post_init__
+    sigma_tan: FloatArray = field(init=False, repr=False)
+    sigma_sec: FloatArray = field(init=False, repr=False)
     componentwise = True
 
     def __post_init__(self) -> None:
@@ -228,9 +231,12 @@ class Stribeck(SetValuedLaw):
         if np.any(sig < self.sigma_tan * (1.0 - 1e-12)):
             raise ModelError(f"sigma: expected sigma >= sigma_tan = {self.sigma_tan} so that "
                              f"phi + sigma I is monotone, got {sig}")
-        part = Stribeck(self.static, self.coulomb, self.stribeck_velocity, self.delta,
-                        self.viscous + sig)
-        return LoopTransformation(monotone_part=part, slope=sig)
+        return LoopTransformation(monotone_part=self._shifted(sig), slope=sig)
+
+    def _shifted(self, sigma: FloatArray) -> Stribeck:
+        """``phi + diag(sigma) I``: the same law with viscous term ``b + sigma``."""
+        return Stribeck(self.static, self.coulomb, self.stribeck_velocity, self.delta,
+                        self.viscous + sigma)
 
     # -- SetValuedLaw hooks ---------------------------------------------------------------
     def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray:
@@ -276,6 +282,8 @@ class AsymmetricStribeck(SetValuedLaw):
 
     plus: Stribeck
     minus: Stribeck
+    sigma_tan: FloatArray = field(init=False, repr=False)
+    sigma_sec: FloatArray = field(init=False, repr=False)
     componentwise = True
 
     def __post_init__(self) -> None:
@@ -298,6 +306,9 @@ class AsymmetricStribeck(SetValuedLaw):
                                                                               self.dim)
         plus = self.plus.loop_transformation(sig).monotone_part
         minus = self.minus.loop_transformation(sig).monotone_part
+        # Stribeck.loop_transformation's monotone part is a Stribeck (checked, not assumed)
+        if not (isinstance(plus, Stribeck) and isinstance(minus, Stribeck)):
+            raise ModelError("plus, minus: their loop transformations are not Stribeck laws")
         return LoopTransformation(monotone_part=AsymmetricStribeck(plus, minus), slope=sig)
 
     def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray:

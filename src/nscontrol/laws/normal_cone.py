@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -61,8 +61,8 @@ class NormalConeBox(SetValuedLaw):
     lower: Any = 0.0
     upper: Any = np.inf
     dim: int = field(default=None)  # type: ignore[assignment]
-    monotone: ClassVar[bool] = True
-    componentwise: ClassVar[bool] = True
+    monotone = True
+    componentwise = True
 
     def __post_init__(self) -> None:
         dim = self.dim

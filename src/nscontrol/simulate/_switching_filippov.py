@@ -252,7 +252,7 @@ def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
 
     def exit_event(side: int) -> Any:
         def ev(t: float, y: FloatArray) -> float:
-            return fields.sigmas(t, y[:n], signs, sliding)[0 if side < 0 else 1]
+            return float(fields.sigmas(t, y[:n], signs, sliding)[0 if side < 0 else 1])
         ev.terminal, ev.direction = True, float(side)  # type: ignore[attr-defined]
         return ev
 

@@ -242,6 +242,8 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     from ..systems.lure import as_input_function
 
     ufn = as_input_function("u", u, system.E.shape[1])
+    if ufn is None:   # this path is taken only for inputs given as functions of time
+        raise ModelError("u: expected an input function of time for the DOP853 path, got None")
 
     def field(i: int, t: float, x: FloatArray) -> FloatArray:
         return system.A[i] @ x + system.b[i] + system.E @ ufn(t)[0]

@@ -499,7 +499,7 @@ def _forward_backward(law: Any, a: FloatArray, Dh: FloatArray) -> tuple[FloatArr
     z = a.copy()
     for _ in range(100_000):
         z_new = np.asarray(law.resolvent(z - gamma * (Dinv @ (z - a)), gamma=gamma), float)
-        if np.linalg.norm(z_new - z) <= 1e-13 * max(1.0, np.linalg.norm(z)):
+        if np.linalg.norm(z_new - z) <= 1e-13 * max(1.0, float(np.linalg.norm(z))):
             return z_new, Dinv @ (z_new - a)
         z = z_new
     raise SolverError("implicit_euler: forward-backward iteration for the one-step inclusion "
@@ -604,7 +604,7 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     with TimeProgress(t0, tf, desc="implicit_euler", enable=options.get("progress")) as bar:
         while done < n_steps:
             k1 = min(n_steps, done + _CHUNK)
-            times = t0 + h * np.arange(done, k1 + 1)
+            times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
             try:
                 X, Z, W = stepper.run(x, times)
             except SolverError as exc:

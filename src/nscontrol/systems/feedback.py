@@ -28,9 +28,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_vector, check_positive
 from ..errors import DimensionError, ModelError
@@ -216,9 +217,14 @@ class PiecewiseStateFeedback(_Block):
         One offset per region (default zeros).
     """
 
-    K: Sequence[Any]
-    k: Sequence[Any] | None = None
+    # The fields hold the validated arrays; __init__ accepts sequences of array_like.
+    K: tuple[FloatArray, ...]
+    k: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
     n_states: int = field(default=0, init=False)
+
+    if TYPE_CHECKING:
+        def __init__(self, K: Sequence[ArrayLike],
+                     k: Sequence[ArrayLike] | None = None) -> None: ...
 
     def __post_init__(self) -> None:
         Ks = tuple(as_matrix(f"K[{i}]", Ki) for i, Ki in enumerate(self.K))

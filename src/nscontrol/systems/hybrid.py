@@ -14,9 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, InadmissibleStateError, ModelError
@@ -83,6 +84,12 @@ class LinearHybridSystem:
     jump_matrices: FloatArray | None = field(init=False, repr=False)
 
     default_method = "event_driven"
+
+    if TYPE_CHECKING:
+        # What the constructor accepts (the dataclass fields hold the validated arrays).
+        def __init__(self, A: ArrayLike, G: ArrayLike, g0: ArrayLike, jump: JumpMap | Any,
+                     state_names: Sequence[str] = (), outputs: Mapping[str, Any] | None = None,
+                     admissible: Callable[[FloatArray], str | None] | None = None) -> None: ...
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__

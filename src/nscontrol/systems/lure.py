@@ -14,11 +14,12 @@ loop are *one* ``LureSystem``: stack the states and combine the laws with ``Prod
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
@@ -187,6 +188,13 @@ class LureSystem:
     state_names: tuple[str, ...] = ()
 
     default_method = "implicit_euler"
+
+    if TYPE_CHECKING:
+        # What the constructor accepts (the dataclass fields hold the validated arrays).
+        def __init__(self, A: ArrayLike, G: ArrayLike, H: ArrayLike, law: Any,
+                     B: ArrayLike | None = None, C: ArrayLike | None = None,
+                     D: ArrayLike | None = None, u: Any = None, g: Any = None,
+                     state_names: Sequence[str] = ()) -> None: ...
 
     def __post_init__(self) -> None:
         A = as_square("A", self.A)

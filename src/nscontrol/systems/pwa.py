@@ -19,9 +19,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
@@ -107,19 +108,28 @@ class PiecewiseAffineSystem:
     (['crossing', 'crossing'], 1, 0)
     """
 
-    A: Sequence[Any]
-    b: Sequence[Any] | None = None
-    regions: Sequence[tuple[Any, Any]] = ()
-    E: Any = None
-    u: Any = None
-    C: Any = None
+    # The fields hold the validated float arrays; __init__ (below) accepts array_like.
+    A: tuple[FloatArray, ...]
+    b: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
+    regions: tuple[tuple[FloatArray, FloatArray], ...] = ()
+    E: FloatArray | None = None
+    u: Any = None   # anything as_input_function accepts: None, an array, a callable t -> u
+    C: FloatArray | None = None
     continuous: bool = True
-    domain: tuple[Any, Any] | None = None
+    domain: tuple[FloatArray, FloatArray] | None = None
     state_names: tuple[str, ...] = ()
     _facets: tuple[_Facet, ...] = field(default=(), init=False, repr=False)
     _neighbours: tuple[tuple[int, int, int], ...] = field(default=(), init=False, repr=False)
 
     default_method = "switching"
+
+    if TYPE_CHECKING:
+        def __init__(self, A: Sequence[ArrayLike], b: Sequence[ArrayLike] | None = None,
+                     regions: Sequence[tuple[ArrayLike, ArrayLike]] = (),
+                     E: ArrayLike | None = None, u: Any = None, C: ArrayLike | None = None,
+                     continuous: bool = True,
+                     domain: tuple[ArrayLike, ArrayLike] | None = None,
+                     state_names: Sequence[str] = ()) -> None: ...
 
     def __post_init__(self) -> None:
         if len(self.A) == 0:
@@ -412,8 +422,8 @@ class PiecewiseAffineSystem:
     def _check_continuity(self, i: int, j: int, p: FloatArray) -> None:
         fi = self.A[i] @ p + self.b[i]
         fj = self.A[j] @ p + self.b[j]
-        scale = (np.linalg.norm(fi) + np.linalg.norm(self.A[i], 2) * np.linalg.norm(p)
-                 + np.linalg.norm(self.b[i]))
+        scale = float(np.linalg.norm(fi) + np.linalg.norm(self.A[i], 2) * np.linalg.norm(p)
+                      + np.linalg.norm(self.b[i]))
         gap = float(np.linalg.norm(fi - fj))
         if gap > CONTINUITY_RTOL * max(scale, 1e-300):
             raise ModelError(
