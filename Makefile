@@ -27,6 +27,7 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench
+	$(PY) -m mypy
 
 clean:
 	rm -rf $(OUT) .pytest_cache build src/*.egg-info

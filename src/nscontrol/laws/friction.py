@@ -35,8 +35,10 @@ class Coulomb(Relay):
     """
 
     bound: Any = field(init=False, default=None)     # derived: mu * normal_force
-    mu: FloatArray = field(init=False)            # set by the own __init__ below
-    normal_force: FloatArray = field(init=False)  # set by the own __init__ below
+    # Set by the own __init__ below; init fields (dataclasses.replace varies them) whose
+    # None defaults only satisfy the field order after Relay's defaulted fields.
+    mu: FloatArray = field(default=None)  # type: ignore[arg-type]
+    normal_force: FloatArray = field(default=None)  # type: ignore[arg-type]
 
     def __init__(self, mu: Any, normal_force: Any = 1.0, dim: int | None = None) -> None:
         if dim is not None:

@@ -42,26 +42,31 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_vector
 from ..errors import DimensionError, ModelError
 from ..systems.feedback import (
+    Controller,
     Jump,
     LinearController,
     LinearObserver,
     Measurement,
+    Observer,
     PiecewiseStateFeedback,
     StateFeedback,
 )
+from ..systems.protocols import Exogenous, SimulableSystem
 from .driver import Integrator, Lowered
 from .trajectory import Trajectory
 
 __all__ = ["closed_loop", "ClosedLoop"]
 
 
-def closed_loop(plant: Any, controller: Any = None, observer: Any = None,
-                exosystem: Any = None, *, input_matrix: Any = None,
-                output_matrix: Any = None) -> ClosedLoop:
+def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
+                observer: Observer | None = None, exosystem: Exogenous | None = None, *,
+                input_matrix: ArrayLike | None = None,
+                output_matrix: ArrayLike | None = None) -> ClosedLoop:
     """Compose a plant with a controller and/or an observer (and an exogenous input).
 
     Parameters

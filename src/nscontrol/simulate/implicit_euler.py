@@ -61,14 +61,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_vector, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
+
+if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
+    from ..systems.lure import LureSystem
 
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
 
@@ -520,7 +524,8 @@ def _check_options(options: dict[str, Any]) -> None:
                          f"{sorted(_OPTIONS)}")
 
 
-def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any) -> Trajectory:
+def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
+              **options: Any) -> Trajectory:
     """Integrate a :class:`~nscontrol.systems.lure.LureSystem` by the θ-method.
 
     Parameters

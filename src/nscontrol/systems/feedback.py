@@ -111,9 +111,15 @@ class Controller(Protocol):
         Size of ``u``.
     """
 
-    n_states: int
-    period: float | None
-    n_outputs: int
+    # read-only members: plain attributes, frozen dataclass fields and properties all fit
+    @property
+    def n_states(self) -> int: ...
+
+    @property
+    def period(self) -> float | None: ...
+
+    @property
+    def n_outputs(self) -> int: ...
 
     def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
         """The block's output at ``t``."""
@@ -139,7 +145,8 @@ class Observer(Controller, Protocol):
         state); the loop's ``error`` signal is ``S x - x̂``.
     """
 
-    estimates: FloatArray
+    @property
+    def estimates(self) -> FloatArray: ...
 
 
 class _Block:

@@ -181,8 +181,8 @@ class LureSystem:
     H: FloatArray
     law: Any
     B: FloatArray | None = None
-    C: FloatArray | None = None
-    D: FloatArray | None = None
+    C: FloatArray = None  # type: ignore[assignment]  # None -> identity at init
+    D: FloatArray = None  # type: ignore[assignment]  # None -> zeros at init
     u: Any = None
     g: Any = None
     state_names: tuple[str, ...] = ()
