@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray
 from ..errors import ModelError
@@ -212,7 +213,7 @@ class Stribeck(SetValuedLaw):
             shape = self.delta * x ** (self.delta - 1.0) * np.exp(-x ** self.delta)
         return self.viscous - (self.static - self.coulomb) / self.stribeck_velocity * shape
 
-    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+    def loop_transformation(self, sigma: ArrayLike | None = None) -> LoopTransformation:
         """``phi = phi_m - diag(sigma) I`` with the monotone ``phi_m = phi + sigma I`` (ch08 §2.6).
 
         Parameters
@@ -302,7 +303,7 @@ class AsymmetricStribeck(SetValuedLaw):
                                                          self.minus.sigma_sec))
         object.__setattr__(self, "monotone", self.plus.monotone and self.minus.monotone)
 
-    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+    def loop_transformation(self, sigma: ArrayLike | None = None) -> LoopTransformation:
         """Both sides shifted by the same slope ``sigma >= sigma_tan`` (``sigma I`` is odd)."""
         sig = self.sigma_tan.copy() if sigma is None else broadcast_parameter("sigma", sigma,
                                                                               self.dim)

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_square, as_vector
 from ..errors import ModelError, SolverError
@@ -44,7 +45,7 @@ def _positive_diagonal(M: FloatArray) -> FloatArray | None:
     return None
 
 
-def solve_inclusion(law: SetValuedLaw, M: Any, q: Any, *,
+def solve_inclusion(law: SetValuedLaw, M: ArrayLike, q: ArrayLike, *,
                     method: Literal["auto", "closed_form", "lcp"] = "auto",
                     lcp_method: str = "lemke", tol: float = 1e-12) -> InclusionSolution:
     """Solve the one-step inclusion ``z = M w + q``, ``w in -phi(z)``.

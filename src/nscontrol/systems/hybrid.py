@@ -127,7 +127,7 @@ class LinearHybridSystem:
         """Guard values ``G x + g0``."""
         return self.G @ x + self.g0
 
-    def check_state(self, x0: Any, *, tol: float = 1e-12) -> FloatArray:
+    def check_state(self, x0: ArrayLike, *, tol: float = 1e-12) -> FloatArray:
         """Validate ``x0``: correct length, every guard ``>= 0``, the user's admissibility test.
 
         Raises

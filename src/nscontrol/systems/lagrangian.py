@@ -366,7 +366,7 @@ class LagrangianSystem:
                                  ).reshape(q.shape[:-1])
         return kin + pot
 
-    def check_state(self, x0: Any, *, tol: float = 1e-12) -> FloatArray:
+    def check_state(self, x0: ArrayLike, *, tol: float = 1e-12) -> FloatArray:
         """Validate ``x0 = [q0; v0]``: no penetration, no approaching velocity at contact.
 
         Raises
@@ -432,7 +432,7 @@ class LagrangianSystem:
 
     # -- constructors -------------------------------------------------------------------
     @classmethod
-    def point_masses(cls, masses: Any, **kwargs: Any) -> LagrangianSystem:
+    def point_masses(cls, masses: ArrayLike, **kwargs: Any) -> LagrangianSystem:
         """Point masses on lines: ``M = diag(masses)``.
 
         Parameters
@@ -510,7 +510,7 @@ class LagrangianSystem:
             "g", g, allow_zero=True)), gap_matrix=G, restitution=restitution)
 
     @classmethod
-    def chain(cls, masses: Any, *, stiffness: Any = None, spacing: float = 0.0,
+    def chain(cls, masses: ArrayLike, *, stiffness: ArrayLike | None = None, spacing: float = 0.0,
               restitution: Any = 1.0) -> LagrangianSystem:
         """Point masses on a line, consecutive ones unilateral: ``q_{k+1} - q_k >= spacing``.
 

@@ -23,6 +23,10 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
+from .protocols import InputSignal
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..laws.base import SetValuedLaw
 
 __all__ = ["LureSystem"]
 
@@ -86,7 +90,8 @@ def _check_picklable(system: Any) -> None:
             fn.__getstate__()
 
 
-def as_input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
+def as_input_function(name: str, value: InputSignal,
+                      size: int) -> Callable[[Any], FloatArray] | None:
     """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
 
     Accepts ``None``, an :class:`~nscontrol.numerics.lti.Exosystem` (anything with a ``u``
@@ -179,21 +184,22 @@ class LureSystem:
     A: FloatArray
     G: FloatArray
     H: FloatArray
-    law: Any
+    law: SetValuedLaw
     B: FloatArray | None = None
     C: FloatArray = None  # type: ignore[assignment]  # None -> identity at init
     D: FloatArray = None  # type: ignore[assignment]  # None -> zeros at init
-    u: Any = None
-    g: Any = None
+    u: InputSignal = None
+    g: InputSignal = None
     state_names: tuple[str, ...] = ()
 
     default_method = "implicit_euler"
 
     if TYPE_CHECKING:
         # What the constructor accepts (the dataclass fields hold the validated arrays).
-        def __init__(self, A: ArrayLike, G: ArrayLike, H: ArrayLike, law: Any,
+        def __init__(self, A: ArrayLike, G: ArrayLike, H: ArrayLike, law: SetValuedLaw,
                      B: ArrayLike | None = None, C: ArrayLike | None = None,
-                     D: ArrayLike | None = None, u: Any = None, g: Any = None,
+                     D: ArrayLike | None = None, u: InputSignal = None,
+                     g: InputSignal = None,
                      state_names: Sequence[str] = ()) -> None: ...
 
     def __post_init__(self) -> None:
@@ -272,7 +278,7 @@ class LureSystem:
         """Dimension ``q`` of the external input ``u`` (0 without ``B``)."""
         return 0 if self.B is None else int(self.B.shape[1])
 
-    def input_at(self, t: Any) -> FloatArray:
+    def input_at(self, t: ArrayLike) -> FloatArray:
         """The external input sampled at given times.
 
         Parameters
@@ -290,7 +296,7 @@ class LureSystem:
             return np.zeros((t.size, self.n_inputs))
         return self._u_fn(t)  # type: ignore[attr-defined]
 
-    def shift_at(self, t: Any) -> FloatArray:
+    def shift_at(self, t: ArrayLike) -> FloatArray:
         """The known shift ``g`` of the law's argument sampled at given times.
 
         Parameters

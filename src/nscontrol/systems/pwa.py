@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
 from .lure import as_input_function
+from .protocols import InputSignal
 
 __all__ = ["PiecewiseAffineSystem", "CONTINUITY_RTOL"]
 
@@ -113,7 +114,7 @@ class PiecewiseAffineSystem:
     b: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
     regions: tuple[tuple[FloatArray, FloatArray], ...] = ()
     E: FloatArray | None = None
-    u: Any = None   # anything as_input_function accepts: None, an array, a callable t -> u
+    u: InputSignal = None
     C: FloatArray | None = None
     continuous: bool = True
     domain: tuple[FloatArray, FloatArray] | None = None
@@ -126,7 +127,7 @@ class PiecewiseAffineSystem:
     if TYPE_CHECKING:
         def __init__(self, A: Sequence[ArrayLike], b: Sequence[ArrayLike] | None = None,
                      regions: Sequence[tuple[ArrayLike, ArrayLike]] = (),
-                     E: ArrayLike | None = None, u: Any = None, C: ArrayLike | None = None,
+                     E: ArrayLike | None = None, u: InputSignal = None, C: ArrayLike | None = None,
                      continuous: bool = True,
                      domain: tuple[ArrayLike, ArrayLike] | None = None,
                      state_names: Sequence[str] = ()) -> None: ...
@@ -184,10 +185,11 @@ class PiecewiseAffineSystem:
 
     # -- construction helpers -----------------------------------------------------------
     @classmethod
-    def bimodal(cls, A1: Any, A2: Any, c: Any, *, d: float = 0.0, b1: Any = None,
-                b2: Any = None, E: Any = None, u: Any = None, C: Any = None,
-                continuous: bool = True, state_names: tuple[str, ...] = ()
-                ) -> PiecewiseAffineSystem:
+    def bimodal(cls, A1: ArrayLike, A2: ArrayLike, c: ArrayLike, *, d: float = 0.0,
+                b1: ArrayLike | None = None, b2: ArrayLike | None = None,
+                E: ArrayLike | None = None, u: InputSignal = None, C: ArrayLike | None = None,
+                continuous: bool = True,
+                state_names: tuple[str, ...] = ()) -> PiecewiseAffineSystem:
         """Two modes split by a hyperplane: ``A1 x + b1`` on ``cᵀx <= d``, ``A2 x + b2`` on
         ``cᵀx >= d``.
 
@@ -225,8 +227,8 @@ class PiecewiseAffineSystem:
                    continuous=continuous, state_names=state_names)
 
     @classmethod
-    def conewise(cls, A: Sequence[Any], H: Sequence[Any], *, E: Any = None, u: Any = None,
-                 C: Any = None, continuous: bool = True,
+    def conewise(cls, A: Sequence[ArrayLike], H: Sequence[ArrayLike], *, E: ArrayLike | None = None,
+                 u: InputSignal = None, C: ArrayLike | None = None, continuous: bool = True,
                  state_names: tuple[str, ...] = ()) -> PiecewiseAffineSystem:
         """Conewise linear system: ``x' = A_i x`` on the cone ``{x : H_i x <= 0}``.
 
@@ -270,7 +272,7 @@ class PiecewiseAffineSystem:
         """``(i, row, j)``: region ``j`` lies across facet ``row`` of region ``i``."""
         return self._neighbours
 
-    def contains(self, i: int, x: Any, tol: float = 1e-9) -> bool:
+    def contains(self, i: int, x: ArrayLike, tol: float = 1e-9) -> bool:
         """Whether a state lies in a region.
 
         Parameters
@@ -290,7 +292,7 @@ class PiecewiseAffineSystem:
         x = np.asarray(x, float)
         return bool(np.all(H @ x - h <= tol * (1.0 + np.abs(h) + np.abs(H) @ np.abs(x))))
 
-    def mode(self, x: Any, tol: float = 1e-9) -> int:
+    def mode(self, x: ArrayLike, tol: float = 1e-9) -> int:
         """The region of a state.
 
         Parameters
@@ -311,7 +313,7 @@ class PiecewiseAffineSystem:
                 return i
         return -1
 
-    def field(self, i: int, x: Any, t: float = 0.0, u: Any = None) -> FloatArray:
+    def field(self, i: int, x: ArrayLike, t: float = 0.0, u: InputSignal = None) -> FloatArray:
         """The vector field of one region.
 
         Parameters
@@ -338,7 +340,7 @@ class PiecewiseAffineSystem:
                 f = f + self.E @ uval
         return f
 
-    def input_at(self, t: float, u: Any = None) -> FloatArray | None:
+    def input_at(self, t: float, u: InputSignal = None) -> FloatArray | None:
         """The input at one time.
 
         Parameters
@@ -371,7 +373,7 @@ class PiecewiseAffineSystem:
         hs = [np.max(np.abs(h), initial=0.0) for _, h in self.regions]
         return max(1.0, *hs)
 
-    def in_domain(self, x: Any, tol: float = 1e-9) -> bool:
+    def in_domain(self, x: ArrayLike, tol: float = 1e-9) -> bool:
         """Whether a state lies in the ``domain`` (always True without one).
 
         Parameters
