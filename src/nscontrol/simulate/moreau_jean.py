@@ -698,7 +698,7 @@ def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
                   v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
                   h: float) -> None:
     """Write a chunk of steps and its impact events; call the jump listeners."""
-    rec.extend(times, np.hstack([q, v]), **_signals(system, q, v, p, rec))
+    rec.extend(times, (q, v), **_signals(system, q, v, p, rec))
     prev = np.vstack([state["p_prev"][None, :], p[:-1]])
     rising = (p > 0.0) & (prev == 0.0)
     steps = np.flatnonzero(rising.any(axis=1))

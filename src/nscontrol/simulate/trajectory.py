@@ -713,10 +713,13 @@ class Recorder:
             buf[i] = val
         self._n += 1
 
-    def extend(self, t: np.ndarray, x: np.ndarray, **signals: np.ndarray) -> None:
+    def extend(self, t: np.ndarray, x: np.ndarray | tuple[np.ndarray, ...],
+               **signals: np.ndarray) -> None:
         """Record a block of samples at once (as produced by a compiled kernel).
 
         ``every`` is applied to the block as if each row had been passed to :meth:`sample`.
+        ``x`` may be given as column blocks ``(q, v)``: only the kept rows are then joined
+        (a long chunk recorded sparsely is never copied whole).
         """
         t = np.asarray(t, float)
         k = t.shape[0]
@@ -727,7 +730,14 @@ class Recorder:
             self._grow()
         i0, i1 = self._n, self._n + sel.size
         self._t[i0:i1] = t[sel]
-        self._x[i0:i1] = np.asarray(x, float)[sel]
+        if isinstance(x, tuple):
+            col = 0
+            for block in x:
+                width = block.shape[1]
+                self._x[i0:i1, col:col + width] = block[sel]
+                col += width
+        else:
+            self._x[i0:i1] = np.asarray(x, float)[sel]
         for name, value in signals.items():
             if not self.wants(name):
                 continue
