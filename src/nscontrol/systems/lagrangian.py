@@ -136,7 +136,8 @@ class LagrangianSystem:
         # What the constructor accepts (the dataclass fields hold the normalised values).
         def __init__(self, mass: ArrayLike | ConfigurationFn, stiffness: ArrayLike | None = None,
                      damping: ArrayLike | None = None, constant_force: ArrayLike | None = None,
-                     force: ForceFn | None = None, gap_matrix: Any = None,
+                     force: ForceFn | None = None,
+                     gap_matrix: Any = None,   # array_like or a scipy.sparse matrix (untyped)
                      gap_offset: ArrayLike | None = None, gap: ConfigurationFn | None = None,
                      jacobian: ConfigurationFn | None = None, restitution: ArrayLike = 0.0,
                      actuation: ArrayLike | None = None,
