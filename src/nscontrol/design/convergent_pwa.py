@@ -177,7 +177,7 @@ class PWAStateFeedback:
         :func:`tune_pwa_state_feedback` minimises the largest of."""
         Sinv = np.linalg.inv(self.scaling.S)
         return tuple(float(np.linalg.norm(K @ Sinv, 2)) / self.scaling.input_unit
-                     for K in self.K)  # type: ignore[return-value]
+                     for K in self.K)  # type: ignore[return-value]  # bimodal: 2 gains
 
     def control(self, x: ArrayLike) -> FloatArray:
         """``u = K_1x + ν·min(cᵀx - d, 0)`` (time-major ``x`` gives time-major ``u``)."""

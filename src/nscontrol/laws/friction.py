@@ -156,7 +156,7 @@ class Stribeck(SetValuedLaw):
     stribeck_velocity: Any
     delta: Any = 2.0
     viscous: Any = 0.0
-    dim: int = field(default=None)  # type: ignore[assignment]
+    dim: int = field(default=None)  # type: ignore[assignment]  # None: set in __post_init__
     # slope constants, derived in __post_init__
     sigma_tan: FloatArray = field(init=False, repr=False)
     sigma_sec: FloatArray = field(init=False, repr=False)

@@ -60,7 +60,7 @@ class NormalConeBox(SetValuedLaw):
 
     lower: Any = 0.0
     upper: Any = np.inf
-    dim: int = field(default=None)  # type: ignore[assignment]
+    dim: int = field(default=None)  # type: ignore[assignment]  # None: set in __post_init__
     monotone = True
     componentwise = True
 

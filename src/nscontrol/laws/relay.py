@@ -59,7 +59,7 @@ class Relay(SetValuedLaw):
     """
 
     bound: Any = 1.0
-    dim: int = field(default=None)  # type: ignore[assignment]
+    dim: int = field(default=None)  # type: ignore[assignment]  # None: set in __post_init__
     monotone = True
     componentwise = True
 

@@ -342,7 +342,7 @@ def _facet_event(row: FloatArray, offset: float) -> Any:
     """Terminal event ``offset - row·x`` falling through zero (leaving the region)."""
     def g(t: float, x: FloatArray) -> float:
         return float(offset - row @ x)
-    g.terminal, g.direction = True, -1.0  # type: ignore[attr-defined]
+    g.terminal, g.direction = True, -1.0  # type: ignore[attr-defined]  # solve_ivp reads these
     return g
 
 
@@ -351,5 +351,5 @@ def _slack_extremum(row: FloatArray, f: Any) -> Any:
     minimum of the slack (a grazing when the slack is zero there)."""
     def g(t: float, x: FloatArray) -> float:
         return -float(row @ f(t, x))
-    g.terminal, g.direction = False, 1.0  # type: ignore[attr-defined]
+    g.terminal, g.direction = False, 1.0  # type: ignore[attr-defined]  # solve_ivp reads these
     return g

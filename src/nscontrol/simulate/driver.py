@@ -355,7 +355,7 @@ def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
             if partial is None:  # pragma: no cover - has_samples() implies a recorder
                 raise
             try:
-                err.trajectory = partial  # type: ignore[attr-defined]
+                err.trajectory = partial  # type: ignore[attr-defined]  # on any exception
                 err.add_note(f"nscontrol: the run so far ({len(partial.t)} samples up to "
                              f"t = {partial.t[-1]:.6g}) is in err.trajectory")
             except (AttributeError, TypeError):  # pragma: no cover - exotic exceptions

@@ -198,10 +198,12 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     from ..laws.relay import Relay
 
     if isinstance(law, Product):
-        parts = [componentwise_spec(p) for p in law.parts]
-        if any(p is None for p in parts):
+        specs = [componentwise_spec(p) for p in law.parts]
+        parts = [p for p in specs if p is not None]
+        if len(parts) < len(specs):
             return None
-        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))  # type: ignore
+        kinds, p1, p2 = (np.concatenate([p[i] for p in parts]) for i in range(3))
+        return kinds, p1, p2
     m = int(law.dim)
     if isinstance(law, Relay):  # Coulomb is a Relay of bound mu·N
         return np.zeros(m, np.int64), _per_component(law.bound, m), np.zeros(m)
@@ -613,7 +615,7 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
             try:
                 X, Z, W = stepper.run(x, times)
             except SolverError as exc:
-                X, Z, W = exc.partial  # type: ignore[attr-defined]
+                X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
                 traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
                                   stats=stats(done + X.shape[0]),
@@ -673,7 +675,10 @@ class _Stepper:
         self.input_mode = ("exact_mean" if self.exo is not None else
                            "samples" if system.has_input else "none")
         if plan.solver == "closed_form":
-            kind, p1, p2 = componentwise_spec(system.law)  # type: ignore[misc]
+            spec = componentwise_spec(system.law)
+            if spec is None:   # _plan chooses the closed form only for such laws
+                raise ModelError("law: the closed-form step needs a componentwise law")
+            kind, p1, p2 = spec
             self.spec = (kind, p1, p2)
             self.ucol = _single_state_rows(system)
 
@@ -707,7 +712,9 @@ class _Stepper:
         if plan.solver == "lcp":
             from ._lure_lcp_kernels import lcp_steps
 
-            M3, Qa3, q03, T3, s3, comp, nv, mg = plan.lcp  # type: ignore[misc]
+            if plan.lcp is None:   # _plan sets the LCP data whenever it chooses "lcp"
+                raise ModelError("law: the LCP step was planned without its LCP data")
+            M3, Qa3, q03, T3, s3, comp, nv, mg = plan.lcp
             done, status, res = lcp_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, M3, Qa3,
                                           q03, T3, s3, comp, nv, mg, x, ubar, gnext, X, Z, W,
                                           LCP_TOL)
@@ -721,7 +728,7 @@ class _Stepper:
                                   f"{times[done + 1]:.6g} has no verified solution: {why}; the "
                                   f"step matrix may be badly conditioned (reduce h)",
                                   status=name)
-                err.partial = (X[:done], Z[:done], W[:done])  # type: ignore[attr-defined]
+                err.partial = (X[:done], Z[:done], W[:done])  # type: ignore[attr-defined]  # partial run, added at raise
                 raise err
             return X, Z, W
         H, D = self.system.H, plan.D
@@ -737,7 +744,7 @@ class _Stepper:
                     w[blk.idx], z[blk.idx] = wg, zg
                     self.worst = max(self.worst, res)
             except SolverError as exc:
-                exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]
+                exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]  # partial run, added at raise
                 raise
             x = q + m.Gh @ w
             X[j], Z[j], W[j] = x, z, w

@@ -15,7 +15,7 @@ loop are *one* ``LureSystem``: stack the states and combine the laws with ``Prod
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -191,6 +191,9 @@ class LureSystem:
     u: InputSignal = None
     g: InputSignal = None
     state_names: tuple[str, ...] = ()
+    # u and g as vectorised functions of time (set by __post_init__)
+    _u_fn: Callable[[ArrayLike], FloatArray] | None = field(default=None, init=False, repr=False)
+    _g_fn: Callable[[ArrayLike], FloatArray] | None = field(default=None, init=False, repr=False)
 
     default_method = "implicit_euler"
 
@@ -292,9 +295,9 @@ class LureSystem:
             ``u(t)`` row by row (zeros when the system has no input).
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        if self._u_fn is None:  # type: ignore[attr-defined]
+        if self._u_fn is None:
             return np.zeros((t.size, self.n_inputs))
-        return self._u_fn(t)  # type: ignore[attr-defined]
+        return self._u_fn(t)
 
     def shift_at(self, t: ArrayLike) -> FloatArray:
         """The known shift ``g`` of the law's argument sampled at given times.
@@ -310,16 +313,16 @@ class LureSystem:
             ``g(t)`` row by row (zeros when the system has no shift).
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        if self._g_fn is None:  # type: ignore[attr-defined]
+        if self._g_fn is None:
             return np.zeros((t.size, self.n_multipliers))
-        return self._g_fn(t)  # type: ignore[attr-defined]
+        return self._g_fn(t)
 
     @property
     def has_input(self) -> bool:
         """Whether an external input ``u(t)`` was given."""
-        return self._u_fn is not None  # type: ignore[attr-defined]
+        return self._u_fn is not None
 
     @property
     def has_shift(self) -> bool:
         """Whether a shift ``g(t)`` of the law's argument was given."""
-        return self._g_fn is not None  # type: ignore[attr-defined]
+        return self._g_fn is not None

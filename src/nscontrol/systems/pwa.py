@@ -17,7 +17,7 @@ facets to a stated tolerance.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -121,6 +121,7 @@ class PiecewiseAffineSystem:
     state_names: tuple[str, ...] = ()
     _facets: tuple[_Facet, ...] = field(default=(), init=False, repr=False)
     _neighbours: tuple[tuple[int, int, int], ...] = field(default=(), init=False, repr=False)
+    _u_fn: Callable[[ArrayLike], FloatArray] | None = field(default=None, init=False, repr=False)
 
     default_method = "switching"
 
@@ -361,7 +362,7 @@ class PiecewiseAffineSystem:
             ``u`` given for a system without an input matrix ``E``.
         """
         if u is None:
-            fn = self._u_fn  # type: ignore[attr-defined]
+            fn = self._u_fn
         elif self.E is None:
             raise ModelError("u: this system has no input matrix E")
         else:

@@ -135,7 +135,7 @@ class _Checker:
             err = ModelError(f"check_system({self.subject}): {self.kind} fails '{name}': "
                              + (f"{_fmt(value)} > {_fmt(threshold)}" if threshold is not None
                                 else "no") + (f"; {detail}" if detail else ""))
-            err.report = self.report()  # type: ignore[attr-defined]
+            err.report = self.report()  # type: ignore[attr-defined]  # the checks so far, added at raise
             raise err
 
     def bound(self, name: str, value: float, threshold: float, detail: str = "") -> None:
