@@ -399,6 +399,7 @@ class Trajectory:
         import matplotlib.pyplot as plt
 
         signals = list(signals)
+        axes: Any   # matplotlib axes: an array of them, or a list of the one given
         if ax is None:
             fig, axes = plt.subplots(1 + len(signals), 1, sharex=True, squeeze=False,
                                      figsize=(7, 2.6 * (1 + len(signals))))
