@@ -409,8 +409,16 @@ class LagrangianSystem:
         """For affine gaps touching at most two coordinates each: ``(ia, ib, ca, cb)``.
 
         Contact ``j`` reads ``g_j = ca[j] q[ia[j]] + cb[j] q[ib[j]] + g0[j]`` (``ib = -1`` when
-        it touches one coordinate). ``None`` for any other structure.
+        it touches one coordinate). ``None`` for any other structure. Computed once per model
+        (it is frozen) and shared by every run: do not modify the arrays.
         """
+        cached = self.__dict__.get("_pairwise")
+        if cached is None:
+            cached = (self._find_pairwise(),)
+            object.__setattr__(self, "_pairwise", cached)
+        return cached[0]
+
+    def _find_pairwise(self) -> tuple[np.ndarray, ...] | None:
         if self.gap_matrix is None:
             return None
         from scipy import sparse
