@@ -65,6 +65,15 @@ LYAPUNOV_RECHECK_RTOL = 1e-8
 SDP_SOLVERS = ("CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT")
 #: ``solver="auto"``: Clarabel, then SCS (tight tolerances) as the fallback.
 _AUTO_ORDER = ("CLARABEL", "SCS")
+#: How to get the fallback solver, which is an optional extra (106 MB installed).
+SCS_INSTALL_HINT = "pip install 'nscontrol[scs]'"
+
+
+def _fallback_hint(order: list[str]) -> str:
+    """A sentence saying how to install SCS when an ``auto`` run had to do without it."""
+    if "SCS" in order or order != ["CLARABEL"]:
+        return ""
+    return f"; the fallback solver SCS is not installed ({SCS_INSTALL_HINT})"
 
 
 def solver_order(solver: str | None) -> list[str]:
@@ -114,8 +123,9 @@ def solver_order(solver: str | None) -> list[str]:
         names = ", ".join(repr(s) for s in ("auto", *SDP_SOLVERS))
         raise ModelError(f"solver: expected one of {names}, got {solver!r}")
     if name not in installed:
+        how = f"; install it with {SCS_INSTALL_HINT}" if name == "SCS" else ""
         raise ModelError(f"solver: {name!r} is an SDP solver but it is not installed "
-                         f"(installed: {sorted(installed)})")
+                         f"(installed: {sorted(installed)}){how}")
     return [name]
 
 
@@ -306,7 +316,8 @@ class LMIProblem:
             raise InfeasibleDesignError(
                 f"{self.name}: no certificate — solver {used} returned status {status!r} for "
                 f"the constraints {', '.join(self._names())}; relax margins or bounds, or "
-                "check the model (e.g. stabilisability/detectability)", status=status)
+                "check the model (e.g. stabilisability/detectability)"
+                f"{_fallback_hint(order)}", status=status)
         result = self._recheck(status, used, recheck_fraction, warn_fraction, eq_tol,
                                None if minimize is None and maximize is None
                                else float(problem.value))
