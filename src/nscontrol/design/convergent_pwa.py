@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ from numpy.typing import NDArray
 from .._validation import as_matrix, as_real_scalar, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
 from ..numerics.scaling import Scaling
+from ..numerics.statespace import is_state_space, state_space_matrices
 
 __all__ = [
     "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
@@ -344,6 +346,16 @@ def _scalar_block(kappa: Any, k: int) -> Any:
     return cp.reshape(kappa, (1, 1), order="F") if k == 1 else kappa * np.eye(k)
 
 
+def _linear_plant(system: Any) -> Any:
+    """A python-control ``StateSpace`` as a one-mode model (its ``A``; ``B``, ``C`` serve
+    as ``E``, ``C``); any other model unchanged."""
+    if not is_state_space(system):
+        return system
+    A, B, C, _ = state_space_matrices(system, "system")
+    return SimpleNamespace(A=(A,), E=B if B.size else None, C=C if C.size else None,
+                           n_states=A.shape[0], continuous=True)
+
+
 def _modes(system: Any) -> tuple[FloatArray, ...]:
     if not getattr(system, "continuous", True):
         raise ModelError(f"system: the convergent-PWA designs need a continuous right-hand "
@@ -375,7 +387,8 @@ def design_state_feedback(system: Any, *, sigma: float, B: Any = None,
     Parameters
     ----------
     system
-        Continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`.
+        Continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`, or a linear plant
+        as a python-control ``StateSpace`` (one mode; its ``B`` is the default ``B``).
     sigma
         Decay rate to certify (> 0, 1/time unit of the model).
     B
@@ -421,6 +434,7 @@ def design_state_feedback(system: Any, *, sigma: float, B: Any = None,
     >>> np.round(sf.K, 2), round(sf.gain_bound, 2)
     (array([[-1.48, -1.74]]), 3.9)
     """
+    system = _linear_plant(system)
     As = _modes(system)
     return _state_feedback(As, _input_matrix(system, B), check_positive("sigma", sigma), scale)
 
@@ -644,7 +658,8 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
     Parameters
     ----------
     system
-        Continuous PWA model.
+        Continuous PWA model, or a linear plant as a python-control ``StateSpace`` (one
+        mode; its ``C`` is the default ``C``).
     sigma
         Error decay rate to certify.
     C
@@ -688,6 +703,7 @@ def design_observer(system: Any, *, sigma: float, C: Any = None,
 
     from ..numerics.lmi import LMIProblem
 
+    system = _linear_plant(system)
     As = _modes(system)
     n = As[0].shape[0]
     C = system.C if C is None else C

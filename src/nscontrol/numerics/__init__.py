@@ -1,7 +1,8 @@
 """Numerical kernels: complementarity solvers (:mod:`.lcp`), exact LTI propagation and root
 location (:mod:`.lti`), LMI helpers on CVXPY and the Lyapunov re-check (:mod:`.lmi`),
 balancing and scaling (:mod:`.scaling`), observability tests (:mod:`.observability`),
-central differences (:mod:`.differences`).
+central differences (:mod:`.differences`), the converter from state-space
+objects such as python-control's ``StateSpace`` (:mod:`.statespace`).
 
 Every public name is importable from here (``from nscontrol.numerics import ...``);
 the defining module loads on first use, so importing the package stays cheap.
@@ -29,6 +30,9 @@ _EXPORTS: dict[str, str] = {
     # observability.py
     "RANK_RTOL": "observability", "pbh_observability": "observability",
     "krylov_basis": "observability",
+    # statespace.py
+    "StateSpaceMatrices": "statespace", "is_state_space": "statespace",
+    "state_space_matrices": "statespace", "state_matrix": "statespace",
     # differences.py
     "central_difference_gradient": "differences", "central_difference_jacobian": "differences",
 }

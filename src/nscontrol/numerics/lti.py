@@ -81,6 +81,7 @@ from .._validation import (
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError
 from .scaling import balance
+from .statespace import state_matrix
 
 __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "GuardEvent",
            "first_event"]
@@ -244,8 +245,9 @@ class LTIFlow:
 
     Parameters
     ----------
-    A : (n, n) array_like
-        System matrix (finite).
+    A : (n, n) array_like or StateSpace
+        System matrix (finite), or a state-space model (python-control's ``StateSpace``)
+        whose ``A`` is used.
 
     Attributes
     ----------
@@ -257,7 +259,7 @@ class LTIFlow:
     """
 
     def __init__(self, A: Any) -> None:
-        self.A = as_square("A", A)
+        self.A = as_square("A", state_matrix("A", A))
         self.A.setflags(write=False)
         self.n = self.A.shape[0]
         self.method = "expm"
@@ -280,7 +282,7 @@ class LTIFlow:
         event-search tables each time. Flows are immutable, so one instance can serve all
         (the most recent ``_SHARED_FLOWS_MAX`` matrices are kept).
         """
-        A = as_square("A", A)
+        A = as_square("A", state_matrix("A", A))
         key = (A.shape, A.tobytes())
         flow = _SHARED_FLOWS.pop(key, None)
         if flow is None:
