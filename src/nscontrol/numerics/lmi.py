@@ -130,12 +130,24 @@ def solver_order(solver: str | None) -> list[str]:
 
 
 def solver_options(name: str) -> dict[str, Any]:
-    """Keyword options passed to CVXPY for solver ``name`` (tight tolerances for SCS)."""
+    """Keyword options passed to CVXPY for solver ``name`` (tight tolerances for SCS).
+
+    Parameters
+    ----------
+    name : str
+        A CVXPY solver name of :data:`SDP_SOLVERS`.
+    """
     return dict(_SCS_OPTIONS) if name == "SCS" else {}
 
 
 def sym(expr: Any) -> Any:
-    """``(M + Mᵀ)/2`` of a square CVXPY expression or array."""
+    """``(M + Mᵀ)/2`` of a square CVXPY expression or array.
+
+    Parameters
+    ----------
+    expr : CVXPY expression or ndarray
+        A square matrix ``M``.
+    """
     return 0.5 * (expr + expr.T)
 
 
@@ -576,6 +588,17 @@ def bisect_max(feasible: Callable[[float], Any], lo: float, hi: float, *,
     returns None) when ``s`` is infeasible. Feasibility must be monotone: feasible at ``s``
     implies feasible at every smaller ``s`` (e.g. a decay rate).
 
+    Parameters
+    ----------
+    feasible : callable ``s -> certificate or None``
+        Decides one value of ``s``.
+    lo, hi : float
+        The bracket, ``lo < hi`` (``lo`` must be feasible).
+    tol : float
+        Absolute width of the final bracket.
+    max_iter : int
+        Upper bound on the number of calls of ``feasible``.
+
     Raises
     ------
     InfeasibleDesignError
@@ -621,6 +644,17 @@ def max_lyapunov_decay_rate(A: Any, *, tol: float = 1e-4, margin: float = 1e-6,
     below; used as a self-check of the LMI machinery. Near the boundary solvers become
     inaccurate; an undecided solve counts as infeasible, so the value is a proven lower
     bound. Clarabel alone by default (the SCS fallback is slow there and decides nothing).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        The matrix.
+    tol : float
+        Bisection tolerance on ``α``.
+    margin : float
+        Strictness margin of the LMIs (``≺ -margin I``).
+    solver : str
+        ``"auto"`` or one name of :data:`SDP_SOLVERS`.
     """
     A = as_square("A", A)
     bound = float(np.linalg.norm(A, 2))

@@ -228,6 +228,15 @@ def augment(A: Any, B: Any, exo: Exosystem) -> FloatArray:
 
     ``A_aug = [[A, B Cu], [0, S]]`` for ``x' = A x + B u``, ``u = Cu w``, ``w' = S w``.
     The initial state is ``np.concatenate([x0, exo.w0])``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        State matrix of the plant.
+    B : (n, q) array_like
+        Its input matrix.
+    exo : Exosystem
+        The signal generator ``w' = S w``, ``u = Cu w``.
     """
     A = as_square("A", A)
     n = A.shape[0]
@@ -343,7 +352,15 @@ def _times(t: Any) -> tuple[FloatArray, bool]:
 
 
 class Discretization(NamedTuple):
-    """Zero-order-hold discretisation ``x_{k+1} = Ad x_k + Bd u_k``."""
+    """Zero-order-hold discretisation ``x_{k+1} = Ad x_k + Bd u_k``.
+
+    Parameters
+    ----------
+    Ad : (n, n) ndarray
+        ``e^{Ah}``.
+    Bd : (n, q) ndarray
+        ``∫_0^h e^{As} ds B``.
+    """
 
     Ad: FloatArray
     Bd: FloatArray
@@ -355,6 +372,15 @@ def discretize(A: Any, B: Any, h: float) -> Discretization:
     Computed from one exponential of the augmented matrix:
     ``expm([[A, B], [0, 0]] h) = [[Ad, Bd], [0, I]]``, so ``Bd = ∫_0^h e^{As} ds B`` holds
     also for singular ``A``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        State matrix.
+    B : (n, q) array_like
+        Input matrix.
+    h : float
+        Sampling period (> 0).
 
     Returns
     -------
