@@ -152,15 +152,6 @@ def _callables():
 
 #: Public callables whose docstrings still lack parameters (to be emptied, not extended).
 KNOWN_WANTING = {
-    "nscontrol.systems.two_link_arm_mass", "nscontrol.systems.two_link_arm_coriolis",
-    "nscontrol.systems.two_link_arm_gravity", "nscontrol.systems.two_link_arm_force_jacobian",
-    "nscontrol.design.jury_second_order", "nscontrol.design.alpha_limit",
-    "nscontrol.design.output_feedback_loop", "nscontrol.analysis.jury_second_order",
-    "nscontrol.analysis.alpha_limit", "nscontrol.analysis.decay_rate",
-    "nscontrol.analysis.product_test", "nscontrol.analysis.circle_test",
-    "nscontrol.analysis.circle_criterion_minimum",
-    "nscontrol.analysis.most_negative_real_eigenvalue", "nscontrol.analysis.bisect_boundary",
-    "nscontrol.analysis.incremental_l2_bound", "nscontrol.analysis.equilibrium",
     "nscontrol.analysis.periodic_steady_state", "nscontrol.analysis.check_uniqueness",
     "nscontrol.analysis.brute_force_steady_state", "nscontrol.analysis.period_multiplicity",
     "nscontrol.analysis.refined_peak", "nscontrol.analysis.dft_harmonics",

@@ -275,6 +275,16 @@ def output_feedback_loop(system: Any, observer: ConvergentObserver,
     With ``feedback=None`` the plant runs open loop (observer only). The output ``C`` of the
     result is ``[I, 0]`` (plant state) — use ``x[:, n:]`` for the estimate.
 
+    Parameters
+    ----------
+    system : PiecewiseAffineSystem
+        The continuous plant.
+    observer : ConvergentObserver
+        From :func:`design_observer`.
+    feedback : ConvergentStateFeedback or PWAStateFeedback, optional
+        From :func:`design_state_feedback` or :func:`design_pwa_state_feedback` (default: open
+        loop).
+
     Notes
     -----
     Separation (ch11 §2.5 d): the error decays by the observer certificate whatever the
