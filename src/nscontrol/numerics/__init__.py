@@ -1,12 +1,11 @@
 """Numerical kernels: complementarity solvers (:mod:`.lcp`), exact LTI propagation and root
 location (:mod:`.lti`), LMI helpers on CVXPY and the Lyapunov re-check (:mod:`.lmi`),
 balancing and scaling (:mod:`.scaling`), observability tests (:mod:`.observability`),
-central differences (:mod:`.differences`), the converter from state-space
-objects such as python-control's ``StateSpace`` (:mod:`.statespace`).
+central differences (:mod:`.differences`)."""
 
-Every public name is importable from here (``from nscontrol.numerics import ...``);
-the defining module loads on first use, so importing the package stays cheap.
-"""
+# Also the converter from state-space objects such as python-control's StateSpace
+# (statespace.py). Every public name is importable from here (from nscontrol.numerics import
+# ...); the defining module loads on first use, so importing the package stays cheap.
 
 from __future__ import annotations
 
