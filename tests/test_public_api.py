@@ -150,23 +150,12 @@ def _callables():
             yield f"nscontrol.{sub}.{name}", obj, doc
 
 
-#: Public callables whose docstrings still lack parameters (to be emptied, not extended).
-KNOWN_WANTING = {
-    "nscontrol.analysis.periodic_steady_state", "nscontrol.analysis.check_uniqueness",
-    "nscontrol.analysis.brute_force_steady_state", "nscontrol.analysis.period_multiplicity",
-    "nscontrol.analysis.refined_peak", "nscontrol.analysis.dft_harmonics",
-    "nscontrol.analysis.harmonic_response", "nscontrol.analysis.frequency_response",
-}
-
-
 @pytest.mark.parametrize("qualname,obj,doc", list(_callables()),
                          ids=lambda v: v if isinstance(v, str) and v.startswith("ns") else "")
 def test_parameters_are_documented(qualname, obj, doc):
     params = _signature_parameters(obj)
     if not params:
         return
-    if qualname in KNOWN_WANTING:
-        pytest.xfail("docstring still lacks parameters (KNOWN_WANTING)")
     documented = documented_parameters(doc)
     if inspect.isclass(obj) and dataclasses.is_dataclass(obj):
         documented |= documented_parameters(doc, "Attributes")  # a record's fields
