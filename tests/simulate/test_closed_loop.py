@@ -176,3 +176,22 @@ def test_measurement_and_blocks_validate_their_matrices():
     m = Measurement(0.0, y=np.zeros(1), x=np.array([1.0, 2.0]))
     with pytest.raises(ModelError, match="needs an observer|has no observer"):
         StateFeedback([[1.0, 1.0]], on="estimate").output(0.0, np.zeros(0), m)
+
+
+def test_a_pwa_plant_with_its_observer_is_one_pwa_system_on_the_product_of_regions():
+    """Chapter 11's observer (a copy of the plant with output injection) composed with the
+    one-sided oscillator: 2 x 2 regions, the error x - x̂ decays at the certified rate."""
+    from nscontrol.design.convergent_pwa import design_observer
+    from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
+    from nscontrol.systems.feedback import PiecewiseObserver
+
+    plant = one_sided_oscillator(0.1)
+    obs = design_observer(plant, sigma=1.0)
+    loop = nsc.closed_loop(plant, observer=PiecewiseObserver(obs.L, obs.C))
+    assert loop.stacked.n_regions == 4 and loop.stacked.n_states == 4
+    tr = nsc.simulate(loop, [0.5, 0.0, -0.5, 0.3], (0.0, 10.0))
+    err = np.linalg.norm(tr.signal("error"), axis=1)
+    np.testing.assert_allclose(tr.signal("error"), tr.x[:, :2] - tr.x[:, 2:], atol=0)
+    # |e(t)| <= sqrt(cond P) e^{-sigma t} |e(0)| with sigma = 1 (the design's certificate)
+    bound = np.sqrt(np.linalg.cond(obs.P)) * np.exp(-1.0 * tr.t) * err[0]
+    assert np.all(err <= bound * (1 + 1e-9) + 1e-12)

@@ -320,31 +320,14 @@ def output_feedback_loop(system: Any, observer: ConvergentObserver,
     >>> bool(np.allclose(x0[:2], ref, atol=1e-9) and np.allclose(x0[2:], x0[:2], atol=1e-9))
     True
     """
-    from ..systems.pwa import PiecewiseAffineSystem
+    from ..simulate.closed_loop import closed_loop
+    from ..systems.feedback import PiecewiseObserver, PiecewiseStateFeedback
 
-    n = system.n_states
-    N = len(system.A)
-    if feedback is None:
-        B = np.zeros((n, 1))
-        Ks, ks = (np.zeros((1, n)),) * N, (np.zeros(1),) * N
-    else:
-        B = feedback.B
-        Ks, ks = feedback.gains(N)
-    LC = observer.L @ observer.C
-    As, bs, regions = [], [], []
-    for i in range(N):
-        Hi, hi = system.regions[i]
-        for j in range(N):
-            Hj, hj = system.regions[j]
-            As.append(np.block([[system.A[i], B @ Ks[j]],
-                                [LC, system.A[j] + B @ Ks[j] - LC]]))
-            bs.append(np.concatenate([system.b[i] + B @ ks[j], system.b[j] + B @ ks[j]]))
-            regions.append((np.block([[Hi, np.zeros_like(Hi)], [np.zeros_like(Hj), Hj]]),
-                            np.concatenate([hi, hj])))
-    E = None if system.E is None else np.vstack([system.E, system.E])
-    return PiecewiseAffineSystem(A=tuple(As), b=tuple(bs), regions=tuple(regions), E=E,
-                                 u=system.u, C=np.hstack([np.eye(n), np.zeros((n, n))]),
-                                 continuous=True)
+    controller = None
+    if feedback is not None:
+        controller = PiecewiseStateFeedback(*feedback.gains(len(system.A)), on="estimate")
+    return closed_loop(system, controller, PiecewiseObserver(observer.L, observer.C),
+                       input_matrix=None if feedback is None else feedback.B).stacked
 
 
 # -- designs ---------------------------------------------------------------------------------

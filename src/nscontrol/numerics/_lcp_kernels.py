@@ -544,14 +544,7 @@ def tridiagonal_howard(lower, diag, upper, q, z, w, max_iter):
             return NUMERICAL_FAILURE, 0
         qmax = max(qmax, abs(q[i]))
     _tridiag_w(lower, diag, upper, q, z, w)
-    row_max = 0.0
-    for i in range(n):
-        a = abs(diag[i])
-        if i > 0:
-            a += abs(lower[i - 1])
-        if i < n - 1:
-            a += abs(upper[i])
-        row_max = max(row_max, a)
+    row_max = tridiagonal_inf_norm(lower, diag, upper)
     active = np.empty(n, dtype=np.bool_)
     cp = np.empty(n)
     dp = np.empty(n)

@@ -50,6 +50,7 @@ from ..systems.feedback import (
     LinearController,
     LinearObserver,
     Measurement,
+    PiecewiseObserver,
     PiecewiseStateFeedback,
     StateFeedback,
 )
@@ -250,7 +251,7 @@ def _is_linear_block(block: Any, role: str) -> bool:
     if role == "controller" and isinstance(block, StateFeedback | PiecewiseStateFeedback |
                                            LinearController):
         return block.period is None
-    return role == "observer" and isinstance(block, LinearObserver)
+    return role == "observer" and isinstance(block, LinearObserver | PiecewiseObserver)
 
 
 def _refuse(loop: ClosedLoop) -> Any:
@@ -450,32 +451,80 @@ def _stacked_shift(p: Any, copies: int) -> Callable[[Any], FloatArray]:
 
 
 def _stack_pwa(loop: ClosedLoop) -> Any:
-    p, ctrl = loop.plant, loop.controller
-    if loop.observer is not None:
-        raise ModelError("observer: a PWA plant with an observer is a product of regions; "
-                         "build it with nscontrol.design.convergent_pwa.output_feedback_loop")
-    if ctrl is None:
+    p, ctrl, obs = loop.plant, loop.controller, loop.observer
+    if obs is not None and not isinstance(obs, PiecewiseObserver):
+        raise ModelError("observer: a PWA plant takes a PiecewiseObserver (a copy of the plant "
+                         "with output injection)")
+    if ctrl is None and obs is None:
         return p, {}
-    n = p.n_states
-    B = _input_matrix(loop, None, n)
-    n_regions = len(p.A)
+    n, N = p.n_states, len(p.A)
+    B = _input_matrix(loop, None, n) if ctrl is not None else np.zeros((n, 1))
+    Ks, ks, on = _pwa_gains(ctrl, N, B, n)
+    if obs is None:
+        if on == "estimate":
+            raise ModelError("controller: feedback on the estimate needs an observer")
+        maps = {"u": (ctrl.K, ctrl.k)} if isinstance(ctrl, StateFeedback) else {}
+        return replace(p, A=tuple(A + B @ K for A, K in zip(p.A, Ks, strict=True)),
+                       b=tuple(b + B @ k for b, k in zip(p.b, ks, strict=True))), maps
+    return _stack_pwa_observer(p, obs, B, Ks, ks, on)
+
+
+def _pwa_gains(ctrl: Any, N: int, B: FloatArray, n: int
+               ) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...], str]:
+    """Per-region gains of the controller (zeros without one) and what they read."""
+    if ctrl is None:
+        return (np.zeros((1, n)),) * N, (np.zeros(1),) * N, "state"
     if isinstance(ctrl, PiecewiseStateFeedback):
-        if len(ctrl.K) != n_regions:
+        if len(ctrl.K) != N:
             raise DimensionError(f"controller: {len(ctrl.K)} region gains for a plant with "
-                                 f"{n_regions} regions")
-        Ks, ks = ctrl.K, ctrl.k
-    elif isinstance(ctrl, StateFeedback) and ctrl.on == "state":
-        Ks, ks = (ctrl.K,) * n_regions, (ctrl.k,) * n_regions
+                                 f"{N} regions")
+        Ks, ks, on = tuple(ctrl.K), tuple(ctrl.k), ctrl.on
+    elif isinstance(ctrl, StateFeedback):
+        Ks, ks, on = (ctrl.K,) * N, (ctrl.k,) * N, ctrl.on
     else:
-        raise ModelError("controller: a PWA plant takes StateFeedback(on='state') or "
+        raise ModelError("controller: a PWA plant takes StateFeedback or "
                          "PiecewiseStateFeedback")
     for i, Ki in enumerate(Ks):
         if Ki.shape != (B.shape[1], n):
             raise DimensionError(f"controller: K[{i}] must have shape ({B.shape[1]}, {n}), "
                                  f"got {Ki.shape}")
-    maps = {"u": (ctrl.K, ctrl.k)} if isinstance(ctrl, StateFeedback) else {}
-    return replace(p, A=tuple(A + B @ K for A, K in zip(p.A, Ks, strict=True)),
-                   b=tuple(b + B @ k for b, k in zip(p.b, ks, strict=True))), maps
+    return Ks, ks, on
+
+
+def _stack_pwa_observer(p: Any, obs: PiecewiseObserver, B: FloatArray,
+                        Ks: tuple[FloatArray, ...], ks: tuple[FloatArray, ...], on: str) -> Any:
+    """Plant and observer on the product of their regions: in region ``(i, j)`` (plant in
+    ``i``, estimate in ``j``) the feedback acts by the region of what it reads::
+
+        x'  = A_i x + b_i + B u + E w,           u = K_r (x or x̂) + k_r
+        x̂' = A_j x̂ + b_j + B u + E w + L C (x - x̂)
+    """
+    from ..systems.pwa import PiecewiseAffineSystem
+
+    n, N = p.n_states, len(p.A)
+    if obs.n_states != n or obs.C.shape[1] != n:
+        raise DimensionError(f"observer: L must have {n} rows and C {n} columns (the plant's "
+                             f"states), got L {obs.L.shape}, C {obs.C.shape}")
+    LC = obs.L @ obs.C
+    zero = np.zeros((n, n))
+    As, bs, regions = [], [], []
+    for i in range(N):
+        Hi, hi = p.regions[i]
+        for j in range(N):
+            Hj, hj = p.regions[j]
+            r = j if on == "estimate" else i
+            BK = B @ Ks[r]
+            Kx, Kh = (zero, BK) if on == "estimate" else (BK, zero)
+            As.append(np.block([[p.A[i] + Kx, Kh], [LC + Kx, p.A[j] + Kh - LC]]))
+            bs.append(np.concatenate([p.b[i] + B @ ks[r], p.b[j] + B @ ks[r]]))
+            regions.append((np.block([[Hi, np.zeros_like(Hi)], [np.zeros_like(Hj), Hj]]),
+                            np.concatenate([hi, hj])))
+    E = None if p.E is None else np.vstack([p.E, p.E])
+    stacked = PiecewiseAffineSystem(A=tuple(As), b=tuple(bs), regions=tuple(regions), E=E,
+                                    u=p.u, C=np.hstack([np.eye(n), zero]), continuous=True)
+    eye = np.eye(n)
+    return stacked, {"xhat": (np.hstack([zero, eye]), np.zeros(n)),
+                     "error": (np.hstack([eye, -eye]), np.zeros(n))}
 
 
 def _fold_state_feedback(plant: Any, ctrl: StateFeedback, input_matrix: Any) -> Any:

@@ -36,7 +36,7 @@ from .._validation import FloatArray, as_matrix, as_vector, check_positive
 from ..errors import DimensionError, ModelError
 
 __all__ = ["Measurement", "Jump", "Controller", "Observer", "StateFeedback",
-           "PiecewiseStateFeedback", "LinearController", "LinearObserver"]
+           "PiecewiseStateFeedback", "LinearController", "LinearObserver", "PiecewiseObserver"]
 
 
 @dataclass(frozen=True)
@@ -214,10 +214,14 @@ class PiecewiseStateFeedback(_Block):
         One gain per region of the plant (the plant's region order).
     k : sequence of array_like (m,), optional
         One offset per region (default zeros).
+    on : {"state", "estimate"}
+        Read the plant state (region of ``x``) or the observer's estimate (region of ``x̂``:
+        ``u = K_j x̂ + k_j``, output feedback).
     """
 
     K: Sequence[Any]
     k: Sequence[Any] | None = None
+    on: str = "state"
     n_states: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
@@ -234,6 +238,8 @@ class PiecewiseStateFeedback(_Block):
                                  f"{len(ks)}")
         object.__setattr__(self, "K", Ks)
         object.__setattr__(self, "k", ks)
+        if self.on not in ("state", "estimate"):
+            raise ModelError(f"on: expected 'state' or 'estimate', got {self.on!r}")
 
     @property
     def n_outputs(self) -> int:
@@ -398,3 +404,48 @@ class LinearObserver(_Block):
             return xc
         raise ModelError("LinearObserver with a jump: it runs stacked into a "
                          "LinearHybridSystem by closed_loop (the jump reads y⁻)")
+
+
+@dataclass(frozen=True, eq=False)
+class PiecewiseObserver(_Block):
+    """A copy of a piecewise-affine plant with output injection (the region is the estimate's)::
+
+        x̂' = A_j x̂ + b_j + B u + E w(t) + L (y - C x̂),    j: the region of x̂
+
+    The modes are the plant's own: :func:`~nscontrol.closed_loop` stacks plant and observer
+    into one :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem` on the product of their
+    regions.
+
+    Parameters
+    ----------
+    L : array_like (n, p)
+        Output injection gain.
+    C : array_like (p, n)
+        The measured output ``y = C x``.
+    """
+
+    L: Any
+    C: Any
+    n_states: int = field(default=0, init=False)
+
+    def __post_init__(self) -> None:
+        L = as_matrix("L", self.L)
+        C = as_matrix("C", self.C, rows=L.shape[1], cols=L.shape[0])
+        object.__setattr__(self, "L", L)
+        object.__setattr__(self, "C", C)
+        object.__setattr__(self, "n_states", L.shape[0])
+
+    @property
+    def n_outputs(self) -> int:
+        return self.n_states
+
+    @property
+    def estimates(self) -> FloatArray:
+        return np.eye(self.n_states)
+
+    def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        return xc
+
+    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        raise ModelError("PiecewiseObserver: its modes are the plant's; it runs only stacked "
+                         "into a PiecewiseAffineSystem by closed_loop")
