@@ -11,6 +11,7 @@ import ast
 import dataclasses
 import importlib
 import inspect
+import pkgutil
 import re
 from pathlib import Path
 
@@ -54,6 +55,21 @@ def test_every_subpackage_declares_all(sub):
     assert module.__all__, f"nscontrol.{sub}: empty __all__"
     assert len(set(module.__all__)) == len(module.__all__), f"nscontrol.{sub}: duplicates"
     assert set(module.__all__) <= set(dir(module))
+
+
+@pytest.mark.parametrize("sub", ["laws", "systems", "numerics", "design", "analysis"])
+def test_subpackage_exports_every_public_module_name(sub):
+    """What a public module of the package exports, the package exports (so a name added to
+    a module cannot be forgotten in the package's lazy map)."""
+    package = importlib.import_module(f"nscontrol.{sub}")
+    missing = []
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"nscontrol.{sub}.{info.name}")
+        missing += [f"{info.name}.{n}" for n in getattr(module, "__all__", ())
+                    if n not in package.__all__]
+    assert not missing, f"nscontrol.{sub}.__all__ lacks {missing}"
 
 
 def test_public_names_import_and_are_documented():

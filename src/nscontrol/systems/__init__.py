@@ -30,6 +30,7 @@ _EXPORTS: dict[str, str] = {
     "Measurement": "feedback", "Jump": "feedback", "Controller": "feedback",
     "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
     "LinearController": "feedback", "LinearObserver": "feedback",
+    "PiecewiseObserver": "feedback",
 }
 
 __all__ = list(_EXPORTS)
