@@ -43,3 +43,14 @@ def test_pyproject_keeps_scs_optional():
     assert not any(d.startswith("scs") for d in project["dependencies"])
     assert project["optional-dependencies"]["scs"] == ["scs>=3.2"]
     assert isinstance(project["license"], str)  # an SPDX expression, not the deprecated table
+
+
+def test_lure_observer_failure_without_scs_says_how_to_install_it(no_scs, clarabel_fails):
+    from nscontrol.design.lure_observer import lure_observer_lmi
+
+    A = np.array([[0.0, 1.0], [-1.0, -0.1]])
+    with pytest.raises(InfeasibleDesignError) as info:  # Clarabel fails, no SCS to fall to
+        lure_observer_lmi(A, [[0.0], [1.0]], [[0.0, 1.0]], [[1.0, 0.0]], variant="basic",
+                          alpha=0.05)
+    assert clarabel_fails == ["CLARABEL"]
+    assert SCS_INSTALL_HINT in str(info.value)

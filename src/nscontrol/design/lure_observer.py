@@ -479,7 +479,9 @@ class _ObserverLMI:
                 if cert is not None:
                     return cert, gains, status
                 status = f"{status} but the re-check failed ({name})"
-        return None, {}, status
+        from ..numerics.lmi import fallback_hint
+
+        return None, {}, status + fallback_hint(self.solvers)
 
     def _recheck(self, alpha: float, solver: str, status: str
                  ) -> tuple[LureObserverCertificate | None, dict[str, Any]]:

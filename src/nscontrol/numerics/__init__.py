@@ -24,6 +24,7 @@ _EXPORTS: dict[str, str] = {
     "LYAPUNOV_RECHECK_RTOL": "lmi", "bisect_max": "lmi", "lyapunov_certificate": "lmi",
     "max_lyapunov_decay_rate": "lmi", "recheck_lyapunov": "lmi", "sym": "lmi",
     "SDP_SOLVERS": "lmi", "solver_order": "lmi", "solver_options": "lmi",
+    "fallback_hint": "lmi", "SCS_INSTALL_HINT": "lmi",
     # scaling.py
     "balance": "scaling", "balanced_unit_norm": "scaling", "Scaling": "scaling",
     # observability.py

@@ -49,7 +49,7 @@ from .scaling import Scaling
 __all__ = ["LMIProblem", "LMIResult", "BisectionResult", "LyapunovCheck",
            "LYAPUNOV_RECHECK_RTOL", "bisect_max", "lyapunov_certificate",
            "max_lyapunov_decay_rate", "recheck_lyapunov", "sym", "SDP_SOLVERS", "solver_order",
-           "solver_options"]
+           "solver_options", "fallback_hint", "SCS_INSTALL_HINT"]
 
 SolverName = Literal["auto", "CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT"]
 _ACCEPTED = ("optimal", "optimal_inaccurate")
@@ -69,8 +69,20 @@ _AUTO_ORDER = ("CLARABEL", "SCS")
 SCS_INSTALL_HINT = "pip install 'nscontrol[scs]'"
 
 
-def _fallback_hint(order: list[str]) -> str:
-    """A sentence saying how to install SCS when an ``auto`` run had to do without it."""
+def fallback_hint(order: list[str]) -> str:
+    """What to append to a failure when ``solver="auto"`` had to do without SCS.
+
+    Parameters
+    ----------
+    order : list of str
+        The solvers tried (:func:`solver_order`).
+
+    Returns
+    -------
+    str
+        ``"; the fallback solver SCS is not installed (pip install 'nscontrol[scs]')"`` when
+        Clarabel was tried alone, else ``""``.
+    """
     if "SCS" in order or order != ["CLARABEL"]:
         return ""
     return f"; the fallback solver SCS is not installed ({SCS_INSTALL_HINT})"
@@ -329,7 +341,7 @@ class LMIProblem:
                 f"{self.name}: no certificate — solver {used} returned status {status!r} for "
                 f"the constraints {', '.join(self._names())}; relax margins or bounds, or "
                 "check the model (e.g. stabilisability/detectability)"
-                f"{_fallback_hint(order)}", status=status)
+                f"{fallback_hint(order)}", status=status)
         result = self._recheck(status, used, recheck_fraction, warn_fraction, eq_tol,
                                None if minimize is None and maximize is None
                                else float(problem.value))
