@@ -3,9 +3,10 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.nscontrol-installed
+DOCS_STAMP := $(VENV)/.nscontrol-docs-installed
 OUT    ?= out
 
-.PHONY: demo test test-all bench lint clean
+.PHONY: demo test test-all bench lint docs clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -25,9 +26,18 @@ test-all: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/nscontrol bench
 
+# The site is built with warnings as errors; figures of a previous `make demo` (out/) go
+# into the gallery when present.
+$(DOCS_STAMP): pyproject.toml $(STAMP)
+	$(PY) -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	MPLBACKEND=Agg $(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench
 
 clean:
-	rm -rf $(OUT) .pytest_cache build src/*.egg-info
+	rm -rf $(OUT) .pytest_cache build src/*.egg-info docs/_build docs/api/generated docs/_gallery docs/gallery.md
 	find src -name '*.nbi' -delete -o -name '*.nbc' -delete

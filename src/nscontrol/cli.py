@@ -1,4 +1,4 @@
-"""The ``nscontrol`` command: ``list``, ``run``, ``report``, ``bench``."""
+"""The ``nscontrol`` command: ``list``, ``run``, ``report``, ``bench``, ``bifurcation``."""
 
 from __future__ import annotations
 
@@ -77,6 +77,39 @@ def report(out: Path, only: tuple[str, ...]) -> None:
         click.echo(f"[{mark}] {ex['example']} ({ex['seconds']:.1f} s)")
     click.echo(f"report: {out / 'index.html'}")
     sys.exit(0 if summary["passed"] else 1)
+
+
+@main.command()
+@click.argument("example")
+@click.option("--param", "param", required=True, metavar="NAME=START:STOP:N",
+              help="Parameter of the example's family and its grid.")
+@click.option("--scheduler", default=None, help="Dask scheduler address (default: serial).")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out"),
+              show_default=True, help="Folder for bifurcation.h5 and bifurcation.png.")
+def bifurcation(example: str, param: str, scheduler: str | None, out: Path) -> None:
+    """Brute-force bifurcation diagram of EXAMPLE's parameter family (up and down sweeps)."""
+    from .analysis.bifurcation import bifurcation_diagram, parse_grid
+    from .examples import get_example
+
+    try:
+        name, values = parse_grid(param)
+        module = sys.modules[get_example(example).run.__module__]
+    except (KeyError, ValueError) as exc:
+        raise click.UsageError(str(exc.args[0])) from None
+    family = getattr(module, "bifurcation_family", None)
+    if family is None:
+        raise click.UsageError(f"example {example!r} defines no parameter family "
+                               f"(bifurcation_family)")
+    bd = bifurcation_diagram(family(name), values, executor=scheduler or "serial",
+                             progress=True, parameter_name=name)
+    out.mkdir(parents=True, exist_ok=True)
+    bd.save(out / "bifurcation.h5")
+    import matplotlib
+    matplotlib.use("Agg")
+    ax = bd.plot()
+    ax.figure.savefig(out / "bifurcation.png", dpi=110)
+    click.echo(f"{len(bd.values)} values, {len(bd.errors)} failed; "
+               f"wrote {out / 'bifurcation.h5'} and {out / 'bifurcation.png'}")
 
 
 def bench_dir() -> Path:

@@ -238,47 +238,6 @@ def test_no_recorder_no_partial_but_the_error_still_reaches_the_caller():
     assert getattr(info.value, "trajectory", None) is None
 
 
-def test_a_run_that_blows_up_is_a_failure_cut_at_the_first_non_finite_sample():
-    from nscontrol.errors import NonFiniteStateError
-    from nscontrol.laws.relay import Relay
-    from nscontrol.systems.lure import LureSystem
-
-    unstable = LureSystem([[50.0]], [[1.0]], [[1.0]], Relay(1.0), state_names=("x",))
-    with pytest.raises(NonFiniteStateError, match=r"^implicit_euler: state x became inf "
-                                                   r"between t = ") as info:
-        nsc.simulate(unstable, [1.0], (0.0, 100.0), h=1e-2)
-    partial = info.value.trajectory
-    # implicit Euler's growth (1 - 50 h)^{-k} = 2^k at h = 1e-2 overflows after ~1024 steps:
-    # every kept sample is finite, the next one is not
-    assert np.all(np.isfinite(partial.x)) and partial.status == -1
-    assert info.value.time > partial.t[-1] and info.value.state == "x"
-    returned = nsc.simulate(unstable, [1.0], (0.0, 100.0), h=1e-2, on_failure="return")
-    np.testing.assert_array_equal(returned.t, partial.t)
-    spring = LagrangianSystem([[1.0]], stiffness=[[-400.0]], gap_matrix=[[1.0]],
-                              gap_offset=[10.0])          # negative stiffness: e^{20 t}
-    for method, opts in (("event_driven", {}), ("moreau_jean", {"h": 1e-3})):
-        with pytest.raises(NonFiniteStateError):
-            nsc.simulate(spring, [0.1, 0.0], (0.0, 100.0), method=method, **opts)
-
-
-@pytest.mark.parametrize("h, match", [
-    (10.0, r"^h: the step 10 is longer than the span 1; use h <= 1"),
-    (1e-12, r"^h: 1e-12 on a span of 1 means 1e\+12 steps"),
-    ("1e-3", r"^h: expected a real number"),
-    (-1e-3, r"^h: expected a finite number > 0")])
-def test_steps_are_checked_once_for_every_time_stepping_method(ball, h, match):
-    for method, system, x0 in (("moreau_jean", ball, [1.0, 0.0]),
-                               ("implicit_euler", _relay(), [1.0, 0.0])):
-        with pytest.raises(ModelError, match=match):
-            nsc.simulate(system, x0, (0.0, 1.0), method=method, h=h)
-
-
-def _relay():
-    from nscontrol.testing.setvalued_problems import relay_feedback
-
-    return relay_feedback().system
-
-
 @pytest.mark.parametrize("method, opts", [("event_driven", {}), ("moreau_jean", {"h": 1e-3})])
 def test_a_user_error_on_impacting_bodies_keeps_the_partial_run_in_their_state_order(
         method, opts):

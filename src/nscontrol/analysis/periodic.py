@@ -260,29 +260,18 @@ def _linear_guess(system: Any, u: Any) -> FloatArray:
 def _newton(system: Any, x: FloatArray, period: float, method: str, u: Any,
             t_eval: FloatArray, tol: float, max_iter: int, options: dict[str, Any]
             ) -> tuple[FloatArray, Any, int, bool]:
-    """Damped Newton on ``F(x) = φ_T(x) - x`` with ``J = Φ(T) - I``; every shot is sampled on
-    ``t_eval`` so that the converged one is returned without another run."""
-    n = x.shape[0]
-    tr = _shoot(system, x, period, method, u, t_eval, options)
-    F = tr.x[-1] - x
-    for k in range(1, max_iter + 1):
-        if np.linalg.norm(F) <= tol * _scale(x):
-            return x, tr, k - 1, True
-        J = np.asarray(tr.stats["state_transition"]) - np.eye(n)
-        try:
-            step = -np.linalg.solve(J, F)
-        except np.linalg.LinAlgError:
-            return x, tr, k, False
-        lam = 1.0
-        while True:  # backtracking: accept the first step that reduces |F|
-            x_new = x + lam * step
-            tr_new = _shoot(system, x_new, period, method, u, t_eval, options)
-            F_new = tr_new.x[-1] - x_new
-            if np.linalg.norm(F_new) < np.linalg.norm(F) or lam < 0.1:
-                break
-            lam *= 0.5
-        x, tr, F = x_new, tr_new, F_new
-    return x, tr, max_iter, bool(np.linalg.norm(F) <= tol * _scale(x))
+    """Newton on ``F(x) = φ_T(x) - x`` by the orbit engine
+    (:func:`~nscontrol.analysis.orbits.find_orbit`: damped Newton with the integrator's
+    state transition); the converged period is then sampled on ``t_eval``."""
+    from .orbits import Forced, find_orbit
+
+    forced = Forced(system, u, period, method, tuple(options.items()))
+    try:
+        orbit = find_orbit(forced, x, tol=tol, max_iter=max_iter)
+    except SolverError:
+        return x, None, int(max_iter), False
+    tr = _shoot(system, orbit.x0, period, method, u, t_eval, options)
+    return orbit.x0, tr, orbit.iterations, True
 
 
 def _fixed_point(system: Any, x: FloatArray, period: float, method: str, u: Any, tol: float,

@@ -1,4 +1,4 @@
-"""Products of laws: ``phi(z) = phi_1(z_1) x ... x phi_k(z_k)`` on stacked components."""
+"""Products of laws: ``phi(z) = phi_1(z_1) x … x phi_k(z_k)`` on stacked components."""
 
 from __future__ import annotations
 

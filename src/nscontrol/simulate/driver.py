@@ -359,11 +359,35 @@ def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
             except (AttributeError, TypeError):  # pragma: no cover - exotic exceptions
                 pass
         raise
-    traj = _stop_at_non_finite(traj, on_failure)
+    traj = _stop_at_non_finite(traj, on_failure, system)
     return _post_process(cls, traj, common)
 
 
-def _stop_at_non_finite(traj: Trajectory, on_failure: str) -> Trajectory:
+def _non_finite_source(system: Any, t: float, x: np.ndarray) -> str | None:
+    """Which of the model's own functions returns a non-finite value at ``(t, x)``, if any
+    (the input, the shift, the force): the error then names it instead of the dynamics."""
+    probes: list[tuple[str, Callable[[], Any]]] = []
+    if getattr(system, "has_input", False):
+        probes.append(("the input u(t)", lambda: system.input_at(np.array([t]))))
+    if getattr(system, "has_shift", False):
+        probes.append(("the shift g(t)", lambda: system.shift_at(np.array([t]))))
+    if getattr(system, "force", None) is not None and hasattr(system, "n_dof"):
+        n = system.n_dof
+        probes.append(("the force(t, q, v)", lambda: system.force(t, x[:n], x[n:2 * n])))
+    u = getattr(system, "u", None)
+    if callable(u) and not hasattr(system, "has_input"):
+        probes.append(("the input u(t)", lambda: u(t)))
+    for name, probe in probes:
+        try:
+            value = np.asarray(probe(), dtype=float)
+        except Exception:  # noqa: BLE001 - a probe that fails says nothing about finiteness
+            continue
+        if not np.all(np.isfinite(value)):
+            return name
+    return None
+
+
+def _stop_at_non_finite(traj: Trajectory, on_failure: str, system: Any = None) -> Trajectory:
     """A run whose state became infinite or NaN is a failure, not a success: cut it at the
     first non-finite sample and raise (or return it with ``status = -1``)."""
     from ..errors import NonFiniteStateError
@@ -378,9 +402,20 @@ def _stop_at_non_finite(traj: Trajectory, on_failure: str) -> Trajectory:
     name = traj.state_names[j] if j < len(traj.state_names) else f"x[{j}]"
     where = (f"at t = {traj.t[i]:.6g}" if i == 0 else
              f"between t = {traj.t[i - 1]:.6g} (last finite sample) and t = {traj.t[i]:.6g}")
-    message = (f"{traj.method or 'simulate'}: state {name} became {traj.x[i, j]} {where}; the "
-               f"model is unstable there, or a force, input or field returned a non-finite "
-               f"value (evaluate them at the last finite state, err.trajectory.x[-1])")
+    source = None
+    if system is not None:
+        t_probe = float(traj.t[i])
+        source = (_non_finite_source(system, t_probe, traj.x[i - 1]) if i > 0 else
+                  _non_finite_source(system, t_probe, traj.x[0]))
+    if source is not None:
+        cause = (f"{source} of the model returns a non-finite value at t = {traj.t[i]:.6g}; "
+                 f"fix it there (the step size is not the cause)")
+    else:
+        cause = ("the model is unstable there, or a force, input or field returned a "
+                 "non-finite value (evaluate them at the last finite state, "
+                 "err.trajectory.x[-1])")
+    message = (f"{traj.method or 'simulate'}: state {name} became {traj.x[i, j]} {where}; "
+               f"{cause}")
     keep = np.arange(len(traj.t)) < i
     partial = replace(traj, t=traj.t[keep], x=traj.x[keep],
                       signals={k: np.asarray(v)[keep] for k, v in traj.signals.items()},

@@ -255,7 +255,9 @@ class PiecewiseStateFeedback(_Block):
 
 @dataclass(frozen=True, eq=False)
 class LinearController(_Block):
-    """A linear dynamic controller reading the measured output ``y``::
+    """A linear dynamic controller reading the measured output ``y``.
+
+    Its equations::
 
         continuous:  xc' = A xc + B y,          u = C xc + D y
         sampled:     xc_{k+1} = A xc_k + B y_k,  u_k = C xc_k + D y_k   (period T)

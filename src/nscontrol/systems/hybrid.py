@@ -1,5 +1,7 @@
 """Linear hybrid systems: linear flow, affine guards, arbitrary jumps.
 
+The model::
+
     x' = A x                         between events,
     g(x) = G x + g0 >= 0             one row per guard,
     x+ = jump(t, x-, indices)        when guards ``indices`` reach zero while decreasing,

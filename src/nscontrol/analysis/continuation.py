@@ -1,0 +1,630 @@
+"""Pseudo-arclength continuation of periodic orbits in one parameter, with bifurcation detection.
+
+:func:`continue_orbit` follows the ``kT``-periodic orbits of ``factory(p)`` (a
+:class:`~nscontrol.analysis.orbits.Forced`) as ``p`` varies. The unknown is
+``y = (x_0, ..., x_{k-1}, p)`` (the multiple-shooting nodes and the parameter); the branch is
+the solution curve of the ``kn`` equations ``G(y) = (P_p(x_i) - x_{i+1})_i = 0``.
+
+Steps
+-----
+* **Predictor** ``y + h t`` along the unit tangent ``t`` (``[G_y; t_prevᵀ] t = [0; 1]``, so
+  the branch is followed through folds).
+* **Corrector**: Newton on ``G(y) = 0``, ``t·(y - y_pred) = 0`` (the pseudo-arclength
+  condition). ``∂G/∂x`` is exact (saltation-based, :func:`~nscontrol.analysis.orbits.
+  stroboscopic_map`); ``∂G/∂p`` is a central difference with step ``δ = ε^{1/3}·max(1, |p|)``
+  (truncation ``O(δ²)`` balancing rounding ``O(ε/δ)``; it only affects the tangent and the
+  corrector's rate, never the converged residual).
+* **Step control**: the step grows by 1.5 after a corrector that converged in at most 3
+  iterations, halves after a failure; below ``step_min`` the run stops, saying where and why.
+
+Detection and location
+----------------------
+Test functions on the multipliers ``μ`` of the monodromy: fold ``Re ∏(μ_i - 1)``, flip
+``Re ∏(μ_i + 1)``, Neimark–Sacker ``Re ∏_{i<j}(μ_iμ_j - 1)`` (a sign change with a real
+pair — a neutral saddle — is discarded). **Grazing** is a change of the orbit's event
+signature (reported as a **sliding** bifurcation when the number of sliding segments
+changes); its monitor is the smallest free-flight gap of a non-impacting orbit and minus
+the smallest impact speed of an impacting one, both of which go to zero at the grazing. A
+sign change between two points is located by the Illinois variant of regula falsi on the
+arclength, each trial point corrected onto the branch, until the parameter is known to
+``locate_tol`` (relative).
+
+Branch switching at a flip (:func:`switch_at_flip`): the flip orbit taken twice solves the
+``2kT`` problem, where the period-doubled branch crosses it tangentially to the flip
+eigenvector ``(w, -w)``; continuation of the doubled problem starts along that direction.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray, check_integer, check_positive
+from ..errors import ModelError, SolverError
+from .orbits import Forced, Orbit, _initial_nodes, _shooting_system, make_orbit
+
+__all__ = ["SpecialPoint", "Branch", "continue_orbit", "switch_at_flip"]
+
+_EPS = float(np.finfo(float).eps)
+
+
+@dataclass(frozen=True, eq=False)
+class SpecialPoint:
+    """A located bifurcation on a branch.
+
+    Attributes
+    ----------
+    kind
+        ``"fold"``, ``"flip"``, ``"neimark_sacker"``, ``"grazing"`` or ``"sliding"``.
+    parameter
+        Where it is.
+    index
+        Its row in the branch's arrays.
+    nodes
+        Shooting nodes of the orbit there.
+    multipliers
+        Floquet multipliers there (for a grazing: those of the last orbit before it).
+    uncertainty
+        Width of the last parameter bracket.
+    """
+
+    kind: str
+    parameter: float
+    index: int
+    nodes: FloatArray
+    multipliers: np.ndarray
+    uncertainty: float
+
+
+@dataclass(frozen=True, eq=False)
+class Branch:
+    """A continued branch of periodic orbits.
+
+    Attributes
+    ----------
+    parameter_name
+        Name of the parameter (axis label).
+    p
+        ``(N,)`` parameter values.
+    nodes
+        ``(N, k, n)`` shooting nodes (``nodes[:, 0]``: the state at ``t = 0``).
+    period
+        ``(N,)`` orbit periods ``kT``.
+    multipliers
+        ``(N, n)`` Floquet multipliers by decreasing modulus.
+    stable
+        ``(N,)`` all multipliers inside the unit circle.
+    n_impacts
+        ``(N,)`` impacts per orbit period.
+    points
+        Located bifurcations, in branch order.
+    stop_reason
+        Why the continuation ended.
+    n_steps, corrector_iterations
+        Continuation steps taken and Newton iterations spent (location included).
+    state_names
+        Names of the state components.
+    """
+
+    parameter_name: str
+    p: FloatArray
+    nodes: FloatArray
+    period: FloatArray
+    multipliers: np.ndarray
+    stable: np.ndarray
+    n_impacts: np.ndarray
+    points: tuple[SpecialPoint, ...]
+    stop_reason: str
+    n_steps: int = 0
+    corrector_iterations: int = 0
+    state_names: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return int(self.p.shape[0])
+
+    @property
+    def x0(self) -> FloatArray:
+        """``(N, n)`` states at ``t = 0``."""
+        return self.nodes[:, 0]
+
+    def special(self, kind: str) -> tuple[SpecialPoint, ...]:
+        """The located points of one kind."""
+        return tuple(pt for pt in self.points if pt.kind == kind)
+
+    def to_pandas(self) -> Any:
+        """One row per branch point: parameter, state at ``t = 0``, period, multipliers'
+        moduli, stability, impacts, and the kind of bifurcation located there (or ``""``)."""
+        import pandas as pd
+
+        names = self.state_names or tuple(f"x{i}" for i in range(self.nodes.shape[2]))
+        data: dict[str, Any] = {self.parameter_name: self.p}
+        for i, nm in enumerate(names):
+            data[nm] = self.x0[:, i]
+        data["period"] = self.period
+        for i in range(self.multipliers.shape[1]):
+            data[f"|mu{i}|"] = np.abs(self.multipliers[:, i])
+        data["stable"] = self.stable
+        data["n_impacts"] = self.n_impacts
+        kinds = [""] * len(self)
+        for pt in self.points:
+            kinds[pt.index] = pt.kind
+        data["special"] = kinds
+        return pd.DataFrame(data)
+
+    def plot(self, ax: Any = None, *, component: int = 0, label: str | None = None,
+             color: str | None = None) -> Any:
+        """Plot ``x0[component]`` against the parameter: stable parts solid, unstable dashed,
+        bifurcation points marked and named in the legend. Returns the axes."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots()
+        y = self.x0[:, component]
+        color = color or "C0"
+        start = 0
+        for i in range(1, len(self) + 1):
+            if i == len(self) or self.stable[i] != self.stable[start]:
+                seg = slice(start, min(i + 1, len(self)))
+                ax.plot(self.p[seg], y[seg], "-" if self.stable[start] else "--", color=color,
+                        label=label if start == 0 else None)
+                start = i
+        marks = {"fold": "s", "flip": "o", "neimark_sacker": "D", "grazing": "^",
+                 "sliding": "v"}
+        for kind, mk in marks.items():
+            pts = self.special(kind)
+            if pts:
+                ax.plot([pt.parameter for pt in pts], [pt.nodes[0, component] for pt in pts],
+                        mk, color="k", mfc="none", ms=8, label=kind.replace("_", "-"))
+        names = self.state_names or ()
+        ax.set_xlabel(self.parameter_name)
+        ax.set_ylabel(f"{names[component] if names else f'x{component}'} at t = 0 mod T")
+        ax.legend(loc="best", fontsize="small")
+        return ax
+
+    # -- HDF5 ------------------------------------------------------------------------------
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write to HDF5 (format ``nscontrol.Branch/1``) atomically: a temporary file in the
+        same directory, renamed over ``path`` only once complete."""
+        import h5py
+
+        path = Path(path)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            with h5py.File(tmp, "w") as f:
+                f.attrs.update(format="nscontrol.Branch/1", parameter_name=self.parameter_name,
+                               stop_reason=self.stop_reason, n_steps=self.n_steps,
+                               corrector_iterations=self.corrector_iterations)
+                f.attrs["state_names"] = np.array(self.state_names, dtype="S")
+                for key in ("p", "nodes", "period", "multipliers", "stable", "n_impacts"):
+                    f.create_dataset(key, data=getattr(self, key))
+                g = f.create_group("points")
+                for i, pt in enumerate(self.points):
+                    s = g.create_group(str(i))
+                    s.attrs.update(kind=pt.kind, parameter=pt.parameter, index=pt.index,
+                                   uncertainty=pt.uncertainty)
+                    s.create_dataset("nodes", data=pt.nodes)
+                    s.create_dataset("multipliers", data=pt.multipliers)
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Branch:
+        """Read a file written by :meth:`save`."""
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != "nscontrol.Branch/1":
+                raise ModelError(f"path: {path} is not an nscontrol.Branch/1 file "
+                                 f"(format {f.attrs.get('format')!r})")
+            g = f["points"]
+            points = tuple(
+                SpecialPoint(str(g[k].attrs["kind"]), float(g[k].attrs["parameter"]),
+                             int(g[k].attrs["index"]), g[k]["nodes"][()],
+                             g[k]["multipliers"][()], float(g[k].attrs["uncertainty"]))
+                for k in sorted(g, key=int))
+            return cls(str(f.attrs["parameter_name"]), f["p"][()], f["nodes"][()],
+                       f["period"][()], f["multipliers"][()], f["stable"][()].astype(bool),
+                       f["n_impacts"][()], points, str(f.attrs["stop_reason"]),
+                       int(f.attrs["n_steps"]), int(f.attrs["corrector_iterations"]),
+                       tuple(s.decode() for s in f.attrs["state_names"]))
+
+
+# -- the continuation problem ------------------------------------------------------------------
+
+@dataclass
+class _Problem:
+    """``G(y) = 0`` for ``y = (nodes, p)`` with counters."""
+
+    factory: Callable[[float], Forced]
+    k: int
+    n: int
+    tol: float
+    iterations: int = 0
+    _cache: dict[float, Forced] = field(default_factory=dict)
+
+    def forced(self, p: float) -> Forced:
+        hit = self._cache.get(p)
+        if hit is None:
+            if len(self._cache) > 16:
+                self._cache.clear()
+            hit = self._cache[p] = self.factory(p)
+            if not isinstance(hit, Forced):
+                raise ModelError(f"factory: expected a Forced (system, input, period) for "
+                                 f"p = {p}, got {type(hit).__name__}")
+        return hit
+
+    def split(self, y: FloatArray) -> tuple[FloatArray, float]:
+        return y[:-1].reshape(self.k, self.n), float(y[-1])
+
+    def residual(self, y: FloatArray, G_p: FloatArray | None = None
+                 ) -> tuple[FloatArray, FloatArray, list[Any]]:
+        """``G(y)``, ``[G_x, G_p]`` and the node maps (``G_p`` recomputed unless given)."""
+        X, p = self.split(y)
+        R, Jx, maps = _shooting_system(self.forced(p), X)
+        if G_p is None:
+            G_p = self.parameter_derivative(y)
+        return R, np.column_stack([Jx, G_p]), maps
+
+    def parameter_derivative(self, y: FloatArray) -> FloatArray:
+        """``∂G/∂p`` by central differences (step ``ε^{1/3}·max(1, |p|)``)."""
+        X, p = self.split(y)
+        dp = _EPS ** (1 / 3) * max(1.0, abs(p))
+        Rp = _shooting_system(self.forced(p + dp), X)[0]
+        Rm = _shooting_system(self.forced(p - dp), X)[0]
+        return (Rp - Rm) / (2 * dp)
+
+    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int = 8
+                ) -> tuple[FloatArray, Orbit]:
+        """Newton on ``G = 0``, ``t·(y - y_pred) = 0``; ``SolverError`` when it fails."""
+        y = y_pred.copy()
+        G_p = None          # evaluated once per correction: a chord in the p column only
+        for it in range(max_iter + 1):
+            R, J, maps = self.residual(y, G_p)
+            G_p = J[:, -1]
+            X, p = self.split(y)
+            res = float(np.max(np.abs(R)))
+            if res <= self.tol * max(1.0, float(np.max(np.abs(X)))):
+                return y, make_orbit(self.forced(p), X, maps, it, res)
+            if it == max_iter:
+                break
+            A = np.vstack([J, t])
+            b = -np.concatenate([R, [t @ (y - y_pred)]])
+            try:
+                y = y + np.linalg.solve(A, b)
+            except np.linalg.LinAlgError as exc:
+                raise SolverError(f"singular extended Jacobian at p = {p:.9g}") from exc
+            self.iterations += 1
+        raise SolverError(f"corrector did not converge in {max_iter} iterations at "
+                          f"p = {self.split(y)[1]:.9g} (residual {res:.3g})")
+
+    def tangent(self, y: FloatArray, t_prev: FloatArray) -> FloatArray:
+        _, J, _ = self.residual(y)
+        A = np.vstack([J, t_prev])
+        b = np.zeros(A.shape[0])
+        b[-1] = 1.0
+        t = np.linalg.solve(A, b)
+        return t / np.linalg.norm(t)
+
+
+# -- test functions --------------------------------------------------------------------------
+
+def _tests(orbit: Orbit) -> dict[str, float]:
+    mu = orbit.multipliers
+    pairs = [mu[i] * mu[j] - 1.0 for i in range(len(mu)) for j in range(i + 1, len(mu))]
+    return {"fold": float(np.prod(mu - 1.0).real), "flip": float(np.prod(mu + 1.0).real),
+            "neimark_sacker": float(np.prod(pairs).real) if pairs else 1.0,
+            "grazing": _grazing_monitor(orbit)}
+
+
+def _grazing_monitor(orbit: Orbit) -> float:
+    """Positive on a non-impacting orbit (its smallest gap), negative on an impacting one
+    (minus its smallest impact speed); both vanish at a grazing."""
+    if any(kind == "grazing" for kind, _ in orbit.signature):
+        return 0.0
+    if orbit.n_impacts:
+        return -orbit.min_impact_speed
+    return orbit.min_gap if np.isfinite(orbit.min_gap) else 1.0
+
+
+def _genuine(kind: str, orbit: Orbit) -> bool:
+    """A Neimark–Sacker sign change needs a complex pair on the unit circle."""
+    if kind != "neimark_sacker":
+        return True
+    mu = orbit.multipliers
+    return bool(np.any((np.abs(mu.imag) > 1e-8) & (np.abs(np.abs(mu) - 1.0) < 1e-6)))
+
+
+@dataclass
+class _Point:
+    y: FloatArray
+    orbit: Orbit
+    tests: dict[str, float]
+
+
+def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
+                   p_range: tuple[float, float], n_periods: int = 1, step: float = 0.01,
+                   step_min: float = 1e-6, step_max: float = 0.1, max_steps: int = 500,
+                   direction: int = 1, tol: float = 1e-10, locate_tol: float = 1e-10,
+                   detect: tuple[str, ...] = ("fold", "flip", "neimark_sacker", "grazing"),
+                   stop_at: tuple[str, ...] = ("grazing", "sliding"), parameter_name: str = "p",
+                   initial_tangent: Any = None, state_names: tuple[str, ...] = ()) -> Branch:
+    """Continue the ``n_periods·T``-periodic orbit through ``x0`` at ``p0`` in ``p``.
+
+    Parameters
+    ----------
+    factory
+        ``p -> Forced``: the system at parameter ``p`` (picklable when used in a sweep).
+    p0, x0
+        Start: parameter and a guess of the orbit (one state or the ``(k, n)`` nodes).
+    p_range
+        Stop when ``p`` leaves ``[lo, hi]``.
+    n_periods
+        ``k`` of the ``kT``-periodic orbit.
+    step, step_min, step_max
+        Initial, smallest and largest arclength steps.
+    max_steps
+        Largest number of continuation steps.
+    direction
+        ``+1``: start towards increasing ``p``; ``-1``: decreasing.
+    tol
+        Corrector tolerance on the shooting residual (relative to ``max(1, |x|)``).
+    locate_tol
+        Relative width of the parameter bracket at which a bifurcation counts as located.
+    detect
+        Which test functions to watch.
+    stop_at
+        Kinds after whose location the continuation stops (default: grazing and sliding
+        bifurcations, where the event sequence and hence the map change).
+    parameter_name, state_names
+        Labels kept in the :class:`Branch`.
+    initial_tangent
+        Start along this direction in ``y = (nodes, p)`` instead of the computed tangent
+        (branch switching); ``x0`` must then be on the branch already.
+
+    Returns
+    -------
+    Branch
+
+    Raises
+    ------
+    SolverError
+        The starting orbit cannot be found.
+    """
+    k = check_integer("n_periods", n_periods, minimum=1)
+    for name, v in (("step", step), ("step_min", step_min), ("step_max", step_max)):
+        check_positive(name, v)
+    if direction not in (1, -1):
+        raise ModelError(f"direction: expected +1 or -1, got {direction!r}")
+    lo, hi = sorted(map(float, p_range))
+    forced0 = factory(float(p0))
+    prob = _Problem(factory, k, forced0.n_states, tol)
+    X0 = _initial_nodes(forced0, x0, k, forced0.n_states)
+    y0 = np.append(X0.ravel(), float(p0))
+    if initial_tangent is None:
+        t0 = np.zeros_like(y0)
+        t0[-1] = float(direction)
+        y, orbit = prob.correct(y0, t0)      # at fixed p: the row (0..0, 1) pins it
+        t = prob.tangent(y, t0)
+    else:
+        t = np.asarray(initial_tangent, float)
+        t = t / np.linalg.norm(t)
+        y = y0
+        _, orbit = prob.correct(y0, t)
+    pts = [_Point(y, orbit, _tests(orbit))]
+    special: list[SpecialPoint] = []
+    h, n_steps, reason = float(step), 0, ""
+    while not reason:
+        if n_steps >= max_steps:
+            reason = f"max_steps ({max_steps}) reached at p = {pts[-1].y[-1]:.9g}"
+            break
+        s_g = (_grazing_ahead(pts[-2], pts[-1], h)
+               if "grazing" in detect and len(pts) >= 2 else None)
+        if s_g is not None:
+            sp = _locate(prob, pts[-1], t, h, "grazing", locate_tol, s_first=s_g)
+            if sp is not None:
+                pts.append(sp)
+                special.append(_special("grazing", sp, len(pts) - 1, prob))
+                if "grazing" in stop_at:
+                    reason = f"grazing at p = {sp.y[-1]:.12g}"
+                    break
+        try:
+            y_new, orb = prob.correct(pts[-1].y + h * t, t)
+        except SolverError as exc:
+            h /= 2
+            if h < step_min:
+                reason = f"corrector failed at p ≈ {pts[-1].y[-1]:.9g} with step {2 * h:.3g} " \
+                         f"< 2·step_min: {exc}"
+            continue
+        n_steps += 1
+        new = _Point(y_new, orb, _tests(orb))
+        found = _crossings(pts[-1], new, detect)
+        stop_kind = None
+        for kind in found:
+            sp = _locate(prob, pts[-1], t, h, kind, locate_tol)
+            if sp is None or not _genuine(kind, sp.orbit):
+                continue
+            if kind == "grazing":
+                kind = _event_change_kind(pts[-1].orbit.signature, new.orbit.signature)
+            pts.append(sp)
+            special.append(_special(kind, sp, len(pts) - 1, prob))
+            if kind in stop_at:
+                stop_kind = kind
+                break
+        if stop_kind is not None:      # what lies past it belongs to another branch
+            reason = f"{stop_kind} at p = {special[-1].parameter:.12g}"
+            break
+        pts.append(new)
+        p_new = float(y_new[-1])
+        if not lo <= p_new <= hi:
+            reason = f"left p_range [{lo:g}, {hi:g}] at p = {p_new:.9g}"
+            break
+        t_new = prob.tangent(y_new, t)
+        t = t_new
+        if orb.iterations <= 3:
+            h = min(1.5 * h, step_max)
+    return _branch(pts, special, reason, n_steps, prob.iterations, parameter_name, state_names,
+                   k, forced0)
+
+
+def _crossings(a: _Point, b: _Point, detect: tuple[str, ...]) -> list[str]:
+    out = [kind for kind in detect
+           if kind in a.tests and a.tests[kind] * b.tests[kind] < 0.0]
+    if "grazing" in detect and "grazing" not in out and a.orbit.signature != b.orbit.signature:
+        out.append("grazing")
+    return out
+
+
+def _event_change_kind(before: tuple[tuple[str, int], ...],
+                       after: tuple[tuple[str, int], ...]) -> str:
+    """``"sliding"`` when a sliding segment appears or vanishes between two event signatures
+    (a sliding bifurcation), ``"grazing"`` otherwise."""
+    def slides(sig: tuple[tuple[str, int], ...]) -> int:
+        return sum(1 for k, _ in sig if k.startswith("sliding"))
+
+    return "sliding" if slides(before) != slides(after) else "grazing"
+
+
+def _value(kind: str, pt: _Point, ref: _Point) -> float:
+    """The test function; for a grazing, the monitor's modulus signed by whether the event
+    signature is still the reference's (the side the continuation came from)."""
+    if kind != "grazing":
+        return pt.tests[kind]
+    mag = abs(pt.tests["grazing"])
+    return mag if pt.orbit.signature == ref.orbit.signature else -mag
+
+
+def _locate(prob: _Problem, a: _Point, t: FloatArray, h: float, kind: str, rtol: float,
+            s_first: float | None = None) -> _Point | None:
+    """Zero of ``test(kind)`` along the arclength from ``a`` (``s`` in ``(0, 2h)``): secant
+    steps while no sign change is bracketed, Illinois regula falsi once one is; a trial whose
+    corrector fails (past a grazing the map is not smooth) is treated as beyond the zero."""
+    def at(s: float) -> _Point:
+        ys, os_ = prob.correct(a.y + s * t, t)
+        return _Point(ys, os_, _tests(os_))
+
+    good = [(0.0, _value(kind, a, a), a)]        # (s, f, point), same sign as at a
+    other: tuple[float, float, _Point] | None = None
+    s_bad = 2.0 * h                               # smallest s known to fail or overshoot
+    s = h if s_first is None else float(s_first)
+    width, side = np.inf, 0
+    for _ in range(100):
+        s = min(max(s, 0.0), s_bad)
+        try:
+            pt = at(s)
+            f = _value(kind, pt, a)
+        except SolverError:
+            pt, f = None, np.nan
+        if pt is None:
+            s_bad = s
+            s = 0.5 * (good[-1][0] + s)
+        elif f == 0.0:
+            good.append((s, f, pt))
+            width = 0.0
+        elif f * good[0][1] > 0:
+            width = abs(pt.y[-1] - (other[2] if other is not None else good[-1][2]).y[-1])
+            good.append((s, f, pt))
+            side += 1
+            if other is not None and side >= 2:
+                other = (other[0], other[1] / 2, other[2])   # Illinois: retained end halved
+        else:
+            width = abs(pt.y[-1] - good[-1][2].y[-1])
+            other, side = (s, f, pt), 0
+            s_bad = s
+        if width <= rtol * max(1.0, abs(good[-1][2].y[-1])):
+            break
+        if pt is None:
+            continue
+        (s0, f0, _), (s1, f1) = good[-1], ((other[0], other[1]) if other is not None
+                                           else (good[-2][0], good[-2][1]))
+        if other is None and len(good) < 2:
+            return None
+        s_next = s1 - f1 * (s1 - s0) / (f1 - f0) if f1 != f0 else 0.5 * (s0 + s1)
+        if other is not None and not min(s0, s1) < s_next < max(s0, s1):
+            s_next = 0.5 * (s0 + s1)
+        s = s_next if s_next < s_bad else 0.5 * (good[-1][0] + s_bad)
+    else:
+        return None
+    best = good[-1][2]
+    if kind != "grazing" and other is not None and abs(other[1]) < abs(good[-1][1]):
+        best = other[2]
+    best.tests["_width"] = float(width)
+    return best
+
+
+def _grazing_ahead(prev: _Point, cur: _Point, h: float) -> float | None:
+    """Arclength to the grazing predicted by linear extrapolation of the grazing monitor over
+    the last step (same event signature), or ``None`` when it is not within ``h``."""
+    if prev.orbit.signature != cur.orbit.signature:
+        return None
+    m0, m1 = abs(prev.tests["grazing"]), abs(cur.tests["grazing"])
+    ds = float(np.linalg.norm(cur.y - prev.y))
+    if not m1 < m0 or ds == 0.0:
+        return None
+    s = m1 * ds / (m0 - m1)
+    return s if s < h else None
+
+
+def _special(kind: str, pt: _Point, index: int, prob: _Problem) -> SpecialPoint:
+    X, p = prob.split(pt.y)
+    return SpecialPoint(kind, p, index, X.copy(), pt.orbit.multipliers.copy(),
+                        float(pt.tests.get("_width", 0.0)))
+
+
+def _branch(pts: list[_Point], special: list[SpecialPoint], reason: str, n_steps: int,
+            iterations: int, name: str, state_names: tuple[str, ...], k: int,
+            forced0: Forced) -> Branch:
+    n = forced0.n_states
+    names = tuple(state_names) or tuple(getattr(forced0.system, "state_names", ()) or ())
+    return Branch(name, np.array([pt.y[-1] for pt in pts]),
+                  np.array([pt.y[:-1].reshape(k, n) for pt in pts]),
+                  np.array([k * pt.orbit.period for pt in pts]),
+                  np.array([pt.orbit.multipliers for pt in pts]),
+                  np.array([pt.orbit.stable for pt in pts]),
+                  np.array([pt.orbit.n_impacts for pt in pts]), tuple(special), reason,
+                  n_steps, iterations, names)
+
+
+def switch_at_flip(factory: Callable[[float], Forced], branch: Branch,
+                   point: SpecialPoint | None = None, **options: Any) -> Branch:
+    """Continue the period-doubled branch born at a flip of ``branch``.
+
+    The flip orbit traversed twice solves the doubled problem; the doubled branch leaves it
+    along the flip eigenvector ``w`` (``M w = -w``), propagated to the nodes
+    (``w_{i+1} = J_i w_i``) and taken with opposite signs on the two copies. ``options`` go
+    to :func:`continue_orbit` (``p_range`` is required).
+    """
+    flips = branch.special("flip")
+    if point is None:
+        if not flips:
+            raise ModelError("branch: no flip point located on this branch")
+        point = flips[0]
+    k, n = point.nodes.shape
+    forced = factory(point.parameter)
+    X = point.nodes
+    _, _, maps = _shooting_system(forced, X)
+    M = np.eye(n)
+    for m in maps:
+        M = m.jacobian @ M
+    mu, V = np.linalg.eig(M)
+    w = np.real(V[:, int(np.argmin(np.abs(mu + 1.0)))])
+    ws = [w]
+    for m in maps[:-1]:
+        ws.append(m.jacobian @ ws[-1])
+    W = np.array(ws)
+    tangent = np.append(np.concatenate([W, -W]).ravel(), 0.0)
+    opts = dict(options)
+    opts.setdefault("parameter_name", branch.parameter_name)
+    # the doubled flip orbit has the multiplier +1: a fold test would fire at the start
+    opts.setdefault("detect", ("flip", "neimark_sacker", "grazing"))
+    return continue_orbit(factory, point.parameter, np.concatenate([X, X]),
+                          n_periods=2 * k, initial_tangent=tangent, **opts)

@@ -1,0 +1,677 @@
+"""Periodic orbits of forced non-smooth systems by multiple shooting, with saltation matrices.
+
+* :class:`Forced` — a system, its ``T``-periodic input and ``T`` (what a continuation factory
+  returns).
+* :func:`stroboscopic_map` — ``P(x0) = x(T)`` (or ``x(kT)``) and its Jacobian, the state
+  transition through every event: flows' transition matrices times saltation matrices
+  (:mod:`~nscontrol.analysis.saltation`).
+* :func:`find_orbit` — Newton on the multiple-shooting equations ``P(x_i) = x_{i+1}``
+  (``i = 0..k-1``, ``x_k = x_0``) for a ``kT``-periodic orbit; the monodromy is the product
+  of the nodes' Jacobians and its eigenvalues are the Floquet multipliers.
+
+Where the Jacobian comes from
+-----------------------------
+* Methods with the ``sensitivity`` capability (``switching``: PWA, Filippov with sliding
+  segments, PWM) return ``stats["state_transition"]``, assembled by the integrator from the
+  flows and the saltation matrices of facet crossings and sliding entry/exit.
+* Linear mechanical systems (:class:`~nscontrol.systems.lagrangian.LagrangianSystem` with
+  constant mass, linear forces and affine gaps) integrated by ``event_driven``: between
+  events the flow is ``x' = A x + B u(t) + c``, so the transition over a free-flight interval
+  ``Δ`` is ``e^{AΔ}`` (:class:`~nscontrol.numerics.lti.LTIFlow`); at each impact of the event
+  table the saltation matrix of Newton's law is applied. Nothing is differentiated
+  numerically.
+
+Grazing monitors
+----------------
+An orbit records its **event signature** (the kinds and contacts of its events in order) and
+two distances to a grazing: the smallest approach speed at its impacts and, for mechanical
+systems, the smallest gap over its free flight (refined on the exact flow). Continuation
+locates a grazing where the signature changes and these distances go to zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray, as_vector, check_integer, check_positive
+from ..errors import DimensionError, ModelError, SolverError
+from .saltation import impact_jump_jacobian, saltation_matrix
+
+__all__ = ["Forced", "MapResult", "Orbit", "stroboscopic_map", "find_orbit", "Cycle",
+           "find_cycle", "SectionReturn", "hyperplane_map",
+           "floquet_multipliers"]
+
+
+@dataclass(frozen=True, eq=False)
+class Forced:
+    """A ``period``-periodically forced system: what a continuation factory returns.
+
+    Attributes
+    ----------
+    system
+        The model (any system :func:`nscontrol.simulate` integrates).
+    u
+        The periodic input passed as ``simulate(..., u=u)`` (``None``: no input; the orbit
+        is then a fixed point of the time-``period`` map).
+    period
+        The input's period ``T``.
+    method
+        Integrator name (``None``: the system's default).
+    options
+        Extra ``simulate`` options, as a tuple of ``(name, value)`` pairs (hashable).
+    """
+
+    system: Any
+    u: Any
+    period: float
+    method: Any = None
+    options: tuple[tuple[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        check_positive("period", self.period)
+
+    @property
+    def n_states(self) -> int:
+        return int(self.system.n_states)
+
+    def simulate(self, x0: Any, t_span: tuple[float, float], **extra: Any) -> Any:
+        """``simulate(system, x0, t_span, method=..., u=..., **options, **extra)``."""
+        from ..simulate import simulate
+
+        opts = dict(self.options)
+        opts.update(extra)
+        if self.u is not None:
+            opts["u"] = self.u
+        return simulate(self.system, x0, t_span, method=self.method, **opts)
+
+
+@dataclass(frozen=True, eq=False)
+class MapResult:
+    """``P(x0)``, its Jacobian and what happened on the way.
+
+    Attributes
+    ----------
+    x
+        The state after ``n_periods`` periods.
+    jacobian
+        ``∂x/∂x0``.
+    trajectory
+        The run (:class:`~nscontrol.simulate.Trajectory`).
+    signature
+        ``((kind, index), ...)`` of the events in order.
+    min_impact_speed
+        Smallest approach speed at an impact (``inf`` when none).
+    """
+
+    x: FloatArray
+    jacobian: FloatArray
+    trajectory: Any
+    signature: tuple[tuple[str, int], ...]
+    min_impact_speed: float
+
+
+def _is_linear_mechanics(system: Any) -> bool:
+    from ..systems.lagrangian import LagrangianSystem
+
+    return isinstance(system, LagrangianSystem) and system.is_linear
+
+
+def _has_sensitivity(forced: Forced) -> bool:
+    from ..simulate.driver import integrator_for
+
+    return "sensitivity" in integrator_for(forced.system, forced.method).capabilities
+
+
+@dataclass(frozen=True, eq=False)
+class _LinearMechanics:
+    """``x' = A x + B u + c`` of a linear :class:`LagrangianSystem` and its exact flow."""
+
+    A: FloatArray
+    B: FloatArray | None
+    c: FloatArray
+    M: FloatArray
+    G: FloatArray
+    g0: FloatArray
+    restitution: FloatArray
+    flow: Any
+
+    @classmethod
+    def of(cls, system: Any) -> _LinearMechanics:
+        from ..numerics.lti import LTIFlow
+
+        n = system.n_dof
+        M = system.mass_matrix()
+        Minv = np.linalg.inv(M)
+        K = system.stiffness if system.stiffness is not None else np.zeros((n, n))
+        C = system.damping if system.damping is not None else np.zeros((n, n))
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]])
+        B = None if system.actuation is None else np.vstack([np.zeros_like(system.actuation),
+                                                             Minv @ system.actuation])
+        c = np.concatenate([np.zeros(n), Minv @ system.constant_force])
+        return cls(A, B, c, M, system.dense_gap_matrix(), np.asarray(system.gap_offset, float),
+                   system.restitution, LTIFlow(A))
+
+    def field(self, x: FloatArray, t: float, u: Any) -> FloatArray:
+        f = self.A @ x + self.c
+        if self.B is not None and u is not None:
+            f = f + self.B @ np.atleast_1d(u.u(t) if hasattr(u, "u") else u)
+        return f
+
+    def impact_saltation(self, event: Any, u: Any) -> tuple[FloatArray, float]:
+        n = self.M.shape[0]
+        w = self.G[event.index]
+        J = impact_jump_jacobian(self.M, w, self.restitution[event.index])
+        grad = np.concatenate([w, np.zeros(n)])
+        fm = self.field(np.asarray(event.pre, float), event.time, u)
+        fp = self.field(np.asarray(event.post, float), event.time, u)
+        speed = -float(w @ np.asarray(event.pre, float)[n:])
+        return saltation_matrix(J, fm, fp, grad), speed
+
+
+def _mechanics_transition(model: _LinearMechanics, tr: Any, t0: float, tf: float,
+                          u: Any) -> tuple[FloatArray, float]:
+    """Product of flow exponentials and impact saltation matrices along ``tr``."""
+    Phi = np.eye(model.A.shape[0])
+    t_last, min_speed = t0, np.inf
+    for ev in tr.events:
+        if ev.kind == "grazing":
+            # a tangential touch without impact: the map's one-sided derivative on the
+            # non-impacting side is the flow's; the orbit is exactly at a grazing
+            min_speed = 0.0
+            continue
+        if ev.kind != "impact":
+            raise ModelError(f"system: the orbit has a {ev.kind!r} event at t = {ev.time:.6g}; "
+                             f"saltation through it is implemented for impacts only (a "
+                             f"sustained contact has no isolated event)")
+        S, speed = model.impact_saltation(ev, u)
+        Phi = S @ model.flow.expm(ev.time - t_last) @ Phi
+        t_last, min_speed = ev.time, min(min_speed, speed)
+    return model.flow.expm(tf - t_last) @ Phi, min_speed
+
+
+def stroboscopic_map(forced: Forced, x0: Any, *, n_periods: int = 1,
+                     t0: float = 0.0) -> MapResult:
+    """``x(t0 + kT)`` from ``x(t0) = x0`` and its Jacobian ``∂x(t0 + kT)/∂x0``.
+
+    Raises
+    ------
+    ModelError
+        A system whose transition can be neither asked from its integrator (capability
+        ``sensitivity``) nor assembled from an event table (linear mechanics).
+    SolverError
+        A grazing impact on the way (no saltation matrix), or the integrator's failure.
+    """
+    k = check_integer("n_periods", n_periods, minimum=1)
+    x0 = as_vector("x0", x0, forced.n_states)
+    tf = t0 + k * forced.period
+    if _has_sensitivity(forced):
+        tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]), sensitivity=True)
+        J = np.asarray(tr.stats["state_transition"], float)
+        speed = np.inf
+    elif _is_linear_mechanics(forced.system):
+        tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]))
+        J, speed = _mechanics_transition(_model_of(forced.system), tr, t0, tf, forced.u)
+    else:
+        raise ModelError(f"system: no state transition for {type(forced.system).__name__} "
+                         f"with method {forced.method!r}; use a method with the "
+                         f"'sensitivity' capability or a linear LagrangianSystem")
+    sig = tuple((e.kind, int(e.index)) for e in tr.events)
+    return MapResult(np.asarray(tr.x[-1], float), J, tr, sig, speed)
+
+
+_MODELS: dict[int, tuple[Any, _LinearMechanics]] = {}
+
+
+def _model_of(system: Any) -> _LinearMechanics:
+    """Cache the flow per system object (continuation calls the map many times)."""
+    hit = _MODELS.get(id(system))
+    if hit is None or hit[0] is not system:
+        if len(_MODELS) > 64:
+            _MODELS.clear()
+        hit = (system, _LinearMechanics.of(system))
+        _MODELS[id(system)] = hit
+    return hit[1]
+
+
+def sample_on_grid(forced: Forced, x0: Any, dt: float, n: int) -> Any:
+    """Run ``(0, n·dt)`` with samples exactly at ``k·dt``: requested times for methods with
+    the ``t_eval`` capability, the ``dt`` sampling grid of ``event_driven`` (whose samples are
+    computed by the exact flow; ``t_eval`` there would interpolate linearly)."""
+    from ..simulate.driver import integrator_for
+
+    grid = dt * np.arange(n + 1, dtype=float)
+    cls = integrator_for(forced.system, forced.method)
+    if "t_eval" in cls.capabilities:
+        return forced.simulate(x0, (0.0, grid[-1]), t_eval=grid)
+    if "dt" in getattr(cls, "options", ()):
+        return forced.simulate(x0, (0.0, grid[-1]), dt=dt)
+    raise ModelError(f"system: method {cls.name!r} can sample neither at requested times nor "
+                     f"on a grid; use an exact-flow method")
+
+
+def at_times(tr: Any, times: Any) -> FloatArray:
+    """Rows of ``tr`` at ``times`` (right-continuous: the post-event state when an event falls
+    on a sample time); the times must be sample times of ``tr``."""
+    times = np.asarray(times, float)
+    tol = 1e-12 * max(1.0, float(np.max(np.abs(times))))   # roundoff of k·dt
+    idx = np.searchsorted(tr.t, times + tol, side="right") - 1
+    return np.asarray(tr.x[np.clip(idx, 0, len(tr.t) - 1)], float)
+
+
+def floquet_multipliers(monodromy: Any) -> np.ndarray:
+    """Eigenvalues of the monodromy matrix, by decreasing modulus."""
+    mu = np.linalg.eigvals(np.asarray(monodromy, float))
+    return mu[np.argsort(-np.abs(mu), kind="stable")]
+
+
+@dataclass(frozen=True, eq=False)
+class Orbit:
+    """A ``kT``-periodic orbit of a forced system.
+
+    Attributes
+    ----------
+    nodes
+        ``(k, n)`` shooting nodes: the state at ``t = 0, T, ..., (k-1)T``.
+    period
+        ``T`` of the input (the orbit's period is ``n_periods·T``).
+    n_periods
+        ``k``.
+    monodromy
+        ``∂x(kT)/∂x(0)``.
+    multipliers
+        Its eigenvalues by decreasing modulus.
+    signature
+        Events of one orbit period, ``((kind, index), ...)``.
+    min_impact_speed, min_gap
+        Distances to a grazing (``inf`` when not applicable).
+    iterations
+        Newton iterations used.
+    residual
+        Final ``max_i |P(x_i) - x_{i+1}|``.
+    """
+
+    nodes: FloatArray
+    period: float
+    n_periods: int
+    monodromy: FloatArray
+    multipliers: np.ndarray
+    signature: tuple[tuple[str, int], ...]
+    min_impact_speed: float = np.inf
+    min_gap: float = np.inf
+    iterations: int = 0
+    residual: float = 0.0
+    node_jacobians: tuple[FloatArray, ...] = field(default=(), repr=False)
+
+    @property
+    def x0(self) -> FloatArray:
+        """State at ``t = 0``."""
+        return self.nodes[0]
+
+    @property
+    def stable(self) -> bool:
+        """All multipliers strictly inside the unit circle."""
+        return bool(np.all(np.abs(self.multipliers) < 1.0))
+
+    @property
+    def n_impacts(self) -> int:
+        return sum(1 for k, _ in self.signature if k == "impact")
+
+
+def _shooting_system(forced: Forced, X: FloatArray
+                     ) -> tuple[FloatArray, FloatArray, list[MapResult]]:
+    """Residual ``P(x_i) - x_{i+1}`` and its block-bidiagonal Jacobian over all nodes."""
+    k, n = X.shape
+    maps = [stroboscopic_map(forced, X[i]) for i in range(k)]
+    R = np.concatenate([maps[i].x - X[(i + 1) % k] for i in range(k)])
+    J = np.zeros((k * n, k * n))
+    for i in range(k):
+        j = (i + 1) % k
+        J[i * n:(i + 1) * n, i * n:(i + 1) * n] += maps[i].jacobian
+        J[i * n:(i + 1) * n, j * n:(j + 1) * n] -= np.eye(n)
+    return R, J, maps
+
+
+def find_orbit(forced: Forced, x0: Any, *, n_periods: int = 1, tol: float = 1e-11,
+               max_iter: int = 30) -> Orbit:
+    """Newton on the multiple-shooting equations of a ``kT``-periodic orbit.
+
+    Parameters
+    ----------
+    forced
+        System, input and period.
+    x0 : (n,) or (k, n) array_like
+        Initial guess: one state (the other nodes are generated by the map) or all nodes.
+    n_periods
+        ``k``: look for an orbit of period ``kT``.
+    tol
+        Stop when ``max_i |P(x_i) - x_{i+1}| <= tol·max(1, |x|)``.
+    max_iter
+        Newton iterations (each a damped step: halved until the residual decreases).
+
+    Raises
+    ------
+    SolverError
+        No convergence within ``max_iter`` iterations (message with the last residual).
+    """
+    k = check_integer("n_periods", n_periods, minimum=1)
+    n = forced.n_states
+    X = _initial_nodes(forced, x0, k, n)
+    for it in range(int(max_iter) + 1):
+        R, J, maps = _shooting_system(forced, X)
+        res = float(np.max(np.abs(R)))
+        if res <= tol * max(1.0, float(np.max(np.abs(X)))):
+            return make_orbit(forced, X, maps, it, res)
+        if it == max_iter:
+            break
+        X = _damped_step(forced, X, R, J, res)
+    raise SolverError(f"x0: shooting did not converge in {max_iter} Newton iterations "
+                      f"(residual {res:.3g}); start closer to the orbit (e.g. from a "
+                      f"brute-force run) or check that a {k}T-periodic orbit exists")
+
+
+def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
+    arr = np.asarray(x0, float)
+    if arr.ndim == 2:
+        if arr.shape != (k, n):
+            raise DimensionError(f"x0: expected shape ({k}, {n}) for {k} nodes, got {arr.shape}")
+        return arr.copy()
+    X = [as_vector("x0", x0, n)]
+    for _ in range(k - 1):
+        X.append(stroboscopic_map(forced, X[-1]).x)
+    return np.array(X)
+
+
+def _damped_step(forced: Forced, X: FloatArray, R: FloatArray, J: FloatArray,
+                 res: float) -> FloatArray:
+    try:
+        dx = np.linalg.solve(J, -R).reshape(X.shape)
+    except np.linalg.LinAlgError as exc:
+        raise SolverError(f"x0: singular shooting Jacobian ({exc}); the orbit is at a fold "
+                          f"or a multiplier is 1") from exc
+    lam = 1.0
+    for _ in range(8):
+        trial = X + lam * dx
+        try:
+            R2 = _shooting_system(forced, trial)[0]
+            if float(np.max(np.abs(R2))) < res:
+                return trial
+        except SolverError:
+            pass
+        lam /= 2
+    return X + lam * dx
+
+
+def make_orbit(forced: Forced, X: FloatArray, maps: list[MapResult], iterations: int,
+               residual: float) -> Orbit:
+    """Assemble an :class:`Orbit` from converged nodes and their maps."""
+    Mono = np.eye(X.shape[1])
+    for m in maps:
+        Mono = m.jacobian @ Mono
+    sig = tuple(s for m in maps for s in m.signature)
+    speed = min((m.min_impact_speed for m in maps), default=np.inf)
+    gap = min_gap(forced, X, maps) if _is_linear_mechanics(forced.system) else np.inf
+    return Orbit(X.copy(), float(forced.period), X.shape[0], Mono, floquet_multipliers(Mono),
+                 sig, float(speed), float(gap), iterations, residual,
+                 tuple(m.jacobian for m in maps))
+
+
+def min_gap(forced: Forced, X: FloatArray, maps: list[MapResult] | None = None,
+            samples: int = 64) -> float:
+    """Smallest local minimum of the gaps over the free flight of the orbit through nodes
+    ``X`` (linear mechanics; minima at impacts excluded, ``inf`` when there is none).
+
+    The gaps are sampled on ``samples`` points per period of the exact flow, and each sampled
+    local minimum is refined by Newton on ``ġ(t) = 0`` (state propagated exactly by the
+    augmented flow of plant and input), so a grazing distance is exact to rounding.
+    """
+    from ..numerics.lti import LTIFlow, augment
+
+    model = _model_of(forced.system)
+    sysm = forced.system
+    n = sysm.n_dof
+    u = forced.u
+    A_aug = augment(model.A, model.B, u) if (u is not None and model.B is not None) else model.A
+    flow = LTIFlow(A_aug)
+    best = np.inf
+    T = forced.period
+    for x_node in X:
+        tr = sample_on_grid(forced, x_node, T / samples, samples)
+        for j in range(sysm.n_contacts):
+            best = min(best, _min_gap_contact(tr, j, model, flow, u, n))
+    return best
+
+
+def _min_gap_contact(tr: Any, j: int, model: _LinearMechanics, flow: Any, u: Any,
+                     n: int) -> float:
+    w, g0 = model.G[j], float(model.g0[j])
+    t, x = tr.t, tr.x
+    g = x[:, :n] @ w + g0
+    t_imp = tr.event_times()
+    best = np.inf
+    for i in range(1, len(t) - 1):
+        lo, hi = t[i - 1], t[i + 1]
+        if g[i] <= g[i - 1] and g[i] <= g[i + 1] and not np.any((t_imp >= lo) & (t_imp <= hi)):
+            best = min(best, _refine_min(t[i], x[i], w, g0, model, flow, u, n, hi - lo))
+    return best
+
+
+def _refine_min(ts: float, xs: FloatArray, w: FloatArray, g0: float, model: _LinearMechanics,
+                flow: Any, u: Any, n: int, width: float) -> float:
+    """Newton on ``ġ(t) = wᵀv(t) = 0`` near a sampled minimum, on the exact flow (kept
+    within ``width`` of the sample; the sampled value when Newton leaves it)."""
+    X0 = np.concatenate([xs, u.w(ts)]) if flow.n > xs.shape[0] else xs.copy()
+    s = 0.0
+    for _ in range(20):
+        X = flow.propagate(X0, s)
+        x = X[: 2 * n]
+        gd = float(w @ x[n:])
+        gdd = float(w @ model.field(x, ts + s, u)[n:])
+        if gdd == 0.0:
+            break
+        ds = -gd / gdd
+        s += ds
+        if abs(ds) <= 4 * np.finfo(float).eps * max(1.0, abs(ts)):
+            break
+    if not abs(s) <= width:
+        return float(w @ xs[:n] + g0)
+    X = flow.propagate(X0, s)
+    return float(w @ X[:n] + g0)
+
+
+# -- autonomous orbits and hyperplane sections -------------------------------------------------
+
+def _transition_run(system: Any, x0: FloatArray, tf: float, method: Any,
+                    t_eval: FloatArray | None = None) -> Any:
+    """``simulate`` over ``(0, tf)`` with the state transition (capability ``sensitivity``)."""
+    from ..simulate import simulate
+    from ..simulate.driver import METHODS, integrator_for
+
+    cls = integrator_for(system, method)
+    if "sensitivity" not in cls.capabilities:
+        able = sorted(k for k in METHODS if "sensitivity" in METHODS[k].capabilities)
+        raise ModelError(f"method: autonomous orbits need the state transition, which "
+                         f"{cls.name!r} does not compute; use one of {able}")
+    te = np.array([0.0, tf]) if t_eval is None else t_eval
+    return simulate(system, x0, (0.0, tf), method=method, t_eval=te, sensitivity=True)
+
+
+def _flow_velocity(system: Any, tr: Any, tf: float, method: Any) -> FloatArray:
+    """``ẋ(tf)`` by central differences of the flow (step ``δ = ε^{1/3}·tf``: truncation
+    ``O(δ²)`` against rounding ``O(ε/δ)``): ``x(tf - δ)`` from the run's samples, ``x(tf + δ)``
+    from a short continuation."""
+    from ..simulate import simulate
+
+    delta = float(np.finfo(float).eps) ** (1 / 3) * tf
+    x_minus = at_times(tr, [tf - delta])[0]
+    after = simulate(system, tr.x[-1], (0.0, delta), method=method,
+                     t_eval=np.array([0.0, delta]))
+    return (after.x[-1] - x_minus) / (2 * delta)
+
+
+@dataclass(frozen=True, eq=False)
+class Cycle:
+    """A periodic orbit of an autonomous system (period unknown).
+
+    Attributes
+    ----------
+    x0
+        A point of the orbit on the phase-condition hyperplane.
+    period
+        ``T``.
+    monodromy
+        ``∂φ_T/∂x0``.
+    multipliers
+        All eigenvalues of the monodromy by decreasing modulus.
+    trivial_index
+        Index in ``multipliers`` of the trivial multiplier 1 (eigenvector along the flow).
+    signature
+        Events of one period.
+    iterations, residual
+        Newton iterations and final ``|φ_T(x0) - x0|``.
+    """
+
+    x0: FloatArray
+    period: float
+    monodromy: FloatArray
+    multipliers: np.ndarray
+    trivial_index: int
+    signature: tuple[tuple[str, int], ...]
+    iterations: int
+    residual: float
+
+    @property
+    def nontrivial(self) -> np.ndarray:
+        """The multipliers without the trivial one."""
+        return np.delete(self.multipliers, self.trivial_index)
+
+    @property
+    def stable(self) -> bool:
+        """All non-trivial multipliers strictly inside the unit circle."""
+        return bool(np.all(np.abs(self.nontrivial) < 1.0))
+
+
+def _trivial_index(M: FloatArray, f: FloatArray) -> tuple[np.ndarray, int]:
+    """Multipliers by decreasing modulus and the index of the one whose eigenvector is most
+    nearly parallel to the flow ``f`` (``M f = f`` on a periodic orbit)."""
+    mu, V = np.linalg.eig(M)
+    order = np.argsort(-np.abs(mu), kind="stable")
+    mu, V = mu[order], V[:, order]
+    fn = f / np.linalg.norm(f)
+    align = np.abs(fn @ V) / np.linalg.norm(V, axis=0)
+    return mu, int(np.argmin(np.abs(mu - 1.0) + (1.0 - align)))
+
+
+def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: float | None = None,
+               method: Any = None, tol: float = 1e-9, max_iter: int = 30) -> Cycle:
+    """Newton on ``φ_T(x0) = x0``, ``normal·x0 = offset`` for ``(x0, T)`` (single shooting).
+
+    The phase condition pins the point on a hyperplane the orbit crosses transversally
+    (default offset: ``normal·x0`` of the guess). The bordered Jacobian is
+    ``[[M - I, ẋ(T)], [normalᵀ, 0]]`` with ``M`` the integrator's state transition and
+    ``ẋ(T)`` a central difference of the flow in time. At the solution ``M ẋ(0) = ẋ(0)``:
+    the multiplier 1 with the flow as eigenvector is the trivial one (``trivial_index``).
+    The default ``tol = 1e-9`` sits above the residual floor of event-located flows (switch
+    instants found to ~1e-11 relative, times the field's jump).
+
+    Raises
+    ------
+    ModelError
+        A method without the ``sensitivity`` capability.
+    SolverError
+        No convergence (message with the residual).
+    """
+    n = int(system.n_states)
+    x = as_vector("x0", x0, n).copy()
+    T = check_positive("period", period)
+    nv = as_vector("normal", normal, n)
+    c = float(nv @ x) if offset is None else float(offset)
+    for it in range(int(max_iter) + 1):
+        delta = float(np.finfo(float).eps) ** (1 / 3) * T
+        tr = _transition_run(system, x, T, method, t_eval=np.array([0.0, T - delta, T]))
+        M = np.asarray(tr.stats["state_transition"], float)
+        r = np.append(tr.x[-1] - x, nv @ x - c)
+        res = float(np.max(np.abs(r)))
+        f = _flow_velocity(system, tr, T, method)
+        if res <= tol * max(1.0, float(np.max(np.abs(x)))):
+            mu, k = _trivial_index(M, f)
+            sig = tuple((e.kind, int(e.index)) for e in tr.events)
+            return Cycle(x, T, M, mu, k, sig, it, res)
+        if it == max_iter:
+            break
+        J = np.block([[M - np.eye(n), f[:, None]], [nv[None, :], np.zeros((1, 1))]])
+        step = np.linalg.solve(J, -r)
+        x, T = x + step[:n], T + float(step[n])
+        if T <= 0:
+            raise SolverError(f"period: Newton drove the period to {T:.3g} <= 0; start from a "
+                              f"better period guess")
+    raise SolverError(f"x0: cycle shooting did not converge in {max_iter} iterations "
+                      f"(residual {res:.3g}); improve the guesses of x0 and period")
+
+
+@dataclass(frozen=True, eq=False)
+class SectionReturn:
+    """First return to a hyperplane ``normal·x = offset``: point, time and the Poincaré map's
+    Jacobian ``(I - ẋ normalᵀ/(normal·ẋ)) ∂φ_τ/∂x0`` (the return time's dependence on ``x0``
+    folded in, as in a saltation matrix with ``J = 0`` jump and zero field after)."""
+
+    x: FloatArray
+    time: float
+    jacobian: FloatArray
+
+
+def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: float,
+                   method: Any = None, direction: int = 1,
+                   samples: int = 2000) -> SectionReturn:
+    """Poincaré map of an autonomous system on the hyperplane ``normal·x = offset``.
+
+    The first crossing in ``direction`` (``+1``: ``normal·x`` increasing) after ``t = 0`` is
+    bracketed on ``samples`` exact-flow samples of ``(0, t_max)`` and refined by secant steps
+    on the flow from the bracket's start. Crossings within the first sample interval are not
+    returns (the start lies on the section, or within rounding of a perturbation of it).
+
+    Raises
+    ------
+    SolverError
+        No crossing within ``t_max``.
+    """
+    from ..simulate import simulate
+
+    n = int(system.n_states)
+    x0 = as_vector("x0", x0, n)
+    nv = as_vector("normal", normal, n)
+    grid = np.linspace(0.0, float(t_max), int(samples) + 1)
+    tr = simulate(system, x0, (0.0, float(t_max)), method=method, t_eval=grid)
+    X = at_times(tr, grid)
+    g = direction * (X @ nv - offset)
+    hits = np.flatnonzero((g[:-1] < 0) & (g[1:] >= 0))
+    hits = hits[hits > 0]       # a start on (or a hair off) the section is not a return
+    if not hits.size:
+        raise SolverError(f"t_max: no crossing of the section within {t_max}; increase t_max")
+    i = int(hits[0])
+    ta, xa = grid[i], X[i]
+
+    def gap(s: float) -> tuple[float, FloatArray]:
+        if s == 0.0:
+            return float(direction * (xa @ nv - offset)), xa
+        y = simulate(system, xa, (0.0, s), method=method, t_eval=np.array([0.0, s])).x[-1]
+        return float(direction * (y @ nv - offset)), y
+
+    s0, s1 = 0.0, grid[i + 1] - ta
+    g0, g1 = gap(s0)[0], gap(s1)[0]
+    for _ in range(60):
+        s2 = s1 - g1 * (s1 - s0) / (g1 - g0) if g1 != g0 else 0.5 * (s0 + s1)
+        g2 = gap(s2)[0]
+        s0, g0, s1, g1 = s1, g1, s2, g2
+        if abs(s1 - s0) <= 4 * np.finfo(float).eps * max(1.0, ta + s1):
+            break
+    tau = ta + s1
+    run = _transition_run(system, x0, tau, method,
+                          t_eval=np.array([0.0, tau - float(np.finfo(float).eps) ** (1 / 3) * tau,
+                                           tau]))
+    M = np.asarray(run.stats["state_transition"], float)
+    f = _flow_velocity(system, run, tau, method)
+    P = np.eye(n) - np.outer(f, nv) / float(nv @ f)
+    return SectionReturn(np.asarray(run.x[-1], float), float(tau), P @ M)
