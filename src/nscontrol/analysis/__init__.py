@@ -36,6 +36,22 @@ _EXPORTS: dict[str, str] = {
     "refined_peak": "periodic", "dft_harmonics": "periodic", "HarmonicResponse": "periodic",
     "harmonic_response": "periodic", "FrequencyResponse": "periodic",
     "frequency_response": "periodic", "frequency_sweep": "periodic",
+    # orbits.py
+    "Forced": "orbits", "MapResult": "orbits", "Orbit": "orbits", "stroboscopic_map": "orbits",
+    "find_orbit": "orbits", "Cycle": "orbits", "find_cycle": "orbits", "SectionReturn": "orbits",
+    "hyperplane_map": "orbits", "floquet_multipliers": "orbits",
+    # saltation.py
+    "saltation_matrix": "saltation", "impact_jump_jacobian": "saltation",
+    "time_shift_term": "saltation",
+    # continuation.py
+    "SpecialPoint": "continuation", "Branch": "continuation", "continue_orbit": "continuation",
+    "switch_at_flip": "continuation",
+    # bifurcation.py
+    "BifurcationDiagram": "bifurcation", "bifurcation_diagram": "bifurcation",
+    "parse_grid": "bifurcation",
+    # impact_oscillator.py
+    "ImpactOscillator": "impact_oscillator", "OneImpactOrbit": "impact_oscillator",
+    "OscillatorFamily": "impact_oscillator",
 }
 
 __all__ = list(_EXPORTS)
