@@ -37,6 +37,7 @@ docs: $(DOCS_STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench
+	$(PY) -m mypy
 
 clean:
 	rm -rf $(OUT) .pytest_cache build src/*.egg-info docs/_build docs/api/generated docs/_gallery docs/gallery.md

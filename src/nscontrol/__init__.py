@@ -15,7 +15,7 @@ stays fast (numba, cvxpy and matplotlib load only when a function needs them).
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import errors
 from .errors import (
@@ -28,6 +28,10 @@ from .errors import (
     ZenoError,
 )
 from .simulate import Trajectory, simulate  # noqa: E402  (the verb shadows its subpackage)
+
+if TYPE_CHECKING:   # the lazy names below, typed for type checkers (imported on first use)
+    from .numerics.lcp import solve_lcp as solve_lcp
+    from .simulate.closed_loop import closed_loop as closed_loop
 
 __version__ = "0.1.0"
 

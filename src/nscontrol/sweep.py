@@ -280,7 +280,9 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
             if not finished:
                 errors[i] = PointError(i, "KeyboardInterrupt", "not run: the sweep was "
                                        "interrupted")
-        exc.sweep_result = SweepResult(points, tuple(values), tuple(errors))  # type: ignore
+        # a new attribute on the interrupt: the points finished so far travel with it
+        exc.sweep_result = SweepResult(  # type: ignore[attr-defined]
+            points, tuple(values), tuple(errors))
         exc.add_note(f"nscontrol.sweep: {sum(done)} of {len(points)} points finished; "
                      "err.sweep_result holds them")
         raise

@@ -16,10 +16,10 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_finite_scalar, as_matrix, as_square, check_positive
 from ..errors import (
@@ -29,6 +29,9 @@ from ..errors import (
     ModelError,
     SolverError,
 )
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..systems.pwa import PiecewiseAffineSystem
 
 __all__ = [
     "ConvergenceCertificate", "quadratic_convergence", "decay_rate",
@@ -85,9 +88,10 @@ class ConvergenceCertificate:
         return self.convergent
 
 
-def _mode_matrices(system: Any) -> tuple[FloatArray, ...]:
+def _mode_matrices(system: PiecewiseAffineSystem | Sequence[ArrayLike]
+                   ) -> tuple[FloatArray, ...]:
     """The linear parts ``A_i`` of a PWA system (refusing a discontinuous one) or of a list."""
-    if isinstance(system, (list, tuple)):
+    if isinstance(system, Sequence):   # list or tuple of mode matrices
         As = tuple(as_square(f"As[{i}]", A) for i, A in enumerate(system))
     else:
         if not getattr(system, "continuous", True):
@@ -106,7 +110,8 @@ def _mode_matrices(system: Any) -> tuple[FloatArray, ...]:
     return As
 
 
-def quadratic_convergence(system: Any, *, decay: float = 0.0, p_max: float = 1e4,
+def quadratic_convergence(system: PiecewiseAffineSystem | Sequence[ArrayLike], *,
+                          decay: float = 0.0, p_max: float = 1e4,
                           normalise: bool = True) -> ConvergenceCertificate:
     """Decide quadratic convergence of a continuous PWA system by a common quadratic
     Lyapunov function.
@@ -220,7 +225,7 @@ def _lyap(A: Any, P: FloatArray, decay: float) -> FloatArray:
     return 0.5 * (M + M.T)
 
 
-def decay_rate(As: Sequence[Any], P: Any) -> float:
+def decay_rate(As: Sequence[ArrayLike], P: ArrayLike) -> float:
     """The largest ``σ`` with ``A_iᵀP + PA_i + 2σP <= 0`` for all i (exact, by generalised
     eigenvalues); negative when ``P`` is not a Lyapunov matrix of every mode.
 
@@ -233,8 +238,9 @@ def decay_rate(As: Sequence[Any], P: Any) -> float:
     """
     from scipy.linalg import eigh
 
-    P = 0.5 * (np.asarray(P, float) + np.asarray(P, float).T)
-    return min(float(eigh(-_lyap(A, P, 0.0), P, eigvals_only=True)[0]) / 2.0 for A in As)
+    Pa = np.asarray(P, float)
+    Ps = 0.5 * (Pa + Pa.T)
+    return min(float(eigh(-_lyap(A, Ps, 0.0), Ps, eigvals_only=True)[0]) / 2.0 for A in As)
 
 
 # -- bimodal cross-checks (§2.4) --------------------------------------------------------------
@@ -271,7 +277,7 @@ class BimodalTests:
         return self.cqlf == self.product == self.circle
 
 
-def bimodal_tests(A1: Any, A2: Any) -> BimodalTests:
+def bimodal_tests(A1: ArrayLike, A2: ArrayLike) -> BimodalTests:
     """Run the CQLF LMI, the ``A_1A_2`` eigenvalue test and the circle criterion.
 
     Parameters
@@ -330,7 +336,7 @@ def _both_hurwitz(A1: FloatArray, A2: FloatArray) -> bool:
     return all(float(np.max(np.linalg.eigvals(A).real)) < 0 for A in (A1, A2))
 
 
-def most_negative_real_eigenvalue(M: Any) -> float:
+def most_negative_real_eigenvalue(M: ArrayLike) -> float:
     """The most negative real eigenvalue of ``M`` (``nan`` when it has none); an eigenvalue
     counts as real when ``|Im λ| <= 1e-9|λ|``.
 
@@ -344,7 +350,7 @@ def most_negative_real_eigenvalue(M: Any) -> float:
     return float(real_neg.min()) if real_neg.size else float("nan")
 
 
-def product_test(A1: Any, A2: Any) -> bool:
+def product_test(A1: ArrayLike, A2: ArrayLike) -> bool:
     """Bimodal test 2 of §2.4: both modes Hurwitz and ``A_1A_2`` without a real negative
     eigenvalue (⇔ a CQLF exists, for a rank-one difference).
 
@@ -358,7 +364,7 @@ def product_test(A1: Any, A2: Any) -> bool:
     return bool(_both_hurwitz(A1, A2) and np.isnan(most_negative_real_eigenvalue(A1 @ A2)))
 
 
-def circle_test(A1: Any, A2: Any) -> bool:
+def circle_test(A1: ArrayLike, A2: ArrayLike) -> bool:
     """Bimodal test 3 of §2.4: both modes Hurwitz and ``1 + k Re G(iω) > 0`` for all ω.
 
     Parameters
@@ -370,7 +376,7 @@ def circle_test(A1: Any, A2: Any) -> bool:
     return bool(_both_hurwitz(A1, A2) and circle_criterion_minimum(A1, A2) > 0)
 
 
-def circle_criterion_minimum(A1: Any, A2: Any) -> float:
+def circle_criterion_minimum(A1: ArrayLike, A2: ArrayLike) -> float:
     """``min_ω 1 + k Re G(iω)``, ``G(s) = cᵀ(sI - A_1)⁻¹g``, for ``A_1 - A_2 = k g cᵀ``.
 
     Parameters
@@ -484,7 +490,7 @@ class SteadyStateBound:
     status: str
 
 
-def isc_gain(P: Any, D: Any, epsilon: float) -> float:
+def isc_gain(P: ArrayLike, D: ArrayLike, epsilon: float) -> float:
     """Input-to-state convergence gain ``γ_ISC = 2|PD|·√κ(P)/ε`` (ch11 §2.2).
 
     With ``A_iᵀP + PA_i <= -εI``: ``limsup|x1 - x2| <= γ_ISC·sup|w1 - w2|``; for the steady
@@ -527,7 +533,7 @@ def isc_gain(P: Any, D: Any, epsilon: float) -> float:
     return 2.0 * float(np.linalg.norm(P @ D, 2)) * float(np.sqrt(lam[-1] / lam[0])) / epsilon
 
 
-def _io_matrices(As: Sequence[Any], D: Any, Cz: Any) -> tuple[list[FloatArray], FloatArray,
+def _io_matrices(As: Sequence[ArrayLike], D: Any, Cz: Any) -> tuple[list[FloatArray], FloatArray,
                                                              FloatArray]:
     As_ = list(_mode_matrices(list(As)))
     n = As_[0].shape[0]
@@ -536,7 +542,7 @@ def _io_matrices(As: Sequence[Any], D: Any, Cz: Any) -> tuple[list[FloatArray], 
     return As_, D, Cz
 
 
-def peak_to_peak_bound(As: Sequence[Any], D: Any, Cz: Any, *,
+def peak_to_peak_bound(As: Sequence[ArrayLike], D: ArrayLike, Cz: ArrayLike, *,
                        alphas: Any = None, refine: bool = True) -> SteadyStateBound:
     """Invariant-ellipsoid peak-to-peak bound on incremental steady-state outputs (§2.3).
 
@@ -662,7 +668,7 @@ def _quiet() -> Iterator[None]:
         yield
 
 
-def incremental_l2_bound(As: Sequence[Any], D: Any, Cz: Any) -> SteadyStateBound:
+def incremental_l2_bound(As: Sequence[ArrayLike], D: ArrayLike, Cz: ArrayLike) -> SteadyStateBound:
     """Incremental L2 (RMS) gain bound of a continuous PWA system (§2.3).
 
     Minimise ``γ²`` s.t. ``P > 0`` and ``[[A_iᵀP + PA_i + C_zᵀC_z, PD], [DᵀP, -γ²I]] <= 0``.
@@ -727,7 +733,7 @@ def incremental_l2_bound(As: Sequence[Any], D: Any, Cz: Any) -> SteadyStateBound
     return SteadyStateBound(float(np.sqrt(res["gamma2"])), res["P"], np.nan, res.status)
 
 
-def equilibrium(system: Any, w0: Any) -> FloatArray:
+def equilibrium(system: PiecewiseAffineSystem, w0: ArrayLike) -> FloatArray:
     """The equilibrium of a continuous PWA system for a constant input ``w0`` (ch11 §2.2).
 
     For each region solve ``A_i x = -b_i - E w0`` and keep the solution if it lies in the
@@ -787,7 +793,7 @@ def equilibrium(system: Any, w0: Any) -> FloatArray:
             continue
         if system.contains(i, x) and not any(np.allclose(x, y, rtol=1e-9, atol=1e-12)
                                              for y in found):
-            found.append(x)
+            found.append(np.asarray(x, dtype=float))
     if len(found) != 1:
         raise ModelError(f"system: expected exactly one equilibrium for w0={w0!r}, found "
                          f"{len(found)}; the system is not convergent (check "

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
@@ -128,7 +129,7 @@ class ReconstructibilityResult:
     reason: str
 
 
-def reconstructibility(A_a: Any, C_a: Any, impacts: Any, t_span: Sequence[float], *,
+def reconstructibility(A_a: ArrayLike, C_a: ArrayLike, impacts: Any, t_span: Sequence[float], *,
                        min_dwell: float = 1e-9) -> ReconstructibilityResult:
     """Theorem 2 of chapter 2: is the state at ``tf`` determined by ``u`` and ``y`` on
     ``[t0, tf)`` for this input?

@@ -22,15 +22,18 @@ the method accepts) with period ``T``.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_vector, check_positive
 from ..errors import DimensionError, ModelError, SolverError
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..systems.protocols import InputSignal, SimulableSystem
 
 __all__ = [
     "PeriodicOrbit", "periodic_steady_state", "UniquenessCheck", "check_uniqueness",
@@ -40,6 +43,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: ``control=``: the effort ``u`` of time-major states ``x`` (shape ``(k, n)`` -> ``(k, p)``).
+ControlMap = Callable[[FloatArray], ArrayLike]
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,7 +135,8 @@ def _scale(x: FloatArray) -> float:
     return max(1.0, float(np.linalg.norm(x)))
 
 
-def periodic_steady_state(system: Any, period: float, *, u: Any = None, x0: Any = None,
+def periodic_steady_state(system: SimulableSystem, period: float, *, u: InputSignal = None,
+                          x0: ArrayLike | None = None,
                           method: str = "switching", tol: float = 1e-11, max_iter: int = 12,
                           fallback: bool = True, max_periods: int = 5000,
                           n_samples: int = 1001, **options: Any) -> PeriodicOrbit:
@@ -245,7 +252,7 @@ def _linear_guess(system: Any, u: Any) -> FloatArray:
     n = int(system.n_states)
     A_list = getattr(system, "A", None)
     exo = u if u is not None else getattr(system, "u", None)
-    if not isinstance(A_list, (list, tuple)) or not hasattr(exo, "S"):
+    if not isinstance(A_list, (list, tuple)) or exo is None or not hasattr(exo, "S"):
         return np.zeros(n)
     try:
         A = sum(np.asarray(a, float) for a in A_list) / len(A_list)
@@ -320,7 +327,8 @@ class UniquenessCheck:
     unique: bool
 
 
-def check_uniqueness(system: Any, period: float, *, u: Any = None, n_guesses: int = 5,
+def check_uniqueness(system: SimulableSystem, period: float, *, u: InputSignal = None,
+                     n_guesses: int = 5,
                      spread: float = 5.0, rtol: float = 1e-8, seed: int = 0,
                      method: str = "switching", **options: Any) -> UniquenessCheck:
     """Shoot from ``n_guesses`` random initial states spread ``spread`` times the size of the
@@ -446,7 +454,8 @@ def period_multiplicity(poincare: Any, *, rtol: float = 1e-3, max_p: int = 6) ->
     return 0
 
 
-def brute_force_steady_state(system: Any, period: float, *, u: Any = None, x0: Any = None,
+def brute_force_steady_state(system: SimulableSystem, period: float, *, u: InputSignal = None,
+                             x0: ArrayLike | None = None,
                              n_transient: int = 200, n_record: int = 12,
                              samples_per_period: int = 200, rtol: float = 1e-3,
                              method: str = "switching", **options: Any) -> BruteForceResult:
@@ -749,7 +758,7 @@ class FrequencyResponse:
     errors: tuple[Any, ...] = ()
 
     @classmethod
-    def from_points(cls, omegas: Sequence[float], points: Sequence[HarmonicResponse | None],
+    def from_points(cls, omegas: ArrayLike, points: Sequence[HarmonicResponse | None],
                     *, direction: str, amplitude: float, n_harmonics: int,
                     errors: Sequence[Any] = ()) -> FrequencyResponse:
         def col(attr: str, fill: Any) -> np.ndarray:
@@ -771,9 +780,10 @@ def _omega_grid(omegas: Any) -> FloatArray:
     return w
 
 
-def frequency_response(system: Any, omegas: Any, *, amplitude: float = 1.0,
-                       output: Any = None, n_samples: int = 1000, n_harmonics: int = 5,
-                       method: str = "switching", control: Any = None,
+def frequency_response(system: SimulableSystem, omegas: ArrayLike, *, amplitude: float = 1.0,
+                       output: ArrayLike | None = None, n_samples: int = 1000,
+                       n_harmonics: int = 5, method: str = "switching",
+                       control: ControlMap | None = None,
                        executor: Any = "auto", progress: bool | None = None,
                        **options: Any) -> FrequencyResponse:
     """Generalized Bode plot of a convergent system: shoot the steady state at each ``ω``
@@ -955,10 +965,12 @@ class _SweepBranch:
         return out
 
 
-def frequency_sweep(system: Any, omegas: Any, *, amplitude: float = 1.0, output: Any = None,
+def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: float = 1.0,
+                    output: ArrayLike | None = None,
                     directions: Sequence[str] = ("up", "down"), n_transient: int = 100,
                     n_record: int = 12, n_harmonics: int = 5, samples_per_period: int = 200,
-                    method: str = "switching", control: Any = None, executor: Any = "auto",
+                    method: str = "switching", control: ControlMap | None = None,
+                    executor: Any = "auto",
                     progress: bool | None = None,
                     **options: Any) -> dict[str, FrequencyResponse]:
     """Brute-force frequency sweeps with continuation (each point starts from the previous
@@ -1053,7 +1065,7 @@ def frequency_sweep(system: Any, omegas: Any, *, amplitude: float = 1.0, output:
                 resp[i] = v
             elif v is not None:
                 errs[i] = v
-            else:  # the whole branch task failed (lost worker, unpicklable system...)
+            elif err is not None:  # the whole branch task failed (lost worker, pickling...)
                 errs[i] = sweep.PointError(i, err.type, f"ω = {wi:g}: the {d} sweep failed "
                                            f"as a whole: {err.message}", err.traceback)
         out[d] = FrequencyResponse.from_points(w, resp, direction=d, amplitude=amplitude,

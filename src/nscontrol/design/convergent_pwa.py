@@ -20,15 +20,20 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_matrix, as_real_scalar, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
 from ..numerics.scaling import Scaling
 from ..numerics.statespace import is_state_space, state_space_matrices
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..systems.feedback import PiecewiseStateFeedback
+    from ..systems.pwa import PiecewiseAffineSystem
+
 
 __all__ = [
     "ConvergentStateFeedback", "PWAStateFeedback", "ConvergentObserver",
@@ -113,16 +118,16 @@ class ConvergentStateFeedback:
         p = self.K.shape[0]
         return (self.K,) * n_regions, (np.zeros(p),) * n_regions
 
-    def control(self, x: Any) -> FloatArray:
+    def control(self, x: ArrayLike) -> FloatArray:
         """``u = Kx`` (time-major ``x`` of shape ``(k, n)`` gives ``u`` of shape ``(k, p)``);
         pass it as ``control=`` to the frequency-response helpers to get the effort."""
         return np.asarray(x, float) @ self.K.T
 
-    def closed_loop(self, system: Any) -> Any:
+    def closed_loop(self, system: PiecewiseAffineSystem) -> PiecewiseAffineSystem:
         """The closed loop ``x' = (A_i + BK)x + b_i + Eu(t)`` as a PWA system."""
         return _with_feedback(system, self.B, *self.gains(len(system.A)))
 
-    def controller(self, n_regions: int) -> Any:
+    def controller(self, n_regions: int) -> PiecewiseStateFeedback:
         """This law as a block for :func:`nscontrol.closed_loop` (``input_matrix=self.B``)."""
         from ..systems.feedback import PiecewiseStateFeedback
 
@@ -174,19 +179,19 @@ class PWAStateFeedback:
         :func:`tune_pwa_state_feedback` minimises the largest of."""
         Sinv = np.linalg.inv(self.scaling.S)
         return tuple(float(np.linalg.norm(K @ Sinv, 2)) / self.scaling.input_unit
-                     for K in self.K)  # type: ignore[return-value]
+                     for K in self.K)  # type: ignore[return-value]  # bimodal: 2 gains
 
-    def control(self, x: Any) -> FloatArray:
+    def control(self, x: ArrayLike) -> FloatArray:
         """``u = K_1x + ν·min(cᵀx - d, 0)`` (time-major ``x`` gives time-major ``u``)."""
         x = np.asarray(x, float)
         s = np.minimum(x @ self.c - self.d, 0.0)
         return x @ self.K[1].T + np.multiply.outer(s, self.nu)
 
-    def closed_loop(self, system: Any) -> Any:
+    def closed_loop(self, system: PiecewiseAffineSystem) -> PiecewiseAffineSystem:
         """The closed loop ``x' = (A_i + BK_i)x + b_i + Bk_i + Eu(t)`` as a PWA system."""
         return _with_feedback(system, self.B, self.K, self.k)
 
-    def controller(self, n_regions: int = 2) -> Any:
+    def controller(self, n_regions: int = 2) -> PiecewiseStateFeedback:
         """This law as a block for :func:`nscontrol.closed_loop` (``input_matrix=self.B``)."""
         from ..systems.feedback import PiecewiseStateFeedback
 
@@ -225,7 +230,7 @@ class ConvergentObserver:
     scaling: Scaling
     status: str
 
-    def error_bound(self, t: Any, e0_norm: float) -> FloatArray:
+    def error_bound(self, t: ArrayLike, e0_norm: float) -> FloatArray:
         """``√κ(P) e^{-σt}|e(0)|``."""
         return np.sqrt(self.kappa) * np.exp(-self.sigma * np.asarray(t, float)) * e0_norm
 
@@ -253,15 +258,15 @@ class EstimateFeedback:
 
 # -- closed loops ----------------------------------------------------------------------------
 
-def _with_feedback(system: Any, B: FloatArray, Ks: Sequence[FloatArray],
-                   ks: Sequence[FloatArray]) -> Any:
+def _with_feedback(system: PiecewiseAffineSystem, B: FloatArray, Ks: Sequence[FloatArray],
+                   ks: Sequence[FloatArray]) -> PiecewiseAffineSystem:
     from ..simulate.closed_loop import closed_loop
     from ..systems.feedback import PiecewiseStateFeedback
 
     return closed_loop(system, PiecewiseStateFeedback(Ks, ks), input_matrix=B).stacked
 
 
-def output_feedback_loop(system: Any, observer: ConvergentObserver,
+def output_feedback_loop(system: PiecewiseAffineSystem, observer: ConvergentObserver,
                          feedback: ConvergentStateFeedback | PWAStateFeedback | None = None
                          ) -> Any:
     """Plant + observer + feedback ``u = K_{j(x̂)}x̂ + k_{j(x̂)}`` as one PWA system in
@@ -369,7 +374,8 @@ def _input_matrix(system: Any, B: Any) -> FloatArray:
     return as_matrix("B", B.reshape(n, -1) if B.ndim == 1 and B.size == n else B, rows=n)
 
 
-def design_state_feedback(system: Any, *, sigma: float, B: Any = None,
+def design_state_feedback(system: PiecewiseAffineSystem, *, sigma: float,
+                          B: ArrayLike | None = None,
                           scale: Scaling | str | None = None) -> ConvergentStateFeedback:
     """Linear state feedback ``u = Kx`` with decay rate ``σ`` and minimal gain bound (SF-σ).
 
@@ -469,7 +475,8 @@ def _state_feedback(As: Sequence[FloatArray], B: FloatArray, sigma: float,
     return ConvergentStateFeedback(K, B, P, sigma, float(np.sqrt(kappa)), sc, status)
 
 
-def design_pwa_state_feedback(system: Any, *, nu: Any, sigma: float, B: Any = None,
+def design_pwa_state_feedback(system: PiecewiseAffineSystem, *, nu: ArrayLike, sigma: float,
+                              B: ArrayLike | None = None,
                               scale: Scaling | str | None = None) -> PWAStateFeedback:
     """Continuity-preserving bimodal PWA feedback ``u = Kx + ν·min(cᵀx - d, 0)`` (§2.5 b).
 
@@ -533,8 +540,9 @@ def design_pwa_state_feedback(system: Any, *, nu: Any, sigma: float, B: Any = No
                             sigma, sf.gain_bound, sf.scaling, sf.status)
 
 
-def tune_pwa_state_feedback(system: Any, *, sigma: float, nu_bounds: tuple[float, float],
-                            n_grid: int = 11, B: Any = None,
+def tune_pwa_state_feedback(system: PiecewiseAffineSystem, *, sigma: float,
+                            nu_bounds: tuple[float, float], n_grid: int = 11,
+                            B: ArrayLike | None = None,
                             scale: Scaling | str | None = None) -> PWAStateFeedback:
     """Continuity-preserving PWA feedback with the slope ``ν`` chosen to minimise the largest
     per-region gain ``max(‖K̃_0‖, ‖K̃_1‖)`` (scaled units) over ``nu_bounds`` (single input).
@@ -641,7 +649,7 @@ def _bimodal_facet(system: Any) -> tuple[FloatArray, float]:
     return np.asarray(regs[0][0][0], float), float(regs[0][1][0])
 
 
-def design_observer(system: Any, *, sigma: float, C: Any = None,
+def design_observer(system: PiecewiseAffineSystem, *, sigma: float, C: ArrayLike | None = None,
                     scale: Scaling | str | None = None) -> ConvergentObserver:
     """Gain-bounded piecewise-linear observer with error decay rate ``σ`` (OBS-σ).
 

@@ -30,14 +30,18 @@ therefore leaves the verdicts and margins unchanged (up to the powers of two of 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_square, as_vector, check_positive
 from ..errors import InfeasibleDesignError, ModelError
 from ..numerics.observability import RANK_RTOL, krylov_basis, pbh_observability
 from ..numerics.scaling import balanced_unit_norm
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..numerics.lti import LTIFlow
 
 __all__ = [
     "Theorem1Result",
@@ -96,7 +100,7 @@ class Theorem1Result:
 
 
 
-def theorem1_test(A_a: Any, B_a: Any, C_a: Any, C_contact: Any, *,
+def theorem1_test(A_a: ArrayLike, B_a: ArrayLike, C_a: ArrayLike, C_contact: ArrayLike, *,
                   rtol: float = RANK_RTOL) -> Theorem1Result:
     """Theorem 1 of chapter 2: is the (n-1, 1) system observable thanks to the impacts?
 
@@ -265,7 +269,7 @@ def _velocity_weights(n: int, velocity_scale: float) -> FloatArray:
     return np.concatenate([np.ones(n // 2), np.full(n // 2, 1.0 / velocity_scale)])
 
 
-def observer_flow_norms(F: Any, P: Any, eps: float, deltas: Any, *,
+def observer_flow_norms(F: ArrayLike | LTIFlow, P: ArrayLike, eps: float, deltas: ArrayLike, *,
                         velocity_scale: float = 1.0) -> FloatArray:
     """``||W e^{A_O,eps delta} W^{-1}||_2`` for each ``delta``, computed in scaled coordinates.
 
@@ -413,8 +417,8 @@ class _Comparison:
         return jury_second_order(c1, c0, rho), d1, d2, radius
 
 
-def search_epsilon(F: Any, P: Any, A_b: Any, M: Any, delta_min: float, delta_max: float,
-                   alpha: float, *, n_delta: int = 64, eps_min: float = 1e-4,
+def search_epsilon(F: ArrayLike, P: ArrayLike, A_b: ArrayLike, M: ArrayLike, delta_min: float,
+                   delta_max: float, alpha: float, *, n_delta: int = 64, eps_min: float = 1e-4,
                    n_grid: int = 41, velocity_scale: float = 1.0) -> EpsilonCertificate:
     """Largest ``eps`` in ``(0, 1]`` satisfying the sufficient conditions of Theorem 3 or 4.
 
@@ -535,8 +539,9 @@ def search_epsilon(F: Any, P: Any, A_b: Any, M: Any, delta_min: float, delta_max
                               comp.velocity_scale)
 
 
-def certified_rate(F: Any, P: Any, A_b: Any, M: Any, delta_min: float, delta_max: float,
-                   eps: float, *, n_delta: int = 64, velocity_scale: float = 1.0) -> float:
+def certified_rate(F: ArrayLike, P: ArrayLike, A_b: ArrayLike, M: ArrayLike, delta_min: float,
+                   delta_max: float, eps: float, *, n_delta: int = 64,
+                   velocity_scale: float = 1.0) -> float:
     """The supremum of the rates ``alpha`` that the sufficient conditions certify at ``eps``.
 
     The converse of :func:`search_epsilon`: same data and comparison system, ``eps`` given.

@@ -40,10 +40,10 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_real_scalar, as_square, as_vector, check_positive
 from ..errors import (
@@ -61,6 +61,10 @@ from .impact_conditions import (
     search_epsilon,
     theorem1_test,
 )
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..systems.impacting_bodies import ImpactingBodies
+
 
 __all__ = [
     "ImpactPlant",
@@ -146,7 +150,7 @@ class ImpactPlant:
         return float(np.sqrt(k2))
 
 
-def impact_plant(bodies: Any) -> ImpactPlant:
+def impact_plant(bodies: ImpactingBodies | ImpactPlant) -> ImpactPlant:
     """Extract :class:`ImpactPlant` from an
     :class:`~nscontrol.systems.impacting_bodies.ImpactingBodies` model.
 
@@ -345,7 +349,7 @@ def _observer_canonical(A: FloatArray, C: FloatArray
     return left, right_inv, a_n, omega, float(np.linalg.cond(rows))
 
 
-def place_scaled(A: Any, C: Any, Lambda1: Any, eps: float) -> ScaledPlacement:
+def place_scaled(A: ArrayLike, C: ArrayLike, Lambda1: ArrayLike, eps: float) -> ScaledPlacement:
     """Place ``sigma(A - G C) = Lambda1 / eps`` for a single output, in scaled coordinates.
 
     Parameters
@@ -444,7 +448,8 @@ def place_scaled(A: Any, C: Any, Lambda1: Any, eps: float) -> ScaledPlacement:
 # ----------------------------------------------------------------------------------------------
 # Observer jumps (7c)-(7g)
 # ----------------------------------------------------------------------------------------------
-def observer_jump(xh_a: Any, xh_b: Any, y: float, M: Any) -> tuple[FloatArray, FloatArray]:
+def observer_jump(xh_a: ArrayLike, xh_b: ArrayLike, y: float,
+                  M: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Jumps (7c)-(7g) of the observer at an impact of the plant ((n-1, 1) case).
 
     Parameters
@@ -652,7 +657,7 @@ class ImpactObserverDesign:
                  else tuple(f"hat_{s}" for s in names[:na2]))
         return obs_a + tuple(f"hat_{s}" for s in names[na2:na2 + nb2])
 
-    def initial_state(self, x_plant0: Any, xhat0: Any, *,
+    def initial_state(self, x_plant0: ArrayLike, xhat0: ArrayLike, *,
                       realisation: Literal["scaled", "original"] = "scaled") -> FloatArray:
         """Stack ``[x_plant0; observer state]`` for :meth:`closed_loop`.
 
@@ -695,9 +700,9 @@ def certificate_velocity_scale(plant: ImpactPlant, delta_max: float) -> float:
     return w if w > 0.0 else 1.0 / check_positive("delta_max", delta_max)
 
 
-def design_impact_observer(bodies: Any, Lambda1: Any, eps: float | None = None, *,
-                           alpha: float | None = None, delta_min: float | None = None,
-                           delta_max: float | None = None,
+def design_impact_observer(bodies: ImpactingBodies | ImpactPlant, Lambda1: ArrayLike,
+                           eps: float | None = None, *, alpha: float | None = None,
+                           delta_min: float | None = None, delta_max: float | None = None,
                            eps_min: float = 1e-4) -> ImpactObserverDesign:
     """Design the asymptotic observer (7) for an (n-1, 1) impacting-bodies plant.
 
@@ -885,7 +890,7 @@ class _WindowReconstructor:
                 f"window: the samples determine only {rank} of {na2} states of body a "
                 f"(singular values {sv[0]:.3g} .. {sv[-1]:.3g}); lengthen the window",
                 status="rank_deficient")
-        return sol
+        return np.asarray(sol, dtype=float)
 
     def before(self, ts: FloatArray, ys: FloatArray, t: float, window: float) -> FloatArray:
         """``x_a(t)`` from the samples in ``(t - window, t]``."""
@@ -916,8 +921,9 @@ def _impact_pair(rec: _WindowReconstructor, ts: FloatArray, ys: FloatArray, t_i:
     return rec.state(ts[keep], ys[keep], t_i), rec.after(ts, ys, t_i, window)
 
 
-def deadbeat_n1(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
-                t_query: Any, *, window: float, u: Any = None) -> DeadbeatEstimate:
+def deadbeat_n1(bodies: ImpactingBodies | ImpactPlant, t_samples: ArrayLike, y_samples: ArrayLike,
+                impact_times: ArrayLike, t_query: Any, *, window: float,
+                u: Any = None) -> DeadbeatEstimate:
     """Dead-beat observer for the (n-1, 1) case: exact state after one impact plus a window.
 
     Parameters
@@ -1035,8 +1041,8 @@ def _consecutive_usable(impacts: FloatArray, ts: FloatArray, window: float) -> l
     return out
 
 
-def deadbeat_1n(bodies: Any, t_samples: Any, y_samples: Any, impact_times: Any,
-                t_query: Any, *, window: float, u: Any = None,
+def deadbeat_1n(bodies: ImpactingBodies | ImpactPlant, t_samples: ArrayLike, y_samples: ArrayLike,
+                impact_times: ArrayLike, t_query: Any, *, window: float, u: Any = None,
                 rtol: float = 1e-10) -> DeadbeatEstimate:
     """Dead-beat observer for the (1, n-1) case: body b recovered from its impacts.
 

@@ -19,14 +19,21 @@ resolves the observer's inclusion exactly; then ``V_k = e_kᵀ P e_k`` obeys
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_matrix, check_in_interval, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..laws.base import SetValuedLaw
+    from ..systems.feedback import LinearObserver
+    from ..systems.lure import LureSystem
+    from ..systems.protocols import InputFunction, InputSignal
 
 __all__ = [
     "LureObserverCertificate",
@@ -213,7 +220,7 @@ def _structural_reason(mat: _Matrices, variant: str) -> str | None:
     return None
 
 
-def structural_infeasibility(A: Any, G: Any, H: Any, C: Any, *,
+def structural_infeasibility(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
                              variant: Variant = "extended") -> str | None:
     """A certain reason why the observer LMIs have no solution, found without an SDP solver.
 
@@ -338,7 +345,7 @@ class LureObserverDesign:
         """The observer's linear part ``A - L C``."""
         return self.A - self.L @ self.C
 
-    def lyapunov(self, error: Any) -> FloatArray:
+    def lyapunov(self, error: ArrayLike) -> FloatArray:
         """``V = eᵀ P e`` for one error vector or a time-major array of them."""
         e = np.asarray(error, dtype=np.float64)
         if e.shape[-1] != self.P.shape[0]:
@@ -346,20 +353,20 @@ class LureObserverDesign:
                                  f"shape {e.shape}")
         return np.einsum("...i,ij,...j->...", e, self.P, e)
 
-    def continuous_bound(self, t: Any, V0: float) -> FloatArray:
+    def continuous_bound(self, t: ArrayLike, V0: float) -> FloatArray:
         """The guaranteed ``V(t) <= exp(-2 α t) V(0)`` of the theorem (spec §2.5)."""
         return V0 * np.exp(-2.0 * self.alpha * np.asarray(t, dtype=np.float64))
 
-    def discrete_bound(self, k: Any, h: float, V0: float) -> FloatArray:
+    def discrete_bound(self, k: ArrayLike, h: float, V0: float) -> FloatArray:
         """The implicit-Euler guarantee ``V_k <= V_0 / (1 + 2 α h)^k`` (spec §3.2)."""
         return V0 * (1.0 + 2.0 * self.alpha * h) ** (-np.asarray(k, dtype=np.float64))
 
-    def error_bound(self, t: Any, e0_norm: float) -> FloatArray:
+    def error_bound(self, t: ArrayLike, e0_norm: float) -> FloatArray:
         """``|e(t)| <= sqrt(cond P) exp(-α t) |e(0)|``."""
         return (np.sqrt(self.certificate.P_cond) * e0_norm
                 * np.exp(-self.alpha * np.asarray(t, dtype=np.float64)))
 
-    def closed_loop(self, plant: Any) -> Any:
+    def closed_loop(self, plant: LureSystem) -> LureSystem:
         """The plant and this observer as ONE :class:`~nscontrol.systems.lure.LureSystem`.
 
         The state is ``[x; xhat]`` (``2 n``), the law the product ``φ × φ`` of the plant's law
@@ -376,7 +383,7 @@ class LureObserverDesign:
         """
         return _closed_loop(self, plant)
 
-    def observer(self, plant: Any) -> Any:
+    def observer(self, plant: LureSystem) -> LinearObserver:
         """This observer as a block for :func:`nscontrol.closed_loop`.
 
         ``xhat' = (A - L C) xhat + G what + B u + L y``,
@@ -392,7 +399,7 @@ class LureObserverDesign:
         """
         return _observer_block(self, plant)
 
-    def observer_system(self, plant: Any, y: Any) -> Any:
+    def observer_system(self, plant: LureSystem, y: InputFunction) -> LureSystem:
         """The observer alone as a :class:`LureSystem` driven by a measured output ``y(t)``.
 
         ``xhat' = (A - L C) xhat + G what + [B, L] [u; y]``,
@@ -510,8 +517,8 @@ def _is_pd(P: FloatArray) -> bool:
     return bool(np.linalg.eigvalsh(P)[0] > 0.0)
 
 
-def recheck_lure_certificate(A: Any, G: Any, H: Any, C: Any, P: Any, L: Any, K: Any,
-                             alpha: float, *, solver: str = "given",
+def recheck_lure_certificate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, P: ArrayLike,
+                             L: ArrayLike, K: ArrayLike, alpha: float, *, solver: str = "given",
                              solver_status: str = "given") -> LureObserverCertificate:
     """Re-check observer gains ``(P, L, K)`` against (1)–(2) of spec §2.2 in NumPy.
 
@@ -654,8 +661,8 @@ def _bisect(lmi: _ObserverLMI, tol: float
     return found.value, *found.result
 
 
-def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
-                      variant: Variant = "extended", alpha: float = 0.0,
+def lure_observer_lmi(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
+                      D: ArrayLike | None = None, variant: Variant = "extended", alpha: float = 0.0,
                       kappa: float | None = None, eps: float | None = None,
                       eps_P: float | None = None, solver: str | None = None,
                       precheck: bool = True) -> LureObserverDesign:
@@ -736,11 +743,11 @@ def lure_observer_lmi(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     return _design(mat, lmi, cert, gains, alpha_v, None)
 
 
-def max_observer_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
-                            variant: Variant = "extended", kappa: float | None = None,
-                            eps: float | None = None, eps_P: float | None = None,
-                            solver: str | None = None, tol: float = 1e-3,
-                            precheck: bool = True) -> LureObserverDesign:
+def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
+                            D: ArrayLike | None = None, variant: Variant = "extended",
+                            kappa: float | None = None, eps: float | None = None,
+                            eps_P: float | None = None, solver: str | None = None,
+                            tol: float = 1e-3, precheck: bool = True) -> LureObserverDesign:
     """Maximise the certified decay rate by bisection; the design at ``alpha_max``.
 
     Parameters
@@ -807,8 +814,9 @@ def max_observer_decay_rate(A: Any, G: Any, H: Any, C: Any, *, D: Any = None,
     return _design(mat, lmi, cert, gains, alpha_max, alpha_max)
 
 
-def observer_from_gains(A: Any, G: Any, H: Any, C: Any, *, L: Any, P: Any, alpha: float,
-                        K: Any = None, D: Any = None) -> LureObserverDesign:
+def observer_from_gains(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *, L: ArrayLike,
+                        P: ArrayLike, alpha: float, K: ArrayLike | None = None,
+                        D: ArrayLike | None = None) -> LureObserverDesign:
     """Wrap given gains ``(L, K)`` and certificate ``(P, alpha)`` after re-checking them.
 
     For certificates from elsewhere, e.g. the Siconos ObserverLCS example (``L = [1, 1]ᵀ``,
@@ -923,7 +931,8 @@ def _plant_matrices(plant: Any, law: Any = None) -> tuple[_Matrices, Any]:
     return _matrices(plant.A, plant.G, plant.H, plant.C, plant.D), plant.law
 
 
-def design_lure_observer(plant: Any, *, law: Any = None, variant: Variant = "extended",
+def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = None,
+                         variant: Variant = "extended",
                          alpha: float | Literal["max"] = "max", alpha_fraction: float = 0.5,
                          kappa: float | None = None, eps: float | None = None,
                          eps_P: float | None = None, solver: str | None = None,
@@ -1025,13 +1034,13 @@ def _check_same_plant(design: LureObserverDesign, mat: _Matrices) -> None:
                              f"transformed plant)")
 
 
-def _closed_loop(design: LureObserverDesign, plant: Any) -> Any:
+def _closed_loop(design: LureObserverDesign, plant: LureSystem) -> LureSystem:
     from ..simulate.closed_loop import closed_loop
 
     return closed_loop(plant, observer=design.observer(plant)).stacked
 
 
-def _observer_block(design: LureObserverDesign, plant: Any) -> Any:
+def _observer_block(design: LureObserverDesign, plant: LureSystem) -> LinearObserver:
     from ..systems.feedback import LinearObserver
 
     mat, law = _plant_matrices(plant)
@@ -1044,7 +1053,8 @@ def _observer_block(design: LureObserverDesign, plant: Any) -> Any:
                           names=tuple(f"{s}_hat" for s in names))
 
 
-def _observer_system(design: LureObserverDesign, plant: Any, y: Any) -> Any:
+def _observer_system(design: LureObserverDesign, plant: LureSystem, y: InputFunction
+                     ) -> LureSystem:
     from ..systems.lure import LureSystem
 
     mat, law = _plant_matrices(plant)
@@ -1055,21 +1065,25 @@ def _observer_system(design: LureObserverDesign, plant: Any, y: Any) -> Any:
     p, n = mat.p, mat.n
     q = plant.n_inputs if getattr(plant, "B", None) is not None else 0
 
-    def y_of(t: Any) -> FloatArray:
+    # y is called on an array of times first (a vectorised y answers at once), then, when
+    # the shape says it is not vectorised, once per time
+    y_vectorised = cast(Callable[[FloatArray], ArrayLike], y)
+
+    def y_of(t: ArrayLike) -> FloatArray:
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        out = np.asarray(y(t), dtype=float)
+        out = np.asarray(y_vectorised(t), dtype=float)
         if out.shape != (t.size, p):
             out = np.array([np.ravel(y(float(s))) for s in t]).reshape(t.size, p)
         return out
 
-    def inputs(t: Any) -> FloatArray:
+    def inputs(t: ArrayLike) -> FloatArray:
         u = plant.input_at(t) if q else np.zeros((np.size(t), 0))
         return np.hstack([u, y_of(t)])
 
-    def shift(t: Any) -> FloatArray:
+    def shift(t: ArrayLike) -> FloatArray:
         return y_of(t) @ design.K.T + plant.shift_at(t)
 
-    B = np.hstack([plant.B if q else np.zeros((n, 0)), design.L])
+    B = np.hstack([plant.B if plant.B is not None and q else np.zeros((n, 0)), design.L])
     names = tuple(f"{s}_hat" for s in (plant.state_names or
                                        tuple(f"x{i}" for i in range(n))))
     return LureSystem(design.A_L, mat.G, mat.H - design.K @ mat.C, law, B=B, C=np.eye(n),
@@ -1077,9 +1091,11 @@ def _observer_system(design: LureObserverDesign, plant: Any, y: Any) -> Any:
                       state_names=names)
 
 
-def loop_transformed_lure_system(A: Any, G: Any, H: Any, law: Any, *, sigma: Any = None,
-                                 B: Any = None, C: Any = None, D: Any = None, u: Any = None,
-                                 g: Any = None, state_names: tuple[str, ...] = ()) -> Any:
+def loop_transformed_lure_system(A: ArrayLike, G: ArrayLike, H: ArrayLike, law: SetValuedLaw, *,
+                                 sigma: ArrayLike | None = None, B: ArrayLike | None = None,
+                                 C: ArrayLike | None = None, D: ArrayLike | None = None,
+                                 u: InputSignal = None, g: InputSignal = None,
+                                 state_names: tuple[str, ...] = ()) -> LureSystem:
     """A :class:`LureSystem` for a non-monotone law through the loop transformation (§2.6).
 
     ``φ = φ_m - diag(σ)`` with ``φ_m`` maximal monotone gives ``x' = (A + G diag(σ) H) x +
@@ -1159,7 +1175,8 @@ def loop_transformed_lure_system(A: Any, G: Any, H: Any, law: Any, *, sigma: Any
                       state_names=state_names)
 
 
-def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> Any:
+def lure_from_statespace(ss: Any, law: SetValuedLaw, *, u: InputSignal = None,
+                         g: InputSignal = None) -> LureSystem:
     """A :class:`LureSystem` from a python-control ``StateSpace`` and a law.
 
     The ``StateSpace`` has inputs ``[w; u]`` (the first ``m = law.dim`` are the multipliers)
@@ -1218,4 +1235,4 @@ def lure_from_statespace(ss: Any, law: Any, *, u: Any = None, g: Any = None) -> 
 
     if not is_state_space(ss):
         raise ModelError(f"ss: expected a python-control StateSpace, got {type(ss).__name__}")
-    return LureSystem(ss, law, u=u, g=g)
+    return LureSystem(ss, law=law, u=u, g=g)

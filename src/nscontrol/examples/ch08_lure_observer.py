@@ -11,11 +11,11 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import InfeasibleDesignError, ModelError
 from . import Check, Example, ExampleResult, check
 
 __all__ = ["Scenario", "siconos_observer_lcs", "coulomb_oscillator", "not_passifiable",
@@ -311,7 +311,8 @@ def _simulate(s: Scenario, design: Any, h: float, T: float | None = None) -> _Ru
     return _Run(s, design, traj, design.lyapunov(traj.signal("y")), h)
 
 
-def _infeasible(s: Scenario, variant: str, kappa: float | None = None) -> dict[str, Any]:
+def _infeasible(s: Scenario, variant: Literal["basic", "extended"],
+                kappa: float | None = None) -> dict[str, Any]:
     from ..design.lure_observer import max_observer_decay_rate
     from ..errors import InfeasibleDesignError
 
@@ -413,9 +414,21 @@ def _run_coulomb(ctx: dict[str, Any]) -> dict[str, Any]:
                     "|q'| <= 1e-12), h = 1e-4: rounding level",
                     st["max_abs_velocity_on_stick_steps"] / st["state_scale"], 1e-15), "5.2")
     _add(ctx, check("3. 5.2 c = 0.1 basic: |alpha_max - c/m| / (c/m)",
-                    abs(damped.alpha_max - 0.1) / 0.1, 0.02), "5.2")
+                    abs(_alpha_max(damped) - 0.1) / 0.1, 0.02), "5.2")
     _add(ctx, _regularised_check(s, design, runs[1e-4], out), "5.2")
     return out
+
+
+_INFEASIBLE_ROTOR_CASES: tuple[tuple[str, Literal["basic", "extended"]], ...] = (
+    ("omega_u", "basic"), ("alpha", "basic"), ("both", "basic"), ("omega_u", "extended"))
+
+
+def _alpha_max(design: Any) -> float:
+    """``design.alpha_max`` of a decay-rate search, which a feasible search always sets."""
+    if design.alpha_max is None:
+        raise InfeasibleDesignError("alpha_max: the decay-rate search found no feasible rate",
+                                    status="infeasible")
+    return float(design.alpha_max)
 
 
 def _regularised_check(s: Scenario, design: Any, ts: _Run, out: dict[str, Any]) -> Check:
@@ -429,10 +442,13 @@ def _regularised_check(s: Scenario, design: Any, ts: _Run, out: dict[str, Any]) 
     x0 = np.r_[s.x0, s.xhat0]
     x5 = ts.traj.x[np.argmin(np.abs(ts.traj.t - 5.0)), :2]
     e1 = simulate(loop, x0, (0.0, 1.0), h=1e-5, progress=False).signal("y")[-1]
+    u = s.u
+    if u is None:   # the scenario's tanh model needs its input signal
+        raise ModelError(f"u: scenario {s.name!r} has no input signal to regularise")
     d_plant, d_err = [], []
     for eps in (1e-2, 1e-3, 1e-4):
         def f(t: float, x: np.ndarray, eps: float = eps) -> np.ndarray:
-            return A @ x - G @ np.tanh(H @ x / eps) + B * s.u(t)
+            return A @ x - G @ np.tanh(H @ x / eps) + B * u(t)
 
         def jac(t: float, x: np.ndarray, eps: float = eps) -> np.ndarray:
             return A - G @ (((1.0 - np.tanh(H @ x / eps) ** 2) / eps)[:, None] * H)
@@ -453,7 +469,7 @@ def _run_not_passifiable(ctx: dict[str, Any]) -> dict[str, Any]:
     from ..design.lure_observer import structural_infeasibility
 
     s = not_passifiable()
-    out = {v: _infeasible(s, v) for v in ("basic", "extended")}
+    out: dict[str, Any] = {v: _infeasible(s, v) for v in ("basic", "extended")}
     rd3 = relay_relative_degree_three()
     out["relative_degree_three"] = _infeasible(rd3, "extended")
     reasons = [structural_infeasibility(s.A, s.G, s.H, s.C, variant=v)
@@ -490,7 +506,7 @@ def _run_relay(ctx: dict[str, Any]) -> dict[str, Any]:
     from ..design.lure_observer import design_lure_observer, max_observer_decay_rate
 
     s = relay_relative_degree_one("z")
-    rates = {v: max_observer_decay_rate(**s.matrices, variant=v, tol=5e-3).alpha_max
+    rates = {v: _alpha_max(max_observer_decay_rate(**s.matrices, variant=v, tol=5e-3))
              for v in ("basic", "extended")}
     design = design_lure_observer(s.plant(), variant="basic", tol=1e-2)
     run = _simulate(s, design, 1e-3)
@@ -519,8 +535,7 @@ def _run_rotor(ctx: dict[str, Any]) -> dict[str, Any]:
     out["sigma"] = float(rotor_friction().sigma_tan[0])
     out["infeasible_cases"] = {
         f"{v}, y = {o}": not _infeasible(rotor_standin(o), v, 1000.0)["feasible"]
-        for o, v in (("omega_u", "basic"), ("alpha", "basic"), ("both", "basic"),
-                     ("omega_u", "extended"))}
+        for o, v in _INFEASIBLE_ROTOR_CASES}
     out["lower_disc_stick_fraction"] = float(np.mean(np.abs(run.traj.x[:, 2]) <= 1e-3))
     _run_checks(ctx, "5.7", run)
     return out
@@ -557,7 +572,7 @@ def _plant_refusal_check(ctx: dict[str, Any]) -> Check:
 
     cases = (("D_h", not_passifiable().plant(), 1e-2),
              ("singular", LureSystem([[10.0]], [[1.0]], [[1.0]], Relay(1.0)), 0.1))
-    messages = {}
+    messages: dict[str, str | None] = {}
     for expected, system, h in cases:
         try:
             simulate(system, np.ones(system.n_states), (0.0, 1.0), h=h, progress=False)

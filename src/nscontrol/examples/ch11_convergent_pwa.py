@@ -117,8 +117,8 @@ def _analysis_checks(out: dict[str, Any]) -> list[Any]:
     beam = beam_surrogate()
     Hv = np.array([[0.0, 0.0, 1.0, 1.0]])
 
-    def pair(kd: float) -> tuple[Any, Any]:
-        return tuple(A - kd * beam.E @ Hv for A in beam.A)  # type: ignore[return-value]
+    def pair(kd: float) -> tuple[Any, ...]:
+        return tuple(A - kd * beam.E @ Hv for A in beam.A)
 
     beam_tests = {"cqlf": lambda k: cv.quadratic_convergence(list(pair(k))).convergent,
                   "product": lambda k: cv.product_test(*pair(k)),

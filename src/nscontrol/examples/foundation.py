@@ -86,7 +86,8 @@ def _lcp_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     ax2.set(xlabel="masses N", ylabel="max relative impulse error",
             title="error vs analytic impulses")
     save_figure(fig, out_dir, "foundation_lcp_stack", figures)
-    metrics = {f"lcp_stack_seconds_N{N}": t for N, t in zip(STACK_SIZES, times, strict=True)}
+    metrics: dict[str, float | str] = {
+        f"lcp_stack_seconds_N{N}": t for N, t in zip(STACK_SIZES, times, strict=True)}
     metrics.update({"lcp_stack_max_rel_error": max(errors), "lcp_time_slope": slope,
                     "lcp_method": methods[-1]})
     checks = [check("stack LCP impulses match the analytic ones (max rel. error)",

@@ -15,10 +15,14 @@ matrices matches a finite-difference Jacobian of the period map.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import Example, ExampleResult, check
+
+if TYPE_CHECKING:
+    from ..simulate import Trajectory
 
 H = 1e-3
 
@@ -105,7 +109,8 @@ def run_pwa_oscillator(out_dir: Path | None) -> ExampleResult:
     ode_err = float(np.max(np.abs(ref.sol(tr.t).T - tr.x)))
     crossings = tr.event_times("crossing")
 
-    def period_map(x: np.ndarray, **kw) -> object:  # over 2T: the stable orbit is 2T-periodic
+    # over 2T: the stable orbit is 2T-periodic
+    def period_map(x: np.ndarray, **kw: Any) -> Trajectory:
         return simulate(p.system, x, (0.0, 2 * T), n_samples=2, progress=False, **kw)
 
     x = tr.x[-1].copy() if abs(tr.t[-1] / (2 * T) - round(tr.t[-1] / (2 * T))) < 1e-9 \

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
@@ -32,7 +33,7 @@ __all__ = [
 ]
 
 
-def as_gamma(gamma: Any, dim: int) -> FloatArray:
+def as_gamma(gamma: ArrayLike, dim: int) -> FloatArray:
     """``gamma`` as a length-``dim`` vector of finite positive step weights."""
     if isinstance(gamma, (float, int, np.floating)) and 0.0 < gamma < np.inf:
         return np.full(dim, float(gamma))         # fast path: the common scalar step
@@ -114,7 +115,7 @@ class ComplementarityForm:
         """Number ``k`` of complementarity pairs (the LCP size)."""
         return int(self.r.shape[0])
 
-    def lcp(self, M: Any, q: Any) -> tuple[FloatArray, FloatArray]:
+    def lcp(self, M: ArrayLike, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """LCP data ``(A, b)`` for the linear step ``z = M w + q``."""
         M = as_matrix("M", M, self.dim, self.dim)
         q = as_vector("q", q, self.dim)
@@ -196,7 +197,7 @@ class SetValuedLaw(ABC):
     componentwise: bool
 
     # -- public surface -------------------------------------------------------------------
-    def resolvent(self, x: Any, gamma: Any = 1.0) -> FloatArray:
+    def resolvent(self, x: ArrayLike, gamma: ArrayLike = 1.0) -> FloatArray:
         """The resolvent ``z = (I + gamma phi)^{-1} x``, i.e. ``x in z + gamma phi(z)``.
 
         Parameters
@@ -218,7 +219,7 @@ class SetValuedLaw(ABC):
                              f"be a scalar, got per-component values {g}")
         return self._resolvent(x, g)
 
-    def graph_residual(self, z: Any, v: Any) -> float:
+    def graph_residual(self, z: ArrayLike, v: ArrayLike) -> float:
         """Distance of ``(z, v)`` from ``graph(phi) = {(z, v): v in phi(z)}`` (Euclidean in R^2m).
 
         Exact for piecewise-linear laws; for curved laws (:class:`MonotoneFunction`,
@@ -229,16 +230,16 @@ class SetValuedLaw(ABC):
         v = as_vector("v", v, self.dim)
         return float(self._graph_distance(z, v))
 
-    def contains(self, z: Any, v: Any, tol: float = 1e-9) -> bool:
+    def contains(self, z: ArrayLike, v: ArrayLike, tol: float = 1e-9) -> bool:
         """Whether ``v in phi(z)`` up to ``graph_residual(z, v) <= tol``."""
         return self.graph_residual(z, v) <= tol
 
-    def in_domain(self, z: Any, tol: float = 0.0) -> bool:
+    def in_domain(self, z: ArrayLike, tol: float = 0.0) -> bool:
         """Whether ``phi(z)`` is nonempty, allowing a violation of the domain by ``tol``."""
         return self._in_domain(as_vector("z", z, self.dim),
                                check_positive("tol", tol, allow_zero=True))
 
-    def select(self, z: Any) -> FloatArray:
+    def select(self, z: ArrayLike) -> FloatArray:
         """The minimum-norm element of ``phi(z)``.
 
         Raises
@@ -260,7 +261,7 @@ class SetValuedLaw(ABC):
                          "not piecewise linear. Use its resolvent (closed form when the step "
                          "matrix is diagonal) instead")
 
-    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+    def loop_transformation(self, sigma: ArrayLike | None = None) -> LoopTransformation:
         """Split ``phi = phi_m - diag(sigma) I`` with ``phi_m`` maximal monotone (ch08 §2.6).
 
         A monotone law returns itself with zero slope.

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray
 from ..errors import ModelError
@@ -35,8 +36,10 @@ class Coulomb(Relay):
     """
 
     bound: Any = field(init=False, default=None)     # derived: mu * normal_force
-    mu: FloatArray = field(default=None)  # type: ignore[assignment]
-    normal_force: FloatArray = field(default=None)  # type: ignore[assignment]
+    # Set by the own __init__ below; init fields (dataclasses.replace varies them) whose
+    # None defaults only satisfy the field order after Relay's defaulted fields.
+    mu: FloatArray = field(default=None)  # type: ignore[arg-type]
+    normal_force: FloatArray = field(default=None)  # type: ignore[arg-type]
 
     def __init__(self, mu: Any, normal_force: Any = 1.0, dim: int | None = None) -> None:
         if dim is not None:
@@ -153,7 +156,10 @@ class Stribeck(SetValuedLaw):
     stribeck_velocity: Any
     delta: Any = 2.0
     viscous: Any = 0.0
-    dim: int = field(default=None)  # type: ignore[assignment]
+    dim: int = field(default=None)  # type: ignore[assignment]  # None: set in __post_init__
+    # slope constants, derived in __post_init__
+    sigma_tan: FloatArray = field(init=False, repr=False)
+    sigma_sec: FloatArray = field(init=False, repr=False)
     componentwise = True
 
     def __post_init__(self) -> None:
@@ -207,7 +213,7 @@ class Stribeck(SetValuedLaw):
             shape = self.delta * x ** (self.delta - 1.0) * np.exp(-x ** self.delta)
         return self.viscous - (self.static - self.coulomb) / self.stribeck_velocity * shape
 
-    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+    def loop_transformation(self, sigma: ArrayLike | None = None) -> LoopTransformation:
         """``phi = phi_m - diag(sigma) I`` with the monotone ``phi_m = phi + sigma I`` (ch08 §2.6).
 
         Parameters
@@ -228,9 +234,12 @@ class Stribeck(SetValuedLaw):
         if np.any(sig < self.sigma_tan * (1.0 - 1e-12)):
             raise ModelError(f"sigma: expected sigma >= sigma_tan = {self.sigma_tan} so that "
                              f"phi + sigma I is monotone, got {sig}")
-        part = Stribeck(self.static, self.coulomb, self.stribeck_velocity, self.delta,
-                        self.viscous + sig)
-        return LoopTransformation(monotone_part=part, slope=sig)
+        return LoopTransformation(monotone_part=self._shifted(sig), slope=sig)
+
+    def _shifted(self, sigma: FloatArray) -> Stribeck:
+        """``phi + diag(sigma) I``: the same law with viscous term ``b + sigma``."""
+        return Stribeck(self.static, self.coulomb, self.stribeck_velocity, self.delta,
+                        self.viscous + sigma)
 
     # -- SetValuedLaw hooks ---------------------------------------------------------------
     def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray:
@@ -276,6 +285,8 @@ class AsymmetricStribeck(SetValuedLaw):
 
     plus: Stribeck
     minus: Stribeck
+    sigma_tan: FloatArray = field(init=False, repr=False)
+    sigma_sec: FloatArray = field(init=False, repr=False)
     componentwise = True
 
     def __post_init__(self) -> None:
@@ -292,12 +303,15 @@ class AsymmetricStribeck(SetValuedLaw):
                                                          self.minus.sigma_sec))
         object.__setattr__(self, "monotone", self.plus.monotone and self.minus.monotone)
 
-    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+    def loop_transformation(self, sigma: ArrayLike | None = None) -> LoopTransformation:
         """Both sides shifted by the same slope ``sigma >= sigma_tan`` (``sigma I`` is odd)."""
         sig = self.sigma_tan.copy() if sigma is None else broadcast_parameter("sigma", sigma,
                                                                               self.dim)
         plus = self.plus.loop_transformation(sig).monotone_part
         minus = self.minus.loop_transformation(sig).monotone_part
+        # Stribeck.loop_transformation's monotone part is a Stribeck (checked, not assumed)
+        if not (isinstance(plus, Stribeck) and isinstance(minus, Stribeck)):
+            raise ModelError("plus, minus: their loop transformations are not Stribeck laws")
         return LoopTransformation(monotone_part=AsymmetricStribeck(plus, minus), slope=sig)
 
     def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
@@ -130,7 +131,7 @@ class NewtonImpactLaw:
                                  f"contact: the columns of W), got {self.e.size}")
         return self.e
 
-    def apply(self, M: Any, W: Any, v_minus: Any, active: Any = None) -> ImpactResult:
+    def apply(self, M: ArrayLike, W: Any, v_minus: Any, active: Any = None) -> ImpactResult:
         """Post-impact velocities and impulses.
 
         Parameters

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_square, as_vector
 from ..errors import ModelError, SolverError
 from .base import SetValuedLaw
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..numerics.lcp import Method as LCPMethod
 
 __all__ = ["solve_inclusion", "InclusionSolution"]
 
@@ -44,9 +48,9 @@ def _positive_diagonal(M: FloatArray) -> FloatArray | None:
     return None
 
 
-def solve_inclusion(law: SetValuedLaw, M: Any, q: Any, *,
+def solve_inclusion(law: SetValuedLaw, M: ArrayLike, q: ArrayLike, *,
                     method: Literal["auto", "closed_form", "lcp"] = "auto",
-                    lcp_method: str = "lemke", tol: float = 1e-12) -> InclusionSolution:
+                    lcp_method: LCPMethod = "lemke", tol: float = 1e-12) -> InclusionSolution:
     """Solve the one-step inclusion ``z = M w + q``, ``w in -phi(z)``.
 
     Parameters
@@ -110,7 +114,7 @@ def solve_inclusion(law: SetValuedLaw, M: Any, q: Any, *,
         z = M @ w + q
         return InclusionSolution(z, w, law._graph_distance(z, -w), "lcp", 0)
     A, b = form.lcp(M, q)
-    result = solve_lcp(A, b, method=lcp_method, tol=tol)  # type: ignore[arg-type]
+    result = solve_lcp(A, b, method=lcp_method, tol=tol)
     if not result.success:
         raise SolverError(f"solve_inclusion: the LCP encoding of {law!r} has no verified "
                           f"solution ({result.status}); check that M is positive definite",

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -56,8 +56,8 @@ class MonotoneFunction(SetValuedLaw):
     f: Callable[[FloatArray], Any]
     df: Callable[[FloatArray], Any] | None = None
     dim: int = 1
-    monotone: ClassVar[bool] = True
-    componentwise: ClassVar[bool] = True
+    monotone = True
+    componentwise = True
 
     def __post_init__(self) -> None:
         if not callable(self.f) or (self.df is not None and not callable(self.df)):
@@ -170,8 +170,8 @@ class PiecewiseLinearFunction(SetValuedLaw):
     slope_left: Any = 0.0
     slope_right: Any = 0.0
     dim: int = 1
-    monotone: ClassVar[bool] = True
-    componentwise: ClassVar[bool] = True
+    monotone = True
+    componentwise = True
 
     def __post_init__(self) -> None:
         b = as_vector("breakpoints", self.breakpoints)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -60,9 +60,9 @@ class NormalConeBox(SetValuedLaw):
 
     lower: Any = 0.0
     upper: Any = np.inf
-    dim: int = field(default=None)  # type: ignore[assignment]
-    monotone: ClassVar[bool] = True
-    componentwise: ClassVar[bool] = True
+    dim: int = field(default=None)  # type: ignore[assignment]  # None: set in __post_init__
+    monotone = True
+    componentwise = True
 
     def __post_init__(self) -> None:
         dim = self.dim

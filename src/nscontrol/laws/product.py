@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_vector
 from ..errors import ModelError
@@ -71,7 +72,7 @@ class Product(SetValuedLaw):
         return np.concatenate([p._select(z[s])
                                for p, s in zip(self.parts, self._slices, strict=True)])
 
-    def resolvent(self, x: Any, gamma: Any = 1.0) -> FloatArray:
+    def resolvent(self, x: ArrayLike, gamma: ArrayLike = 1.0) -> FloatArray:
         """Blockwise resolvent; ``gamma`` may be a vector when every part accepts one for its
         block (a non-componentwise part needs a constant ``gamma`` on its block)."""
         x = as_vector("x", x, self.dim)
@@ -86,7 +87,7 @@ class Product(SetValuedLaw):
         """The parts' forms side by side (``ModelError`` if a part has none)."""
         return ComplementarityForm.block_diagonal([p.complementarity_form() for p in self.parts])
 
-    def loop_transformation(self, sigma: Any = None) -> LoopTransformation:
+    def loop_transformation(self, sigma: ArrayLike | None = None) -> LoopTransformation:
         """Blockwise loop transformation; monotone parts keep zero slope.
 
         ``sigma`` (optional) is the stacked vector of slopes, split over the parts.

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -59,9 +59,9 @@ class Relay(SetValuedLaw):
     """
 
     bound: Any = 1.0
-    dim: int = field(default=None)  # type: ignore[assignment]
-    monotone: ClassVar[bool] = True
-    componentwise: ClassVar[bool] = True
+    dim: int = field(default=None)  # type: ignore[assignment]  # None: set in __post_init__
+    monotone = True
+    componentwise = True
 
     def __post_init__(self) -> None:
         dim = None if self.dim is None else check_dim(self.dim)

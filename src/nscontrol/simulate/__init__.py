@@ -12,7 +12,10 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
+from numpy.typing import ArrayLike
+
 from .._validation import check_t_span
+from ..systems.protocols import SimulableSystem
 from . import driver
 from .driver import METHODS, Integrator, register_method
 from .trajectory import STATUS_MESSAGES, Event, Recorder, Trajectory
@@ -20,11 +23,13 @@ from .trajectory import STATUS_MESSAGES, Event, Recorder, Trajectory
 __all__ = ["simulate", "Trajectory", "Event", "Recorder", "METHODS", "STATUS_MESSAGES",
            "Integrator", "register_method"]
 
+#: The built-in method names (``register_method`` adds more, so ``simulate`` takes any str).
 Method = Literal["event_driven", "moreau_jean", "implicit_euler", "switching"]
 
 
-def simulate(system: Any, x0: Any, t_span: tuple[float, float], *,
-             method: Method | type[Integrator] | None = None, **options: Any) -> Trajectory:
+def simulate(system: SimulableSystem, x0: ArrayLike, t_span: tuple[float, float], *,
+             method: Method | str | type[Integrator] | None = None,
+             **options: Any) -> Trajectory:
     """Simulate a non-smooth system (or a closed loop) from ``x0`` over ``t_span``.
 
     Parameters

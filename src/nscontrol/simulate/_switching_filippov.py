@@ -247,20 +247,20 @@ def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
     def surface(k: int) -> Any:
         def ev(t: float, y: FloatArray) -> float:
             return float(system.surfaces[k](y[:n]))
-        ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]
+        ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]  # solve_ivp reads these
         return ev
 
     def exit_event(side: int) -> Any:
         def ev(t: float, y: FloatArray) -> float:
-            return fields.sigmas(t, y[:n], signs, sliding)[0 if side < 0 else 1]
-        ev.terminal, ev.direction = True, float(side)  # type: ignore[attr-defined]
+            return float(fields.sigmas(t, y[:n], signs, sliding)[0 if side < 0 else 1])
+        ev.terminal, ev.direction = True, float(side)  # type: ignore[attr-defined]  # solve_ivp reads these
         return ev
 
     def graze(k: int) -> Any:
         def ev(t: float, y: FloatArray) -> float:
             x = y[:n]
             return float(system.gradient(k, x) @ fields.rhs(signs, sliding)(t, x))
-        ev.terminal, ev.direction = False, float(signs[k])  # type: ignore[attr-defined]
+        ev.terminal, ev.direction = False, float(signs[k])  # type: ignore[attr-defined]  # solve_ivp reads these
         return ev
 
     for k in range(len(signs)):

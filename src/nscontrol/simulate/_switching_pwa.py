@@ -242,6 +242,8 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     from ..systems.lure import as_input_function
 
     ufn = as_input_function("u", u, system.E.shape[1])
+    if ufn is None:   # this path is taken only for inputs given as functions of time
+        raise ModelError("u: expected an input function of time for the DOP853 path, got None")
 
     def field(i: int, t: float, x: FloatArray) -> FloatArray:
         return system.A[i] @ x + system.b[i] + system.E @ ufn(t)[0]
@@ -340,7 +342,7 @@ def _facet_event(row: FloatArray, offset: float) -> Any:
     """Terminal event ``offset - row·x`` falling through zero (leaving the region)."""
     def g(t: float, x: FloatArray) -> float:
         return float(offset - row @ x)
-    g.terminal, g.direction = True, -1.0  # type: ignore[attr-defined]
+    g.terminal, g.direction = True, -1.0  # type: ignore[attr-defined]  # solve_ivp reads these
     return g
 
 
@@ -349,5 +351,5 @@ def _slack_extremum(row: FloatArray, f: Any) -> Any:
     minimum of the slack (a grazing when the slack is zero there)."""
     def g(t: float, x: FloatArray) -> float:
         return -float(row @ f(t, x))
-    g.terminal, g.direction = False, 1.0  # type: ignore[attr-defined]
+    g.terminal, g.direction = False, 1.0  # type: ignore[attr-defined]  # solve_ivp reads these
     return g

@@ -42,27 +42,32 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_vector
 from ..errors import DimensionError, ModelError
 from ..systems.feedback import (
+    Controller,
     Jump,
     LinearController,
     LinearObserver,
     Measurement,
+    Observer,
     PiecewiseObserver,
     PiecewiseStateFeedback,
     StateFeedback,
 )
+from ..systems.protocols import Exogenous, SimulableSystem
 from .driver import Integrator, Lowered
 from .trajectory import Trajectory
 
 __all__ = ["closed_loop", "ClosedLoop"]
 
 
-def closed_loop(plant: Any, controller: Any = None, observer: Any = None,
-                exosystem: Any = None, *, input_matrix: Any = None,
-                output_matrix: Any = None) -> ClosedLoop:
+def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
+                observer: Observer | None = None, exosystem: Exogenous | None = None, *,
+                input_matrix: ArrayLike | None = None,
+                output_matrix: ArrayLike | None = None) -> ClosedLoop:
     """Compose a plant with a controller and/or an observer (and an exogenous input).
 
     Parameters
@@ -308,7 +313,12 @@ def _interconnect(loop: ClosedLoop, A: FloatArray, B: FloatArray | None, Cy: Flo
     Xhat = obs.E @ Po if obs is not None else np.zeros((0, N))
     U, u0 = _controller_maps(ctrl, Px, Xhat, Pc, Cy)
     Z = np.zeros((N, N))
-    Z[:n] = A @ Px + (B @ U if U.shape[0] else 0.0)
+    Z[:n] = A @ Px
+    if U.shape[0]:
+        if B is None:   # a controller drives the plant through its input matrix
+            raise ModelError("input_matrix: the plant declares no input matrix for the "
+                             "controller's output; pass input_matrix= to closed_loop")
+        Z[:n] += B @ U
     if obs is not None:
         flow = obs.F @ Po + obs.L @ Cy @ Px
         if obs.B is not None:
@@ -629,7 +639,8 @@ class _BlockRunner:
                 setattr(self, "xo" if name == "observer" else "xc",
                         as_vector(f"{name}.x0", x_init, block.n_states))
         self.next_sample = {"observer": None, "controller": None}
-        self.held: dict[str, FloatArray] = {}
+        # a continuous block's last Measurement, a sampled block's held output ("<role>_out")
+        self.held: dict[str, Any] = {}
         self.t_prev: float | None = None
         self.log: list[tuple[float, FloatArray, FloatArray, FloatArray | None]] = []
 

@@ -352,8 +352,10 @@ def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
     except BaseException as err:  # user callbacks, KeyboardInterrupt: keep what was computed
         if ctx.has_samples() and getattr(err, "trajectory", None) is None:
             partial = ctx.partial(f"interrupted by {type(err).__name__}: {err}")
+            if partial is None:  # pragma: no cover - has_samples() implies a recorder
+                raise
             try:
-                err.trajectory = partial  # type: ignore[attr-defined]
+                err.trajectory = partial  # type: ignore[attr-defined]  # on any exception
                 err.add_note(f"nscontrol: the run so far ({len(partial.t)} samples up to "
                              f"t = {partial.t[-1]:.6g}) is in err.trajectory")
             except (AttributeError, TypeError):  # pragma: no cover - exotic exceptions

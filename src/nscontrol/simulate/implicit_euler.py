@@ -61,14 +61,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_vector, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
+
+if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
+    from ..systems.lure import LureSystem
 
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
 
@@ -194,10 +198,12 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     from ..laws.relay import Relay
 
     if isinstance(law, Product):
-        parts = [componentwise_spec(p) for p in law.parts]
-        if any(p is None for p in parts):
+        specs = [componentwise_spec(p) for p in law.parts]
+        parts = [p for p in specs if p is not None]
+        if len(parts) < len(specs):
             return None
-        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))  # type: ignore
+        kinds, p1, p2 = (np.concatenate([p[i] for p in parts]) for i in range(3))
+        return kinds, p1, p2
     m = int(law.dim)
     if isinstance(law, Relay):  # Coulomb is a Relay of bound mu·N
         return np.zeros(m, np.int64), _per_component(law.bound, m), np.zeros(m)
@@ -499,7 +505,7 @@ def _forward_backward(law: Any, a: FloatArray, Dh: FloatArray) -> tuple[FloatArr
     z = a.copy()
     for _ in range(100_000):
         z_new = np.asarray(law.resolvent(z - gamma * (Dinv @ (z - a)), gamma=gamma), float)
-        if np.linalg.norm(z_new - z) <= 1e-13 * max(1.0, np.linalg.norm(z)):
+        if np.linalg.norm(z_new - z) <= 1e-13 * max(1.0, float(np.linalg.norm(z))):
             return z_new, Dinv @ (z_new - a)
         z = z_new
     raise SolverError("implicit_euler: forward-backward iteration for the one-step inclusion "
@@ -520,7 +526,8 @@ def _check_options(options: dict[str, Any]) -> None:
                          f"{sorted(_OPTIONS)}")
 
 
-def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any) -> Trajectory:
+def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
+              **options: Any) -> Trajectory:
     """Integrate a :class:`~nscontrol.systems.lure.LureSystem` by the θ-method.
 
     Parameters
@@ -579,11 +586,12 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
     n = system.n_states
-    rec = Recorder(n, every=options.get("record_every", 1), signals=options.get("signals"),
-                   offered=_SIGNALS)
-    x0 = as_vector("x0", x0, n)
     t0, tf = t_span
     n_steps = max(1, math.ceil((tf - t0) / h_req - 1e-9))
+    every = options.get("record_every", 1)
+    rec = Recorder(n, every=every, signals=options.get("signals"), offered=_SIGNALS,
+                   capacity=Recorder.capacity_for(n_steps + 2, every))
+    x0 = as_vector("x0", x0, n)
     h = (tf - t0) / n_steps
     mats = StepMatrices(system, h, theta)
     plan = _plan(system, mats.Dh, h)
@@ -604,11 +612,11 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any)
     with TimeProgress(t0, tf, desc="implicit_euler", enable=options.get("progress")) as bar:
         while done < n_steps:
             k1 = min(n_steps, done + _CHUNK)
-            times = t0 + h * np.arange(done, k1 + 1)
+            times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
             try:
                 X, Z, W = stepper.run(x, times)
             except SolverError as exc:
-                X, Z, W = exc.partial  # type: ignore[attr-defined]
+                X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
                 traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
                                   stats=stats(done + X.shape[0]),
@@ -668,7 +676,10 @@ class _Stepper:
         self.input_mode = ("exact_mean" if self.exo is not None else
                            "samples" if system.has_input else "none")
         if plan.solver == "closed_form":
-            kind, p1, p2 = componentwise_spec(system.law)  # type: ignore[misc]
+            spec = componentwise_spec(system.law)
+            if spec is None:   # _plan chooses the closed form only for such laws
+                raise ModelError("law: the closed-form step needs a componentwise law")
+            kind, p1, p2 = spec
             self.spec = (kind, p1, p2)
             self.ucol = _single_state_rows(system)
 
@@ -702,7 +713,9 @@ class _Stepper:
         if plan.solver == "lcp":
             from ._lure_lcp_kernels import lcp_steps
 
-            M3, Qa3, q03, T3, s3, comp, nv, mg = plan.lcp  # type: ignore[misc]
+            if plan.lcp is None:   # _plan sets the LCP data whenever it chooses "lcp"
+                raise ModelError("law: the LCP step was planned without its LCP data")
+            M3, Qa3, q03, T3, s3, comp, nv, mg = plan.lcp
             done, status, res = lcp_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, M3, Qa3,
                                           q03, T3, s3, comp, nv, mg, x, ubar, gnext, X, Z, W,
                                           LCP_TOL)
@@ -716,7 +729,7 @@ class _Stepper:
                                   f"{times[done + 1]:.6g} has no verified solution: {why}; the "
                                   f"step matrix may be badly conditioned (reduce h)",
                                   status=name)
-                err.partial = (X[:done], Z[:done], W[:done])  # type: ignore[attr-defined]
+                err.partial = (X[:done], Z[:done], W[:done])  # type: ignore[attr-defined]  # partial run, added at raise
                 raise err
             return X, Z, W
         H, D = self.system.H, plan.D
@@ -732,7 +745,7 @@ class _Stepper:
                     w[blk.idx], z[blk.idx] = wg, zg
                     self.worst = max(self.worst, res)
             except SolverError as exc:
-                exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]
+                exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]  # partial run, added at raise
                 raise
             x = q + m.Gh @ w
             X[j], Z[j], W[j] = x, z, w

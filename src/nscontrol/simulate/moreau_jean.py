@@ -57,14 +57,21 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_in_interval, check_positive
 from ..errors import DimensionError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
+
+if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
+    from ..systems.impacting_bodies import ImpactingBodies
+    from ..systems.lagrangian import LagrangianSystem
+    from ..systems.protocols import InputSignal
+    from .callbacks import Listener, StepController
 
 __all__ = ["integrate"]
 
@@ -93,10 +100,11 @@ class _Setup:
     mass_at: str = "start"
 
 
-def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | None = None,
-              theta: float = 0.5, gamma: float = 0.5, u: Any = None,
-              controller: Callable[[float, FloatArray, FloatArray], Any] | None = None,
-              listeners: Sequence[Callable[..., None]] = (), record_every: int = 1,
+def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
+              t_span: tuple[float, float], *, h: float | None = None,
+              theta: float = 0.5, gamma: float = 0.5, u: InputSignal = None,
+              controller: StepController | None = None,
+              listeners: Sequence[Listener] = (), record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None,
               activation: float | None = None,
               forces: str = "implicit", mass_at: str = "start") -> Trajectory:
@@ -265,13 +273,14 @@ def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, h: float | N
     h_last = (tf - t0) - n_full * h
     n_steps = n_full + (1 if h_last > 1e-9 * h else 0)
     rec = Recorder(system.n_states, every=record_every, signals=signals,
-                   offered=("impulse", "gap", "energy"))
+                   offered=("impulse", "gap", "energy"),
+                   capacity=Recorder.capacity_for(n_steps + 2, record_every))
     _sample_initial(rec, system, t0, x0)
     setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces,
                    mass_at)
     runner = _choose_runner(system, setup, activation)
     path = runner.path
-    state = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
+    state: dict[str, Any] = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
              "p_prev": np.zeros(system.n_contacts), "k": 0, "t0": t0, "h": h,
              "reads": reads, "active_prev": np.zeros(0, dtype=np.int64)}
     per_step = controller is not None

@@ -45,14 +45,19 @@ with ``status = -1``); errors in the model or its initial state are always raise
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_float_array, as_vector, check_integer, check_positive
 from ..errors import ModelError, NscontrolError, ZenoError
 from .trajectory import Recorder, Trajectory
+
+if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
+    from ..systems.pwa import PiecewiseAffineSystem
+    from ..systems.switched import FilippovSystem, SwitchedAffineSystem
 
 __all__ = ["integrate", "saltation_matrix"]
 
@@ -192,7 +197,8 @@ class _Run:
                                state_names=getattr(self.system, "state_names", ()))
 
 
-def integrate(system: Any, x0: Any, t_span: tuple[float, float], **options: Any) -> Trajectory:
+def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem,
+              x0: ArrayLike, t_span: tuple[float, float], **options: Any) -> Trajectory:
     """Integrate a PWA, Filippov or PWM-switched system with every switching located.
 
     Parameters

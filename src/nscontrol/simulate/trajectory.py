@@ -404,6 +404,7 @@ class Trajectory:
         import matplotlib.pyplot as plt
 
         signals = list(signals)
+        axes: Any   # matplotlib axes: an array of them, or a list of the one given
         if ax is None:
             fig, axes = plt.subplots(1 + len(signals), 1, sharex=True, squeeze=False,
                                      figsize=(7, 2.6 * (1 + len(signals))))
@@ -683,6 +684,14 @@ class Recorder:
         """The samples and events recorded so far as a :class:`Trajectory` (the recorder goes
         on; used for the partial trajectory of a run that fails)."""
         return self._freeze(status, message, method, {}, ())
+
+    @staticmethod
+    def capacity_for(n_samples: int, every: Any = 1) -> int:
+        """An initial ``capacity`` for about ``n_samples`` offered samples kept one in
+        ``every`` (so a run of known length never regrows its buffers), bounded by 2**20 rows
+        (past that the buffers double as needed)."""
+        k = every if isinstance(every, int) and every >= 1 else 1
+        return int(min(max(n_samples, 0) // k + 4, 2**20))
 
     def wants(self, name: str) -> bool:
         """Whether signal ``name`` is to be recorded (integrators may skip computing it)."""

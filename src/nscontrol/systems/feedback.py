@@ -28,9 +28,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_vector, check_positive
 from ..errors import DimensionError, ModelError
@@ -110,9 +111,15 @@ class Controller(Protocol):
         Size of ``u``.
     """
 
-    n_states: int
-    period: float | None
-    n_outputs: int
+    # read-only members: plain attributes, frozen dataclass fields and properties all fit
+    @property
+    def n_states(self) -> int: ...
+
+    @property
+    def period(self) -> float | None: ...
+
+    @property
+    def n_outputs(self) -> int: ...
 
     def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
         """The block's output at ``t``."""
@@ -138,7 +145,8 @@ class Observer(Controller, Protocol):
         state); the loop's ``error`` signal is ``S x - x̂``.
     """
 
-    estimates: FloatArray
+    @property
+    def estimates(self) -> FloatArray: ...
 
 
 class _Block:
@@ -219,10 +227,15 @@ class PiecewiseStateFeedback(_Block):
         ``u = K_j x̂ + k_j``, output feedback).
     """
 
-    K: Sequence[Any]
-    k: Sequence[Any] | None = None
+    # The fields hold the validated arrays; __init__ accepts sequences of array_like.
+    K: tuple[FloatArray, ...]
+    k: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
     on: str = "state"
     n_states: int = field(default=0, init=False)
+
+    if TYPE_CHECKING:
+        def __init__(self, K: Sequence[ArrayLike], k: Sequence[ArrayLike] | None = None,
+                     on: str = "state") -> None: ...
 
     def __post_init__(self) -> None:
         Ks = tuple(as_matrix(f"K[{i}]", Ki) for i, Ki in enumerate(self.K))

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, InadmissibleStateError, ModelError
@@ -86,6 +87,12 @@ class LinearHybridSystem:
 
     default_method = "event_driven"
 
+    if TYPE_CHECKING:
+        # What the constructor accepts (the dataclass fields hold the validated arrays).
+        def __init__(self, A: ArrayLike, G: ArrayLike, g0: ArrayLike, jump: JumpMap | Any,
+                     state_names: Sequence[str] = (), outputs: Mapping[str, Any] | None = None,
+                     admissible: Callable[[FloatArray], str | None] | None = None) -> None: ...
+
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         A = as_square("A", self.A)
@@ -122,7 +129,7 @@ class LinearHybridSystem:
         """Guard values ``G x + g0``."""
         return self.G @ x + self.g0
 
-    def check_state(self, x0: Any, *, tol: float = 1e-12) -> FloatArray:
+    def check_state(self, x0: ArrayLike, *, tol: float = 1e-12) -> FloatArray:
         """Validate ``x0``: correct length, every guard ``>= 0``, the user's admissibility test.
 
         Raises

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
@@ -28,6 +29,9 @@ from .._validation import (
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError
 from .hybrid import LinearHybridSystem
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..numerics.lti import Exosystem
 
 __all__ = ["ImpactingBodies", "stiffness_from_springs"]
 
@@ -115,10 +119,10 @@ class ImpactingBodies:
         set_(self, "restitution", e)
 
     @classmethod
-    def from_springs(cls, masses_a: Any, masses_b: Any,
+    def from_springs(cls, masses_a: ArrayLike, masses_b: ArrayLike,
                      springs_a: Mapping[tuple[int, int], float] | None = None,
                      springs_b: Mapping[tuple[int, int], float] | None = None, *,
-                     E: Any = None, restitution: float = 1.0) -> ImpactingBodies:
+                     E: ArrayLike | None = None, restitution: float = 1.0) -> ImpactingBodies:
         """Build the matrices from masses and springs ``{(h, j): k_hj}`` (0-based indices
         within each body; ``(h, h)`` ties mass ``h`` to the origin)."""
         ma, mb = as_vector("masses_a", masses_a), as_vector("masses_b", masses_b)
@@ -172,7 +176,7 @@ class ImpactingBodies:
         """``q_na+1 - q_na`` (>= 0 when admissible)."""
         return float(x[2 * self.n_a] - x[self.n_a - 1])
 
-    def check_state(self, x0: Any, *, tol: float = 1e-12, name: str = "x0") -> FloatArray:
+    def check_state(self, x0: ArrayLike, *, tol: float = 1e-12, name: str = "x0") -> FloatArray:
         """Validate ``x0 = [x_a; x_b]`` against the admissible set of ch02 §1.
 
         Parameters
@@ -232,7 +236,7 @@ class ImpactingBodies:
         qb, vb = 2 * na + np.arange(nb), 2 * na + nb + np.arange(nb)
         return np.concatenate([qa, qb, va, vb])
 
-    def hybrid(self, u: Any = None) -> LinearHybridSystem:
+    def hybrid(self, u: Exosystem | None = None) -> LinearHybridSystem:
         """The plant as a :class:`~nscontrol.systems.hybrid.LinearHybridSystem`.
 
         Parameters

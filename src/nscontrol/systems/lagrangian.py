@@ -16,9 +16,10 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
@@ -36,6 +37,10 @@ __all__ = ["LagrangianSystem", "two_link_arm_mass", "two_link_arm_coriolis",
            "two_link_arm_gravity", "two_link_arm_force_jacobian"]
 
 ForceFn = Callable[[float, FloatArray, FloatArray], FloatArray]
+#: ``(t, q, v) -> (∂force/∂q, ∂force/∂v)``.
+ForceJacobianFn = Callable[[float, FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
+#: ``q -> M(q)`` (a configuration-dependent mass matrix), ``q -> g(q)``, ``q -> ∂g/∂q``.
+ConfigurationFn = Callable[[FloatArray], FloatArray]
 #: ε^(1/3): the central-difference step (relative) balancing truncation and roundoff.
 _CBRT_EPS = float(np.finfo(float).eps) ** (1.0 / 3.0)
 
@@ -109,23 +114,36 @@ class LagrangianSystem:
     True
     """
 
-    mass: Any
+    # The fields hold the normalised values (float arrays); __init__ accepts array_like.
+    mass: Any   # FloatArray (n, n) or (n,) (a diagonal), or a ConfigurationFn
     stiffness: FloatArray | None = None
     damping: FloatArray | None = None
-    constant_force: FloatArray | None = None
+    constant_force: FloatArray = None  # type: ignore[assignment]  # None -> zeros(n) at init
     force: ForceFn | None = None
     gap_matrix: FloatArray | None = None
     gap_offset: FloatArray | None = None
-    gap: Callable[[FloatArray], FloatArray] | None = None
-    jacobian: Callable[[FloatArray], FloatArray] | None = None
-    restitution: Any = 0.0
+    gap: ConfigurationFn | None = None
+    jacobian: ConfigurationFn | None = None
+    restitution: FloatArray = 0.0  # type: ignore[assignment]  # a scalar -> full(m) at init
     actuation: FloatArray | None = None
     potential: Callable[[FloatArray], float] | None = None
     names: Sequence[str] = ()
-    force_jacobian: Callable[[float, FloatArray, FloatArray],
-                             tuple[FloatArray, FloatArray]] | None = None
+    force_jacobian: ForceJacobianFn | None = None
     n_dof: int = field(init=False)
     n_contacts: int = field(init=False)
+
+    if TYPE_CHECKING:
+        # What the constructor accepts (the dataclass fields hold the normalised values).
+        def __init__(self, mass: ArrayLike | ConfigurationFn, stiffness: ArrayLike | None = None,
+                     damping: ArrayLike | None = None, constant_force: ArrayLike | None = None,
+                     force: ForceFn | None = None,
+                     gap_matrix: Any = None,   # array_like or a scipy.sparse matrix (untyped)
+                     gap_offset: ArrayLike | None = None, gap: ConfigurationFn | None = None,
+                     jacobian: ConfigurationFn | None = None, restitution: ArrayLike = 0.0,
+                     actuation: ArrayLike | None = None,
+                     potential: Callable[[FloatArray], float] | None = None,
+                     names: Sequence[str] = (),
+                     force_jacobian: ForceJacobianFn | None = None) -> None: ...
 
     default_method = "event_driven"
 
@@ -205,7 +223,7 @@ class LagrangianSystem:
                 "gap_offset", self.gap_offset, G.shape[0])
             set_(self, "gap_offset", g0)
             return int(G.shape[0])
-        g = as_vector("gap(q)", self.gap(np.zeros(n)))
+        g = as_vector("gap(q)", self._gap_function()(np.zeros(n)))
         m = g.shape[0]
         if self.jacobian is None:
             warnings.warn("jacobian: not given; using central differences of gap (give an "
@@ -213,7 +231,7 @@ class LagrangianSystem:
                           stacklevel=4)
         else:
             J = as_matrix("jacobian(q)", self.jacobian(np.zeros(n)), rows=m, cols=n)
-            _warn_if_jacobian_disagrees(self.gap, J, n)
+            _warn_if_jacobian_disagrees(self._gap_function(), J, n)
         return int(m)
 
     # -- structure ----------------------------------------------------------------------
@@ -255,6 +273,9 @@ class LagrangianSystem:
     def dense_gap_matrix(self) -> FloatArray:
         """The affine gaps' matrix as a dense array."""
         G = self.gap_matrix
+        if G is None:
+            raise ModelError("gap_matrix: this system has nonlinear gaps (gap=...); "
+                             "use gap_jacobian(q) for their Jacobian")
         return G.toarray() if hasattr(G, "toarray") else np.asarray(G)
 
     def forces(self, t: float, q: FloatArray, v: FloatArray,
@@ -301,9 +322,10 @@ class LagrangianSystem:
 
     def gaps(self, q: FloatArray) -> FloatArray:
         """``g(q)``, shape ``(m,)``."""
-        if self.gap_matrix is not None:
-            return self.gap_matrix @ q + self.gap_offset
-        return np.asarray(self.gap(q), float)
+        G, g0 = self.gap_matrix, self.gap_offset
+        if G is not None and g0 is not None:   # affine gaps: __post_init__ set both
+            return np.asarray(G @ q + g0, float)
+        return np.asarray(self._gap_function()(q), float)
 
     def gap_jacobian(self, q: FloatArray) -> FloatArray:
         """``∂g/∂q``, shape ``(m, n)``."""
@@ -312,9 +334,17 @@ class LagrangianSystem:
         if self.jacobian is not None:
             return np.asarray(self.jacobian(q), float)
         eps = 1e-7 * max(1.0, float(np.max(np.abs(q), initial=0.0)))
-        cols = [(self.gap(q + eps * d) - self.gap(q - eps * d)) / (2 * eps)
+        gap = self._gap_function()
+        cols = [(gap(q + eps * d) - gap(q - eps * d)) / (2 * eps)
                 for d in np.eye(self.n_dof)]
         return np.array(cols).T
+
+    def _gap_function(self) -> ConfigurationFn:
+        """The nonlinear gap callable (``ModelError`` for a system with affine gaps)."""
+        if self.gap is None:
+            raise ModelError("gap: this system has affine gaps (gap_matrix); there is no "
+                             "gap callable")
+        return self.gap
 
     def energy(self, x: FloatArray) -> FloatArray:
         """Mechanical energy ``½ vᵀMv + ½ qᵀKq - f0ᵀq (+ potential)``; ``x`` (.., 2n)."""
@@ -337,7 +367,7 @@ class LagrangianSystem:
                                  ).reshape(q.shape[:-1])
         return kin + pot
 
-    def check_state(self, x0: Any, *, tol: float = 1e-12) -> FloatArray:
+    def check_state(self, x0: ArrayLike, *, tol: float = 1e-12) -> FloatArray:
         """Validate ``x0 = [q0; v0]``: no penetration, no approaching velocity at contact.
 
         Raises
@@ -403,7 +433,7 @@ class LagrangianSystem:
 
     # -- constructors -------------------------------------------------------------------
     @classmethod
-    def point_masses(cls, masses: Any, **kwargs: Any) -> LagrangianSystem:
+    def point_masses(cls, masses: ArrayLike, **kwargs: Any) -> LagrangianSystem:
         """Point masses on lines: ``M = diag(masses)``.
 
         Parameters
@@ -481,7 +511,7 @@ class LagrangianSystem:
             "g", g, allow_zero=True)), gap_matrix=G, restitution=restitution)
 
     @classmethod
-    def chain(cls, masses: Any, *, stiffness: Any = None, spacing: float = 0.0,
+    def chain(cls, masses: ArrayLike, *, stiffness: ArrayLike | None = None, spacing: float = 0.0,
               restitution: Any = 1.0) -> LagrangianSystem:
         """Point masses on a line, consecutive ones unilateral: ``q_{k+1} - q_k >= spacing``.
 

@@ -14,15 +14,20 @@ loop are *one* ``LureSystem``: stack the states and combine the laws with ``Prod
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
 from ..numerics.statespace import is_state_space, state_space_matrices
+from .protocols import InputSignal
+
+if TYPE_CHECKING:   # imported where used at run time
+    from ..laws.base import SetValuedLaw
 
 __all__ = ["LureSystem"]
 
@@ -86,7 +91,8 @@ def _check_picklable(system: Any) -> None:
             fn.__getstate__()
 
 
-def as_input_function(name: str, value: Any, size: int) -> Callable[[Any], FloatArray] | None:
+def as_input_function(name: str, value: InputSignal,
+                      size: int) -> Callable[[Any], FloatArray] | None:
     """Normalise an input signal to a vectorised ``t -> (len(t), size)`` function.
 
     Accepts ``None``, an :class:`~nscontrol.numerics.lti.Exosystem` (anything with a ``u``
@@ -182,17 +188,29 @@ class LureSystem:
     """
 
     A: FloatArray
-    G: FloatArray | None = None
-    H: FloatArray | None = None
-    law: Any = None
+    G: FloatArray = None  # type: ignore[assignment]  # None: from a StateSpace A
+    H: FloatArray = None  # type: ignore[assignment]
+    law: SetValuedLaw = None  # type: ignore[assignment]
     B: FloatArray | None = None
-    C: FloatArray | None = None
-    D: FloatArray | None = None
-    u: Any = None
-    g: Any = None
+    C: FloatArray = None  # type: ignore[assignment]  # None -> identity at init
+    D: FloatArray = None  # type: ignore[assignment]  # None -> zeros at init
+    u: InputSignal = None
+    g: InputSignal = None
     state_names: tuple[str, ...] = ()
+    # u and g as vectorised functions of time (set by __post_init__)
+    _u_fn: Callable[[ArrayLike], FloatArray] | None = field(default=None, init=False, repr=False)
+    _g_fn: Callable[[ArrayLike], FloatArray] | None = field(default=None, init=False, repr=False)
 
     default_method = "implicit_euler"
+
+    if TYPE_CHECKING:
+        # What the constructor accepts (the dataclass fields hold the validated arrays).
+        def __init__(self, A: ArrayLike, G: ArrayLike | None = None,
+                     H: ArrayLike | None = None, law: SetValuedLaw | None = None,
+                     B: ArrayLike | None = None, C: ArrayLike | None = None,
+                     D: ArrayLike | None = None, u: InputSignal = None,
+                     g: InputSignal = None,
+                     state_names: Sequence[str] = ()) -> None: ...
 
     def __post_init__(self) -> None:
         if is_state_space(self.A):
@@ -331,7 +349,7 @@ class LureSystem:
         """Dimension ``q`` of the external input ``u`` (0 without ``B``)."""
         return 0 if self.B is None else int(self.B.shape[1])
 
-    def input_at(self, t: Any) -> FloatArray:
+    def input_at(self, t: ArrayLike) -> FloatArray:
         """The external input sampled at given times.
 
         Parameters
@@ -345,11 +363,11 @@ class LureSystem:
             ``u(t)`` row by row (zeros when the system has no input).
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        if self._u_fn is None:  # type: ignore[attr-defined]
+        if self._u_fn is None:
             return np.zeros((t.size, self.n_inputs))
-        return self._u_fn(t)  # type: ignore[attr-defined]
+        return self._u_fn(t)
 
-    def shift_at(self, t: Any) -> FloatArray:
+    def shift_at(self, t: ArrayLike) -> FloatArray:
         """The known shift ``g`` of the law's argument sampled at given times.
 
         Parameters
@@ -363,16 +381,16 @@ class LureSystem:
             ``g(t)`` row by row (zeros when the system has no shift).
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        if self._g_fn is None:  # type: ignore[attr-defined]
+        if self._g_fn is None:
             return np.zeros((t.size, self.n_multipliers))
-        return self._g_fn(t)  # type: ignore[attr-defined]
+        return self._g_fn(t)
 
     @property
     def has_input(self) -> bool:
         """Whether an external input ``u(t)`` was given."""
-        return self._u_fn is not None  # type: ignore[attr-defined]
+        return self._u_fn is not None
 
     @property
     def has_shift(self) -> bool:
         """Whether a shift ``g(t)`` of the law's argument was given."""
-        return self._g_fn is not None  # type: ignore[attr-defined]
+        return self._g_fn is not None

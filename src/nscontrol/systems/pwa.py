@@ -17,16 +17,18 @@ facets to a stated tolerance.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
 from ..numerics.statespace import is_state_space, state_space_matrices
 from .lure import as_input_function
+from .protocols import InputSignal
 
 __all__ = ["PiecewiseAffineSystem", "CONTINUITY_RTOL"]
 
@@ -110,19 +112,29 @@ class PiecewiseAffineSystem:
     (['crossing', 'crossing'], 1, 0)
     """
 
-    A: Sequence[Any]
-    b: Sequence[Any] | None = None
-    regions: Sequence[tuple[Any, Any]] = ()
-    E: Any = None
-    u: Any = None
-    C: Any = None
+    # The fields hold the validated float arrays; __init__ (below) accepts array_like.
+    A: tuple[FloatArray, ...]
+    b: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
+    regions: tuple[tuple[FloatArray, FloatArray], ...] = ()
+    E: FloatArray | None = None
+    u: InputSignal = None
+    C: FloatArray | None = None
     continuous: bool = True
-    domain: tuple[Any, Any] | None = None
+    domain: tuple[FloatArray, FloatArray] | None = None
     state_names: tuple[str, ...] = ()
     _facets: tuple[_Facet, ...] = field(default=(), init=False, repr=False)
     _neighbours: tuple[tuple[int, int, int], ...] = field(default=(), init=False, repr=False)
+    _u_fn: Callable[[ArrayLike], FloatArray] | None = field(default=None, init=False, repr=False)
 
     default_method = "switching"
+
+    if TYPE_CHECKING:
+        def __init__(self, A: Sequence[ArrayLike], b: Sequence[ArrayLike] | None = None,
+                     regions: Sequence[tuple[ArrayLike, ArrayLike]] = (),
+                     E: ArrayLike | None = None, u: InputSignal = None, C: ArrayLike | None = None,
+                     continuous: bool = True,
+                     domain: tuple[ArrayLike, ArrayLike] | None = None,
+                     state_names: Sequence[str] = ()) -> None: ...
 
     def __post_init__(self) -> None:
         if len(self.A) == 0:
@@ -200,10 +212,11 @@ class PiecewiseAffineSystem:
 
     # -- construction helpers -----------------------------------------------------------
     @classmethod
-    def bimodal(cls, A1: Any, A2: Any, c: Any, *, d: float = 0.0, b1: Any = None,
-                b2: Any = None, E: Any = None, u: Any = None, C: Any = None,
-                continuous: bool = True, state_names: tuple[str, ...] = ()
-                ) -> PiecewiseAffineSystem:
+    def bimodal(cls, A1: ArrayLike, A2: ArrayLike, c: ArrayLike, *, d: float = 0.0,
+                b1: ArrayLike | None = None, b2: ArrayLike | None = None,
+                E: ArrayLike | None = None, u: InputSignal = None, C: ArrayLike | None = None,
+                continuous: bool = True,
+                state_names: tuple[str, ...] = ()) -> PiecewiseAffineSystem:
         """Two modes split by a hyperplane: ``A1 x + b1`` on ``cᵀx <= d``, ``A2 x + b2`` on
         ``cᵀx >= d``.
 
@@ -241,8 +254,8 @@ class PiecewiseAffineSystem:
                    continuous=continuous, state_names=state_names)
 
     @classmethod
-    def conewise(cls, A: Sequence[Any], H: Sequence[Any], *, E: Any = None, u: Any = None,
-                 C: Any = None, continuous: bool = True,
+    def conewise(cls, A: Sequence[ArrayLike], H: Sequence[ArrayLike], *, E: ArrayLike | None = None,
+                 u: InputSignal = None, C: ArrayLike | None = None, continuous: bool = True,
                  state_names: tuple[str, ...] = ()) -> PiecewiseAffineSystem:
         """Conewise linear system: ``x' = A_i x`` on the cone ``{x : H_i x <= 0}``.
 
@@ -286,7 +299,7 @@ class PiecewiseAffineSystem:
         """``(i, row, j)``: region ``j`` lies across facet ``row`` of region ``i``."""
         return self._neighbours
 
-    def contains(self, i: int, x: Any, tol: float = 1e-9) -> bool:
+    def contains(self, i: int, x: ArrayLike, tol: float = 1e-9) -> bool:
         """Whether a state lies in a region.
 
         Parameters
@@ -306,7 +319,7 @@ class PiecewiseAffineSystem:
         x = np.asarray(x, float)
         return bool(np.all(H @ x - h <= tol * (1.0 + np.abs(h) + np.abs(H) @ np.abs(x))))
 
-    def mode(self, x: Any, tol: float = 1e-9) -> int:
+    def mode(self, x: ArrayLike, tol: float = 1e-9) -> int:
         """The region of a state.
 
         Parameters
@@ -327,7 +340,7 @@ class PiecewiseAffineSystem:
                 return i
         return -1
 
-    def field(self, i: int, x: Any, t: float = 0.0, u: Any = None) -> FloatArray:
+    def field(self, i: int, x: ArrayLike, t: float = 0.0, u: InputSignal = None) -> FloatArray:
         """The vector field of one region.
 
         Parameters
@@ -354,7 +367,7 @@ class PiecewiseAffineSystem:
                 f = f + self.E @ uval
         return f
 
-    def input_at(self, t: float, u: Any = None) -> FloatArray | None:
+    def input_at(self, t: float, u: InputSignal = None) -> FloatArray | None:
         """The input at one time.
 
         Parameters
@@ -375,7 +388,7 @@ class PiecewiseAffineSystem:
             ``u`` given for a system without an input matrix ``E``.
         """
         if u is None:
-            fn = self._u_fn  # type: ignore[attr-defined]
+            fn = self._u_fn
         elif self.E is None:
             raise ModelError("u: this system has no input matrix E")
         else:
@@ -387,7 +400,7 @@ class PiecewiseAffineSystem:
         hs = [np.max(np.abs(h), initial=0.0) for _, h in self.regions]
         return max(1.0, *hs)
 
-    def in_domain(self, x: Any, tol: float = 1e-9) -> bool:
+    def in_domain(self, x: ArrayLike, tol: float = 1e-9) -> bool:
         """Whether a state lies in the ``domain`` (always True without one).
 
         Parameters
@@ -438,8 +451,8 @@ class PiecewiseAffineSystem:
     def _check_continuity(self, i: int, j: int, p: FloatArray) -> None:
         fi = self.A[i] @ p + self.b[i]
         fj = self.A[j] @ p + self.b[j]
-        scale = (np.linalg.norm(fi) + np.linalg.norm(self.A[i], 2) * np.linalg.norm(p)
-                 + np.linalg.norm(self.b[i]))
+        scale = float(np.linalg.norm(fi) + np.linalg.norm(self.A[i], 2) * np.linalg.norm(p)
+                      + np.linalg.norm(self.b[i]))
         gap = float(np.linalg.norm(fi - fj))
         if gap > CONTINUITY_RTOL * max(scale, 1e-300):
             raise ModelError(

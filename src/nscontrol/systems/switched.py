@@ -15,9 +15,10 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
@@ -30,6 +31,9 @@ from .._validation import (
 )
 from ..errors import DimensionError, ModelError
 from ..numerics.differences import central_difference_gradient, central_difference_jacobian
+
+if TYPE_CHECKING:   # imported where used at run time
+    from .pwa import PiecewiseAffineSystem
 
 __all__ = ["FilippovSystem", "SwitchedAffineSystem", "PWMController"]
 
@@ -261,7 +265,7 @@ class FilippovSystem:
                    gradients=None if gradient is None else (gradient,), state_names=state_names)
 
     @classmethod
-    def from_pwa(cls, pwa: Any) -> FilippovSystem:
+    def from_pwa(cls, pwa: PiecewiseAffineSystem) -> FilippovSystem:
         """The Filippov form of a bimodal piecewise-affine system, for discontinuous fields with
         sliding.
 
@@ -570,7 +574,7 @@ class SwitchedAffineSystem:
         M[:n, :n], M[:n, n] = A, b
         return LTIFlow.shared(M)
 
-    def propagate(self, mode: int, x: Any, t: Any) -> FloatArray:
+    def propagate(self, mode: int, x: ArrayLike, t: ArrayLike) -> FloatArray:
         """Exact solution of one mode.
 
         Parameters

@@ -135,14 +135,14 @@ class _Checker:
             err = ModelError(f"check_system({self.subject}): {self.kind} fails '{name}': "
                              + (f"{_fmt(value)} > {_fmt(threshold)}" if threshold is not None
                                 else "no") + (f"; {detail}" if detail else ""))
-            err.report = self.report()  # type: ignore[attr-defined]
+            err.report = self.report()  # type: ignore[attr-defined]  # the checks so far, added at raise
             raise err
 
     def bound(self, name: str, value: float, threshold: float, detail: str = "") -> None:
         self.record(name, float(value), float(threshold), bool(value <= threshold), detail)
 
-    def fact(self, name: str, passed: bool, detail: str = "") -> None:
-        self.record(name, bool(passed), None, passed, detail)
+    def fact(self, name: str, passed: bool | np.bool_, detail: str = "") -> None:
+        self.record(name, bool(passed), None, bool(passed), detail)
 
     def report(self) -> CheckReport:
         return CheckReport(self.subject, self.kind, tuple(self.items))
@@ -278,6 +278,8 @@ def _check_law(chk: _Checker, law: Any, rng: np.random.Generator, n: int, tol: f
     dim = getattr(law, "dim", None)
     chk.fact(f"{label}dim is a positive integer", isinstance(dim, int | np.integer)
              and not isinstance(dim, bool) and dim >= 1, f"dim = {dim!r}")
+    if not isinstance(dim, int | np.integer):   # fact() has raised already; narrows dim
+        return
     for flag in ("monotone", "componentwise"):
         value = getattr(law, flag, None)
         chk.fact(f"{label}{flag} is a bool", isinstance(value, bool | np.bool_),

@@ -135,7 +135,7 @@ def stack_delassus(n_masses: int, *, mass: float = 1.0, g: float = 9.81, h: floa
     M = sp.diags([off, diag, off], [-1, 0, 1], format="csr")
     q = np.zeros(n)
     q[0] = -g * h
-    z = (n - np.arange(n)) * mass * g * h
+    z = np.asarray((n - np.arange(n)) * mass * g * h, dtype=float)
     return LCPProblem(f"stack of {n} masses", M if sparse else M.toarray(), q, z,
                       np.zeros(n), True,
                       "each contact impulse carries the weight-impulse m g h of the masses "

@@ -114,7 +114,7 @@ class RestingStack:
 
     def impulses(self, h: float) -> FloatArray:
         """Moreau–Jean impulses of a step ``h``: ``(n - k) m g h`` for contact ``k``."""
-        return (self.n - np.arange(self.n)) * self.mass * self.g * h
+        return np.asarray((self.n - np.arange(self.n)) * self.mass * self.g * h, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -157,7 +157,7 @@ class NewtonsCradle:
 
     def impact_times(self) -> FloatArray:
         """Closing times of the ``n - 1`` contacts, in order."""
-        return self.spacing * np.arange(1, self.n) / self.velocity
+        return np.asarray(self.spacing * np.arange(1, self.n) / self.velocity, dtype=float)
 
     @property
     def final_time(self) -> float:

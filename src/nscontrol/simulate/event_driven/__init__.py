@@ -55,11 +55,14 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ...errors import ModelError, NscontrolError
 from ...systems.hybrid import LinearHybridSystem
 from ...systems.impacting_bodies import ImpactingBodies
 from ...systems.lagrangian import LagrangianSystem
+from ...systems.protocols import InputSignal
+from ..callbacks import Listener
 from ..trajectory import Trajectory
 from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
 from ._recording import _guarded, partial_in_caller_order, reorder_listeners, reorder_states
@@ -70,11 +73,12 @@ from .nonlinear_mechanics import NonlinearMechanicsRun
 __all__ = ["integrate", "reorder_listeners", "reorder_states", "partial_in_caller_order"]
 
 
-def integrate(system: Any, x0: Any, t_span: tuple[float, float], *, u: Any = None,
+def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x0: ArrayLike,
+              t_span: tuple[float, float], *, u: InputSignal = None,
               controller: Any = None, dt: float | None = None, max_events: int = 100_000,
               min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
               zeno_horizon: float | None = None, zeno_rel: float = 1e-3,
-              listeners: Sequence[Callable[..., None]] = (),
+              listeners: Sequence[Listener] = (),
               rtol: float = 1e-10, atol: float = 1e-12, record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None
               ) -> Trajectory:

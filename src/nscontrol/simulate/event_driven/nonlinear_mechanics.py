@@ -109,8 +109,8 @@ class NonlinearMechanicsRun:
         def event(t: float, x: FloatArray) -> float:
             return float(self.s.gaps(x[: self.s.n_dof])[j])
 
-        event.terminal = True  # type: ignore[attr-defined]
-        event.direction = -1  # type: ignore[attr-defined]
+        event.terminal = True  # type: ignore[attr-defined]  # solve_ivp reads it
+        event.direction = -1  # type: ignore[attr-defined]  # solve_ivp reads it
         return event
 
     def _impact(self, t: float, x: FloatArray) -> Any:
