@@ -31,6 +31,9 @@ _EXPORTS: dict[str, str] = {
     "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
     "LinearController": "feedback", "LinearObserver": "feedback",
     "PiecewiseObserver": "feedback",
+    # protocols.py
+    "SimulableSystem": "protocols", "StateChecked": "protocols", "InputFunction": "protocols",
+    "Exogenous": "protocols", "InputSignal": "protocols",
 }
 
 __all__ = list(_EXPORTS)
