@@ -11,7 +11,7 @@ OUT    ?= out
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,cluster,control]"
+	$(PY) -m pip install --quiet -e ".[dev,cluster,control,scs]"
 	touch $(STAMP)
 
 demo: $(STAMP)

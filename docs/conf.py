@@ -41,7 +41,11 @@ myst_heading_anchors = 3
 
 autosummary_generate = True
 autosummary_imported_members = False
-autodoc_default_options = {"members": True, "show-inheritance": False}
+# "ignore-module-all": a subpackage's __all__ re-exports its modules' names (so that
+# ``from nscontrol.laws import Relay`` works); each object is documented once, on the page of
+# the module that defines it.
+autodoc_default_options = {"members": True, "show-inheritance": False,
+                           "ignore-module-all": True}
 autodoc_typehints = "none"          # numpydoc shows the documented types
 
 numpydoc_show_class_members = False  # autosummary lists members; no duplicate tables

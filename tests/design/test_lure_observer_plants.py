@@ -128,8 +128,11 @@ def test_statespace_bad_input():
     s = ex.coulomb_oscillator(0.1)
     with pytest.raises(ModelError, match="continuous-time"):
         lure_from_statespace(control.ss(s.A, s.G, s.C, 0, dt=0.1), Relay(1.0))
-    with pytest.raises(DimensionError):
-        lure_from_statespace(control.ss(s.A, s.G, s.H, 0), Relay(1.0))
+    # a single-output model (only z) is accepted: it measures the whole state, as LureSystem
+    np.testing.assert_array_equal(
+        lure_from_statespace(control.ss(s.A, s.G, s.H, 0), Relay(1.0)).C, np.eye(len(s.A)))
+    with pytest.raises(DimensionError):  # fewer inputs than the law's dimension
+        lure_from_statespace(control.ss(s.A, s.G, s.H, 0), Relay(np.ones(2)))
     ss = control.ss(s.A, np.hstack([s.G, s.B]), np.vstack([s.H, s.C]), [[0, 0], [0, 1.0]])
     with pytest.raises(ModelError, match="feedthrough"):
         lure_from_statespace(ss, Relay(1.0))

@@ -1,2 +1,71 @@
 """Analysis: observability, convergence, periodic orbits, Floquet multipliers, sweeps of
-trajectories against a theorem's claim."""
+trajectories against a theorem's claim.
+
+Every public name is importable from here (``from nscontrol.analysis import ...``);
+the defining module loads on first use, so importing the package stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Public name -> the module of this package that defines it.
+_EXPORTS: dict[str, str] = {
+    # observability.py
+    "Theorem1Result": "observability", "ReconstructibilityResult": "observability",
+    "EpsilonCertificate": "observability", "DecayMeasurement": "observability",
+    "RANK_RTOL": "observability", "theorem1_test": "observability",
+    "impact_observability": "observability", "pbh_observability": "observability",
+    "reconstructibility": "observability", "jury_second_order": "observability",
+    "alpha_limit": "observability", "observer_flow_norms": "observability",
+    "search_epsilon": "observability", "certified_rate": "observability",
+    "impact_decay_rate": "observability",
+    # convergence.py
+    "ConvergenceCertificate": "convergence", "quadratic_convergence": "convergence",
+    "decay_rate": "convergence", "BimodalTests": "convergence", "bimodal_tests": "convergence",
+    "product_test": "convergence", "circle_test": "convergence",
+    "circle_criterion_minimum": "convergence", "most_negative_real_eigenvalue": "convergence",
+    "bisect_boundary": "convergence", "SteadyStateBound": "convergence", "isc_gain": "convergence",
+    "peak_to_peak_bound": "convergence", "incremental_l2_bound": "convergence",
+    "equilibrium": "convergence",
+    # periodic.py
+    "PeriodicOrbit": "periodic", "periodic_steady_state": "periodic",
+    "UniquenessCheck": "periodic", "check_uniqueness": "periodic", "BruteForceResult": "periodic",
+    "brute_force_steady_state": "periodic", "period_multiplicity": "periodic",
+    "refined_peak": "periodic", "dft_harmonics": "periodic", "HarmonicResponse": "periodic",
+    "harmonic_response": "periodic", "FrequencyResponse": "periodic",
+    "frequency_response": "periodic", "frequency_sweep": "periodic",
+    # orbits.py
+    "Forced": "orbits", "MapResult": "orbits", "Orbit": "orbits", "stroboscopic_map": "orbits",
+    "find_orbit": "orbits", "Cycle": "orbits", "find_cycle": "orbits", "SectionReturn": "orbits",
+    "hyperplane_map": "orbits", "floquet_multipliers": "orbits",
+    # saltation.py
+    "saltation_matrix": "saltation", "impact_jump_jacobian": "saltation",
+    "time_shift_term": "saltation",
+    # continuation.py
+    "SpecialPoint": "continuation", "Branch": "continuation", "continue_orbit": "continuation",
+    "switch_at_flip": "continuation",
+    # bifurcation.py
+    "BifurcationDiagram": "bifurcation", "bifurcation_diagram": "bifurcation",
+    "parse_grid": "bifurcation",
+    # impact_oscillator.py
+    "ImpactOscillator": "impact_oscillator", "OneImpactOrbit": "impact_oscillator",
+    "OscillatorFamily": "impact_oscillator",
+}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: import the defining module on first use and cache the name here
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -231,6 +231,10 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
         Progress bar (per chunk), as :func:`nscontrol.sweep.run`.
     rtol
         Tolerance of the period-multiplicity test (relative to the largest sample).
+    parameter_name : str
+        Name of the parameter (axis labels, saved files).
+    state_names : tuple of str
+        Names of the state components (default ``x0, x1, ...``).
 
     Returns
     -------
@@ -282,6 +286,11 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
 
 def parse_grid(spec: str) -> tuple[str, FloatArray]:
     """``"NAME=START:STOP:N"`` -> ``(NAME, linspace(START, STOP, N))``.
+
+    Parameters
+    ----------
+    spec : str
+        The grid, as on the command line.
 
     Examples
     --------

@@ -602,6 +602,17 @@ def switch_at_flip(factory: Callable[[float], Forced], branch: Branch,
     along the flip eigenvector ``w`` (``M w = -w``), propagated to the nodes
     (``w_{i+1} = J_i w_i``) and taken with opposite signs on the two copies. ``options`` go
     to :func:`continue_orbit` (``p_range`` is required).
+
+    Parameters
+    ----------
+    factory : callable ``p -> Forced``
+        The family of forced systems.
+    branch : Branch
+        The branch with the flip.
+    point : SpecialPoint, optional
+        The flip (default: the first one found on ``branch``).
+    **options
+        Passed to :func:`continue_orbit`.
     """
     flips = branch.special("flip")
     if point is None:

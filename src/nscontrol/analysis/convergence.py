@@ -227,7 +227,15 @@ def _lyap(A: Any, P: FloatArray, decay: float) -> FloatArray:
 
 def decay_rate(As: Sequence[ArrayLike], P: ArrayLike) -> float:
     """The largest ``σ`` with ``A_iᵀP + PA_i + 2σP <= 0`` for all i (exact, by generalised
-    eigenvalues); negative when ``P`` is not a Lyapunov matrix of every mode."""
+    eigenvalues); negative when ``P`` is not a Lyapunov matrix of every mode.
+
+    Parameters
+    ----------
+    As : sequence of (n, n) array_like
+        The modes ``A_i``.
+    P : (n, n) array_like
+        A symmetric positive definite matrix.
+    """
     from scipy.linalg import eigh
 
     Pa = np.asarray(P, float)
@@ -330,7 +338,13 @@ def _both_hurwitz(A1: FloatArray, A2: FloatArray) -> bool:
 
 def most_negative_real_eigenvalue(M: ArrayLike) -> float:
     """The most negative real eigenvalue of ``M`` (``nan`` when it has none); an eigenvalue
-    counts as real when ``|Im λ| <= 1e-9|λ|``."""
+    counts as real when ``|Im λ| <= 1e-9|λ|``.
+
+    Parameters
+    ----------
+    M : (n, n) array_like
+        The matrix.
+    """
     lam = np.linalg.eigvals(np.asarray(M, float))
     real_neg = lam[(np.abs(lam.imag) <= 1e-9 * np.abs(lam)) & (lam.real < 0)].real
     return float(real_neg.min()) if real_neg.size else float("nan")
@@ -338,20 +352,38 @@ def most_negative_real_eigenvalue(M: ArrayLike) -> float:
 
 def product_test(A1: ArrayLike, A2: ArrayLike) -> bool:
     """Bimodal test 2 of §2.4: both modes Hurwitz and ``A_1A_2`` without a real negative
-    eigenvalue (⇔ a CQLF exists, for a rank-one difference)."""
+    eigenvalue (⇔ a CQLF exists, for a rank-one difference).
+
+    Parameters
+    ----------
+    A1, A2 : (n, n) array_like
+        The two modes, with a rank-one difference ``A_1 - A_2 = k g cᵀ``.
+    """
     A1, A2 = _pair(A1, A2)
     _rank_one(A1 - A2)
     return bool(_both_hurwitz(A1, A2) and np.isnan(most_negative_real_eigenvalue(A1 @ A2)))
 
 
 def circle_test(A1: ArrayLike, A2: ArrayLike) -> bool:
-    """Bimodal test 3 of §2.4: both modes Hurwitz and ``1 + k Re G(iω) > 0`` for all ω."""
+    """Bimodal test 3 of §2.4: both modes Hurwitz and ``1 + k Re G(iω) > 0`` for all ω.
+
+    Parameters
+    ----------
+    A1, A2 : (n, n) array_like
+        The two modes, with a rank-one difference ``A_1 - A_2 = k g cᵀ``.
+    """
     A1, A2 = _pair(A1, A2)
     return bool(_both_hurwitz(A1, A2) and circle_criterion_minimum(A1, A2) > 0)
 
 
 def circle_criterion_minimum(A1: ArrayLike, A2: ArrayLike) -> float:
-    """``min_ω 1 + k Re G(iω)``, ``G(s) = cᵀ(sI - A_1)⁻¹g``, for ``A_1 - A_2 = k g cᵀ``."""
+    """``min_ω 1 + k Re G(iω)``, ``G(s) = cᵀ(sI - A_1)⁻¹g``, for ``A_1 - A_2 = k g cᵀ``.
+
+    Parameters
+    ----------
+    A1, A2 : (n, n) array_like
+        The two modes, with a rank-one difference ``A_1 - A_2 = k g cᵀ``.
+    """
     A1, A2 = _pair(A1, A2)
     g, c, k = _rank_one(A1 - A2)
     return _circle_minimum(A1, g, c, k)
@@ -403,6 +435,15 @@ def bisect_boundary(is_convergent: Callable[[float], bool], lo: float, hi: float
 
     ``is_convergent(lo)`` and ``is_convergent(hi)`` must differ; the returned ``p*`` is where
     the verdict changes, to ``rtol`` relative.
+
+    Parameters
+    ----------
+    is_convergent : callable ``p -> bool``
+        The test, monotone in ``p``.
+    lo, hi : float
+        The bracket; the verdicts at its ends must differ.
+    rtol : float
+        Relative width of the final bracket.
 
     Raises
     ------
@@ -633,6 +674,15 @@ def incremental_l2_bound(As: Sequence[ArrayLike], D: ArrayLike, Cz: ArrayLike) -
     Minimise ``γ²`` s.t. ``P > 0`` and ``[[A_iᵀP + PA_i + C_zᵀC_z, PD], [DᵀP, -γ²I]] <= 0``.
     For T-periodic inputs ``RMS(z̄_{w1} - z̄_{w2}) <= γ·RMS(w1 - w2)``; one mode: the H∞ norm.
 
+    Parameters
+    ----------
+    As : sequence of (n, n) array_like
+        The modes ``A_i`` of the continuous PWA system.
+    D : (n, q) array_like
+        Input matrix of the input ``w`` (common to all modes).
+    Cz : (r, n) array_like
+        Performance output ``z = C_z x`` (common to all modes).
+
     Raises
     ------
     SolverError
@@ -689,6 +739,13 @@ def equilibrium(system: PiecewiseAffineSystem, w0: ArrayLike) -> FloatArray:
     For each region solve ``A_i x = -b_i - E w0`` and keep the solution if it lies in the
     region (relative tolerance 1e-9); exactly one distinct point must survive (it may be found
     in two regions when it lies on a facet).
+
+    Parameters
+    ----------
+    system : PiecewiseAffineSystem
+        A continuous PWA model.
+    w0 : array_like
+        The constant input (length of the input matrix's columns).
 
     Raises
     ------

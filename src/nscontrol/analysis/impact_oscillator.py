@@ -289,6 +289,13 @@ class OscillatorFamily:
     (for :func:`~nscontrol.analysis.continuation.continue_orbit` and
     :func:`~nscontrol.analysis.bifurcation.bifurcation_diagram`).
 
+    Parameters
+    ----------
+    base : ImpactOscillator
+        The oscillator whose parameter varies.
+    parameter : str
+        The name of the varied field of :class:`ImpactOscillator`.
+
     Examples
     --------
     >>> fam = OscillatorFamily(ImpactOscillator(), "forcing")

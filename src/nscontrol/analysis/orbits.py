@@ -196,6 +196,17 @@ def stroboscopic_map(forced: Forced, x0: Any, *, n_periods: int = 1,
                      t0: float = 0.0) -> MapResult:
     """``x(t0 + kT)`` from ``x(t0) = x0`` and its Jacobian ``∂x(t0 + kT)/∂x0``.
 
+    Parameters
+    ----------
+    forced : Forced
+        The periodically forced system and its period ``T``.
+    x0 : array_like
+        Initial state.
+    n_periods : int
+        ``k``, the number of periods.
+    t0 : float
+        Initial time.
+
     Raises
     ------
     ModelError
@@ -262,7 +273,13 @@ def at_times(tr: Any, times: Any) -> FloatArray:
 
 
 def floquet_multipliers(monodromy: Any) -> np.ndarray:
-    """Eigenvalues of the monodromy matrix, by decreasing modulus."""
+    """Eigenvalues of the monodromy matrix, by decreasing modulus.
+
+    Parameters
+    ----------
+    monodromy : (n, n) array_like
+        The monodromy matrix.
+    """
     mu = np.linalg.eigvals(np.asarray(monodromy, float))
     return mu[np.argsort(-np.abs(mu), kind="stable")]
 
@@ -291,6 +308,9 @@ class Orbit:
         Newton iterations used.
     residual
         Final ``max_i |P(x_i) - x_{i+1}|``.
+    node_jacobians
+        ``J_i = ∂P(x_i)/∂x_i``, the one-period Jacobians at the nodes (their product is the
+        monodromy).
     """
 
     nodes: FloatArray
@@ -576,6 +596,25 @@ def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: floa
     The default ``tol = 1e-9`` sits above the residual floor of event-located flows (switch
     instants found to ~1e-11 relative, times the field's jump).
 
+    Parameters
+    ----------
+    system
+        An autonomous model whose integrator offers the ``sensitivity`` capability.
+    x0 : array_like
+        Initial guess of a point of the cycle.
+    period : float
+        Initial guess of its period.
+    normal : array_like
+        Normal of the phase-condition hyperplane.
+    offset : float, optional
+        Its offset (default ``normal·x0`` of the guess).
+    method : str or Integrator subclass, optional
+        The integrator (default: the system's).
+    tol : float
+        Newton's tolerance on the residual.
+    max_iter : int
+        Newton iterations at most.
+
     Raises
     ------
     ModelError
@@ -615,7 +654,17 @@ def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: floa
 class SectionReturn:
     """First return to a hyperplane ``normal·x = offset``: point, time and the Poincaré map's
     Jacobian ``(I - ẋ normalᵀ/(normal·ẋ)) ∂φ_τ/∂x0`` (the return time's dependence on ``x0``
-    folded in, as in a saltation matrix with ``J = 0`` jump and zero field after)."""
+    folded in, as in a saltation matrix with ``J = 0`` jump and zero field after).
+
+    Parameters
+    ----------
+    x : ndarray
+        The return point.
+    time : float
+        The return time.
+    jacobian : ndarray
+        The Poincaré map's Jacobian.
+    """
 
     x: FloatArray
     time: float
@@ -631,6 +680,25 @@ def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: f
     bracketed on ``samples`` exact-flow samples of ``(0, t_max)`` and refined by secant steps
     on the flow from the bracket's start. Crossings within the first sample interval are not
     returns (the start lies on the section, or within rounding of a perturbation of it).
+
+    Parameters
+    ----------
+    system
+        An autonomous model.
+    x0 : array_like
+        The starting state.
+    normal : array_like
+        Normal of the hyperplane.
+    offset : float
+        Its offset.
+    t_max : float
+        Longest time searched for a return.
+    method : str or Integrator subclass, optional
+        The integrator (default: the system's).
+    direction : {1, -1}
+        Crossing direction counted as a return.
+    samples : int
+        Samples of ``(0, t_max)`` that bracket the crossing.
 
     Raises
     ------

@@ -165,6 +165,10 @@ def periodic_steady_state(system: SimulableSystem, period: float, *, u: InputSig
         (``max(max_iter, 6)`` iterations).
     n_samples
         Uniform samples of the returned period.
+    method : str
+        The integrator (default ``"switching"``).
+    max_periods : int
+        Periods of the fallback iteration at most.
     **options
         Passed to the integrator.
 
@@ -330,6 +334,27 @@ def check_uniqueness(system: SimulableSystem, period: float, *, u: InputSignal =
     """Shoot from ``n_guesses`` random initial states spread ``spread`` times the size of the
     response and compare the periodic solutions (convergent ⇒ one solution, ch11 P3/P6).
 
+    Parameters
+    ----------
+    system
+        A model simulable with ``method``.
+    period : float
+        ``T > 0``, the period of the input.
+    u
+        The ``T``-periodic input (default: the system's own).
+    n_guesses : int
+        Number of random initial states.
+    spread : float
+        Their standard deviation, in units of the response's size (``max|x|``).
+    rtol : float
+        Relative agreement demanded of the periodic solutions.
+    seed : int
+        Seed of the random initial states.
+    method : str
+        The integrator (default ``"switching"``).
+    **options
+        Passed to :func:`periodic_steady_state`.
+
     Raises
     ------
     SolverError
@@ -408,7 +433,17 @@ class BruteForceResult:
 
 def period_multiplicity(poincare: Any, *, rtol: float = 1e-3, max_p: int = 6) -> int:
     """Smallest ``p <= max_p`` with ``max_k |x_{k+p} - x_k| <= rtol·max|x|`` over Poincaré
-    samples ``x_k = x(t0 + kT)``; ``0`` when none (quasi-periodic, chaotic, or transient)."""
+    samples ``x_k = x(t0 + kT)``; ``0`` when none (quasi-periodic, chaotic, or transient).
+
+    Parameters
+    ----------
+    poincare : (K, n) array_like
+        The Poincaré samples ``x_k``, one per row.
+    rtol : float
+        Tolerance relative to ``max|x|``.
+    max_p : int
+        Largest multiplicity tried.
+    """
     X = np.asarray(poincare, float)
     scale = max(float(np.max(np.abs(X))), 1e-300)
     for p in range(1, max_p + 1):
@@ -429,6 +464,29 @@ def brute_force_steady_state(system: SimulableSystem, period: float, *, u: Input
 
     The recorded window is sampled at ``samples_per_period`` uniform times per period (plus
     the event instants; :meth:`BruteForceResult.uniform_samples` returns the uniform ones).
+
+    Parameters
+    ----------
+    system
+        A model simulable with ``method``.
+    period : float
+        ``T > 0``, the period of the input.
+    u
+        The ``T``-periodic input (default: the system's own).
+    x0 : array_like, optional
+        Initial state (default zeros).
+    n_transient : int
+        Periods simulated and discarded.
+    n_record : int
+        Periods recorded after them.
+    samples_per_period : int
+        Uniform samples per recorded period.
+    rtol : float
+        Relative tolerance of the period multiplicity (see Notes).
+    method : str
+        The integrator (default ``"switching"``).
+    **options
+        Passed to the integrator.
 
     Raises
     ------
@@ -494,7 +552,13 @@ def brute_force_steady_state(system: SimulableSystem, period: float, *, u: Input
 def refined_peak(values: Any) -> float:
     """Maximum of a periodic, uniformly sampled signal refined by a parabola through the
     largest sample and its two (cyclic) neighbours; plain sampled maxima are biased low by
-    about ``(π/N)²/2`` relative."""
+    about ``(π/N)²/2`` relative.
+
+    Parameters
+    ----------
+    values : (N,) array_like
+        One period of the signal, uniformly sampled (without the repeated endpoint).
+    """
     y = np.asarray(values, float)
     i = int(np.argmax(y))
     ym, y0, yp = y[i - 1], y[i], y[(i + 1) % y.size]
@@ -507,7 +571,15 @@ def refined_peak(values: Any) -> float:
 
 def dft_harmonics(values: Any, n_harmonics: int) -> FloatArray:
     """``|Z_k|``, ``Z_k = (2/N) Σ_n z_n e^{-2πikn/N}``, k = 1..K, for N uniform samples of one
-    period (without the repeated endpoint)."""
+    period (without the repeated endpoint).
+
+    Parameters
+    ----------
+    values : (N,) array_like
+        The samples ``z_n``.
+    n_harmonics : int
+        ``K``, the number of harmonics returned.
+    """
     z = np.asarray(values, float)
     Z = np.fft.rfft(z) * (2.0 / z.size)
     return np.abs(Z[1:int(n_harmonics) + 1])
@@ -587,7 +659,23 @@ def harmonic_response(orbit: PeriodicOrbit, *, amplitude: float, output: Any = N
                       control: Any = None) -> HarmonicResponse:
     """Generalized-Bode figures of a shot orbit: refined ``γ_a``, RMS gain, harmonics, peak
     state and (with ``control``, a callable ``x -> u`` on time-major states) the effort
-    ``max|u|``."""
+    ``max|u|``.
+
+    Parameters
+    ----------
+    orbit : PeriodicOrbit
+        From :func:`periodic_steady_state`.
+    amplitude : float
+        The excitation's amplitude ``a``.
+    output : array_like, optional
+        Performance output matrix ``C_z`` (default: the system's ``C``, else the first state).
+    system : optional
+        The model, for its default output.
+    n_harmonics : int
+        Number of harmonics measured.
+    control : callable, optional
+        The feedback law ``x -> u`` on time-major states, for the effort.
+    """
     n = orbit.x0.shape[0]
     Cz = _output_matrix(system, output) if system is not None else \
         (np.eye(1, n) if output is None else np.reshape(output, (-1, n)))
@@ -715,6 +803,8 @@ def frequency_response(system: SimulableSystem, omegas: ArrayLike, *, amplitude:
         Performance output matrix ``C_z`` (default: the model's ``C``, else the first state).
     n_samples
         Uniform samples per period for the peak and the DFT (``>= 64·n_harmonics``).
+    n_harmonics : int
+        Number of harmonics measured (``|Z_1| .. |Z_K|``).
     method
         Integrator (default ``"switching"``).
     control

@@ -98,6 +98,15 @@ def impact_jump_jacobian(mass_matrix: Any, normal: Any, restitution: float) -> F
     With state ``x = (q, v)``, contact normal ``w`` (``ġ = wᵀv``) and mass matrix ``M``, the
     post-impact velocity is ``v+ = v- - (1 + e) M⁻¹w (wᵀv-) / (wᵀM⁻¹w)``; positions do not
     jump. Returns the ``(2n, 2n)`` block matrix ``diag(I, I - (1 + e) M⁻¹w wᵀ/(wᵀM⁻¹w))``.
+
+    Parameters
+    ----------
+    mass_matrix : (n, n) array_like
+        ``M``, symmetric positive definite.
+    normal : (n,) array_like
+        The contact normal ``w``.
+    restitution : float
+        Newton's coefficient ``e``.
     """
     M = as_matrix("mass_matrix", mass_matrix)
     n = M.shape[0]
@@ -111,7 +120,15 @@ def impact_jump_jacobian(mass_matrix: Any, normal: Any, restitution: float) -> F
 
 def time_shift_term(f_minus: Any, f_plus: Any, dtau_dx: Any) -> FloatArray:
     """``(f- - f+) ∂τ/∂xᵀ``: the part of the transition from a sampled state ``x_k`` due to a
-    switching instant ``t_e = t_k + τ(x_k)`` (PWM edge set by the sampled state)."""
+    switching instant ``t_e = t_k + τ(x_k)`` (PWM edge set by the sampled state).
+
+    Parameters
+    ----------
+    f_minus, f_plus : (n,) array_like
+        The fields before and after the switching instant.
+    dtau_dx : (n,) array_like
+        ``∂τ/∂x``, the gradient of the switching delay.
+    """
     fm = as_vector("f_minus", f_minus)
     fp = as_vector("f_plus", f_plus, fm.shape[0])
     g = as_vector("dtau_dx", dtau_dx)

@@ -1,2 +1,55 @@
 """Designs: one module per method family; each returns a design object holding the gains and
-the re-checked certificate, able to build its closed loop."""
+the re-checked certificate, able to build its closed loop.
+
+Every public name is importable from here (``from nscontrol.design import ...``);
+the defining module loads on first use, so importing the package stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Public name -> the module of this package that defines it.
+_EXPORTS: dict[str, str] = {
+    # impact_conditions.py
+    "Theorem1Result": "impact_conditions", "EpsilonCertificate": "impact_conditions",
+    "theorem1_test": "impact_conditions", "jury_second_order": "impact_conditions",
+    "alpha_limit": "impact_conditions", "observer_flow_norms": "impact_conditions",
+    "search_epsilon": "impact_conditions", "certified_rate": "impact_conditions",
+    # impact_observer.py
+    "ImpactPlant": "impact_observer", "PlacementConditioning": "impact_observer",
+    "ScaledPlacement": "impact_observer", "ImpactObserverDesign": "impact_observer",
+    "DeadbeatEstimate": "impact_observer", "impact_plant": "impact_observer",
+    "place_scaled": "impact_observer", "certificate_velocity_scale": "impact_observer",
+    "design_impact_observer": "impact_observer", "observer_jump": "impact_observer",
+    "deadbeat_n1": "impact_observer", "deadbeat_1n": "impact_observer",
+    # lure_observer.py
+    "LureObserverCertificate": "lure_observer", "LureObserverDesign": "lure_observer",
+    "structural_infeasibility": "lure_observer", "lure_observer_lmi": "lure_observer",
+    "max_observer_decay_rate": "lure_observer", "design_lure_observer": "lure_observer",
+    "lure_from_statespace": "lure_observer", "loop_transformed_lure_system": "lure_observer",
+    "observer_from_gains": "lure_observer", "recheck_lure_certificate": "lure_observer",
+    # convergent_pwa.py
+    "ConvergentStateFeedback": "convergent_pwa", "PWAStateFeedback": "convergent_pwa",
+    "ConvergentObserver": "convergent_pwa", "EstimateFeedback": "convergent_pwa",
+    "design_state_feedback": "convergent_pwa", "design_pwa_state_feedback": "convergent_pwa",
+    "tune_pwa_state_feedback": "convergent_pwa", "design_observer": "convergent_pwa",
+    "output_feedback_loop": "convergent_pwa",
+}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: import the defining module on first use and cache the name here
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

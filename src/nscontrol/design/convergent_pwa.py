@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -27,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import as_matrix, as_real_scalar, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
 from ..numerics.scaling import Scaling
+from ..numerics.statespace import is_state_space, state_space_matrices
 
 if TYPE_CHECKING:   # imported where used at run time
     from ..systems.feedback import PiecewiseStateFeedback
@@ -278,6 +280,16 @@ def output_feedback_loop(system: PiecewiseAffineSystem, observer: ConvergentObse
     With ``feedback=None`` the plant runs open loop (observer only). The output ``C`` of the
     result is ``[I, 0]`` (plant state) — use ``x[:, n:]`` for the estimate.
 
+    Parameters
+    ----------
+    system : PiecewiseAffineSystem
+        The continuous plant.
+    observer : ConvergentObserver
+        From :func:`design_observer`.
+    feedback : ConvergentStateFeedback or PWAStateFeedback, optional
+        From :func:`design_state_feedback` or :func:`design_pwa_state_feedback` (default: open
+        loop).
+
     Notes
     -----
     Separation (ch11 §2.5 d): the error decays by the observer certificate whatever the
@@ -332,6 +344,16 @@ def _scalar_block(kappa: Any, k: int) -> Any:
     return cp.reshape(kappa, (1, 1), order="F") if k == 1 else kappa * np.eye(k)
 
 
+def _linear_plant(system: Any) -> Any:
+    """A python-control ``StateSpace`` as a one-mode model (its ``A``; ``B``, ``C`` serve
+    as ``E``, ``C``); any other model unchanged."""
+    if not is_state_space(system):
+        return system
+    A, B, C, _ = state_space_matrices(system, "system")
+    return SimpleNamespace(A=(A,), E=B if B.size else None, C=C if C.size else None,
+                           n_states=A.shape[0], continuous=True)
+
+
 def _modes(system: Any) -> tuple[FloatArray, ...]:
     if not getattr(system, "continuous", True):
         raise ModelError(f"system: the convergent-PWA designs need a continuous right-hand "
@@ -364,7 +386,8 @@ def design_state_feedback(system: PiecewiseAffineSystem, *, sigma: float,
     Parameters
     ----------
     system
-        Continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`.
+        Continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`, or a linear plant
+        as a python-control ``StateSpace`` (one mode; its ``B`` is the default ``B``).
     sigma
         Decay rate to certify (> 0, 1/time unit of the model).
     B
@@ -410,6 +433,7 @@ def design_state_feedback(system: PiecewiseAffineSystem, *, sigma: float,
     >>> np.round(sf.K, 2), round(sf.gain_bound, 2)
     (array([[-1.48, -1.74]]), 3.9)
     """
+    system = _linear_plant(system)
     As = _modes(system)
     return _state_feedback(As, _input_matrix(system, B), check_positive("sigma", sigma), scale)
 
@@ -635,7 +659,8 @@ def design_observer(system: PiecewiseAffineSystem, *, sigma: float, C: ArrayLike
     Parameters
     ----------
     system
-        Continuous PWA model.
+        Continuous PWA model, or a linear plant as a python-control ``StateSpace`` (one
+        mode; its ``C`` is the default ``C``).
     sigma
         Error decay rate to certify.
     C
@@ -679,6 +704,7 @@ def design_observer(system: PiecewiseAffineSystem, *, sigma: float, C: ArrayLike
 
     from ..numerics.lmi import LMIProblem
 
+    system = _linear_plant(system)
     As = _modes(system)
     n = As[0].shape[0]
     C = system.C if C is None else C

@@ -209,6 +209,13 @@ def theorem1_test(A_a: ArrayLike, B_a: ArrayLike, C_a: ArrayLike, C_contact: Arr
 def jury_second_order(c1: float, c0: float, rho: float) -> bool:
     """Whether both roots of ``z^2 - c1 z - c0`` have modulus ``< rho``.
 
+    Parameters
+    ----------
+    c1, c0 : float
+        The polynomial's coefficients.
+    rho : float
+        The radius (> 0).
+
     Notes
     -----
     Our restatement of the chapter's garbled (11a)-(11b), valid for any real ``c0, c1``:
@@ -230,6 +237,14 @@ def jury_second_order(c1: float, c0: float, rho: float) -> bool:
 
 def alpha_limit(M22: float, delta_max: float) -> float:
     """``alpha_L = -ln|M22| / delta_max`` of Theorem 4 (``inf`` for equal masses, ``M22 = 0``).
+
+    Parameters
+    ----------
+    M22 : float
+        Entry ``M22`` of the impact map (the velocity of the impacting mass after the
+        impact per unit before it), ``|M22| < 1``.
+    delta_max : float
+        The longest interval between two impacts, ``δ_max > 0``.
 
     Examples
     --------

@@ -486,7 +486,9 @@ class _ObserverLMI:
                 if cert is not None:
                     return cert, gains, status
                 status = f"{status} but the re-check failed ({name})"
-        return None, {}, status
+        from ..numerics.lmi import fallback_hint
+
+        return None, {}, status + fallback_hint(self.solvers)
 
     def _recheck(self, alpha: float, solver: str, status: str
                  ) -> tuple[LureObserverCertificate | None, dict[str, Any]]:
@@ -908,18 +910,29 @@ def observer_from_gains(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, 
         certificate=cert, A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D)
 
 
-def _plant_matrices(plant: Any) -> tuple[_Matrices, Any]:
+def _plant_matrices(plant: Any, law: Any = None) -> tuple[_Matrices, Any]:
+    from ..numerics.statespace import is_state_space
     from ..systems.lure import LureSystem
 
+    if is_state_space(plant):
+        if law is None:
+            raise ModelError("law: a StateSpace plant (inputs [w; u], outputs [z; y]) needs "
+                             "its law to say how many inputs are multipliers: pass "
+                             "law=, e.g. law=nscontrol.laws.Relay(1.0)")
+        plant = LureSystem(plant, law)
+    elif law is not None:
+        raise ModelError("law: only for a StateSpace plant; a LureSystem holds its own law")
     if not isinstance(plant, LureSystem):
         raise ModelError(f"plant: expected a nscontrol.systems.lure.LureSystem, got "
                          f"{type(plant).__name__}; build one from a python-control StateSpace "
-                         f"with lure_from_statespace(ss, law), or, for a non-monotone law "
+                         f"with LureSystem(ss, law) (or lure_from_statespace(ss, law)), or, "
+                         f"for a non-monotone law "
                          f"(Stribeck friction), with loop_transformed_lure_system(A, G, H, law)")
     return _matrices(plant.A, plant.G, plant.H, plant.C, plant.D), plant.law
 
 
-def design_lure_observer(plant: LureSystem, *, variant: Variant = "extended",
+def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = None,
+                         variant: Variant = "extended",
                          alpha: float | Literal["max"] = "max", alpha_fraction: float = 0.5,
                          kappa: float | None = None, eps: float | None = None,
                          eps_P: float | None = None, solver: str | None = None,
@@ -930,10 +943,13 @@ def design_lure_observer(plant: LureSystem, *, variant: Variant = "extended",
     ----------
     plant : LureSystem
         ``x' = A x + G w + B u``, ``z = H x + D w + g(t)``, ``w ∈ -φ(z)``, ``y = C x``
-        (a :class:`LureSystem` holds only maximal monotone laws). A python-control
-        ``StateSpace`` goes through :func:`lure_from_statespace`; a non-monotone law
+        (a :class:`LureSystem` holds only maximal monotone laws), or a python-control
+        ``StateSpace`` with inputs ``[w; u]`` and outputs ``[z; y]`` together with ``law``
+        (as ``LureSystem(ss, law)``); a non-monotone law
         (Stribeck friction) through :func:`loop_transformed_lure_system`, which builds the
         split ``φ = φ_m - σ I`` from the law itself (spec §2.6).
+    law : SetValuedLaw, optional
+        The plant's law, with a ``StateSpace`` plant only.
     variant : {"extended", "basic"}
         Output injection ``K`` into the set-valued map, or ``K = 0``.
     alpha : float or "max"
@@ -988,7 +1004,7 @@ def design_lure_observer(plant: LureSystem, *, variant: Variant = "extended",
     >>> bool(abs(d.alpha_max - 0.1) < 0.002), d.alpha == d.alpha_max / 2
     (True, True)
     """
-    mat, _ = _plant_matrices(plant)  # a LureSystem: its law is maximal monotone
+    mat, _ = _plant_matrices(plant, law)  # a LureSystem: its law is maximal monotone
     frac = check_in_interval("alpha_fraction", alpha_fraction, 0.0, 1.0)
     if frac == 0.0:
         raise ModelError("alpha_fraction: expected a value in (0, 1], got 0; a zero rate "
@@ -1165,7 +1181,9 @@ def lure_from_statespace(ss: Any, law: SetValuedLaw, *, u: InputSignal = None,
 
     The ``StateSpace`` has inputs ``[w; u]`` (the first ``m = law.dim`` are the multipliers)
     and outputs ``[z; y]`` (the first ``m`` feed the law, the rest are measured), i.e.
-    ``B_ss = [G, B]``, ``C_ss = [H; C]``, ``D_ss = [[D, 0], [0, 0]]``.
+    ``B_ss = [G, B]``, ``C_ss = [H; C]``, ``D_ss = [[D, 0], [0, 0]]``. The same as
+    ``LureSystem(ss, law, u=u, g=g)``; a model with only the ``m`` outputs ``z`` measures the
+    whole state.
 
     Parameters
     ----------
@@ -1188,7 +1206,7 @@ def lure_from_statespace(ss: Any, law: SetValuedLaw, *, u: InputSignal = None,
         Not a state-space object, discrete-time system, feedthrough from ``u`` or into ``y``
         (not in the model), or ``u`` given while the system has no input besides ``w``.
     DimensionError
-        Fewer inputs or outputs than ``m`` (and no measured output).
+        Fewer inputs or outputs than ``m``.
 
     Notes
     -----
@@ -1212,30 +1230,9 @@ def lure_from_statespace(ss: Any, law: SetValuedLaw, *, u: InputSignal = None,
     >>> plant.G.ravel().tolist(), plant.B.ravel().tolist(), plant.C.tolist()
     ([0.0, 1.0], [0.0, 1.0], [[1.0, 0.0]])
     """
+    from ..numerics.statespace import is_state_space
     from ..systems.lure import LureSystem
 
-    if not all(hasattr(ss, k) for k in ("A", "B", "C", "D")):
+    if not is_state_space(ss):
         raise ModelError(f"ss: expected a python-control StateSpace, got {type(ss).__name__}")
-    if getattr(ss, "dt", 0) not in (0, None):
-        raise ModelError(f"ss: expected a continuous-time system (dt = 0), got dt = {ss.dt}")
-    A, Bs, Cs, Ds = (np.asarray(getattr(ss, k), float) for k in ("A", "B", "C", "D"))
-    m = getattr(law, "dim", None)
-    if m is None:
-        raise ModelError(f"law: expected a SetValuedLaw from nscontrol.laws, got "
-                         f"{type(law).__name__}")
-    m = int(m)
-    if Bs.shape[1] < m or Cs.shape[0] <= m:
-        raise DimensionError(f"ss: expected at least {m} inputs (w) and more than {m} outputs "
-                             f"(z, then y), got {Bs.shape[1]} inputs and {Cs.shape[0]} outputs")
-    if np.any(Ds[m:, :]) or np.any(Ds[:m, m:]):
-        raise ModelError("ss: feedthrough is only allowed from w to z (D[:m, :m]); the "
-                         "measured outputs y = C x and the law's argument take no u directly "
-                         "(use the shift g(t) for a known additive term)")
-    B = Bs[:, m:] if Bs.shape[1] > m else None
-    if B is None and u is not None:
-        raise ModelError(f"u: the StateSpace has {Bs.shape[1]} inputs, all taken by the "
-                         f"law's multipliers w (m = {m}), so there is no input for u; add the "
-                         f"u columns to B after the first {m}, or drop u (got "
-                         f"{type(u).__name__})")
-    return LureSystem(A, Bs[:, :m], Cs[:m], law, B=B, C=Cs[m:], D=Ds[:m, :m] if np.any(
-        Ds[:m, :m]) else None, u=u, g=g)
+    return LureSystem(ss, law=law, u=u, g=g)

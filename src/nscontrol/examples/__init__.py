@@ -66,6 +66,21 @@ def check(name: str, value: Any, threshold: Any, op: str = "<=", note: str = "")
 
     A comparison that cannot be made (incomparable types) is a failed check, not an error.
 
+    Parameters
+    ----------
+    name : str
+        The claim, in words.
+    value, threshold
+        The measured figure and the bound it is compared with.
+    op : {"<=", "<", ">=", ">", "=="}
+        The comparison ``value <op> threshold``.
+    note : str
+        Why the claim is checked this way, or ``""``.
+
+    Returns
+    -------
+    Check
+
     Examples
     --------
     >>> check("residual", 1e-13, 1e-10).passed, check("events", 3, 4, ">=").passed
@@ -150,7 +165,13 @@ def all_examples() -> list[Example]:
 
 
 def get_example(name: str) -> Example:
-    """The example called ``name``; a clear error lists the available ones."""
+    """The example called ``name``; a clear error lists the available ones.
+
+    Parameters
+    ----------
+    name : str
+        An example's name, as ``nscontrol list`` prints it.
+    """
     examples = {e.name: e for e in all_examples()}
     if name not in examples:
         raise KeyError(f"no example {name!r}; available: {', '.join(sorted(examples))}")

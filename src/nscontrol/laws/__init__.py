@@ -1,3 +1,50 @@
 """Nonsmooth laws: set-valued maximal monotone maps (relay, normal cones, complementarity,
 Coulomb friction, monotone functions, products), their resolvents and complementarity forms,
-and impact laws (Newton restitution, single and multi-contact)."""
+and impact laws (Newton restitution, single and multi-contact).
+
+Every public name is importable from here (``from nscontrol.laws import ...``);
+the defining module loads on first use, so importing the package stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Public name -> the module of this package that defines it.
+_EXPORTS: dict[str, str] = {
+    # base.py
+    "SetValuedLaw": "base", "ComplementarityForm": "base", "LoopTransformation": "base",
+    "require_monotone": "base",
+    # relay.py
+    "Relay": "relay",
+    # normal_cone.py
+    "NormalConeBox": "normal_cone", "NormalConeInterval": "normal_cone",
+    "Complementarity": "normal_cone",
+    # friction.py
+    "Coulomb": "friction", "Stribeck": "friction", "AsymmetricStribeck": "friction",
+    # monotone_function.py
+    "MonotoneFunction": "monotone_function", "PiecewiseLinearFunction": "monotone_function",
+    # product.py
+    "Product": "product",
+    # inclusion.py
+    "solve_inclusion": "inclusion", "InclusionSolution": "inclusion",
+    # impact.py
+    "NewtonImpactLaw": "impact", "ImpactResult": "impact", "restitution_matrix": "impact",
+}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: import the defining module on first use and cache the name here
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

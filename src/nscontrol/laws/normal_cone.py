@@ -127,6 +127,13 @@ class NormalConeInterval(NormalConeBox):
     """Normal cone of one interval ``[lower, upper]`` (scalars), repeated over ``dim`` components.
 
     The same map as :class:`NormalConeBox`; this name reads better for scalar constraints.
+
+    Parameters
+    ----------
+    lower, upper : float
+        The interval's bounds, ``lower <= upper`` (either may be infinite).
+    dim : int, optional
+        Number of components (default 1).
     """
 
     def __post_init__(self) -> None:

@@ -2,3 +2,53 @@
 location (:mod:`.lti`), LMI helpers on CVXPY and the Lyapunov re-check (:mod:`.lmi`),
 balancing and scaling (:mod:`.scaling`), observability tests
 (:mod:`~nscontrol.numerics.observability`), central differences (:mod:`.differences`)."""
+
+# Also the converter from state-space objects such as python-control's StateSpace
+# (statespace.py). Every public name is importable from here (from nscontrol.numerics import
+# ...); the defining module loads on first use, so importing the package stays cheap.
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Public name -> the module of this package that defines it.
+_EXPORTS: dict[str, str] = {
+    # lcp.py
+    "LCPResult": "lcp", "LCPSolver": "lcp", "solve_lcp": "lcp", "residual": "lcp",
+    # lti.py
+    "Exosystem": "lti", "augment": "lti", "LTIFlow": "lti", "discretize": "lti",
+    "Discretization": "lti", "GuardEvent": "lti", "first_event": "lti",
+    # lmi.py
+    "LMIProblem": "lmi", "LMIResult": "lmi", "BisectionResult": "lmi", "LyapunovCheck": "lmi",
+    "LYAPUNOV_RECHECK_RTOL": "lmi", "bisect_max": "lmi", "lyapunov_certificate": "lmi",
+    "max_lyapunov_decay_rate": "lmi", "recheck_lyapunov": "lmi", "sym": "lmi",
+    "SDP_SOLVERS": "lmi", "solver_order": "lmi", "solver_options": "lmi",
+    "fallback_hint": "lmi", "SCS_INSTALL_HINT": "lmi",
+    # scaling.py
+    "balance": "scaling", "balanced_unit_norm": "scaling", "Scaling": "scaling",
+    # observability.py
+    "RANK_RTOL": "observability", "pbh_observability": "observability",
+    "krylov_basis": "observability",
+    # statespace.py
+    "StateSpaceMatrices": "statespace", "is_state_space": "statespace",
+    "state_space_matrices": "statespace", "state_matrix": "statespace",
+    # differences.py
+    "central_difference_gradient": "differences", "central_difference_jacobian": "differences",
+}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: import the defining module on first use and cache the name here
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -20,6 +20,13 @@ __all__ = ["central_difference_gradient", "central_difference_jacobian"]
 def central_difference_gradient(h: Callable[[FloatArray], float], x: FloatArray) -> FloatArray:
     """``∇h(x)`` of a scalar function by central differences (step ``1e-7 (1 + |x_k|)``).
 
+    Parameters
+    ----------
+    h : callable ``R^n -> R``
+        The scalar function.
+    x : (n,) ndarray
+        The point.
+
     Examples
     --------
     >>> g = central_difference_gradient(lambda x: x[0] ** 2 + 3 * x[1], np.array([1.0, 2.0]))
@@ -39,6 +46,13 @@ def central_difference_jacobian(f: Callable[[FloatArray], FloatArray],
                                 x: FloatArray) -> FloatArray:
     """``∂f/∂x`` of a vector field ``R^n -> R^n`` by central differences (step
     ``1e-6 (1 + |x_k|)``).
+
+    Parameters
+    ----------
+    f : callable ``R^n -> R^n``
+        The vector field.
+    x : (n,) ndarray
+        The point.
 
     Examples
     --------

@@ -124,6 +124,15 @@ def residual(M: Any, z: Any, q: Any) -> float:
     """Relative natural residual ``max_i |min(z_i, (Mz + q)_i)| / (1 + max|q|)`` of a point.
 
     Works for dense and scipy.sparse ``M``; zero exactly at solutions of LCP(M, q).
+
+    Parameters
+    ----------
+    M : (n, n) array_like or scipy.sparse matrix
+        The LCP matrix.
+    z : (n,) array_like
+        The point to measure.
+    q : (n,) array_like
+        The LCP vector.
     """
     z = np.asarray(z, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)

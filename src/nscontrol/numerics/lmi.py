@@ -49,7 +49,7 @@ from .scaling import Scaling
 __all__ = ["LMIProblem", "LMIResult", "BisectionResult", "LyapunovCheck",
            "LYAPUNOV_RECHECK_RTOL", "bisect_max", "lyapunov_certificate",
            "max_lyapunov_decay_rate", "recheck_lyapunov", "sym", "SDP_SOLVERS", "solver_order",
-           "solver_options"]
+           "solver_options", "fallback_hint", "SCS_INSTALL_HINT"]
 
 SolverName = Literal["auto", "CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT"]
 _ACCEPTED = ("optimal", "optimal_inaccurate")
@@ -65,6 +65,27 @@ LYAPUNOV_RECHECK_RTOL = 1e-8
 SDP_SOLVERS = ("CLARABEL", "SCS", "MOSEK", "CVXOPT", "SDPA", "COPT")
 #: ``solver="auto"``: Clarabel, then SCS (tight tolerances) as the fallback.
 _AUTO_ORDER = ("CLARABEL", "SCS")
+#: How to get the fallback solver, which is an optional extra (106 MB installed).
+SCS_INSTALL_HINT = "pip install 'nscontrol[scs]'"
+
+
+def fallback_hint(order: list[str]) -> str:
+    """What to append to a failure when ``solver="auto"`` had to do without SCS.
+
+    Parameters
+    ----------
+    order : list of str
+        The solvers tried (:func:`solver_order`).
+
+    Returns
+    -------
+    str
+        ``"; the fallback solver SCS is not installed (pip install 'nscontrol[scs]')"`` when
+        Clarabel was tried alone, else ``""``.
+    """
+    if "SCS" in order or order != ["CLARABEL"]:
+        return ""
+    return f"; the fallback solver SCS is not installed ({SCS_INSTALL_HINT})"
 
 
 def solver_order(solver: str | None) -> list[str]:
@@ -114,18 +135,31 @@ def solver_order(solver: str | None) -> list[str]:
         names = ", ".join(repr(s) for s in ("auto", *SDP_SOLVERS))
         raise ModelError(f"solver: expected one of {names}, got {solver!r}")
     if name not in installed:
+        how = f"; install it with {SCS_INSTALL_HINT}" if name == "SCS" else ""
         raise ModelError(f"solver: {name!r} is an SDP solver but it is not installed "
-                         f"(installed: {sorted(installed)})")
+                         f"(installed: {sorted(installed)}){how}")
     return [name]
 
 
 def solver_options(name: str) -> dict[str, Any]:
-    """Keyword options passed to CVXPY for solver ``name`` (tight tolerances for SCS)."""
+    """Keyword options passed to CVXPY for solver ``name`` (tight tolerances for SCS).
+
+    Parameters
+    ----------
+    name : str
+        A CVXPY solver name of :data:`SDP_SOLVERS`.
+    """
     return dict(_SCS_OPTIONS) if name == "SCS" else {}
 
 
 def sym(expr: Any) -> Any:
-    """``(M + Mᵀ)/2`` of a square CVXPY expression or array."""
+    """``(M + Mᵀ)/2`` of a square CVXPY expression or array.
+
+    Parameters
+    ----------
+    expr : CVXPY expression or ndarray
+        A square matrix ``M``.
+    """
     return 0.5 * (expr + expr.T)
 
 
@@ -306,7 +340,8 @@ class LMIProblem:
             raise InfeasibleDesignError(
                 f"{self.name}: no certificate — solver {used} returned status {status!r} for "
                 f"the constraints {', '.join(self._names())}; relax margins or bounds, or "
-                "check the model (e.g. stabilisability/detectability)", status=status)
+                "check the model (e.g. stabilisability/detectability)"
+                f"{fallback_hint(order)}", status=status)
         result = self._recheck(status, used, recheck_fraction, warn_fraction, eq_tol,
                                None if minimize is None and maximize is None
                                else float(problem.value))
@@ -565,6 +600,17 @@ def bisect_max(feasible: Callable[[float], Any], lo: float, hi: float, *,
     returns None) when ``s`` is infeasible. Feasibility must be monotone: feasible at ``s``
     implies feasible at every smaller ``s`` (e.g. a decay rate).
 
+    Parameters
+    ----------
+    feasible : callable ``s -> certificate or None``
+        Decides one value of ``s``.
+    lo, hi : float
+        The bracket, ``lo < hi`` (``lo`` must be feasible).
+    tol : float
+        Absolute width of the final bracket.
+    max_iter : int
+        Upper bound on the number of calls of ``feasible``.
+
     Raises
     ------
     InfeasibleDesignError
@@ -610,6 +656,17 @@ def max_lyapunov_decay_rate(A: Any, *, tol: float = 1e-4, margin: float = 1e-6,
     below; used as a self-check of the LMI machinery. Near the boundary solvers become
     inaccurate; an undecided solve counts as infeasible, so the value is a proven lower
     bound. Clarabel alone by default (the SCS fallback is slow there and decides nothing).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        The matrix.
+    tol : float
+        Bisection tolerance on ``α``.
+    margin : float
+        Strictness margin of the LMIs (``≺ -margin I``).
+    solver : str
+        ``"auto"`` or one name of :data:`SDP_SOLVERS`.
     """
     A = as_square("A", A)
     bound = float(np.linalg.norm(A, 2))

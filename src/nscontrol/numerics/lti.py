@@ -81,6 +81,7 @@ from .._validation import (
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError
 from .scaling import balance
+from .statespace import state_matrix
 
 __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "GuardEvent",
            "first_event"]
@@ -227,6 +228,15 @@ def augment(A: Any, B: Any, exo: Exosystem) -> FloatArray:
 
     ``A_aug = [[A, B Cu], [0, S]]`` for ``x' = A x + B u``, ``u = Cu w``, ``w' = S w``.
     The initial state is ``np.concatenate([x0, exo.w0])``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        State matrix of the plant.
+    B : (n, q) array_like
+        Its input matrix.
+    exo : Exosystem
+        The signal generator ``w' = S w``, ``u = Cu w``.
     """
     A = as_square("A", A)
     n = A.shape[0]
@@ -244,8 +254,9 @@ class LTIFlow:
 
     Parameters
     ----------
-    A : (n, n) array_like
-        System matrix (finite).
+    A : (n, n) array_like or StateSpace
+        System matrix (finite), or a state-space model (python-control's ``StateSpace``)
+        whose ``A`` is used.
 
     Attributes
     ----------
@@ -257,7 +268,7 @@ class LTIFlow:
     """
 
     def __init__(self, A: Any) -> None:
-        self.A = as_square("A", A)
+        self.A = as_square("A", state_matrix("A", A))
         self.A.setflags(write=False)
         self.n = self.A.shape[0]
         self.method = "expm"
@@ -280,7 +291,7 @@ class LTIFlow:
         event-search tables each time. Flows are immutable, so one instance can serve all
         (the most recent ``_SHARED_FLOWS_MAX`` matrices are kept).
         """
-        A = as_square("A", A)
+        A = as_square("A", state_matrix("A", A))
         key = (A.shape, A.tobytes())
         flow = _SHARED_FLOWS.pop(key, None)
         if flow is None:
@@ -341,7 +352,15 @@ def _times(t: Any) -> tuple[FloatArray, bool]:
 
 
 class Discretization(NamedTuple):
-    """Zero-order-hold discretisation ``x_{k+1} = Ad x_k + Bd u_k``."""
+    """Zero-order-hold discretisation ``x_{k+1} = Ad x_k + Bd u_k``.
+
+    Parameters
+    ----------
+    Ad : (n, n) ndarray
+        ``e^{Ah}``.
+    Bd : (n, q) ndarray
+        ``∫_0^h e^{As} ds B``.
+    """
 
     Ad: FloatArray
     Bd: FloatArray
@@ -353,6 +372,15 @@ def discretize(A: Any, B: Any, h: float) -> Discretization:
     Computed from one exponential of the augmented matrix:
     ``expm([[A, B], [0, 0]] h) = [[Ad, Bd], [0, I]]``, so ``Bd = ∫_0^h e^{As} ds B`` holds
     also for singular ``A``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        State matrix.
+    B : (n, q) array_like
+        Input matrix.
+    h : float
+        Sampling period (> 0).
 
     Returns
     -------

@@ -91,6 +91,15 @@ def krylov_basis(A: FloatArray, b: FloatArray, rtol: float) -> FloatArray:
     re-orthogonalisation per step (``||A|| = 1`` assumed: a new direction shorter than
     ``rtol`` ends the space).
 
+    Parameters
+    ----------
+    A : (n, n) ndarray
+        The matrix (balanced, unit norm).
+    b : (n,) ndarray
+        The starting vector.
+    rtol : float
+        Length below which a new direction counts as zero.
+
     Examples
     --------
     >>> A = np.diag([0.5, -0.5, 1.0])

@@ -354,10 +354,13 @@ class Trajectory:
             state_names=tuple(str(s) for s in attrs["state_names"]),
         )
 
-    def to_dataframe(self) -> Any:
-        """Samples as a pandas DataFrame indexed by ``t`` (states, then flattened signals)."""
-        import pandas as pd
+    def to_pandas(self) -> Any:
+        """Samples as a pandas DataFrame indexed by ``t`` (states, then flattened signals).
 
+        python-control's name for it; :meth:`to_dataframe` is the same method. Needs pandas
+        (``pip install 'nscontrol[dataframe]'``; the error says so when it is missing).
+        """
+        pd = _import_pandas()
         names = self.state_names or tuple(f"x{i}" for i in range(self.n_states))
         cols: dict[str, np.ndarray] = {n: self.x[:, i] for i, n in enumerate(names)}
         for key, value in self.signals.items():
@@ -368,9 +371,11 @@ class Trajectory:
                 cols.update({f"{key}[{j}]": arr[:, j] for j in range(arr.shape[1])})
         return pd.DataFrame(cols, index=pd.Index(self.t, name="t"))
 
+    to_dataframe = to_pandas
+
     def events_dataframe(self) -> Any:
         """The event table as a pandas DataFrame (one row per event)."""
-        import pandas as pd
+        pd = _import_pandas()
 
         return pd.DataFrame({
             "time": [e.time for e in self.events], "kind": [e.kind for e in self.events],
@@ -834,3 +839,13 @@ def _signal_names(signals: Iterable[str], offered: tuple[str, ...] | None) -> se
             raise ModelError(f"signals: unknown name(s) {unknown}; this integrator "
                              f"records {sorted(offered)}")
     return set(names)
+
+
+def _import_pandas() -> Any:
+    """pandas, or an ImportError that says which extra installs it."""
+    try:
+        import pandas
+    except ImportError as exc:
+        raise ImportError("pandas is needed for DataFrames of trajectories and is not "
+                          "installed: pip install 'nscontrol[dataframe]'") from exc
+    return pandas

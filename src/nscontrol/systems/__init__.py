@@ -1,2 +1,53 @@
 """Models, validated at construction: mechanical systems with impacts, linear hybrid systems,
-Lur'e systems, piecewise-affine, Filippov and switched affine systems."""
+Lur'e systems, piecewise-affine, Filippov and switched affine systems.
+
+Every public name is importable from here (``from nscontrol.systems import ...``);
+the defining module loads on first use, so importing the package stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Public name -> the module of this package that defines it.
+_EXPORTS: dict[str, str] = {
+    # lure.py
+    "LureSystem": "lure",
+    # pwa.py
+    "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
+    # switched.py
+    "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
+    # lagrangian.py
+    "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
+    "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
+    "two_link_arm_force_jacobian": "lagrangian",
+    # impacting_bodies.py
+    "ImpactingBodies": "impacting_bodies", "stiffness_from_springs": "impacting_bodies",
+    # hybrid.py
+    "LinearHybridSystem": "hybrid",
+    # feedback.py
+    "Measurement": "feedback", "Jump": "feedback", "Controller": "feedback",
+    "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
+    "LinearController": "feedback", "LinearObserver": "feedback",
+    "PiecewiseObserver": "feedback",
+    # protocols.py
+    "SimulableSystem": "protocols", "StateChecked": "protocols", "InputFunction": "protocols",
+    "Exogenous": "protocols", "InputSignal": "protocols",
+}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: import the defining module on first use and cache the name here
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -279,7 +279,17 @@ class ImpactingBodies:
 
 def stiffness_from_springs(n: int, springs: Mapping[tuple[int, int], float],
                            name: str = "springs") -> FloatArray:
-    """``K[h,h] = k_hh + Σ_{j≠h} k_hj``, ``K[h,j] = -k_hj`` (ch02 §1)."""
+    """``K[h,h] = k_hh + Σ_{j≠h} k_hj``, ``K[h,j] = -k_hj`` (ch02 §1).
+
+    Parameters
+    ----------
+    n : int
+        Number of masses.
+    springs : mapping ``(h, j) -> k_hj``
+        Spring constants: ``(h, h)`` to the ground, ``(h, j)`` between masses ``h`` and ``j``.
+    name : str
+        The argument's name, for error messages.
+    """
     K = np.zeros((n, n))
     for (h, j), k in springs.items():
         if not (0 <= h < n and 0 <= j < n):

@@ -638,7 +638,19 @@ class LagrangianSystem:
 
 def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: float,
                       I1: float, I2: float) -> FloatArray:
-    """Mass matrix of the two-link arm (ch03 §4.1)."""
+    """Mass matrix of the two-link arm (ch03 §4.1).
+
+    Parameters
+    ----------
+    q : (2,) ndarray
+        Joint angles ``θ``.
+    l1, l2 : float
+        Link lengths.
+    m1, m2 : float
+        Link masses.
+    I1, I2 : float
+        Link moments of inertia about their centres of mass.
+    """
     c2 = np.cos(q[1])
     m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
     m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + I2
@@ -647,14 +659,42 @@ def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: flo
 
 def two_link_arm_coriolis(q: FloatArray, v: FloatArray, *, l1: float, l2: float, m1: float,
                           m2: float, I1: float, I2: float) -> FloatArray:
-    """Coriolis matrix in Christoffel form (``Ṁ - 2C`` skew-symmetric), ch03 §4.1."""
+    """Coriolis matrix in Christoffel form (``Ṁ - 2C`` skew-symmetric), ch03 §4.1.
+
+    Parameters
+    ----------
+    q : (2,) ndarray
+        Joint angles ``θ``.
+    v : (2,) ndarray
+        Joint velocities ``θ'``.
+    l1, l2 : float
+        Link lengths.
+    m1, m2 : float
+        Link masses.
+    I1, I2 : float
+        Link moments of inertia about their centres of mass.
+    """
     h = m2 * l1 * l2 / 2 * np.sin(q[1])
     return np.array([[-h * v[1], -h * (v[0] + v[1])], [h * v[0], 0.0]])
 
 
 def two_link_arm_gravity(q: FloatArray, *, g: float, l1: float, l2: float, m1: float,
                          m2: float, I1: float, I2: float) -> FloatArray:
-    """Gravity torques ``G = ∂P/∂θ`` of the two-link arm, ch03 §4.1."""
+    """Gravity torques ``G = ∂P/∂θ`` of the two-link arm, ch03 §4.1.
+
+    Parameters
+    ----------
+    q : (2,) ndarray
+        Joint angles ``θ``.
+    g : float
+        Gravitational acceleration.
+    l1, l2 : float
+        Link lengths.
+    m1, m2 : float
+        Link masses.
+    I1, I2 : float
+        Link moments of inertia about their centres of mass.
+    """
     c12 = np.cos(q[0] + q[1])
     return np.array([g / 2 * (l1 * (m1 + 2 * m2) * np.cos(q[0]) + m2 * l2 * c12),
                      m2 * g * l2 / 2 * c12])
@@ -666,6 +706,21 @@ def two_link_arm_force_jacobian(q: FloatArray, v: FloatArray, *, g: float, l1: f
     """``(∂f/∂θ, ∂f/∂θ')`` of the two-link arm's force ``f = -C(θ, θ')θ' - G(θ)``.
 
     With ``c = m2 l1 l2 / 2``: ``-C θ' = c sin θ2 (2 θ1'θ2' + θ2'², -θ1'²)``.
+
+    Parameters
+    ----------
+    q : (2,) ndarray
+        Joint angles ``θ``.
+    v : (2,) ndarray
+        Joint velocities ``θ'``.
+    g : float
+        Gravitational acceleration.
+    l1, l2 : float
+        Link lengths.
+    m1, m2 : float
+        Link masses.
+    I1, I2 : float
+        Link moments of inertia about their centres of mass.
     """
     c = m2 * l1 * l2 / 2
     s2, c2 = c * np.sin(q[1]), c * np.cos(q[1])

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
+from ..numerics.statespace import is_state_space, state_space_matrices
 from .protocols import InputSignal
 
 if TYPE_CHECKING:   # imported where used at run time
@@ -119,12 +120,17 @@ class LureSystem:
 
     Parameters
     ----------
-    A : (n, n) array_like
-        State matrix.
+    A : (n, n) array_like or StateSpace
+        State matrix; or a python-control ``StateSpace`` with inputs ``[w; u]`` and outputs
+        ``[z; y]`` (``B_ss = [G, B]``, ``C_ss = [H; C]``, ``D_ss = [[D, 0], [0, 0]]``), which
+        gives ``G``, ``H``, ``B``, ``C``, ``D`` at once: ``LureSystem(ss, law)``. With only
+        the ``m`` outputs ``z``, ``C`` is what ``C=`` says (default the whole state).
     G : (n, m) array_like
-        How the multiplier ``w`` enters the state equation.
+        The multiplier's input channel: how ``w`` enters the state equation (``B`` in much
+        of the Lur'e literature).
     H : (m, n) array_like
-        Output of the state that feeds the law.
+        The multiplier's output channel: the state's output that feeds the law (``C`` in
+        much of the Lur'e literature).
     law : SetValuedLaw
         The maximal monotone map ``φ`` of dimension ``m`` (``w ∈ -φ(z)``).
     B : (n, q) array_like, optional
@@ -182,9 +188,9 @@ class LureSystem:
     """
 
     A: FloatArray
-    G: FloatArray
-    H: FloatArray
-    law: SetValuedLaw
+    G: FloatArray = None  # type: ignore[assignment]  # None: from a StateSpace A
+    H: FloatArray = None  # type: ignore[assignment]
+    law: SetValuedLaw = None  # type: ignore[assignment]
     B: FloatArray | None = None
     C: FloatArray = None  # type: ignore[assignment]  # None -> identity at init
     D: FloatArray = None  # type: ignore[assignment]  # None -> zeros at init
@@ -199,13 +205,17 @@ class LureSystem:
 
     if TYPE_CHECKING:
         # What the constructor accepts (the dataclass fields hold the validated arrays).
-        def __init__(self, A: ArrayLike, G: ArrayLike, H: ArrayLike, law: SetValuedLaw,
+        def __init__(self, A: ArrayLike, G: ArrayLike | None = None,
+                     H: ArrayLike | None = None, law: SetValuedLaw | None = None,
                      B: ArrayLike | None = None, C: ArrayLike | None = None,
                      D: ArrayLike | None = None, u: InputSignal = None,
                      g: InputSignal = None,
                      state_names: Sequence[str] = ()) -> None: ...
 
     def __post_init__(self) -> None:
+        if is_state_space(self.A):
+            self._split_state_space()
+        self._require_channels()
         A = as_square("A", self.A)
         n = A.shape[0]
         G = as_matrix("G", self.G, rows=n)
@@ -249,6 +259,64 @@ class LureSystem:
 
         _check_picklable(self)
         return dict(self.__dict__)
+
+    def _require_channels(self) -> None:
+        """Name the multiplier's channels when ``G`` or ``H`` is missing (the letters differ
+        across the literature)."""
+        missing = [k for k in ("G", "H") if getattr(self, k) is None]
+        if missing:
+            raise ModelError(
+                f"{', '.join(missing)}: missing; LureSystem needs the multiplier's channels: "
+                f"G (n, m), its input channel (x' = A x + G w + B u), and H (m, n), its output "
+                f"channel (z = H x + D w feeds the law, w ∈ -φ(z)). Much of the Lur'e "
+                f"literature calls them B and C (x' = A x + B w, z = C x); here B is the "
+                f"external input's matrix and C the measured output's. A python-control "
+                f"StateSpace with inputs [w; u] and outputs [z; y] gives all of them: "
+                f"LureSystem(ss, law)")
+        if self.law is None:
+            raise ModelError("law: missing; pass the maximal monotone law φ of dimension m "
+                             "(e.g. nscontrol.laws.Relay(1.0)), w ∈ -φ(z)")
+
+    def _split_state_space(self) -> None:
+        """``LureSystem(ss, law)``: inputs ``[w; u]``, outputs ``[z; y]`` of a StateSpace."""
+        A, Bs, Cs, Ds = state_space_matrices(self.A, "A")
+        law = self.law
+        if law is None and getattr(self.G, "dim", None) is not None:
+            law, given = self.G, [k for k in ("H",) if getattr(self, k) is not None]
+        else:
+            given = [k for k in ("G", "H") if getattr(self, k) is not None]
+        if given:
+            raise ModelError(f"{', '.join(given)}: a StateSpace already holds the channels "
+                             f"(inputs [w; u], outputs [z; y]); pass LureSystem(ss, law) "
+                             f"without them")
+        m = getattr(law, "dim", None)
+        if m is None:
+            raise ModelError(f"law: expected a SetValuedLaw from nscontrol.laws, got "
+                             f"{type(law).__name__}")
+        m = int(m)
+        if Bs.shape[1] < m or Cs.shape[0] < m:
+            raise DimensionError(f"A: expected a StateSpace with at least {m} inputs (w) and "
+                                 f"{m} outputs (z) for a law of dimension {m}, got "
+                                 f"{Bs.shape[1]} inputs and {Cs.shape[0]} outputs")
+        if np.any(Ds[m:, :]) or np.any(Ds[:m, m:]):
+            raise ModelError("A: the StateSpace's feedthrough is only allowed from w to z "
+                             "(D[:m, :m]); the measured outputs y = C x and the law's argument "
+                             "take no u directly (use the shift g(t) for a known additive term)")
+        if self.B is not None or self.C is not None and Cs.shape[0] > m:
+            raise ModelError("B, C: a StateSpace already holds the input matrix (its inputs "
+                             "after the first m) and the measured output (its outputs after "
+                             "the first m); pass them there")
+        B = Bs[:, m:] if Bs.shape[1] > m else None
+        if B is None and self.u is not None:
+            raise ModelError(f"u: the StateSpace has {Bs.shape[1]} inputs, all taken by the "
+                             f"law's multipliers w (m = {m}), so there is no input for u; add "
+                             f"the u columns after the first {m}, or drop u")
+        # a single-output model (only z) measures what C= says, else the whole state as usual
+        C = Cs[m:] if Cs.shape[0] > m else self.C
+        D = Ds[:m, :m] if np.any(Ds[:m, :m]) else self.D
+        for key, value in (("A", A), ("G", Bs[:, :m]), ("H", Cs[:m]), ("law", law), ("B", B),
+                           ("C", C), ("D", D)):
+            object.__setattr__(self, key, value)
 
     def _require_monotone(self) -> None:
         from ..laws.base import require_monotone

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
+from ..numerics.statespace import is_state_space, state_space_matrices
 from .lure import as_input_function
 from .protocols import InputSignal
 
@@ -52,8 +53,10 @@ class PiecewiseAffineSystem:
 
     Parameters
     ----------
-    A : sequence of (n, n) array_like
-        One state matrix per region.
+    A : sequence of (n, n) array_like or StateSpace
+        One state matrix per region; a python-control ``StateSpace`` mode gives its ``A``,
+        and the modes' common ``B`` and ``C`` serve as ``E`` and ``C`` when those are not
+        given.
     b : sequence of (n,) array_like, optional
         One offset per region (default zeros).
     regions : sequence of (H_i, h_i)
@@ -136,6 +139,7 @@ class PiecewiseAffineSystem:
     def __post_init__(self) -> None:
         if len(self.A) == 0:
             raise DimensionError("A: expected one matrix per region, got none")
+        self._take_state_space_modes()
         As = tuple(as_square(f"A[{i}]", a) for i, a in enumerate(self.A))
         n = As[0].shape[0]
         As = tuple(as_square(f"A[{i}]", a, n) for i, a in enumerate(As))
@@ -175,6 +179,28 @@ class PiecewiseAffineSystem:
                            as_input_function("u", self.u, E.shape[1]) if self.u is not None
                            else None)
         self._check_partition()
+
+    def _take_state_space_modes(self) -> None:
+        """Modes given as StateSpace models: their ``A``; their common ``B``/``C`` become
+        ``E``/``C`` unless given (modes that disagree must say which one to use)."""
+        if not any(is_state_space(a) for a in self.A):
+            return
+        mats = [state_space_matrices(a, f"A[{i}]") if is_state_space(a) else None
+                for i, a in enumerate(self.A)]
+        object.__setattr__(self, "A", tuple(a if m is None else m.A
+                                            for a, m in zip(self.A, mats, strict=True)))
+        given = [m for m in mats if m is not None]
+        for key, attr in (("E", "B"), ("C", "C")):
+            if getattr(self, key) is not None:
+                continue
+            blocks = [getattr(m, attr) for m in given if getattr(m, attr).size]
+            if not blocks:
+                continue
+            if any(b.shape != blocks[0].shape or np.any(b != blocks[0]) for b in blocks):
+                raise ModelError(f"{key}: the StateSpace modes have different {attr} "
+                                 f"matrices; a PiecewiseAffineSystem has one {key} for all "
+                                 f"regions: pass {key}= explicitly")
+            object.__setattr__(self, key, blocks[0])
 
     def __getstate__(self) -> dict[str, Any]:
         # the input functions are checked first, so that a lambda input is reported by name
