@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.nscontrol-installed
 OUT    ?= out
 
-.PHONY: demo test test-all bench lint clean
+.PHONY: demo warmup test test-all bench lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -14,6 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
+	$(VENV)/bin/nscontrol warmup   # compiles the numba kernels once, saying so
 	$(VENV)/bin/nscontrol report --out $(OUT)
 
 test: $(STAMP)
@@ -21,6 +22,9 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile
+
+warmup: $(STAMP)
+	$(VENV)/bin/nscontrol warmup
 
 bench: $(STAMP)
 	$(VENV)/bin/nscontrol bench
