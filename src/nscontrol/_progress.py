@@ -63,15 +63,16 @@ def progress_iter(iterable: Any, *, total: int | None = None, desc: str = "",
     from tqdm.auto import tqdm
 
     bar = tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=2.0, leave=False,
-               bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed} {postfix}")
+               bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}")
     if label is None:
         return bar
-    return _labelled(bar, label)
+    return _labelled(bar, desc, label)
 
 
-def _labelled(bar: Any, label: Any) -> Any:
+def _labelled(bar: Any, desc: str, label: Any) -> Any:
+    # the label goes into the description: tqdm would print a postfix after a stray ", "
     for item in bar:
-        bar.set_postfix_str(f"running {label(item)}", refresh=True)
+        bar.set_description_str(f"{desc} (running {label(item)})", refresh=True)
         yield item
 
 
