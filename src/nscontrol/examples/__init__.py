@@ -174,13 +174,14 @@ class Example:
 
 def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
     """A verdict formatter quoting checks: each ``(key, phrase)`` finds the first check whose
-    name contains ``key`` and says ``"phrase <measured> (bound <op> <threshold>)"``.
+    name contains ``key`` and says ``"phrase <measured> (bound <op> <threshold>)"``; the
+    count of passing checks closes the line.
 
     Examples
     --------
     >>> res = ExampleResult("x", checks=[check("impact time error [s]", 3e-15, 1e-12)])
     >>> verdict_from(("impact time", "impact times exact to"))(res)
-    'impact times exact to 3e-15 s (bound ≤ 1e-12)'
+    'impact times exact to 3e-15 s (bound ≤ 1e-12); 1 of 1 checks pass'
     """
 
     def verdict(result: ExampleResult) -> str:

@@ -190,7 +190,7 @@ EXAMPLES = [
             "pwa_oscillator": "Top: position with the crossings of q = 0 marked. Bottom: "
             "the difference to a tight DOP853 reference, at rounding level over the run.",
             "pwa_oscillator_orbit": "The periodic orbit in the phase plane, sampled at 400 "
-            "points over two forcing periods; the stiff side is q > 0 (right of the grey "
-            "line). Both Floquet multipliers in the title lie inside the unit circle: the "
+            "points over two forcing periods; the one-sided spring engages for q < 0 (left "
+            "of the grey line). Both Floquet multipliers in the title lie inside the unit circle: the "
             "orbit is stable."}),
 ]
