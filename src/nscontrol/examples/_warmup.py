@@ -31,7 +31,7 @@ def _mechanics() -> None:
     ball = BouncingBall()
     simulate(ball.system(), ball.x0, (0.0, 1.0), method="event_driven", progress=False)
     simulate(ball.system(), ball.x0, (0.0, 1.0), method="moreau_jean", h=1e-3, progress=False)
-    stack = RestingStack()
+    stack = RestingStack(n=3)
     simulate(stack.system(), stack.x0, (0.0, 0.01), method="moreau_jean", h=1e-3,
              progress=False)
     simulate(impact_oscillator(), [0.0, 0.0], (0.0, 2.0), progress=False)
