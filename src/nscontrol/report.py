@@ -117,7 +117,9 @@ body{font-family:system-ui,sans-serif;max-width:1100px;margin:auto;padding:0 1em
      line-height:1.45;color:#222}
 table{border-collapse:collapse;margin:.5em 0}
 td,th{border:1px solid #ccc;padding:3px 8px;vertical-align:top;text-align:left}
-th{background:#f3f3f3} td.num{text-align:right;font-variant-numeric:tabular-nums}
+th{background:#f3f3f3} td.num{text-align:right;font-variant-numeric:tabular-nums;
+     white-space:nowrap}
+td.pass,td.fail{font-weight:normal} td.pass b{color:#070} td.fail b{color:#b00}
 .pass{color:#070;font-weight:600}.fail{color:#b00;font-weight:600}
 .verdict{font-size:1.05em;padding:.4em .6em;border-left:4px solid #070;background:#f4faf4}
 .verdict.fail{border-color:#b00;background:#fbf3f3}
@@ -134,12 +136,13 @@ _INLINE_ENTRIES = 12
 
 def _html(rows: list[dict[str, Any]], out: Path) -> str:
     """The report page: a summary of every chapter, then one section per chapter."""
+    rows = _reading_order(rows)
     parts = ["<!doctype html><html lang='en'><meta charset='utf-8'>",
              "<meta name='viewport' content='width=device-width,initial-scale=1'>",
              f"<title>nscontrol — examples report</title><style>{_STYLE}</style>",
              "<h1>nscontrol — what each chapter claims, and whether this run reproduced it</h1>",
              _index_table(rows)]
-    for r in rows:
+    for r in rows:  # already in reading order
         parts.append(_section(r, out))
     return "\n".join(parts) + "\n</html>\n"
 
@@ -160,10 +163,28 @@ def _index_table(rows: list[dict[str, Any]]) -> str:
         parts.append(
             f"<tr><td>{esc(ex.chapter)}</td><td><a href='#{esc(ex.name)}'>{esc(ex.title)}</a>"
             f"</td><td>{esc(_first_sentence(ex.claim))}</td>"
-            f"<td class={'pass' if ok else 'fail'}>{esc(verdict)}</td>"
+            f"<td class={'pass' if ok else 'fail'}>{_bold_head(verdict)}</td>"
             f"<td class=num>{r['seconds']:.1f} s</td></tr>")
     parts.append("</table>")
     return "\n".join(parts)
+
+
+def _bold_head(verdict: str) -> str:
+    """``"Reproduced: figures"`` with the word before the colon in bold."""
+    head, _, rest = verdict.partition(": ")
+    return f"<b>{html.escape(head)}</b>: {html.escape(rest)}" if rest else html.escape(verdict)
+
+
+#: The order a reader meets the examples in: the building blocks, then the chapters.
+_CHAPTER_ORDER = ("foundation", "mechanics", "set-valued")
+
+
+def _reading_order(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    def key(r: dict[str, Any]) -> tuple[int, str, str]:
+        chapter = r["example"].chapter
+        rank = _CHAPTER_ORDER.index(chapter) if chapter in _CHAPTER_ORDER else 3
+        return rank, chapter, r["example"].name
+    return sorted(rows, key=key)
 
 
 def _first_sentence(text: str) -> str:
@@ -227,16 +248,25 @@ def _checks_table(res: ExampleResult) -> str:
 
 def plain_name(name: str) -> str:
     """A check's identifier as words: ``"impact_count_exact_minus_dop853"`` → ``"Impact count
-    exact minus dop853"``; names already in words are kept."""
-    words = name.replace("_", " ").strip()
+    exact minus dop853"``; names already in words keep their underscores (``alpha_max``)."""
+    words = name.strip() if " " in name.strip() else name.replace("_", " ").strip()
     return words[:1].upper() + words[1:]
+
+
+def _key_text(key: Any) -> str:
+    """A metrics key as a row heading: numbers (e.g. the frequencies of a sweep) formatted,
+    identifiers in words."""
+    try:
+        return format_value(float(key))
+    except (TypeError, ValueError):
+        return plain_name(str(key))
 
 
 def _value_html(value: Any, depth: int = 0) -> str:
     """Nested dicts as (foldable) sub-tables, small matrices as grids, scalars formatted."""
     esc = html.escape
     if isinstance(value, dict):
-        rows = "".join(f"<tr><th>{esc(plain_name(str(k)))}</th><td>{_value_html(v, depth + 1)}"
+        rows = "".join(f"<tr><th>{esc(_key_text(k))}</th><td>{_value_html(v, depth + 1)}"
                        f"</td></tr>" for k, v in value.items())
         table = f"<table class=sub>{rows}</table>"
         if depth > 0 and len(value) > _INLINE_ENTRIES:

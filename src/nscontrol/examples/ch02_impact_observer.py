@@ -485,8 +485,8 @@ EXAMPLES = [Example(
           "parameter eps shrinks (equal masses) or saturates at the rate the impacts allow "
           "(unequal masses); without impacts the error on the hidden body does not decay.",
     verdict=verdict_from(("with_impacts_body_b_error_ratio",
-                          "hidden-body error shrinks by a factor"),
-                         ("no_impacts_body_b_error_ratio", "without impacts it keeps")),
+                          "hidden-body error, end over start, with impacts"),
+                         ("no_impacts_body_b_error_ratio", "without impacts")),
     key_figure="ch02_impacts_prevented",
     captions={
         "ch02_impacts_prevented": "Estimation error on the unmeasured body b, with impacts "

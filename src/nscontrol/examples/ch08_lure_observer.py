@@ -711,7 +711,8 @@ EXAMPLES = [Example(
         "(solid) and the observer (dashed); grey bands are sticking phases. The estimate "
         "joins the true state and stays on it through sticking.",
         "ch08_alpha_vs_kappa": "Certified decay rate against the bound κ on the observer "
-        "gain: a larger gain buys a faster certified rate, up to a plateau.",
+        "gain, for the Coulomb oscillator and the diode circuit: allowing a larger gain buys "
+        "a faster certified rate.",
         "ch08_rotor": "Rotor with Stribeck friction (non-monotone, handled by a loop "
         "transformation): angular velocities of the upper and lower discs and their "
         "estimates; grey bands mark where the lower disc sticks."})]

@@ -484,7 +484,7 @@ EXAMPLES = [Example(
           "when the damping exceeds √6 − 1), and a state feedback designed by LMIs makes an "
           "open loop with coexisting responses convergent, so its frequency response is "
           "well defined and attenuates the resonance.",
-    verdict=verdict_from(("1 bisection boundary", "boundary √6 − 1 found to a relative"),
+    verdict=verdict_from(("1 bisection boundary", "boundary √6 − 1 found to relative error"),
                          ("12 attenuation", "resonance attenuated by a factor")),
     key_figure="ch11_trajectories_converge",
     captions={
