@@ -115,6 +115,6 @@ def announce_compilation(stream: Any = None) -> bool:
         return False
     _announced = True
     print("nscontrol: compiling the numerical kernels (numba) - this happens once per install "
-          "and takes 15-30 s;\n           later runs load them from the cache "
+          "and takes tens of seconds;\n           later runs load them from the cache "
           "(`nscontrol warmup` does it ahead).", file=stream or sys.stderr, flush=True)
     return True

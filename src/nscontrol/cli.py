@@ -80,13 +80,13 @@ def _run_summary(example: Any, result: Any, seconds: float) -> str:
 def warmup() -> None:
     """Compile the numerical kernels now (once per install) so that later runs start fast."""
     from ._progress import FIRST_USE_KERNELS, uncompiled_kernel_modules
-    from .examples._warmup import warm_up
+    from .examples.warmup import warm_up
 
     missing = sorted(set(uncompiled_kernel_modules()) - set(FIRST_USE_KERNELS))
     if not missing:
         click.echo("kernels already compiled (numba cache is up to date); nothing to do")
         return
-    click.echo(f"compiling {len(missing)} kernel modules (once per install, 15-30 s)...",
+    click.echo(f"compiling {len(missing)} kernel modules (once per install, tens of seconds)...",
                err=True)
     start = time.perf_counter()
     failed = warm_up(lambda what: click.echo(f"  {what}", err=True))
@@ -166,9 +166,9 @@ def bench(name: str | None, as_json: bool, quick: bool) -> None:
 def plain_json(value: Any) -> Any:
     """``value`` with numpy scalars and arrays turned into Python numbers and lists (so no
     ``np.float64(...)`` text reaches a line), non-finite floats as strings."""
-    from .examples import _jsonable
+    from .examples import jsonable
 
-    return _jsonable(value)
+    return jsonable(value)
 
 
 def _bench_line(r: dict) -> str:

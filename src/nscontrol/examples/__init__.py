@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["Check", "Example", "ExampleResult", "check", "all_examples", "get_example",
-           "format_value", "numeric_array", "verdict_from"]
+           "format_value", "jsonable", "numeric_array", "verdict_from"]
 
 _OPS: dict[str, Callable[[Any, Any], bool]] = {
     "<=": operator.le, "<": operator.lt, ">=": operator.ge, ">": operator.gt,
@@ -269,6 +269,19 @@ def get_example(name: str) -> Example:
     if name not in examples:
         raise KeyError(f"no example {name!r}; available: {', '.join(sorted(examples))}")
     return examples[name]
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON data: numbers, strings, lists and dicts only (numpy scalars and
+    arrays converted, non-finite floats as strings, complex numbers as ``{"re", "im"}``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> jsonable({"x": np.float64(0.5), "n": np.arange(2), "bad": float("nan")})
+    {'x': 0.5, 'n': [0, 1], 'bad': 'nan'}
+    """
+    return _jsonable(value)
 
 
 def _jsonable(value: Any) -> Any:
