@@ -69,11 +69,8 @@ def run(name: str, out: Path | None, as_json: bool) -> None:
 
 
 def _run_summary(example: Any, result: Any, seconds: float) -> str:
-    """``NAME: PASSED (n/n checks) in 12.3 s — verdict`` on one line."""
-    n_ok = sum(c.passed for c in result.checks)
-    head = "PASSED" if result.passed else "FAILED"
-    return (f"{example.name}: {head} ({n_ok}/{len(result.checks)} checks) in {seconds:.1f} s"
-            f" — {example.verdict_line(result)}")
+    """``NAME (12.3 s): Reproduced: <numbers>; n of n checks pass.`` on one line."""
+    return f"{example.name} ({seconds:.1f} s): {example.verdict_line(result)}"
 
 
 @main.command()
