@@ -142,8 +142,9 @@ def bench(name: str | None, as_json: bool, quick: bool) -> None:
     available = sorted(p.stem[len("bench_"):] for p in folder.glob("bench_*.py"))
     if name is not None and name not in available:
         raise click.UsageError(f"no benchmark {name!r}; available: {', '.join(available)}")
-    from ._progress import progress_iter
+    from ._progress import announce_compilation, progress_iter
 
+    announce_compilation()      # on stderr: stdout stays one JSON object per line
     sys.path.insert(0, str(folder))
     for bname in [name] if name else available:
         spec = importlib.util.spec_from_file_location(f"bench_{bname}",
