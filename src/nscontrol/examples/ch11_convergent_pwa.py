@@ -478,12 +478,12 @@ EXAMPLES = [Example(
     "ch11-convergent-pwa",
     "Convergent PWA systems: CQLF analysis, LMI feedback/observer design, periodic steady "
     "states and frequency responses", "ch11", run,
-    claim="A piecewise-affine system is convergent when all its solutions forget their "
-          "initial condition and approach one steady state for each input. A common "
-          "quadratic Lyapunov function decides this (for the one-sided oscillator exactly "
-          "when the damping exceeds √6 − 1), and a state feedback designed by LMIs makes an "
-          "open loop with coexisting responses convergent, so its frequency response is "
-          "well defined and attenuates the resonance.",
+    claim="A state feedback designed by LMIs makes a piecewise-affine oscillator convergent: "
+          "every solution forgets its initial condition and approaches one steady state for "
+          "each input. A common quadratic Lyapunov function certifies this (for the "
+          "open loop exactly when its damping exceeds √6 − 1). An open loop with coexisting "
+          "responses becomes convergent, so its frequency response is well defined and "
+          "attenuates the resonance.",
     verdict=verdict_from(("1 bisection boundary", "boundary √6 − 1 found to relative error"),
                          ("12 attenuation", "resonance attenuated by a factor")),
     key_figure="ch11_trajectories_converge",

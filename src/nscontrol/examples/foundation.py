@@ -195,10 +195,10 @@ def run(out_dir: Path | None) -> ExampleResult:
 
 EXAMPLES = [Example(
     "foundation", "LCP stack family and exact LTI propagation with events", "foundation", run,
-    claim="The two building blocks every integrator relies on. Contact impulses of a stack "
-          "of masses come out of the LCP solver equal to their closed form, in a time linear "
-          "in the number of masses; linear flows are propagated exactly (matrix exponential) "
-          "and their level crossings located to rounding error.",
+    claim="The LCP solver returns the contact impulses of a stack of masses equal to their "
+          "closed form, in a time linear in the number of masses, and linear flows are "
+          "propagated exactly (matrix exponential) with their level crossings located to "
+          "rounding error. These are the two building blocks every integrator relies on.",
     verdict=verdict_from(("stack LCP impulses", "impulse error"),
                          ("exact propagation agrees", "difference to DOP853")),
     captions={

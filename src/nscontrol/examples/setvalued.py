@@ -178,9 +178,9 @@ EXAMPLES = [
     Example(
         "pwa-oscillator", "One-sided spring under harmonic forcing: exact crossings, "
         "saltation-based monodromy", "set-valued", run_pwa_oscillator,
-        claim="An oscillator whose spring stiffens on one side is piecewise affine. The "
-              "exact integrator locates every crossing of the switching plane and matches a "
-              "tight ODE solver; the monodromy matrix built from saltation matrices matches "
+        claim="For a forced oscillator whose spring stiffens on one side (a piecewise-affine "
+              "system), the exact integrator locates every crossing of the switching plane "
+              "and matches a tight ODE solver. The monodromy matrix built from saltation matrices matches "
               "finite differences, and the forced response settles on a stable orbit of "
               "twice the forcing period.",
         verdict=verdict_from(("exact switching vs tight DOP853", "difference to DOP853"),
