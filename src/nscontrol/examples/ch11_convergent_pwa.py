@@ -423,7 +423,7 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     fig, ax = new_figure(figsize=(6, 3.6))
     ax.semilogx(frf.omega, frf.max_floquet, "k.-", label="closed loop max|μ|")
     ax.semilogx(frf.omega, np.exp(-SIGMA * 2 * np.pi / frf.omega), "g--",
-                label="P6 bound e^(-σT), σ = 0.3")
+                label="guaranteed bound e^(-σT), σ = 0.3")
     if shot:
         ax.semilogx([w for w, _, _ in shot], [mu for _, _, mu in shot], "r^",
                     label="open-loop T-orbit max|μ|")
