@@ -480,11 +480,10 @@ EXAMPLES = [Example(
     "states and frequency responses", "ch11", run,
     claim="A state feedback designed by LMIs makes a piecewise-affine oscillator convergent: "
           "every solution forgets its initial condition and approaches one steady state for "
-          "each input. A common quadratic Lyapunov function certifies this (the uncontrolled "
-          "oscillator is convergent exactly when its damping exceeds √6 − 1). An open loop "
-          "with coexisting "
-          "responses becomes convergent, so its frequency response is well defined and "
-          "attenuates the resonance.",
+          "each input, so an open loop with coexisting responses gets one well-defined "
+          "frequency response that attenuates the resonance. A common quadratic Lyapunov "
+          "function certifies convergence (the uncontrolled oscillator has one exactly when "
+          "its damping exceeds √6 − 1).",
     verdict=verdict_from(("1 bisection boundary", "boundary √6 − 1 found to relative error"),
                          ("12 attenuation", "resonance attenuated by a factor")),
     key_figure="ch11_trajectories_converge",
