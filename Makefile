@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.nscontrol-installed
 DOCS_STAMP := $(VENV)/.nscontrol-docs-installed
 OUT    ?= out
 
-.PHONY: demo test test-all bench lint docs clean
+.PHONY: demo warmup test test-all bench lint docs clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -15,6 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
+	$(VENV)/bin/nscontrol warmup   # compiles the numba kernels once, saying so
 	$(VENV)/bin/nscontrol report --out $(OUT)
 
 test: $(STAMP)
@@ -22,6 +23,9 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile
+
+warmup: $(STAMP)
+	$(VENV)/bin/nscontrol warmup
 
 bench: $(STAMP)
 	$(VENV)/bin/nscontrol bench

@@ -5,6 +5,12 @@ scenario with at least: ``scenario``, ``size``, ``ours_steps_per_s`` (or
 ``ours_s_per_solve``), ``reference``, ``reference_steps_per_s`` (or
 ``reference_s_per_solve``), ``ratio`` (our speed / reference speed, > 1 = faster) and
 ``accuracy`` (figures showing both sides computed the same thing).
+
+``reference`` is ``None`` (with the reference speed and ``ratio``) when no reference ran for a
+scenario; ``note`` then says why (Siconos not installed, or no counterpart of that solver).
+``nscontrol bench`` prints such a line as ``ref[none]=— (reason)``. Records may hold numpy
+scalars: the command converts them to plain JSON numbers before printing, so stdout carries
+one clean JSON object per line and progress bars go to stderr.
 """
 
 from __future__ import annotations

@@ -51,10 +51,70 @@ class TimeProgress:
 
 
 def progress_iter(iterable: Any, *, total: int | None = None, desc: str = "",
-                  enable: bool | None = None) -> Any:
-    """Wrap an iterable in a tqdm bar on stderr (shown after 2 s), or return it unchanged."""
+                  enable: bool | None = None, label: Any = None) -> Any:
+    """Wrap an iterable in a tqdm bar on stderr (shown after 2 s), or return it unchanged.
+
+    The items may take very different times (an example, a benchmark), so the bar shows the
+    count and the elapsed time but no ETA: an estimate from the fast items would freeze at
+    "2 s left" during a slow one. ``label(item)`` names the item in progress.
+    """
     if enable is False:
         return iterable
     from tqdm.auto import tqdm
 
-    return tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=2.0, leave=False)
+    bar = tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=2.0, leave=False,
+               bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}")
+    if label is None:
+        return bar
+    return _labelled(bar, desc, label)
+
+
+def _labelled(bar: Any, desc: str, label: Any) -> Any:
+    # the label goes into the description: tqdm would print a postfix after a stray ", "
+    for item in bar:
+        bar.set_description_str(f"{desc} (running {label(item)})", refresh=True)
+        yield item
+
+
+#: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder.
+KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py")
+
+#: Kernels of paths the warm-up does not reach (Lur'e laws coupled through the LCP,
+#: Moreau-Jean with nonlinear forces): they compile on first use, without a notice.
+FIRST_USE_KERNELS = ("simulate._lure_lcp_kernels", "simulate._mj_linearised_kernel")
+
+_announced = False
+
+
+def uncompiled_kernel_modules() -> list[str]:
+    """The kernel modules with no numba cache index yet (``[]`` once compiled).
+
+    Looks at files only (nothing is imported): a module ``m.py`` is compiled when its
+    ``__pycache__`` holds an ``m.*.nbi`` index, or when numba caches elsewhere
+    (``NUMBA_CACHE_DIR``), which this check cannot see and so assumes done.
+    """
+    import os
+    from pathlib import Path
+
+    if os.environ.get("NUMBA_CACHE_DIR") or os.environ.get("NUMBA_DISABLE_JIT"):
+        return []
+    root = Path(__file__).resolve().parent
+    missing = []
+    for pattern in KERNEL_GLOBS:
+        for module in sorted(root.glob(pattern)):
+            if not any((module.parent / "__pycache__").glob(f"{module.stem}.*.nbi")):
+                missing.append(f"{module.parent.name}.{module.stem}")
+    return missing
+
+
+def announce_compilation(stream: Any = None) -> bool:
+    """Say once per process, on stderr, that the kernels are about to be compiled (first run
+    of an install only). Returns whether the message was printed."""
+    global _announced
+    if _announced or not set(uncompiled_kernel_modules()) - set(FIRST_USE_KERNELS):
+        return False
+    _announced = True
+    print("nscontrol: compiling the numerical kernels (numba) - this happens once per install "
+          "and takes tens of seconds;\n           later runs load them from the cache "
+          "(`nscontrol warmup` does it ahead).", file=stream or sys.stderr, flush=True)
+    return True

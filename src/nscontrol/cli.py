@@ -1,4 +1,5 @@
-"""The ``nscontrol`` command: ``list``, ``run``, ``report``, ``bench``, ``bifurcation``."""
+"""The ``nscontrol`` command: ``list``, ``run``, ``report``, ``bench``, ``warmup``,
+``bifurcation``."""
 
 from __future__ import annotations
 
@@ -6,7 +7,9 @@ import importlib.util
 import json
 import os
 import sys
+import time
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -45,16 +48,51 @@ def run(name: str, out: Path | None, as_json: bool) -> None:
         raise click.UsageError(str(exc.args[0])) from None
     except ModelError as exc:
         raise click.UsageError(str(exc)) from None
+    from ._progress import announce_compilation
+    from .examples import format_value
+
+    announce_compilation()
+    start = time.perf_counter()
     result = example.run(out)
+    seconds = time.perf_counter() - start
     if as_json:
-        click.echo(json.dumps(result.to_json()))
+        click.echo(json.dumps({**result.to_json(), "passed": result.passed,
+                               "seconds": round(seconds, 3)}))
     else:
         for c in result.checks:
             mark = "pass" if c.passed else "FAIL"
-            click.echo(f"[{mark}] {c.name}: {c.value} {c.op} {c.threshold}")
+            click.echo(f"[{mark}] {c.name}: {format_value(c.value)} {c.op} "
+                       f"{format_value(c.threshold)}")
         for fig in result.figures:
             click.echo(f"figure: {fig}")
+        click.echo(_run_summary(example, result, seconds))
     sys.exit(0 if result.passed else 1)
+
+
+def _run_summary(example: Any, result: Any, seconds: float) -> str:
+    """``NAME (12.3 s): Reproduced: <numbers>; n of n checks pass.`` on one line."""
+    return f"{example.name} ({seconds:.1f} s): {example.verdict_line(result)}"
+
+
+@main.command()
+def warmup() -> None:
+    """Compile the numerical kernels now (once per install) so that later runs start fast."""
+    from ._progress import FIRST_USE_KERNELS, uncompiled_kernel_modules
+    from .examples.warmup import warm_up
+
+    missing = sorted(set(uncompiled_kernel_modules()) - set(FIRST_USE_KERNELS))
+    if not missing:
+        click.echo("kernels already compiled (numba cache is up to date); nothing to do")
+        return
+    click.echo(f"compiling {len(missing)} kernel modules (once per install, tens of seconds)...",
+               err=True)
+    start = time.perf_counter()
+    failed = warm_up(lambda what: click.echo(f"  {what}", err=True))
+    for line in failed:
+        click.echo(f"  skipped: {line}", err=True)
+    left = uncompiled_kernel_modules()
+    click.echo(f"warmup: compiled in {time.perf_counter() - start:.0f} s"
+               + (f"; still compiled on first use: {', '.join(left)}" if left else ""))
 
 
 @main.command()
@@ -71,11 +109,17 @@ def report(out: Path, only: tuple[str, ...]) -> None:
         check_output_folder(out, "--out")
     except ModelError as exc:
         raise click.UsageError(str(exc).replace("only:", "--only:", 1)) from None
+    from ._progress import announce_compilation
+
+    announce_compilation()
     summary = write_report(out, list(only) or None)
     for ex in summary["examples"]:
         mark = "pass" if ex["passed"] else "FAIL"
         click.echo(f"[{mark}] {ex['example']} ({ex['seconds']:.1f} s)")
-    click.echo(f"report: {out / 'index.html'}")
+    n_ok = sum(ex["passed"] for ex in summary["examples"])
+    total = sum(ex["seconds"] for ex in summary["examples"])
+    click.echo(f"{n_ok}/{len(summary['examples'])} examples reproduced in {total:.0f} s; "
+               f"report: {out / 'index.html'}")
     sys.exit(0 if summary["passed"] else 1)
 
 
@@ -132,8 +176,9 @@ def bench(name: str | None, as_json: bool, quick: bool) -> None:
     available = sorted(p.stem[len("bench_"):] for p in folder.glob("bench_*.py"))
     if name is not None and name not in available:
         raise click.UsageError(f"no benchmark {name!r}; available: {', '.join(available)}")
-    from ._progress import progress_iter
+    from ._progress import announce_compilation, progress_iter
 
+    announce_compilation()      # on stderr: stdout stays one JSON object per line
     sys.path.insert(0, str(folder))
     for bname in [name] if name else available:
         spec = importlib.util.spec_from_file_location(f"bench_{bname}",
@@ -143,20 +188,42 @@ def bench(name: str | None, as_json: bool, quick: bool) -> None:
         spec.loader.exec_module(module)
         # one tick per scenario, on stderr (stdout stays one JSON object per line)
         for record in progress_iter(module.run(quick=quick), desc=f"bench {bname}"):
+            record = plain_json(record)
             if as_json:
                 click.echo(json.dumps(record))
             else:
                 click.echo(_bench_line(record))
 
 
+def plain_json(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists (so no
+    ``np.float64(...)`` text reaches a line), non-finite floats as strings."""
+    from .examples import jsonable
+
+    return jsonable(value)
+
+
 def _bench_line(r: dict) -> str:
+    """One readable line per scenario; ``ref`` names the reference measured in the same run
+    (``ref[none]=—`` when there is none, followed by the reason: Siconos absent, or no
+    reference implementation of this scenario)."""
+    from .examples import format_value
+
     speed = r.get("ours_steps_per_s") or r.get("ours_s_per_solve")
+    unit = "steps/s" if r.get("ours_steps_per_s") else "s/solve"
     ref = r.get("reference_steps_per_s") or r.get("reference_s_per_solve")
     ratio = r.get("ratio")
     ratio_s = f"{ratio:.3g}x" if isinstance(ratio, (int, float)) else "n/a"
-    return (f"{r['scenario']:40s} size={r.get('size')!s:>6s} ours={speed:.4g} "
-            f"ref[{r.get('reference')}]={ref if ref is None else f'{ref:.4g}'} ratio={ratio_s} "
-            f"accuracy={r.get('accuracy')}")
+    ref_name = r.get("reference") or "none"
+    ref_s = "—" if ref is None else format_value(ref)
+    why = (f" ({r.get('note') or 'no reference implementation for this scenario'})"
+           if ref is None else "")
+    acc = r.get("accuracy")
+    acc_s = (", ".join(f"{k}={format_value(v)}" for k, v in acc.items())
+             if isinstance(acc, dict) else format_value(acc))
+    return (f"{r['scenario']:40s} size={format_value(r.get('size')):>6s} "
+            f"ours={format_value(speed)} {unit} ref[{ref_name}]={ref_s}{why} ratio={ratio_s} "
+            f"accuracy: {acc_s}")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ModelError
-from .examples import Example, ExampleResult, all_examples
+from .examples import Example, ExampleResult, all_examples, format_value
+from .examples import numeric_array as _as_numeric_array
 
 
 def check_output_folder(out: Any, name: str = "out") -> Path:
@@ -93,7 +94,8 @@ def write_report(out: Path, names: list[str] | None = None, *, progress: bool | 
     examples = select_examples(names)
     out = check_output_folder(out)
     rows: list[dict[str, Any]] = []
-    for ex in progress_iter(examples, total=len(examples), desc="examples", enable=progress):
+    for ex in progress_iter(examples, total=len(examples), desc="examples", enable=progress,
+                          label=lambda e: e.name):
         result, error, seconds = run_example(ex, out / ex.name)
         rows.append({"example": ex, "result": result, "error": error, "seconds": seconds})
     summary: dict[str, Any] = {
@@ -110,50 +112,173 @@ def write_report(out: Path, names: list[str] | None = None, *, progress: bool | 
     return summary
 
 
+_STYLE = """
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:auto;padding:0 1em;
+     line-height:1.45;color:#222}
+table{border-collapse:collapse;margin:.5em 0}
+td,th{border:1px solid #ccc;padding:3px 8px;vertical-align:top;text-align:left}
+th{background:#f3f3f3} td.num{text-align:right;font-variant-numeric:tabular-nums;
+     white-space:nowrap}
+td.pass,td.fail{font-weight:normal} td.pass b{color:#070} td.fail b{color:#b00}
+.pass{color:#070;font-weight:600}.fail{color:#b00;font-weight:600}
+.verdict{font-size:1.05em;padding:.4em .6em;border-left:4px solid #070;background:#f4faf4}
+.verdict.fail{border-color:#b00;background:#fbf3f3}
+.claim{font-size:1.05em} .chapter{color:#666;font-weight:normal;font-size:.8em}
+figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee}
+figcaption{color:#444;font-size:.92em;max-width:900px}
+small{color:#555} details{margin:.5em 0} summary{cursor:pointer;color:#335}
+table.sub td,table.sub th{border-color:#e3e3e3;padding:1px 5px;font-size:.92em}
+"""
+
+#: At most this many entries of a dict or list are drawn inline; larger ones fold away.
+_INLINE_ENTRIES = 12
+
+
 def _html(rows: list[dict[str, Any]], out: Path) -> str:
+    """The report page: a summary of every chapter, then one section per chapter."""
+    rows = _reading_order(rows)
+    parts = ["<!doctype html><html lang='en'><meta charset='utf-8'>",
+             "<meta name='viewport' content='width=device-width,initial-scale=1'>",
+             f"<title>nscontrol — examples report</title><style>{_STYLE}</style>",
+             "<h1>nscontrol — what each chapter claims, and whether this run reproduced it</h1>",
+             _index_table(rows)]
+    for r in rows:  # already in reading order
+        parts.append(_section(r, out))
+    return "\n".join(parts) + "\n</html>\n"
+
+
+def _index_table(rows: list[dict[str, Any]]) -> str:
+    """One row per chapter: title (linked), claim, verdict, runtime."""
     esc = html.escape
-    parts = ["<!doctype html><meta charset='utf-8'><title>nscontrol report</title>",
-             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
-             "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 6px}"
-             ".pass{color:#070}.fail{color:#b00}img{max-width:100%}</style>",
-             "<h1>nscontrol — examples report</h1><ul>"]
-    for r in rows:
-        ok = r["result"] is not None and r["result"].passed
-        parts.append(f"<li><a href='#{esc(r['example'].name)}'>{esc(r['example'].name)}</a> "
-                     f"<span class={'pass' if ok else 'fail'}>{'pass' if ok else 'FAIL'}"
-                     f"</span> ({r['seconds']:.1f} s)</li>")
-    parts.append("</ul>")
+    n_ok = sum(bool(r["result"] and r["result"].passed) for r in rows)
+    total = sum(r["seconds"] for r in rows)
+    parts = [f"<p>{n_ok} of {len(rows)} examples reproduced their claims; "
+             f"the run took {total:.0f} s.</p>",
+             "<table><tr><th>chapter</th><th>example</th><th>claim</th><th>verdict</th>"
+             "<th>runtime</th></tr>"]
     for r in rows:
         ex, res = r["example"], r["result"]
-        parts.append(f"<h2 id='{esc(ex.name)}'>{esc(ex.name)} — {esc(ex.title)}</h2>"
-                     f"<p>{esc(ex.chapter)}</p>")
-        if res is None:
-            parts.append(f"<pre class=fail>{esc(r['error'])}</pre>")
-            continue
-        if res.summary:
-            parts.append(f"<p>{esc(res.summary)}</p>")
-        parts.append("<table><tr><th>check</th><th>value</th><th></th><th>threshold</th>"
-                     "<th>result</th></tr>")
-        for c in res.checks:
-            cls = "pass" if c.passed else "fail"
-            name = esc(c.name) + (f"<br><small>{esc(c.note)}</small>" if c.note else "")
-            parts.append(f"<tr><td>{name}</td><td>{esc(_fmt(c.value))}</td>"
-                         f"<td>{esc(c.op)}</td><td>{esc(_fmt(c.threshold))}</td>"
-                         f"<td class={cls}>{'pass' if c.passed else 'FAIL'}</td></tr>")
-        parts.append("</table><h3>metrics</h3><table>")
-        for k, v in res.metrics.items():
-            parts.append(f"<tr><td>{esc(k)}</td><td>{esc(_fmt(v))}</td></tr>")
-        parts.append("</table>")
-        for fig in res.figures:
-            parts.append(f"<p><img src='{esc(str(Path(fig).relative_to(out)))}'></p>")
+        ok = bool(res and res.passed)
+        verdict = ex.verdict_line(res) if res is not None else "Failed to run (error below)."
+        parts.append(
+            f"<tr><td>{esc(ex.chapter)}</td><td><a href='#{esc(ex.name)}'>{esc(ex.title)}</a>"
+            f"</td><td>{esc(_first_sentence(ex.claim))}</td>"
+            f"<td class={'pass' if ok else 'fail'}>{_bold_head(verdict)}</td>"
+            f"<td class=num>{r['seconds']:.1f} s</td></tr>")
+    parts.append("</table>")
     return "\n".join(parts)
 
 
-def _fmt(value: Any) -> str:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    if isinstance(value, (list, tuple)) and len(value) > 12:
-        return f"[{len(value)} values] " + ", ".join(_fmt(v) for v in value[:6]) + ", …"
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_fmt(v) for v in value) + "]"
-    return str(value)
+def _bold_head(verdict: str) -> str:
+    """``"Reproduced: figures"`` with the word before the colon in bold."""
+    head, _, rest = verdict.partition(": ")
+    return f"<b>{html.escape(head)}</b>: {html.escape(rest)}" if rest else html.escape(verdict)
+
+
+#: The order a reader meets the examples in: the building blocks, then the chapters.
+_CHAPTER_ORDER = ("foundation", "mechanics", "set-valued")
+
+
+def _reading_order(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    def key(r: dict[str, Any]) -> tuple[int, str, str]:
+        chapter = r["example"].chapter
+        rank = _CHAPTER_ORDER.index(chapter) if chapter in _CHAPTER_ORDER else 3
+        return rank, chapter, r["example"].name
+    return sorted(rows, key=key)
+
+
+def _first_sentence(text: str) -> str:
+    head, dot, _ = text.partition(". ")
+    return head + (dot.strip() if dot else "")
+
+
+def _section(r: dict[str, Any], out: Path) -> str:
+    """A chapter: claim, verdict, key figure, checks, other figures, metrics."""
+    esc = html.escape
+    ex, res = r["example"], r["result"]
+    parts = [f"<section id='{esc(ex.name)}'><h2>{esc(ex.title)} "
+             f"<span class=chapter>{esc(ex.chapter)} · {esc(ex.name)} · "
+             f"{r['seconds']:.1f} s</span></h2>"]
+    if ex.claim:
+        parts.append(f"<p class=claim>{esc(ex.claim)}</p>")
+    if res is None:
+        parts.append("<p class='verdict fail'>The example failed to run:</p>"
+                     f"<pre>{esc(r['error'])}</pre></section>")
+        return "\n".join(parts)
+    parts.append(f"<p class='verdict{'' if res.passed else ' fail'}'>"
+                 f"{esc(ex.verdict_line(res))}</p>")
+    figures = ex.ordered_figures(res)
+    parts += [_figure(ex, f, out) for f in figures[:1]]
+    parts.append(_checks_table(res))
+    parts += [_figure(ex, f, out) for f in figures[1:]]
+    if res.summary:
+        parts.append(f"<p><small>This run: {esc(res.summary)}</small></p>")
+    if res.metrics:
+        parts.append("<details><summary>Metrics (all figures measured; also in report.json)"
+                     "</summary>" + _value_html(res.metrics) + "</details>")
+    parts.append("</section>")
+    return "\n".join(parts)
+
+
+def _figure(ex: Example, path: Path, out: Path) -> str:
+    esc = html.escape
+    caption = ex.caption(path)
+    src = Path(path).relative_to(out).as_posix()
+    return (f"<figure><img src='{esc(src)}' alt='{esc(caption)}' loading='lazy'>"
+            f"<figcaption>{esc(caption)}</figcaption></figure>")
+
+
+_OP_TEXT = {"<=": "≤", "<": "<", ">=": "≥", ">": ">", "==": "="}
+
+
+def _checks_table(res: ExampleResult) -> str:
+    esc = html.escape
+    parts = ["<table><tr><th>check</th><th>measured</th><th>bound</th><th>verdict</th></tr>"]
+    for c in res.checks:
+        note = f"<br><small>{esc(c.note)}</small>" if c.note else ""
+        parts.append(
+            f"<tr><td>{esc(plain_name(c.name))}{note}</td>"
+            f"<td class=num>{esc(format_value(c.value))}</td>"
+            f"<td class=num>{esc(_OP_TEXT.get(c.op, c.op))} {esc(format_value(c.threshold))}"
+            f"</td><td class={'pass' if c.passed else 'fail'}>"
+            f"{'pass' if c.passed else 'FAIL'}</td></tr>")
+    parts.append("</table>")
+    return "\n".join(parts)
+
+
+def plain_name(name: str) -> str:
+    """A check's identifier as words: ``"impact_count_exact_minus_dop853"`` → ``"Impact count
+    exact minus dop853"``; names already in words keep their underscores (``alpha_max``)."""
+    words = name.strip() if " " in name.strip() else name.replace("_", " ").strip()
+    return words[:1].upper() + words[1:]
+
+
+def _key_text(key: Any) -> str:
+    """A metrics key as a row heading: numbers (e.g. the frequencies of a sweep) formatted,
+    identifiers in words."""
+    try:
+        return format_value(float(key))
+    except (TypeError, ValueError):
+        return plain_name(str(key))
+
+
+def _value_html(value: Any, depth: int = 0) -> str:
+    """Nested dicts as (foldable) sub-tables, small matrices as grids, scalars formatted."""
+    esc = html.escape
+    if isinstance(value, dict):
+        rows = "".join(f"<tr><th>{esc(_key_text(k))}</th><td>{_value_html(v, depth + 1)}"
+                       f"</td></tr>" for k, v in value.items())
+        table = f"<table class=sub>{rows}</table>"
+        if depth > 0 and len(value) > _INLINE_ENTRIES:
+            return f"<details><summary>{len(value)} entries</summary>{table}</details>"
+        return table
+    arr = _as_numeric_array(value) if isinstance(value, (list, tuple)) or hasattr(
+        value, "shape") else None
+    if arr is not None and arr.ndim == 2 and arr.shape[0] <= 6 and arr.shape[1] <= 6:
+        grid = "".join("<tr>" + "".join(f"<td class=num>{esc(format_value(v))}</td>"
+                                        for v in row) + "</tr>" for row in arr)
+        return f"<table class=sub>{grid}</table>"
+    if isinstance(value, (list, tuple)) and arr is None and len(value) <= _INLINE_ENTRIES \
+            and all(isinstance(v, dict) for v in value):
+        return "".join(_value_html(v, depth + 1) for v in value)
+    return esc(format_value(value))

@@ -11,12 +11,13 @@ from __future__ import annotations
 import importlib
 import operator
 import pkgutil
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Check", "Example", "ExampleResult", "check", "all_examples", "get_example"]
+__all__ = ["Check", "Example", "ExampleResult", "check", "all_examples", "get_example",
+           "format_value", "jsonable", "numeric_array", "verdict_from"]
 
 _OPS: dict[str, Callable[[Any, Any], bool]] = {
     "<=": operator.le, "<": operator.lt, ">=": operator.ge, ">": operator.gt,
@@ -145,12 +146,125 @@ class Example:
         What it shows and where it comes from.
     run
         ``run(out_dir) -> ExampleResult``; writes figures into ``out_dir`` when it is given.
+    claim
+        The chapter's claim in two or three plain sentences (opens its report section).
+    verdict
+        ``verdict(result) -> str``: one line with the one or two measured numbers that show
+        whether this run reproduced the claim (``None``: the report counts the checks).
+    captions
+        Figure file stem (e.g. ``"bouncing_ball"``) to a caption saying what to look at; the
+        report uses it as caption and alt text.
+    key_figure
+        The stem of the figure shown first (default: the first one written).
     """
 
     name: str
     title: str
     chapter: str
     run: Callable[[Path | None], ExampleResult]
+    claim: str = ""
+    verdict: Callable[[ExampleResult], str] | None = None
+    captions: Mapping[str, str] = field(default_factory=dict)
+    key_figure: str | None = None
+
+    def verdict_line(self, result: ExampleResult) -> str:
+        """The verdict of ``result`` in one line: ``reproduced``/``NOT reproduced`` followed by
+        the example's own figures (or the number of checks that passed)."""
+        n_ok = sum(c.passed for c in result.checks)
+        head = "Reproduced" if result.passed else "NOT reproduced"
+        detail = (self.verdict(result) if self.verdict is not None
+                  else f"{n_ok} of {len(result.checks)} checks pass")
+        return f"{head}: {detail}."
+
+    def ordered_figures(self, result: ExampleResult) -> list[Path]:
+        """``result.figures`` with the key figure first."""
+        key = [f for f in result.figures if Path(f).stem == self.key_figure]
+        return key + [f for f in result.figures if f not in key]
+
+    def caption(self, figure: Path) -> str:
+        """The caption of ``figure`` (its stem in words when the example gives none)."""
+        stem = Path(figure).stem
+        return self.captions.get(stem, stem.replace("_", " "))
+
+
+def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
+    """A verdict formatter quoting checks: each ``(key, phrase)`` finds the first check whose
+    name contains ``key`` and says ``"phrase <measured> (bound <op> <threshold>)"``; the
+    count of passing checks closes the line.
+
+    Examples
+    --------
+    >>> res = ExampleResult("x", checks=[check("impact time error [s]", 3e-15, 1e-12)])
+    >>> verdict_from(("impact time", "impact times exact to"))(res)
+    'impact times exact to 3e-15 s (bound ≤ 1e-12); 1 of 1 checks pass'
+    """
+
+    def verdict(result: ExampleResult) -> str:
+        said = []
+        for key, phrase in parts:
+            found = [c for c in result.checks if key in c.name]
+            if not found:
+                continue
+            c = found[0]
+            unit = " s" if "[s]" in c.name else ""
+            said.append(f"{phrase} {format_value(c.value)}{unit} "
+                        f"(bound {_OP_TEXT.get(c.op, c.op)} {format_value(c.threshold)})")
+        n_ok = sum(c.passed for c in result.checks)
+        said.append(f"{n_ok} of {len(result.checks)} checks pass")
+        return "; ".join(said)
+
+    return verdict
+
+
+_OP_TEXT = {"<=": "≤", "<": "<", ">=": "≥", ">": ">", "==": "="}
+
+
+def format_value(value: Any) -> str:
+    """A scalar as a reader wants it: 4 significant digits, ``yes``/``no``, ``—`` for None;
+    a short sequence of scalars comma-separated; anything larger summarised."""
+    import numpy as np
+
+    if value is None:
+        return "—"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return f"{int(value):,}".replace(",", " ")
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if v == 0.0 or not np.isfinite(v):
+            return str(v)
+        return f"{v:.4g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.3g}"
+    if isinstance(value, (complex, np.complexfloating)):
+        return f"{format_value(value.real)} {'+' if value.imag >= 0 else '−'} " \
+               f"{format_value(abs(value.imag))}i"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, dict):
+        return f"{len(value)} entries (see report.json)"
+    arr = numeric_array(value)
+    if arr is None:
+        return (f"{len(value)} items (see report.json)" if hasattr(value, "__len__")
+                else str(value))
+    if arr.ndim == 1 and arr.size <= 6:
+        return "[" + ", ".join(format_value(v) for v in arr) + "]"
+    if arr.size == 0:
+        return "(none)"
+    shape = "×".join(str(n) for n in arr.shape)
+    if np.iscomplexobj(arr):
+        arr = np.abs(arr)
+    return f"{shape} values from {format_value(np.min(arr))} to {format_value(np.max(arr))}"
+
+
+def numeric_array(value: Any) -> Any:
+    """``value`` as a numeric numpy array, or None when it is not a regular numeric array."""
+    import numpy as np
+
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError):
+        return None
+    return arr if arr.dtype.kind in "biufc" else None
 
 
 def all_examples() -> list[Example]:
@@ -176,6 +290,19 @@ def get_example(name: str) -> Example:
     if name not in examples:
         raise KeyError(f"no example {name!r}; available: {', '.join(sorted(examples))}")
     return examples[name]
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON data: numbers, strings, lists and dicts only (numpy scalars and
+    arrays converted, non-finite floats as strings, complex numbers as ``{"re", "im"}``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> jsonable({"x": np.float64(0.5), "n": np.arange(2), "bad": float("nan")})
+    {'x': 0.5, 'n': [0, 1], 'bad': 'nan'}
+    """
+    return _jsonable(value)
 
 
 def _jsonable(value: Any) -> Any:

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from . import Example, ExampleResult
+from . import Example, ExampleResult, verdict_from
 
 __all__ = ["one_sided_oscillator", "one_sided_threshold", "beam_surrogate", "EXAMPLES"]
 
@@ -373,8 +373,8 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     ax.plot(cs, np.clip(circ, -1, None), "s-", ms=3, label="circle: min 1 + k Re G (clipped)")
     ax.axvline(c_star, color="k", ls="--", label=f"c* = √6 − 1 = {c_star:.4f}")
     ax.axhline(0, color="0.6", lw=0.8)
-    ax.set_xlabel("damping c")
-    ax.set_ylabel("margin")
+    ax.set_xlabel("damping c [N s/m]")
+    ax.set_ylabel("convergence margin [-]")
     ax.legend(fontsize="small")
     save_figure(fig, out_dir, "ch11_convergence_boundary", figures)
 
@@ -385,8 +385,8 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
         tr = simulate(loop, x0, (0, 8 * T), method="switching", u=_sin(1.0, W_SUB),
                       n_samples=800)
         ax.plot(tr.t, tr.x[:, 0], lw=1, label=f"x0 = {x0}")
-    ax.set_xlabel("t")
-    ax.set_ylabel("q")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("position q [m]")
     ax.set_title("closed loop, w = sin(2.9 t): one steady state")
     ax.legend(fontsize="small")
     save_figure(fig, out_dir, "ch11_trajectories_converge", figures)
@@ -404,8 +404,8 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
                         label=f"open-loop T-periodic solution ({text}, shooting)")
     ax.semilogy(frf.omega, frf.gamma, "k-", label="closed loop γ₁(ω) (shooting)")
     ax.set_xscale("log")
-    ax.set_xlabel("ω")
-    ax.set_ylabel("max|q| / a")
+    ax.set_xlabel("forcing frequency ω [rad/s]")
+    ax.set_ylabel("response gain max|q| / a [-]")
     ax.set_title("open loop: coexisting responses; closed loop: one steady state",
                  fontsize="medium")
     ax.legend(fontsize="x-small")
@@ -423,14 +423,14 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     fig, ax = new_figure(figsize=(6, 3.6))
     ax.semilogx(frf.omega, frf.max_floquet, "k.-", label="closed loop max|μ|")
     ax.semilogx(frf.omega, np.exp(-SIGMA * 2 * np.pi / frf.omega), "g--",
-                label="P6 bound e^(-σT), σ = 0.3")
+                label="guaranteed bound e^(-σT), σ = 0.3")
     if shot:
         ax.semilogx([w for w, _, _ in shot], [mu for _, _, mu in shot], "r^",
                     label="open-loop T-orbit max|μ|")
     ax.axhline(1.0, color="0.5", lw=0.8)
     ax.set_yscale("log")
-    ax.set_xlabel("ω")
-    ax.set_ylabel("Floquet multiplier modulus")
+    ax.set_xlabel("forcing frequency ω [rad/s]")
+    ax.set_ylabel("Floquet multiplier modulus |μ| [-]")
     ax.legend(fontsize="small")
     save_figure(fig, out_dir, "ch11_floquet", figures)
 
@@ -474,6 +474,28 @@ def run(out_dir: Path | None = None) -> ExampleResult:
                          summary=summary)
 
 
-EXAMPLES = [Example("ch11-convergent-pwa",
-                    "Convergent PWA systems: CQLF analysis, LMI feedback/observer design, "
-                    "periodic steady states and frequency responses", "ch11", run)]
+EXAMPLES = [Example(
+    "ch11-convergent-pwa",
+    "Convergent PWA systems: CQLF analysis, LMI feedback/observer design, periodic steady "
+    "states and frequency responses", "ch11", run,
+    claim="A state feedback designed by LMIs makes a piecewise-affine oscillator convergent: "
+          "every solution forgets its initial condition and approaches one steady state for "
+          "each input, so an open loop with coexisting responses gets one well-defined "
+          "frequency response that attenuates the resonance. A common quadratic Lyapunov "
+          "function certifies convergence (the uncontrolled oscillator has one exactly when "
+          "its damping exceeds √6 − 1).",
+    verdict=verdict_from(("1 bisection boundary", "boundary √6 − 1 found to relative error"),
+                         ("12 attenuation", "resonance attenuated by a factor")),
+    key_figure="ch11_trajectories_converge",
+    captions={
+        "ch11_trajectories_converge": "The closed loop under w = sin(2.9 t) from four "
+        "initial states: all trajectories join one periodic steady state.",
+        "ch11_convergence_boundary": "Convergence margins against the damping c: the "
+        "quadratic-Lyapunov margin and the circle criterion change sign at c* = √6 − 1 "
+        "(dashed line).",
+        "ch11_frequency_response": "Response gain max|q|/a against forcing frequency: the open "
+        "loop (coloured) has coexisting responses, the convergent closed loop (black) a single "
+        "frequency response, far below the open-loop resonance.",
+        "ch11_floquet": "Largest Floquet multiplier of the closed-loop periodic solution "
+        "against frequency: always under the guaranteed bound e^(−σT) (dashed) and under 1 "
+        "(grey line), i.e. the steady state is stable at every frequency."})]

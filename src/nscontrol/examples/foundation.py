@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import Example, ExampleResult, check
+from . import Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
 
 __all__ = ["EXAMPLES", "stack_lcp", "forced_oscillator"]
@@ -80,10 +80,10 @@ def _lcp_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     ax1.loglog(STACK_SIZES, times, "o-", label=f"solve_lcp ({methods[-1]})")
     ref = times[-1] * np.asarray(STACK_SIZES) / STACK_SIZES[-1]
     ax1.loglog(STACK_SIZES, ref, "k--", lw=0.8, label="∝ N")
-    ax1.set(xlabel="masses N", ylabel="seconds per solve", title="stack LCP: time vs N")
+    ax1.set(xlabel="number of masses N [-]", ylabel="time per solve [s]", title="stack LCP: time vs N")
     ax1.legend()
     ax2.loglog(STACK_SIZES, np.maximum(errors, 1e-17), "s-")
-    ax2.set(xlabel="masses N", ylabel="max relative impulse error",
+    ax2.set(xlabel="number of masses N [-]", ylabel="max relative impulse error [-]",
             title="error vs analytic impulses")
     save_figure(fig, out_dir, "foundation_lcp_stack", figures)
     metrics: dict[str, float | str] = {
@@ -156,7 +156,8 @@ def _lti_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     ax.plot(ts[::10], ivp.y[0, ::10], ".", ms=3, label="solve_ivp DOP853")
     ax.axhline(c, color="gray", lw=0.8)
     ax.plot(events, np.full(len(events), c), "rx", label="first_event crossings")
-    ax.set(xlabel="t", ylabel="x", title="forced oscillator: exact propagation and events")
+    ax.set(xlabel="t [s]", ylabel="position x [m]",
+           title="forced oscillator: exact propagation and events")
     ax.legend(loc="upper right", fontsize=8)
     save_figure(fig, out_dir, "foundation_lti_oscillator", figures)
     fig, ax = new_figure(figsize=(8, 3.2))
@@ -164,7 +165,8 @@ def _lti_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     if same_count:
         ax.semilogy(events, np.maximum(np.abs(np.asarray(events) - ivp_events), 1e-17), "rx",
                     label="|t_event - t_event,DOP853|")
-    ax.set(xlabel="t", ylabel="difference", title="exact LTI vs DOP853 (rtol 1e-12)")
+    ax.set(xlabel="t [s]", ylabel="difference |Δx| [m], |Δt| [s]",
+           title="exact LTI vs DOP853 (rtol 1e-12)")
     ax.legend(fontsize=8)
     save_figure(fig, out_dir, "foundation_lti_error", figures)
 
@@ -192,5 +194,21 @@ def run(out_dir: Path | None) -> ExampleResult:
                                  "propagation and guard events vs DOP853")
 
 
-EXAMPLES = [Example("foundation", "LCP stack family and exact LTI propagation with events",
-                    "foundation", run)]
+EXAMPLES = [Example(
+    "foundation", "LCP stack family and exact LTI propagation with events", "foundation", run,
+    claim="The LCP solver returns the contact impulses of a stack of masses equal to their "
+          "closed form, in a time linear in the number of masses, and linear flows are "
+          "propagated exactly (matrix exponential) with their level crossings located to "
+          "rounding error. These are the two building blocks every integrator relies on.",
+    verdict=verdict_from(("stack LCP impulses", "impulse error"),
+                         ("exact propagation agrees", "difference to DOP853")),
+    captions={
+        "foundation_lcp_stack": "Left: time per LCP solve against the number of masses (a "
+        "slope of one on log-log axes is linear cost). Right: the largest relative error of "
+        "the impulses against the closed form.",
+        "foundation_lti_oscillator": "A forced oscillator propagated exactly, with the "
+        "crossings of the level (grey line) found by the event search (red crosses) on top of "
+        "DOP853's solution.",
+        "foundation_lti_error": "Difference between exact propagation and DOP853 (rtol 1e-12) "
+        "over the run, and between their crossing times: both stay at the reference's own "
+        "accuracy."})]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import Example, ExampleResult, check
+from . import Example, ExampleResult, check, verdict_from
 
 H = 1e-3
 
@@ -120,8 +120,26 @@ def run_newtons_cradle(out_dir: Path | None) -> ExampleResult:
 
 
 EXAMPLES = [
-    Example("bouncing-ball", "Bouncing ball: exact event-driven vs Moreau-Jean, Zeno "
-            "accumulation then rest", "mechanics", run_bouncing_ball),
-    Example("newtons-cradle", "Newton's cradle: velocity exchange, momentum and energy per "
-            "impact", "mechanics", run_newtons_cradle),
+    Example(
+        "bouncing-ball", "Bouncing ball: exact event-driven vs Moreau-Jean, Zeno "
+        "accumulation then rest", "mechanics", run_bouncing_ball,
+        claim="A ball bouncing with restitution 0.9 makes infinitely many impacts that "
+              "accumulate at a finite time (8.5789 s), after which it rests. The event-driven "
+              "integrator finds every impact time exactly and passes the accumulation point; "
+              "Moreau-Jean time-stepping captures each impact within a step or two.",
+        verdict=verdict_from(("event-driven impact times", "impact times exact to"),
+                             ("accumulation time", "accumulation time error")),
+        captions={"bouncing_ball": "Height, velocity and energy of the ball against time: "
+                  "the event-driven (exact) and Moreau-Jean curves lie on top of each other; "
+                  "the bounces shrink geometrically and stop at the accumulation time."}),
+    Example(
+        "newtons-cradle", "Newton's cradle: velocity exchange, momentum and energy per "
+        "impact", "mechanics", run_newtons_cradle,
+        claim="In Newton's cradle a striker's velocity passes from bead to bead at elastic "
+              "impacts. Momentum and energy are conserved at every impact to rounding error, "
+              "and the last bead leaves with the striker's velocity.",
+        verdict=verdict_from(("event-driven momentum", "momentum error per impact"),
+                             ("event-driven energy", "energy error per impact")),
+        captions={"newtons_cradle": "Positions and velocities of the beads: each impact hands "
+                  "the whole velocity to the next bead, so one bead moves at a time."}),
 ]

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import Example, ExampleResult, check
+from . import Example, ExampleResult, check, verdict_from
 
 if TYPE_CHECKING:
     from ..simulate import Trajectory
@@ -83,12 +83,13 @@ def run_relay_feedback(out_dir: Path | None) -> ExampleResult:
     axes[0].semilogy(ie.t, np.maximum(np.abs(y_ie), floor), label="implicit Euler")
     axes[0].semilogy(sw.t, np.maximum(np.abs(y_sw), floor), "--", label="switching (Filippov)")
     axes[0].axvline(t_r, color="0.5", lw=0.8)
-    axes[0].set(xlabel="t [s]", ylabel="|y| = |x1 + x2|", title="sliding variable")
+    axes[0].set(xlabel="t [s]", ylabel="sliding variable |y| = |x1 + x2| [-]",
+                title="sliding variable")
     axes[0].legend(fontsize="small")
     axes[1].plot(ie.x[:, 0], ie.x[:, 1], label="implicit Euler")
     axes[1].plot(sw.x[:, 0], sw.x[:, 1], "--", label="switching")
     axes[1].plot([-1, 1], [1, -1], color="0.6", lw=0.8, label="y = 0")
-    axes[1].set(xlabel="x1", ylabel="x2", title="phase plane")
+    axes[1].set(xlabel="state x1 [-]", ylabel="state x2 [-]", title="phase plane")
     axes[1].legend(fontsize="small")
     save_figure(fig, out_dir, "relay_feedback", result.figures)
     return result
@@ -149,25 +150,52 @@ def run_pwa_oscillator(out_dir: Path | None) -> ExampleResult:
     axes[0].plot(tr.t, tr.x[:, 0], lw=0.9)
     axes[0].plot(crossings, np.zeros_like(crossings), "rx", ms=4, label="crossings")
     axes[0].axhline(0.0, color="0.6", lw=0.6)
-    axes[0].set(ylabel="q", title="one-sided spring, a = 1, ω = 2.9")
+    axes[0].set(ylabel="position q [m]", title="one-sided spring, a = 1, ω = 2.9")
     axes[0].legend(fontsize="small")
     axes[1].semilogy(tr.t, np.maximum(np.max(np.abs(ref.sol(tr.t).T - tr.x), axis=1), 1e-17))
-    axes[1].set(xlabel="t [s]", ylabel="|exact - DOP853|")
+    axes[1].set(xlabel="t [s]", ylabel="|exact − DOP853| [m, m/s]")
     save_figure(fig, out_dir, "pwa_oscillator", result.figures)
     fig, ax = new_figure(figsize=(5, 5))
-    ax.plot(orbit.x[:, 0], orbit.x[:, 1])
     fine = simulate(p.system, x, (0.0, 2 * T), n_samples=400, progress=False)
     ax.plot(fine.x[:, 0], fine.x[:, 1], label="2T-periodic orbit")
     ax.axvline(0.0, color="0.6", lw=0.6)
-    ax.set(xlabel="q", ylabel="v", title=f"|μ| = {np.abs(mu).round(3).tolist()}")
+    ax.set(xlabel="position q [m]", ylabel="velocity v [m/s]",
+           title=f"Floquet multipliers |μ| = {np.abs(mu).round(3).tolist()}")
     ax.legend(fontsize="small")
     save_figure(fig, out_dir, "pwa_oscillator_orbit", result.figures)
     return result
 
 
 EXAMPLES = [
-    Example("relay-feedback", "Relay feedback: reaching and sliding without chattering "
-            "(implicit Euler vs switching vs explicit Euler)", "set-valued", run_relay_feedback),
-    Example("pwa-oscillator", "One-sided spring under harmonic forcing: exact crossings, "
-            "saltation-based monodromy", "set-valued", run_pwa_oscillator),
+    Example(
+        "relay-feedback", "Relay feedback: reaching and sliding without chattering "
+        "(implicit Euler vs switching vs explicit Euler)", "set-valued", run_relay_feedback,
+        claim="A linear system under relay (sign) feedback reaches the switching surface "
+              "y = 0 at √3 − 1 s and then slides along it. Implicit Euler with the set-valued "
+              "law stays exactly on the surface without chattering, the switching integrator "
+              "finds the reaching time to 1e-10 s, while explicit Euler chatters.",
+        verdict=verdict_from(("switching reaching time", "reaching time error"),
+                             ("implicit Euler max|y|", "implicit Euler |y| after reaching")),
+        captions={"relay_feedback": "Left: the sliding variable |y| on a log scale; implicit "
+                  "Euler and the switching integrator drop to zero at the reaching time "
+                  "(grey line) while explicit Euler keeps oscillating around it. Right: the "
+                  "phase plane, where both exact methods slide along the line y = 0."}),
+    Example(
+        "pwa-oscillator", "One-sided spring under harmonic forcing: exact crossings, "
+        "saltation-based monodromy", "set-valued", run_pwa_oscillator,
+        claim="For a forced oscillator whose spring stiffens on one side (a piecewise-affine "
+              "system), the exact integrator locates every crossing of the switching plane "
+              "and matches a tight ODE solver. The monodromy matrix built from saltation matrices matches "
+              "finite differences, and the forced response settles on a stable orbit of "
+              "twice the forcing period.",
+        verdict=verdict_from(("exact switching vs tight DOP853", "difference to DOP853"),
+                             ("max |Floquet", "largest Floquet multiplier")),
+        key_figure="pwa_oscillator_orbit",
+        captions={
+            "pwa_oscillator": "Top: position with the crossings of q = 0 marked. Bottom: "
+            "the difference to a tight DOP853 reference, at rounding level over the run.",
+            "pwa_oscillator_orbit": "The periodic orbit in the phase plane, sampled at 400 "
+            "points over two forcing periods; the one-sided spring engages for q < 0 (left "
+            "of the grey line). Both Floquet multipliers in the title lie inside the unit circle: the "
+            "orbit is stable."}),
 ]

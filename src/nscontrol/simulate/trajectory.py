@@ -387,7 +387,7 @@ class Trajectory:
     # -- plotting --------------------------------------------------------------------------
     def plot(self, states: Sequence[str | int] | None = None,
              signals: Iterable[str] = (), *, mark_events: bool | str = True,
-             ax: Any = None) -> Any:
+             ax: Any = None, units: Mapping[str, str] | None = None) -> Any:
         """Plot states (and signals, one panel each) against time; returns the figure.
 
         Parameters
@@ -400,6 +400,17 @@ class Trajectory:
             Draw a vertical line at every event (or only at events of this kind).
         ax
             An existing matplotlib axes for the states panel; signals then go nowhere.
+        units
+            Unit of each state or signal by name (e.g. ``{"q": "m", "v": "m/s"}``): the
+            axes read ``"q, v [m, m/s]"``; without units an axis is labelled by the names.
+
+        Examples
+        --------
+        >>> import matplotlib; matplotlib.use("Agg")
+        >>> traj = Trajectory(t=np.linspace(0, 1, 5), x=np.zeros((5, 2)), state_names=("q", "v"))
+        >>> fig = traj.plot(units={"q": "m", "v": "m/s"})
+        >>> fig.axes[0].get_ylabel(), fig.axes[0].get_xlabel()
+        ('q, v [m, m/s]', 't [s]')
         """
         import matplotlib.pyplot as plt
 
@@ -411,15 +422,20 @@ class Trajectory:
             axes = axes[:, 0]
         else:
             fig, axes = ax.figure, [ax]
+        units = dict(units or {})
         picks = list(range(min(self.n_states, 8))) if states is None else list(states)
+        names = []
         for p in picks:
             label = p if isinstance(p, str) else (self.state_names[p] if self.state_names
                                                    else f"x{p}")
+            names.append(str(label))
             axes[0].plot(self.t, self.state(p), label=str(label))
-        axes[0].legend(loc="best", fontsize="small")
+        axes[0].set_ylabel(_axis_label(names, units))
+        if len(picks) > 1:
+            axes[0].legend(loc="best", fontsize="small")
         for a, name in zip(axes[1:], signals, strict=False):
             a.plot(self.t, self.signal(name))
-            a.set_ylabel(name)
+            a.set_ylabel(_axis_label([name], units))
         if mark_events:
             kind = mark_events if isinstance(mark_events, str) else None
             for te in self.event_times(kind)[:500]:
@@ -427,6 +443,17 @@ class Trajectory:
                     a.axvline(te, color="0.7", lw=0.5, zorder=0)
         axes[-1].set_xlabel("t [s]")
         return fig
+
+
+def _axis_label(names: Sequence[str], units: Mapping[str, str]) -> str:
+    """``"q, v [m, m/s]"``: the names (the first four, then "..."), with their units in
+    brackets when known (one unit when they share it)."""
+    shown = list(names[:4]) + (["..."] if len(names) > 4 else [])
+    found = [units[n] for n in names[:4] if n in units]
+    if not found:
+        return ", ".join(shown)
+    unit = found[0] if len(set(found)) == 1 else ", ".join(units.get(n, "?") for n in names[:4])
+    return f"{', '.join(shown)} [{unit}]"
 
 
 _FORMAT = "nscontrol.Trajectory/3"

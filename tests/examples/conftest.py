@@ -1,0 +1,25 @@
+"""Every figure an example draws is inspected before it is saved: labelled axes, a caption."""
+
+import pytest
+
+from nscontrol.examples import all_examples
+from nscontrol.examples._figures import FIGURE_HOOKS, unlabelled_axes
+
+
+@pytest.fixture(autouse=True)
+def figures_are_labelled_and_captioned():
+    """Collects the figures the test's example finishes (through ``FIGURE_HOOKS``) and, after
+    the test, refuses a panel without x or y label and a figure its example gives no caption."""
+    seen: list[tuple[str, list[str]]] = []
+
+    def inspect(name, fig):
+        seen.append((name, unlabelled_axes(fig)))
+
+    FIGURE_HOOKS.append(inspect)
+    yield seen
+    FIGURE_HOOKS.remove(inspect)
+    captioned = {stem for ex in all_examples() for stem in ex.captions}
+    unlabelled = {name: missing for name, missing in seen if missing}
+    assert not unlabelled, f"figures with unlabelled axes: {unlabelled}"
+    uncaptioned = sorted({name for name, _ in seen} - captioned)
+    assert not uncaptioned, f"figures without a caption in their Example: {uncaptioned}"
