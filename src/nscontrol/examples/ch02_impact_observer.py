@@ -406,7 +406,8 @@ def _figures(out_dir: Path, res: ExampleResult, runs_eq: dict, runs_uneq: dict,
     for i, name in ((0, "q1"), (1, "q2"), (4, "q3")):
         ax.plot(traj.t, traj.x[:, i], label=name, lw=0.9)
     ax.plot(t_imp, [ev.pre[1] for ev in traj.events_of("jump")], "k|", ms=12, label="impacts")
-    ax.set(xlabel="t [s]", ylabel="position q [m]", title="positions (equal masses), impacts marked")
+    ax.set(xlabel="t [s]", ylabel="position q [m]",
+           title="positions (equal masses), impacts marked")
     ax.legend(fontsize="small", ncol=4)
     save_figure(fig, out_dir, "ch02_positions", res.figures)
 
@@ -473,7 +474,8 @@ def _figures(out_dir: Path, res: ExampleResult, runs_eq: dict, runs_uneq: dict,
         ax.loglog([run.design.eps], [run.design.certificate.alpha], marker, color="k", ms=6,
                   mfc="none", label=f"{name}: certified (eps, alpha) = ({run.design.eps:.3g}, "
                                     f"{run.design.certificate.alpha:.3g}) of search_epsilon")
-    ax.set(xlabel="observer parameter eps [-]", ylabel="decay rate [1/s]", title="measured decay rate vs eps")
+    ax.set(xlabel="observer parameter eps [-]", ylabel="decay rate [1/s]",
+           title="measured decay rate vs eps")
     ax.set_xticks(EPS_LIST, [f"{t:g}" for t in EPS_LIST], minor=False)
     ax.set_xticks([], minor=True)
     ax.invert_xaxis()

@@ -80,7 +80,8 @@ def _lcp_part(figures: list[Path], out_dir: Path | None) -> tuple[dict, list]:
     ax1.loglog(STACK_SIZES, times, "o-", label=f"solve_lcp ({methods[-1]})")
     ref = times[-1] * np.asarray(STACK_SIZES) / STACK_SIZES[-1]
     ax1.loglog(STACK_SIZES, ref, "k--", lw=0.8, label="∝ N")
-    ax1.set(xlabel="number of masses N [-]", ylabel="time per solve [s]", title="stack LCP: time vs N")
+    ax1.set(xlabel="number of masses N [-]", ylabel="time per solve [s]",
+            title="stack LCP: time vs N")
     ax1.legend()
     ax2.loglog(STACK_SIZES, np.maximum(errors, 1e-17), "s-")
     ax2.set(xlabel="number of masses N [-]", ylabel="max relative impulse error [-]",

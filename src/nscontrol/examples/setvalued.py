@@ -185,8 +185,9 @@ EXAMPLES = [
         "saltation-based monodromy", "set-valued", run_pwa_oscillator,
         claim="For a forced oscillator whose spring stiffens on one side (a piecewise-affine "
               "system), the exact integrator locates every crossing of the switching plane "
-              "and matches a tight ODE solver. The monodromy matrix built from saltation matrices matches "
-              "finite differences, and the forced response settles on a stable orbit of "
+              "and matches a tight ODE solver. The monodromy matrix built from saltation "
+              "matrices matches finite differences, and the forced response settles on a "
+              "stable orbit of "
               "twice the forcing period.",
         verdict=verdict_from(("exact switching vs tight DOP853", "difference to DOP853"),
                              ("max |Floquet", "largest Floquet multiplier")),
@@ -196,6 +197,6 @@ EXAMPLES = [
             "the difference to a tight DOP853 reference, at rounding level over the run.",
             "pwa_oscillator_orbit": "The periodic orbit in the phase plane, sampled at 400 "
             "points over two forcing periods; the one-sided spring engages for q < 0 (left "
-            "of the grey line). Both Floquet multipliers in the title lie inside the unit circle: the "
-            "orbit is stable."}),
+            "of the grey line). Both Floquet multipliers in the title lie inside the unit "
+            "circle: the orbit is stable."}),
 ]
