@@ -192,6 +192,11 @@ def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
     name contains ``key`` and says ``"phrase <measured> (bound <op> <threshold>)"``; the
     count of passing checks closes the line.
 
+    Parameters
+    ----------
+    *parts : tuple of (str, str)
+        ``(key, phrase)`` pairs: a substring of a check's name and the words that quote it.
+
     Examples
     --------
     >>> res = ExampleResult("x", checks=[check("impact time error [s]", 3e-15, 1e-12)])
@@ -221,7 +226,13 @@ _OP_TEXT = {"<=": "≤", "<": "<", ">=": "≥", ">": ">", "==": "="}
 
 def format_value(value: Any) -> str:
     """A scalar as a reader wants it: 4 significant digits, ``yes``/``no``, ``—`` for None;
-    a short sequence of scalars comma-separated; anything larger summarised."""
+    a short sequence of scalars comma-separated; anything larger summarised.
+
+    Parameters
+    ----------
+    value : object
+        A number, bool, None, string or a sequence of them.
+    """
     import numpy as np
 
     if value is None:
@@ -257,7 +268,13 @@ def format_value(value: Any) -> str:
 
 
 def numeric_array(value: Any) -> Any:
-    """``value`` as a numeric numpy array, or None when it is not a regular numeric array."""
+    """``value`` as a numeric numpy array, or None when it is not a regular numeric array.
+
+    Parameters
+    ----------
+    value : object
+        Anything :func:`numpy.asarray` may take.
+    """
     import numpy as np
 
     try:
@@ -295,6 +312,11 @@ def get_example(name: str) -> Example:
 def jsonable(value: Any) -> Any:
     """``value`` as plain JSON data: numbers, strings, lists and dicts only (numpy scalars and
     arrays converted, non-finite floats as strings, complex numbers as ``{"re", "im"}``).
+
+    Parameters
+    ----------
+    value : object
+        Any nesting of dicts, sequences, numpy arrays and scalars.
 
     Examples
     --------
