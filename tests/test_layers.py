@@ -5,7 +5,7 @@ Every module of ``src/nscontrol`` is parsed with :mod:`ast` (nothing is imported
 check also sees imports made inside functions and ``importlib.import_module("...")`` calls
 with a literal name. The layers, lowest first (docs/architecture.md)::
 
-    errors, _validation, _progress, sweep -> numerics -> laws -> systems -> simulate
+    errors, _validation, _progress, _lazy, sweep -> numerics -> laws -> systems -> simulate
     -> design -> analysis -> testing -> examples -> cli, report, the package root
 
 Modules of one layer may import each other. A name starting with ``_`` belongs to its
@@ -30,7 +30,7 @@ ROOT = Path(nscontrol.__file__).resolve().parent
 
 #: Layer of each top-level unit of the package (a subpackage or a top-level module).
 LAYERS: dict[str, int] = {
-    "errors": 0, "_validation": 0, "_progress": 0, "sweep": 0,
+    "errors": 0, "_validation": 0, "_progress": 0, "_lazy": 0, "sweep": 0,
     "numerics": 1,
     "laws": 2,
     "systems": 3,
