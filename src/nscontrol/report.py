@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import html
 import json
-import os
 import tempfile
 import time
 import traceback
 from pathlib import Path
 from typing import Any
 
+from ._files import replaced_atomically
 from .errors import ModelError
 from .examples import Example, ExampleResult, all_examples, format_value
 from .examples import numeric_array as _as_numeric_array
@@ -61,13 +61,8 @@ def select_examples(names: list[str] | None) -> list[Example]:
 
 def _write_atomically(path: Path, text: str) -> None:
     """``path`` replaced in one step: a failure leaves the previous file whole."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with replaced_atomically(path) as tmp:
         tmp.write_text(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def run_example(example: Example, out_dir: Path | None) -> tuple[ExampleResult | None, str, float]:

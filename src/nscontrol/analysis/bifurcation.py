@@ -21,7 +21,6 @@ its points as failed — never the others.
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import replaced_atomically
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import ModelError
 from .orbits import Forced, at_times, sample_on_grid
@@ -114,26 +114,19 @@ class BifurcationDiagram:
         import h5py
 
         path = Path(path)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            with h5py.File(tmp, "w") as f:
-                f.attrs.update(format="nscontrol.BifurcationDiagram/1",
-                               parameter_name=self.parameter_name, chunk_size=self.chunk_size)
-                f.attrs["directions"] = np.array(self.directions, dtype="S")
-                f.attrs["state_names"] = np.array(self.state_names, dtype="S")
-                f.create_dataset("values", data=self.values)
-                f.create_dataset("points", data=self.points, compression="gzip")
-                f.create_dataset("multiplicity", data=self.multiplicity)
-                f.create_dataset("error_direction",
-                                 data=np.array([e[0] for e in self.errors], dtype="S"))
-                f.create_dataset("error_index", data=np.array([e[1] for e in self.errors], int))
-                f.create_dataset("error_message",
-                                 data=np.array([e[2].encode() for e in self.errors], dtype="S"))
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        with replaced_atomically(path) as tmp, h5py.File(tmp, "w") as f:
+            f.attrs.update(format="nscontrol.BifurcationDiagram/1",
+                           parameter_name=self.parameter_name, chunk_size=self.chunk_size)
+            f.attrs["directions"] = np.array(self.directions, dtype="S")
+            f.attrs["state_names"] = np.array(self.state_names, dtype="S")
+            f.create_dataset("values", data=self.values)
+            f.create_dataset("points", data=self.points, compression="gzip")
+            f.create_dataset("multiplicity", data=self.multiplicity)
+            f.create_dataset("error_direction",
+                             data=np.array([e[0] for e in self.errors], dtype="S"))
+            f.create_dataset("error_index", data=np.array([e[1] for e in self.errors], int))
+            f.create_dataset("error_message",
+                             data=np.array([e[2].encode() for e in self.errors], dtype="S"))
         return path
 
     @classmethod

@@ -37,7 +37,6 @@ eigenvector ``(w, -w)``; continuation of the doubled problem starts along that d
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import replaced_atomically
 from .._validation import FloatArray, check_integer, check_positive
 from ..errors import ModelError, SolverError
 from .orbits import Forced, Orbit, _initial_nodes, _shooting_system, make_orbit
@@ -194,27 +194,20 @@ class Branch:
         import h5py
 
         path = Path(path)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            with h5py.File(tmp, "w") as f:
-                f.attrs.update(format="nscontrol.Branch/1", parameter_name=self.parameter_name,
-                               stop_reason=self.stop_reason, n_steps=self.n_steps,
-                               corrector_iterations=self.corrector_iterations)
-                f.attrs["state_names"] = np.array(self.state_names, dtype="S")
-                for key in ("p", "nodes", "period", "multipliers", "stable", "n_impacts"):
-                    f.create_dataset(key, data=getattr(self, key))
-                g = f.create_group("points")
-                for i, pt in enumerate(self.points):
-                    s = g.create_group(str(i))
-                    s.attrs.update(kind=pt.kind, parameter=pt.parameter, index=pt.index,
-                                   uncertainty=pt.uncertainty)
-                    s.create_dataset("nodes", data=pt.nodes)
-                    s.create_dataset("multipliers", data=pt.multipliers)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        with replaced_atomically(path) as tmp, h5py.File(tmp, "w") as f:
+            f.attrs.update(format="nscontrol.Branch/1", parameter_name=self.parameter_name,
+                           stop_reason=self.stop_reason, n_steps=self.n_steps,
+                           corrector_iterations=self.corrector_iterations)
+            f.attrs["state_names"] = np.array(self.state_names, dtype="S")
+            for key in ("p", "nodes", "period", "multipliers", "stable", "n_impacts"):
+                f.create_dataset(key, data=getattr(self, key))
+            g = f.create_group("points")
+            for i, pt in enumerate(self.points):
+                s = g.create_group(str(i))
+                s.attrs.update(kind=pt.kind, parameter=pt.parameter, index=pt.index,
+                               uncertainty=pt.uncertainty)
+                s.create_dataset("nodes", data=pt.nodes)
+                s.create_dataset("multipliers", data=pt.multipliers)
         return path
 
     @classmethod

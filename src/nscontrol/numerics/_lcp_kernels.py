@@ -689,17 +689,8 @@ def verify_dense(M, q, z, w_out):
 @njit(cache=True)
 def verify_tridiagonal(lower, diag, upper, q, z, w_out):
     """``w_out = M z + q`` for tridiagonal ``M``; returns ``(residual, round-off floor)``."""
-    n = q.shape[0]
     _tridiag_w(lower, diag, upper, q, z, w_out)
-    row_sum_max = 0.0
-    for i in range(n):
-        a = abs(diag[i])
-        if i > 0:
-            a += abs(lower[i - 1])
-        if i < n - 1:
-            a += abs(upper[i])
-        row_sum_max = max(row_sum_max, a)
-    return _residual_and_floor(z, w_out, q, row_sum_max)
+    return _residual_and_floor(z, w_out, q, tridiagonal_inf_norm(lower, diag, upper))
 
 
 @njit(cache=True)

@@ -12,8 +12,6 @@ step or selected signals only) and call :meth:`Recorder.finish` to obtain the fr
 from __future__ import annotations
 
 import json
-import os
-import secrets
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -22,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._files import replaced_atomically
 from .._validation import as_float_array, as_real_scalar, check_integer
 from ..errors import DimensionError, ModelError
 from ._run_context import register_recorder
@@ -252,13 +251,8 @@ class Trajectory:
                                     "it first (e.g. Path(...).mkdir(parents=True))")
         if path.is_dir():
             raise IsADirectoryError(f"path: {str(path)!r} is a folder; pass a file name")
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-        try:
+        with replaced_atomically(path) as tmp:
             self._write(tmp)
-            os.replace(tmp, path)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
 
     def _write(self, path: Path) -> None:
         """The body of :meth:`save`: the whole file, written to a fresh ``path``."""
