@@ -20,6 +20,10 @@ Where the Jacobian comes from
   ``Δ`` is ``e^{AΔ}`` (:class:`~nscontrol.numerics.lti.LTIFlow`); at each impact of the event
   table the saltation matrix of Newton's law is applied. Nothing is differentiated
   numerically.
+* Nonlinear mechanical systems (``M(q)``, nonlinear forces or gaps, a callable controller)
+  under ``event_driven``: the integrator's ``sensitivity`` (DOP853 with the variational
+  equation, the saltation matrix of Newton's law with ``M(q)`` and ``g(q)`` at each impact);
+  the smallest impact speed is read from the event table.
 
 Grazing monitors
 ----------------
@@ -218,19 +222,42 @@ def stroboscopic_map(forced: Forced, x0: Any, *, n_periods: int = 1,
     k = check_integer("n_periods", n_periods, minimum=1)
     x0 = as_vector("x0", x0, forced.n_states)
     tf = t0 + k * forced.period
-    if _has_sensitivity(forced):
-        tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]), sensitivity=True)
-        J = np.asarray(tr.stats["state_transition"], float)
-        speed = np.inf
-    elif _is_linear_mechanics(forced.system):
+    if _is_linear_mechanics(forced.system):   # exact: nothing integrated numerically
         tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]))
         J, speed = _mechanics_transition(_model_of(forced.system), tr, t0, tf, forced.u)
+    elif _has_sensitivity(forced):
+        tr = _transition_over(forced, x0, t0, tf)
+        J = np.asarray(tr.stats["state_transition"], float)
+        speed = _min_impact_speed(forced.system, tr)
     else:
         raise ModelError(f"system: no state transition for {type(forced.system).__name__} "
                          f"with method {forced.method!r}; use a method with the "
                          f"'sensitivity' capability or a linear LagrangianSystem")
     sig = tuple((e.kind, int(e.index)) for e in tr.events)
     return MapResult(np.asarray(tr.x[-1], float), J, tr, sig, speed)
+
+
+def _transition_over(forced: Forced, x0: FloatArray, t0: float, tf: float) -> Any:
+    """The run with ``sensitivity=True``, sampled at ``t0, tf`` by a ``t_eval`` method and on
+    the coarsest grid (``dt = tf - t0``) by ``event_driven`` (whose ``t_eval`` would
+    interpolate)."""
+    from ..simulate.driver import integrator_for
+
+    cls = integrator_for(forced.system, forced.method)
+    grid = ({"t_eval": np.array([t0, tf])} if "t_eval" in cls.capabilities
+            else {"dt": tf - t0} if "dt" in getattr(cls, "options", ()) else {})
+    return forced.simulate(x0, (t0, tf), sensitivity=True, **grid)
+
+
+def _min_impact_speed(system: Any, tr: Any) -> float:
+    """Smallest approach speed ``-∇g_j(q)·v-`` over the impacts of a mechanical run
+    (``inf`` for another system or no impact)."""
+    if not hasattr(system, "gap_jacobian"):
+        return np.inf
+    n = system.n_dof
+    speeds = [-float(system.gap_jacobian(ev.pre[:n])[ev.index] @ ev.pre[n:])
+              for ev in tr.events if ev.kind == "impact"]
+    return min(speeds, default=np.inf)
 
 
 _MODELS: dict[int, tuple[Any, _LinearMechanics]] = {}
