@@ -10,7 +10,6 @@ from nscontrol.analysis.continuation import continue_orbit
 from nscontrol.analysis.impact_oscillator import ImpactOscillator
 from nscontrol.analysis.orbits import Forced, find_orbit, stroboscopic_map
 from nscontrol.numerics.differences import central_difference_jacobian
-from nscontrol.systems.lagrangian import LagrangianSystem
 from nscontrol.testing.mechanics_problems import ImpactingPendulum
 
 # DOP853's global error over one period: at most (steps <= 200) local errors of
@@ -20,30 +19,12 @@ RTOL = 1e-12
 OPTIONS = dict(rtol=RTOL, atol=RTOL * 1e-2, progress=False)
 
 
-def _through_dop853(osc: ImpactOscillator) -> Forced:
-    """The impact oscillator with its drive written as a force callable (not linear any
-    more to the integrator: DOP853 and the variational equation, not exponentials)."""
-    F, w = osc.forcing, osc.omega
-
-    def drive(t, q, v):
-        return np.array([F * np.cos(w * t)])
-
-    def drive_jacobian(t, q, v):
-        return np.zeros((1, 1)), np.zeros((1, 1))
-
-    s = LagrangianSystem(np.array([[osc.mass]]), stiffness=[[osc.stiffness]],
-                         damping=[[osc.damping]], force=drive, force_jacobian=drive_jacobian,
-                         gap_matrix=[[-1.0]], gap_offset=[osc.stop],
-                         restitution=osc.restitution)
-    assert not s.is_linear
-    return Forced(s, None, osc.period, method="event_driven",
-                  options=tuple(OPTIONS.items()))
-
-
 def test_impact_oscillator_through_the_nonlinear_path_gives_the_closed_form():
     osc = ImpactOscillator(omega=2.5, stop=0.1, forcing=2.0)
     cf = osc.admissible_orbit()
-    orb = find_orbit(_through_dop853(osc), cf.x0 + [1e-3, -1e-3])
+    f = osc.forced(drive_as_force=True, **OPTIONS)    # DOP853, not exponentials
+    assert not f.system.is_linear
+    orb = find_orbit(f, cf.x0 + [1e-3, -1e-3])
     assert orb.signature == (("impact", 0),)
     delta = STEP_BOUND * RTOL * max(1.0, np.max(np.abs(cf.x0)))   # the map's error
     kappa = np.linalg.cond(np.eye(2) - cf.monodromy)
