@@ -9,6 +9,7 @@ from nscontrol import simulate
 from nscontrol.errors import ModelError, SolverError
 from nscontrol.numerics.differences import central_difference_jacobian
 from nscontrol.numerics.saltation import impact_jump_jacobian
+from nscontrol.systems.hybrid import LinearHybridSystem
 from nscontrol.systems.lagrangian import LagrangianSystem
 from nscontrol.testing.mechanics_problems import ImpactingPendulum
 
@@ -76,6 +77,11 @@ def test_refusals():
     p = ImpactingPendulum()
     with pytest.raises(ModelError, match="^sensitivity: expected True or False"):
         simulate(p.system(), p.x_guess, (0.0, 1.0), sensitivity="yes")
+    hybrid = LinearHybridSystem([[0, 1, 0], [0, 0, -9.81], [0, 0, 0]], [[1, 0, 0]], [0.0],
+                                np.diag([1.0, -0.5, 1.0]))
+    with pytest.raises(ModelError, match="^sensitivity: event_driven computes the state "
+                                         "transition of a LagrangianSystem"):
+        simulate(hybrid, [1.0, 0.0, 1.0], (0.0, 1.0), sensitivity=True)
     # two contacts closing at the same instant: the jump is not differentiable there
     twin = LagrangianSystem(np.eye(1), force=lambda t, q, v: np.zeros(1),
                             gap_matrix=[[-1.0], [-1.0]], gap_offset=[0.5, 0.5],
