@@ -172,13 +172,13 @@ class ImpactOscillator:
         """
         from ..systems.lagrangian import LagrangianSystem
 
-        drive = (dict(force=_Drive(self.forcing, self.omega), force_jacobian=_Drive.jacobian)
-                 if drive_as_force else {})
+        drive = _Drive(self.forcing, self.omega) if drive_as_force else None
         return LagrangianSystem(np.array([[self.mass]]), stiffness=np.array([[self.stiffness]]),
                                 damping=np.array([[self.damping]]),
                                 gap_matrix=np.array([[-1.0]]), gap_offset=np.array([self.stop]),
                                 restitution=self.restitution, actuation=np.array([[1.0]]),
-                                names=("mass",), **drive)
+                                names=("mass",), force=drive,
+                                force_jacobian=None if drive is None else _Drive.jacobian)
 
     def input(self) -> Any:
         """The drive ``F cos(ωt)`` as an :class:`~nscontrol.numerics.lti.Exosystem`."""
