@@ -87,3 +87,32 @@ def test_continuation_of_the_pendulum_orbit_in_the_forcing(pendulum_orbit):
     x_end = br.nodes[-1, 0]
     m = stroboscopic_map(family(br.p[-1]), x_end)
     assert np.max(np.abs(m.x - x_end)) <= 1e-10 * max(1.0, np.max(np.abs(x_end)))
+
+
+@dataclass(frozen=True)
+class _DriveAsForce:
+    """``F -> Forced``: the impact oscillator at forcing ``F``, drive written as a force."""
+
+    base: ImpactOscillator
+
+    def __call__(self, F: float) -> Forced:
+        return self.base.with_(forcing=float(F)).forced(drive_as_force=True, **OPTIONS)
+
+
+def test_non_impacting_branch_grazes_at_the_closed_form_forcing_through_the_nonlinear_path():
+    osc = ImpactOscillator(omega=2.5, stop=0.1)
+    Fg = osc.grazing_forcing()
+    family = _DriveAsForce(osc)
+    orb = find_orbit(family(0.4), osc.with_(forcing=0.4).non_impacting_state(0.0))
+    # the smallest gap of the free orbit, d - A (closed form): the samples' minimum refined
+    # on ġ = 0, as accurate as the runs (STEP_BOUND·rtol·max(1, |x|) = 1e-9)
+    delta = STEP_BOUND * RTOL
+    assert orb.n_impacts == 0
+    assert orb.min_gap == pytest.approx(osc.stop - osc.with_(forcing=0.4).amplitude(),
+                                        abs=delta)
+    br = continue_orbit(family, 0.4, orb.x0, p_range=(0.0, 1.0), step=0.05, step_max=0.2)
+    (g,) = br.special("grazing")
+    # the monitor d - A(F) has slope -d/F_g at grazing: an error delta in it moves the zero
+    # by delta·F_g/d, i.e. delta/d relative; plus the location tolerance 1e-10
+    assert abs(g.parameter - Fg) / Fg <= 1e-10 + delta / osc.stop
+    assert br.stop_reason.startswith("grazing")
