@@ -257,8 +257,8 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
         from ._switching_filippov import run_smooth as runner
     else:
         raise ModelError(f"switching: expected a PiecewiseAffineSystem, FilippovSystem, "
-                         f"SwitchedAffineSystem or NonlinearSystem, got {type(system).__name__}; Lur'e systems use "
-                         f"method='implicit_euler'")
+                         f"SwitchedAffineSystem or NonlinearSystem, got "
+                         f"{type(system).__name__}; Lur'e systems use method='implicit_euler'")
     x0 = as_vector("x0", x0, system.n_states)
     run = _Run(system, x0, t_span, options)
     try:

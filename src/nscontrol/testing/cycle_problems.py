@@ -121,10 +121,9 @@ def polar_normal_form(radial: ArrayLike = (2.0, -3.0, 1.0), omega: float = 4.0
     w = check_positive("omega", omega)
     field = _PolarField(coef, w)
     system = NonlinearSystem(2, field, field.jacobian, state_names=("x", "y"))
-    roots = field.g.roots()
-    radii = sorted(float(r.real) for r in roots
-                   if abs(r.imag) <= 1e-12 * (1 + abs(r)) and r.real > 0.0
-                   and field.dg(r.real) != 0.0)
+    roots = np.asarray(field.g.roots(), complex)
+    real = roots.real[np.abs(roots.imag) <= 1e-12 * (1.0 + np.abs(roots))]
+    radii = sorted(float(r) for r in real if r > 0.0 and field.dg(r) != 0.0)
     cycles = tuple(KnownCycle(np.array([r, 0.0]), 2 * np.pi / w,
                               float(np.exp(2 * np.pi * r * field.dg(r) / w)),
                               np.array([0.0, 1.0])) for r in radii)
