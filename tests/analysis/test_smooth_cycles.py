@@ -8,6 +8,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from nscontrol.analysis import Autonomous, continue_orbit, find_cycle
+from nscontrol.errors import DimensionError, ModelError
 from nscontrol.testing.cycle_problems import (
     hopf_normal_form,
     polar_normal_form,
@@ -140,10 +141,11 @@ def test_hopf_cycle_is_continued_in_mu():
 
     def factory(mu):
         system, _ = hopf_normal_form(mu, omega)
-        return Autonomous(system, 2 * np.pi / omega, normal=[0.0, 1.0], offset=0.0)
+        return Autonomous(system, 1.01 * 2 * np.pi / omega, normal=[0.0, 1.0], offset=0.0)
 
     T = 2 * np.pi / omega
-    branch = continue_orbit(factory, 0.25, [0.51, 0.0, 1.01 * T], p_range=(0.1, 1.0),
+    # the start gives the state alone: the factory's period is the guess of T
+    branch = continue_orbit(factory, 0.25, [0.51, 0.0], p_range=(0.1, 1.0),
                             step=0.05, step_max=0.2, parameter_name="mu")
     assert branch.stop_reason.startswith("left p_range") and branch.points == ()
     mu = branch.p
@@ -162,3 +164,17 @@ def test_hopf_cycle_is_continued_in_mu():
     rel = np.abs(branch.multipliers[:, 0].real / expected - 1.0)
     assert np.max(rel) <= INTEGRATION + 6 * np.sqrt(mu.max()) * T * err
     assert branch.stable.all()
+
+
+def test_a_cycle_is_continued_from_one_node_only():
+    system, _ = hopf_normal_form(0.25, 2.0)
+
+    def factory(mu):
+        return Autonomous(system, np.pi, normal=[0.0, 1.0])
+
+    with pytest.raises(ModelError, match=r"n_periods: a cycle is shot from one node"):
+        continue_orbit(factory, 0.25, [0.5, 0.0], p_range=(0.1, 1.0), n_periods=2)
+    with pytest.raises(DimensionError, match=r"x0"):
+        continue_orbit(factory, 0.25, [0.5, 0.0, np.pi, 1.0], p_range=(0.1, 1.0))
+    with pytest.raises(DimensionError, match=r"normal"):
+        Autonomous(system, np.pi, normal=[0.0, 1.0, 0.0])

@@ -395,6 +395,8 @@ def find_orbit(forced: Forced, x0: Any, *, n_periods: int = 1, tol: float = 1e-1
 
 
 def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
+    if isinstance(forced, Autonomous):
+        return _cycle_node(forced, x0, k)
     arr = np.asarray(x0, float)
     if arr.ndim == 2:
         if arr.shape != (k, n):
@@ -670,7 +672,8 @@ class Autonomous(Forced):
     returns to follow a limit cycle (:func:`nscontrol.analysis.continuation.continue_orbit`).
 
     The shooting unknowns are ``(x0, T)``, one node: a state on the hyperplane
-    ``normal·x0 = offset`` and the period. So that the continuation engine of forced orbits
+    ``normal·x0 = offset`` and the period (the start of a continuation may give ``x0``
+    alone: ``period`` is then the guess of ``T``). So that the continuation engine of forced orbits
     runs unchanged, this is a :class:`Forced` (no input; ``period`` the guess of ``T``) whose
     ``n_states`` counts the unknowns, ``system.n_states + 1``; its orbits' ``multipliers``
     are the non-trivial ones (the trivial 1 would zero the fold test everywhere).
@@ -693,7 +696,7 @@ class Autonomous(Forced):
     Examples
     --------
     Continuation in ``μ`` of the Hopf normal form's cycle (``r' = r(μ - r²)``, ``θ' = 1``)
-    starts from ``continue_orbit(factory, 0.25, [0.5, 0.0, 2π], p_range=(0.1, 1.0))`` with
+    starts from ``continue_orbit(factory, 0.25, [0.5, 0.0], p_range=(0.1, 1.0))`` with
     ``factory = lambda mu: Autonomous(system_at(mu), 2π, normal=[0, 1])``.
     """
 
@@ -713,6 +716,18 @@ class Autonomous(Forced):
     def n_states(self) -> int:
         """Number of shooting unknowns: the state and the period."""
         return int(self.system.n_states) + 1
+
+
+def _cycle_node(problem: Autonomous, x0: Any, k: int) -> FloatArray:
+    """The one shooting node ``(x0, T)`` of a cycle: ``x0`` with the period guess appended,
+    or ``(x0, T)`` as given."""
+    if k != 1:
+        raise ModelError(f"n_periods: a cycle is shot from one node (n_periods = 1), got {k}")
+    n = int(problem.system.n_states)
+    arr = np.asarray(x0, float).reshape(-1)
+    if arr.size == n:
+        arr = np.append(arr, problem.period)
+    return as_vector("x0", arr, n + 1)[None, :].copy()
 
 
 @dataclass(frozen=True, eq=False)

@@ -76,8 +76,7 @@ def hopf_branches(omega: float = 2.0) -> list[Any]:
     ``[0.1, 1]`` (each branch ends with its first point outside)."""
     from ..analysis.continuation import continue_orbit
 
-    guess = [0.51, 0.0, 1.01 * 2 * np.pi / omega]
-    return [continue_orbit(_HopfFamily(omega), 0.25, guess, p_range=(0.1, 1.0), step=0.05,
+    return [continue_orbit(_HopfFamily(omega), 0.25, [0.51, 0.0], p_range=(0.1, 1.0), step=0.05,
                            step_max=0.2, direction=d, parameter_name="μ") for d in (1, -1)]
 
 
@@ -92,7 +91,7 @@ class _HopfFamily:
         from ..testing.cycle_problems import hopf_normal_form
 
         system, _ = hopf_normal_form(mu, self.omega)
-        return Autonomous(system, 2 * np.pi / self.omega, normal=[0.0, 1.0], offset=0.0)
+        return Autonomous(system, 1.01 * 2 * np.pi / self.omega, normal=[0.0, 1.0], offset=0.0)
 
 
 def run(out_dir: Path | None) -> ExampleResult:
