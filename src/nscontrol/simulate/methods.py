@@ -13,7 +13,7 @@ method             systems                                     capabilities
                                                                controller, multipliers
 ``implicit_euler`` LureSystem                                  time stepping, multipliers
 ``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
-                   SwitchedAffineSystem                        sensitivity, t_eval
+                   SwitchedAffineSystem, NonlinearSystem       sensitivity, t_eval
 =================  ==========================================  ============================
 """
 
@@ -106,12 +106,14 @@ class Switching(_ModuleIntegrator):
 
     @classmethod
     def supports(cls, system: Any) -> bool:
+        from ..systems.nonlinear import NonlinearSystem
         from ..systems.pwa import PiecewiseAffineSystem
         from ..systems.switched import FilippovSystem, SwitchedAffineSystem
 
-        return isinstance(system, PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem)
+        return isinstance(system, PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem
+                          | NonlinearSystem)
 
     @classmethod
     def systems(cls) -> str:
-        return ("PiecewiseAffineSystem, FilippovSystem and SwitchedAffineSystem (for Lur'e "
-                "systems use method='implicit_euler')")
+        return ("PiecewiseAffineSystem, FilippovSystem, SwitchedAffineSystem and "
+                "NonlinearSystem (for Lur'e systems use method='implicit_euler')")
