@@ -34,6 +34,8 @@ _EXPORTS: dict[str, str] = {
     "state_space_matrices": "statespace", "state_matrix": "statespace",
     # differences.py
     "central_difference_gradient": "differences", "central_difference_jacobian": "differences",
+    # saltation.py
+    "time_shift_term": "saltation",
 }
 
 __all__ = list(_EXPORTS)
