@@ -116,8 +116,12 @@ class StepJacobians:
             if self.first_degenerate_time is None:
                 self.first_degenerate_time = float(times[int(np.argmax(bad))])
         P = self.transition
-        for r in rho:
-            P = self._step(r) @ P
+        # runs of steps on one active set share one Jacobian: J^count by repeated squaring
+        starts = np.flatnonzero(np.r_[True, np.any(rho[1:] != rho[:-1], axis=1)])
+        counts = np.diff(np.r_[starts, rho.shape[0]])
+        for i, count in zip(starts, counts, strict=True):
+            J = self._step(rho[i])
+            P = (J if count == 1 else np.linalg.matrix_power(J, int(count))) @ P
         self.transition = P
 
     def _step(self, rho: FloatArray) -> FloatArray:
