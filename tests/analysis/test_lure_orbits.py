@@ -129,3 +129,20 @@ def test_forced_input_and_map_jacobian_of_a_lure_orbit():
     np.testing.assert_array_equal(again.jacobian, orbit.monodromy)
     assert again.trajectory.stats["steps"] == 300
     assert again.trajectory.stats["degenerate_steps"] == 0
+
+
+def test_periodic_steady_state_shoots_the_same_discrete_orbit(saturated):
+    # periodic_steady_state asks for the sensitivity capability, which implicit_euler now has:
+    # its Newton on the same discrete map lands on the same fixed point. Both stop at a
+    # residual <= 1e-11 relative on a map contracting by |μ| = 0.64: within 1e-11/(1 - 0.64)
+    from nscontrol.analysis.periodic import periodic_steady_state
+
+    lure, _ = _saturated_oscillator()
+    _, orbits = saturated
+    pss = periodic_steady_state(lure, PERIOD, method="implicit_euler", h=PERIOD / 400,
+                                n_samples=2)
+    scale = max(1.0, np.max(np.abs(orbits[1].x0)))
+    assert np.max(np.abs(pss.x0 - orbits[1].x0)) <= 3e-11 * scale
+    # the step Jacobians depend only on the active sets, the same at both points: the
+    # monodromies differ by the rounding of 400 products, ~400 ε |J|
+    np.testing.assert_allclose(pss.monodromy, orbits[1].monodromy, rtol=0, atol=1e-9)
