@@ -36,8 +36,10 @@ def time_shift_term(f_minus: Any, f_plus: Any, dtau_dx: Any) -> FloatArray:
 
     Examples
     --------
-    >>> time_shift_term([1.0, 0.0], [0.0, 1.0], [0.5, 0.0]).tolist()
-    [[0.5, 0.0], [-0.5, 0.0]]
+    A falling edge (field ``(1, 0)`` to ``(0, 1)``) delayed by half the first state's change:
+
+    >>> time_shift_term([1.0, 0.0], [0.0, 1.0], [0.5, 0.25]).tolist()
+    [[0.5, 0.25], [-0.5, -0.25]]
     """
     fm = as_vector("f_minus", f_minus)
     fp = as_vector("f_plus", f_plus, fm.shape[0])
