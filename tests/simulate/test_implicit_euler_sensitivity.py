@@ -77,6 +77,21 @@ def test_relay_sliding_makes_the_map_rank_deficient():
     assert abs(np.linalg.det(J)) <= 8 * EPS * np.max(np.abs(J)) ** 2
 
 
+def test_trapezoidal_steps_are_differentiated_too():
+    # θ = 1/2 changes Φ, G_h and D_h, not the argument: still exact up to rounding
+    system, h, tf = _lure(Relay(1.5)), 0.01, 3.0
+    x0 = np.array([0.3, -0.2])
+    tr = simulate(system, x0, (0.0, tf), method="implicit_euler", h=h, theta=0.5,
+                  sensitivity=True)
+    J = tr.stats["state_transition"]
+
+    def P(x):
+        return simulate(system, x, (0.0, tf), method="implicit_euler", h=h, theta=0.5).x[-1]
+
+    fd = _central_differences(P, x0, 1e-5)
+    assert np.max(np.abs(J - fd)) <= _rounding_bound(300, tr.x, J, 1e-5)
+
+
 def test_full_step_matrix_lcp_path_matches_central_differences():
     # two relays coupled through a full D_h (one LCP a step)
     law = Product(Relay(1.0), Relay(0.5))

@@ -559,7 +559,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         ``lcp`` or ``python``), ``structure`` of ``D_h`` (``diagonal``, ``triangular``,
         ``block_triangular`` or ``full``), ``blocks``, ``input`` (``exact_mean``, ``samples``
         or ``none``) and, for the LCP and Python paths, ``max_residual`` (the largest accepted
-        per-step residual).
+        per-step residual); with ``sensitivity=True`` also ``state_transition``,
+        ``degenerate_steps`` and ``first_degenerate_time``.
 
     Raises
     ------
@@ -638,6 +639,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
             except SolverError as exc:
                 X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
+                if jac is not None:   # the transition up to the last verified step
+                    jac.extend(times[1:1 + X.shape[0]], Z, W, stepper.worst)
                 traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
                                   stats=stats(done + X.shape[0]),
                                   state_names=system.state_names)
