@@ -13,7 +13,10 @@ Where the Jacobian comes from
 -----------------------------
 * Methods with the ``sensitivity`` capability (``switching``: PWA, Filippov with sliding
   segments, PWM) return ``stats["state_transition"]``, assembled by the integrator from the
-  flows and the saltation matrices of facet crossings and sliding entry/exit.
+  flows and the saltation matrices of facet crossings and sliding entry/exit (and, for PWM,
+  the terms of the instants set by the sampled state). ``implicit_euler`` (Lur'e systems)
+  returns the Jacobian of its discrete map: the orbit is then the fixed point of the discrete
+  stroboscopic map (``T`` a multiple of the step ``h``).
 * Linear mechanical systems (:class:`~nscontrol.systems.lagrangian.LagrangianSystem` with
   constant mass, linear forces and affine gaps) integrated by ``event_driven``: between
   events the flow is ``x' = A x + B u(t) + c``, so the transition over a free-flight interval

@@ -21,7 +21,8 @@ monodromy of an orbit through events. Special cases:
 * a **switching instant fixed in time** (PWM edge at a given time, ``∇h = 0``): ``S = I``;
   a PWM edge whose instant depends on the sampled state ``x_k`` (``t_e = t_k + τ(x_k)``)
   adds ``(f- - f+) ∂τ/∂x_k`` to the transition from ``x_k``, which
-  :func:`time_shift_term` returns.
+  :func:`time_shift_term` returns (defined in :mod:`nscontrol.numerics.saltation`, where the
+  PWM integrator finds it).
 
 Grazing (``ḣ- = 0``) makes ``S`` unbounded: :func:`saltation_matrix` refuses it with
 ``SolverError``.
@@ -46,6 +47,7 @@ import numpy as np
 
 from .._validation import FloatArray, as_matrix, as_vector
 from ..errors import DimensionError, SolverError
+from ..numerics.saltation import time_shift_term  # the simulate layer uses it too
 
 __all__ = ["saltation_matrix", "impact_jump_jacobian", "time_shift_term"]
 
@@ -116,20 +118,3 @@ def impact_jump_jacobian(mass_matrix: Any, normal: Any, restitution: float) -> F
     out = np.eye(2 * n)
     out[n:, n:] = P
     return out
-
-
-def time_shift_term(f_minus: Any, f_plus: Any, dtau_dx: Any) -> FloatArray:
-    """``(f- - f+) ∂τ/∂xᵀ``: the part of the transition from a sampled state ``x_k`` due to a
-    switching instant ``t_e = t_k + τ(x_k)`` (PWM edge set by the sampled state).
-
-    Parameters
-    ----------
-    f_minus, f_plus : (n,) array_like
-        The fields before and after the switching instant.
-    dtau_dx : (n,) array_like
-        ``∂τ/∂x``, the gradient of the switching delay.
-    """
-    fm = as_vector("f_minus", f_minus)
-    fp = as_vector("f_plus", f_plus, fm.shape[0])
-    g = as_vector("dtau_dx", dtau_dx)
-    return np.outer(fm - fp, g)

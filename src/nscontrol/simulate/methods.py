@@ -11,7 +11,8 @@ method             systems                                     capabilities
                    ImpactingBodies                             listeners, controller
 ``moreau_jean``    LagrangianSystem, ImpactingBodies           time stepping, listeners,
                                                                controller, multipliers
-``implicit_euler`` LureSystem                                  time stepping, multipliers
+``implicit_euler`` LureSystem                                  time stepping, multipliers,
+                                                               sensitivity (discrete map)
 ``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
                    SwitchedAffineSystem, NonlinearSystem       sensitivity, t_eval
 =================  ==========================================  ============================
@@ -78,8 +79,8 @@ class ImplicitEuler(_ModuleIntegrator):
 
     name = "implicit_euler"
     module = "nscontrol.simulate.implicit_euler"
-    capabilities = frozenset({"time_stepping", "multipliers"})
-    options: ClassVar[frozenset[str]] = frozenset({"h", "theta"})
+    capabilities = frozenset({"time_stepping", "multipliers", "sensitivity"})
+    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:
