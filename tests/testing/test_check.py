@@ -25,6 +25,7 @@ from nscontrol.systems.hybrid import LinearHybridSystem
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
 from nscontrol.systems.lure import LureSystem
+from nscontrol.systems.nonlinear import NonlinearSystem
 from nscontrol.systems.pwa import PiecewiseAffineSystem
 from nscontrol.systems.switched import FilippovSystem, PWMController, SwitchedAffineSystem
 from nscontrol.testing import CheckReport, check_system
@@ -60,6 +61,7 @@ def _systems():
                              PWMController(0.25, lambda t, x: 0.15)),
         LinearHybridSystem([[0, 1, 0], [0, 0, -9.81], [0, 0, 0]], [[1, 0, 0]], [0.0],
                            np.diag([1.0, -0.5, 1.0])),
+        NonlinearSystem(2, lambda t, x: np.array([x[1], -x[0] + 0.5 * (1 - x[0] ** 2) * x[1]])),
     ]
 
 

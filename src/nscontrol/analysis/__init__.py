@@ -38,6 +38,7 @@ _EXPORTS: dict[str, str] = {
     # orbits.py
     "Forced": "orbits", "MapResult": "orbits", "Orbit": "orbits", "stroboscopic_map": "orbits",
     "find_orbit": "orbits", "Cycle": "orbits", "find_cycle": "orbits", "SectionReturn": "orbits",
+    "Autonomous": "orbits",
     "hyperplane_map": "orbits", "floquet_multipliers": "orbits",
     # saltation.py
     "saltation_matrix": "saltation", "impact_jump_jacobian": "saltation",

@@ -13,7 +13,10 @@ Where the Jacobian comes from
 -----------------------------
 * Methods with the ``sensitivity`` capability (``switching``: PWA, Filippov with sliding
   segments, PWM) return ``stats["state_transition"]``, assembled by the integrator from the
-  flows and the saltation matrices of facet crossings and sliding entry/exit.
+  flows and the saltation matrices of facet crossings and sliding entry/exit (and, for PWM,
+  the terms of the instants set by the sampled state). ``implicit_euler`` (Lur'e systems)
+  returns the Jacobian of its discrete map: the orbit is then the fixed point of the discrete
+  stroboscopic map (``T`` a multiple of the step ``h``).
 * Linear mechanical systems (:class:`~nscontrol.systems.lagrangian.LagrangianSystem` with
   constant mass, linear forces and affine gaps) integrated by ``event_driven``: between
   events the flow is ``x' = A x + B u(t) + c``, so the transition over a free-flight interval
@@ -46,7 +49,7 @@ from ..errors import DimensionError, ModelError, SolverError
 from .saltation import impact_jump_jacobian, saltation_matrix
 
 __all__ = ["Forced", "MapResult", "Orbit", "stroboscopic_map", "find_orbit", "Cycle",
-           "find_cycle", "SectionReturn", "hyperplane_map",
+           "find_cycle", "Autonomous", "SectionReturn", "hyperplane_map",
            "floquet_multipliers"]
 
 
@@ -245,14 +248,14 @@ def stroboscopic_map(forced: Forced, x0: Any, *, n_periods: int = 1,
 
 
 def _transition_over(forced: Forced, x0: FloatArray, t0: float, tf: float) -> Any:
-    """The run with ``sensitivity=True``, sampled at ``t0, tf`` by a ``t_eval`` method and on
-    the coarsest grid (``dt = tf - t0``) by ``event_driven`` (whose ``t_eval`` would
-    interpolate)."""
+    """The run with ``sensitivity=True``, sampled at ``t0, tf``: on the coarsest grid
+    (``dt = tf - t0``) by a method without ``t_eval`` that has a sampling grid
+    (``event_driven``, whose ``t_eval`` would interpolate), by ``t_eval`` otherwise."""
     from ..simulate.driver import integrator_for
 
     cls = integrator_for(forced.system, forced.method)
-    grid = ({"t_eval": np.array([t0, tf])} if "t_eval" in cls.capabilities
-            else {"dt": tf - t0} if "dt" in getattr(cls, "options", ()) else {})
+    grid = ({"dt": tf - t0} if "t_eval" not in cls.capabilities
+            and "dt" in getattr(cls, "options", ()) else {"t_eval": np.array([t0, tf])})
     return forced.simulate(x0, (t0, tf), sensitivity=True, **grid)
 
 
@@ -377,6 +380,8 @@ class Orbit:
 def _shooting_system(forced: Forced, X: FloatArray
                      ) -> tuple[FloatArray, FloatArray, list[MapResult]]:
     """Residual ``P(x_i) - x_{i+1}`` and its block-bidiagonal Jacobian over all nodes."""
+    if isinstance(forced, Autonomous):
+        return _cycle_shooting_system(forced, X)
     k, n = X.shape
     maps = [stroboscopic_map(forced, X[i]) for i in range(k)]
     R = np.concatenate([maps[i].x - X[(i + 1) % k] for i in range(k)])
@@ -427,6 +432,8 @@ def find_orbit(forced: Forced, x0: Any, *, n_periods: int = 1, tol: float = 1e-1
 
 
 def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
+    if isinstance(forced, Autonomous):
+        return _cycle_node(forced, x0, k)
     arr = np.asarray(x0, float)
     if arr.ndim == 2:
         if arr.shape != (k, n):
@@ -461,6 +468,8 @@ def _damped_step(forced: Forced, X: FloatArray, R: FloatArray, J: FloatArray,
 def make_orbit(forced: Forced, X: FloatArray, maps: list[MapResult], iterations: int,
                residual: float) -> Orbit:
     """Assemble an :class:`Orbit` from converged nodes and their maps."""
+    if isinstance(forced, Autonomous):
+        return _cycle_orbit(forced, X, maps, iterations, residual)
     Mono = np.eye(X.shape[1])
     for m in maps:
         Mono = m.jacobian @ Mono
@@ -722,19 +731,14 @@ def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: floa
     nv = as_vector("normal", normal, n)
     c = float(nv @ x) if offset is None else float(offset)
     for it in range(int(max_iter) + 1):
-        delta = float(np.finfo(float).eps) ** (1 / 3) * T
-        tr = _transition_run(system, x, T, method, t_eval=np.array([0.0, T - delta, T]))
-        M = np.asarray(tr.stats["state_transition"], float)
-        r = np.append(tr.x[-1] - x, nv @ x - c)
+        r, J, M, f, tr = _cycle_equations(system, x, T, nv, c, method)
         res = float(np.max(np.abs(r)))
-        f = _flow_velocity(system, tr, T, method)
         if res <= tol * max(1.0, float(np.max(np.abs(x)))):
             mu, k = _trivial_index(M, f)
             sig = tuple((e.kind, int(e.index)) for e in tr.events)
             return Cycle(x, T, M, mu, k, sig, it, res)
         if it == max_iter:
             break
-        J = np.block([[M - np.eye(n), f[:, None]], [nv[None, :], np.zeros((1, 1))]])
         step = np.linalg.solve(J, -r)
         x, T = x + step[:n], T + float(step[n])
         if T <= 0:
@@ -742,6 +746,117 @@ def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: floa
                               f"better period guess")
     raise SolverError(f"x0: cycle shooting did not converge in {max_iter} iterations "
                       f"(residual {res:.3g}); improve the guesses of x0 and period")
+
+
+def _cycle_equations(system: Any, x: FloatArray, T: float, normal: FloatArray, offset: float,
+                     method: Any) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, Any]:
+    """The single-shooting equations of a cycle, ``(φ_T(x) - x, normal·x - offset)``, their
+    bordered Jacobian ``[[M - I, ẋ(T)], [normalᵀ, 0]]``, the monodromy ``M``, the velocity
+    ``ẋ(T)`` and the run."""
+    n = x.shape[0]
+    delta = float(np.finfo(float).eps) ** (1 / 3) * T
+    tr = _transition_run(system, x, T, method, t_eval=np.array([0.0, T - delta, T]))
+    M = np.asarray(tr.stats["state_transition"], float)
+    r = np.append(tr.x[-1] - x, normal @ x - offset)
+    f = _flow_velocity(system, tr, T, method)
+    J = np.block([[M - np.eye(n), f[:, None]], [normal[None, :], np.zeros((1, 1))]])
+    return r, J, M, f, tr
+
+
+@dataclass(frozen=True, eq=False, init=False)
+class Autonomous(Forced):
+    """An autonomous system and the phase condition of its cycles: what a continuation factory
+    returns to follow a limit cycle (:func:`nscontrol.analysis.continuation.continue_orbit`).
+
+    The shooting unknowns are ``(x0, T)``, one node: a state on the hyperplane
+    ``normal·x0 = offset`` and the period (the start of a continuation may give ``x0``
+    alone: ``period`` is then the guess of ``T``). So that the continuation engine of forced orbits
+    runs unchanged, this is a :class:`Forced` (no input; ``period`` the guess of ``T``) whose
+    ``n_states`` counts the unknowns, ``system.n_states + 1``; its orbits' ``multipliers``
+    are the non-trivial ones (the trivial 1 would zero the fold test everywhere).
+
+    Parameters
+    ----------
+    system
+        The autonomous model; its integrator must offer the ``sensitivity`` capability.
+    period : float
+        A guess of the cycle's period.
+    normal : array_like
+        Normal of the phase-condition hyperplane (crossed transversally by the cycles).
+    offset : float
+        Its offset.
+    method : str or Integrator subclass, optional
+        The integrator (default: the system's).
+    options : tuple of (name, value) pairs
+        Extra ``simulate`` options.
+
+    Examples
+    --------
+    Continuation in ``μ`` of the Hopf normal form's cycle (``r' = r(μ - r²)``, ``θ' = 1``)
+    starts from ``continue_orbit(factory, 0.25, [0.5, 0.0], p_range=(0.1, 1.0))`` with
+    ``factory = lambda mu: Autonomous(system_at(mu), 2π, normal=[0, 1])``.
+    """
+
+    normal: Any = None
+    offset: float = 0.0
+
+    def __init__(self, system: Any, period: float, *, normal: Any, offset: float = 0.0,
+                 method: Any = None, options: tuple[tuple[str, Any], ...] = ()) -> None:
+        nv = as_vector("normal", normal, int(system.n_states))
+        values = {"system": system, "u": None, "period": period, "method": method,
+                  "options": tuple(options), "normal": nv, "offset": float(offset)}
+        for key, value in values.items():
+            object.__setattr__(self, key, value)
+        self.__post_init__()
+
+    @property
+    def n_states(self) -> int:
+        """Number of shooting unknowns: the state and the period."""
+        return int(self.system.n_states) + 1
+
+
+def _cycle_node(problem: Autonomous, x0: Any, k: int) -> FloatArray:
+    """The one shooting node ``(x0, T)`` of a cycle: ``x0`` with the period guess appended,
+    or ``(x0, T)`` as given."""
+    if k != 1:
+        raise ModelError(f"n_periods: a cycle is shot from one node (n_periods = 1), got {k}")
+    n = int(problem.system.n_states)
+    arr = np.asarray(x0, float).reshape(-1)
+    if arr.size == n:
+        arr = np.append(arr, problem.period)
+    return as_vector("x0", arr, n + 1)[None, :].copy()
+
+
+@dataclass(frozen=True, eq=False)
+class _CycleMap(MapResult):
+    """The map of a cycle's shooting node, with the flow velocity at its end."""
+
+    velocity: Any = None
+
+
+def _cycle_shooting_system(problem: Autonomous, X: FloatArray
+                           ) -> tuple[FloatArray, FloatArray, list[MapResult]]:
+    """:func:`_shooting_system` of a cycle: one node ``(x0, T)``."""
+    if X.shape[0] != 1:
+        raise ModelError(f"n_periods: a cycle is shot from one node (n_periods = 1), got "
+                         f"{X.shape[0]}")
+    x, T = X[0, :-1], float(X[0, -1])
+    if not T > 0.0:
+        raise SolverError(f"period: the corrector drove the period to {T:.3g} <= 0")
+    r, J, M, f, tr = _cycle_equations(problem.system, x, T, problem.normal, problem.offset,
+                                      problem.method)
+    sig = tuple((e.kind, int(e.index)) for e in tr.events)
+    return r, J, [_CycleMap(np.append(tr.x[-1], T), M, tr, sig, np.inf, f)]
+
+
+def _cycle_orbit(problem: Autonomous, X: FloatArray, maps: list[MapResult], iterations: int,
+                 residual: float) -> Orbit:
+    """:func:`make_orbit` of a cycle: the non-trivial multipliers only."""
+    (m,) = maps
+    velocity = m.velocity if isinstance(m, _CycleMap) else None
+    mu, k = _trivial_index(m.jacobian, np.asarray(velocity, float))
+    return Orbit(X.copy(), float(X[0, -1]), 1, m.jacobian, np.delete(mu, k), m.signature,
+                 iterations=iterations, residual=residual, node_jacobians=(m.jacobian,))
 
 
 @dataclass(frozen=True, eq=False)

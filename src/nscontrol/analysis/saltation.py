@@ -28,9 +28,10 @@ monodromy of an orbit through events. Special cases:
 Grazing (``ḣ- = 0``) makes ``S`` unbounded: :func:`saltation_matrix` refuses it with
 ``SolverError``.
 
-:func:`saltation_matrix`, :func:`impact_jump_jacobian` and :func:`impact_velocity` are
-defined in :mod:`nscontrol.numerics.saltation` (the event-driven integrator applies them while
-it integrates the variational equation) and re-exported here.
+:func:`saltation_matrix`, :func:`impact_jump_jacobian`, :func:`impact_velocity` and
+:func:`time_shift_term` are defined in :mod:`nscontrol.numerics.saltation`, below ``simulate``
+(the event-driven integrator applies the first three while it integrates the variational
+equation, the PWM integrator the last), and re-exported here.
 
 Examples
 --------
@@ -46,28 +47,11 @@ at ``v = 2`` with acceleration ``-1`` before and ``-1`` after:
 
 from __future__ import annotations
 
-from typing import Any
-
-import numpy as np
-
-from .._validation import FloatArray, as_vector
-from ..numerics.saltation import impact_jump_jacobian, impact_velocity, saltation_matrix
+from ..numerics.saltation import (  # the simulate layer uses them too
+    impact_jump_jacobian,
+    impact_velocity,
+    saltation_matrix,
+    time_shift_term,
+)
 
 __all__ = ["saltation_matrix", "impact_jump_jacobian", "impact_velocity", "time_shift_term"]
-
-
-def time_shift_term(f_minus: Any, f_plus: Any, dtau_dx: Any) -> FloatArray:
-    """``(f- - f+) ∂τ/∂xᵀ``: the part of the transition from a sampled state ``x_k`` due to a
-    switching instant ``t_e = t_k + τ(x_k)`` (PWM edge set by the sampled state).
-
-    Parameters
-    ----------
-    f_minus, f_plus : (n,) array_like
-        The fields before and after the switching instant.
-    dtau_dx : (n,) array_like
-        ``∂τ/∂x``, the gradient of the switching delay.
-    """
-    fm = as_vector("f_minus", f_minus)
-    fp = as_vector("f_plus", f_plus, fm.shape[0])
-    g = as_vector("dtau_dx", dtau_dx)
-    return np.outer(fm - fp, g)

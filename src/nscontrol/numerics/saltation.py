@@ -1,4 +1,5 @@
-"""Saltation matrices: the general formula and the Jacobian of Newton's impact jump.
+"""Saltation matrices, the Jacobian of Newton's impact jump, and the transition term of a
+switching instant set by a sampled state.
 
 The theory (what a saltation matrix is, every event kind) is told in
 :mod:`nscontrol.analysis.saltation`, which re-exports these functions. They live here, below
@@ -16,6 +17,17 @@ Its Jacobian is block lower triangular: ``∂q+/∂q = I``, ``∂q+/∂v = 0``,
 ``∂v+/∂q``, which is zero when ``M`` is constant and the gap affine, and otherwise carries the
 rotation of the normal and the change of the inertia along the motion (taken by central
 differences, see :func:`impact_jump_jacobian`).
+
+A sampled controller (a PWM modulator) reads ``x_k = x(t_k)`` and switches the vector field
+from ``f-`` to ``f+`` at ``t_e = t_k + τ(x_k)``. The instantaneous state is continuous there
+(its own saltation matrix is the identity: the instant does not depend on the state at
+``t_e``), but the instant moves with ``x_k``: delaying it by ``δt`` runs ``f-`` instead of
+``f+`` for ``δt``, so the state just after ``t_e`` moves by ``(f- - f+) δt``. Hence the
+transition from ``x_k`` gains, at ``t_e``,
+
+    ∂x(t_e+)/∂x_k  +=  (f- - f+) ∂τ/∂x_kᵀ,
+
+and the flows after ``t_e`` carry this term on like the rest of the transition.
 """
 
 from __future__ import annotations
@@ -28,7 +40,7 @@ from .._validation import FloatArray, as_matrix, as_vector
 from ..errors import DimensionError, ModelError, SolverError
 from .differences import central_difference_jacobian
 
-__all__ = ["saltation_matrix", "impact_jump_jacobian", "impact_velocity"]
+__all__ = ["saltation_matrix", "impact_jump_jacobian", "impact_velocity", "time_shift_term"]
 
 
 def saltation_matrix(jump_jacobian: Any, f_minus: Any, f_plus: Any, guard_gradient: Any, *,
@@ -188,3 +200,27 @@ def _constant_impact_jacobian(mass_matrix: Any, normal: Any, restitution: float)
     out = np.eye(2 * n)
     out[n:, n:] = P
     return out
+
+
+def time_shift_term(f_minus: Any, f_plus: Any, dtau_dx: Any) -> FloatArray:
+    """``(f- - f+) ∂τ/∂xᵀ``: the part of the transition from a sampled state ``x_k`` due to a
+    switching instant ``t_e = t_k + τ(x_k)`` (PWM edge set by the sampled state).
+
+    Parameters
+    ----------
+    f_minus, f_plus : (n,) array_like
+        The fields before and after the switching instant.
+    dtau_dx : (n,) array_like
+        ``∂τ/∂x``, the gradient of the switching delay.
+
+    Examples
+    --------
+    A falling edge (field ``(1, 0)`` to ``(0, 1)``) delayed by half the first state's change:
+
+    >>> time_shift_term([1.0, 0.0], [0.0, 1.0], [0.5, 0.25]).tolist()
+    [[0.5, 0.25], [-0.5, -0.25]]
+    """
+    fm = as_vector("f_minus", f_minus)
+    fp = as_vector("f_plus", f_plus, fm.shape[0])
+    g = as_vector("dtau_dx", dtau_dx)
+    return np.outer(fm - fp, g)

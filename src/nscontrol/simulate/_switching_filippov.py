@@ -24,6 +24,9 @@ Filippov field does not accumulate off a curved surface.
 With ``sensitivity=True`` the variational equation ``Φ' = J Φ`` (``J`` from
 ``system.jacobian`` or central differences; for ``F_s`` always by differences) is integrated
 with the state.
+
+A smooth :class:`~nscontrol.systems.nonlinear.NonlinearSystem` is the case of no surface
+(:func:`run_smooth`): one DOP853 piece over the whole span, the variational equation with it.
 """
 
 from __future__ import annotations
@@ -71,6 +74,38 @@ class _Fields:
             return lambda t, x: self.s.jac(t, x, signs)
         f = self.rhs(signs, sliding)
         return lambda t, x: central_difference_jacobian(lambda xx: f(t, xx), x)
+
+
+class _NoSurfaces:
+    """A smooth system seen as a Filippov system with no switching surface, its input bound:
+    the one field ``f(t, x, u(t))`` on the (only) side ``signs = ()``."""
+
+    surfaces: tuple[Any, ...] = ()
+    n_surfaces = 0
+
+    def __init__(self, system: Any, u: Any) -> None:
+        self.system = system
+        self.n_states = system.n_states
+        self.state_names = system.state_names
+        self.u_of = system.input_function(u)
+
+    def field(self, t: float, x: FloatArray, signs: tuple[int, ...]) -> FloatArray:
+        return self.system.rhs(t, x, self.u_of(t))
+
+    def jac(self, t: float, x: FloatArray, signs: tuple[int, ...]) -> FloatArray:
+        return self.system.jac(t, x, self.u_of(t))
+
+    def h(self, x: FloatArray) -> FloatArray:
+        return np.zeros(0)
+
+
+def run_smooth(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+               ) -> dict[str, Any]:
+    """Integrate a smooth :class:`~nscontrol.systems.nonlinear.NonlinearSystem` (input from
+    ``options["u"]`` or the system's) by the Filippov path with no surface."""
+    extra = run_filippov(_NoSurfaces(system, options.get("u")), x0, run, options)
+    del extra["final_mode"]      # a single mode: nothing to report
+    return extra
 
 
 def _mode_code(signs: tuple[int, ...], sliding: int) -> int:

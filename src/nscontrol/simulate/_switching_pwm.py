@@ -7,6 +7,22 @@ these exact instants, each piece propagated exactly by the mode's
 :class:`~nscontrol.numerics.lti.LTIFlow` on the augmented state ``[x; 1]``
 (:meth:`SwitchedAffineSystem.flow`, shared across runs). So neither the instants nor the times
 at which the duty is evaluated drift over long runs.
+
+Sensitivity (``sensitivity=True``). Over the period from ``t_k`` the transition starts at
+``I``; each piece multiplies it by its mode's ``e^{A_σ Δ}``; at each switching instant
+``s_j = t_k + o_j(d(x_k))`` whose offset moves with the duty, the term
+``(f_before - f_after)(x(s_j)) ∂s_j/∂x_k`` is added
+(:func:`nscontrol.numerics.saltation.time_shift_term`), with
+``∂s_j/∂x_k = (∂o_j/∂d) ∇d(x_k)``: the duty reads the **sampled** state, so the instants
+depend on ``x_k`` and on nothing later (the instantaneous state's saltation is the identity,
+and ``stats["saltation_matrices"]`` is empty). ``∂o_j/∂d`` is ``±1/2`` for the two edges of
+a centred pulse, ``1`` for the falling edge of a leading one, ``-1`` for the rising edge of a
+trailing one. ``∇d`` is a central difference of the unclipped duty law (exact up to rounding
+for an affine law; step ``1e-7(1 + |x_i|)``, error ``O(1e-9)`` relative otherwise). A
+saturated period (the unclipped duty outside ``[0, T]``) has no switching-time dependence;
+a duty exactly at ``0`` or ``T`` is a corner of the clipped law (one-sided derivatives
+differ): such periods are counted in ``stats["degenerate_periods"]`` and the saturated side
+is used.
 """
 
 from __future__ import annotations
@@ -18,6 +34,13 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..errors import ModelError
+from ..numerics.differences import central_difference_gradient
+from ..numerics.saltation import time_shift_term
+
+#: ``∂o_j/∂d`` of the pieces' offsets, in the order of ``PWMController.offsets(d)`` for
+#: ``0 < d < T`` (every piece nonempty): centred ``(0, d/2, T - d/2)``, leading ``(0, d)``,
+#: trailing ``(0, T - d)``.
+_OFFSET_RATES = {"centered": (0.0, 0.5, -0.5), "leading": (0.0, 1.0), "trailing": (0.0, -1.0)}
 
 
 def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
@@ -27,9 +50,6 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
                          "be simulated, and the controller is part of the model (not a "
                          "simulate option): build SwitchedAffineSystem(modes, "
                          "controller=PWMController(period, duty))")
-    if run.sensitivity:
-        raise ModelError("sensitivity: not available for PWM systems (the switching instants "
-                         "depend on the sampled state); use the stroboscopic-map analysis")
     n = system.n_states
     flows: dict[int, Any] = {}
 
@@ -44,6 +64,7 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
     t = t0
     run.rec.sample(t, x0, force=True)
     duties, mode_prev = [], -1
+    degenerate = 0
     k = 0
     while k < n_periods:
         t_k = t0 + k * T                      # exact instants, not accumulated
@@ -57,7 +78,12 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
         offs = ctrl.offsets(d)
         starts = [t_k + o for o, _ in offs]
         ends = starts[1:] + [t_next]
-        for (_, mode), a, b in zip(offs, starts, ends, strict=True):
+        rates = None
+        if run.sensitivity:
+            rates, corner = _instant_gradients(ctrl, t_k, xi[:n], len(offs))
+            degenerate += corner
+            Phi = np.eye(n)
+        for j, ((_, mode), a, b) in enumerate(zip(offs, starts, ends, strict=True)):
             if a >= tf:
                 break
             b = min(b, tf)
@@ -65,6 +91,9 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
                 x = xi[:n]
                 run.event(a, "switch", -1, x, x, mode_prev, mode)
                 run.rec.sample(a, x, force=True)
+                if rates is not None and rates[j] is not None:
+                    Phi += time_shift_term(system.field(mode_prev, x), system.field(mode, x),
+                                           rates[j])
             mode_prev = mode
             if b <= a:
                 continue
@@ -72,11 +101,48 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
             ts = run.samples(a, b, last=False)
             if ts.size:
                 run.rec.extend(ts, np.atleast_2d(fl.propagate(xi, ts - a))[:, :n])
+            if run.sensitivity:
+                Phi = np.asarray(fl.expm(b - a))[:n, :n] @ Phi
             xi = fl.state_at(xi, b - a)
             xi[n] = 1.0
             t = b
+        if run.sensitivity:
+            run.Phi = Phi @ run.Phi
         k += 1
         run.bar.update(t)
     if run.rec.last_time < tf:
         run.rec.sample(tf, xi[:n], force=True)
-    return {"periods": k, "duty": np.array(duties), "final_mode": mode_prev}
+    out = {"periods": k, "duty": np.array(duties), "final_mode": mode_prev}
+    if run.sensitivity:
+        out["degenerate_periods"] = degenerate
+        if degenerate:
+            import warnings
+
+            from ..errors import NscontrolWarning
+
+            warnings.warn(f"switching: the duty sat exactly on 0 or the period in {degenerate} "
+                          f"period(s), a corner of the clipped duty law where the map is not "
+                          f"differentiable; stats['state_transition'] uses the saturated side",
+                          NscontrolWarning, stacklevel=4)
+    return out
+
+
+def _instant_gradients(ctrl: Any, t_k: float, x_k: FloatArray, n_pieces: int
+                       ) -> tuple[list[FloatArray | None], int]:
+    """``∂s_j/∂x_k`` for each piece's start (``None`` where it does not move with ``x_k``) and
+    whether the duty sits exactly on a clipping bound (a corner: 1, else 0)."""
+    raw = float(ctrl.duty(t_k, x_k))
+    if not 0.0 < raw < ctrl.period:   # saturated: the instants do not move
+        on_bound = raw in (0.0, ctrl.period) and bool(np.any(_duty_gradient(ctrl, t_k, x_k)))
+        return [None] * n_pieces, int(on_bound)
+    rates = _OFFSET_RATES[ctrl.pattern]
+    if len(rates) != n_pieces:   # pragma: no cover - 0 < d < T gives every piece
+        raise ModelError(f"controller.pattern: {ctrl.pattern!r} gave {n_pieces} pieces for "
+                         f"the duty {raw:.6g} in (0, T), expected {len(rates)}")
+    grad = _duty_gradient(ctrl, t_k, x_k)
+    return [None if r == 0.0 else r * grad for r in rates], 0
+
+
+def _duty_gradient(ctrl: Any, t_k: float, x_k: FloatArray) -> FloatArray:
+    """``∇d(x_k)`` of the unclipped duty law, by central differences."""
+    return central_difference_gradient(lambda x: float(ctrl.duty(t_k, x)), np.array(x_k))

@@ -50,6 +50,15 @@ signals : iterable of str, optional
     Subset of ``("z", "w", "y")`` to record (other names raise ``ModelError``).
 progress : bool, optional
     Progress bar on stderr (default: shown after 2 s).
+u : Exosystem or callable or array_like, optional
+    External input overriding the system's ``u`` (what a periodically forced analysis passes).
+sensitivity : bool
+    Also compute ``stats["state_transition"]``, the exact Jacobian ``∂x_N/∂x_0`` of the
+    *discrete* map (the product of the steps' Jacobians ``Φ + G_h (∂w/∂a) HΦ``, each from
+    the implicit function theorem on the step's inclusion at its solution, see
+    :mod:`nscontrol.simulate._lure_sensitivity`), with ``stats["degenerate_steps"]`` (steps
+    whose solution sits at a corner of the law's graph, where the map is not differentiable;
+    the first one's time in ``stats["first_degenerate_time"]``, and a warning).
 
 A failed step raises :class:`~nscontrol.errors.SolverError` with the partial trajectory
 (``simulate(..., on_failure="return")`` returns it with ``status = -1``). A step fails when
@@ -77,7 +86,7 @@ if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays li
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
 
 _CHUNK = 1 << 16
-_OPTIONS = {"h", "theta", "record_every", "signals", "progress"}
+_OPTIONS = {"h", "theta", "u", "record_every", "signals", "progress", "sensitivity"}
 _SIGNALS = ("z", "w", "y")
 #: Couplings of ``D_h`` below this fraction of ``max|D_h|`` are structural zeros.
 _STRUCTURAL_ZERO = 1e-14
@@ -539,8 +548,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     t_span : (float, float)
         Start and end times.
     **options
-        ``h`` (required), ``theta`` (default 1), ``record_every``, ``signals``, ``progress``,
-        -- see the module docstring.
+        ``h`` (required), ``theta`` (default 1), ``u``, ``sensitivity``, ``record_every``,
+        ``signals``, ``progress`` -- see the module docstring.
 
     Returns
     -------
@@ -550,7 +559,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         ``lcp`` or ``python``), ``structure`` of ``D_h`` (``diagonal``, ``triangular``,
         ``block_triangular`` or ``full``), ``blocks``, ``input`` (``exact_mean``, ``samples``
         or ``none``) and, for the LCP and Python paths, ``max_residual`` (the largest accepted
-        per-step residual).
+        per-step residual); with ``sensitivity=True`` also ``state_transition``,
+        ``degenerate_steps`` and ``first_degenerate_time``.
 
     Raises
     ------
@@ -583,6 +593,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     if "h" not in options:
         raise ModelError("h: implicit_euler needs a step, e.g. simulate(sys, x0, t_span, "
                          "method='implicit_euler', h=1e-3)")
+    system = _with_input(system, options.get("u"))
+    sensitivity = _check_sensitivity(options.get("sensitivity", False))
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
     n = system.n_states
@@ -598,6 +610,11 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     z0, w0 = _initial_multiplier(system, x0, t0)
     rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
     stepper = _Stepper(system, mats, plan)
+    jac = None
+    if sensitivity:
+        from ._lure_sensitivity import StepJacobians
+
+        jac = StepJacobians(system, mats, plan.D, _law_parts(system.law))
     x = x0
     done = 0
 
@@ -607,6 +624,10 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
                "blocks": max(1, len(plan.blocks)), "input": stepper.input_mode}
         if plan.solver != "closed_form":
             out["max_residual"] = stepper.worst
+        if jac is not None:
+            out["state_transition"] = jac.transition.copy()
+            out["degenerate_steps"] = jac.degenerate_steps
+            out["first_degenerate_time"] = jac.first_degenerate_time
         return out
 
     with TimeProgress(t0, tf, desc="implicit_euler", enable=options.get("progress")) as bar:
@@ -618,16 +639,52 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
             except SolverError as exc:
                 X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
+                if jac is not None:   # the transition up to the last verified step
+                    jac.extend(times[1:1 + X.shape[0]], Z, W, stepper.worst)
                 traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
                                   stats=stats(done + X.shape[0]),
                                   state_names=system.state_names)
                 raise SolverError(str(exc), status=exc.status, trajectory=traj) from None
             _record_block(rec, system, times[1:], X, Z, W, last=k1 == n_steps)
+            if jac is not None:
+                jac.extend(times[1:], Z, W, stepper.worst)
             x = X[-1]
             done = k1
             bar.update(times[-1])
+    if jac is not None and jac.degenerate_steps:
+        _warn_degenerate(jac)
     return rec.finish(status=0, message=None, method="implicit_euler", stats=stats(n_steps),
                       state_names=system.state_names)
+
+
+def _with_input(system: Any, u: Any) -> Any:
+    """``system`` with its input replaced by ``u`` (``None``: unchanged)."""
+    if u is None:
+        return system
+    if system.B is None:
+        raise ModelError("u: this LureSystem has no input matrix B, so it takes no input; "
+                         "build it with B= to force it")
+    from dataclasses import replace
+
+    return replace(system, u=u)
+
+
+def _check_sensitivity(value: Any) -> bool:
+    if not isinstance(value, bool | np.bool_):
+        raise ModelError(f"sensitivity: expected True or False, got {value!r}")
+    return bool(value)
+
+
+def _warn_degenerate(jac: Any) -> None:
+    import warnings
+
+    from ..errors import NscontrolWarning
+
+    warnings.warn(f"implicit_euler: {jac.degenerate_steps} step(s) ended at a corner of the "
+                  f"law's graph (first at t = {jac.first_degenerate_time:.6g}), where the "
+                  f"discrete map is not differentiable; stats['state_transition'] uses the "
+                  f"constraint-active one-sided derivative there", NscontrolWarning,
+                  stacklevel=3)
 
 
 def _record_block(rec: Recorder, system: Any, t: FloatArray, X: FloatArray, Z: FloatArray,

@@ -12,9 +12,10 @@ method             systems                                     capabilities
                                                                sensitivity (Lagrangian)
 ``moreau_jean``    LagrangianSystem, ImpactingBodies           time stepping, listeners,
                                                                controller, multipliers
-``implicit_euler`` LureSystem                                  time stepping, multipliers
+``implicit_euler`` LureSystem                                  time stepping, multipliers,
+                                                               sensitivity (discrete map)
 ``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
-                   SwitchedAffineSystem                        sensitivity, t_eval
+                   SwitchedAffineSystem, NonlinearSystem       sensitivity, t_eval
 =================  ==========================================  ============================
 """
 
@@ -81,8 +82,8 @@ class ImplicitEuler(_ModuleIntegrator):
 
     name = "implicit_euler"
     module = "nscontrol.simulate.implicit_euler"
-    capabilities = frozenset({"time_stepping", "multipliers"})
-    options: ClassVar[frozenset[str]] = frozenset({"h", "theta"})
+    capabilities = frozenset({"time_stepping", "multipliers", "sensitivity"})
+    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:
@@ -109,12 +110,14 @@ class Switching(_ModuleIntegrator):
 
     @classmethod
     def supports(cls, system: Any) -> bool:
+        from ..systems.nonlinear import NonlinearSystem
         from ..systems.pwa import PiecewiseAffineSystem
         from ..systems.switched import FilippovSystem, SwitchedAffineSystem
 
-        return isinstance(system, PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem)
+        return isinstance(system, PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem
+                          | NonlinearSystem)
 
     @classmethod
     def systems(cls) -> str:
-        return ("PiecewiseAffineSystem, FilippovSystem and SwitchedAffineSystem (for Lur'e "
-                "systems use method='implicit_euler')")
+        return ("PiecewiseAffineSystem, FilippovSystem, SwitchedAffineSystem and "
+                "NonlinearSystem (for Lur'e systems use method='implicit_euler')")

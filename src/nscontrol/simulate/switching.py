@@ -13,6 +13,9 @@ Accepted systems:
   surfaces ``h_j(x) = 0``; DOP853 with event location and grazing detection; attracting
   sliding by the Filippov (equivalent) vector field with exit detection, the state projected
   back onto the surface; repelling sliding raises ``ModelError``.
+* :class:`~nscontrol.systems.nonlinear.NonlinearSystem` — a smooth field ``f(t, x[, u])``:
+  the Filippov path with no surface (one DOP853 piece; with ``sensitivity=True`` the
+  variational equation gives the state transition).
 * :class:`~nscontrol.systems.switched.SwitchedAffineSystem` with a PWM controller — the
   switching instants ``t_k + o_j`` follow from the state sampled at the exact ``t_k = t0 + kT``
   in closed form, and each sub-interval is propagated exactly by the mode's ``LTIFlow``.
@@ -24,7 +27,7 @@ Event kinds: ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"grazing
 Options
 -------
 u : Exosystem or callable, optional
-    Input (PWA systems), overriding the system's default.
+    Input (PWA and nonlinear systems), overriding the system's default.
 t_eval : array_like, optional
     Sample times (event instants are always added). Default: ``n_samples`` equally spaced.
 n_samples : int
@@ -56,6 +59,7 @@ from ..errors import ModelError, NscontrolError, ZenoError
 from .trajectory import Recorder, Trajectory
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
+    from ..systems.nonlinear import NonlinearSystem
     from ..systems.pwa import PiecewiseAffineSystem
     from ..systems.switched import FilippovSystem, SwitchedAffineSystem
 
@@ -197,13 +201,15 @@ class _Run:
                                state_names=getattr(self.system, "state_names", ()))
 
 
-def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem,
-              x0: ArrayLike, t_span: tuple[float, float], **options: Any) -> Trajectory:
-    """Integrate a PWA, Filippov or PWM-switched system with every switching located.
+def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem
+              | NonlinearSystem, x0: ArrayLike, t_span: tuple[float, float],
+              **options: Any) -> Trajectory:
+    """Integrate a PWA, Filippov or PWM-switched system with every switching located (or a
+    smooth nonlinear system, which has none).
 
     Parameters
     ----------
-    system : PiecewiseAffineSystem or FilippovSystem or SwitchedAffineSystem
+    system : PiecewiseAffineSystem or FilippovSystem or SwitchedAffineSystem or NonlinearSystem
     x0 : array_like, shape (n,)
     t_span : (float, float)
     **options
@@ -237,6 +243,7 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
     >>> [e.kind for e in tr.events], tr.stats["saltation_matrices"].shape
     (['sliding_start'], (1, 2, 2))
     """
+    from ..systems.nonlinear import NonlinearSystem
     from ..systems.pwa import PiecewiseAffineSystem
     from ..systems.switched import FilippovSystem, SwitchedAffineSystem
 
@@ -246,10 +253,12 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
         from ._switching_filippov import run_filippov as runner
     elif isinstance(system, SwitchedAffineSystem):
         from ._switching_pwm import run_pwm as runner
+    elif isinstance(system, NonlinearSystem):
+        from ._switching_filippov import run_smooth as runner
     else:
-        raise ModelError(f"switching: expected a PiecewiseAffineSystem, FilippovSystem or "
-                         f"SwitchedAffineSystem, got {type(system).__name__}; Lur'e systems use "
-                         f"method='implicit_euler'")
+        raise ModelError(f"switching: expected a PiecewiseAffineSystem, FilippovSystem, "
+                         f"SwitchedAffineSystem or NonlinearSystem, got "
+                         f"{type(system).__name__}; Lur'e systems use method='implicit_euler'")
     x0 = as_vector("x0", x0, system.n_states)
     run = _Run(system, x0, t_span, options)
     try:

@@ -1,5 +1,6 @@
 """Models, validated at construction: mechanical systems with impacts, linear hybrid systems,
-Lur'e systems, piecewise-affine, Filippov and switched affine systems.
+Lur'e systems, piecewise-affine, Filippov and switched affine systems, and smooth nonlinear
+flows.
 
 Every public name is importable from here (``from nscontrol.systems import ...``);
 the defining module loads on first use, so importing the package stays cheap.
@@ -17,6 +18,8 @@ _EXPORTS: dict[str, str] = {
     "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
     # switched.py
     "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
+    # nonlinear.py
+    "NonlinearSystem": "nonlinear",
     # lagrangian.py
     "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
