@@ -198,6 +198,11 @@ def _dedupe_legend(ax: Any) -> None:
     ax.legend(seen.values(), seen.keys(), loc="lower left", fontsize="small")
 
 
-EXAMPLES = [Example("impact-oscillator-bifurcation",
-                    "grazing and flip of the forced impact oscillator: continuation vs brute "
-                    "force", "orbits", run)]
+EXAMPLES = [Example(
+    "impact-oscillator-bifurcation",
+    "grazing and flip of the forced impact oscillator: continuation vs brute force", "orbits",
+    run,
+    captions={"impact_oscillator_bifurcation":
+              "Stroboscopic position against the forcing F: brute force (dots, up and down "
+              "sweeps) and continuation (lines; unstable dashed), with the grazing and the flip "
+              "marked where continuation located them."})]
