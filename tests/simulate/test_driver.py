@@ -173,9 +173,11 @@ def test_a_model_error_is_raised_whatever_the_failure_policy(ball):
 
 
 def test_capabilities_are_asked_for_not_assumed(ball):
-    with pytest.raises(ModelError, match=r"^sensitivity: method 'event_driven' does not "
-                                         r"compute sensitivities; use one of \[.*'switching'.*\]"):
-        nsc.simulate(ball, [1.0, 0.0], (0.0, 1.0), sensitivity=True)
+    with pytest.raises(ModelError, match=r"^sensitivity: method 'moreau_jean' does not "
+                                         r"compute sensitivities; use one of "
+                                         r"\[.*'event_driven'.*'switching'.*\]"):
+        nsc.simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3,
+                     sensitivity=True)
     from nscontrol.analysis.periodic import periodic_steady_state
 
     with pytest.raises(ModelError, match="shooting needs sensitivities"):

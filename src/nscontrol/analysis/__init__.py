@@ -42,6 +42,7 @@ _EXPORTS: dict[str, str] = {
     "hyperplane_map": "orbits", "floquet_multipliers": "orbits",
     # saltation.py
     "saltation_matrix": "saltation", "impact_jump_jacobian": "saltation",
+    "impact_velocity": "saltation",
     "time_shift_term": "saltation",
     # continuation.py
     "SpecialPoint": "continuation", "Branch": "continuation", "continue_orbit": "continuation",

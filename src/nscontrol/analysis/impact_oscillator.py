@@ -163,15 +163,22 @@ class ImpactOscillator:
         """A copy with some parameters changed (``osc.with_(forcing=2.0)``)."""
         return replace(self, **changes)
 
-    def system(self) -> Any:
-        """The model as a :class:`~nscontrol.systems.lagrangian.LagrangianSystem`."""
+    def system(self, *, drive_as_force: bool = False) -> Any:
+        """The model as a :class:`~nscontrol.systems.lagrangian.LagrangianSystem`.
+
+        With ``drive_as_force`` the drive ``F cos(ωt)`` is part of the model as a force
+        callable (then no input is passed): the same motion, but nonlinear to the integrator,
+        which takes DOP853 (and for orbits its variational equation) instead of exponentials.
+        """
         from ..systems.lagrangian import LagrangianSystem
 
+        drive = _Drive(self.forcing, self.omega) if drive_as_force else None
         return LagrangianSystem(np.array([[self.mass]]), stiffness=np.array([[self.stiffness]]),
                                 damping=np.array([[self.damping]]),
                                 gap_matrix=np.array([[-1.0]]), gap_offset=np.array([self.stop]),
                                 restitution=self.restitution, actuation=np.array([[1.0]]),
-                                names=("mass",))
+                                names=("mass",), force=drive,
+                                force_jacobian=None if drive is None else _Drive.jacobian)
 
     def input(self) -> Any:
         """The drive ``F cos(ωt)`` as an :class:`~nscontrol.numerics.lti.Exosystem`."""
@@ -179,11 +186,15 @@ class ImpactOscillator:
 
         return Exosystem.sinusoid(self.forcing, self.omega, phase=math.pi / 2)
 
-    def forced(self) -> Any:
-        """The model, its drive and period as a :class:`~nscontrol.analysis.orbits.Forced`."""
+    def forced(self, *, drive_as_force: bool = False, **options: Any) -> Any:
+        """The model, its drive and period as a :class:`~nscontrol.analysis.orbits.Forced`
+        (``drive_as_force``: see :meth:`system`; ``options`` such as ``rtol`` go to every
+        run)."""
         from .orbits import Forced
 
-        return Forced(self.system(), self.input(), self.period, method="event_driven")
+        return Forced(self.system(drive_as_force=drive_as_force),
+                      None if drive_as_force else self.input(), self.period,
+                      method="event_driven", options=tuple(sorted(options.items())))
 
     # -- closed forms -----------------------------------------------------------------------
     def _response(self) -> complex:
@@ -281,6 +292,22 @@ class ImpactOscillator:
             return 1.0 + float(np.trace(M)) + float(np.linalg.det(M))
 
         return float(scipy.optimize.brentq(g, *bracket, xtol=1e-15, rtol=4 * np.finfo(float).eps))
+
+
+@dataclass(frozen=True)
+class _Drive:
+    """``(t, q, v) -> [F cos(ωt)]`` as a picklable force callable."""
+
+    forcing: float
+    omega: float
+
+    def __call__(self, t: float, q: FloatArray, v: FloatArray) -> FloatArray:
+        return np.array([self.forcing * math.cos(self.omega * t)])
+
+    @staticmethod
+    def jacobian(t: float, q: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The drive depends on time only."""
+        return np.zeros((1, 1)), np.zeros((1, 1))
 
 
 @dataclass(frozen=True)

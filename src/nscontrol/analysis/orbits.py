@@ -23,13 +23,18 @@ Where the Jacobian comes from
   ``Δ`` is ``e^{AΔ}`` (:class:`~nscontrol.numerics.lti.LTIFlow`); at each impact of the event
   table the saltation matrix of Newton's law is applied. Nothing is differentiated
   numerically.
+* Nonlinear mechanical systems (``M(q)``, nonlinear forces or gaps, a callable controller)
+  under ``event_driven``: the integrator's ``sensitivity`` (DOP853 with the variational
+  equation, the saltation matrix of Newton's law with ``M(q)`` and ``g(q)`` at each impact);
+  the smallest impact speed is read from the event table.
 
 Grazing monitors
 ----------------
 An orbit records its **event signature** (the kinds and contacts of its events in order) and
 two distances to a grazing: the smallest approach speed at its impacts and, for mechanical
-systems, the smallest gap over its free flight (refined on the exact flow). Continuation
-locates a grazing where the signature changes and these distances go to zero.
+systems, the smallest gap over its free flight (refined on the exact flow, or for nonlinear
+mechanics by Brent's method on ``ġ = 0`` with short runs: :func:`nonlinear_min_gap`).
+Continuation locates a grazing where the signature changes and these distances go to zero.
 """
 
 from __future__ import annotations
@@ -120,6 +125,12 @@ def _is_linear_mechanics(system: Any) -> bool:
     from ..systems.lagrangian import LagrangianSystem
 
     return isinstance(system, LagrangianSystem) and system.is_linear
+
+
+def _is_mechanics(system: Any) -> bool:
+    from ..systems.lagrangian import LagrangianSystem
+
+    return isinstance(system, LagrangianSystem)
 
 
 def _has_sensitivity(forced: Forced) -> bool:
@@ -221,19 +232,42 @@ def stroboscopic_map(forced: Forced, x0: Any, *, n_periods: int = 1,
     k = check_integer("n_periods", n_periods, minimum=1)
     x0 = as_vector("x0", x0, forced.n_states)
     tf = t0 + k * forced.period
-    if _has_sensitivity(forced):
-        tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]), sensitivity=True)
-        J = np.asarray(tr.stats["state_transition"], float)
-        speed = np.inf
-    elif _is_linear_mechanics(forced.system):
+    if _is_linear_mechanics(forced.system):   # exact: nothing integrated numerically
         tr = forced.simulate(x0, (t0, tf), t_eval=np.array([t0, tf]))
         J, speed = _mechanics_transition(_model_of(forced.system), tr, t0, tf, forced.u)
+    elif _has_sensitivity(forced):
+        tr = _transition_over(forced, x0, t0, tf)
+        J = np.asarray(tr.stats["state_transition"], float)
+        speed = _min_impact_speed(forced.system, tr)
     else:
         raise ModelError(f"system: no state transition for {type(forced.system).__name__} "
                          f"with method {forced.method!r}; use a method with the "
                          f"'sensitivity' capability or a linear LagrangianSystem")
     sig = tuple((e.kind, int(e.index)) for e in tr.events)
     return MapResult(np.asarray(tr.x[-1], float), J, tr, sig, speed)
+
+
+def _transition_over(forced: Forced, x0: FloatArray, t0: float, tf: float) -> Any:
+    """The run with ``sensitivity=True``, sampled at ``t0, tf``: on the coarsest grid
+    (``dt = tf - t0``) by a method without ``t_eval`` that has a sampling grid
+    (``event_driven``, whose ``t_eval`` would interpolate), by ``t_eval`` otherwise."""
+    from ..simulate.driver import integrator_for
+
+    cls = integrator_for(forced.system, forced.method)
+    grid = ({"dt": tf - t0} if "t_eval" not in cls.capabilities
+            and "dt" in getattr(cls, "options", ()) else {"t_eval": np.array([t0, tf])})
+    return forced.simulate(x0, (t0, tf), sensitivity=True, **grid)
+
+
+def _min_impact_speed(system: Any, tr: Any) -> float:
+    """Smallest approach speed ``-∇g_j(q)·v-`` over the impacts of a mechanical run
+    (``inf`` for another system or no impact)."""
+    if not hasattr(system, "gap_jacobian"):
+        return np.inf
+    n = system.n_dof
+    speeds = [-float(system.gap_jacobian(ev.pre[:n])[ev.index] @ ev.pre[n:])
+              for ev in tr.events if ev.kind == "impact"]
+    return min(speeds, default=np.inf)
 
 
 _MODELS: dict[int, tuple[Any, _LinearMechanics]] = {}
@@ -441,7 +475,8 @@ def make_orbit(forced: Forced, X: FloatArray, maps: list[MapResult], iterations:
         Mono = m.jacobian @ Mono
     sig = tuple(s for m in maps for s in m.signature)
     speed = min((m.min_impact_speed for m in maps), default=np.inf)
-    gap = min_gap(forced, X, maps) if _is_linear_mechanics(forced.system) else np.inf
+    gap = (min_gap(forced, X, maps) if _is_linear_mechanics(forced.system)
+           else nonlinear_min_gap(forced, X) if _is_mechanics(forced.system) else np.inf)
     return Orbit(X.copy(), float(forced.period), X.shape[0], Mono, floquet_multipliers(Mono),
                  sig, float(speed), float(gap), iterations, residual,
                  tuple(m.jacobian for m in maps))
@@ -508,6 +543,65 @@ def _refine_min(ts: float, xs: FloatArray, w: FloatArray, g0: float, model: _Lin
         return float(w @ xs[:n] + g0)
     X = flow.propagate(X0, s)
     return float(w @ X[:n] + g0)
+
+
+def nonlinear_min_gap(forced: Forced, X: FloatArray, samples: int = 64) -> float:
+    """Smallest local minimum of the gaps over the free flight of the orbit through nodes
+    ``X`` of a nonlinear mechanical system (minima at impacts excluded; ``inf`` if none).
+
+    The gaps are sampled on the run's grid of ``samples`` points per period; each sampled
+    local minimum of contact ``j`` is refined by Brent's method on ``ġ_j = ∇g_j(q)·v = 0``
+    between its neighbouring samples (each evaluation a short run from the left one), so the
+    grazing distance is as accurate as the integrator, not the sampling.
+
+    Parameters
+    ----------
+    forced : Forced
+        The forced :class:`~nscontrol.systems.lagrangian.LagrangianSystem`.
+    X : (k, n) array_like
+        The orbit's shooting nodes (at ``t = 0, T, ...``).
+    samples : int
+        Samples per period.
+    """
+    sysm, T = forced.system, forced.period
+    best = np.inf
+    for x_node in np.atleast_2d(np.asarray(X, float)):
+        tr = sample_on_grid(forced, x_node, T / samples, samples)
+        g = np.array([sysm.gaps(x[: sysm.n_dof]) for x in tr.x]).reshape(len(tr.t), -1)
+        t_imp = tr.event_times()
+        for j in range(g.shape[1]):
+            for i in range(1, len(tr.t) - 1):
+                lo, hi = tr.t[i - 1], tr.t[i + 1]
+                if (g[i, j] <= g[i - 1, j] and g[i, j] <= g[i + 1, j] and hi > lo
+                        and not np.any((t_imp >= lo) & (t_imp <= hi))):
+                    best = min(best, _refine_gap_min(forced, tr.x[i - 1], lo, hi, j))
+    return float(best)
+
+
+def _refine_gap_min(forced: Forced, x_lo: FloatArray, t_lo: float, t_hi: float,
+                    j: int) -> float:
+    """``g_j`` where ``ġ_j = 0`` in ``(t_lo, t_hi)`` (``g_j`` decreasing at ``t_lo``,
+    increasing at ``t_hi``), the state run from ``x_lo`` at ``t_lo``; the smaller end value
+    when ``ġ_j`` does not change sign there."""
+    import scipy.optimize
+
+    sysm, n = forced.system, forced.system.n_dof
+
+    def state(s: float) -> FloatArray:
+        if s == 0.0:
+            return x_lo
+        return np.asarray(forced.simulate(x_lo, (t_lo, t_lo + s), dt=s).x[-1], float)
+
+    def rate(s: float) -> float:
+        x = state(s)
+        return float(sysm.gap_jacobian(x[:n])[j] @ x[n:])
+
+    width = t_hi - t_lo
+    r0, r1 = rate(0.0), rate(width)
+    if not r0 < 0.0 < r1:
+        return float(min(sysm.gaps(state(0.0)[:n])[j], sysm.gaps(state(width)[:n])[j]))
+    s = scipy.optimize.brentq(rate, 0.0, width, xtol=4 * np.finfo(float).eps * max(1.0, t_hi))
+    return float(sysm.gaps(state(s)[:n])[j])
 
 
 # -- autonomous orbits and hyperplane sections -------------------------------------------------

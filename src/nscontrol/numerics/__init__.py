@@ -1,8 +1,9 @@
 """Numerical kernels: complementarity solvers (:mod:`.lcp`), exact LTI propagation and root
 location (:mod:`.lti`), LMI helpers on CVXPY and the Lyapunov re-check (:mod:`.lmi`),
 balancing and scaling (:mod:`.scaling`), observability tests
-(:mod:`~nscontrol.numerics.observability`), central differences (:mod:`.differences`), the
-transition term of a sampled switching instant (:mod:`.saltation`)."""
+(:mod:`~nscontrol.numerics.observability`), central differences (:mod:`.differences`),
+saltation matrices and the transition term of a sampled switching instant
+(:mod:`.saltation`)."""
 
 # Also the converter from state-space objects such as python-control's StateSpace
 # (statespace.py). Every public name is importable from here (from nscontrol.numerics import
@@ -36,7 +37,8 @@ _EXPORTS: dict[str, str] = {
     # differences.py
     "central_difference_gradient": "differences", "central_difference_jacobian": "differences",
     # saltation.py
-    "time_shift_term": "saltation",
+    "saltation_matrix": "saltation", "impact_jump_jacobian": "saltation",
+    "impact_velocity": "saltation", "time_shift_term": "saltation",
 }
 
 __all__ = list(_EXPORTS)

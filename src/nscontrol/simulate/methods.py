@@ -8,7 +8,8 @@ algorithm.
 method             systems                                     capabilities
 =================  ==========================================  ============================
 ``event_driven``   LinearHybridSystem, LagrangianSystem,       events, exact flow,
-                   ImpactingBodies                             listeners, controller
+                   ImpactingBodies                             listeners, controller,
+                                                               sensitivity (Lagrangian)
 ``moreau_jean``    LagrangianSystem, ImpactingBodies           time stepping, listeners,
                                                                controller, multipliers
 ``implicit_euler`` LureSystem                                  time stepping, multipliers,
@@ -32,8 +33,10 @@ class EventDriven(_ModuleIntegrator):
 
     name = "event_driven"
     module = "nscontrol.simulate.event_driven"
+    # sensitivity: LagrangianSystem only (DOP853 with the variational equation); the
+    # integrator refuses it for the other systems with a ModelError
     capabilities = frozenset({"events", "exact_flow", "listeners", "controller",
-                              "multipliers"})
+                              "multipliers", "sensitivity"})
     options: ClassVar[frozenset[str]] = frozenset(
         {"u", "controller", "dt", "max_events", "min_interval", "zeno_ratio_tol",
          "zeno_horizon", "zeno_rel", "rtol", "atol"})

@@ -16,6 +16,10 @@ Integrates
   with scipy's DOP853 and event location (no persistent contact: an accumulation of impacts
   there is reported as Zeno).
 
+With ``sensitivity=True`` (a :class:`LagrangianSystem`) the run is DOP853's with the
+variational equation integrated along and the saltation matrix of Newton's law applied at each
+impact: ``stats["state_transition"]`` is ``∂x(tf)/∂x0`` (:mod:`._variational`).
+
 Impacts go through Newton's multi-contact law (:class:`nscontrol.laws.NewtonImpactLaw`, one
 LCP on the Delassus matrix of the closed contacts), so simultaneous impacts are resolved
 together. After an impact the contacts that stay closed with zero normal velocity enter
@@ -80,8 +84,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
               zeno_horizon: float | None = None, zeno_rel: float = 1e-3,
               listeners: Sequence[Listener] = (),
               rtol: float = 1e-10, atol: float = 1e-12, record_every: int = 1,
-              signals: Sequence[str] | None = None, progress: bool | None = None
-              ) -> Trajectory:
+              signals: Sequence[str] | None = None, progress: bool | None = None,
+              sensitivity: bool = False) -> Trajectory:
     """Event-driven simulation from ``x0`` over ``t_span`` (see the module docstring).
 
     Parameters
@@ -127,13 +131,20 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         ``energy`` for mechanics); an empty sequence records states only.
     progress : bool, optional
         Progress bar (default: shown after 2 s).
+    sensitivity : bool
+        Also compute the state transition ``∂x(tf)/∂x0`` (:class:`LagrangianSystem` only):
+        the variational equation is integrated with the state by DOP853 (a linear system
+        too: the exact runner has no variational equation, and persistent contact is then
+        refused as Zeno) and each impact multiplies it by the saltation matrix of Newton's
+        law with ``M(q)`` and ``g(q)``; see :mod:`._variational`.
 
     Returns
     -------
     Trajectory
         ``signals``: the system's outputs (hybrid), ``gap`` and ``energy`` (mechanics);
         ``stats["impulses"]`` (mechanics): one row of contact impulses per ``"impact"``
-        event, in the order of ``traj.events_of("impact")``.
+        event, in the order of ``traj.events_of("impact")``. With ``sensitivity=True``:
+        ``stats["state_transition"]`` and ``stats["saltation_matrices"]`` (one per impact).
 
     Raises
     ------
@@ -172,6 +183,12 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
         listeners=listeners, rtol=rtol, atol=atol, record_every=record_every,
         signals=signals, progress=progress)
+    if not isinstance(sensitivity, bool | np.bool_):
+        raise ModelError(f"sensitivity: expected True or False, got {sensitivity!r}")
+    if sensitivity and not isinstance(system, LagrangianSystem):
+        raise ModelError(f"sensitivity: event_driven computes the state transition of a "
+                         f"LagrangianSystem, got {type(system).__name__}; for an "
+                         f"ImpactingBodies pass its .lagrangian() form")
     if isinstance(system, LinearHybridSystem):
         for name, value in (("u", u), ("controller", controller)):
             if value is not None:
@@ -189,7 +206,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
                                            signals=signals, progress=progress)
     if isinstance(system, LagrangianSystem):
         return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
-                                       _check_input(system, u), controller, opts))
+                                       _check_input(system, u), controller, opts,
+                                       bool(sensitivity)))
     raise ModelError(f"event_driven: integrates LinearHybridSystem, LagrangianSystem and "
                      f"ImpactingBodies, got {type(system).__name__}")
 
@@ -215,9 +233,14 @@ def _integrate_impacting_bodies(system: Any, x0: Any, t_span: tuple[float, float
 
 
 def _mechanics_run(system: Any, x0: Any, t0: float, tf: float, u: Any, controller: Any,
-                   opts: _Options) -> Any:
+                   opts: _Options, sensitivity: bool = False) -> Any:
     """The runner of a Lagrangian system: exact (linear flow, a gain ``K`` keeps it linear)
-    or DOP853 (nonlinear model, or a callable controller)."""
+    or DOP853 (nonlinear model, a callable controller, or the state transition asked)."""
+    if sensitivity:
+        if controller is not None and not callable(controller):
+            controller = _linear_controller(system, controller)
+        return NonlinearMechanicsRun(system, x0, t0, tf, u, opts, controller=controller,
+                                     sensitivity=True)
     if controller is not None and not callable(controller):
         if system.is_linear:
             return LinearMechanicsRun(system, x0, t0, tf, u, opts,

@@ -1,5 +1,10 @@
 """Event-driven run of a nonlinear Lagrangian system (``M(q)``, nonlinear forces or gaps, a
-callable controller): scipy's DOP853 with gap events and Newton's impact law."""
+callable controller): scipy's DOP853 with gap events and Newton's impact law.
+
+With ``sensitivity=True`` the variational equation is integrated with the state and every
+impact multiplies the transition by its saltation matrix (:mod:`._variational`); the run
+returns ``stats["state_transition"]`` (``∂x(tf)/∂x0``) and ``stats["saltation_matrices"]``
+(one per impact, in the order of ``traj.events_of("impact")``)."""
 
 from __future__ import annotations
 
@@ -15,6 +20,7 @@ from ..trajectory import Trajectory
 from ._flight import _sample_times
 from ._options import _Options
 from ._recording import _fail_zeno, _Samples
+from ._variational import Variational
 from ._zeno import _Zeno
 
 
@@ -22,7 +28,8 @@ class NonlinearMechanicsRun:
     """DOP853 with event location for ``M(q)``, nonlinear forces or gaps."""
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
-                 opts: _Options, controller: Callable[..., Any] | None = None) -> None:
+                 opts: _Options, controller: Callable[..., Any] | None = None,
+                 sensitivity: bool = False) -> None:
         from ...laws.impact import NewtonImpactLaw
 
         self.s, self.x, self.t0, self.tf, self.u, self.opts = system, x0, t0, tf, u, opts
@@ -36,6 +43,10 @@ class NonlinearMechanicsRun:
         self.rec = self.samples.rec
         self.zeno = _Zeno(opts, system.n_contacts)
         self.impulses: list[FloatArray] = []
+        self.var = Variational(system, self._rhs, controller is not None) if sensitivity \
+            else None
+        self.saltations: list[FloatArray] = []
+        self.closed: list[int] = []   # the contacts of the last impact
 
     def _input(self, t: float, q: FloatArray, v: FloatArray) -> FloatArray | None:
         uu = None if self.u is None else self.u.u(t)
@@ -70,6 +81,10 @@ class NonlinearMechanicsRun:
         finish = dict(method="event_driven", state_names=s.state_names)
         self._sample(np.array([t]), x[None])
         events = [self._gap_event(j) for j in range(s.n_contacts)]
+        N = s.n_states
+        # with sensitivity the integrated vector is [x; vec Φ] (events read its first n)
+        z = x if self.var is None else self.var.augment(x, np.eye(N))
+        rhs = self._rhs if self.var is None else self.var.rhs
         # windows of at most 1/50 of the span: an error raised inside the model (a controller
         # returning NaN, M(q) losing definiteness) loses one window, never the run
         window = max(self.opts.dt, (self.tf - self.t0) / 50)
@@ -80,7 +95,7 @@ class NonlinearMechanicsRun:
                 # crossings (direction -1) count
                 t_stop = min(self.tf, t + window)
                 grid = _sample_times(t, t_stop, self.opts.dt, self.t0)
-                sol = solve_ivp(self._rhs, (t, t_stop), x, method="DOP853",
+                sol = solve_ivp(rhs, (t, t_stop), z, method="DOP853",
                                 rtol=self.opts.rtol, atol=self.opts.atol,
                                 events=events or None, dense_output=True)
                 if not sol.success:
@@ -89,8 +104,9 @@ class NonlinearMechanicsRun:
                 t_end = float(sol.t[-1])
                 grid = grid[grid < t_end]
                 if grid.size:
-                    self._sample(grid, sol.sol(grid).T)
-                x = sol.y[:, -1].copy()
+                    self._sample(grid, sol.sol(grid).T[:, :N])
+                z = sol.y[:, -1].copy()
+                x = z[:N]
                 t = t_end
                 self._sample(np.array([t]), x[None])
                 bar.update(t)
@@ -99,11 +115,22 @@ class NonlinearMechanicsRun:
                 out = self._impact(t, x)
                 if isinstance(out, Trajectory):
                     return out
-                x = out
+                z = out if self.var is None else self._carry_transition(self.var, t, x, out, z)
         stats = {"events": self.zeno.n_events,
                  "impacts": sum(e.kind == "impact" for e in self.rec.events),
                  "impulses": np.array(self.impulses).reshape(-1, s.n_contacts)}
+        if self.var is not None:
+            stats["state_transition"] = self.var.transition(z).copy()
+            stats["saltation_matrices"] = np.array(self.saltations).reshape(-1, N, N)
         return self.samples.finish(status=0, stats=stats, **finish)
+
+    def _carry_transition(self, var: Variational, t: float, x_minus: FloatArray,
+                          x_plus: FloatArray, z: FloatArray) -> FloatArray:
+        """``[x+; vec(S Φ)]``: the transition carried through the impact just applied (on
+        the contacts Newton's law closed, ``self.closed``)."""
+        S = var.impact_saltation(t, x_minus, x_plus, self.closed)
+        self.saltations.append(S)
+        return var.augment(x_plus, S @ var.transition(z))
 
     def _gap_event(self, j: int) -> Callable[[float, FloatArray], float]:
         def event(t: float, x: FloatArray) -> float:
@@ -119,6 +146,7 @@ class NonlinearMechanicsRun:
         q, v = x[:n], x[n:]
         g = s.gaps(q)
         closed = np.flatnonzero(np.abs(g) <= 1e-9 * (1.0 + np.max(np.abs(q))))
+        self.closed = [int(j) for j in closed]
         self.zeno.n_events += 1
         J = s.gap_jacobian(q)
         hitting = [int(j) for j in closed if J[j] @ v < 0]
