@@ -56,6 +56,7 @@ _EXPORTS: dict[str, str] = {
     "PostureCertificate": "posture_certificate", "posture_certificate": "posture_certificate",
     "gain_threshold": "posture_certificate", "KineticAngleReport": "posture_certificate",
     "kinetic_angle_condition": "posture_certificate",
+    "ConstrainedMinimum": "posture_certificate", "constrained_minimum": "posture_certificate",
 }
 
 __all__ = list(_EXPORTS)

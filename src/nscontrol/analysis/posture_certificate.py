@@ -31,7 +31,8 @@ from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import ModelError
 
 __all__ = ["PostureCertificate", "posture_certificate", "gain_threshold",
-           "KineticAngleReport", "kinetic_angle_condition"]
+           "KineticAngleReport", "kinetic_angle_condition", "ConstrainedMinimum",
+           "constrained_minimum"]
 
 _EPS = float(np.finfo(float).eps)
 
@@ -343,3 +344,121 @@ def kinetic_angle_condition(M: ArrayLike, G: ArrayLike) -> KineticAngleReport:
     # W is computed to about n ε relative (a Cholesky solve): a factor 100
     return KineticAngleReport(bool(worst <= 100 * M.shape[0] * _EPS), W, cos, worst)
 
+
+
+@dataclass(frozen=True, eq=False)
+class ConstrainedMinimum:
+    """A local minimiser of a potential on ``Φ = {g(q) >= 0}`` (symmetry directions fixed).
+
+    Attributes
+    ----------
+    q
+        The minimiser.
+    active
+        Contacts closed there (``g <= gap_tol``).
+    multipliers
+        Their contact forces ``λ`` (``∇W = G_activeᵀ λ``, least squares).
+    value
+        The potential there.
+    kkt_residual
+        ``‖Nᵀ(∇W - G_activeᵀ λ)‖ / ‖∇W‖`` (``N``: the non-symmetry directions).
+    success
+        The optimiser converged, or stopped at its precision limit (SLSQP's "positive
+        directional derivative") with ``kkt_residual <= 1e-8`` and ``λ >= 0``.
+    """
+
+    q: FloatArray
+    active: tuple[int, ...]
+    multipliers: FloatArray
+    value: float
+    kkt_residual: float
+    success: bool
+
+
+def constrained_minimum(model: Any, potential: Any, gradient: Any, q0: ArrayLike, *,
+                        gap_tol: float = 1e-9) -> ConstrainedMinimum:
+    """Minimise ``potential`` on ``{g(q) >= 0}`` from ``q0``, the symmetry coordinates fixed.
+
+    Sequential quadratic programming (SciPy's SLSQP) on the coordinates orthogonal to the
+    symmetry directions; the multipliers are then recomputed by least squares on the
+    contacts found closed.
+
+    Parameters
+    ----------
+    model : ActuatedContactModel
+        Gaps, their Jacobian and the symmetry directions.
+    potential, gradient : callable
+        ``q -> W(q)`` and ``q -> ∇W(q)`` (e.g. a :class:`ContactRegulator`'s
+        ``total_potential`` and ``total_potential_gradient`` on the *true* model).
+    q0 : array_like (n,)
+        Starting point (admissible).
+    gap_tol : float
+        A contact with ``g <= gap_tol`` counts as closed.
+
+    Returns
+    -------
+    ConstrainedMinimum
+    """
+    from scipy.linalg import null_space
+    from scipy.optimize import minimize
+
+    q0 = as_vector("q0", q0, model.n_dof)
+    N = np.eye(model.n_dof) if not model.symmetry.size else null_space(model.symmetry)
+
+    def to_q(z: FloatArray) -> FloatArray:
+        return q0 + N @ z
+
+    res = minimize(lambda z: float(potential(to_q(z))), np.zeros(N.shape[1]),
+                   jac=lambda z: N.T @ np.asarray(gradient(to_q(z)), float), method="SLSQP",
+                   constraints=[{"type": "ineq", "fun": lambda z: model.gaps(to_q(z)),
+                                 "jac": lambda z: model.gap_jacobian(to_q(z)) @ N}],
+                   options={"ftol": 1e-12, "maxiter": 500})
+    z = res.x
+    active = tuple(int(i) for i in np.flatnonzero(model.gaps(to_q(z)) <= gap_tol))
+    if active:   # polish: Newton on the KKT equations of the contacts found closed
+        z = _polish_kkt(model, gradient, to_q, N, z, list(active))
+    q = to_q(z)
+    G = np.asarray(model.gap_jacobian(q), float)[list(active)]
+    lam = np.linalg.lstsq(G.T, np.asarray(gradient(q), float), rcond=None)[0] if active \
+        else np.zeros(0)
+    grad = np.asarray(gradient(q), float)
+    kkt = float(np.linalg.norm(N.T @ (grad - G.T @ lam)) / max(np.linalg.norm(grad), 1e-300))
+    # SLSQP stops with "positive directional derivative" when the line search cannot
+    # improve W in floating point: accept it when the point satisfies KKT (1e-8: the
+    # optimiser's ftol of 1e-12 on W translates into about √ftol on the gradient)
+    ok = bool(res.success or (kkt <= 1e-8 and np.all(lam >= 0.0)))
+    return ConstrainedMinimum(q, active, lam, float(potential(q)), kkt, ok)
+
+
+def _polish_kkt(model: Any, gradient: Any, to_q: Any, N: FloatArray, z: FloatArray,
+                active: list[int]) -> FloatArray:
+    """Newton on ``Nᵀ(∇W - G_Aᵀ λ) = 0, g_A = 0`` (central-difference Jacobian), a few
+    iterations from SLSQP's point; returns it unchanged if Newton does not reduce the
+    residual."""
+    from ..numerics.differences import central_difference_jacobian
+
+    k = len(active)
+
+    def residual(x: FloatArray) -> FloatArray:
+        zz, lam = x[:-k], x[-k:]
+        q = to_q(zz)
+        G = np.asarray(model.gap_jacobian(q), float)[active]
+        return np.concatenate([N.T @ (np.asarray(gradient(q), float) - G.T @ lam),
+                               np.asarray(model.gaps(q), float)[active]])
+
+    q = to_q(z)
+    G = np.asarray(model.gap_jacobian(q), float)[active]
+    lam = np.linalg.lstsq(G.T, np.asarray(gradient(q), float), rcond=None)[0]
+    x = np.concatenate([z, lam])
+    r = residual(x)
+    for _ in range(20):
+        J = central_difference_jacobian(residual, x)
+        try:
+            x_new = x - np.linalg.solve(J, r)
+        except np.linalg.LinAlgError:
+            break
+        r_new = residual(x_new)
+        if not np.linalg.norm(r_new) < np.linalg.norm(r):
+            break
+        x, r = x_new, r_new
+    return np.asarray(x[:-k], float)
