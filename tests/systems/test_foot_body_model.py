@@ -34,8 +34,8 @@ def test_mass_matrix_is_spd_and_christoffel_consistent(model):
         M = model.mass(q)
         assert np.array_equal(M, M.T) and np.linalg.eigvalsh(M).min() > 0
         # C(q, v) v equals the Christoffel form ∂(Mv)/∂q v - ½ ∂(vᵀMv)/∂q
-        dMv = central_difference_jacobian(lambda x: model.mass(x) @ v, q)
-        grad_T = central_difference_jacobian(lambda x: np.array([0.5 * v @ model.mass(x) @ v]),
+        dMv = central_difference_jacobian(lambda x, v=v: model.mass(x) @ v, q)
+        grad_T = central_difference_jacobian(lambda x, v=v: np.array([0.5 * v @ model.mass(x) @ v]),
                                              q)[0]
         expected = dMv @ v - grad_T
         scale = np.abs(expected).max() + 1.0
@@ -46,15 +46,15 @@ def test_force_and_gap_derivatives_match_central_differences(model):
     rng = np.random.default_rng(1)
     for q, v in _random_states(rng):
         Jq, Jv = model.smooth_force_jacobian(0.0, q, v)
-        fd_q = central_difference_jacobian(lambda x: model.smooth_force(0.0, x, v), q)
-        fd_v = central_difference_jacobian(lambda x: model.smooth_force(0.0, q, x), v)
+        fd_q = central_difference_jacobian(lambda x, v=v: model.smooth_force(0.0, x, v), q)
+        fd_v = central_difference_jacobian(lambda x, q=q: model.smooth_force(0.0, q, x), v)
         scale = np.abs(fd_q).max() + np.abs(fd_v).max() + 1.0
         assert np.allclose(Jq, fd_q, atol=FD_RTOL * scale)
         assert np.allclose(Jv, fd_v, atol=FD_RTOL * scale)
         assert np.allclose(model.gap_jacobian(q), central_difference_jacobian(
             lambda x: np.r_[model.gaps(x), 0.0, 0.0], q)[:2], atol=FD_RTOL)
         for a in range(2):
-            H = central_difference_jacobian(lambda x: model.gap_jacobian(x)[a], q)
+            H = central_difference_jacobian(lambda x, a=a: model.gap_jacobian(x)[a], q)
             assert np.allclose(model.gap_hessians(q)[a], H, atol=FD_RTOL)
         assert np.allclose(model.potential_gradient(q), central_difference_jacobian(
             lambda x: np.r_[model.potential(x), 0, 0, 0], q)[0], atol=FD_RTOL * 200)

@@ -422,7 +422,7 @@ def constrained_minimum(model: Any, potential: Any, gradient: Any, q0: ArrayLike
     lam = np.linalg.lstsq(G.T, np.asarray(gradient(q), float), rcond=None)[0] if active \
         else np.zeros(0)
     grad = np.asarray(gradient(q), float)
-    kkt = float(np.linalg.norm(N.T @ (grad - G.T @ lam)) / max(np.linalg.norm(grad), 1e-300))
+    kkt = float(np.linalg.norm(N.T @ (grad - G.T @ lam))) / max(float(np.linalg.norm(grad)), 1e-300)
     # SLSQP stops with "positive directional derivative" when the line search cannot
     # improve W in floating point: accept it when the point satisfies KKT (1e-8: the
     # optimiser's ftol of 1e-12 on W translates into about √ftol on the gradient)

@@ -158,7 +158,7 @@ def _balancing_forces(A: FloatArray, rhs: FloatArray, G: FloatArray, grad_V: Flo
                       ) -> tuple[FloatArray, float]:
     """``λ`` with ``A λ = rhs`` (the unactuated rows of the balance): minimum-norm, or the
     closest to ``lam_ref`` / the most positive one when the minimum-norm one is not ``> 0``."""
-    lam, *_ = np.linalg.lstsq(A, rhs, rcond=None)
+    lam = np.asarray(np.linalg.lstsq(A, rhs, rcond=None)[0], dtype=np.float64)
     residual = float(np.linalg.norm(A @ lam - rhs))
     sv = np.linalg.svd(A, compute_uv=False)
     # least squares is backward stable: a consistent system leaves a residual of about
@@ -292,7 +292,8 @@ class ContactRegulator:
 
     def __post_init__(self) -> None:
         p = self.model.actuation.shape[0]
-        Kp, Kd = as_square("Kp", np.atleast_2d(self.Kp), p), as_square("Kd", np.atleast_2d(self.Kd), p)
+        Kp = as_square("Kp", np.atleast_2d(self.Kp), p)
+        Kd = as_square("Kd", np.atleast_2d(self.Kd), p)
         check_symmetric("Kp", Kp)
         check_symmetric("Kd", Kd)
         if np.linalg.eigvalsh(Kp).min() <= 0.0:
@@ -417,11 +418,13 @@ def design_contact_regulator(model: Any, q_star: ArrayLike, active: Any, Kp: Any
     Examples
     --------
     >>> from nscontrol.systems.foot_body import foot_body_model
-    >>> reg = design_contact_regulator(foot_body_model(), [0.0, 0.05, 0.0, -0.25], [0, 1],
-    ...                                400.0, 30.0)
-    Traceback (most recent call last):
-    ...
-    nscontrol.errors.InfeasibleDesignError: q_star: no contact forces >= 1e-06 on ['heel', 'toe'] hold this posture; the balancing force of heel is -15.2433 N; the centre of pressure needed, x = 0.188498 m, lies outside the support [-0.08, 0.17] m (the centre of mass must project strictly inside it); choose a posture closer to balance or keep other contacts closed
+    >>> from nscontrol.errors import InfeasibleDesignError
+    >>> try:        # leaning so far that the centre of mass is beyond the toe
+    ...     design_contact_regulator(foot_body_model(), [0.0, 0.05, 0.0, -0.25], [0, 1],
+    ...                              400.0, 30.0)
+    ... except InfeasibleDesignError as err:
+    ...     print(err.status, "outside the support [-0.08, 0.17]" in str(err))
+    negative_contact_force True
     """
     design = static_contact_forces(model, q_star, active, lam_ref=lam_ref, lam_min=lam_min)
     return ContactRegulator(model, design, Kp, Kd)

@@ -12,7 +12,7 @@ with the perturbation scenarios A1–A7. Checks 1–11 are the acceptance list o
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -176,16 +176,19 @@ def lcp_enumeration_checks(draws: int = 300, seed: int = 6) -> dict[str, float]:
     from ..testing.lcp_problems import random_psd_matrix
 
     rng = np.random.default_rng(seed)
-    worst: dict[str, float] = {"lemke": 0.0, "pgs": 0.0, "auto": 0.0}
+    methods: tuple[Literal["lemke", "pgs", "auto"], ...] = ("lemke", "pgs", "auto")
+    worst: dict[str, float] = dict.fromkeys(methods, 0.0)
     for _ in range(draws):
         n = int(rng.integers(1, 4))
         M = random_psd_matrix(n, int(rng.integers(1, n + 1)), rng)
         z0 = np.where(rng.random(n) < 0.5, rng.uniform(0, 1, n), 0.0)
         w0 = np.where(z0 > 0, 0.0, rng.uniform(0, 1, n))
         q = w0 - M @ z0
-        w_ref = M @ _enumerate_lcp(M, q) + q
+        z_ref = _enumerate_lcp(M, q)
+        assert z_ref is not None                      # the empty support is always tried
+        w_ref = M @ z_ref + q
         scale = 1.0 + np.abs(q).max() + np.abs(M).max()
-        for method in worst:
+        for method in methods:
             res = solve_lcp(M, q, method=method, tol=1e-12, max_iter=20000)
             worst[method] = max(worst[method],
                                 float(np.abs(M @ res.z + q - w_ref).max() / scale))
@@ -195,11 +198,12 @@ def lcp_enumeration_checks(draws: int = 300, seed: int = 6) -> dict[str, float]:
 # -- Example C -------------------------------------------------------------------------------
 def run_wall(restitution: float, h: float, theta: float = 0.5) -> dict[str, Any]:
     """Example C from ``q0 = -0.5`` for 5 s: energy steps, final state, force and drift."""
-    import nscontrol as nsc
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
 
     _, reg, plant = wall_mass_setup(restitution)
-    loop = nsc.closed_loop(plant, reg.state_feedback())   # folded: linear, compiled
-    tr = nsc.simulate(loop, [WALL_Q0, 0.0], (0.0, 5.0), method="moreau_jean", h=h,
+    loop = closed_loop(plant, reg.state_feedback())   # folded: linear, compiled
+    tr = simulate(loop, [WALL_Q0, 0.0], (0.0, 5.0), method="moreau_jean", h=h,
                       theta=theta, progress=False)
     E = np.array([reg.energy(x[:1], x[1:]) for x in tr.x])
     P = tr.signals["impulse"][:, 0]
@@ -221,13 +225,14 @@ def run_foot(theta_dot: float, *, h: float = 1e-3, T: float = 8.0, kp: float = K
     """Example A from ``q*`` with body rate ``θ̇0`` (zero horizontal momentum). The law is
     folded into the plant's forces (implicit in the θ-method) unless ``as_block``: then it
     runs as a :class:`~nscontrol.systems.Controller` block held over each step."""
-    import nscontrol as nsc
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
 
     model, reg, plant = foot_body_setup(kp, kd, theta_star, m_b_design)
     q_star = reg.design.q_star
     x0 = initial_state(model, q_star, theta_dot)
-    system = nsc.closed_loop(plant, reg) if as_block else reg.folded(plant)
-    tr = nsc.simulate(system, x0, (0.0, T), method="moreau_jean", h=h, progress=False,
+    system = closed_loop(plant, reg) if as_block else reg.folded(plant)
+    tr = simulate(system, x0, (0.0, T), method="moreau_jean", h=h, progress=False,
                       activation=ACTIVATION)
     n = model.n_dof
     E = np.array([reg.energy(x[:n], x[n:]) for x in tr.x])

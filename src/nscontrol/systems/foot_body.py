@@ -287,6 +287,6 @@ def wall_mass_model(mass: float = 1.0) -> ActuatedContactModel:
         lambda q, v: (np.zeros((1, 1)), np.zeros((1, 1))), lambda q: 0.0,
         lambda q: zero1.copy(), lambda q: np.zeros((1, 1)), lambda q: -np.asarray(q, float),
         lambda q: np.array([[-1.0]]), lambda q: np.zeros((1, 1, 1)),
-        actuation=np.eye(1), symmetry=None, names=("q",), contact_names=("wall",),
+        actuation=np.eye(1), symmetry=np.zeros((0, 1)), names=("q",), contact_names=("wall",),
         parameters={"mass": mass})
 
