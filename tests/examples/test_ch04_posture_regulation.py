@@ -77,3 +77,21 @@ def test_example_runs_all_checks(tmp_path):
     m = json.loads(json.dumps(res.to_json()))["metrics"]
     assert m["A4"]["max_theta_error_5s"] > 0.1 and m["A4"]["unstable_rate_linearised"] > 0
     assert len(res.figures) == 5 and all(p.exists() for p in res.figures)
+
+
+@pytest.mark.slow
+def test_failing_designs_and_undamped_posture():
+    """§5 checks 9-10: A5 (posture beyond the toe) falls, A4 (k_p < k̄) diverges, A6
+    (k_d = 0) keeps oscillating with energy kept to the scheme's accuracy."""
+    a5 = run_foot(0.0, theta_star=-0.25, T=2.0)
+    assert a5["theta_error"].max() > 1.0
+    a4 = run_foot(-0.05, kp=120.0, T=5.0)
+    err = a4["theta_error"]
+    t = a4["trajectory"].t
+    assert err[t <= 3.0].max() > 0.05 and err.max() > 0.1      # diverging (0.074 at 3 s)
+    a6 = run_foot(-0.3, kd=0.0, T=5.0)
+    tr6 = a6["trajectory"]
+    assert np.ptp(tr6.x[tr6.t >= 4.0, 3]) / 2 > 0.01
+    # θ = ½ with a configuration-dependent M frozen at the step start conserves E only to
+    # O(h²) per step: the acceptance bound 1e-7 E0 (measured 7.8e-10 E0)
+    assert a6["max_energy_step"] <= 1e-7 * a6["E0"]

@@ -542,6 +542,7 @@ def _drawing(out_dir: Path, figures: list[Path], a1: dict[str, Any], model: Any)
         ax.set_ylim(-0.05, 0.95)
         ax.set_aspect("equal")
         ax.set_xlabel("x [m]")
+        ax.set_ylabel("height [m]")
     axes[0].set_ylabel("height [m] (red: contact force, 1 m = 400 N)")
     save_figure(fig, out_dir, "ch04_robot", figures)
 
