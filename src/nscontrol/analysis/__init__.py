@@ -53,6 +53,11 @@ _EXPORTS: dict[str, str] = {
     # impact_oscillator.py
     "ImpactOscillator": "impact_oscillator", "OneImpactOrbit": "impact_oscillator",
     "OscillatorFamily": "impact_oscillator",
+    # posture_certificate.py
+    "PostureCertificate": "posture_certificate", "posture_certificate": "posture_certificate",
+    "gain_threshold": "posture_certificate", "KineticAngleReport": "posture_certificate",
+    "kinetic_angle_condition": "posture_certificate",
+    "ConstrainedMinimum": "posture_certificate", "constrained_minimum": "posture_certificate",
 }
 
 __all__ = list(_EXPORTS)

@@ -35,6 +35,9 @@ _EXPORTS: dict[str, str] = {
     "design_state_feedback": "convergent_pwa", "design_pwa_state_feedback": "convergent_pwa",
     "tune_pwa_state_feedback": "convergent_pwa", "design_observer": "convergent_pwa",
     "output_feedback_loop": "convergent_pwa",
+    # contact_posture.py
+    "StaticPostureDesign": "contact_posture", "ContactRegulator": "contact_posture",
+    "static_contact_forces": "contact_posture", "design_contact_regulator": "contact_posture",
 }
 
 __all__ = list(_EXPORTS)

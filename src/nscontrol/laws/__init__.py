@@ -30,6 +30,7 @@ _EXPORTS: dict[str, str] = {
     "solve_inclusion": "inclusion", "InclusionSolution": "inclusion",
     # impact.py
     "NewtonImpactLaw": "impact", "ImpactResult": "impact", "restitution_matrix": "impact",
+    "delassus_matrix": "impact", "impact_energy_change": "impact",
 }
 
 __all__ = list(_EXPORTS)

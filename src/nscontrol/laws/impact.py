@@ -27,7 +27,8 @@ from .._validation import (
 )
 from ..errors import DimensionError, ModelError, SolverError
 
-__all__ = ["NewtonImpactLaw", "ImpactResult", "restitution_matrix"]
+__all__ = ["NewtonImpactLaw", "ImpactResult", "restitution_matrix", "delassus_matrix",
+           "impact_energy_change"]
 
 
 def restitution_matrix(m1: Any, m2: Any, e: Any) -> FloatArray:
@@ -89,7 +90,14 @@ class NewtonImpactLaw:
     ``P = max(0, -(1 + e) u- / Delta)`` is used. With one ``e`` for all contacts the kinetic
     energy changes by ``(1 - e) / 2 * P^T W^T v- <= 0`` (complementarity gives
     ``P^T Delta P = -(1 + e) P^T W^T v-``): it never grows, and is conserved for ``e = 1``.
-    With different ``e`` per contact this bound is not guaranteed.
+    With different ``e`` per contact this bound is not guaranteed. Exactly, for one ``e``
+    (:func:`impact_energy_change`)::
+
+        T+ - T- = -(1 - e) / (2 (1 + e)) · Pᵀ Delta P   (T = ½ vᵀ M v)
+
+    This is the impact law of Moreau–Jean time-stepping for several simultaneous contacts
+    (one LCP per step over the contacts predicted to close; for ``e = 0`` the post-impact
+    velocity is the ``M``-metric projection of ``v-`` on the tangent cone of the contacts).
 
     Parameters
     ----------
@@ -178,6 +186,60 @@ class NewtonImpactLaw:
             impulse[idx] = _impact_lcp(Wa.T @ MinvW, q)
             v_plus += MinvW @ impulse[idx]
         return ImpactResult(v_plus=v_plus, impulse=impulse, normal_velocity=W.T @ v_plus)
+
+
+def delassus_matrix(M: ArrayLike, W: ArrayLike) -> FloatArray:
+    """The Delassus matrix ``Delta = Wᵀ M⁻¹ W`` of the contacts (columns of ``W``).
+
+    Parameters
+    ----------
+    M
+        ``(n, n)`` symmetric positive definite mass matrix.
+    W
+        ``(n, k)`` contact gradients, one column per contact.
+
+    Raises
+    ------
+    ModelError
+        ``M`` not symmetric positive definite.
+
+    Examples
+    --------
+    >>> delassus_matrix(2.0 * np.eye(2), [[1.0], [1.0]])
+    array([[1.]])
+    """
+    M = as_square("M", M)
+    n = M.shape[0]
+    W = as_vector("W", W, n).reshape(n, 1) if np.ndim(W) == 1 else as_matrix("W", W, n)
+    D = W.T @ _mass_inverse(M)(W)
+    return np.asarray(0.5 * (D + D.T), float)
+
+
+def impact_energy_change(delassus: ArrayLike, impulse: ArrayLike, e: float) -> float:
+    """Kinetic energy change of a Newton impact, ``-(1 - e) / (2 (1 + e)) Pᵀ Delta P``.
+
+    Exact for one restitution coefficient ``e`` on every contact: complementarity gives
+    ``Pᵀ Delta P = -(1 + e) Pᵀ Wᵀ v-``, and ``T+ - T- = Pᵀ Wᵀ v- + ½ Pᵀ Delta P``.
+
+    Parameters
+    ----------
+    delassus
+        ``(k, k)`` Delassus matrix of the contacts (:func:`delassus_matrix`).
+    impulse
+        ``(k,)`` impulses ``P >= 0`` of the impact.
+    e
+        The common restitution coefficient, in ``[0, 1]``.
+
+    Examples
+    --------
+    >>> res = NewtonImpactLaw(0.5).apply(np.eye(1), [1.0], [-2.0])   # T- = 2, v+ = 1
+    >>> impact_energy_change(np.eye(1), res.impulse, 0.5)               # T+ - T- = 0.5 - 2
+    -1.5
+    """
+    e = check_in_interval("e", e, 0.0, 1.0)
+    P = as_vector("impulse", impulse)
+    D = as_square("delassus", delassus, P.shape[0])
+    return float(-(1.0 - e) / (2.0 * (1.0 + e)) * (P @ D @ P))
 
 
 def _mass_inverse(M: FloatArray) -> Callable[[FloatArray], FloatArray]:

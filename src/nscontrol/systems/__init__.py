@@ -33,6 +33,10 @@ _EXPORTS: dict[str, str] = {
     "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
     "LinearController": "feedback", "LinearObserver": "feedback",
     "PiecewiseObserver": "feedback",
+    # foot_body.py
+    "ActuatedContactModel": "foot_body", "FootBodyParameters": "foot_body",
+    "foot_body_model": "foot_body", "foot_body_points": "foot_body",
+    "wall_mass_model": "foot_body",
     # protocols.py
     "SimulableSystem": "protocols", "StateChecked": "protocols", "InputFunction": "protocols",
     "Exogenous": "protocols", "InputSignal": "protocols",
