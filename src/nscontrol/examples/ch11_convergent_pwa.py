@@ -19,7 +19,7 @@ __all__ = ["one_sided_oscillator", "one_sided_threshold", "beam_surrogate", "EXA
 
 def one_sided_oscillator(c: float = 0.1, *, m: float = 1.0, k: float = 1.0, ks: float = 5.0,
                          gap: float = 0.0, u: Any = None) -> Any:
-    """Example A (``gap = 0``) or B (``gap > 0``) of ch11 §4 as a continuous bimodal PWA system.
+    """Example A (``gap = 0``) or B (``gap > 0``) as a continuous bimodal PWA system.
 
     ``m q'' + c q' + k q + k_s·min(q + gap, 0) = u(t)``, state ``x = (q, q')``, force input
     ``E = [0, 1/m]ᵀ``, measured ``y = q``. Region 0 (``q <= -gap``, spring engaged):
@@ -37,13 +37,13 @@ def one_sided_oscillator(c: float = 0.1, *, m: float = 1.0, k: float = 1.0, ks: 
 
 def one_sided_threshold(*, m: float = 1.0, k: float = 1.0, ks: float = 5.0,
                         kp: float = 0.0) -> float:
-    """Closed-form CQLF damping threshold ``c* = √m(√(k + k_p + k_s) - √(k + k_p))`` (ch11
-    §2.4): the one-sided oscillator is quadratically convergent iff ``c > c*``."""
+    """Closed-form CQLF damping threshold ``c* = √m(√(k + k_p + k_s) - √(k + k_p))``: the
+    one-sided oscillator is quadratically convergent iff ``c > c*``."""
     return float(np.sqrt(m) * (np.sqrt(k + kp + ks) - np.sqrt(k + kp)))
 
 
 def beam_surrogate(*, u: Any = None, zeta: float = 0.02, alpha: float = 5.0) -> Any:
-    """Example C: the ch06 §1.3 two-mode beam surrogate "beam2" (state ``[η1, η2, η1', η2']``,
+    """Example C: the chapter-6 two-mode beam surrogate "beam2" (state ``[η1, η2, η1', η2']``,
     support, force, actuator and sensor at the midpoint ``y = η1 + η2``)."""
     from ..systems.pwa import PiecewiseAffineSystem
 
@@ -252,7 +252,7 @@ def _analysis_checks(out: dict[str, Any]) -> list[Any]:
 
 
 def _designs(plant: Any, out: dict[str, Any]) -> tuple[Any, Any, list[Any], list[Any]]:
-    """Checks 3 and 15 (and the gain-bound part of 12): the three designs of §4.1."""
+    """Checks 3 and 15 (and the gain-bound part of 12): the three designs of the example."""
     from ..design import convergent_pwa as d
     from ..numerics.lmi import recheck_lyapunov
 
@@ -424,7 +424,7 @@ def _frequency_checks(plant: Any, sf: Any, out: dict[str, Any]) -> tuple[list[An
 
 
 def _beam_metrics(out: dict[str, Any]) -> list[Any]:
-    """Example C: the ch06 beam surrogate, designed with the mechanical scaling of ch06 §2.4;
+    """Example C: the chapter-6 beam surrogate, designed with the mechanical scaling of chapter 6;
     the output-feedback loop's steady state at the bilinear resonance is stable."""
     from ..analysis import convergence as cv
     from ..design import convergent_pwa as d
@@ -439,7 +439,7 @@ def _beam_metrics(out: dict[str, Any]) -> list[Any]:
     w_b = 2 * np.pi * 27.53
     orbit = _orbit(d.output_feedback_loop(beam, obs, sf), w_b, a=2.99)
     auto = {k: d.design_observer(beam, sigma=k * w_ref, scale="auto").status
-            for k in (0.1, 0.3, 0.5)}  # "auto" normalises ‖C̃‖ = 1 (ch11 §3.5)
+            for k in (0.1, 0.3, 0.5)}  # "auto" normalises ‖C̃‖ = 1
     out.update(beam_open_loop_cqlf_margin=cv.quadratic_convergence(beam).margin, beam_K=sf.K,
                beam_L=obs.L.ravel(), beam_output_feedback_max_floquet=orbit.max_multiplier,
                beam_auto_observer_status={str(k): v for k, v in auto.items()})
@@ -550,7 +550,7 @@ def _open_loop_T_orbits(plant: Any, omegas: Any) -> list[tuple[float, float, flo
 
 
 def run(out_dir: Path | None = None) -> ExampleResult:
-    """Examples A, B, C of ch11 §4; all 15 acceptance checks of §5 with measured values."""
+    """Examples A, B, C; all 15 acceptance checks, with measured values."""
     out: dict[str, Any] = {}
     plant = one_sided_oscillator(0.1)
     checks = _analysis_checks(out)
