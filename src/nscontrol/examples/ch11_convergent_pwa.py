@@ -491,21 +491,22 @@ def _figures(plant: Any, sf: Any, frf: Any, out_dir: Path, figures: list[Path],
     ws = np.linspace(0.5, 4.0, 36)
     branches = pr.frequency_sweep(plant, ws, n_transient=100, n_record=6, progress=False)
     shot = _open_loop_T_orbits(plant, ws[::2])
-    fig, ax = new_figure(figsize=(7, 4))
-    ax.semilogy(ws, branches["up"].gamma, "^-", ms=3, label="open loop, brute force, sweep up")
+    # the legend beside the axes (five entries would hide the curves), readable at report size
+    fig, ax = new_figure(figsize=(9.5, 4))
+    ax.semilogy(ws, branches["up"].gamma, "^-", ms=3, label="open loop, sweep up (brute force)")
     ax.semilogy(ws, branches["down"].gamma, "v--", ms=3, label="open loop, sweep down")
     for stable, mark, text in ((True, "o", "stable"), (False, "x", "unstable")):
         pts = [(w, g) for w, g, mu in shot if (mu < 1) == stable]
         if pts:
             ax.semilogy(*zip(*pts, strict=True), mark, color="r",
-                        label=f"open-loop T-periodic solution ({text}, shooting)")
+                        label=f"open loop T-periodic, {text} (shooting)")
     ax.semilogy(frf.omega, frf.gamma, "k-", label="closed loop γ₁(ω) (shooting)")
     ax.set_xscale("log")
     ax.set_xlabel("forcing frequency ω [rad/s]")
     ax.set_ylabel("response gain max|q| / a [-]")
     ax.set_title("open loop: coexisting responses; closed loop: one steady state",
                  fontsize="medium")
-    ax.legend(fontsize="x-small")
+    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
     gap = float(np.nanmax(np.abs(branches["up"].gamma / branches["down"].gamma - 1)))
     ax.text(-0.1, -0.2, f"a = 1. Sweeps up and down coincide (largest relative difference "
             f"{gap:.1e}): no hysteresis at this amplitude.\nThe coexisting responses shown "
