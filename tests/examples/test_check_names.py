@@ -17,8 +17,9 @@ import pytest
 
 import nscontrol.examples as examples_pkg
 
-# "5. 5.2: x", "1 CQLF", "10 max", "3.2 bound", "§6", "spec 5.7", "(spec §2)"
-SECTION_START = re.compile(r"^\s*(§|spec\b|\d+(\.\d+)*[.:)]?\s)", re.I)
+# "5. 5.2: x", "1 CQLF", "10 max", "3.2 bound", "1a impact", "4c: wall", "§6", "spec 5.7"
+# (case-sensitive: "2T orbit", twice the period, is not a section; ANYWHERE catches "Spec")
+SECTION_START = re.compile(r"^\s*(§|\d+[a-z]?(\.\d+[a-z]?)*[.:)]?\s)")
 ANYWHERE = re.compile(r"§|\bspec\b|\bspecification\b", re.I)
 KEY = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
