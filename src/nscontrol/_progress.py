@@ -79,10 +79,6 @@ def _labelled(bar: Any, desc: str, label: Any) -> Any:
 #: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder.
 KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py")
 
-#: Kernels of paths the warm-up does not reach (Lur'e laws coupled through the LCP,
-#: Moreau-Jean with nonlinear forces): they compile on first use, without a notice.
-FIRST_USE_KERNELS = ("simulate._lure_lcp_kernels", "simulate._mj_linearised_kernel")
-
 _announced = False
 
 
@@ -111,7 +107,7 @@ def announce_compilation(stream: Any = None) -> bool:
     """Say once per process, on stderr, that the kernels are about to be compiled (first run
     of an install only). Returns whether the message was printed."""
     global _announced
-    if _announced or not set(uncompiled_kernel_modules()) - set(FIRST_USE_KERNELS):
+    if _announced or not uncompiled_kernel_modules():
         return False
     _announced = True
     print("nscontrol: compiling the numerical kernels (numba) - this happens once per install "

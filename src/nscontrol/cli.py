@@ -77,10 +77,10 @@ def _run_summary(example: Any, result: Any, seconds: float) -> str:
 @main.command()
 def warmup() -> None:
     """Compile the numerical kernels now (once per install) so that later runs start fast."""
-    from ._progress import FIRST_USE_KERNELS, uncompiled_kernel_modules
+    from ._progress import uncompiled_kernel_modules
     from .examples.warmup import warm_up
 
-    missing = sorted(set(uncompiled_kernel_modules()) - set(FIRST_USE_KERNELS))
+    missing = uncompiled_kernel_modules()
     if not missing:
         click.echo("kernels already compiled (numba cache is up to date); nothing to do")
         return

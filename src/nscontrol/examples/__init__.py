@@ -40,7 +40,11 @@ class Check:
     op
         One of ``"<="``, ``"<"``, ``">="``, ``">"``, ``"=="``.
     note
-        Why the claim is checked this way (e.g. where it deviates from the spec), or ``""``.
+        Why the claim is checked this way (e.g. where it deviates from the reference), or
+        ``""``.
+    key
+        A stable identifier for scripts reading ``report.json`` (``snake_case``), or ``""``;
+        the name is for people and may be reworded, the key is not.
     """
 
     name: str
@@ -49,20 +53,24 @@ class Check:
     passed: bool
     op: str = "<="
     note: str = ""
+    key: str = ""
 
     def to_json(self) -> dict[str, Any]:
-        """``{"name", "value", "threshold", "op", "passed"}`` (plus ``"note"`` when there is
-        one) with JSON-compatible values (numpy scalars and arrays converted, non-finite
-        floats as strings)."""
+        """``{"name", "value", "threshold", "op", "passed"}`` (plus ``"note"`` and ``"key"``
+        when there are) with JSON-compatible values (numpy scalars and arrays converted,
+        non-finite floats as strings)."""
         out = {"name": self.name, "value": _jsonable(self.value),
                "threshold": _jsonable(self.threshold), "op": self.op,
                "passed": bool(self.passed)}
         if self.note:
             out["note"] = self.note
+        if self.key:
+            out["key"] = self.key
         return out
 
 
-def check(name: str, value: Any, threshold: Any, op: str = "<=", note: str = "") -> Check:
+def check(name: str, value: Any, threshold: Any, op: str = "<=", note: str = "",
+          key: str = "") -> Check:
     """Build a :class:`Check` by comparing ``value`` with ``threshold`` using ``op``.
 
     A comparison that cannot be made (incomparable types) is a failed check, not an error.
@@ -77,6 +85,8 @@ def check(name: str, value: Any, threshold: Any, op: str = "<=", note: str = "")
         The comparison ``value <op> threshold``.
     note : str
         Why the claim is checked this way, or ``""``.
+    key : str
+        A stable ``snake_case`` identifier for scripts reading ``report.json``, or ``""``.
 
     Returns
     -------
@@ -93,7 +103,7 @@ def check(name: str, value: Any, threshold: Any, op: str = "<=", note: str = "")
         passed = bool(_OPS[op](value, threshold))
     except TypeError:
         passed = False
-    return Check(name, value, threshold, passed, op, note)
+    return Check(name, value, threshold, passed, op, note, key)
 
 
 @dataclass
@@ -189,13 +199,14 @@ class Example:
 
 def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
     """A verdict formatter quoting checks: each ``(key, phrase)`` finds the first check whose
-    name contains ``key`` and says ``"phrase <measured> (bound <op> <threshold>)"``; the
-    count of passing checks closes the line.
+    key equals ``key`` or whose name contains it, and says ``"phrase <measured> (bound <op>
+    <threshold>)"``; the count of passing checks closes the line.
 
     Parameters
     ----------
     *parts : tuple of (str, str)
-        ``(key, phrase)`` pairs: a substring of a check's name and the words that quote it.
+        ``(key, phrase)`` pairs: a check's key (or a substring of its name) and the words
+        that quote it.
 
     Examples
     --------
@@ -207,7 +218,7 @@ def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
     def verdict(result: ExampleResult) -> str:
         said = []
         for key, phrase in parts:
-            found = [c for c in result.checks if key in c.name]
+            found = [c for c in result.checks if c.key == key or key in c.name]
             if not found:
                 continue
             c = found[0]

@@ -31,7 +31,7 @@ def save_figure(fig: Any, out_dir: Path | None, name: str, figures: list[Path]) 
         out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / f"{name}.png"
         fig.tight_layout()
-        fig.savefig(path, dpi=110)
+        fig.savefig(path, dpi=SAVE_DPI)
         figures.append(path)
     plt.close(fig)
 
@@ -50,3 +50,32 @@ def unlabelled_axes(fig: Any) -> list[str]:
         if not ax.get_ylabel():
             missing.append(f"panel {k} ({ax.get_title() or 'untitled'}): no y label")
     return missing
+
+
+#: Width of the report's figure column in CSS pixels (``report.py``: a 1100 px page less its
+#: padding); a wider figure is scaled down to it.
+REPORT_COLUMN_PX = 1068
+#: Smallest legend text, in pixels at report size, that stays readable (11 px: the size of
+#: the smallest captions browsers show by default is 10-12 px).
+MIN_LEGEND_PX = 11.0
+#: The resolution ``save_figure`` writes at.
+SAVE_DPI = 110
+
+
+def small_legends(fig: Any) -> list[str]:
+    """The legends of ``fig`` whose text is smaller than :data:`MIN_LEGEND_PX` once the saved
+    image is shown in the report (``[]`` when all are readable)."""
+    width_px = fig.get_figwidth() * SAVE_DPI
+    scale = min(1.0, REPORT_COLUMN_PX / width_px)
+    found = []
+    legends = [*fig.legends, *(ax.get_legend() for ax in fig.axes)]
+    legends += [a for ax in fig.axes for a in ax.artists if type(a).__name__ == "Legend"]
+    for k, legend in enumerate(leg for leg in legends if leg is not None):
+        texts = legend.get_texts()
+        if not texts:
+            continue
+        px = min(t.get_fontsize() for t in texts) * SAVE_DPI / 72.0 * scale
+        if px < MIN_LEGEND_PX:
+            found.append(f"legend {k} ('{texts[0].get_text()[:30]}'): {px:.1f} px at report "
+                         f"size")
+    return found

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from . import Example, ExampleResult, check
+from . import Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
 
 __all__ = ["EXAMPLES", "oscillator", "bifurcation_family", "run"]
@@ -202,7 +202,17 @@ EXAMPLES = [Example(
     "impact-oscillator-bifurcation",
     "grazing and flip of the forced impact oscillator: continuation vs brute force", "orbits",
     run,
-    captions={"impact_oscillator_bifurcation":
-              "Stroboscopic position against the forcing F: brute force (dots, up and down "
-              "sweeps) and continuation (lines; unstable dashed), with the grazing and the flip "
-              "marked where continuation located them."})]
+    claim="A harmonically forced oscillator hitting a stop changes behaviour at two forcing "
+          "amplitudes known in closed form: at grazing its orbit first touches the stop, and "
+          "at a flip the one-impact orbit becomes stable. Continuation of the periodic orbits "
+          "locates both to a relative error of 1e-6, and a brute-force simulation sweep shows "
+          "them within its grid spacing.",
+    verdict=verdict_from(("continuation locates the grazing (non-impacting side)",
+                          "grazing located to relative error"),
+                         ("continuation locates the flip", "flip to")),
+    key_figure="impact_oscillator_bifurcation",
+    captions={
+        "impact_oscillator_bifurcation": "Bifurcation diagram against the forcing amplitude F: "
+        "the states a brute-force simulation settles on (dots) and the periodic orbits "
+        "followed by continuation (lines): the non-impacting orbit up to grazing, the "
+        "one-impact orbit born there, and the period-2 orbit switched onto at the flip."})]

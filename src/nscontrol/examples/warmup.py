@@ -2,8 +2,10 @@
 
 Each kernel compiles on its first call and is cached on disk (``cache=True``), so one short
 run of every integrator path that reaches a kernel is enough: the LCP solvers, the exact
-event loop (impacts and guards), Moreau–Jean, implicit Euler on Lur'e systems and the
-switching integrator.
+event loop (impacts and guards), Moreau–Jean (linear and nonlinear forces), implicit Euler on
+Lur'e systems (closed-form and LCP steps) and the switching integrator. :data:`COMPILES`
+names the kernel modules each step reaches; a test holds it equal to the ``_*_kernel*.py``
+modules of the package, so a new kernel module cannot be forgotten here.
 """
 
 from __future__ import annotations
@@ -35,6 +37,10 @@ def _mechanics() -> None:
     simulate(stack.system(), stack.x0, (0.0, 0.01), method="moreau_jean", h=1e-3,
              progress=False)
     simulate(impact_oscillator(), [0.0, 0.0], (0.0, 2.0), progress=False)
+    # forces="explicit" takes the Python path (as M(q) or nonlinear forces do), whose
+    # matrices come from the linearised-forces kernel
+    simulate(ball.system(), ball.x0, (0.0, 0.2), method="moreau_jean", h=1e-3,
+             forces="explicit", progress=False)
 
 
 def _impacting_bodies() -> None:
@@ -55,6 +61,20 @@ def _setvalued() -> None:
             simulate(p.switched, p.x0, (p.t_span[0], t_end), progress=False)
     p = sp.bimodal_oscillator()
     simulate(p.system, p.x0, (0.0, 2.0), sensitivity=True, progress=False)
+    _lure_lcp()
+
+
+def _lure_lcp() -> None:
+    """A two-component relay coupled through ``H G`` (no triangular order): the one-step
+    inclusion is an LCP, solved by the compiled LCP step loop."""
+    import numpy as np
+
+    from ..laws.set_valued import Relay
+    from ..simulate import simulate
+    from ..systems.lure import LureSystem
+
+    coupled = LureSystem(-np.eye(2), np.eye(2), [[1.0, 0.5], [0.5, 1.0]], Relay([1.0, 1.0]))
+    simulate(coupled, [1.0, -1.0], (0.0, 0.1), h=1e-2, progress=False)
 
 
 #: (what, how): one step of the warm-up each.
@@ -64,6 +84,18 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("impacting bodies with an observer", _impacting_bodies),
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
 ]
+
+#: Step name to the kernel modules (``subpackage._module``, as
+#: :func:`nscontrol._progress.uncompiled_kernel_modules` names them) its runs compile.
+COMPILES: dict[str, tuple[str, ...]] = {
+    "LCP solvers": ("numerics._lcp_kernels",),
+    "event-driven and Moreau-Jean mechanics": (
+        "numerics._lti_kernels", "simulate._event_kernels", "simulate._moreau_jean_kernels",
+        "simulate._mj_linearised_kernel"),
+    "impacting bodies with an observer": ("numerics._lti_kernels", "simulate._event_kernels"),
+    "Lur'e systems (implicit Euler) and switching": (
+        "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels"),
+}
 
 
 def warm_up(report: Callable[[str], None] = lambda _: None) -> list[str]:
