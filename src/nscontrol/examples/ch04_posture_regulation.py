@@ -276,25 +276,27 @@ def run(out_dir: Path | None) -> ExampleResult:
     # 1-3: the impact map and the LCP solvers
     imp = random_impact_checks()
     metrics["impact_map"] = imp
-    checks.append(check("1a impact: complementarity U⁺+eU⁻ ⊥ P, worst relative product",
-                        imp["complementarity"], 1e-10))
-    checks.append(check("1b impact: energy identity T⁺−T⁻ = −(1−e)/(2(1+e)) PᵀWP, worst "
+    checks.append(check("Impact: complementarity U⁺+eU⁻ ⊥ P, worst relative product",
+                        imp["complementarity"], 1e-10, key="check_1a"))
+    checks.append(check("Impact: energy identity T⁺−T⁻ = −(1−e)/(2(1+e)) PᵀWP, worst "
                         "relative error", imp["energy_identity_rel"], 1e-8,
                         note="600 random draws, n ≤ 5, 1–3 contacts; the error over "
-                             f"n ε κ(W) is at most {imp['energy_identity_over_estimate']:.3g}"))
+                             f"n ε κ(W) is at most {imp['energy_identity_over_estimate']:.3g}",
+                             key="check_1b"))
     seq = sequential_impact_checks()
     metrics["sequential_impacts"] = seq
-    checks.append(check("2a impacts in sequence equal simultaneous ones when the kinetic angle "
+    checks.append(check("Impacts in sequence equal simultaneous ones when the kinetic angle "
                         "is not obtuse (W₁₂ ≤ 0), worst difference",
-                        seq["worst_difference_non_obtuse"], 1e-9))
-    checks.append(check("2b kinetic-angle helper misjudges the sign of W₁₂ (draws)",
-                        seq["helper_disagreements"], 0, "=="))
+                        seq["worst_difference_non_obtuse"], 1e-9, key="check_2a"))
+    checks.append(check("Kinetic-angle helper misjudges the sign of W₁₂ (draws)",
+                        seq["helper_disagreements"], 0, "==", key="check_2b"))
     lcp = lcp_enumeration_checks()
     metrics["lcp_vs_enumeration"] = lcp
-    checks.append(check("3 LCP solvers (Lemke, PGS, auto) agree with enumeration on PSD "
+    checks.append(check("LCP solvers (Lemke, PGS, auto) agree with enumeration on PSD "
                         "problems of size ≤ 3, worst difference of w", max(lcp.values()),
                         1e-8, note="PGS is iterative: its tolerance 1e-12 on the residual "
-                                   "bounds w's error by about 1e-12 κ; 1e-8 covers κ ≤ 1e4"))
+                                   "bounds w's error by about 1e-12 κ; 1e-8 covers κ ≤ 1e4",
+                                   key="check_3"))
 
     # 4-5: Example C
     wall = {}
@@ -305,20 +307,20 @@ def run(out_dir: Path | None) -> ExampleResult:
     metrics["wall"] = {f"e={e},h={h}": {k: v for k, v in r.items()
                                         if k not in ("trajectory", "energy")}
                        for (e, h), r in wall.items()}
-    checks.append(check("4a wall: largest energy increase in one step over E0 (e = 0, 0.5, "
+    checks.append(check("Wall: largest energy increase in one step over E0 (e = 0, 0.5, "
                         "0.9; θ = 1/2)", max(r["max_energy_step"] / r["E0"] for r in at_h),
-                        1e-6))
-    checks.append(check("4b wall: final energy below the initial one (all e)",
-                        all(r["E_final"] < r["E0"] for r in at_h), True, "=="))
-    checks.append(check("4c wall: speed at the end", max(abs(r["v_final"]) for r in at_h),
-                        1e-12))
-    checks.append(check("4d wall: discrete static balance P/h = k_p (q_d − q_end) at rest, "
-                        "error [N]", max(r["balance_error"] for r in at_h), 1e-9))
+                        1e-6, key="check_4a"))
+    checks.append(check("Wall: final energy below the initial one (all e)",
+                        all(r["E_final"] < r["E0"] for r in at_h), True, "==", key="check_4b"))
+    checks.append(check("Wall: speed at the end", max(abs(r["v_final"]) for r in at_h),
+                        1e-12, key="check_4c"))
+    checks.append(check("Wall: discrete static balance P/h = k_p (q_d − q_end) at rest, "
+                        "error [N]", max(r["balance_error"] for r in at_h), 1e-9, key="check_4d"))
     drift = max(r["q_final"] / (h * abs(r["approach_velocity"])) for (e, h), r in wall.items())
-    checks.append(check("5 wall: rest penetration over h·|U⁻| (h = 2, 1, 0.5 ms; all e)",
+    checks.append(check("Wall: rest penetration over h·|U⁻| (h = 2, 1, 0.5 ms; all e)",
                         drift, 1.0, note="and never negative: min q_end = "
                         f"{min(r['q_final'] for r in wall.values()):.3g}; U⁻ measured "
-                        f"{abs(at_h[0]['approach_velocity']):.3g} m/s"))
+                        f"{abs(at_h[0]['approach_velocity']):.3g} m/s", key="check_5"))
 
     # 6-7: static design and certificates of Example A
     model, reg, _ = foot_body_setup()
@@ -333,12 +335,12 @@ def run(out_dir: Path | None) -> ExampleResult:
     # the reference values are printed to 4-6 digits: compare to their rounding
     rel = max(abs(got[k] - v) / abs(v) for k, v in ref.items())
     metrics["static_design"] = got
-    checks.append(check("6a static design: τ*, λ*, ZMP offset and k̄ against the closed forms, "
-                        "worst relative difference", rel, 1e-4))
+    checks.append(check("Static design: τ*, λ*, ZMP offset and k̄ against the closed forms, "
+                        "worst relative difference", rel, 1e-4, key="check_6a"))
     f_eq = model.smooth_force(0.0, d.q_star, np.zeros(4)) + model.actuation.T @ d.tau_star \
         + model.gap_jacobian(d.q_star).T @ d.lam_star
-    checks.append(check("6b static design: equilibrium residual f(q*, 0) + Sᵀτ* + Gᵀλ*",
-                        float(np.abs(f_eq).max()), 1e-10))
+    checks.append(check("Static design: equilibrium residual f(q*, 0) + Sᵀτ* + Gᵀλ*",
+                        float(np.abs(f_eq).max()), 1e-10, key="check_6b"))
     cert = {"nominal (k_p = 400)": posture_certificate(model, d.q_star, [0, 1], KP, d.tau_star),
             "k_p = 120": posture_certificate(model, d.q_star, [0, 1], 120.0, d.tau_star)}
     _, reg5, _ = foot_body_setup(theta_star=-0.25)
@@ -346,14 +348,15 @@ def run(out_dir: Path | None) -> ExampleResult:
                                              reg5.design.tau_star)
     metrics["certificates"] = {k: c.to_json() for k, c in cert.items()}
     nominal = cert["nominal (k_p = 400)"]
-    checks.append(check("7a certificate, nominal gains: strict minimum (KKT, strict "
+    checks.append(check("Certificate, nominal gains: strict minimum (KKT, strict "
                         "complementarity, second-order condition)",
-                        nominal.is_strict_min and nominal.strictly_complementary, True, "=="))
-    checks.append(check("7b certificate, k_p = 120: second-order condition fails (smallest "
+                        nominal.is_strict_min and nominal.strictly_complementary, True, "==",
+                        key="check_7a"))
+    checks.append(check("Certificate, k_p = 120: second-order condition fails (smallest "
                         "reduced eigenvalue)", float(cert["k_p = 120"].reduced_hessian_eigs[0]),
-                        0.0, "<"))
-    checks.append(check("7c certificate, θ* = −0.25: heel multiplier negative",
-                        float(cert["θ* = −0.25"].multipliers[0]), 0.0, "<"))
+                        0.0, "<", key="check_7b"))
+    checks.append(check("Certificate, θ* = −0.25: heel multiplier negative",
+                        float(cert["θ* = −0.25"].multipliers[0]), 0.0, "<", key="check_7c"))
     metrics["kinetic_angle_at_posture"] = kinetic_angle_condition(
         model.mass(d.q_star), model.gap_jacobian(d.q_star)).worst
 
@@ -374,48 +377,59 @@ def run(out_dir: Path | None) -> ExampleResult:
     metrics["A3_as_controller_block"] = {
         "max_energy_step": block["max_energy_step"], "final_deviation": block["final_deviation"],
         "final_force": block["final_force"].tolist()}
-    checks.append(check("8a A1–A3: largest energy increase in one step [J]",
-                        max(r["max_energy_step"] for r in runs.values()), 1e-9))
-    checks.append(check("8b A1: largest heel gap [m] (the heel lifts and closes again: "
-                        f"{'yes' if closed else 'no'})", lift if closed else 0.0, 1e-3, ">"))
-    checks.append(check("8c A1–A3: deviation of (y, φ, θ) from q* after 8 s, h = 1 ms",
-                        max(r["final_deviation"] for r in runs.values()), 5e-3))
-    checks.append(check("8d A1–A2: deviation after 8 s, h = 0.25 ms",
-                        max(r["final_deviation"] for r in fine.values()), 5e-4))
-    checks.append(check("8e A1–A3: final contact force P/h against λ*, h = 1 ms (relative)",
-                        max(_force_error(r) for r in runs.values()), 0.03))
-    checks.append(check("8f A1–A2: final contact force against λ*, h = 0.25 ms (relative)",
-                        max(_force_error(r) for r in fine.values()), 0.005))
-    checks.append(check("8g A1–A3: horizontal drift of the centre of mass [m]",
-                        max(r["x_com_drift"] for r in runs.values()), 1e-3))
+    checks.append(check("A1–A3: largest energy increase in one step [J]",
+                        max(r["max_energy_step"] for r in runs.values()), 1e-9, key="check_8a"))
+    checks.append(check("A1: largest heel gap [m] (the heel lifts and closes again: "
+                        f"{'yes' if closed else 'no'})", lift if closed else 0.0, 1e-3, ">",
+                        key="check_8b"))
+    checks.append(check("A1–A3: deviation of (y, φ, θ) from q* after 8 s, h = 1 ms",
+                        max(r["final_deviation"] for r in runs.values()), 5e-3, key="check_8c"))
+    checks.append(check("A1–A2: deviation after 8 s, h = 0.25 ms",
+                        max(r["final_deviation"] for r in fine.values()), 5e-4, key="check_8d"))
+    checks.append(check("A1–A3: final contact force P/h against λ*, h = 1 ms (relative)",
+                        max(_force_error(r) for r in runs.values()), 0.03, key="check_8e"))
+    checks.append(check("A1–A2: final contact force against λ*, h = 0.25 ms (relative)",
+                        max(_force_error(r) for r in fine.values()), 0.005, key="check_8f"))
+    checks.append(check("A1–A3: horizontal drift of the centre of mass [m]",
+                        max(r["x_com_drift"] for r in runs.values()), 1e-3, key="check_8g"))
 
     # 9-10: A4 (gain too low), A5 (infeasible posture), A6 (no damping)
-    a4 = run_foot(-0.05, kp=120.0, T=3.0)
-    a4_long = run_foot(-0.05, kp=120.0, T=5.0)
+    a4 = run_foot(-0.05, kp=120.0, T=5.0)
     a5 = run_foot(0.0, theta_star=-0.25, T=2.0)
     a6 = run_foot(-0.3, kd=0.0, T=5.0)
     tr6 = a6["trajectory"]
     last = tr6.t >= tr6.t[-1] - 1.0
     amp6 = float(np.ptp(tr6.x[last, 3]) / 2)
     growth = _unstable_rate(model, d.q_star, 120.0, KD)
-    metrics["A4"] = {"max_theta_error_3s": float(a4["theta_error"].max()),
-                     "max_theta_error_5s": float(a4_long["theta_error"].max()),
-                     "unstable_rate_linearised": growth}
+    e4, t4 = a4["theta_error"], a4["trajectory"].t
+    metrics["A4"] = {"max_theta_error_3s": float(e4[t4 <= 3.0].max()),
+                     "max_theta_error_5s": float(e4.max()),
+                     "time_to_leave_0.1_rad": _first_time_above(t4, e4, 0.1),
+                     "unstable_rate_linearised": growth,
+                     "unstable_rate_measured": _growth_rate(t4, e4, 1e-2, 3e-2)}
     metrics["A5"] = {"max_theta_error_2s": float(a5["theta_error"].max())}
     metrics["A6"] = {"amplitude_last_second": amp6,
                      "max_energy_step_over_E0": a6["max_energy_step"] / a6["E0"]}
-    checks.append(check("9a A4 (k_p = 120 < k̄): largest |θ − θ*| within 3 s [rad]",
-                        metrics["A4"]["max_theta_error_3s"], 0.1, ">",
-                        note=f"the linearised unstable rate is {growth:.3g} 1/s (the foot "
-                             "slides freely): from θ̇0 = −0.05 the error needs about 3.3 s "
-                             "to reach 0.1; within 5 s it is "
-                             f"{metrics['A4']['max_theta_error_5s']:.3g}"))
-    checks.append(check("9b A5 (θ* = −0.25, infeasible): largest |θ − θ*| within 2 s [rad]",
-                        metrics["A5"]["max_theta_error_2s"], 1.0, ">"))
-    checks.append(check("10a A6 (k_d = 0): amplitude of θ in the last second [rad]",
-                        amp6, 0.01, ">"))
-    checks.append(check("10b A6: largest energy increase in one step over E0",
-                        metrics["A6"]["max_energy_step_over_E0"], 1e-7))
+    checks.append(check("A4 (k_p = 120 < k̄): largest |θ − θ*| within 5 s [rad]",
+                        metrics["A4"]["max_theta_error_5s"], 0.1, ">",
+                        note="the posture is unstable: the error leaves 0.1 rad at t = "
+                             f"{metrics['A4']['time_to_leave_0.1_rad']:.3g} s (the 3 s of the "
+                             "reconstructed scenario was one run's figure, not a bound of the "
+                             "theory) and the robot falls", key="check_9a"))
+    # Between 1e-2 and 3e-2 rad the error is one exponential: the stable mode (rate 18.5 1/s)
+    # has decayed to e^-20 by the time e reaches 1e-2 (t ≈ 1.2 s). The quadratic terms
+    # (centrifugal θ̇² against the linear restoring torque, the curvature of sin θ) change the
+    # rate by O(e) relative, at most ~3e-2 on this band; the θ-method's eigenvalue error is
+    # (rh)²/12 ~ 1e-7. Bound 5e-2.
+    rate_err = abs(metrics["A4"]["unstable_rate_measured"] - growth) / growth
+    checks.append(check("A4: growth rate of |θ − θ*| against the linearised unstable rate "
+                        "(relative)", rate_err, 5e-2, key="check_9a_rate"))
+    checks.append(check("A5 (θ* = −0.25, infeasible): largest |θ − θ*| within 2 s [rad]",
+                        metrics["A5"]["max_theta_error_2s"], 1.0, ">", key="check_9b"))
+    checks.append(check("A6 (k_d = 0): amplitude of θ in the last second [rad]",
+                        amp6, 0.01, ">", key="check_10a"))
+    checks.append(check("A6: largest energy increase in one step over E0",
+                        metrics["A6"]["max_energy_step_over_E0"], 1e-7, key="check_10b"))
 
     # 11: A7 (mass mis-estimated by ±20 %)
     a7 = {}
@@ -428,25 +442,41 @@ def run(out_dir: Path | None) -> ExampleResult:
                  "true_min_forces": cm.multipliers.tolist(), "success": cm.success,
                  "final_theta": float(r["trajectory"].x[-1, 3])}
     metrics["A7"] = {f"m_b x {f}": v for f, v in a7.items()}
-    checks.append(check("11a A7: the true minimiser keeps the foot flat with both forces "
+    checks.append(check("A7: the true minimiser keeps the foot flat with both forces "
                         "positive", all(v["success"] and v["true_min_active"] == [0, 1]
                                         and min(v["true_min_forces"]) > 0 for v in a7.values()),
-                        True, "=="))
-    checks.append(check("11b A7: final θ against the true minimiser's θ [rad]",
+                        True, "==", key="check_11a"))
+    checks.append(check("A7: final θ against the true minimiser's θ [rad]",
                         max(abs(v["final_theta"] - v["true_min_theta"]) for v in a7.values()),
-                        3e-3))
-    checks.append(check("11c A7: the true minimiser is away from θ* [rad]",
+                        3e-3, key="check_11b"))
+    checks.append(check("A7: the true minimiser is away from θ* [rad]",
                         min(abs(v["true_min_theta"] - d.q_star[3]) for v in a7.values()),
-                        1e-2, ">"))
+                        1e-2, ">", key="check_11c"))
 
     figures: list[Path] = []
     if out_dir is not None:
-        _figures(out_dir, figures, runs, fine, a4_long, a6, a7, cert, model, k_bar)
+        _figures(out_dir, figures, runs, fine, a4, a6, a7, cert, model, k_bar)
     return ExampleResult(
         example="ch04-posture-regulation", metrics=metrics, checks=checks, figures=figures,
         summary=f"k̄ = {k_bar:.3f} N m/rad; A1 deviation after 8 s "
                 f"{runs['A1']['final_deviation']:.2g} (h = 1 ms), "
                 f"{fine['A1']['final_deviation']:.2g} (h = 0.25 ms)")
+
+
+def _first_time_above(t: np.ndarray, e: np.ndarray, level: float) -> float:
+    """First sample time where ``e > level`` (``inf`` when never)."""
+    above = np.flatnonzero(e > level)
+    return float(t[above[0]]) if above.size else float("inf")
+
+
+def _growth_rate(t: np.ndarray, e: np.ndarray, low: float, high: float) -> float:
+    """Slope of ``log e`` fitted on the first passage of ``e`` from ``low`` to ``high``."""
+    end = np.flatnonzero(e > high)
+    stop = end[0] if end.size else len(e)
+    sel = (e[:stop] > low)
+    if sel.sum() < 3:
+        return float("nan")
+    return float(np.polyfit(t[:stop][sel], np.log(e[:stop][sel]), 1)[0])
 
 
 def _unstable_rate(model: Any, q_star: np.ndarray, kp: float, kd: float) -> float:
@@ -596,8 +626,8 @@ EXAMPLES = [Example(
           "Hessian — the energy never increases and the posture is stable whatever contacts "
           "open, close or impact; a too soft joint or a centre of mass outside the support "
           "breaks it.",
-    verdict=verdict_from(("7b", "k_p = 120 fails the second-order test with eigenvalue"),
-                         ("8c", "the pushed robot returns within")),
+    verdict=verdict_from(("check_7b", "k_p = 120 fails the second-order test with eigenvalue"),
+                         ("check_8c", "the pushed robot returns within")),
     key_figure="ch04_robot",
     captions={
         "ch04_robot": "A1: the robot pushed forward (θ̇0 = −1 rad/s) at five instants; the "
