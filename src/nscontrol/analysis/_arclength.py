@@ -56,13 +56,14 @@ class ArclengthProblem:
         """``max(1, max|x|)``: the corrector tolerance is relative to it."""
         return max(1.0, float(np.max(np.abs(y[:-1])))) if y.size > 1 else 1.0
 
-    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int = 8
-                ) -> tuple[FloatArray, Any]:
+    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int = 8,
+                G_p: FloatArray | None = None) -> tuple[FloatArray, Any]:
         """Newton on ``G = 0``, ``t·(y - y_pred) = 0`` from ``y_pred``; ``SolverError`` when it
         fails. ``G_p`` is evaluated once per correction (a chord in the ``p`` column only:
-        it is the costly column for shooting problems and changes little over a step)."""
+        it is the costly column for shooting problems and changes little over a step); a
+        given ``G_p`` is used instead (with ``t = (0, ..., 0, 1)``, ``p`` is pinned and the
+        column does not matter: pass zeros)."""
         y = y_pred.copy()
-        G_p = None
         res = np.inf
         for it in range(max_iter + 1):
             R, J, aux = self.residual(y, G_p)
@@ -84,7 +85,9 @@ class ArclengthProblem:
 
     def tangent(self, y: FloatArray, t_prev: FloatArray) -> FloatArray:
         """Unit tangent at ``y`` oriented like ``t_prev`` (``t_prev·t = 1 > 0`` before
-        normalisation, so a fold is passed without turning back)."""
+        normalisation, so a fold is passed without turning back), from a fresh Jacobian
+        (the correction's chord in ``p`` is not accurate enough for a tangent near a
+        grazing, where ``∂G/∂p`` varies fast)."""
         _, J, _ = self.residual(y)
         return unit_tangent(J, t_prev)
 

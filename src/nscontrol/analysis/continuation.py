@@ -13,7 +13,8 @@ Steps
   condition). ``∂G/∂x`` is exact (saltation-based, :func:`~nscontrol.analysis.orbits.
   stroboscopic_map`); ``∂G/∂p`` is a central difference with step ``δ = ε^{1/3}·max(1, |p|)``
   (truncation ``O(δ²)`` balancing rounding ``O(ε/δ)``; it only affects the tangent and the
-  corrector's rate, never the converged residual).
+  corrector's rate, never the converged residual). Predictor, corrector, tangent and
+  location are the engine shared with equilibria (:mod:`~nscontrol.analysis._arclength`).
 * **Step control**: the step grows by 1.5 after a corrector that converged in at most 3
   iterations, halves after a failure; below ``step_min`` the run stops, saying where and why.
 
@@ -319,6 +320,19 @@ class _Problem(ArclengthProblem):
         """The corrected point with its test functions."""
         y, orbit = self.correct(y_pred, t)
         return Point(y, orbit, _tests(orbit))
+
+
+def _orbit_at(factory: Callable[[float], Forced], p: float, nodes: FloatArray, *,
+              tol: float = 1e-10, max_iter: int = 6) -> Orbit:
+    """The engine's corrector with the parameter pinned: the ``k``-node orbit of
+    ``factory(p)`` near ``nodes`` by plain Newton (no line search: from a good predictor it
+    converges quadratically; from a bad one it fails fast with ``SolverError``)."""
+    k, n = nodes.shape
+    prob = _Problem(factory, k, n, tol)
+    pin = np.zeros(k * n + 1)
+    pin[-1] = 1.0
+    return prob.correct(np.append(nodes.ravel(), float(p)), pin, max_iter,
+                        G_p=np.zeros(k * n))[1]
 
 
 # -- test functions --------------------------------------------------------------------------
