@@ -928,6 +928,11 @@ def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: Fl
                             x0=bf.poincare[-1], state_peak=peak, effort=effort)
 
 
+#: Shooting tolerance of the sweeps' orbits (relative to ``max(1, |x|)``), as in
+#: :func:`~nscontrol.analysis.continuation.continue_orbit`.
+_SWEEP_TOL = 1e-10
+
+
 @dataclass(frozen=True)
 class _FrequencyFamily:
     """Picklable continuation factory ``ω -> Forced(system, a sin(ωt), 2π/ω)``."""
@@ -1053,13 +1058,12 @@ class _SweepBranch:
         k = int(orbit.n_periods)
         known = [(w0, orbit.nodes)]
         last = orbit
-        slope = _node_slope(family, w0, orbit)
         for w in ahead:
-            if len(known) > 1:
-                guess = _secant_nodes(known, w)
-            else:
-                guess = known[0][1] + (w - known[0][0]) * slope
-            new = _shoot_nodes(family, w, guess)
+            new = None
+            if len(known) > 1:      # secant predictor: free
+                new = _shoot_nodes(family, w, _secant_nodes(known, w))
+            if new is None:         # Euler predictor, halving the frequency step twice
+                new = _advance(family, known[-1][0], last, w, depth=2)
             if new is None or not new.stable:
                 curve = self._continue(family, known[-1][0], last, w, span)
                 if curve is None:
@@ -1071,11 +1075,10 @@ class _SweepBranch:
             d = period_multiplicity(np.vstack([new.nodes, new.nodes[:1]]))
             if d < k:   # a kT orbit merged into a dT one (reverse flip): follow that one
                 try:
-                    new = _orbit_at(family, w, new.nodes[:d])
+                    new = _orbit_at(family, w, new.nodes[:d], tol=_SWEEP_TOL)
                 except NscontrolError:
                     break
                 k, known = d, []
-                slope = _node_slope(family, w, new)
             covered.append((self._orbit_response(family, w, new, Cz), new.x0))
             known = [*known[-1:], (w, new.nodes)]
             last = new
@@ -1099,8 +1102,8 @@ class _SweepBranch:
         try:
             return continue_orbit(family, w0, orbit.nodes, n_periods=int(orbit.n_periods),
                                   p_range=span, step=h / 2,
-                                  step_max=2 * h, step_min=1e-4 * h, max_steps=30,
-                                  direction=1 if w > w0 else -1, locate_tol=1e-7,
+                                  step_max=2 * h, step_min=1e-2 * h, max_steps=30,
+                                  direction=1 if w > w0 else -1, locate_tol=1e-6, tol=_SWEEP_TOL,
                                   detect=("fold", "flip", "neimark_sacker"),
                                   stop_at=("flip", "neimark_sacker"), parameter_name="omega")
         except NscontrolError:
@@ -1108,20 +1111,39 @@ class _SweepBranch:
 
 
 def _shoot_nodes(family: _FrequencyFamily, w: float, guess: FloatArray) -> Any:
-    """The orbit at ``w`` from predicted nodes: plain Newton (the engine's corrector, cheap
-    from a good prediction), then damped Newton (:func:`~nscontrol.analysis.orbits.
-    find_orbit`: where the predicted orbit has ceased to exist, e.g. a 2T orbit merged
-    into the doubled T orbit, it reaches what is there); ``None`` when both fail."""
+    """The orbit at ``w`` from predicted nodes by plain Newton (the engine's corrector with
+    ``ω`` pinned: quadratic from a good prediction, a fast failure from a bad one), or
+    ``None``."""
     from ..errors import NscontrolError
     from .continuation import _orbit_at
-    from .orbits import find_orbit
 
     try:
-        return _orbit_at(family, w, guess)
+        return _orbit_at(family, w, guess, tol=_SWEEP_TOL)
     except NscontrolError:
-        pass
+        return None
+
+
+def _advance(family: _FrequencyFamily, w0: float, orbit: Any, w: float, depth: int) -> Any:
+    """The orbit at ``w`` from ``orbit`` at ``w0``: Euler predictor and Newton; on failure
+    through the midpoint (``depth`` halvings at most: the nodes of a resonant or
+    subharmonic orbit can move by ~10 per unit ``ω``), then damped Newton
+    (:func:`~nscontrol.analysis.orbits.find_orbit`: where the orbit has ceased to exist,
+    e.g. a 2T orbit merged into the doubled T orbit, it reaches what is there). An orbit
+    at ``w`` that converges but is unstable is returned as it is (a bifurcation lies before
+    it); ``None`` when none is found or the midpoint's is unstable."""
+    from ..errors import NscontrolError
+    from .orbits import find_orbit
+
+    new = _shoot_nodes(family, w, orbit.nodes + (w - w0) * _node_slope(family, w0, orbit))
+    if new is not None:
+        return new
+    if depth > 0:
+        mid = _advance(family, w0, orbit, 0.5 * (w0 + w), depth - 1)
+        if mid is None or not mid.stable:
+            return None
+        return _advance(family, 0.5 * (w0 + w), mid, w, depth - 1)
     try:
-        return find_orbit(family(w), guess, n_periods=guess.shape[0], max_iter=10)
+        return find_orbit(family(w), orbit.nodes, n_periods=int(orbit.n_periods), max_iter=6)
     except NscontrolError:
         return None
 
