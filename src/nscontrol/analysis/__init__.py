@@ -47,6 +47,9 @@ _EXPORTS: dict[str, str] = {
     # continuation.py
     "SpecialPoint": "continuation", "Branch": "continuation", "continue_orbit": "continuation",
     "switch_at_flip": "continuation",
+    # equilibria.py
+    "VectorField": "equilibria", "EquilibriumPoint": "equilibria",
+    "continue_equilibrium": "equilibria",
     # bifurcation.py
     "BifurcationDiagram": "bifurcation", "bifurcation_diagram": "bifurcation",
     "parse_grid": "bifurcation",

@@ -13,7 +13,8 @@ Steps
   condition). ``∂G/∂x`` is exact (saltation-based, :func:`~nscontrol.analysis.orbits.
   stroboscopic_map`); ``∂G/∂p`` is a central difference with step ``δ = ε^{1/3}·max(1, |p|)``
   (truncation ``O(δ²)`` balancing rounding ``O(ε/δ)``; it only affects the tangent and the
-  corrector's rate, never the converged residual).
+  corrector's rate, never the converged residual). Predictor, corrector, tangent and
+  location are the engine shared with equilibria (:mod:`~nscontrol.analysis._arclength`).
 * **Step control**: the step grows by 1.5 after a corrector that converged in at most 3
   iterations, halves after a failure; below ``step_min`` the run stops, saying where and why.
 
@@ -47,6 +48,7 @@ import numpy as np
 from .._files import replaced_atomically
 from .._validation import FloatArray, check_integer, check_positive
 from ..errors import ModelError, SolverError
+from ._arclength import ArclengthProblem, Point, locate
 from .orbits import Forced, Orbit, _initial_nodes, _shooting_system, make_orbit
 
 __all__ = ["SpecialPoint", "Branch", "continue_orbit", "switch_at_flip"]
@@ -61,15 +63,17 @@ class SpecialPoint:
     Attributes
     ----------
     kind
-        ``"fold"``, ``"flip"``, ``"neimark_sacker"``, ``"grazing"`` or ``"sliding"``.
+        Orbits: ``"fold"``, ``"flip"``, ``"neimark_sacker"``, ``"grazing"`` or
+        ``"sliding"``; equilibria: ``"fold"``, ``"hopf"`` or ``"boundary_equilibrium"``.
     parameter
         Where it is.
     index
         Its row in the branch's arrays.
     nodes
-        Shooting nodes of the orbit there.
+        Shooting nodes of the orbit there (an equilibrium: ``(1, n)``, the state).
     multipliers
-        Floquet multipliers there (for a grazing: those of the last orbit before it).
+        Floquet multipliers there (for a grazing: those of the last orbit before it); for
+        an equilibrium the eigenvalues of the Jacobian.
     uncertainty
         Width of the last parameter bracket.
     """
@@ -84,7 +88,11 @@ class SpecialPoint:
 
 @dataclass(frozen=True, eq=False)
 class Branch:
-    """A continued branch of periodic orbits.
+    """A continued branch of periodic orbits or of equilibria (``solution``).
+
+    An equilibrium is stored as a one-node "orbit": ``nodes[:, 0]`` is the state, ``period``
+    is NaN, ``multipliers`` holds the Jacobian's eigenvalues (also :attr:`eigenvalues`) and
+    ``stable`` means all of them in the open left half-plane.
 
     Attributes
     ----------
@@ -95,13 +103,16 @@ class Branch:
     nodes
         ``(N, k, n)`` shooting nodes (``nodes[:, 0]``: the state at ``t = 0``).
     period
-        ``(N,)`` orbit periods ``kT``.
+        ``(N,)`` orbit periods ``kT`` (NaN for equilibria).
     multipliers
-        ``(N, n)`` Floquet multipliers by decreasing modulus.
+        ``(N, n)`` Floquet multipliers by decreasing modulus (equilibria: eigenvalues by
+        decreasing real part).
     stable
-        ``(N,)`` all multipliers inside the unit circle.
+        ``(N,)`` all multipliers inside the unit circle (equilibria: all eigenvalues with
+        negative real part).
     n_impacts
-        ``(N,)`` impacts per orbit period.
+        ``(N,)`` impacts per orbit period (equilibria of a PWA system: the region index,
+        ``-1`` otherwise).
     points
         Located bifurcations, in branch order.
     stop_reason
@@ -110,6 +121,8 @@ class Branch:
         Continuation steps taken and Newton iterations spent (location included).
     state_names
         Names of the state components.
+    solution
+        ``"periodic"`` or ``"equilibrium"``.
     """
 
     parameter_name: str
@@ -124,6 +137,7 @@ class Branch:
     n_steps: int = 0
     corrector_iterations: int = 0
     state_names: tuple[str, ...] = ()
+    solution: str = "periodic"
 
     def __len__(self) -> int:
         return int(self.p.shape[0])
@@ -133,24 +147,41 @@ class Branch:
         """``(N, n)`` states at ``t = 0``."""
         return self.nodes[:, 0]
 
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """``(N, n)`` eigenvalues of an equilibrium branch (``ModelError`` for orbits)."""
+        if self.solution != "equilibrium":
+            raise ModelError("branch: a branch of periodic orbits has multipliers, not "
+                             "eigenvalues; read Branch.multipliers")
+        return self.multipliers
+
     def special(self, kind: str) -> tuple[SpecialPoint, ...]:
         """The located points of one kind."""
         return tuple(pt for pt in self.points if pt.kind == kind)
 
     def to_pandas(self) -> Any:
         """One row per branch point: parameter, state at ``t = 0``, period, multipliers'
-        moduli, stability, impacts, and the kind of bifurcation located there (or ``""``)."""
+        moduli, stability, impacts, and the kind of bifurcation located there (or ``""``);
+        for equilibria: parameter, state, eigenvalues' real and imaginary parts, stability,
+        region."""
         import pandas as pd
 
         names = self.state_names or tuple(f"x{i}" for i in range(self.nodes.shape[2]))
         data: dict[str, Any] = {self.parameter_name: self.p}
         for i, nm in enumerate(names):
             data[nm] = self.x0[:, i]
-        data["period"] = self.period
-        for i in range(self.multipliers.shape[1]):
-            data[f"|mu{i}|"] = np.abs(self.multipliers[:, i])
-        data["stable"] = self.stable
-        data["n_impacts"] = self.n_impacts
+        if self.solution == "equilibrium":
+            for i in range(self.multipliers.shape[1]):
+                data[f"Re lambda{i}"] = self.multipliers[:, i].real
+                data[f"Im lambda{i}"] = self.multipliers[:, i].imag
+            data["stable"] = self.stable
+            data["region"] = self.n_impacts
+        else:
+            data["period"] = self.period
+            for i in range(self.multipliers.shape[1]):
+                data[f"|mu{i}|"] = np.abs(self.multipliers[:, i])
+            data["stable"] = self.stable
+            data["n_impacts"] = self.n_impacts
         kinds = [""] * len(self)
         for pt in self.points:
             kinds[pt.index] = pt.kind
@@ -175,7 +206,7 @@ class Branch:
                         label=label if start == 0 else None)
                 start = i
         marks = {"fold": "s", "flip": "o", "neimark_sacker": "D", "grazing": "^",
-                 "sliding": "v"}
+                 "sliding": "v", "hopf": "D", "boundary_equilibrium": "^"}
         for kind, mk in marks.items():
             pts = self.special(kind)
             if pts:
@@ -183,19 +214,22 @@ class Branch:
                         mk, color="k", mfc="none", ms=8, label=kind.replace("_", "-"))
         names = self.state_names or ()
         ax.set_xlabel(self.parameter_name)
-        ax.set_ylabel(f"{names[component] if names else f'x{component}'} at t = 0 mod T")
+        where = "(equilibrium)" if self.solution == "equilibrium" else "at t = 0 mod T"
+        ax.set_ylabel(f"{names[component] if names else f'x{component}'} {where}")
         ax.legend(loc="best", fontsize="small")
         return ax
 
     # -- HDF5 ------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write to HDF5 (format ``nscontrol.Branch/1``) atomically: a temporary file in the
+        """Write to HDF5 (format ``nscontrol.Branch/2``: ``/1`` and the ``solution``
+        attribute) atomically: a temporary file in the
         same directory, renamed over ``path`` only once complete."""
         import h5py
 
         path = Path(path)
         with replaced_atomically(path) as tmp, h5py.File(tmp, "w") as f:
-            f.attrs.update(format="nscontrol.Branch/1", parameter_name=self.parameter_name,
+            f.attrs.update(format="nscontrol.Branch/2", solution=self.solution,
+                           parameter_name=self.parameter_name,
                            stop_reason=self.stop_reason, n_steps=self.n_steps,
                            corrector_iterations=self.corrector_iterations)
             f.attrs["state_names"] = np.array(self.state_names, dtype="S")
@@ -212,12 +246,12 @@ class Branch:
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Branch:
-        """Read a file written by :meth:`save`."""
+        """Read a file written by :meth:`save` (formats ``/1``, periodic only, and ``/2``)."""
         import h5py
 
         with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != "nscontrol.Branch/1":
-                raise ModelError(f"path: {path} is not an nscontrol.Branch/1 file "
+            if f.attrs.get("format") not in ("nscontrol.Branch/1", "nscontrol.Branch/2"):
+                raise ModelError(f"path: {path} is not an nscontrol.Branch/1 or /2 file "
                                  f"(format {f.attrs.get('format')!r})")
             g = f["points"]
             points = tuple(
@@ -229,14 +263,16 @@ class Branch:
                        f["period"][()], f["multipliers"][()], f["stable"][()].astype(bool),
                        f["n_impacts"][()], points, str(f.attrs["stop_reason"]),
                        int(f.attrs["n_steps"]), int(f.attrs["corrector_iterations"]),
-                       tuple(s.decode() for s in f.attrs["state_names"]))
+                       tuple(s.decode() for s in f.attrs["state_names"]),
+                       str(f.attrs.get("solution", "periodic")))
 
 
 # -- the continuation problem ------------------------------------------------------------------
 
 @dataclass
-class _Problem:
-    """``G(y) = 0`` for ``y = (nodes, p)`` with counters."""
+class _Problem(ArclengthProblem):
+    """``G(y) = 0`` for ``y = (nodes, p)`` (multiple shooting); corrector and tangent are the
+    shared engine's (:class:`~nscontrol.analysis._arclength.ArclengthProblem`)."""
 
     factory: Callable[[float], Forced]
     k: int
@@ -276,37 +312,27 @@ class _Problem:
         Rm = _shooting_system(self.forced(p - dp), X)[0]
         return (Rp - Rm) / (2 * dp)
 
-    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int = 8
-                ) -> tuple[FloatArray, Orbit]:
-        """Newton on ``G = 0``, ``t·(y - y_pred) = 0``; ``SolverError`` when it fails."""
-        y = y_pred.copy()
-        G_p = None          # evaluated once per correction: a chord in the p column only
-        for it in range(max_iter + 1):
-            R, J, maps = self.residual(y, G_p)
-            G_p = J[:, -1]
-            X, p = self.split(y)
-            res = float(np.max(np.abs(R)))
-            if res <= self.tol * max(1.0, float(np.max(np.abs(X)))):
-                return y, make_orbit(self.forced(p), X, maps, it, res)
-            if it == max_iter:
-                break
-            A = np.vstack([J, t])
-            b = -np.concatenate([R, [t @ (y - y_pred)]])
-            try:
-                y = y + np.linalg.solve(A, b)
-            except np.linalg.LinAlgError as exc:
-                raise SolverError(f"singular extended Jacobian at p = {p:.9g}") from exc
-            self.iterations += 1
-        raise SolverError(f"corrector did not converge in {max_iter} iterations at "
-                          f"p = {self.split(y)[1]:.9g} (residual {res:.3g})")
+    def solution(self, y: FloatArray, aux: Any, iterations: int, residual: float) -> Orbit:
+        X, p = self.split(y)
+        return make_orbit(self.forced(p), X, aux, iterations, residual)
 
-    def tangent(self, y: FloatArray, t_prev: FloatArray) -> FloatArray:
-        _, J, _ = self.residual(y)
-        A = np.vstack([J, t_prev])
-        b = np.zeros(A.shape[0])
-        b[-1] = 1.0
-        t = np.linalg.solve(A, b)
-        return t / np.linalg.norm(t)
+    def point(self, y_pred: FloatArray, t: FloatArray) -> Point:
+        """The corrected point with its test functions."""
+        y, orbit = self.correct(y_pred, t)
+        return Point(y, orbit, _tests(orbit))
+
+
+def _orbit_at(factory: Callable[[float], Forced], p: float, nodes: FloatArray, *,
+              tol: float = 1e-10, max_iter: int = 6) -> Orbit:
+    """The engine's corrector with the parameter pinned: the ``k``-node orbit of
+    ``factory(p)`` near ``nodes`` by plain Newton (no line search: from a good predictor it
+    converges quadratically; from a bad one it fails fast with ``SolverError``)."""
+    k, n = nodes.shape
+    prob = _Problem(factory, k, n, tol)
+    pin = np.zeros(k * n + 1)
+    pin[-1] = 1.0
+    return prob.correct(np.append(nodes.ravel(), float(p)), pin, max_iter,
+                        G_p=np.zeros(k * n))[1]
 
 
 # -- test functions --------------------------------------------------------------------------
@@ -335,13 +361,6 @@ def _genuine(kind: str, orbit: Orbit) -> bool:
         return True
     mu = orbit.multipliers
     return bool(np.any((np.abs(mu.imag) > 1e-8) & (np.abs(np.abs(mu) - 1.0) < 1e-6)))
-
-
-@dataclass
-class _Point:
-    y: FloatArray
-    orbit: Orbit
-    tests: dict[str, float]
 
 
 def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
@@ -413,7 +432,7 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
         t = t / np.linalg.norm(t)
         y = y0
         _, orbit = prob.correct(y0, t)
-    pts = [_Point(y, orbit, _tests(orbit))]
+    pts = [Point(y, orbit, _tests(orbit))]
     special: list[SpecialPoint] = []
     h, n_steps, reason = float(step), 0, ""
     while not reason:
@@ -439,15 +458,15 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
                          f"< 2·step_min: {exc}"
             continue
         n_steps += 1
-        new = _Point(y_new, orb, _tests(orb))
+        new = Point(y_new, orb, _tests(orb))
         found = _crossings(pts[-1], new, detect)
         stop_kind = None
         for kind in found:
             sp = _locate(prob, pts[-1], t, h, kind, locate_tol)
-            if sp is None or not _genuine(kind, sp.orbit):
+            if sp is None or not _genuine(kind, sp.sol):
                 continue
             if kind == "grazing":
-                kind = _event_change_kind(pts[-1].orbit.signature, new.orbit.signature)
+                kind = _event_change_kind(pts[-1].sol.signature, new.sol.signature)
             pts.append(sp)
             special.append(_special(kind, sp, len(pts) - 1, prob))
             if kind in stop_at:
@@ -469,10 +488,10 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
                    k, forced0)
 
 
-def _crossings(a: _Point, b: _Point, detect: tuple[str, ...]) -> list[str]:
+def _crossings(a: Point, b: Point, detect: tuple[str, ...]) -> list[str]:
     out = [kind for kind in detect
            if kind in a.tests and a.tests[kind] * b.tests[kind] < 0.0]
-    if "grazing" in detect and "grazing" not in out and a.orbit.signature != b.orbit.signature:
+    if "grazing" in detect and "grazing" not in out and a.sol.signature != b.sol.signature:
         out.append("grazing")
     return out
 
@@ -487,77 +506,28 @@ def _event_change_kind(before: tuple[tuple[str, int], ...],
     return "sliding" if slides(before) != slides(after) else "grazing"
 
 
-def _value(kind: str, pt: _Point, ref: _Point) -> float:
+def _value(kind: str, pt: Point, ref: Point) -> float:
     """The test function; for a grazing, the monitor's modulus signed by whether the event
     signature is still the reference's (the side the continuation came from)."""
     if kind != "grazing":
         return pt.tests[kind]
     mag = abs(pt.tests["grazing"])
-    return mag if pt.orbit.signature == ref.orbit.signature else -mag
+    return mag if pt.sol.signature == ref.sol.signature else -mag
 
 
-def _locate(prob: _Problem, a: _Point, t: FloatArray, h: float, kind: str, rtol: float,
-            s_first: float | None = None) -> _Point | None:
-    """Zero of ``test(kind)`` along the arclength from ``a`` (``s`` in ``(0, 2h)``): secant
-    steps while no sign change is bracketed, Illinois regula falsi once one is; a trial whose
-    corrector fails (past a grazing the map is not smooth) is treated as beyond the zero."""
-    def at(s: float) -> _Point:
-        ys, os_ = prob.correct(a.y + s * t, t)
-        return _Point(ys, os_, _tests(os_))
-
-    good = [(0.0, _value(kind, a, a), a)]        # (s, f, point), same sign as at a
-    other: tuple[float, float, _Point] | None = None
-    s_bad = 2.0 * h                               # smallest s known to fail or overshoot
-    s = h if s_first is None else float(s_first)
-    width, side = np.inf, 0
-    for _ in range(100):
-        s = min(max(s, 0.0), s_bad)
-        try:
-            pt = at(s)
-            f = _value(kind, pt, a)
-        except SolverError:
-            pt, f = None, np.nan
-        if pt is None:
-            s_bad = s
-            s = 0.5 * (good[-1][0] + s)
-        elif f == 0.0:
-            good.append((s, f, pt))
-            width = 0.0
-        elif f * good[0][1] > 0:
-            width = abs(pt.y[-1] - (other[2] if other is not None else good[-1][2]).y[-1])
-            good.append((s, f, pt))
-            side += 1
-            if other is not None and side >= 2:
-                other = (other[0], other[1] / 2, other[2])   # Illinois: retained end halved
-        else:
-            width = abs(pt.y[-1] - good[-1][2].y[-1])
-            other, side = (s, f, pt), 0
-            s_bad = s
-        if width <= rtol * max(1.0, abs(good[-1][2].y[-1])):
-            break
-        if pt is None:
-            continue
-        (s0, f0, _), (s1, f1) = good[-1], ((other[0], other[1]) if other is not None
-                                           else (good[-2][0], good[-2][1]))
-        if other is None and len(good) < 2:
-            return None
-        s_next = s1 - f1 * (s1 - s0) / (f1 - f0) if f1 != f0 else 0.5 * (s0 + s1)
-        if other is not None and not min(s0, s1) < s_next < max(s0, s1):
-            s_next = 0.5 * (s0 + s1)
-        s = s_next if s_next < s_bad else 0.5 * (good[-1][0] + s_bad)
-    else:
-        return None
-    best = good[-1][2]
-    if kind != "grazing" and other is not None and abs(other[1]) < abs(good[-1][1]):
-        best = other[2]
-    best.tests["_width"] = float(width)
-    return best
+def _locate(prob: _Problem, a: Point, t: FloatArray, h: float, kind: str, rtol: float,
+            s_first: float | None = None) -> Point | None:
+    """Zero of ``test(kind)`` along the arclength from ``a`` (the shared
+    :func:`~nscontrol.analysis._arclength.locate`); for a grazing the point kept is on
+    ``a``'s side (past it the event sequence, hence the map, is another)."""
+    return locate(prob.point, a, t, h, lambda pt: _value(kind, pt, a), rtol,
+                  s_first=s_first, closest=kind != "grazing")
 
 
-def _grazing_ahead(prev: _Point, cur: _Point, h: float) -> float | None:
+def _grazing_ahead(prev: Point, cur: Point, h: float) -> float | None:
     """Arclength to the grazing predicted by linear extrapolation of the grazing monitor over
     the last step (same event signature), or ``None`` when it is not within ``h``."""
-    if prev.orbit.signature != cur.orbit.signature:
+    if prev.sol.signature != cur.sol.signature:
         return None
     m0, m1 = abs(prev.tests["grazing"]), abs(cur.tests["grazing"])
     ds = float(np.linalg.norm(cur.y - prev.y))
@@ -567,23 +537,23 @@ def _grazing_ahead(prev: _Point, cur: _Point, h: float) -> float | None:
     return s if s < h else None
 
 
-def _special(kind: str, pt: _Point, index: int, prob: _Problem) -> SpecialPoint:
+def _special(kind: str, pt: Point, index: int, prob: _Problem) -> SpecialPoint:
     X, p = prob.split(pt.y)
-    return SpecialPoint(kind, p, index, X.copy(), pt.orbit.multipliers.copy(),
+    return SpecialPoint(kind, p, index, X.copy(), pt.sol.multipliers.copy(),
                         float(pt.tests.get("_width", 0.0)))
 
 
-def _branch(pts: list[_Point], special: list[SpecialPoint], reason: str, n_steps: int,
+def _branch(pts: list[Point], special: list[SpecialPoint], reason: str, n_steps: int,
             iterations: int, name: str, state_names: tuple[str, ...], k: int,
             forced0: Forced) -> Branch:
     n = forced0.n_states
     names = tuple(state_names) or tuple(getattr(forced0.system, "state_names", ()) or ())
     return Branch(name, np.array([pt.y[-1] for pt in pts]),
                   np.array([pt.y[:-1].reshape(k, n) for pt in pts]),
-                  np.array([k * pt.orbit.period for pt in pts]),
-                  np.array([pt.orbit.multipliers for pt in pts]),
-                  np.array([pt.orbit.stable for pt in pts]),
-                  np.array([pt.orbit.n_impacts for pt in pts]), tuple(special), reason,
+                  np.array([k * pt.sol.period for pt in pts]),
+                  np.array([pt.sol.multipliers for pt in pts]),
+                  np.array([pt.sol.stable for pt in pts]),
+                  np.array([pt.sol.n_impacts for pt in pts]), tuple(special), reason,
                   n_steps, iterations, names)
 
 

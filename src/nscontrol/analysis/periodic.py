@@ -11,8 +11,9 @@
 * :func:`frequency_response` — the generalized Bode plot ``γ_a(ω) = max_t|z̄(t)|/a`` of a
   convergent system (refined peak), RMS gain, DFT harmonics and Floquet multipliers per
   frequency, the frequencies running in parallel through :func:`nscontrol.sweep.run`;
-  :func:`frequency_sweep` — brute-force continuation up and down in frequency (hysteresis of
-  non-convergent models), the two directions in parallel.
+  :func:`frequency_sweep` — sweeps up and down in frequency that follow the attractor's
+  orbit by continuation (hysteresis of non-convergent models, the coexisting unstable orbits
+  and the located folds and flips), the two directions in parallel.
 
 The system must be simulable by ``simulate(system, x0, (0, T), method=..., u=...,
 t_eval=..., sensitivity=True)`` (default ``method="switching"``: PWA, Filippov and PWM
@@ -742,6 +743,10 @@ class FrequencyResponse:
     errors
         Per-point :class:`~nscontrol.sweep.PointError` or ``None`` (one entry per frequency,
         its ``index`` the position in :attr:`omega`).
+    branches
+        :func:`frequency_sweep`: the orbit branches continued in ``ω`` (one
+        :class:`~nscontrol.analysis.continuation.Branch` per attractor the sweep landed on,
+        unstable parts past a fold included: the coexisting orbits); ``()`` otherwise.
     """
 
     omega: FloatArray
@@ -756,11 +761,13 @@ class FrequencyResponse:
     direction: str
     amplitude: float
     errors: tuple[Any, ...] = ()
+    branches: tuple[Any, ...] = ()
 
     @classmethod
     def from_points(cls, omegas: ArrayLike, points: Sequence[HarmonicResponse | None],
                     *, direction: str, amplitude: float, n_harmonics: int,
-                    errors: Sequence[Any] = ()) -> FrequencyResponse:
+                    errors: Sequence[Any] = (), branches: Sequence[Any] = ()
+                    ) -> FrequencyResponse:
         def col(attr: str, fill: Any) -> np.ndarray:
             return np.array([getattr(p, attr) if p is not None else fill for p in points])
 
@@ -769,7 +776,8 @@ class FrequencyResponse:
                              for p in points]),
                    col("max_floquet", np.nan), col("multiplicity", -1).astype(np.int64),
                    col("n_crossings", -1).astype(np.int64), col("state_peak", np.nan),
-                   col("effort", np.nan), direction, float(amplitude), tuple(errors))
+                   col("effort", np.nan), direction, float(amplitude), tuple(errors),
+                   tuple(branches))
 
 
 def _omega_grid(omegas: Any) -> FloatArray:
@@ -920,11 +928,34 @@ def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: Fl
                             x0=bf.poincare[-1], state_peak=peak, effort=effort)
 
 
+#: Shooting tolerance of the sweeps' orbits (relative to ``max(1, |x|)``), as in
+#: :func:`~nscontrol.analysis.continuation.continue_orbit`.
+_SWEEP_TOL = 1e-10
+
+
+@dataclass(frozen=True)
+class _FrequencyFamily:
+    """Picklable continuation factory ``ω -> Forced(system, a sin(ωt), 2π/ω)``."""
+
+    system: Any
+    amplitude: float
+    method: Any
+    options: tuple[tuple[str, Any], ...] = ()
+
+    def __call__(self, omega: float) -> Any:
+        from ..numerics.lti import Exosystem
+        from .orbits import Forced
+
+        return Forced(self.system, Exosystem.sinusoid(self.amplitude, omega), 2 * np.pi / omega,
+                      self.method, self.options)
+
+
 @dataclass(frozen=True)
 class _SweepBranch:
-    """Picklable task: brute-force continuation over ``(direction, ((index, ω), ...))``, in
-    the given order; a failing frequency is that frequency's error and the branch goes on
-    from the last good state."""
+    """Picklable task: one sweep direction over ``(direction, ((index, ω), ...))``, in the
+    given order, by continuation of the attractor's orbit (see :func:`frequency_sweep`).
+    Returns ``(responses, branches)``; a frequency that fails is that frequency's error and
+    the sweep goes on from the last good state."""
 
     system: Any
     amplitude: float
@@ -937,32 +968,255 @@ class _SweepBranch:
     options: dict[str, Any] = field(default_factory=dict)
     control: Any = None
 
-    def __call__(self, branch: tuple[str, tuple[tuple[int, float], ...]]) -> list[Any]:
+    def __call__(self, branch: tuple[str, tuple[tuple[int, float], ...]]
+                 ) -> tuple[list[Any], list[Any]]:
         import traceback
 
-        from ..numerics.lti import Exosystem
         from ..sweep import PointError
 
         direction, points = branch
         Cz = _output_matrix(self.system, self.output)
+        family = _FrequencyFamily(self.system, self.amplitude, self.method,
+                                  tuple(self.options.items()))
         x = np.zeros(int(self.system.n_states))
-        out: list[Any] = []
-        for i, w in points:
-            try:
-                bf = brute_force_steady_state(
-                    self.system, 2 * np.pi / w, u=Exosystem.sinusoid(self.amplitude, w), x0=x,
-                    n_transient=self.n_transient, n_record=self.n_record,
-                    samples_per_period=self.samples_per_period, method=self.method,
-                    **self.options)
-                out.append(_brute_response(bf, w, self.amplitude, Cz, self.n_harmonics,
-                                           self.control))
-            except Exception as exc:  # this frequency's error; the branch continues
-                out.append(PointError(int(i), type(exc).__name__,
-                                      f"ω = {w:g} ({direction} sweep): {exc}",
-                                      traceback.format_exc()))
+        out: list[Any] = [None] * len(points)
+        curves: list[Any] = []
+        span = (min(wj for _, wj in points), max(wj for _, wj in points))
+        i = 0
+        while i < len(points):
+            idx, w = points[i]
+            try:        # land on the attractor: transient, record, multiplicity
+                bf = self._brute_force(w, x)
+                out[i] = _brute_response(bf, w, self.amplitude, Cz, self.n_harmonics,
+                                         self.control)
+            except Exception as exc:  # this frequency's error; the sweep continues
+                out[i] = PointError(int(idx), type(exc).__name__,
+                                    f"ω = {w:g} ({direction} sweep): {exc}",
+                                    traceback.format_exc())
+                i += 1
                 continue
             x = bf.x_end
-        return out
+            orbit = _stable_orbit(family(w), bf)
+            if orbit is None:   # not periodic, or no stable orbit by shooting: brute force
+                i += 1
+                continue
+            out[i] = self._orbit_response(family, w, orbit, Cz)
+            x = orbit.x0
+            covered, more = self._follow(family, w, orbit, [wj for _, wj in points[i + 1:]],
+                                         Cz, span)
+            curves.extend(more)
+            for j, (resp, xj) in enumerate(covered, start=i + 1):
+                out[j], x = resp, xj
+            i += 1 + len(covered)
+        return out, curves
+
+    def _brute_force(self, w: float, x: FloatArray) -> BruteForceResult:
+        from ..numerics.lti import Exosystem
+
+        return brute_force_steady_state(
+            self.system, 2 * np.pi / w, u=Exosystem.sinusoid(self.amplitude, w), x0=x,
+            n_transient=self.n_transient, n_record=self.n_record,
+            samples_per_period=self.samples_per_period, method=self.method, **self.options)
+
+    def _orbit_response(self, family: _FrequencyFamily, w: float, orbit: Any,
+                        Cz: FloatArray) -> HarmonicResponse:
+        """The figures of a shot ``pT`` orbit: ``p`` periods from its node at ``t = 0``,
+        measured like a brute-force window, with its largest multiplier."""
+        from dataclasses import replace
+
+        forced = family(w)
+        p = int(orbit.n_periods)
+        bf = brute_force_steady_state(self.system, forced.period, u=forced.u, x0=orbit.x0,
+                                      n_transient=0, n_record=p,
+                                      samples_per_period=self.samples_per_period,
+                                      method=self.method, **self.options)
+        bf = replace(bf, multiplicity=p)     # exact by construction (shooting residual)
+        resp = _brute_response(bf, w, self.amplitude, Cz, self.n_harmonics, self.control)
+        return replace(resp, max_floquet=float(np.abs(orbit.multipliers[0])))
+
+    def _follow(self, family: _FrequencyFamily, w0: float, orbit: Any, ahead: list[float],
+                Cz: FloatArray, span: tuple[float, float]
+                ) -> tuple[list[tuple[HarmonicResponse, FloatArray]], list[Any]]:
+        """Follow the stable orbit ``orbit`` (at ``w0``) over the frequencies ``ahead`` (in
+        sweep order): the responses it covers, with their states, and the branches continued
+        on the way.
+
+        From one frequency to the next the orbit is predicted by secant extrapolation of
+        the nodes and corrected by shooting at the exact frequency. Where that fails or
+        ends on an unstable orbit, a bifurcation or a steep stretch lies between the two
+        frequencies: pseudo-arclength continuation (:func:`~nscontrol.analysis.continuation.
+        continue_orbit`) from the last good orbit locates the flip, Neimark–Sacker point or
+        fold (stopping at the first two: the attractor changes period, the next frequency
+        lands afresh), passes a fold onto the coexisting unstable orbits (within the sweep's
+        ``span`` and a step budget), and otherwise carries the orbit across to the next
+        frequency."""
+        from ..errors import NscontrolError
+        from .continuation import _orbit_at
+
+        covered: list[tuple[HarmonicResponse, FloatArray]] = []
+        curves: list[Any] = []
+        k = int(orbit.n_periods)
+        known = [(w0, orbit.nodes)]
+        last = orbit
+        for w in ahead:
+            new = None
+            if len(known) > 1:      # secant predictor: free
+                new = _shoot_nodes(family, w, _secant_nodes(known, w))
+            if new is None:         # Euler predictor, halving the frequency step twice
+                new = _advance(family, known[-1][0], last, w, depth=2)
+            if new is None or not new.stable:
+                curve = self._continue(family, known[-1][0], last, w, span)
+                if curve is None:
+                    break
+                curves.append(curve)
+                new = _stable_on_branch(family, curve, w)
+                if new is None:
+                    break
+            d = period_multiplicity(np.vstack([new.nodes, new.nodes[:1]]))
+            if d < k:   # a kT orbit merged into a dT one (reverse flip): follow that one
+                try:
+                    new = _orbit_at(family, w, new.nodes[:d], tol=_SWEEP_TOL)
+                except NscontrolError:
+                    break
+                k, known = d, []
+            covered.append((self._orbit_response(family, w, new, Cz), new.x0))
+            known = [*known[-1:], (w, new.nodes)]
+            last = new
+        return covered, curves
+
+    def _continue(self, family: _FrequencyFamily, w0: float, orbit: Any, w: float,
+                  span: tuple[float, float]) -> Any:
+        """Pseudo-arclength continuation from the last good ``orbit`` (at ``w0``) towards
+        ``w`` (``None`` when it cannot start); past a fold it runs on along the unstable
+        orbits within ``span`` and a budget of 30 steps. Steps are measured against the
+        arclength of one frequency interval, ``h = |Δω|·√(1 + |dX/dω|²)`` (the Euler slope
+        at ``orbit``; a secant over the last interval overestimates it where the orbit
+        changed a lot, and the nodes of a resonant orbit move much faster than ``ω``): first
+        ``h/2``, at most ``2h`` — longer steps could pass a flip and the
+        flip back within one step, where no test function changes sign."""
+        from ..errors import NscontrolError
+        from .continuation import continue_orbit
+
+        slope = _node_slope(family, w0, orbit)
+        h = abs(w - w0) * float(np.sqrt(1.0 + np.sum(slope**2)))
+        try:
+            return continue_orbit(family, w0, orbit.nodes, n_periods=int(orbit.n_periods),
+                                  p_range=span, step=h / 2,
+                                  step_max=2 * h, step_min=1e-2 * h, max_steps=30,
+                                  direction=1 if w > w0 else -1, locate_tol=1e-6, tol=_SWEEP_TOL,
+                                  detect=("fold", "flip", "neimark_sacker"),
+                                  stop_at=("flip", "neimark_sacker"), parameter_name="omega")
+        except NscontrolError:
+            return None
+
+
+def _shoot_nodes(family: _FrequencyFamily, w: float, guess: FloatArray) -> Any:
+    """The orbit at ``w`` from predicted nodes by plain Newton (the engine's corrector with
+    ``ω`` pinned: quadratic from a good prediction, a fast failure from a bad one), or
+    ``None``."""
+    from ..errors import NscontrolError
+    from .continuation import _orbit_at
+
+    try:
+        return _orbit_at(family, w, guess, tol=_SWEEP_TOL)
+    except NscontrolError:
+        return None
+
+
+def _advance(family: _FrequencyFamily, w0: float, orbit: Any, w: float, depth: int) -> Any:
+    """The orbit at ``w`` from ``orbit`` at ``w0``: Euler predictor and Newton; on failure
+    through the midpoint (``depth`` halvings at most: the nodes of a resonant or
+    subharmonic orbit can move by ~10 per unit ``ω``), then damped Newton
+    (:func:`~nscontrol.analysis.orbits.find_orbit`: where the orbit has ceased to exist,
+    e.g. a 2T orbit merged into the doubled T orbit, it reaches what is there). An orbit
+    at ``w`` that converges but is unstable is returned as it is (a bifurcation lies before
+    it); ``None`` when none is found or the midpoint's is unstable."""
+    from ..errors import NscontrolError
+    from .orbits import find_orbit
+
+    new = _shoot_nodes(family, w, orbit.nodes + (w - w0) * _node_slope(family, w0, orbit))
+    if new is not None:
+        return new
+    if depth > 0:
+        mid = _advance(family, w0, orbit, 0.5 * (w0 + w), depth - 1)
+        if mid is None or not mid.stable:
+            return None
+        return _advance(family, 0.5 * (w0 + w), mid, w, depth - 1)
+    try:
+        return find_orbit(family(w), orbit.nodes, n_periods=int(orbit.n_periods), max_iter=6)
+    except NscontrolError:
+        return None
+
+
+def _node_slope(family: _FrequencyFamily, w0: float, orbit: Any) -> FloatArray:
+    """``dX/dω = -G_X⁻¹ ∂G/∂ω`` of the shooting equations at the orbit (``G_X`` from its node
+    Jacobians; ``∂G/∂ω`` a forward difference, step ``√ε·ω``, from ``G = 0`` up to the
+    shooting residual): the Euler predictor where no secant is known yet. A 2T orbit just
+    born at a flip lies close to the doubled T orbit, so a predictor this good keeps Newton
+    on the right one."""
+    from .orbits import _shooting_system
+
+    X = orbit.nodes
+    k, n = X.shape
+    J = np.zeros((k * n, k * n))
+    for i, Ji in enumerate(orbit.node_jacobians):
+        j = (i + 1) % k
+        J[i * n:(i + 1) * n, i * n:(i + 1) * n] += Ji
+        J[i * n:(i + 1) * n, j * n:(j + 1) * n] -= np.eye(n)
+    dw = float(np.finfo(float).eps) ** 0.5 * max(1.0, abs(w0))
+    G_w = _shooting_system(family(w0 + dw), X)[0] / dw
+    try:
+        return -np.linalg.solve(J, G_w).reshape(k, n)
+    except np.linalg.LinAlgError:
+        return np.zeros_like(X)
+
+
+def _secant_nodes(known: list[tuple[float, FloatArray]], w: float) -> FloatArray:
+    """Nodes at ``w`` extrapolated linearly from the last two known ``(ω, nodes)``."""
+    if len(known) < 2:
+        return known[-1][1]
+    (w1, n1), (w2, n2) = known[-2], known[-1]
+    return n2 + (w - w2) / (w2 - w1) * (n2 - n1)
+
+
+def _stable_on_branch(family: _FrequencyFamily, br: Any, w: float) -> Any:
+    """The stable orbit at ``w`` on the branch's first monotone stretch in ``ω`` (up to
+    its first fold), by shooting from the nodes interpolated there; ``None`` past it."""
+    from ..errors import NscontrolError
+    from .orbits import find_orbit
+
+    if len(br) < 2:
+        return None
+    sign = 1.0 if br.p[1] > br.p[0] else -1.0
+    q = sign * br.p
+    back = np.flatnonzero(np.diff(q) <= 0.0)
+    end = int(back[0]) + 1 if back.size else len(br)
+    j = int(np.searchsorted(q[:end], sign * w))
+    if j == 0 or j >= end or not (br.stable[j - 1] or br.stable[j]):
+        return None
+    lam = (sign * w - q[j - 1]) / (q[j] - q[j - 1])
+    guess = (1 - lam) * br.nodes[j - 1] + lam * br.nodes[j]
+    try:
+        orbit = find_orbit(family(w), guess, n_periods=br.nodes.shape[1], max_iter=8)
+    except NscontrolError:
+        return None
+    return orbit if orbit.stable else None
+
+
+def _stable_orbit(forced: Any, bf: BruteForceResult) -> Any:
+    """The stable ``pT`` orbit through the end of a brute-force window of multiplicity
+    ``p >= 1`` (Newton from its last Poincaré sample), or ``None``."""
+    from ..errors import NscontrolError
+    from .orbits import find_orbit
+
+    if bf.multiplicity < 1:
+        return None
+    try:
+        orbit = find_orbit(forced, bf.poincare[-1], n_periods=int(bf.multiplicity),
+                           max_iter=10)
+    except NscontrolError:
+        return None
+    return orbit if orbit.stable else None
 
 
 def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: float = 1.0,
@@ -973,10 +1227,20 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
                     executor: Any = "auto",
                     progress: bool | None = None,
                     **options: Any) -> dict[str, FrequencyResponse]:
-    """Brute-force frequency sweeps with continuation (each point starts from the previous
-    point's final state), up and/or down in frequency; the directions run in parallel
-    through :func:`nscontrol.sweep.run`. Differences between the branches reveal coexisting
-    steady states (hysteresis) of non-convergent models.
+    """Frequency sweeps up and/or down by continuation of the attractor's periodic orbit in
+    ``ω``; the directions run in parallel through :func:`nscontrol.sweep.run`. Differences
+    between the directions reveal coexisting steady states (hysteresis) of non-convergent
+    models, and the continued branches carry the unstable orbits between them.
+
+    A sweep *lands* on an attractor by brute force (:func:`brute_force_steady_state` from
+    the last state: ``n_transient`` periods, then ``n_record`` recorded, multiplicity
+    ``p``), shoots its ``pT`` orbit and *follows* it: at each next frequency the orbit is
+    predicted (Euler, then secant on the nodes) and corrected by shooting at that exact
+    frequency. Where the correction fails or the orbit is unstable, pseudo-arclength
+    continuation (:func:`~nscontrol.analysis.continuation.continue_orbit`) from the last
+    orbit locates the flip or Neimark–Sacker point (the attractor changes period: the next
+    frequency lands afresh) or the fold, which it passes onto the coexisting unstable orbits;
+    a ``pT`` orbit that merges into a ``dT`` one (``d < p``) is followed as that.
 
     Parameters
     ----------
@@ -985,12 +1249,14 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
     directions
         ``"up"`` and/or ``"down"``.
     n_transient, n_record, samples_per_period
-        Per frequency, as in :func:`brute_force_steady_state`.
+        Per landing, as in :func:`brute_force_steady_state` (``samples_per_period`` also
+        samples the shot orbits).
     executor
         As in :func:`nscontrol.sweep.run`. Default ``"auto"``: local processes when two
-        directions run on a machine with two or more CPUs (a branch costs
-        ``n_ω·(n_transient + n_record)`` simulated periods — 0.05–0.3 s per frequency for the
-        ch11 oscillator at the defaults, against ~0.035 s to start a pool), else serial.
+        directions run on a machine with two or more CPUs (a direction costs one landing of
+        ``n_transient + n_record`` periods per attractor, a few shooting passes per
+        frequency and a continuation per bifurcation — 0.05–0.3 s per frequency for the
+        ch11 oscillator, against ~0.035 s to start a pool), else serial.
     **options
         Passed to the integrator.
 
@@ -998,10 +1264,12 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
     -------
     dict of str to FrequencyResponse
         One per direction, on the increasing frequency grid; ``gamma`` is ``max|z|/a`` of
-        the recorded response (refined over its last ``p`` periods when its multiplicity is
-        ``p >= 1``), ``multiplicity`` the detected period multiplicity (0: not periodic
-        within 6T). A failing frequency is NaN with its own error in ``errors`` (index and
-        frequency); the branch continues from the last good state.
+        the response over its ``p`` periods (refined peak) — of the shot orbit, or of the
+        brute-force window where no stable orbit was shot — ``multiplicity`` the period
+        multiplicity (0: not periodic within 6T), ``max_floquet`` the shot orbit's largest
+        multiplier modulus (NaN for a brute-force point), ``branches`` the continued
+        branches with their located points. A failing frequency is NaN with its own error
+        in ``errors`` (index and frequency); the sweep continues from the last good state.
 
     Raises
     ------
@@ -1012,7 +1280,8 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
     -----
     Continuation is sequential within a direction: the point of sweeping up *and* down is
     that each frequency starts on the attractor the previous one ended on, so a coexisting
-    branch is followed until it disappears (a fold) and the jump shows where it does.
+    branch is followed until it disappears (a fold, located) and the jump shows where it
+    does.
     Splitting a direction into segments seeded from a coarse pass would be exact except
     where it matters — near folds the landing attractor depends on the seed — and on two
     CPUs it gains nothing over running the two directions side by side (coarse pass
@@ -1023,7 +1292,7 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
     ----------
     D5.3 chapter 11 (§3.4 of our spec); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
     response functions for nonlinear convergent systems", IEEE TAC 52(6), 2007 (FRFs exist
-    only for convergent systems; hence brute force here).
+    only for convergent systems; hence sweeps that follow attractors here).
 
     Examples
     --------
@@ -1056,11 +1325,11 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
         executor = None if len(grids) > 1 and (os.cpu_count() or 1) > 1 else "serial"
     res = sweep.run(task, grids, executor=executor, progress=progress, desc="sweep")
     out = {}
-    for (d, pts), values, err in zip(grids, res.values, res.errors, strict=True):
+    for (d, pts), result, err in zip(grids, res.values, res.errors, strict=True):
         resp: list[HarmonicResponse | None] = [None] * w.size
         errs: list[Any] = [None] * w.size
-        for (i, wi), v in zip(pts, values if values is not None else [None] * len(pts),
-                              strict=True):
+        values, curves = result if result is not None else ([None] * len(pts), [])
+        for (i, wi), v in zip(pts, values, strict=True):
             if isinstance(v, HarmonicResponse):
                 resp[i] = v
             elif v is not None:
@@ -1069,5 +1338,6 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
                 errs[i] = sweep.PointError(i, err.type, f"ω = {wi:g}: the {d} sweep failed "
                                            f"as a whole: {err.message}", err.traceback)
         out[d] = FrequencyResponse.from_points(w, resp, direction=d, amplitude=amplitude,
-                                               n_harmonics=n_harmonics, errors=errs)
+                                               n_harmonics=n_harmonics, errors=errs,
+                                               branches=curves)
     return out

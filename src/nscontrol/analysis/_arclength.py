@@ -1,0 +1,205 @@
+"""The one pseudo-arclength engine: corrector, tangent and location of a test function's zero.
+
+A continuation problem is a map ``G: R^{m+1} -> R^m`` of ``y = (unknowns, p)`` whose zero set
+is the branch. :class:`ArclengthProblem` owns what every problem shares — Newton on
+``G(y) = 0, t·(y - y_pred) = 0`` (the pseudo-arclength condition), the unit tangent
+``[G_y; t_prevᵀ] t = [0; 1]`` and the iteration count — and a subclass says only how ``G``,
+its Jacobian and the solution record are computed. :func:`locate` finds the zero of a test
+function along the arclength, each trial point corrected onto the branch.
+
+Periodic orbits (:mod:`~nscontrol.analysis.continuation`) and equilibria
+(:mod:`~nscontrol.analysis.equilibria`) are the two clients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray
+from ..errors import SolverError
+
+
+@dataclass
+class Point:
+    """A corrected branch point: ``y``, the problem's solution record and its test values."""
+
+    y: FloatArray
+    sol: Any
+    tests: dict[str, float]
+
+
+class ArclengthProblem:
+    """``G(y) = 0`` with the shared corrector and tangent.
+
+    Subclasses implement :meth:`residual` (``G``, ``[G_x, G_p]`` and whatever the solution
+    record needs), :meth:`solution` (the record of a converged point) and :meth:`scale` (the
+    size the tolerance is relative to). ``tol`` is the corrector tolerance on ``max|G|``.
+    """
+
+    tol: float
+    iterations: int
+
+    def residual(self, y: FloatArray, G_p: FloatArray | None = None
+                 ) -> tuple[FloatArray, FloatArray, Any]:
+        """``G(y)``, ``[G_x, G_p]`` (``G_p`` reused when given) and auxiliary data."""
+        raise NotImplementedError
+
+    def solution(self, y: FloatArray, aux: Any, iterations: int, residual: float) -> Any:
+        """The solution record of a converged ``y``."""
+        raise NotImplementedError
+
+    def scale(self, y: FloatArray) -> float:
+        """``max(1, max|x|)``: the corrector tolerance is relative to it."""
+        return max(1.0, float(np.max(np.abs(y[:-1])))) if y.size > 1 else 1.0
+
+    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int = 8,
+                G_p: FloatArray | None = None) -> tuple[FloatArray, Any]:
+        """Newton on ``G = 0``, ``t·(y - y_pred) = 0`` from ``y_pred``; ``SolverError`` when it
+        fails. ``G_p`` is evaluated once per correction (a chord in the ``p`` column only:
+        it is the costly column for shooting problems and changes little over a step); a
+        given ``G_p`` is used instead (with ``t = (0, ..., 0, 1)``, ``p`` is pinned and the
+        column does not matter: pass zeros)."""
+        y = y_pred.copy()
+        res = np.inf
+        for it in range(max_iter + 1):
+            R, J, aux = self.residual(y, G_p)
+            G_p = J[:, -1]
+            res = float(np.max(np.abs(R))) if R.size else 0.0
+            if res <= self.tol * self.scale(y):
+                return y, self.solution(y, aux, it, res)
+            if it == max_iter:
+                break
+            A = np.vstack([J, t])
+            b = -np.concatenate([R, [t @ (y - y_pred)]])
+            try:
+                y = y + np.linalg.solve(A, b)
+            except np.linalg.LinAlgError as exc:
+                raise SolverError(f"singular extended Jacobian at p = {y[-1]:.9g}") from exc
+            self.iterations += 1
+        raise SolverError(f"corrector did not converge in {max_iter} iterations at "
+                          f"p = {y[-1]:.9g} (residual {res:.3g})")
+
+    def tangent(self, y: FloatArray, t_prev: FloatArray) -> FloatArray:
+        """Unit tangent at ``y`` oriented like ``t_prev`` (``t_prev·t = 1 > 0`` before
+        normalisation, so a fold is passed without turning back), from a fresh Jacobian
+        (the correction's chord in ``p`` is not accurate enough for a tangent near a
+        grazing, where ``∂G/∂p`` varies fast)."""
+        _, J, _ = self.residual(y)
+        return unit_tangent(J, t_prev)
+
+
+def unit_tangent(J: FloatArray, t_prev: FloatArray) -> FloatArray:
+    """Solve ``[J; t_prevᵀ] t = [0; 1]`` and normalise.
+
+    Parameters
+    ----------
+    J : (m, m+1) ndarray
+        ``[G_x, G_p]`` at the point.
+    t_prev : (m+1,) ndarray
+        The previous tangent (orientation).
+    """
+    A = np.vstack([J, t_prev])
+    b = np.zeros(A.shape[0])
+    b[-1] = 1.0
+    t = np.linalg.solve(A, b)
+    return t / np.linalg.norm(t)
+
+
+def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: FloatArray,
+           h: float, value: Callable[[Point], float], rtol: float,
+           s_first: float | None = None, closest: bool = True,
+           whole_state: bool = False) -> Point | None:
+    """Zero of ``value`` along the arclength from ``a`` (``s`` in ``(0, 2h)``).
+
+    Secant steps while no sign change is bracketed, Illinois regula falsi once one is; a
+    trial whose corrector fails (past a grazing the map is not smooth) counts as beyond the
+    zero. Stops when the bracket is ``rtol`` (relative) wide: in the parameter, or with
+    ``whole_state`` in ``|y|`` — at a fold the parameter is stationary along the branch, so a
+    narrow parameter bracket says nothing about the state.
+
+    Parameters
+    ----------
+    correct
+        ``(y_pred, t) -> Point``: the corrector.
+    a
+        The last branch point before the sign change.
+    t
+        The tangent at ``a``.
+    h
+        The step that produced the sign change.
+    value
+        The test function of a corrected point.
+    rtol
+        Relative width of the parameter bracket at which the zero counts as located.
+    s_first
+        First trial arclength (default ``h``).
+    closest
+        Return whichever bracket end has the smaller ``|value|`` (``False``: always the end
+        on ``a``'s side, as for a grazing, whose far side belongs to another map).
+    whole_state
+        Measure the bracket in ``y = (state, p)`` instead of ``p`` alone.
+
+    Returns
+    -------
+    Point or None
+        ``None`` when no zero is found within 100 trials or no bracket can be formed.
+    """
+    good = [(0.0, value(a), a)]                   # (s, f, point), same sign as at a
+    other: tuple[float, float, Point] | None = None
+    s_bad = 2.0 * h                               # smallest s known to fail or overshoot
+    s = h if s_first is None else float(s_first)
+    width, side = np.inf, 0
+
+    def dist(u: Point, v: Point) -> float:
+        return float(np.max(np.abs(u.y - v.y)) if whole_state else abs(u.y[-1] - v.y[-1]))
+
+    def size(u: Point) -> float:
+        return max(1.0, float(np.max(np.abs(u.y)) if whole_state else abs(u.y[-1])))
+
+    for _ in range(100):
+        s = min(max(s, 0.0), s_bad)
+        pt: Point | None
+        try:
+            pt = correct(a.y + s * t, t)
+            f = value(pt)
+        except SolverError:
+            pt, f = None, np.nan
+        if pt is None:
+            s_bad = s
+            s = 0.5 * (good[-1][0] + s)
+        elif f == 0.0:
+            good.append((s, f, pt))
+            width = 0.0
+        elif f * good[0][1] > 0:
+            width = dist(pt, other[2] if other is not None else good[-1][2])
+            good.append((s, f, pt))
+            side += 1
+            if other is not None and side >= 2:
+                other = (other[0], other[1] / 2, other[2])   # Illinois: retained end halved
+        else:
+            width = dist(pt, good[-1][2])
+            other, side = (s, f, pt), 0
+            s_bad = s
+        if width <= rtol * size(good[-1][2]):
+            break
+        if pt is None:
+            continue
+        if other is None and len(good) < 2:
+            return None
+        (s0, f0, _), (s1, f1) = good[-1], ((other[0], other[1]) if other is not None
+                                           else (good[-2][0], good[-2][1]))
+        s_next = s1 - f1 * (s1 - s0) / (f1 - f0) if f1 != f0 else 0.5 * (s0 + s1)
+        if other is not None and not min(s0, s1) < s_next < max(s0, s1):
+            s_next = 0.5 * (s0 + s1)
+        s = s_next if s_next < s_bad else 0.5 * (good[-1][0] + s_bad)
+    else:
+        return None
+    best = good[-1][2]
+    if closest and other is not None and abs(other[1]) < abs(good[-1][1]):
+        best = other[2]
+    best.tests["_width"] = float(width)
+    return best
