@@ -48,7 +48,7 @@ _EXPORTS: dict[str, str] = {
     "SpecialPoint": "continuation", "Branch": "continuation", "continue_orbit": "continuation",
     "switch_at_flip": "continuation",
     # equilibria.py
-    "VectorField": "equilibria", "EquilibriumPoint": "equilibria",
+    "EquilibriumPoint": "equilibria",
     "continue_equilibrium": "equilibria",
     # bifurcation.py
     "BifurcationDiagram": "bifurcation", "bifurcation_diagram": "bifurcation",

@@ -12,8 +12,8 @@ What the factory may return
   field at a time (``F_x = A_r``, exact); when its equilibrium reaches a facet of the region
   the **boundary equilibrium** is located and, for a continuous field, the continuation
   goes on in the region across the facet (the point solves both regions' equations there);
-* a :class:`VectorField` (or a plain callable ``x -> ẋ``): a smooth field, Jacobian given or
-  by central differences.
+* a :class:`~nscontrol.systems.NonlinearSystem` (autonomous: its field at ``t = 0``, its
+  ``jacobian`` or central differences) or a plain callable ``x -> ẋ`` (central differences).
 
 Test functions (on the eigenvalues ``λ`` of ``F_x``)
 ---------------------------------------------------
@@ -43,10 +43,12 @@ import numpy as np
 
 from .._validation import FloatArray, as_vector, check_integer, check_positive
 from ..errors import ModelError, SolverError
+from ..numerics.differences import central_difference_jacobian
+from ..systems.nonlinear import NonlinearSystem
 from ._arclength import ArclengthProblem, Point, locate, unit_tangent
 from .continuation import Branch, SpecialPoint
 
-__all__ = ["VectorField", "EquilibriumPoint", "continue_equilibrium"]
+__all__ = ["EquilibriumPoint", "continue_equilibrium"]
 
 _EPS = float(np.finfo(float).eps)
 #: Central-difference step factor: truncation ``O(δ²)`` against rounding ``O(ε/δ)``.
@@ -54,37 +56,23 @@ _DELTA = _EPS ** (1 / 3)
 
 
 @dataclass(frozen=True, eq=False)
-class VectorField:
-    """A smooth autonomous field ``ẋ = f(x)`` (one parameter value of a family).
+class _SmoothField:
+    """A smooth autonomous field at one parameter value: ``value(x)`` and ``derivative(x)``
+    (a :class:`~nscontrol.systems.NonlinearSystem` at ``t = 0``, or a plain callable with
+    central differences from :mod:`nscontrol.numerics.differences`)."""
 
-    Attributes
-    ----------
-    f
-        ``x -> ẋ``, ``(n,) -> (n,)``.
-    jacobian
-        ``x -> ∂f/∂x`` (``None``: central differences, step ``ε^{1/3}·max(1, |x_j|)``,
-        error ``O(ε^{2/3})`` relative).
-    """
+    value: Callable[[FloatArray], FloatArray]
+    derivative: Callable[[FloatArray], FloatArray]
 
-    f: Callable[[FloatArray], Any]
-    jacobian: Callable[[FloatArray], Any] | None = None
+    @classmethod
+    def of(cls, obj: Any) -> _SmoothField:
+        if isinstance(obj, NonlinearSystem):
+            return cls(lambda x: obj.rhs(0.0, x), lambda x: obj.jac(0.0, x))
 
-    def value(self, x: FloatArray) -> FloatArray:
-        """``f(x)`` as a float vector."""
-        return np.atleast_1d(np.asarray(self.f(x), float))
+        def value(x: FloatArray) -> FloatArray:
+            return np.atleast_1d(np.asarray(obj(x), float))
 
-    def derivative(self, x: FloatArray) -> FloatArray:
-        """``∂f/∂x`` (given, or central differences)."""
-        if self.jacobian is not None:
-            return np.atleast_2d(np.asarray(self.jacobian(x), float))
-        n = x.shape[0]
-        J = np.empty((self.value(x).shape[0], n))
-        for j in range(n):
-            d = _DELTA * max(1.0, abs(float(x[j])))
-            e = np.zeros(n)
-            e[j] = d
-            J[:, j] = (self.value(x + e) - self.value(x - e)) / (2 * d)
-        return J
+        return cls(value, lambda x: central_difference_jacobian(value, x))
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,11 +125,11 @@ def _constant_input(system: Any) -> FloatArray | None:
 
 
 def _as_field(obj: Any) -> Any:
-    if _is_pwa(obj) or isinstance(obj, VectorField):
+    if _is_pwa(obj):
         return obj
-    if callable(obj):
-        return VectorField(obj)
-    raise ModelError(f"factory: expected a PiecewiseAffineSystem, a VectorField or a callable "
+    if isinstance(obj, NonlinearSystem) or callable(obj):
+        return _SmoothField.of(obj)
+    raise ModelError(f"factory: expected a PiecewiseAffineSystem, a NonlinearSystem or a callable "
                      f"x -> dx/dt, got {type(obj).__name__}")
 
 
@@ -177,7 +165,7 @@ class _EquilibriumProblem(ArclengthProblem):
 
     def value(self, x: FloatArray, p: float) -> FloatArray:
         s = self.system(p)
-        if isinstance(s, VectorField):
+        if isinstance(s, _SmoothField):
             return s.value(x)
         f = s.A[self.region] @ x + s.b[self.region]
         eu = _constant_input(s)
@@ -185,7 +173,7 @@ class _EquilibriumProblem(ArclengthProblem):
 
     def jacobian_x(self, x: FloatArray, p: float) -> FloatArray:
         s = self.system(p)
-        return s.derivative(x) if isinstance(s, VectorField) else np.array(s.A[self.region])
+        return s.derivative(x) if isinstance(s, _SmoothField) else np.array(s.A[self.region])
 
     def residual(self, y: FloatArray, G_p: FloatArray | None = None
                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -210,7 +198,7 @@ class _EquilibriumProblem(ArclengthProblem):
         return {"fold": float(np.prod(lam).real),
                 "hopf": float(np.prod(pairs).real) if pairs else 1.0,
                 "boundary_equilibrium": (_slack(s, self.region, eq.x)
-                                         if not isinstance(s, VectorField) else 1.0)}
+                                         if not isinstance(s, _SmoothField) else 1.0)}
 
     def point(self, y_pred: FloatArray, t: FloatArray) -> Point:
         y, eq = self.correct(y_pred, t)
@@ -228,7 +216,7 @@ def _start(prob: _EquilibriumProblem, p0: float, x0: FloatArray) -> None:
     """PWA: pick the region of the admissible equilibrium nearest ``x0`` (each region's
     affine equilibrium solved exactly); smooth fields need nothing."""
     s = prob.system(p0)
-    if isinstance(s, VectorField):
+    if isinstance(s, _SmoothField):
         return
     best, where = np.inf, -1
     for r in range(s.n_regions):
@@ -280,7 +268,7 @@ def continue_equilibrium(factory: Callable[[float], Any], p0: float, x0: Any, *,
     ----------
     factory
         ``p -> system``: a :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem` (no input
-        or a constant one), a :class:`VectorField` or a callable ``x -> ẋ``.
+        or a constant one), a :class:`~nscontrol.systems.NonlinearSystem` or a callable ``x -> ẋ``.
     p0, x0
         Start: parameter and a guess of the equilibrium.
     p_range
