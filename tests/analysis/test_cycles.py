@@ -79,3 +79,35 @@ def test_hyperplane_map_jacobian_and_its_fixed_point():
     ev = np.sort_complex(np.linalg.eigvals(ret.jacobian))
     expected = np.sort_complex(np.append(cyc.nontrivial, 0.0))
     assert np.max(np.abs(ev - expected)) <= 1e-7
+
+
+def test_relay_cycle_under_implicit_euler_converges_at_first_order():
+    """The same relay loop in Lur'e form (w ∈ -sign(c·x), the multiplier solved in each
+    implicit step) settles on a discrete cycle of a whole number of steps N, and N·h tends to
+    the exact period at first order: e(h) = |N h - T| = K h + O(h²)."""
+    from nscontrol import simulate
+    from nscontrol.laws import Relay
+    from nscontrol.systems import LureSystem
+
+    half, x0 = _symmetric_orbit()
+    T = 2 * half
+    lure = LureSystem(A, B[:, None], C[None, :], Relay(1.0))
+    errors = []
+    for n in (200, 400, 800):
+        h = T / n
+        tr = simulate(lure, x0 + [0.0, 1e-3, 0.0], (0.0, 30 * T), method="implicit_euler", h=h)
+        y, t = tr.x[:, 0], tr.t
+        up = np.flatnonzero((y[:-1] < 0) & (y[1:] >= 0))
+        crossings = (t[up] - y[up] * (t[up + 1] - t[up]) / (y[up + 1] - y[up]))
+        periods = np.diff(crossings[crossings > 10 * T])
+        # a discrete cycle: every period is the same whole number of steps (to the rounding of
+        # t = k h and of the interpolated crossing, ~1e3 ε T)
+        steps = periods / h
+        assert np.ptp(periods) <= 1e3 * EPS * T
+        assert abs(steps[0] - round(steps[0])) <= 1e3 * EPS * n
+        errors.append(abs(periods.mean() - T) / h)      # the error in steps, e(h)/h
+    # first order: e(h)/h converges to K; it changes by O(h) between step sizes, plus at most
+    # one whole step when the grid's rounding of a crossing flips: consecutive values within 1
+    assert all(0.0 < e < 10.0 for e in errors)
+    for a, b in zip(errors, errors[1:], strict=False):
+        assert abs(a - b) <= 1.0
