@@ -51,6 +51,12 @@ _EXPORTS: dict[str, str] = {
     # impact_oscillator.py
     "ImpactOscillator": "impact_oscillator", "OneImpactOrbit": "impact_oscillator",
     "OscillatorFamily": "impact_oscillator",
+    # tracking_cycles.py
+    "ImpactEvent": "tracking_cycles", "CycleReport": "tracking_cycles",
+    "WeakStabilityVerdict": "tracking_cycles", "impact_events": "tracking_cycles",
+    "cycle_reports": "tracking_cycles", "accumulation_estimate": "tracking_cycles",
+    "check_weak_stability": "tracking_cycles", "free_phase_growth": "tracking_cycles",
+    "PHASE_NAMES": "tracking_cycles",
 }
 
 __all__ = list(_EXPORTS)

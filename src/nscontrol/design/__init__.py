@@ -35,6 +35,15 @@ _EXPORTS: dict[str, str] = {
     "design_state_feedback": "convergent_pwa", "design_pwa_state_feedback": "convergent_pwa",
     "tune_pwa_state_feedback": "convergent_pwa", "design_observer": "convergent_pwa",
     "output_feedback_loop": "convergent_pwa",
+    # complementarity_tracking.py
+    "PBCGains": "complementarity_tracking", "TransitionDesign": "complementarity_tracking",
+    "ContactPhaseDesign": "complementarity_tracking", "Phase": "complementarity_tracking",
+    "CyclicTask": "complementarity_tracking", "CircleTask": "complementarity_tracking",
+    "HalfSineTask": "complementarity_tracking", "TaskSpaceModel": "complementarity_tracking",
+    "SwitchingTrackingController": "complementarity_tracking",
+    "slotine_li_force": "complementarity_tracking",
+    "lyapunov_decay_rate": "complementarity_tracking",
+    "virtual_dive": "complementarity_tracking", "liftoff_blend": "complementarity_tracking",
 }
 
 __all__ = list(_EXPORTS)

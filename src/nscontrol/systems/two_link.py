@@ -224,7 +224,8 @@ class TwoLinkArm:
             Joint angles and velocities.
         """
         J = self.jacobian(theta)
-        Jinv = np.linalg.inv(J)
+        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]   # = l1 l2 sin θ2 (up to sign)
+        Jinv = np.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]]) / det
         M = self.mass(theta)
         Mq = Jinv.T @ M @ Jinv
         Cq = Jinv.T @ (self.coriolis(theta, dtheta) - M @ Jinv @ self.jacobian_rate(
