@@ -467,11 +467,15 @@ class SwitchingTrackingController:
         ``"impact-triggered"`` (the 2007 Siconos logic): transition at the first contact
         impulse with ``q2 < trigger_q2``, ``d = √(γ2 V/γ1)``, constrained once gap and normal
         velocity are below ``1e-4``, ``λ_d = 0.5 (q2_end - q2)``, take-off when
-        ``λ̂ < 1e-4``.
+        ``λ̂ < 1e-4`` or at the end of the nominal sliding segment (the period's end).
     trigger_q2 : float
         Tangential position below which the impact-triggered transition starts.
     q2_end : float
         End of the sliding segment (impact-triggered ``λ_d``).
+    force_feedback_scale : float
+        Multiplies ``K_f (λ̂ - λ_d)`` (1: the law as stated). The 2007 Siconos code fed back
+        the impulse ``P = h λ̂`` instead of the force: ``h`` reproduces that scaling, which
+        keeps its ``K_f = 3`` from destabilising the one-step-delayed force loop.
 
     Examples
     --------
@@ -485,7 +489,7 @@ class SwitchingTrackingController:
                  transition: TransitionDesign = TransitionDesign(),
                  contact: ContactPhaseDesign = ContactPhaseDesign(), model_scale: float = 1.0,
                  switching: str = "designed", trigger_q2: float = 0.65,
-                 q2_end: float = 0.75) -> None:
+                 q2_end: float = 0.75, force_feedback_scale: float = 1.0) -> None:
         if switching not in ("designed", "impact-triggered"):
             raise ModelError(f"switching: expected 'designed' or 'impact-triggered', got "
                              f"{switching!r}")
@@ -493,6 +497,8 @@ class SwitchingTrackingController:
         self.transition, self.contact = transition, contact
         self.model_scale = check_positive("model_scale", model_scale)
         self.switching, self.trigger_q2, self.q2_end = switching, trigger_q2, q2_end
+        self.force_feedback_scale = check_positive("force_feedback_scale",
+                                                   force_feedback_scale, allow_zero=True)
         self.n = int(model.n_dof)
         self.reset_run()
 
@@ -587,7 +593,7 @@ class SwitchingTrackingController:
                                q_star)
         lam_hat = min(lam_raw, self.contact.lam_sat)
         if self.phase == Phase.CONSTRAINED:
-            tau[0] += -lam_d + self.gains.Kf * (lam_hat - lam_d)
+            tau[0] += -lam_d + self.force_feedback_scale * self.gains.Kf * (lam_hat - lam_d)
         V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
         self._log.append((t, int(self.phase), self.cycle, V, V1, lam_d, lam_hat,
                           self.current.depth, *q, *dq, *qd))
@@ -660,13 +666,21 @@ class SwitchingTrackingController:
             cyc.V_tau0, cyc.V1_tau0 = V, V1
             cyc.depth = math.sqrt(self.gains.gamma2 * V / self.gains.gamma1)
             cyc.q10, cyc.q2_star = 0.0, q[1:].copy()
+            # the nominal sliding segment of this period ends at the period's end
+            cyc.t_detach = self.task.t_detach(int(t // self.task.period))
             self.phase = Phase.IMPACTS
         elif self.phase == Phase.IMPACTS and q[0] <= 1e-4 and abs(dq[0]) <= 1e-4:
             cyc.t_constrained = t
             self.phase, self.contact_steps = Phase.CONSTRAINED, 0
         elif self.phase == Phase.CONSTRAINED:
-            self.contact_steps += 1
-            if self.contact_steps > 1 and lam_raw < 1e-4:
+            # take-off once the contact force, after it has built up, falls below 1e-4 N
+            # (a gap of up to 1e-4 m is accepted as contact: no force may follow at once)
+            if lam_raw >= 1e-4:
+                self.contact_steps += 1
+            elif self.contact_steps > 0:
+                self._take_off(t)
+                return
+            if t >= cyc.t_detach - 1e-12:   # the nominal path leaves the ground
                 self._take_off(t)
 
     def _take_off(self, t: float) -> None:

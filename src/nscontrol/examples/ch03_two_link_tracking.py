@@ -164,7 +164,10 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         arm, CircleTask(period=cfg.period), gains,
         TransitionDesign(depth_law=depth_law, depth_min=depth_min, phi=phi),
         ContactPhaseDesign(lam_rate=1.0 + kf), model_scale=model_scale,
-        switching=cfg.switching)
+        switching=cfg.switching,
+        # the 2007 code fed back the impulse h λ̂, not λ̂ (its K_f = 3 > 1 would otherwise
+        # make the one-step-delayed force loop unstable)
+        force_feedback_scale=(cfg.h if h is None else h) if config == "siconos-2007" else 1.0)
     x0 = np.array([*cfg.theta0, 0.0, 0.0])
     e = cfg.restitution if restitution is None else restitution
     step = cfg.h if h is None else h
