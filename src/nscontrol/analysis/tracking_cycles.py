@@ -103,6 +103,8 @@ class CycleReport:
         ``max |λ̂ - λ_d|`` over the last second before take-off.
     t_star, u_star
         Crossing of the surface by the virtual dive and its speed there (designed switching).
+    events
+        The cycle's impact events.
     """
 
     index: int

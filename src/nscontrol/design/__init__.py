@@ -37,7 +37,7 @@ _EXPORTS: dict[str, str] = {
     "output_feedback_loop": "convergent_pwa",
     # complementarity_tracking.py
     "PBCGains": "complementarity_tracking", "TransitionDesign": "complementarity_tracking",
-    "ContactPhaseDesign": "complementarity_tracking", "Phase": "complementarity_tracking",
+    "ContactPhaseDesign": "complementarity_tracking",
     "CyclicTask": "complementarity_tracking", "CircleTask": "complementarity_tracking",
     "HalfSineTask": "complementarity_tracking", "TaskSpaceModel": "complementarity_tracking",
     "SwitchingTrackingController": "complementarity_tracking",

@@ -36,7 +36,7 @@ import numpy as np
 from .._validation import FloatArray, check_positive
 from ..errors import ModelError
 
-__all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "Phase", "CyclicTask",
+__all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
            "CircleTask", "HalfSineTask", "TaskSpaceModel", "SwitchingTrackingController",
            "slotine_li_force", "lyapunov_decay_rate", "virtual_dive", "liftoff_blend"]
 
@@ -373,7 +373,7 @@ def virtual_dive(t: float, tau0: float, q10: float, depth: float, delta: float,
 
     Examples
     --------
-    >>> virtual_dive(1.5, 0.0, 0.01, 0.005, 0.5, 1.0)[0]
+    >>> virtual_dive(0.5, 0.0, 0.01, 0.005, 0.5, 1.0)[0]
     0.01
     >>> virtual_dive(3.0, 0.0, 0.01, 0.005, 0.5, 1.0)
     (-0.005, 0.0, 0.0)

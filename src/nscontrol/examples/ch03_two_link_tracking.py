@@ -85,6 +85,8 @@ class TrackingRun:
         The step.
     model
         The plant model (task map).
+    extras
+        Anything a caller attaches to the run.
     """
 
     traj: Any
@@ -98,11 +100,11 @@ class TrackingRun:
 def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
               theta: float, restitution: float) -> TrackingRun:
     """Simulate plant + controller with Moreau–Jean and merge the controller's log."""
-    import nscontrol as nsc
+    from ..simulate import closed_loop, simulate
 
     controller.reset_run()
-    loop = nsc.closed_loop(model.system(restitution), controller)
-    traj = nsc.simulate(loop, x0, (0.0, T), method="moreau_jean", h=h, theta=theta,
+    loop = closed_loop(model.system(restitution), controller)
+    traj = simulate(loop, x0, (0.0, T), method="moreau_jean", h=h, theta=theta,
                         progress=False)
     log = controller.signals()
     # the log holds one row per step start; the final sample gets its own evaluation

@@ -91,7 +91,8 @@ class TwoLinkArm:
     """
 
     params: TwoLinkParams = field(default_factory=TwoLinkParams)
-    n_dof: int = 2
+    #: Number of joints.
+    n_dof: int = field(default=2, init=False)
 
     # -- joint space ---------------------------------------------------------------------
     def mass(self, theta: FloatArray) -> FloatArray:
@@ -255,7 +256,8 @@ class OneDofMass:
 
     m: float = 1.0
     g: float = 9.81
-    n_dof: int = 1
+    #: One coordinate.
+    n_dof: int = field(default=1, init=False)
 
     def __post_init__(self) -> None:
         check_positive("m", self.m)
