@@ -100,7 +100,8 @@ class TrackingRun:
 def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
               theta: float, restitution: float) -> TrackingRun:
     """Simulate plant + controller with Moreau–Jean and merge the controller's log."""
-    from ..simulate import closed_loop, simulate
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
 
     controller.reset_run()
     loop = closed_loop(model.system(restitution), controller)
