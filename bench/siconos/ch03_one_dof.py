@@ -47,7 +47,6 @@ class Controller:
         return k * self.P + (math.pi - math.asin(0.01 / self.A)) / self.w
 
     def reference(self, t):
-        p = self.p
         if self.phase == 0:
             a, b, c = self.nominal(t)
             s, ds, dds = blend((t - self.lift) / 0.5)

@@ -128,3 +128,22 @@ def test_warp_is_continuous_with_the_nominal_path_at_the_transition_start():
     assert v[0] == pytest.approx(0.0, abs=1e-9)
     assert p[0] == pytest.approx(pn[0], abs=1e-9)
     assert math.isfinite(p[0])
+
+
+def test_controller_works_as_a_closed_loop_block_and_as_a_step_controller():
+    """The same law through nscontrol.closed_loop (a Controller block fed λ̂) and as the
+    integrator's controller= callable: the same torques, hence the same trajectory."""
+    import nscontrol as nsc
+
+    plant = OneDofMass()
+    runs = []
+    for as_block in (True, False):
+        ctrl = SwitchingTrackingController(plant, HalfSineTask(), PBCGains(5.0, 5.0))
+        system = nsc.closed_loop(plant.system(0.7), ctrl) if as_block else plant.system(0.7)
+        extra = {} if as_block else {"controller": ctrl}
+        traj = nsc.simulate(system, [0.05, 0.0], (0.0, 0.5), method="moreau_jean", h=1e-3,
+                            progress=False, **extra)
+        runs.append((traj.x[:, :2], ctrl.signals()["V"]))
+    assert np.array_equal(runs[0][0], runs[1][0])
+    assert np.array_equal(runs[0][1], runs[1][1])
+    assert runs[0][1][-1] < runs[0][1][0]            # V decays in free motion

@@ -110,3 +110,46 @@ def test_2007_configuration_repeats_identical_cycles():
     landings = [x[np.searchsorted(run.traj.t, r.t_first_impact)] for r in reports]
     assert np.allclose(landings, 0.55, atol=0.01)
     assert x.max() == pytest.approx(0.75, abs=0.01)
+
+
+@pytest.mark.slow
+def test_restitution_sets_the_number_of_impacts_not_the_outcome():
+    """Check 14 (one cycle each, h = 1e-3): every e reaches the constrained phase, e = 0 lands
+    with a single impact event, and the accumulation lasts longer as e grows."""
+    durations = []
+    for e in (0.0, 0.3, 0.7, 0.9):
+        run = two_link_tracking("siconos-current", cycles=1, h=1e-3, restitution=e)
+        _, reports, _ = _analyse(run, 1e-6)
+        (r,) = reports
+        assert math.isfinite(r.t_constrained)
+        if e == 0.0:
+            assert r.n_impacts == 1
+        durations.append(r.t_constrained - r.t_first_impact)
+    assert all(np.diff(durations) > 0.0), durations
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scale", [0.9, 1.1])
+def test_model_error_keeps_the_cycles_and_predicts_early_liftoff(scale):
+    """Check 15 (two cycles, h = 1e-3): the controller's M, C, g scaled by 0.9 or 1.1.
+    Every cycle completes, V(τ0) grows by at most 10 % per cycle, the free-phase error at
+    τ0 stays below 3 cm and the dive hits its upper clip. With 1.1 the model-error force
+    pulls the arm off the ground before t_d: the gap opens (by a few mm) about
+    Δλ/c_λ seconds early, Δλ = λ̂ - λ_d measured in contact, within 0.1 s."""
+    run = two_link_tracking("siconos-current", cycles=2, h=1e-3, model_scale=scale)
+    _, reports, verdict = _analyse(run, 1e-6)
+    assert len(reports) == 2 and all(math.isfinite(r.t_constrained) for r in reports)
+    V = [r.V_tau0 for r in reports]
+    assert V[1] <= 1.1 * V[0] + 1e-8
+    assert max(r.tracking_error_tau0 for r in reports) <= 0.03
+    assert all(r.depth == run.controller.transition.depth_max for r in reports)
+    if scale > 1.0:
+        t, sig = run.traj.t, run.traj.signals
+        gap, c_lam = sig["gap"][:, 0], run.controller.contact.lam_rate
+        for c in run.controller.cycles[:2]:
+            contact = (t >= c.t_constrained) & (t < c.t_detach)
+            opened = t[contact & (gap > 1e-6)]
+            assert opened.size and gap[contact].max() <= 5e-3
+            settled = contact & (t < opened[0]) & (t > c.t_constrained + 0.5)
+            dlam = float(np.median(sig["lam_hat"][settled] - sig["lam_d"][settled]))
+            assert opened[0] == pytest.approx(c.t_detach + dlam / c_lam, abs=0.1)

@@ -404,6 +404,7 @@ def _inline_controller(controller: Any, setup: _Setup, state: dict[str, Any]
     (same arguments and checks as :func:`_external_force`); a bad output stops the run as a
     model error (``err.trajectory`` the steps so far)."""
     S, reads, h = setup.Sinput, state["reads"], state["h"]
+    assert S is not None   # a controller always sets the input matrix (_input_matrix)
 
     def force(t: float, q: FloatArray, v: FloatArray, p_prev: FloatArray,
               active_prev: np.ndarray) -> FloatArray:
