@@ -82,16 +82,20 @@ def test_step_size_robustness(fine_run):
 @pytest.mark.slow
 def test_linear_depth_law_without_floor_stalls():
     """Check 16 documents a known failure: with d = φ V1 (φ = 1e5) and no lower clip, the
-    tracking error at τ0 of cycle 1 is so small that the dive is microscopic and the arm
-    never reaches the ground in that cycle. The test passes when the failure is
-    reproduced; it is the reason for the default lower clip of the depth."""
+    tracking error at τ0 of cycle 1 is so small that the dive is microscopic (4 µm here):
+    the pressing force γ1 γ2 d almost vanishes and the transition degrades — either no
+    impact at all (what an independent prototype with a smaller V1 floor, 3e-12, saw) or,
+    here (V1 = 4e-11), a landing at 0.7 mm/s whose rebounds take 3 s to settle, beyond the
+    2.5 s of check 7. The test passes when the failure is reproduced; it is the reason for
+    the default lower clip of the depth."""
     # at h = 1e-3 the O(h) floor of V1(τ0) (4e-9) still gives a 0.4 mm dive: the chapter's
     # step is needed to see the stall (200 000 steps)
     run = two_link_tracking("siconos-current", cycles=2, h=1e-4, depth_law="linear",
                             depth_min=0.0, phi=1e5)
     cycles = run.controller.cycles
     assert len(cycles) >= 2 and cycles[1].depth < 1e-4
-    assert math.isnan(cycles[1].t_first_impact)
+    c = cycles[1]
+    assert math.isnan(c.t_first_impact) or c.t_constrained - c.t_first_impact > 2.5
 
 
 @pytest.mark.slow
