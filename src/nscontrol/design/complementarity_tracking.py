@@ -162,7 +162,8 @@ class CyclicTask(Protocol):
     period: float
 
     def nominal(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``(q_d, q̇_d, q̈_d)`` of the nominal task at ``t``."""
+        """``(q_d, q̇_d, q̈_d)`` of the nominal task at ``t`` (new arrays: the controller
+        modifies them in place)."""
         ...
 
     def tau0(self, k: int) -> float:
@@ -301,6 +302,12 @@ class TaskSpaceModel(Protocol):
     def task_dynamics(self, theta: FloatArray, dtheta: FloatArray
                       ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """``(M_q, C_q, g_q, J)``."""
+        ...
+
+    def task_model(self, theta: FloatArray, dtheta: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                              FloatArray]:
+        """``(q, q', M_q, C_q, g_q, J)`` in one evaluation."""
         ...
 
 
@@ -600,9 +607,7 @@ class SwitchingTrackingController:
             Last step's impulse over ``h`` (unsaturated).
         """
         n = self.n
-        theta, dtheta = x[:n], x[n:]
-        q, dq = self.model.task_state(theta, dtheta)
-        Mq, Cq, gq, J = self.model.task_dynamics(theta, dtheta)
+        q, dq, Mq, Cq, gq, J = self.model.task_model(x[:n], x[n:])
         self._advance(t, q, dq, Mq, lam_raw)
         qd, dqd, ddqd, q_star, lam_d = self._reference(t, q)
         sc = self.model_scale
@@ -613,7 +618,7 @@ class SwitchingTrackingController:
             tau[0] += -lam_d + self.force_feedback_scale * self.gains.Kf * (lam_hat - lam_d)
         V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
         self._log.append((t, int(self.phase), self.cycle, V, V1, lam_d, lam_hat,
-                          self.current.depth, *q, *dq, *qd))
+                          self.current.depth, *q.tolist(), *dq.tolist(), *qd.tolist()))
         self._t_prev = t
         return J.T @ tau
 
@@ -730,8 +735,7 @@ class SwitchingTrackingController:
         """``(q_d, q̇_d, q̈_d, q*_d or None, λ_d)`` of the current phase."""
         cyc, n = self.current, self.n
         if self.phase == Phase.FREE:
-            qd, dqd, ddqd = self.task.nominal(t)
-            qd, dqd, ddqd = qd.copy(), dqd.copy(), ddqd.copy()
+            qd, dqd, ddqd = self.task.nominal(t)     # fresh arrays: modified in place below
             if self.switching == "designed":
                 a, b, c = liftoff_blend((t - self.liftoff_at) / self.contact.liftoff_time)
                 if a < 1.0:   # y = σ y_nom: leaves the surface with zero velocity
