@@ -130,7 +130,10 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         read once from its signature), it also receives ``lam_hat``, the previous step's
         contact impulses divided by ``h`` (shape ``(m,)``, an estimate of the contact
         force; zeros at the first step), and ``active``, the indices of the contacts in the
-        previous step's active set (an int array, empty at the first step).
+        previous step's active set (an int array, empty at the first step). On the Python
+        path and without ``listeners`` it is called inside the step loop (many steps per
+        chunk: the same inputs and trajectory, less overhead); otherwise the loop advances
+        one step per chunk so that listeners run between steps.
     listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
         Called for every step that contains an impact (observer resets), with the states at
         the step's start and end, the impacting contacts and the step's impulses; ``t`` is
