@@ -421,12 +421,11 @@ def _figures(tr: TrackingRun, events: list[Any], reports: list[Any], out_dir: Pa
     q, qd = sig["q_task"], sig["qd"]
     fig, ax = new_figure(figsize=(6.5, 4))
     ax.axhline(0.0, color="k", lw=2, label="ground y = 0")
-    ax.plot(qd[:, 1], qd[:, 0], "--", color="0.5", lw=1,
-            label="reference (with the virtual dive)")
+    ax.plot(qd[:, 1], qd[:, 0], "--", color="0.5", lw=1, label="reference used")
     ax.plot(q[:, 1], q[:, 0], lw=1.2, label="end effector")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.legend(loc="upper right", fontsize="small")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3, fontsize="small")
     ax.set_title("End-effector path")
     save_figure(fig, out_dir, "ch03_path", figures)
 
@@ -437,6 +436,7 @@ def _figures(tr: TrackingRun, events: list[Any], reports: list[Any], out_dir: Pa
             label="impacts")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("y [m]")
+    ax.set_ylim(top=1.45 * float(q[:, 0].max()))      # room for the legend
     ax.legend(loc="upper right", fontsize="small", ncol=2)
     ax.set_title("Height above the ground, phases shaded")
     save_figure(fig, out_dir, "ch03_height", figures)
@@ -467,10 +467,11 @@ EXAMPLES = [Example(
                          ("12. penetration", "smallest gap")),
     key_figure="ch03_height",
     captions={
-        "ch03_path": "End-effector path in the (x, y) plane: the upper half-circle in free "
-                     "motion, the landing near x = 0.55 with a few rebounds, the slide along "
-                     "the ground to x = 0.75. The dashed reference dips below the ground: "
-                     "that is the virtual dive that presses the arm onto the surface.",
+        "ch03_path": "End-effector path in the (x, y) plane: the transient from the start "
+                     "point, the upper half-circle in free motion, the landing near x = 0.55 "
+                     "with a few rebounds, the slide along the ground to x = 0.75. Dashed: "
+                     "the reference the controller used (nominal circle, the virtual dive "
+                     "until the first impact, the surface point after it, the slide).",
         "ch03_height": "Height y(t) with the phases shaded (approach, impacts, sliding) and "
                        "the impacts marked: each landing is a short burst of rebounds that "
                        "accumulate before the sliding phase.",
