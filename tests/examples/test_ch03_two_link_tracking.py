@@ -157,3 +157,17 @@ def test_model_error_keeps_the_cycles_and_predicts_early_liftoff(scale):
             settled = contact & (t < opened[0]) & (t > c.t_constrained + 0.5)
             dlam = float(np.median(sig["lam_hat"][settled] - sig["lam_d"][settled]))
             assert opened[0] == pytest.approx(c.t_detach + dlam / c_lam, abs=0.1)
+
+
+@pytest.mark.slow
+def test_robustness_point_runs_through_a_sweep():
+    """One point of the robustness grid through nscontrol.sweep (serial): the record a
+    robustness map is drawn from."""
+    from nscontrol import sweep
+    from nscontrol.examples.ch03_two_link_tracking import robustness_point
+
+    result = sweep.run(robustness_point, [{"restitution": 0.0, "cycles": 1}],
+                       executor="serial", progress=False)
+    (rec,) = result.values
+    assert rec["cycles_completed"] == 1 and rec["impacts_per_cycle"] == [1]
+    assert rec["weakly_stable"] and rec["penetration"] <= 1e-4

@@ -22,7 +22,8 @@ from ..errors import ModelError
 from . import Check, Example, ExampleResult, check, verdict_from
 
 __all__ = ["TrackingConfig", "TrackingRun", "CONFIGS", "two_link_tracking",
-           "one_dof_tracking", "EXAMPLES"]
+           "one_dof_tracking", "robustness_point", "model_checks", "tracking_checks",
+           "EXAMPLES"]
 
 
 @dataclass(frozen=True)
@@ -215,6 +216,50 @@ def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
                                        model_scale=model_scale)
     return _run_loop(plant, ctrl, np.array([q0, 0.0]), cycles * task.period, h, 0.5,
                      restitution)
+
+
+def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
+    """One grid point of a robustness sweep of the two-link task (a module-level function, so
+    that :func:`nscontrol.sweep.run` can ship it to processes or a Dask cluster).
+
+    Parameters
+    ----------
+    point : dict
+        Any of ``restitution`` (default 0.7), ``model_scale`` (1.0), ``h`` (1e-3),
+        ``cycles`` (2), ``config`` (``"siconos-current"``).
+
+    Returns
+    -------
+    dict
+        The point's parameters and ``cycles_completed``, ``worst_tau0_error`` (m),
+        ``worst_V_growth`` (largest ``V(τ0ᵏ⁺¹)/V(τ0ᵏ)``), ``penetration`` (m, ``>= 0``),
+        ``impacts_per_cycle`` and ``weakly_stable`` (growth allowance 1.1, floor
+        ``1e-8 (h/1e-4)²``).
+
+    Examples
+    --------
+    >>> from nscontrol import sweep
+    >>> grid = [{"restitution": e, "cycles": 1} for e in (0.0, 0.7)]
+    >>> result = sweep.run(robustness_point, grid, executor="serial")  # doctest: +SKIP
+    """
+    from ..analysis.tracking_cycles import check_weak_stability, cycle_reports
+
+    h = float(point.get("h", 1e-3))
+    run = two_link_tracking(point.get("config", "siconos-current"),
+                            cycles=int(point.get("cycles", 2)), h=h,
+                            restitution=float(point.get("restitution", 0.7)),
+                            model_scale=float(point.get("model_scale", 1.0)))
+    reports = cycle_reports(run.traj, run.controller, run.model, run.restitution)
+    verdict = check_weak_stability(reports, v_floor=1e-8 * max(1.0, (h / 1e-4) ** 2),
+                                   growth=1.1)
+    V = [r.V_tau0 for r in reports]
+    growth = max((b / a for a, b in zip(V, V[1:], strict=False) if a > 0), default=math.nan)
+    return {**point, "cycles_completed": verdict.cycles_completed,
+            "worst_tau0_error": max((r.tracking_error_tau0 for r in reports), default=math.nan),
+            "worst_V_growth": growth,
+            "penetration": max(0.0, -float(run.traj.signals["gap"].min())),
+            "impacts_per_cycle": [r.n_impacts for r in reports],
+            "weakly_stable": verdict.holds}
 
 
 #: Step of the example's main run. The checks are stated at h = 1e-4; the example runs at
