@@ -61,6 +61,12 @@ _EXPORTS: dict[str, str] = {
     "gain_threshold": "posture_certificate", "KineticAngleReport": "posture_certificate",
     "kinetic_angle_condition": "posture_certificate",
     "ConstrainedMinimum": "posture_certificate", "constrained_minimum": "posture_certificate",
+    # tracking_cycles.py
+    "ImpactEvent": "tracking_cycles", "CycleReport": "tracking_cycles",
+    "WeakStabilityVerdict": "tracking_cycles", "impact_events": "tracking_cycles",
+    "cycle_reports": "tracking_cycles", "accumulation_estimate": "tracking_cycles",
+    "check_weak_stability": "tracking_cycles", "free_phase_growth": "tracking_cycles",
+    "PHASE_NAMES": "tracking_cycles",
 }
 
 __all__ = list(_EXPORTS)

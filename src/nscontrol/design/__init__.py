@@ -38,6 +38,15 @@ _EXPORTS: dict[str, str] = {
     # contact_posture.py
     "StaticPostureDesign": "contact_posture", "ContactRegulator": "contact_posture",
     "static_contact_forces": "contact_posture", "design_contact_regulator": "contact_posture",
+    # complementarity_tracking.py
+    "PBCGains": "complementarity_tracking", "TransitionDesign": "complementarity_tracking",
+    "ContactPhaseDesign": "complementarity_tracking",
+    "CyclicTask": "complementarity_tracking", "CircleTask": "complementarity_tracking",
+    "HalfSineTask": "complementarity_tracking", "TaskSpaceModel": "complementarity_tracking",
+    "SwitchingTrackingController": "complementarity_tracking",
+    "slotine_li_force": "complementarity_tracking",
+    "lyapunov_decay_rate": "complementarity_tracking",
+    "virtual_dive": "complementarity_tracking", "liftoff_blend": "complementarity_tracking",
 }
 
 __all__ = list(_EXPORTS)

@@ -130,7 +130,10 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         read once from its signature), it also receives ``lam_hat``, the previous step's
         contact impulses divided by ``h`` (shape ``(m,)``, an estimate of the contact
         force; zeros at the first step), and ``active``, the indices of the contacts in the
-        previous step's active set (an int array, empty at the first step).
+        previous step's active set (an int array, empty at the first step). On the Python
+        path and without ``listeners`` it is called inside the step loop (many steps per
+        chunk: the same inputs and trajectory, less overhead); otherwise the loop advances
+        one step per chunk so that listeners run between steps.
     listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
         Called for every step that contains an impact (observer resets), with the states at
         the step's start and end, the impacting contacts and the step's impulses; ``t`` is
@@ -283,7 +286,12 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
     state: dict[str, Any] = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
              "p_prev": np.zeros(system.n_contacts), "k": 0, "t0": t0, "h": h,
              "reads": reads, "active_prev": np.zeros(0, dtype=np.int64)}
-    per_step = controller is not None
+    # Without listeners (which observe after each chunk) a controller on the Python path runs
+    # inside the step loop: chunks of many steps, the same zero-order hold per step.
+    inline = controller is not None and not listeners and runner.path == "python"
+    if inline:
+        state["inline"] = _inline_controller(controller, setup, state)
+    per_step = controller is not None and not inline
     status, message = 0, None
     with TimeProgress(t0, tf, desc="moreau_jean", enable=progress) as bar:
         while state["k"] < n_steps:
@@ -298,13 +306,15 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
                     1, 2 * system.n_dof + system.n_contacts)))
                 times, step = t0 + h * np.arange(k, k + chunk), h
             try:
-                fext = _external_force(setup, u, controller, times, state)
+                fext = _external_force(setup, u, None if inline else controller, times,
+                                       state)
             except ModelError as err:
                 err.trajectory = rec.finish(status=-1, message=str(err), method="moreau_jean",
                                             state_names=system.state_names)
                 raise
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
-            active = runner.active_set(q_pre, v_pre) if "active" in reads else None
+            active = runner.active_set(q_pre, v_pre) if "active" in reads and not inline \
+                else None
             done, code, q_out, v_out, p_out = runner(state, fext, times.size)
             if done and active is not None:  # one step per chunk with a controller
                 state["active_prev"] = active
@@ -389,6 +399,32 @@ def _external_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
                              f"from controller(t, q, v), got {c!r} at t = {times[0]:.6g}")
         total[0] += c
     return total @ S.T
+
+
+def _inline_controller(controller: Any, setup: _Setup, state: dict[str, Any]
+                       ) -> Callable[..., FloatArray]:
+    """The controller as a force ``S c(t, q, v)`` evaluated inside the Python step loop
+    (same arguments and checks as :func:`_external_force`); a bad output stops the run as a
+    model error (``err.trajectory`` the steps so far)."""
+    S, reads, h = setup.Sinput, state["reads"], state["h"]
+    assert S is not None   # a controller always sets the input matrix (_input_matrix)
+
+    def force(t: float, q: FloatArray, v: FloatArray, p_prev: FloatArray,
+              active_prev: np.ndarray) -> FloatArray:
+        kwargs = {}
+        if "lam_hat" in reads:
+            kwargs["lam_hat"] = p_prev / h
+        if "active" in reads:
+            kwargs["active"] = active_prev.copy()
+        c = np.asarray(controller(float(t), q.copy(), v.copy(), **kwargs),
+                       dtype=float).reshape(-1)
+        if c.shape != (S.shape[1],) or not np.all(np.isfinite(c)):
+            raise _StepFailure(_MODEL_ERROR, "model_error",
+                               f"controller: expected a finite input of length {S.shape[1]} "
+                               f"from controller(t, q, v), got {c!r} at t = {t:.6g}")
+        return S @ c
+
+    return force
 
 
 def _controller_reads(controller: Any) -> frozenset[str]:
@@ -542,6 +578,7 @@ class _PythonRunner:
         self.lemke, self.matrices = lemke_kernel, mj_linearised_kernel
         n = system.n_dof
         self.zeros = np.zeros((n, n))  # the Jacobians of explicit forces
+        self.active_prev = np.zeros(0, dtype=np.int64)
         self.minv, self.dv = np.empty((n, n)), np.empty(n)
         # affine gaps (possibly scipy.sparse): one dense matrix for the whole run
         self.G = None if system.gap_matrix is None else system.dense_gap_matrix()
@@ -563,11 +600,17 @@ class _PythonRunner:
         q_out = np.empty((chunk, s.n_dof))
         v_out = np.empty((chunk, s.n_dof))
         p_out = np.zeros((chunk, s.n_contacts))
+        inline = state.get("inline")
         for k in range(chunk):
-            t = state.get("t0", 0.0) + self.setup.h * (state["k"] + k)
+            # step starts are t0 + k h (also for the shortened last step, whose runner has
+            # its own, shorter h)
+            t = state.get("t0", 0.0) + state.get("h", self.setup.h) * (state["k"] + k)
             try:
-                code, q_new, v_new = self._step(t, q, v, fext[min(k, fext.shape[0] - 1)],
-                                                p_out[k])
+                f_k = fext[min(k, fext.shape[0] - 1)]
+                if inline is not None:
+                    f_k = f_k + inline(t, q, v, p_out[k - 1] if k else state["p_prev"],
+                                       self.active_prev if k else state["active_prev"])
+                code, q_new, v_new = self._step(t, q, v, f_k, p_out[k])
             except _StepFailure as failure:
                 state["q"], state["v"] = q, v
                 state[failure.key] = failure.message
@@ -578,6 +621,8 @@ class _PythonRunner:
             q, v = q_new, v_new
             q_out[k], v_out[k] = q, v
         state["q"], state["v"] = q, v
+        if inline is not None:
+            state["active_prev"] = self.active_prev
         return chunk, 0, q_out, v_out, p_out
 
     def _step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
@@ -603,6 +648,7 @@ class _PythonRunner:
         G = self.gap_jacobian(q)
         un = G @ v
         active = np.flatnonzero(s.gaps(q) + st.gamma * h * un <= self.activation)
+        self.active_prev = active
         v_new = v_free
         if active.size:
             GA = G[active]

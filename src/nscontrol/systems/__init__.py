@@ -24,6 +24,8 @@ _EXPORTS: dict[str, str] = {
     "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
     "two_link_arm_force_jacobian": "lagrangian",
+    # two_link.py
+    "TwoLinkParams": "two_link", "TwoLinkArm": "two_link", "OneDofMass": "two_link",
     # impacting_bodies.py
     "ImpactingBodies": "impacting_bodies", "stiffness_from_springs": "impacting_bodies",
     # hybrid.py

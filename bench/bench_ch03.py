@@ -1,0 +1,89 @@
+"""Chapter 3: the closed-loop tracking runs, ours against Siconos on the 1-DOF task.
+
+1. ``one-dof``: a unit mass above the ground under the chapter's switching controller
+   (half-sine task, e = 0.7, h = 1e-3, one 8 s cycle, 8 000 steps). Siconos runs the same
+   scenario (``LagrangianLinearTIDS``, Newton impact, Moreau–Jean θ = ½, LCP) with the same
+   controller written in its Python (``bench/siconos/ch03_one_dof.py``). ``ratio`` = our
+   steps/s over Siconos'; ``accuracy``: largest position difference over the free motion
+   before the first impact (both schemes are the same θ-method: they should agree to
+   rounding), the impact times of both and how many coincide to within one step.
+2. ``two-link`` (no reference): the 30 s, three-cycle run of the arm at h = 1e-3 (1e-4 unless
+   ``quick``: 300 000 steps), our steps/s; the Siconos Python bindings would need a
+   Python-side ``LagrangianDS`` with plugins for M(q), forces and Jacobians, not done.
+
+Run: ``nscontrol bench ch03 --json``.
+"""
+
+import math
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from harness import run_siconos, siconos_available, siconos_version
+
+from nscontrol.examples.ch03_two_link_tracking import one_dof_tracking, two_link_tracking
+
+H = 1e-3
+OMEGA = 2 * math.pi / 8
+
+
+def _timed(fn: Any) -> tuple[float, Any]:
+    fn()                                   # warm-up: compiled kernels, caches
+    start = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - start, out
+
+
+def run(quick: bool = False) -> Iterator[dict[str, Any]]:
+    seconds, ours = _timed(lambda: one_dof_tracking(cycles=1, h=H, restitution=0.7))
+    steps = ours.traj.t.size - 1
+    rate = steps / seconds
+    impacts = [float(t) for t in ours.traj.t[:-1][
+        (ours.traj.signals["impulse"][1:, 0] > 0) & (ours.traj.signals["impulse"][:-1, 0] == 0)
+        & (ours.traj.x[:-1, 1] < 0)]]
+    record: dict[str, Any] = {
+        "scenario": f"ch03 1-DOF tracking, one 8 s cycle, e = 0.7, h = {H:g}",
+        "size": steps, "ours_steps_per_s": rate, "reference": None,
+        "reference_steps_per_s": None, "ratio": None,
+        "accuracy": {"impacts_ours": len(impacts), "first_impact_ours": impacts[0]}}
+    have, why = siconos_available()
+    if not have:
+        record["note"] = why
+    else:
+        payload = {"h": H, "T": 8.0, "e": 0.7, "q0": 0.05, "A": 0.1, "omega": OMEGA,
+                   "g1": 5.0, "g2": 5.0, "Kf": 0.5, "g": 9.81, "sample_every": 1}
+        sic = run_siconos("ch03_one_dof.py", payload)[-1]
+        sic_rate = sic["steps"] / sic["seconds"]
+        q_sic = np.array(sic["q"])
+        first = int(round(impacts[0] / H))
+        n = min(first, q_sic.size, ours.traj.t.size)
+        sic_imp = sic["impacts"]
+        same = sum(any(abs(a - b) <= 1.5 * H for b in sic_imp) for a in impacts)
+        record.update(reference=siconos_version() + " MoreauJeanOSI + LCP, Python controller",
+                      reference_steps_per_s=sic_rate, ratio=rate / sic_rate)
+        record["accuracy"].update(
+            max_q_difference_before_first_impact=float(np.max(np.abs(
+                ours.traj.x[:n, 0] - q_sic[:n]))),
+            impacts_siconos=len(sic_imp), first_impact_siconos=sic_imp[0] if sic_imp else None,
+            impacts_within_one_step=same)
+    yield record
+
+    h = 1e-3 if quick else 1e-4
+    start = time.perf_counter()
+    arm = two_link_tracking("siconos-current", cycles=3, h=h)
+    seconds = time.perf_counter() - start
+    steps = arm.traj.t.size - 1
+    yield {"scenario": f"ch03 two-link arm, 3 cycles (30 s), h = {h:g}", "size": steps,
+           "ours_steps_per_s": steps / seconds, "ours_seconds": seconds, "reference": None,
+           "reference_steps_per_s": None, "ratio": None,
+           "note": "no Siconos counterpart (needs a Python-side LagrangianDS with plugins)",
+           "accuracy": {"cycles": len([c for c in arm.controller.cycles
+                                       if math.isfinite(c.t_constrained)])}}
+
+
+if __name__ == "__main__":
+    import json
+
+    for rec in run(quick=True):
+        print(json.dumps(rec, default=float))

@@ -1,0 +1,372 @@
+"""The planar two-link arm in task coordinates, and a one-degree-of-freedom twin (chapter 3).
+
+Joint model (angles ``θ = (θ1, θ2)``, ``θ1`` from the horizontal, ``θ2`` relative)::
+
+    M(θ) θ'' + C(θ, θ') θ' + G(θ) = U + ∇F(θ) λ,   0 <= F(θ) = y(θ) ⟂ λ >= 0,
+
+with ``C`` in Christoffel form (``Ṁ - 2C`` skew-symmetric) and Newton restitution on the
+end effector's normal velocity ``ẏ``. The tracking controller works in the task coordinates
+``q = (y, x)`` of the end effector (normal coordinate first), where the ground is ``q1 >= 0``::
+
+    M_q = J⁻ᵀ M J⁻¹,   C_q = J⁻ᵀ (C - M J⁻¹ J̇) J⁻¹,   g_q = J⁻ᵀ G,   U = Jᵀ τ,
+
+``J = ∂(y, x)/∂θ``. The change of coordinates keeps ``Ṁ_q - 2 C_q`` skew-symmetric, which is
+what the passivity-based controller needs. The elbow branch ``θ2 ∈ (-π, 0)`` is the one the
+inverse map returns (``det J = l1 l2 sin θ2`` vanishes only at the stretched and folded arm).
+
+:class:`OneDofMass` is the same interface for a unit mass on a vertical line above the ground
+``q >= 0`` (the identity task map): the closed forms of the transition phase hold for it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validation import FloatArray, check_in_interval, check_positive
+from ..errors import InadmissibleStateError
+from .lagrangian import (
+    LagrangianSystem,
+    two_link_arm_coriolis,
+    two_link_arm_gravity,
+    two_link_arm_mass,
+)
+
+__all__ = ["TwoLinkParams", "TwoLinkArm", "OneDofMass"]
+
+
+@dataclass(frozen=True)
+class TwoLinkParams:
+    """Geometry and inertia of the two-link arm (masses at mid-link).
+
+    Attributes
+    ----------
+    l1, l2
+        Link lengths (m).
+    m1, m2
+        Link masses (kg).
+    I1, I2
+        Moments of inertia about the links' centres of mass (kg m²).
+    g
+        Gravity along ``-y`` (m/s²).
+    """
+
+    l1: float = 0.5
+    l2: float = 0.5
+    m1: float = 1.0
+    m2: float = 1.0
+    I1: float = 1.0
+    I2: float = 1.0
+    g: float = 9.8
+
+    def __post_init__(self) -> None:
+        for name in ("l1", "l2", "m1", "m2", "I1", "I2"):
+            check_positive(name, getattr(self, name))
+        check_positive("g", self.g, allow_zero=True)
+
+    def inertial(self) -> dict[str, float]:
+        """The keyword arguments of the joint-space functions (without ``g``)."""
+        return dict(l1=self.l1, l2=self.l2, m1=self.m1, m2=self.m2, I1=self.I1, I2=self.I2)
+
+
+@dataclass(frozen=True)
+class TwoLinkArm:
+    """The two-link arm with its end-effector task map and ground constraint ``y >= 0``.
+
+    Parameters
+    ----------
+    params : TwoLinkParams
+        Geometry, inertia, gravity.
+
+    Examples
+    --------
+    >>> arm = TwoLinkArm()
+    >>> y, x = arm.position(np.array([0.9, -1.6]))
+    >>> round(float(x), 6), round(float(y), 6)
+    (0.693226, 0.069555)
+    >>> theta = arm.inverse(np.array([y, x]))
+    >>> bool(np.allclose(theta, [0.9, -1.6], atol=1e-12))
+    True
+    """
+
+    params: TwoLinkParams = field(default_factory=TwoLinkParams)
+    #: Number of joints.
+    n_dof: int = field(default=2, init=False)
+
+    # -- joint space ---------------------------------------------------------------------
+    def mass(self, theta: FloatArray) -> FloatArray:
+        """``M(θ)``, symmetric positive definite.
+
+        Parameters
+        ----------
+        theta : (2,) ndarray
+            Joint angles.
+        """
+        return two_link_arm_mass(theta, **self.params.inertial())
+
+    def coriolis(self, theta: FloatArray, dtheta: FloatArray) -> FloatArray:
+        """``C(θ, θ')`` in Christoffel form.
+
+        Parameters
+        ----------
+        theta, dtheta : (2,) ndarray
+            Joint angles and velocities.
+        """
+        return two_link_arm_coriolis(theta, dtheta, **self.params.inertial())
+
+    def gravity(self, theta: FloatArray) -> FloatArray:
+        """``G(θ) = ∂P/∂θ``.
+
+        Parameters
+        ----------
+        theta : (2,) ndarray
+            Joint angles.
+        """
+        return two_link_arm_gravity(theta, g=self.params.g, **self.params.inertial())
+
+    def system(self, restitution: float = 0.7) -> LagrangianSystem:
+        """The plant for the integrators: gravity on, ground ``y >= 0``, fully actuated.
+
+        Parameters
+        ----------
+        restitution : float
+            Newton coefficient of the ground, in ``[0, 1]``.
+        """
+        p = self.params
+        check_in_interval("restitution", restitution, 0.0, 1.0)
+        return LagrangianSystem.two_link_arm(l1=p.l1, l2=p.l2, m1=p.m1, m2=p.m2, I1=p.I1,
+                                             I2=p.I2, g=p.g, restitution=restitution)
+
+    # -- task map ------------------------------------------------------------------------
+    def position(self, theta: FloatArray) -> FloatArray:
+        """End-effector task coordinates ``q = (y, x)``.
+
+        Parameters
+        ----------
+        theta : (2,) ndarray
+            Joint angles.
+        """
+        l1, l2 = self.params.l1, self.params.l2
+        t12 = theta[0] + theta[1]
+        return np.array([l1 * np.sin(theta[0]) + l2 * np.sin(t12),
+                         l1 * np.cos(theta[0]) + l2 * np.cos(t12)])
+
+    def jacobian(self, theta: FloatArray) -> FloatArray:
+        """``J = ∂(y, x)/∂θ``.
+
+        Parameters
+        ----------
+        theta : (2,) ndarray
+            Joint angles.
+        """
+        l1, l2 = self.params.l1, self.params.l2
+        t12 = theta[0] + theta[1]
+        c12, s12 = l2 * np.cos(t12), l2 * np.sin(t12)
+        return np.array([[l1 * np.cos(theta[0]) + c12, c12],
+                         [-l1 * np.sin(theta[0]) - s12, -s12]])
+
+    def jacobian_rate(self, theta: FloatArray, dtheta: FloatArray) -> FloatArray:
+        """``J̇ = d/dt J(θ(t))``.
+
+        Parameters
+        ----------
+        theta, dtheta : (2,) ndarray
+            Joint angles and velocities.
+        """
+        l1, l2 = self.params.l1, self.params.l2
+        t12, w12 = theta[0] + theta[1], dtheta[0] + dtheta[1]
+        c12, s12 = l2 * np.cos(t12) * w12, l2 * np.sin(t12) * w12
+        return np.array([[-l1 * np.sin(theta[0]) * dtheta[0] - s12, -s12],
+                         [-l1 * np.cos(theta[0]) * dtheta[0] - c12, -c12]])
+
+    def inverse(self, q: FloatArray) -> FloatArray:
+        """Joint angles of the end-effector position ``q = (y, x)`` on the elbow branch
+        ``θ2 ∈ (-π, 0)``.
+
+        Parameters
+        ----------
+        q : (2,) ndarray
+            Task coordinates ``(y, x)``.
+
+        Raises
+        ------
+        InadmissibleStateError
+            ``q`` out of reach (``|l1 - l2| <= |q| <= l1 + l2`` is needed).
+        """
+        l1, l2 = self.params.l1, self.params.l2
+        y, x = float(q[0]), float(q[1])
+        c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+        if not -1.0 <= c2 <= 1.0:
+            raise InadmissibleStateError(f"q: the point (x, y) = ({x:.6g}, {y:.6g}) is out of "
+                                         f"the arm's reach [{abs(l1 - l2):.6g}, {l1 + l2:.6g}]")
+        t2 = -np.arccos(c2)
+        t1 = np.arctan2(y, x) - np.arctan2(l2 * np.sin(t2), l1 + l2 * np.cos(t2))
+        return np.array([t1, t2])
+
+    def task_state(self, theta: FloatArray, dtheta: FloatArray
+                   ) -> tuple[FloatArray, FloatArray]:
+        """``(q, q')`` in task coordinates.
+
+        Parameters
+        ----------
+        theta, dtheta : (2,) ndarray
+            Joint angles and velocities.
+        """
+        return self.position(theta), self.jacobian(theta) @ dtheta
+
+    def task_dynamics(self, theta: FloatArray, dtheta: FloatArray
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(M_q, C_q, g_q, J)`` of the task-space model (module docstring).
+
+        Parameters
+        ----------
+        theta, dtheta : (2,) ndarray
+            Joint angles and velocities.
+        """
+        # closed form on floats: this runs at every step of a closed loop (2x2 numpy
+        # products cost more in call overhead than in arithmetic)
+        p = self.params
+        l1, l2, m1, m2 = p.l1, p.l2, p.m1, p.m2
+        t1, t2 = float(theta[0]), float(theta[1])
+        w1, w2 = float(dtheta[0]), float(dtheta[1])
+        s1, c1, s2, c2 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2)
+        s12, c12 = math.sin(t1 + t2), math.cos(t1 + t2)
+        J = (l1 * c1 + l2 * c12, l2 * c12, -l1 * s1 - l2 * s12, -l2 * s12)
+        det = J[0] * J[3] - J[1] * J[2]           # = l1 l2 sin θ2 (up to sign)
+        Ji = (J[3] / det, -J[1] / det, -J[2] / det, J[0] / det)
+        m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + p.I1 + p.I2
+        m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + p.I2
+        M = (m11, m12, m12, m2 * l2**2 / 4 + p.I2)
+        hh = m2 * l1 * l2 / 2 * s2
+        C = (-hh * w2, -hh * (w1 + w2), hh * w1, 0.0)
+        w12 = w1 + w2
+        Jd = (-l1 * s1 * w1 - l2 * s12 * w12, -l2 * s12 * w12,
+              -l1 * c1 * w1 - l2 * c12 * w12, -l2 * c12 * w12)
+        JiT = (Ji[0], Ji[2], Ji[1], Ji[3])
+        Mq = _mm(_mm(JiT, M), Ji)
+        MJiJd = _mm(_mm(M, Ji), Jd)
+        Cq = _mm(_mm(JiT, tuple(a - b for a, b in zip(C, MJiJd, strict=True))), Ji)
+        G1 = p.g / 2 * (l1 * (m1 + 2 * m2) * c1 + m2 * l2 * c12)
+        G2 = m2 * p.g * l2 / 2 * c12
+        gq = np.array([JiT[0] * G1 + JiT[1] * G2, JiT[2] * G1 + JiT[3] * G2])
+        off = 0.5 * (Mq[1] + Mq[2])
+        return (np.array([[Mq[0], off], [off, Mq[3]]]), np.array([[Cq[0], Cq[1]], [Cq[2], Cq[3]]]),
+                gq, np.array([[J[0], J[1]], [J[2], J[3]]]))
+
+    def task_model(self, theta: FloatArray, dtheta: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                              FloatArray]:
+        """``(q, q', M_q, C_q, g_q, J)`` in one evaluation (what a controller needs per step).
+
+        Parameters
+        ----------
+        theta, dtheta : (2,) ndarray
+            Joint angles and velocities.
+        """
+        Mq, Cq, gq, J = self.task_dynamics(theta, dtheta)
+        # q = (y, x): y = -J[1, 0], x = J[0, 0] (the Jacobian's entries are the link sums)
+        return np.array([-J[1, 0], J[0, 0]]), J @ dtheta, Mq, Cq, gq, J
+
+
+def _mm(A: tuple[float, ...], B: tuple[float, ...]) -> tuple[float, float, float, float]:
+    """Product of two 2x2 matrices stored row-major as 4-tuples."""
+    return (A[0] * B[0] + A[1] * B[2], A[0] * B[1] + A[1] * B[3],
+            A[2] * B[0] + A[3] * B[2], A[2] * B[1] + A[3] * B[3])
+
+
+@dataclass(frozen=True)
+class OneDofMass:
+    """A mass on a vertical line above the ground ``q >= 0``, under gravity (§4.4 of the
+    chapter's test systems). The task map is the identity.
+
+    Parameters
+    ----------
+    m : float
+        Mass (kg).
+    g : float
+        Gravity (m/s²).
+
+    Examples
+    --------
+    >>> plant = OneDofMass()
+    >>> plant.task_dynamics(np.array([0.1]), np.array([0.0]))[2]
+    array([9.81])
+    """
+
+    m: float = 1.0
+    g: float = 9.81
+    #: One coordinate.
+    n_dof: int = field(default=1, init=False)
+
+    def __post_init__(self) -> None:
+        check_positive("m", self.m)
+        check_positive("g", self.g, allow_zero=True)
+
+    def system(self, restitution: float = 0.7) -> LagrangianSystem:
+        """The plant: ``m q'' = -m g + u + λ``, ``0 <= q ⟂ λ >= 0``.
+
+        Parameters
+        ----------
+        restitution : float
+            Newton coefficient, in ``[0, 1]``.
+        """
+        return LagrangianSystem([[self.m]], constant_force=[-self.m * self.g],
+                                gap_matrix=[[1.0]], restitution=restitution, names=("q",))
+
+    def position(self, theta: FloatArray) -> FloatArray:
+        """Task coordinate (the position itself).
+
+        Parameters
+        ----------
+        theta : (1,) ndarray
+            Position.
+        """
+        return np.asarray(theta, float).copy()
+
+    def inverse(self, q: FloatArray) -> FloatArray:
+        """The identity.
+
+        Parameters
+        ----------
+        q : (1,) ndarray
+            Position.
+        """
+        return np.asarray(q, float).copy()
+
+    def task_state(self, theta: FloatArray, dtheta: FloatArray
+                   ) -> tuple[FloatArray, FloatArray]:
+        """``(q, q')``.
+
+        Parameters
+        ----------
+        theta, dtheta : (1,) ndarray
+            Position and velocity.
+        """
+        return np.asarray(theta, float).copy(), np.asarray(dtheta, float).copy()
+
+    def task_dynamics(self, theta: FloatArray, dtheta: FloatArray
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(M, C, g, J) = (m, 0, m g, 1)``.
+
+        Parameters
+        ----------
+        theta, dtheta : (1,) ndarray
+            Position and velocity.
+        """
+        return (np.array([[self.m]]), np.zeros((1, 1)), np.array([self.m * self.g]),
+                np.eye(1))
+
+    def task_model(self, theta: FloatArray, dtheta: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                              FloatArray]:
+        """``(q, q', M, C, g, J)`` in one evaluation.
+
+        Parameters
+        ----------
+        theta, dtheta : (1,) ndarray
+            Position and velocity.
+        """
+        return (np.asarray(theta, float).copy(), np.asarray(dtheta, float).copy(),
+                *self.task_dynamics(theta, dtheta))
