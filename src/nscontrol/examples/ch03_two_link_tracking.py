@@ -305,21 +305,23 @@ def model_checks(samples: int = 50, seed: int = 0) -> list[Check]:
     fk_err = max(abs(fk1[1] - 0.693226), abs(fk1[0] - 0.069555), abs(fk2[1] - 0.708942),
                  abs(fk2[0] - 0.181023))
     return [
-        check("1a. M(theta) symmetric (max |M - M^T|) on the elbow branch", worst_sym, 0.0,
-              "=="),
-        check("1b. M(theta) positive definite (smallest eigenvalue, kg m^2)", min_eig, 0.0,
-              ">"),
-        check("1c. Mdot - 2C skew in joint coordinates (symmetric part over |Mdot|)",
+        check("M(theta) symmetric (max |M - M^T|) on the elbow branch", worst_sym, 0.0,
+              "==", key="check_1a"),
+        check("M(theta) positive definite (smallest eigenvalue, kg m^2)", min_eig, 0.0,
+              ">", key="check_1b"),
+        check("Mdot - 2C skew in joint coordinates (symmetric part over |Mdot|)",
               worst_skew, 1e-5,
-              note="central differences, step 1e-5: truncation ~1e-10, roundoff ~2e-11"),
-        check("1d. Mdot - 2C skew in task coordinates (symmetric part over |Mdot|)",
+              note="central differences, step 1e-5: truncation ~1e-10, roundoff ~2e-11",
+              key="check_1c"),
+        check("Mdot - 2C skew in task coordinates (symmetric part over |Mdot|)",
               worst_task, 1e-5,
               note="the same differences through J^-1 (cond J <= 12 for |sin theta2| >= "
-                   "0.29): ~1e-9"),
-        check("2a. J^T M_q J = M_theta (relative)", worst_back, 1e-12,
-              note="a few 2x2 products with cond(J) <= 12: 12 x 16 x 2.2e-16 = 4e-14"),
-        check("2b. forward kinematics at (0.9, -1.6) and (1, -1.5) (max error, m)", fk_err,
-              5e-7, note="the reference values are given to 6 decimals"),
+                   "0.29): ~1e-9", key="check_1d"),
+        check("J^T M_q J = M_theta (relative)", worst_back, 1e-12,
+              note="a few 2x2 products with cond(J) <= 12: 12 x 16 x 2.2e-16 = 4e-14",
+              key="check_2a"),
+        check("Forward kinematics at (0.9, -1.6) and (1, -1.5) (max error, m)", fk_err,
+              5e-7, note="the reference values are given to 6 decimals", key="check_2b"),
     ]
 
 
@@ -347,65 +349,69 @@ def tracking_checks(run: TrackingRun, reports: list[Any], events: list[Any],
     hl = max(1.0, h / 1e-4)         # and the O(h) bounds
     checks: list[Check] = []
     newton = max((abs(ev.u_plus / ev.u_minus + e) for ev in events), default=np.inf)
-    checks.append(check("4. Newton's law at every impact: max |u+/u- + e|", newton, 1e-12,
+    checks.append(check("Newton's law at every impact: max |u+/u- + e|", newton, 1e-12,
                         note="the LCP imposes u+ = -e u- on the step's normal velocity; "
-                             "a few roundings of O(1) numbers: 100 x 2.2e-16 = 2e-14"))
-    checks.append(check("5a. V never rises in free motion (max rise above running min)",
+                             "a few roundings of O(1) numbers: 100 x 2.2e-16 = 2e-14",
+                        key="check_4"))
+    checks.append(check("V never rises in free motion (max rise above running min)",
                         free_phase_growth(traj), 1e-8 * hs,
-                        note=f"O(h²) floor: 1e-8 at h = 1e-4, times (h/1e-4)² = {hs:g}"))
+                        note=f"O(h²) floor: 1e-8 at h = 1e-4, times (h/1e-4)² = {hs:g}",
+                        key="check_5a"))
     later = [r.tracking_error_tau0 for r in reports[1:]]
-    checks.append(check("5b. tracking error at the transition start, cycles k >= 1 (m)",
+    checks.append(check("Tracking error at the transition start, cycles k >= 1 (m)",
                         max(later, default=np.inf), 1e-5 * hl,
-                        note="first-order scheme (M(q) frozen over a step): O(h)"))
-    checks.append(check("6. weak stability across cycles (V(tau0) non-increasing up to the "
+                        note="first-order scheme (M(q) frozen over a step): O(h)", key="check_5b"))
+    checks.append(check("Weak stability across cycles (V(tau0) non-increasing up to the "
                         "floor, every cycle reaches contact)", verdict.holds, True, "==",
-                        note=verdict.message))
+                        note=verdict.message, key="check_6"))
     window = [r.t_first_impact - r.tau0 for r in reports]
-    checks.append(check("7a. first impact after the transition start (worst delay, s)",
-                        max(window, default=np.inf), tr.delta + tr.Delta + 1.0))
+    checks.append(check("First impact after the transition start (worst delay, s)",
+                        max(window, default=np.inf), tr.delta + tr.Delta + 1.0, key="check_7a"))
     n_imp = [r.n_impacts for r in reports]
-    checks.append(check("7b. impact events per cycle, fewest", min(n_imp, default=0), 1,
-                        ">="))
-    checks.append(check("7c. impact events per cycle, most", max(n_imp, default=10**9), 60))
+    checks.append(check("Impact events per cycle, fewest", min(n_imp, default=0), 1,
+                        ">=", key="check_7b"))
+    checks.append(check("Impact events per cycle, most", max(n_imp, default=10**9), 60,
+    key="check_7c"))
     settle = [r.t_constrained - r.t_first_impact for r in reports]
-    checks.append(check("7d. first impact to persistent contact (worst, s)",
-                        max(settle, default=np.inf), 2.5))
+    checks.append(check("First impact to persistent contact (worst, s)",
+                        max(settle, default=np.inf), 2.5, key="check_7d"))
     ratios = [x for r in reports for x in r.flight_ratios[1:6]]
-    checks.append(check("8a. flight-time ratios of impacts 3-7, lowest", min(
-        ratios, default=-np.inf), e - 0.2, ">="))
-    checks.append(check("8b. flight-time ratios of impacts 3-7, highest", max(
+    checks.append(check("Flight-time ratios of impacts 3-7, lowest", min(
+        ratios, default=-np.inf), e - 0.2, ">=", key="check_8a"))
+    checks.append(check("Flight-time ratios of impacts 3-7, highest", max(
         ratios, default=np.inf), e + 0.02 + 4 * h / 0.02,
         note="impact times are quantised to h: a flight of ~0.02 s has a ratio error up "
-             "to ~4h/0.02 (0 at h -> 0)"))
+             "to ~4h/0.02 (0 at h -> 0)", key="check_8b"))
     rel = [abs(ev.sigma_V - ev.dT_predicted) / abs(ev.dT_predicted) for ev in events
            if not ev.first and ev.phase == 2 and abs(ev.u_minus) >= 1e-3]
-    checks.append(check("9a. later impacts: |sigma_V - dT| / |dT| (worst)", max(
+    checks.append(check("Later impacts: |sigma_V - dT| / |dT| (worst)", max(
         rel, default=np.inf), 0.02 * hl,
-        note="sigma_V also holds the smooth change of V over the impact step: O(h)"))
+        note="sigma_V also holds the smooth change of V over the impact step: O(h)",
+        key="check_9a"))
     firsts = [r for r in reports if math.isfinite(r.t_star) and r.events]
-    checks.append(check("9b. first impact at the dive's crossing time t* (worst |t0 - t*|, s)",
+    checks.append(check("First impact at the dive's crossing time t* (worst |t0 - t*|, s)",
                         max((abs(r.t_first_impact - r.t_star) for r in firsts),
-                            default=np.inf), 0.01))
-    checks.append(check("9c. first impact speed vs the cubic's crossing speed (relative)",
+                            default=np.inf), 0.01, key="check_9b"))
+    checks.append(check("First impact speed vs the cubic's crossing speed (relative)",
                         max((abs(r.events[0].u_minus / r.u_star - 1) for r in firsts),
-                            default=np.inf), 0.05))
+                            default=np.inf), 0.05, key="check_9c"))
     gap = traj.signals["gap"][:, 0]
     phase = traj.signals["phase"]
     P = traj.signals["impulse"][:, 0]
     cons = phase == 3
     # the phase at sample k governs step k, whose impulse is stored at sample k + 1
     cons_steps = np.flatnonzero(cons[:-1])
-    checks.append(check("10a. gap during the constrained phase, lowest (m)",
+    checks.append(check("Gap during the constrained phase, lowest (m)",
                         float(gap[cons].min()) if cons.any() else -np.inf, -1e-5 * hl, ">=",
                         note="drift O(h u-) of the impact steps, never corrected at "
-                             "velocity level"))
-    checks.append(check("10b. gap during the constrained phase, highest (m)",
-                        float(gap[cons].max()) if cons.any() else np.inf, 1e-6))
-    checks.append(check("10c. steps without contact impulse in the constrained phase",
-                        int(np.sum(P[cons_steps + 1] <= 0.0)), 0, "=="))
-    checks.append(check("10d. |lam_hat - lam_d| over the last second of contact (worst, N)",
+                             "velocity level", key="check_10a"))
+    checks.append(check("Gap during the constrained phase, highest (m)",
+                        float(gap[cons].max()) if cons.any() else np.inf, 1e-6, key="check_10b"))
+    checks.append(check("Steps without contact impulse in the constrained phase",
+                        int(np.sum(P[cons_steps + 1] <= 0.0)), 0, "==", key="check_10c"))
+    checks.append(check("|lam_hat - lam_d| over the last second of contact (worst, N)",
                         max((r.force_error_last_second for r in reports), default=np.inf),
-                        1e-2))
+                        1e-2, key="check_10d"))
     T_l = ctrl.contact.liftoff_time
     t = traj.t
     lifted, impulses_after = True, 0
@@ -415,12 +421,12 @@ def tracking_checks(run: TrackingRun, reports: list[Any], events: list[Any],
         lifted &= bool(np.any(gap[(t > r.t_detach) & (t <= r.t_detach + T_l)] > 0.0))
         nxt = reports[k + 1].tau0 if k + 1 < len(reports) else t[-1]
         impulses_after += int(np.sum(P[(t > r.t_detach + T_l) & (t < nxt)] > 0.0))
-    checks.append(check("11a. take-off: the gap opens within T_l after t_d", lifted, True,
-                        "=="))
-    checks.append(check("11b. take-off: impulses between t_d + T_l and the next transition",
-                        impulses_after, 0, "=="))
-    checks.append(check("12. penetration: smallest gap over the run (m)", float(gap.min()),
-                        -1e-4, ">=", note="a landing penetrates at most h |u-|"))
+    checks.append(check("Take-off: the gap opens within T_l after t_d", lifted, True,
+                        "==", key="check_11a"))
+    checks.append(check("Take-off: impulses between t_d + T_l and the next transition",
+                        impulses_after, 0, "==", key="check_11b"))
+    checks.append(check("Penetration: smallest gap over the run (m)", float(gap.min()),
+                        -1e-4, ">=", note="a landing penetrates at most h |u-|", key="check_12"))
     return checks
 
 
@@ -508,8 +514,8 @@ EXAMPLES = [Example(
           "that dives slightly below the ground makes the impacts accumulate in finite time; "
           "the Lyapunov function measured at the start of each transition does not grow "
           "from cycle to cycle (weak stability).",
-    verdict=verdict_from(("6. weak stability", "weak stability across cycles"),
-                         ("12. penetration", "smallest gap")),
+    verdict=verdict_from(("check_6", "weak stability across cycles"),
+                         ("check_12", "smallest gap")),
     key_figure="ch03_height",
     captions={
         "ch03_path": "End-effector path in the (x, y) plane: the transient from the start "

@@ -282,7 +282,7 @@ def run(out_dir: Path | None) -> ExampleResult:
                         "relative error", imp["energy_identity_rel"], 1e-8,
                         note="600 random draws, n ≤ 5, 1–3 contacts; the error over "
                              f"n ε κ(W) is at most {imp['energy_identity_over_estimate']:.3g}",
-                             key="check_1b"))
+                        key="check_1b"))
     seq = sequential_impact_checks()
     metrics["sequential_impacts"] = seq
     checks.append(check("Impacts in sequence equal simultaneous ones when the kinetic angle "
@@ -296,7 +296,7 @@ def run(out_dir: Path | None) -> ExampleResult:
                         "problems of size ≤ 3, worst difference of w", max(lcp.values()),
                         1e-8, note="PGS is iterative: its tolerance 1e-12 on the residual "
                                    "bounds w's error by about 1e-12 κ; 1e-8 covers κ ≤ 1e4",
-                                   key="check_3"))
+                              key="check_3"))
 
     # 4-5: Example C
     wall = {}
@@ -381,7 +381,7 @@ def run(out_dir: Path | None) -> ExampleResult:
                         max(r["max_energy_step"] for r in runs.values()), 1e-9, key="check_8a"))
     checks.append(check("A1: largest heel gap [m] (the heel lifts and closes again: "
                         f"{'yes' if closed else 'no'})", lift if closed else 0.0, 1e-3, ">",
-                        key="check_8b"))
+    key="check_8b"))
     checks.append(check("A1–A3: deviation of (y, φ, θ) from q* after 8 s, h = 1 ms",
                         max(r["final_deviation"] for r in runs.values()), 5e-3, key="check_8c"))
     checks.append(check("A1–A2: deviation after 8 s, h = 0.25 ms",
