@@ -23,6 +23,25 @@ from .._validation import FloatArray
 from ..errors import SolverError
 
 
+class FactoryMemo:
+    """``factory(p)`` remembered for the last few parameter values: the corrector and the
+    central difference in ``p`` ask for the same few ``p`` again and again, and a factory may
+    build matrices or exponentials. ``convert`` checks or adapts what the factory returns."""
+
+    def __init__(self, factory: Callable[[float], Any],
+                 convert: Callable[[Any, float], Any], size: int = 16) -> None:
+        self.factory, self.convert, self.size = factory, convert, size
+        self._memo: dict[float, Any] = {}
+
+    def __call__(self, p: float) -> Any:
+        hit = self._memo.get(p)
+        if hit is None:
+            if len(self._memo) > self.size:
+                self._memo.clear()
+            hit = self._memo[p] = self.convert(self.factory(p), p)
+        return hit
+
+
 @dataclass
 class Point:
     """A corrected branch point: ``y``, the problem's solution record and its test values."""

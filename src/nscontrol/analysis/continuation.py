@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +48,7 @@ import numpy as np
 from .._files import replaced_atomically
 from .._validation import FloatArray, check_integer, check_positive
 from ..errors import ModelError, SolverError
-from ._arclength import ArclengthProblem, Point, locate
+from ._arclength import ArclengthProblem, FactoryMemo, Point, locate
 from .orbits import Forced, Orbit, _initial_nodes, _shooting_system, make_orbit
 
 __all__ = ["SpecialPoint", "Branch", "continue_orbit", "switch_at_flip"]
@@ -269,6 +269,13 @@ class Branch:
 
 # -- the continuation problem ------------------------------------------------------------------
 
+def _as_forced(hit: Any, p: float) -> Forced:
+    if not isinstance(hit, Forced):
+        raise ModelError(f"factory: expected a Forced (system, input, period) for p = {p}, "
+                         f"got {type(hit).__name__}")
+    return hit
+
+
 @dataclass
 class _Problem(ArclengthProblem):
     """``G(y) = 0`` for ``y = (nodes, p)`` (multiple shooting); corrector and tangent are the
@@ -279,18 +286,9 @@ class _Problem(ArclengthProblem):
     n: int
     tol: float
     iterations: int = 0
-    _cache: dict[float, Forced] = field(default_factory=dict)
 
-    def forced(self, p: float) -> Forced:
-        hit = self._cache.get(p)
-        if hit is None:
-            if len(self._cache) > 16:
-                self._cache.clear()
-            hit = self._cache[p] = self.factory(p)
-            if not isinstance(hit, Forced):
-                raise ModelError(f"factory: expected a Forced (system, input, period) for "
-                                 f"p = {p}, got {type(hit).__name__}")
-        return hit
+    def __post_init__(self) -> None:
+        self.forced: FactoryMemo = FactoryMemo(self.factory, _as_forced)
 
     def split(self, y: FloatArray) -> tuple[FloatArray, float]:
         return y[:-1].reshape(self.k, self.n), float(y[-1])

@@ -36,7 +36,7 @@ new tangent into the new region, so it follows either.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -45,7 +45,7 @@ from .._validation import FloatArray, as_vector, check_integer, check_positive
 from ..errors import ModelError, SolverError
 from ..numerics.differences import central_difference_jacobian
 from ..systems.nonlinear import NonlinearSystem
-from ._arclength import ArclengthProblem, Point, locate, unit_tangent
+from ._arclength import ArclengthProblem, FactoryMemo, Point, locate, unit_tangent
 from .continuation import Branch, SpecialPoint
 
 __all__ = ["EquilibriumPoint", "continue_equilibrium"]
@@ -153,15 +153,9 @@ class _EquilibriumProblem(ArclengthProblem):
     tol: float
     region: int = -1
     iterations: int = 0
-    _cache: dict[float, Any] = field(default_factory=dict)
 
-    def system(self, p: float) -> Any:
-        hit = self._cache.get(p)
-        if hit is None:
-            if len(self._cache) > 16:
-                self._cache.clear()
-            hit = self._cache[p] = _as_field(self.factory(p))
-        return hit
+    def __post_init__(self) -> None:
+        self.system: FactoryMemo = FactoryMemo(self.factory, lambda obj, p: _as_field(obj))
 
     def value(self, x: FloatArray, p: float) -> FloatArray:
         s = self.system(p)
