@@ -52,6 +52,17 @@ _EXPORTS: dict[str, str] = {
     # impact_oscillator.py
     "ImpactOscillator": "impact_oscillator", "OneImpactOrbit": "impact_oscillator",
     "OscillatorFamily": "impact_oscillator",
+    # friction_equilibria.py
+    "ExactCompensationCondition": "friction_equilibria",
+    "exact_compensation_condition": "friction_equilibria",
+    "observer_error_bound": "friction_equilibria",
+    "stick_margin": "friction_equilibria",
+    "stick_equilibria": "friction_equilibria",
+    "equilibrium_halfwidth": "friction_equilibria",
+    "LureForm": "friction_equilibria",
+    "closed_loop_lure_form": "friction_equilibria",
+    "lure_form_certificate": "friction_equilibria",
+    "limit_cycle_summary": "friction_equilibria",
 }
 
 __all__ = list(_EXPORTS)
