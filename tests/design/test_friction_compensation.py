@@ -72,9 +72,9 @@ def test_the_closed_loop_is_the_sampled_recursion_step_for_step():
         if abs(free) <= H * T_S / J:
             omega = 0.0
         else:
-            s = math.copysign(1.0, free)
-            v = brentq(lambda v: J * v + H * float(F.magnitude(v)[0]) - J * abs(free), 0.0,
-                       abs(free), xtol=1e-15, rtol=4 * np.finfo(float).eps)
+            s, a = math.copysign(1.0, free), abs(free)
+            v = brentq(lambda v, a=a: J * v + H * float(F.magnitude(v)[0]) - J * a, 0.0, a,
+                       xtol=1e-15, rtol=4 * np.finfo(float).eps)
             omega = s * v
         theta += H * omega
         xi = (xi + H * (-L * L * theta + upd / J)) / (1.0 + H * L)

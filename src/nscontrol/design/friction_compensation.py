@@ -277,6 +277,11 @@ class ReducedOrderVelocityObserver:
         object.__setattr__(self, "l", l_val)
         object.__setattr__(self, "period", check_positive("period", self.period))
 
+    @property
+    def estimates(self) -> FloatArray:
+        """``S = [0, 1]``: the observer estimates the velocity of ``(theta, omega)``."""
+        return np.array([[0.0, 1.0]])
+
     def starting_at(self, theta0: float, omega_hat0: float) -> ReducedOrderVelocityObserver:
         """The same observer whose estimate at the first tick is ``omega_hat0``."""
         T, l = self.period, self.l
@@ -434,7 +439,7 @@ class FrictionLoopRun:
         """``e = omega - omega_hat``."""
         return self.omega - self.omega_hat
 
-    def window(self, start: float) -> FloatArray:
+    def window(self, start: float) -> np.ndarray:
         """Boolean mask of the ticks with ``t >= start``."""
         return self.t >= start - 1e-9 * max(1.0, abs(start))
 

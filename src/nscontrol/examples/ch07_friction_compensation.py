@@ -207,7 +207,7 @@ def _scenario_checks(ctx: dict[str, Any]) -> None:
               "[rad] (0 if moving)", abs(x1) if stuck else 0.0, 1e-3, ">"),
         check("8. slow observer: Proposition B margin T_s - g(|x1|) at the end [N m]",
               float(stick_margin(x1, J, kp, kd, 10.0, F, F)[0]), 0.0, ">="),
-        check("8. stick_equilibria ranges off the set-point: l = 10", 
+        check("8. stick_equilibria ranges off the set-point: l = 10",
               len(stick_equilibria(J, kp, kd, 10.0, F, F)), 1, ">="),
         check("8. stick_equilibria ranges off the set-point: l = 150",
               len(stick_equilibria(J, kp, kd, l, F, F)), 0, "==")]
