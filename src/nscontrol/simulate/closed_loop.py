@@ -40,6 +40,7 @@ Python blocks the integrator's state is the plant's and the blocks' states are t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -693,7 +694,7 @@ class _BlockRunner:
         xhat = None
         if self.obs is not None:
             self.xo, xhat = self._advance("observer", self.obs, self.xo, t, h, m)
-            m = replace(m, xhat=xhat)
+            m = Measurement(m.t, m.y, m.x, xhat, m.lam, m.active, m.w)   # replace() is slow
         u = np.zeros(self.n_inputs)      # an observer alone leaves the plant unforced
         if self.ctrl is not None:
             self.xc, u = self._advance("controller", self.ctrl, self.xc, t, h, m)
@@ -744,11 +745,19 @@ class _BlockRunner:
         return replace(traj, signals=signals)
 
 
+def _all_finite(a: FloatArray) -> bool:
+    """``np.isfinite(a).all()``, without numpy's reduction overhead for the few entries a
+    block returns at every step."""
+    if a.size <= 8:
+        return all(map(math.isfinite, a.tolist()))
+    return bool(np.isfinite(a).all())
+
+
 def _finite(role: str, value: Any, size: int | None, t: float) -> FloatArray:
     out = np.asarray(value, dtype=float).reshape(-1)
     if size is not None and out.size != size:
         raise DimensionError(f"{role}: update returned {out.size} values, its state has "
                              f"{size} (at t = {t:.6g})")
-    if not np.isfinite(out).all():
+    if not _all_finite(out):
         raise ModelError(f"{role}: returned a non-finite value at t = {t:.6g}: {out!r}")
     return out

@@ -816,7 +816,7 @@ class _Stepper:
         ubar, gnext = np.zeros((1, q)), np.zeros((1, mm))
         for j in range(k):
             u = np.asarray(controller(float(times[j]), x.copy()), dtype=float).reshape(-1)
-            if u.size != q or not np.isfinite(u).all():
+            if u.size != q or not all(map(math.isfinite, u.tolist())):
                 raise ModelError(f"controller: expected a finite input of length {q} at t = "
                                  f"{times[j]:.6g}, got {u!r}")
             if fast is not None:         # the compiled step, straight into the outputs
