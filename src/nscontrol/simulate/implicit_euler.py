@@ -12,7 +12,8 @@ implicit, so every step is the one-step inclusion
 with ``W = I - hθA``, ``Φ = W⁻¹(I + h(1-θ)A)``, ``Γ = hW⁻¹B``, ``G_h = hW⁻¹G``,
 ``D_h = H G_h + D``. It is solved exactly at every step:
 
-* componentwise laws (relay, Coulomb, normal cones of intervals, complementarity and their
+* componentwise laws (relay, Coulomb, normal cones of intervals, complementarity, the
+  monotone set-valued Stribeck law -- its slip branch by safeguarded Newton -- and their
   products) with a diagonal ``D_h``, or one that a permutation makes lower triangular (a plant
   and its observer): closed-form resolvents ``z_i = (1 + d_ii φ_i)⁻¹(a_i + Σ_j d_ij w_j)``
   component after component, in a compiled loop;
