@@ -379,7 +379,7 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
         ax.plot(kappas[stuck], np.abs(vals[stuck, 0]), "C0.", ms=4,
                 label="stuck at the end: |final x1|")
         ax.plot(kappas[~stuck], vals[~stuck, 1], "C3.", ms=4,
-                label="moving at the end: oscillation amplitude")
+                label="still moving in the last 4 s: oscillation amplitude")
         kk = np.linspace(0.0, 1.5, 151)
         pred = [equilibrium_halfwidth(J, kp, kd, l, F, compensation_model(F, k)) for k in kk]
         ax.plot(kk, pred, "k-", lw=1, label="predicted half-width c_max(kappa)")
