@@ -226,3 +226,14 @@ def test_gain_helper_follows_the_rule_and_warns():
     assert g.l_necessary == pytest.approx(float(F.sigma_sec[0]) / J, rel=1e-12)
     with pytest.warns(NscontrolWarning, match="l \\* control_period"):
         one_link_gains(J, F, math.sqrt(40.0), 0.47, control_period=0.01)
+
+
+def test_measured_velocity_never_compensates_static_friction_at_rest():
+    """Without observer the compensation reads the measured velocity, 0 at rest: the link
+    stops where the spring-like PD torque is below T_s, |k_p x1| <= T_s, whatever T_hat."""
+    run = simulate_friction_loop(ROBOT, PDLaw(KP, KD, J, SetPoint(1.0)), l=None, kappa=1.0,
+                                 h=H, T=4.0)
+    m = run.window(3.0)
+    assert np.all(run.omega[m] == 0.0)
+    assert abs(KP * run.error[-1]) <= T_S
+    assert abs(run.error[-1]) > 1e-3          # stuck short of the set-point
