@@ -66,13 +66,6 @@ class OneLinkRobot:
                              "delta >= 1")
         object.__setattr__(self, "sigma", sig)
 
-    @property
-    def static_level(self) -> float:
-        """``T_s``: the largest friction torque at rest (the positive side if asymmetric)."""
-        law = getattr(self.friction, "plus", self.friction)
-        level = getattr(law, "static", getattr(law, "bound", None))
-        return float(np.asarray(level).reshape(-1)[0])
-
     def max_step(self) -> float:
         """``J / sigma_tan``: backward Euler needs ``h < J / sigma_tan`` (inf if monotone)."""
         return np.inf if self.sigma == 0.0 else self.J / self.sigma
