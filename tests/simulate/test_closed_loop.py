@@ -147,8 +147,13 @@ def test_composition_refuses_what_no_integrator_runs():
         nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method="event_driven")
     from nscontrol.testing.setvalued_problems import relay_feedback
 
-    with pytest.raises(ModelError, match=r"^closed_loop: a LureSystem plant runs with blocks "):
-        nsc.closed_loop(relay_feedback().system, SampledPD(1, 1, 0, 0.1))
+    # Python blocks around a Lur'e plant run by implicit Euler only
+    lure_loop = nsc.closed_loop(relay_feedback().system, SampledPD(1, 1, 0, 0.1))
+    assert lure_loop.stacked is None and lure_loop.default_method == "implicit_euler"
+    with pytest.raises(ModelError, match=r"^moreau_jean: this loop's blocks run as Python code "
+                                         r"stepped with a LureSystem"):
+        nsc.simulate(lure_loop, np.zeros(lure_loop.n_states), (0.0, 1.0),
+                     method="moreau_jean", h=1e-2)
     with pytest.raises(DimensionError, match=r"^controller: K must have shape \(1, 2\)"):
         nsc.closed_loop(_mass_on_wall(), StateFeedback([[1.0, 2.0, 3.0]]))
 

@@ -67,6 +67,17 @@ _EXPORTS: dict[str, str] = {
     "cycle_reports": "tracking_cycles", "accumulation_estimate": "tracking_cycles",
     "check_weak_stability": "tracking_cycles", "free_phase_growth": "tracking_cycles",
     "PHASE_NAMES": "tracking_cycles",
+    # friction_equilibria.py
+    "ExactCompensationCondition": "friction_equilibria",
+    "exact_compensation_condition": "friction_equilibria",
+    "observer_error_bound": "friction_equilibria",
+    "stick_margin": "friction_equilibria",
+    "stick_equilibria": "friction_equilibria",
+    "equilibrium_halfwidth": "friction_equilibria",
+    "LureForm": "friction_equilibria",
+    "closed_loop_lure_form": "friction_equilibria",
+    "lure_form_certificate": "friction_equilibria",
+    "limit_cycle_summary": "friction_equilibria",
 }
 
 __all__ = list(_EXPORTS)

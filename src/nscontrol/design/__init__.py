@@ -29,6 +29,17 @@ _EXPORTS: dict[str, str] = {
     "max_observer_decay_rate": "lure_observer", "design_lure_observer": "lure_observer",
     "lure_from_statespace": "lure_observer", "loop_transformed_lure_system": "lure_observer",
     "observer_from_gains": "lure_observer", "recheck_lure_certificate": "lure_observer",
+    # friction_compensation.py
+    "SetPoint": "friction_compensation",
+    "Sinusoid": "friction_compensation",
+    "PDLaw": "friction_compensation",
+    "compensation_model": "friction_compensation",
+    "FrictionCompensatingPD": "friction_compensation",
+    "ReducedOrderVelocityObserver": "friction_compensation",
+    "OneLinkGains": "friction_compensation",
+    "one_link_gains": "friction_compensation",
+    "FrictionLoopRun": "friction_compensation",
+    "simulate_friction_loop": "friction_compensation",
     # convergent_pwa.py
     "ConvergentStateFeedback": "convergent_pwa", "PWAStateFeedback": "convergent_pwa",
     "ConvergentObserver": "convergent_pwa", "EstimateFeedback": "convergent_pwa",

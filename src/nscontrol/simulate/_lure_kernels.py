@@ -7,7 +7,11 @@ of the components (a plant and its observer). Component kinds:
 
 * ``KIND_SOFT`` (relay ``c Sign``, Coulomb): ``z = sign(a) max(|a| - γ c, 0)``;
 * ``KIND_CLIP`` (normal cone of ``[lo, hi]``, complementarity when ``[0, inf)``):
-  ``z = clip(a, lo, hi)``.
+  ``z = clip(a, lo, hi)``;
+* ``KIND_CURVE`` (monotone set-valued Stribeck ``Sign(z) f(|z|)``, the monotone part of a
+  friction law after the loop transformation; ``curve[i] = (T_s, T_c, omega_s, delta, b)``
+  with ``f(s) = T_c + (T_s - T_c) exp(-(s/omega_s)^delta) + b s`` nondecreasing): ``z = 0``
+  when ``|a| <= d T_s``, else the root of ``s + d f(s) = |a|`` (safeguarded Newton).
 """
 
 from __future__ import annotations
@@ -17,6 +21,34 @@ from numba import njit
 
 KIND_SOFT = 0
 KIND_CLIP = 1
+KIND_CURVE = 2
+_CURVE_ITER = 200
+
+
+@njit(cache=True)
+def curve_root(target, d, ts, tc, ws, dl, b):
+    """The root ``s in (0, target)`` of ``s + d f(s) = target`` (``f`` nondecreasing, so the
+    left side increases strictly); Newton steps kept inside a shrinking bracket, else
+    bisection, until the bracket is a few ulps wide."""
+    lo = 0.0
+    hi = target
+    s = 0.5 * target
+    for _ in range(_CURVE_ITER):
+        x = s / ws
+        e = np.exp(-x ** dl)
+        g = s + d * (tc + (ts - tc) * e + b * s) - target
+        if g == 0.0:
+            return s
+        if g < 0.0:
+            lo = s
+        else:
+            hi = s
+        if hi - lo <= 4.0 * np.spacing(hi):
+            return 0.5 * (lo + hi)
+        slope = 1.0 + d * (b - (ts - tc) / ws * dl * x ** (dl - 1.0) * e) if x > 0.0 else 1.0
+        step = s - g / slope
+        s = step if (slope > 0.0 and lo < step < hi) else 0.5 * (lo + hi)
+    return s
 
 
 @njit(cache=True)
@@ -41,8 +73,8 @@ def _affine_part(Phi, Gam, HPhi, HGam, x, ubar, gnext, q, a):
 
 
 @njit(cache=True)
-def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2, H, ucol, x0,
-                     ubar, gnext, X, Z, Wout):
+def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2, curve, H,
+                     ucol, x0, ubar, gnext, X, Z, Wout):
     """Steps with a step matrix ``D_h`` that is lower triangular in the component order
     ``order`` (diagonal when ``coupled`` is False): closed-form resolvents, one component after
     the other, ``z_i = (1 + d_ii φ_i)⁻¹(a_i + Σ_{j before i} d_ij w_j)``.
@@ -89,6 +121,17 @@ def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2,
                     zi = 0.0
                     wi = -ai / d
                     kink = True
+            elif kind[i] == KIND_CURVE:
+                ts, tc, ws, dl, b = curve[i, 0], curve[i, 1], curve[i, 2], curve[i, 3], curve[i, 4]
+                if abs(ai) <= d * ts:   # stick: z = 0, the multiplier inside [-T_s, T_s]
+                    zi = 0.0
+                    wi = -ai / d
+                    kink = True
+                else:                   # slip in the direction of a
+                    sg = 1.0 if ai > 0.0 else -1.0
+                    v = curve_root(abs(ai), d, ts, tc, ws, dl, b)
+                    zi = sg * v
+                    wi = -sg * (tc + (ts - tc) * np.exp(-(v / ws) ** dl) + b * v)
             else:
                 zi = min(max(ai, p1[i]), p2[i])
                 if zi == ai:

@@ -25,6 +25,9 @@ LagrangianSystem                           into its linear forces (exact event-d
 any :class:`Controller` / :class:`Observer`  Moreau–Jean on the plant, the blocks stepped at
 (Python, sampled or continuous, with       the start of every step (zero-order hold), fed
 state) around a LagrangianSystem           the contact multipliers ``λ̂`` and reset at impacts
+the same around a LureSystem               implicit Euler on the plant (its set-valued law
+                                           solved every step), the blocks stepped at the
+                                           start of every step (zero-order hold)
 =========================================  ===============================================
 
 Any other combination is refused with a :class:`~nscontrol.errors.ModelError` that says what
@@ -37,6 +40,7 @@ Python blocks the integrator's state is the plant's and the blocks' states are t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -154,9 +158,11 @@ class ClosedLoop:
 
     @property
     def default_method(self) -> str:
+        from ..systems.lure import LureSystem
+
         if self._stacked is not None:
             return str(self._stacked.default_method)
-        return "moreau_jean"
+        return "implicit_euler" if isinstance(self.plant, LureSystem) else "moreau_jean"
 
     @property
     def n_states(self) -> int:
@@ -235,7 +241,7 @@ def _stack(loop: ClosedLoop) -> Any:
     if isinstance(plant, PiecewiseAffineSystem):
         return _stack_pwa(loop) if linear_blocks else _refuse(loop)
     if isinstance(plant, LureSystem):
-        return _stack_lure(loop) if linear_blocks else _refuse(loop)
+        return _stack_lure(loop) if linear_blocks else None   # Python blocks: implicit Euler
     if isinstance(plant, LinearHybridSystem) or (
             isinstance(plant, ImpactingBodies) and loop._needs_hybrid()):
         return _stack_hybrid(loop) if linear_blocks else _refuse(loop)
@@ -264,7 +270,8 @@ def _refuse(loop: ClosedLoop) -> Any:
                      f"as matrices (StateFeedback, PiecewiseStateFeedback, continuous "
                      f"LinearController, LinearObserver), stacked into one model; blocks "
                      f"written as Python code (or sampled) run around LagrangianSystem and "
-                     f"ImpactingBodies plants with method='moreau_jean'")
+                     f"ImpactingBodies plants with method='moreau_jean' and around "
+                     f"LureSystem plants with method='implicit_euler'")
 
 
 def _input_matrix(loop: ClosedLoop, default: Any, n: int) -> FloatArray:
@@ -601,6 +608,10 @@ def _signals_of_stack(loop: ClosedLoop) -> Callable[[Trajectory], Trajectory]:
 
 # -- Python blocks beside a mechanical plant (Moreau–Jean) -----------------------------------
 def _lower_python_blocks(loop: ClosedLoop, method: type[Integrator], x0: Any) -> Lowered:
+    from ..systems.lure import LureSystem
+
+    if isinstance(loop.plant, LureSystem):
+        return _lower_python_blocks_lure(loop, method, x0)
     if method.name != "moreau_jean":
         raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
                          f"the plant; use method='moreau_jean' (or give the blocks as "
@@ -610,6 +621,20 @@ def _lower_python_blocks(loop: ClosedLoop, method: type[Integrator], x0: Any) ->
     if loop.exosystem is not None:
         options["u"] = loop.exosystem
     return Lowered(loop.plant, x0, options, runner.finish)
+
+
+def _lower_python_blocks_lure(loop: ClosedLoop, method: type[Integrator], x0: Any
+                              ) -> Lowered:
+    """Python blocks around a Lur'e plant: implicit Euler with ``controller=`` (ZOH)."""
+    if method.name != "implicit_euler":
+        raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
+                         f"a LureSystem plant; use method='implicit_euler'")
+    if loop.exosystem is not None:
+        raise ModelError("exosystem: a Lur'e plant with Python blocks takes its reference "
+                         "through the blocks themselves (the plant's input is the controller's "
+                         "output)")
+    runner = _BlockRunner(loop)
+    return Lowered(loop.plant, x0, {"controller": runner.step_state}, runner.finish)
 
 
 class _BlockRunner:
@@ -629,8 +654,12 @@ class _BlockRunner:
         self.Cy = _output_matrix(loop, None, self.n)
         self.perm = p.lagrangian_permutation() if isinstance(p, ImpactingBodies) else None
         self.obs, self.ctrl = loop.observer, loop.controller
-        mech = p.lagrangian() if isinstance(p, ImpactingBodies) else p
-        self.n_inputs = mech.n_dof if mech.actuation is None else mech.actuation.shape[1]
+        if hasattr(p, "law"):          # a LureSystem: u enters through its B
+            self.Cy = _output_matrix(loop, p.C, self.n)
+            self.n_inputs = int(p.n_inputs)
+        else:
+            mech = p.lagrangian() if isinstance(p, ImpactingBodies) else p
+            self.n_inputs = mech.n_dof if mech.actuation is None else mech.actuation.shape[1]
         self.xo = np.zeros(0 if self.obs is None else self.obs.n_states)
         self.xc = np.zeros(0 if self.ctrl is None else self.ctrl.n_states)
         for name, block in (("observer", self.obs), ("controller", self.ctrl)):
@@ -651,6 +680,11 @@ class _BlockRunner:
             back = np.empty_like(x)
             back[self.perm] = x
             x = back
+        return self.step_state(t, x, lam_hat, active)
+
+    def step_state(self, t: float, x: FloatArray, lam_hat: Any = None,
+                   active: Any = None) -> FloatArray:
+        """The blocks at the start of a step of a plant in state ``x``; returns ``u``."""
         h = 0.0 if self.t_prev is None else t - self.t_prev
         self.t_prev = t
         w = None if self.loop.exosystem is None else np.atleast_1d(
@@ -660,7 +694,7 @@ class _BlockRunner:
         xhat = None
         if self.obs is not None:
             self.xo, xhat = self._advance("observer", self.obs, self.xo, t, h, m)
-            m = replace(m, xhat=xhat)
+            m = Measurement(m.t, m.y, m.x, xhat, m.lam, m.active, m.w)   # replace() is slow
         u = np.zeros(self.n_inputs)      # an observer alone leaves the plant unforced
         if self.ctrl is not None:
             self.xc, u = self._advance("controller", self.ctrl, self.xc, t, h, m)
@@ -711,11 +745,19 @@ class _BlockRunner:
         return replace(traj, signals=signals)
 
 
+def _all_finite(a: FloatArray) -> bool:
+    """``np.isfinite(a).all()``, without numpy's reduction overhead for the few entries a
+    block returns at every step."""
+    if a.size <= 8:
+        return all(map(math.isfinite, a.tolist()))
+    return bool(np.isfinite(a).all())
+
+
 def _finite(role: str, value: Any, size: int | None, t: float) -> FloatArray:
     out = np.asarray(value, dtype=float).reshape(-1)
     if size is not None and out.size != size:
         raise DimensionError(f"{role}: update returned {out.size} values, its state has "
                              f"{size} (at t = {t:.6g})")
-    if not np.all(np.isfinite(out)):
+    if not _all_finite(out):
         raise ModelError(f"{role}: returned a non-finite value at t = {t:.6g}: {out!r}")
     return out

@@ -12,7 +12,8 @@ implicit, so every step is the one-step inclusion
 with ``W = I - hθA``, ``Φ = W⁻¹(I + h(1-θ)A)``, ``Γ = hW⁻¹B``, ``G_h = hW⁻¹G``,
 ``D_h = H G_h + D``. It is solved exactly at every step:
 
-* componentwise laws (relay, Coulomb, normal cones of intervals, complementarity and their
+* componentwise laws (relay, Coulomb, normal cones of intervals, complementarity, the
+  monotone set-valued Stribeck law -- its slip branch by safeguarded Newton -- and their
   products) with a diagonal ``D_h``, or one that a permutation makes lower triangular (a plant
   and its observer): closed-form resolvents ``z_i = (1 + d_ii φ_i)⁻¹(a_i + Σ_j d_ij w_j)``
   component after component, in a compiled loop;
@@ -52,6 +53,11 @@ progress : bool, optional
     Progress bar on stderr (default: shown after 2 s).
 u : Exosystem or callable or array_like, optional
     External input overriding the system's ``u`` (what a periodically forced analysis passes).
+controller : callable ``(t, x) -> u``, optional
+    Feedback evaluated at the start of every step and held over it (zero-order hold); it
+    replaces ``u``. What :func:`nscontrol.closed_loop` passes for controllers and observers
+    written as Python code around a Lur'e plant (a digital controller with a friction
+    compensation, chapter 7). The steps then run one at a time in Python.
 sensitivity : bool
     Also compute ``stats["state_transition"]``, the exact Jacobian ``∂x_N/∂x_0`` of the
     *discrete* map (the product of the steps' Jacobians ``Φ + G_h (∂w/∂a) HΦ``, each from
@@ -86,7 +92,8 @@ if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays li
 __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
 
 _CHUNK = 1 << 16
-_OPTIONS = {"h", "theta", "u", "record_every", "signals", "progress", "sensitivity"}
+_OPTIONS = {"h", "theta", "u", "record_every", "signals", "progress", "sensitivity",
+            "controller"}
 _SIGNALS = ("z", "w", "y")
 #: Couplings of ``D_h`` below this fraction of ``max|D_h|`` are structural zeros.
 _STRUCTURAL_ZERO = 1e-14
@@ -191,7 +198,8 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     (kind, p1, p2) or None
         Per component: ``kind[i] = 0`` for ``c Sign`` with ``c = p1[i]`` (relay, Coulomb),
         ``kind[i] = 1`` for the normal cone of ``[p1[i], p2[i]]`` (complementarity:
-        ``[0, inf)``). ``None`` for any other law.
+        ``[0, inf)``), ``kind[i] = 2`` for a monotone set-valued Stribeck law (its parameters
+        in :func:`curve_parameters`). ``None`` for any other law.
 
     Examples
     --------
@@ -202,6 +210,7 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     >>> kind.tolist(), p1.tolist(), p2.tolist()
     ([0, 1], [2.0, 0.0], [0.0, inf])
     """
+    from ..laws.friction import Stribeck
     from ..laws.normal_cone import NormalConeBox
     from ..laws.product import Product
     from ..laws.relay import Relay
@@ -219,7 +228,27 @@ def componentwise_spec(law: Any) -> tuple[np.ndarray, FloatArray, FloatArray] | 
     if isinstance(law, NormalConeBox):
         return (np.ones(m, np.int64), _per_component(law.lower, m),
                 _per_component(law.upper, m))
+    if isinstance(law, Stribeck) and law.monotone:   # parameters in curve_parameters(law)
+        return np.full(m, 2, np.int64), np.zeros(m), np.zeros(m)
     return None
+
+
+def curve_parameters(law: Any) -> FloatArray:
+    """Per component ``(T_s, T_c, omega_s, delta, b)`` of the monotone Stribeck components of
+    ``law`` (``componentwise_spec`` kind 2), zeros for the other components; shape ``(m, 5)``.
+    """
+    from ..laws.friction import Stribeck
+    from ..laws.product import Product
+
+    parts = law.parts if isinstance(law, Product) else [law]
+    rows = []
+    for part in parts:
+        if isinstance(part, Stribeck):
+            rows.append(np.column_stack([part.static, part.coulomb, part.stribeck_velocity,
+                                         part.delta, part.viscous]))
+        else:
+            rows.append(np.zeros((int(part.dim), 5)))
+    return np.ascontiguousarray(np.vstack(rows), dtype=np.float64)
 
 
 def _per_component(value: Any, m: int) -> FloatArray:
@@ -593,8 +622,12 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     if "h" not in options:
         raise ModelError("h: implicit_euler needs a step, e.g. simulate(sys, x0, t_span, "
                          "method='implicit_euler', h=1e-3)")
+    controller = _check_controller(system, options)
     system = _with_input(system, options.get("u"))
     sensitivity = _check_sensitivity(options.get("sensitivity", False))
+    if sensitivity and controller is not None:
+        raise ModelError("sensitivity: not available with a controller= (the Jacobian of the "
+                         "discrete map would miss the feedback's derivative)")
     h_req = check_positive("h", options["h"])
     theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
     n = system.n_states
@@ -621,7 +654,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     def stats(steps: int) -> dict[str, Any]:
         out = {"steps": int(steps), "h": float(h), "theta": float(theta),
                "solver": plan.solver, "structure": plan.structure,
-               "blocks": max(1, len(plan.blocks)), "input": stepper.input_mode}
+               "blocks": max(1, len(plan.blocks)),
+               "input": "controller" if controller is not None else stepper.input_mode}
         if plan.solver != "closed_form":
             out["max_residual"] = stepper.worst
         if jac is not None:
@@ -635,7 +669,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
             k1 = min(n_steps, done + _CHUNK)
             times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
             try:
-                X, Z, W = stepper.run(x, times)
+                X, Z, W = stepper.run(x, times) if controller is None else \
+                    stepper.run_with_controller(x, times, controller)
             except SolverError as exc:
                 X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
@@ -667,6 +702,23 @@ def _with_input(system: Any, u: Any) -> Any:
     from dataclasses import replace
 
     return replace(system, u=u)
+
+
+def _check_controller(system: Any, options: dict[str, Any]) -> Any:
+    """The ``controller`` option, checked against the system (``None`` when absent)."""
+    controller = options.get("controller")
+    if controller is None:
+        return None
+    if not callable(controller):
+        raise ModelError(f"controller: expected a callable (t, x) -> u, got "
+                         f"{type(controller).__name__}")
+    if system.B is None:
+        raise ModelError("controller: this LureSystem has no input matrix B, so it takes no "
+                         "input; build it with B= to close a loop around it")
+    if options.get("u") is not None:
+        raise ModelError("controller, u: give one of them (the controller's output is the "
+                         "input u)")
+    return controller
 
 
 def _check_sensitivity(value: Any) -> bool:
@@ -738,6 +790,7 @@ class _Stepper:
                 raise ModelError("law: the closed-form step needs a componentwise law")
             kind, p1, p2 = spec
             self.spec = (kind, p1, p2)
+            self.curve = curve_parameters(system.law)
             self.ucol = _single_state_rows(system)
 
     def _inputs(self, times: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -753,8 +806,59 @@ class _Stepper:
             np.zeros((times.size - 1, sys_.n_multipliers))
         return np.ascontiguousarray(ubar), np.ascontiguousarray(gnext)
 
-    def run(self, x: FloatArray, times: FloatArray) -> tuple[FloatArray, ...]:
-        ubar, gnext = self._inputs(times)
+    def run_with_controller(self, x: FloatArray, times: FloatArray,
+                            controller: Any) -> tuple[FloatArray, ...]:
+        """Steps over ``times`` one at a time, the input ``controller(t_k, x_k)`` held over
+        each (zero-order hold)."""
+        k, q = times.size - 1, self.system.n_inputs
+        n, mm = self.system.n_states, self.system.n_multipliers
+        X, Z, W = np.empty((k, n)), np.empty((k, mm)), np.empty((k, mm))
+        fast = self._compiled_step()
+        ubar, gnext = np.zeros((1, q)), np.zeros((1, mm))
+        for j in range(k):
+            u = np.asarray(controller(float(times[j]), x.copy()), dtype=float).reshape(-1)
+            if u.size != q or not all(map(math.isfinite, u.tolist())):
+                raise ModelError(f"controller: expected a finite input of length {q} at t = "
+                                 f"{times[j]:.6g}, got {u!r}")
+            if fast is not None:         # the compiled step, straight into the outputs
+                ubar[0] = u
+                if self.system.has_shift:
+                    gnext[0] = self.system.shift_at(times[j + 1:j + 2])[0]
+                fast(x, ubar, gnext, X[j:j + 1], Z[j:j + 1], W[j:j + 1])
+                x = X[j]
+                continue
+            try:
+                Xj, Zj, Wj = self.run(x, times[j:j + 2], ubar=u[None, :])
+            except SolverError as exc:
+                exc.partial = (X[:j], Z[:j], W[:j])  # type: ignore[attr-defined]  # partial run, added at raise
+                raise
+            x = X[j] = Xj[0]
+            Z[j], W[j] = Zj[0], Wj[0]
+        return X, Z, W
+
+    def _compiled_step(self) -> Any:
+        """``step(x, ubar, gnext, X, Z, W)``: one compiled closed-form step, or ``None``."""
+        if self.plan.solver != "closed_form":
+            return None
+        from ._lure_kernels import triangular_steps
+
+        m, plan, (kind, p1, p2) = self.m, self.plan, self.spec
+        coupled = plan.structure != "diagonal"
+
+        def step(x: FloatArray, ubar: FloatArray, gnext: FloatArray, X: FloatArray,
+                 Z: FloatArray, W: FloatArray) -> None:
+            triangular_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order, coupled,
+                             kind, p1, p2, self.curve, self.system.H, self.ucol, x, ubar,
+                             gnext, X, Z, W)
+        return step
+
+    def run(self, x: FloatArray, times: FloatArray,
+            ubar: FloatArray | None = None) -> tuple[FloatArray, ...]:
+        if ubar is None:
+            ubar, gnext = self._inputs(times)
+        else:
+            gnext = self.system.shift_at(times[1:]) if self.system.has_shift else \
+                np.zeros((times.size - 1, self.system.n_multipliers))
         k = times.size - 1
         n, mm = self.system.n_states, self.system.n_multipliers
         X, Z, W = np.empty((k, n)), np.empty((k, mm)), np.empty((k, mm))
@@ -764,7 +868,8 @@ class _Stepper:
 
             kind, p1, p2 = self.spec
             triangular_steps(m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
-                             plan.structure != "diagonal", kind, p1, p2, self.system.H,
+                             plan.structure != "diagonal", kind, p1, p2, self.curve,
+                             self.system.H,
                              self.ucol, x, ubar, gnext, X, Z, W)
             return X, Z, W
         if plan.solver == "lcp":

@@ -14,6 +14,8 @@ from .._lazy import lazy_exports
 _EXPORTS: dict[str, str] = {
     # lure.py
     "LureSystem": "lure",
+    # one_link.py
+    "OneLinkRobot": "one_link",
     # pwa.py
     "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
     # switched.py

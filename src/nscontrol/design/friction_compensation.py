@@ -1,0 +1,510 @@
+"""Friction compensation of a one-link robot with a reduced-order velocity observer (ch. 7).
+
+The plant (:class:`~nscontrol.systems.one_link.OneLinkRobot`) measures its angle only. A
+digital controller (zero-order hold, period ``T``) applies::
+
+    u_pd = J r'' - k_p (theta - r) - k_d (omega_hat - r')         (PD + feedforward)
+    u    = u_pd + T_hat(omega_hat)                                  (friction compensation)
+
+with ``T_hat`` a friction model of the plant's form whose force levels (``T_s, T_c, b``) are
+the plant's times the compensation factor ``kappa`` (``kappa = 1`` exact, ``< 1`` under-,
+``> 1`` over-compensation; scaling all levels is our choice of parameterisation). The
+velocity estimate comes from the reduced-order linear observer of the *compensated* model
+``J theta'' = u_pd``::
+
+    xi' = -l xi - l^2 theta + u_pd / J,    omega_hat = xi + l theta
+
+discretised by backward Euler at every controller tick with the new angle sample:
+``xi_{k+1} = (xi_k + T(-l^2 theta_{k+1} + u_pd,k / J)) / (1 + T l)``. The observer is driven
+by ``u_pd``, not ``u``: the compensation cancels from the estimation error, which is then
+forced by the friction mismatch only (driving it by ``u`` would leave the full friction
+torque in the error, which would never converge).
+
+The controller outputs one number, so ``T_hat`` at ``omega_hat = 0`` is a chosen value
+(``value_at_zero``, default 0). This is harmless with the observer: ``omega_hat`` does not
+depend on the compensation and crosses zero transversally.
+
+Both blocks are :class:`~nscontrol.systems.feedback.Controller` /
+:class:`~nscontrol.systems.feedback.Observer` objects closed around the plant by
+:func:`nscontrol.closed_loop` and run by implicit Euler (:func:`simulate_friction_loop`).
+
+The reconstruction (observer structure, parameterisation of ``kappa``, gain-design rule of
+:func:`one_link_gains`) is ours: the original paper's equations and numbers could not be read.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray, check_positive
+from ..errors import ModelError, NscontrolWarning
+
+__all__ = ["SetPoint", "Sinusoid", "PDLaw", "compensation_model", "FrictionCompensatingPD",
+           "ReducedOrderVelocityObserver", "OneLinkGains", "one_link_gains",
+           "FrictionLoopRun", "simulate_friction_loop"]
+
+
+# -- references --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SetPoint:
+    """A constant reference ``r(t) = value`` (``r' = r'' = 0``).
+
+    Attributes
+    ----------
+    value
+        The set-point [rad].
+    """
+
+    value: float = 0.0
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        return float(self.value), 0.0, 0.0
+
+
+@dataclass(frozen=True)
+class Sinusoid:
+    """``r(t) = amplitude sin(frequency t)`` with its two derivatives.
+
+    Attributes
+    ----------
+    amplitude
+        Amplitude [rad].
+    frequency
+        Angular frequency [rad/s].
+    """
+
+    amplitude: float = 1.0
+    frequency: float = 1.0
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        a, w = self.amplitude, self.frequency
+        s, c = math.sin(w * t), math.cos(w * t)
+        return a * s, a * w * c, -a * w * w * s
+
+
+# -- the PD part and the compensation ------------------------------------------------------
+@dataclass(frozen=True)
+class PDLaw:
+    """``u_pd = J r'' - k_p (theta - r) - k_d (omega_hat - r')`` (feedforward optional).
+
+    Parameters
+    ----------
+    kp, kd
+        Gains ``> 0``.
+    J
+        Inertia used by the feedforward and the observer.
+    reference
+        ``t -> (r, r', r'')`` (:class:`SetPoint`, :class:`Sinusoid` or any callable).
+    feedforward
+        Include ``J r''``.
+    """
+
+    kp: float
+    kd: float
+    J: float
+    reference: Any = field(default_factory=SetPoint)
+    feedforward: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("kp", "kd", "J"):
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        if not callable(self.reference):
+            raise ModelError(f"reference: expected a callable t -> (r, r', r''), got "
+                             f"{type(self.reference).__name__}")
+
+    def torque(self, t: float, theta: float, omega_hat: float) -> float:
+        """``u_pd`` at ``t`` for the angle ``theta`` and velocity estimate ``omega_hat``."""
+        r, dr, ddr = self.reference(t)
+        ff = self.J * ddr if self.feedforward else 0.0
+        return ff - self.kp * (theta - r) - self.kd * (omega_hat - dr)
+
+
+def compensation_model(friction: Any, kappa: float) -> Any:
+    """The plant's friction law with its force levels ``T_s, T_c, b`` scaled by ``kappa``.
+
+    Parameters
+    ----------
+    friction
+        A one-component :class:`~nscontrol.laws.Stribeck` law.
+    kappa
+        Compensation factor ``>= 0`` (1: exact; our parameterisation of under/over).
+
+    Returns
+    -------
+    Stribeck or None
+        ``None`` for ``kappa = 0`` (no compensation).
+
+    Raises
+    ------
+    ModelError
+        ``kappa < 0`` or not finite, or ``friction`` is not a Stribeck law.
+    """
+    from ..laws.friction import Stribeck
+
+    kappa = check_positive("kappa", kappa, allow_zero=True)
+    if not isinstance(friction, Stribeck):
+        raise ModelError(f"friction: expected a Stribeck law to scale, got {friction!r}")
+    if kappa == 0.0:
+        return None
+    return Stribeck(kappa * friction.static, kappa * friction.coulomb,
+                    friction.stribeck_velocity, friction.delta, kappa * friction.viscous)
+
+
+def _curve(law: Any) -> tuple[float, float, float, float, float]:
+    """``(T_s, T_c, omega_s, delta, b)`` of a one-component Stribeck law."""
+    from ..laws.friction import Stribeck
+
+    if not isinstance(law, Stribeck) or law.dim != 1:
+        raise ModelError(f"compensation: expected a one-component Stribeck law, got {law!r}")
+    return (float(law.static[0]), float(law.coulomb[0]), float(law.stribeck_velocity[0]),
+            float(law.delta[0]), float(law.viscous[0]))
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionCompensatingPD:
+    """The digital controller ``u = u_pd + T_hat(omega_hat)`` (a ``Controller``).
+
+    Reads ``omega_hat`` from the observer's estimate; without an observer in the loop it
+    reads the *measured* velocity (then, with ``value_at_zero = 0``, static friction is never
+    compensated at rest).
+
+    Parameters
+    ----------
+    pd
+        The PD (+ feedforward) part.
+    compensation
+        The friction model ``T_hat`` (a Stribeck law, e.g. :func:`compensation_model`) or
+        ``None`` for no compensation.
+    period
+        Control period ``T > 0`` (zero-order hold).
+    value_at_zero
+        ``T_hat(0)`` (default 0).
+    smooth_eps
+        Optional smoothing ``sat(v / eps) f_hat(|v|)`` of the sign (off by default; it
+        re-creates a small stuck region of width about ``eps (J l + k_d) / k_p``).
+    """
+
+    pd: PDLaw
+    compensation: Any
+    period: float
+    value_at_zero: float = 0.0
+    smooth_eps: float | None = None
+    n_states: int = field(default=0, init=False)
+    n_outputs: int = field(default=1, init=False)
+    _params: Any = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "period", check_positive("period", self.period))
+        if self.smooth_eps is not None:
+            object.__setattr__(self, "smooth_eps", check_positive("smooth_eps",
+                                                                  self.smooth_eps))
+        curve = None if self.compensation is None else _curve(self.compensation)
+        object.__setattr__(self, "_params", curve)
+
+    def friction_estimate(self, omega_hat: float) -> float:
+        """``T_hat(omega_hat)``: ``sign(v) f_hat(|v|)``, ``value_at_zero`` at 0."""
+        if self._params is None:
+            return 0.0
+        ts, tc, ws, dl, b = self._params
+        s = abs(omega_hat)
+        mag = tc + (ts - tc) * math.exp(-(s / ws) ** dl) + b * s
+        if self.smooth_eps is not None:
+            return max(-1.0, min(1.0, omega_hat / self.smooth_eps)) * mag
+        if omega_hat == 0.0:
+            return float(self.value_at_zero)
+        return math.copysign(mag, omega_hat)
+
+    def velocity(self, m: Any) -> float:
+        """The velocity the controller uses: the estimate, else the measured one."""
+        return float(m.xhat[0]) if m.xhat is not None else float(m.x[1])
+
+    def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
+        """``[u]`` at the tick ``t``."""
+        v = self.velocity(m)
+        return np.array([self.pd.torque(t, float(m.y[0]), v) + self.friction_estimate(v)])
+
+    def update(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
+        """No internal state."""
+        return xc
+
+    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
+        """No internal state."""
+        return xc
+
+
+@dataclass(frozen=True, eq=False)
+class ReducedOrderVelocityObserver:
+    """The reduced-order linear velocity observer, backward Euler at each tick (an
+    ``Observer``).
+
+    Its state carried into tick ``k`` is ``(xi_{k-1}, u_pd,k-1, omega_hat_{k-1})``: the
+    update to ``xi_k`` needs the new angle sample ``theta_k`` and the previous tick's
+    ``u_pd`` (recomputed from the same :class:`PDLaw` as the controller's). Its recorded
+    estimate (``E`` picks ``omega_hat``) is thus the one that acted over each step.
+
+    Parameters
+    ----------
+    l
+        Observer gain ``l > 0`` [1/s] (the estimate's error decays like ``exp(-l t)`` on the
+        compensated model; ``l <= 0`` is unstable and refused).
+    pd
+        The controller's PD law (the observer is driven by ``u_pd``).
+    period
+        Sampling period ``T`` (the controller's).
+    x0
+        Initial internal state (use :meth:`starting_at`).
+    """
+
+    l: float
+    pd: PDLaw
+    period: float
+    x0: FloatArray | None = None
+    n_states: int = field(default=3, init=False)
+    n_outputs: int = field(default=1, init=False)
+    E: FloatArray = field(default_factory=lambda: np.array([[0.0, 0.0, 1.0]]), init=False)
+
+    def __post_init__(self) -> None:
+        try:
+            l_val = check_positive("l", self.l)
+        except ModelError:
+            raise ModelError(f"l: the observer gain must be > 0 (its error dynamics "
+                             f"e' = -l e is unstable for l <= 0), got l = {self.l!r}") from None
+        object.__setattr__(self, "l", l_val)
+        object.__setattr__(self, "period", check_positive("period", self.period))
+
+    @property
+    def estimates(self) -> FloatArray:
+        """``S = [0, 1]``: the observer estimates the velocity of ``(theta, omega)``."""
+        return np.array([[0.0, 1.0]])
+
+    def starting_at(self, theta0: float, omega_hat0: float) -> ReducedOrderVelocityObserver:
+        """The same observer whose estimate at the first tick is ``omega_hat0``."""
+        T, l = self.period, self.l
+        xi0 = omega_hat0 - l * theta0
+        # the state before tick 0 that the first update maps to xi0 (with u_pd = 0)
+        xi_prev = xi0 * (1.0 + T * l) + T * l * l * theta0
+        return replace(self, x0=np.array([xi_prev, 0.0, float(omega_hat0)]))
+
+    def _xi(self, xo: FloatArray, theta: float) -> float:
+        T, l, J = self.period, self.l, self.pd.J
+        return (float(xo[0]) + T * (-l * l * theta + float(xo[1]) / J)) / (1.0 + T * l)
+
+    def estimate(self, xo: FloatArray, theta: float) -> float:
+        """``omega_hat`` at a tick with angle sample ``theta`` and carried state ``xo``."""
+        return self._xi(xo, theta) + self.l * theta
+
+    def output(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
+        """``[omega_hat]`` at the tick ``t``."""
+        return np.array([self.estimate(xo, float(m.y[0]))])
+
+    def update(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
+        """The state carried into the next tick."""
+        theta = float(m.y[0])
+        xi = self._xi(xo, theta)
+        omega_hat = xi + self.l * theta
+        return np.array([xi, self.pd.torque(t, theta, omega_hat), omega_hat])
+
+    def reset(self, t: float, xo: FloatArray, jump: Any) -> FloatArray:
+        """The plant does not jump."""
+        return xo
+
+
+# -- gain design -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class OneLinkGains:
+    """Gains from :func:`one_link_gains`.
+
+    Attributes
+    ----------
+    kp, kd, l
+        PD gains and observer gain.
+    l_sufficient
+        ``sigma_tan / J``: ``l`` above it proves global exponential stability under exact
+        compensation.
+    l_necessary
+        ``sigma_sec / J``: at or below it a stuck equilibrium off the set-point exists.
+    warnings
+        The design warnings raised (also issued as ``NscontrolWarning``).
+    """
+
+    kp: float
+    kd: float
+    l: float
+    l_sufficient: float
+    l_necessary: float
+    warnings: tuple[str, ...] = ()
+
+
+def one_link_gains(J: float, friction: Any, omega_n: float, zeta: float, *,
+                   margin: float = 2.0, control_period: float | None = None,
+                   encoder_step: float | None = None) -> OneLinkGains:
+    """PD and observer gains for a frictionless target ``(omega_n, zeta)`` (our rule).
+
+    ``k_p = J omega_n^2``, ``k_d = 2 zeta omega_n J``, ``l = max(margin sigma_tan / J,
+    5 omega_n)``.
+
+    Parameters
+    ----------
+    J
+        Inertia ``> 0``.
+    friction
+        The plant's Stribeck law.
+    omega_n, zeta
+        Natural frequency ``> 0`` and damping ``> 0`` of the frictionless loop.
+    margin
+        Factor ``>= 1`` over the sufficient observer gain.
+    control_period
+        If given, warn when ``l T > 0.2`` (the sampled observer lags).
+    encoder_step
+        If given, warn when ``l q > 0.1 omega_s`` (encoder noise flips the compensation).
+
+    Returns
+    -------
+    OneLinkGains
+
+    Examples
+    --------
+    >>> from nscontrol.laws import Stribeck
+    >>> g = one_link_gains(0.05, Stribeck(0.4, 0.2, 0.05, 2.0, 0.02), 2 * 10 ** 0.5, 0.5)
+    >>> round(g.kp, 6), round(g.l_sufficient, 2), round(g.l, 2)
+    (2.0, 68.22, 136.44)
+    """
+    J = check_positive("J", J)
+    omega_n, zeta = check_positive("omega_n", omega_n), check_positive("zeta", zeta)
+    margin = check_positive("margin", margin)
+    if margin < 1.0:
+        raise ModelError(f"margin: expected >= 1 (the observer must beat sigma_tan / J), got "
+                         f"{margin}")
+    ts, tc, ws, dl, b = _curve(friction)
+    l_suf = float(friction.sigma_tan[0]) / J
+    l_nec = float(friction.sigma_sec[0]) / J
+    l_gain = max(margin * l_suf, 5.0 * omega_n)
+    notes = []
+    if control_period is not None and l_gain * check_positive("control_period",
+                                                              control_period) > 0.2:
+        notes.append(f"l * control_period = {l_gain * control_period:.3g} > 0.2: the sampled "
+                     f"observer lags; shorten the period")
+    if encoder_step is not None and l_gain * check_positive("encoder_step",
+                                                            encoder_step) > 0.1 * ws:
+        notes.append(f"l * encoder_step = {l_gain * encoder_step:.3g} > 0.1 omega_s = "
+                     f"{0.1 * ws:.3g}: estimate noise flips the compensation at rest")
+    for note in notes:
+        warnings.warn(f"one_link_gains: {note}", NscontrolWarning, stacklevel=2)
+    return OneLinkGains(kp=J * omega_n ** 2, kd=2.0 * zeta * omega_n * J, l=l_gain,
+                        l_sufficient=l_suf, l_necessary=l_nec, warnings=tuple(notes))
+
+
+# -- running the loop ------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class FrictionLoopRun:
+    """A closed-loop run at the controller ticks.
+
+    Attributes
+    ----------
+    t, theta, omega
+        Tick times and the plant's angle and velocity there.
+    omega_hat
+        The velocity estimate computed at each tick (the measured velocity without observer).
+    u
+        Torque applied from each tick to the next.
+    friction
+        Friction torque ``T_f`` over the step ending at each tick (``F(omega)``).
+    reference
+        ``r(t)`` at the ticks.
+    trajectory
+        The underlying :class:`~nscontrol.simulate.trajectory.Trajectory`.
+    """
+
+    t: FloatArray
+    theta: FloatArray
+    omega: FloatArray
+    omega_hat: FloatArray
+    u: FloatArray
+    friction: FloatArray
+    reference: FloatArray
+    trajectory: Any
+
+    @property
+    def error(self) -> FloatArray:
+        """Tracking error ``theta - r``."""
+        return self.theta - self.reference
+
+    @property
+    def estimation_error(self) -> FloatArray:
+        """``e = omega - omega_hat``."""
+        return self.omega - self.omega_hat
+
+    def window(self, start: float) -> np.ndarray:
+        """Boolean mask of the ticks with ``t >= start``."""
+        return self.t >= start - 1e-9 * max(1.0, abs(start))
+
+
+def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float,
+                           h: float, T: float, theta0: float = 0.0, omega0: float = 0.0,
+                           omega_hat0: float = 0.0, value_at_zero: float = 0.0,
+                           smooth_eps: float | None = None) -> FrictionLoopRun:
+    """Run the digital friction-compensating loop (control period ``h``) by implicit Euler.
+
+    Parameters
+    ----------
+    robot
+        The :class:`~nscontrol.systems.one_link.OneLinkRobot`.
+    pd
+        The PD (+ feedforward) law and its reference.
+    l
+        Observer gain, or ``None`` to feed back the measured velocity (no observer).
+    kappa
+        Compensation factor ``>= 0`` (0: none, 1: exact).
+    h
+        Plant step and control period; ``h sigma_tan < J`` is required.
+    T
+        Final time.
+    theta0, omega0, omega_hat0
+        Initial angle, velocity and velocity estimate.
+    value_at_zero, smooth_eps
+        Passed to :class:`FrictionCompensatingPD`.
+
+    Returns
+    -------
+    FrictionLoopRun
+
+    Raises
+    ------
+    ModelError
+        ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
+    """
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
+
+    h = robot.check_step(h)
+    T = check_positive("T", T)
+    comp = compensation_model(robot.friction, kappa)
+    ctrl = FrictionCompensatingPD(pd, comp, h, value_at_zero=value_at_zero,
+                                  smooth_eps=smooth_eps)
+    obs = None
+    if l is not None:
+        obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
+    plant = robot.lure_system()
+    loop = closed_loop(plant, ctrl, obs)
+    traj = simulate(loop, [theta0, omega0], (0.0, T), method="implicit_euler", h=h,
+                    progress=False)
+    t, x = traj.t, traj.x
+    w = traj.signal("w")[:, 0]
+    friction = robot.friction_torque(x[:, 1], w)
+    if obs is None:
+        omega_hat = x[:, 1].copy()
+    else:   # the estimate of each tick from its carried state and angle sample
+        xo = traj.signal("xo")
+        omega_hat = np.array([obs.estimate(xo[k], x[k, 0]) for k in range(t.size)])
+        omega_hat[0] = omega_hat0
+    u = traj.signal("u")[:, 0]
+    u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
+    ref = np.array([pd.reference(tk)[0] for tk in t])
+    return FrictionLoopRun(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(),
+                           omega_hat=omega_hat, u=u, friction=friction, reference=ref,
+                           trajectory=traj)
