@@ -15,7 +15,7 @@ def test_example_is_listed():
 @pytest.mark.slow
 def test_example_runs_all_checks(tmp_path):
     res = get_example("ch07-friction-compensation").run(tmp_path)
-    numbers = {c.name.split()[0].rstrip(".") for c in res.checks}
+    numbers = {c.key.split("_")[1].rstrip("abcdefghij") for c in res.checks}
     assert {str(k) for k in range(1, 12)} <= numbers
     assert res.passed, [c for c in res.checks if not c.passed]
     assert len(res.figures) == 6 and all(p.exists() for p in res.figures)
