@@ -16,7 +16,7 @@ What the factory may return
   ``jacobian`` or central differences) or a plain callable ``x -> ẋ`` (central differences).
 
 Test functions (on the eigenvalues ``λ`` of ``F_x``)
----------------------------------------------------
+----------------------------------------------------
 * fold: ``det F_x = ∏ λ_i`` (real);
 * Hopf: the bialternate product ``∏_{i<j} (λ_i + λ_j)`` (real), which vanishes when a pair
   ``±iω`` crosses the imaginary axis; a sign change from a real pair ``±κ`` (a neutral

@@ -224,7 +224,7 @@ def gain_threshold(model: Any, q_star: ArrayLike, active: Any, lam_star: ArrayLi
         The posture.
     active : sequence of int
         The contacts closed at ``q*``.
-    lam_star : array_like (|active|,)
+    lam_star : array_like, shape (n_active,)
         The contact forces at ``q*``.
     rtol : float
         Relative accuracy of the bisection.

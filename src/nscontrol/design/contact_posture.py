@@ -100,7 +100,7 @@ def static_contact_forces(model: Any, q_star: ArrayLike, active: Any, *,
         others open.
     active : sequence of int
         The contacts to keep closed, ``I*``.
-    lam_ref : array_like (|I*|,), optional
+    lam_ref : array_like, shape (n_active,), optional
         A preferred force distribution when several balance the posture (projected on the
         feasible set); default: the minimum-norm one.
     lam_min : float

@@ -30,7 +30,7 @@ KP, KD = 400.0, 30.0
 #: contact kept closed at velocity level drifts by the curvature term ½ δqᵀ∇²g δq ≈ 1e-12 m
 #: per step, enough to fall out of the default threshold (1e-12); the light foot then turns
 #: freely for one step and the toe sinks by 0.3 mm, which velocity-level constraints never
-#: undo. 1 µm is far above that drift and far below the landing drift h |U⁻| ≈ 1e-4 m.
+#: undo. 1 µm is far above that drift and far below the landing drift ``h |U⁻|`` ≈ 1e-4 m.
 ACTIVATION = 1e-6
 #: Example C: stiffness, damping, desired contact force, start.
 WALL_KP, WALL_KD, WALL_FORCE, WALL_Q0 = 100.0, 2.0, 5.0, -0.5

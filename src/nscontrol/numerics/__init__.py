@@ -3,7 +3,7 @@ location (:mod:`.lti`), LMI helpers on CVXPY and the Lyapunov re-check (:mod:`.l
 balancing and scaling (:mod:`.scaling`), observability tests
 (:mod:`~nscontrol.numerics.observability`), central differences (:mod:`.differences`),
 saltation matrices and the transition term of a sampled switching instant
-(:mod:`.saltation`)."""
+(:mod:`~nscontrol.numerics.saltation`)."""
 
 # Also the converter from state-space objects such as python-control's StateSpace
 # (statespace.py). Every public name is importable from here (from nscontrol.numerics import
