@@ -25,8 +25,10 @@ def list_examples() -> None:
     """List the runnable examples."""
     from .examples import all_examples
 
-    for ex in all_examples():
-        click.echo(f"{ex.name:28s} {ex.chapter:10s} {ex.title}")
+    examples = all_examples()
+    width = max(len(ex.name) for ex in examples)
+    for ex in examples:
+        click.echo(f"{ex.name:{width}s}  {ex.chapter:10s} {ex.title}")
 
 
 @main.command()

@@ -200,7 +200,7 @@ def _dedupe_legend(ax: Any) -> None:
 
 EXAMPLES = [Example(
     "impact-oscillator-bifurcation",
-    "grazing and flip of the forced impact oscillator: continuation vs brute force", "orbits",
+    "Grazing and flip of the forced impact oscillator: continuation vs brute force", "orbits",
     run,
     claim="A harmonically forced oscillator hitting a stop changes behaviour at two forcing "
           "amplitudes known in closed form: at grazing its orbit first touches the stop, and "

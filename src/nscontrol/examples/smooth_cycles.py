@@ -168,7 +168,7 @@ def run(out_dir: Path | None) -> ExampleResult:
 
 
 EXAMPLES = [Example(
-    "smooth-cycles", "limit cycles of smooth flows: polar normal forms, Van der Pol, Hopf",
+    "smooth-cycles", "Limit cycles of smooth flows: polar normal forms, Van der Pol, Hopf",
     "orbits", run,
     claim="Shooting with the variational equation finds the limit cycles of smooth flows: "
           "the exact cycles of polar normal forms to the integrator's tolerance, Van der "
