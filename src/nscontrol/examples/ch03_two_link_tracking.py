@@ -240,8 +240,10 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
     dict
         The point's parameters and ``cycles_completed``, ``worst_tau0_error`` (m),
         ``worst_V_growth`` (largest ``V(τ0ᵏ⁺¹)/V(τ0ᵏ)``), ``penetration`` (m, ``>= 0``),
-        ``impacts_per_cycle`` and ``weakly_stable`` (growth allowance 1.1, floor
-        ``1e-8 (h/1e-4)²``).
+        ``impacts_per_cycle``, ``weakly_stable`` (growth allowance 1.1, floor
+        ``1e-8 (h/1e-4)²``) and ``gap_before_first_takeoff`` (m, smallest gap over the last
+        second before the first planned take-off: 0 when the arm slides on the ground,
+        positive when it hovers above it).
 
     Examples
     --------
@@ -269,7 +271,15 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
             "worst_V_growth": growth,
             "penetration": max(0.0, -float(run.traj.signals["gap"].min())),
             "impacts_per_cycle": [r.n_impacts for r in reports],
-            "weakly_stable": verdict.holds}
+            "weakly_stable": verdict.holds,
+            "gap_before_first_takeoff": _gap_before(run, run.controller.task.t_detach(0))}
+
+
+def _gap_before(run: TrackingRun, t_detach: float) -> float:
+    """Smallest gap over ``[t_detach - 1 s, t_detach)`` (NaN when the run ends before)."""
+    t = run.traj.t
+    window = (t >= t_detach - 1.0) & (t < t_detach)
+    return float(run.traj.signals["gap"][window, 0].min()) if window.any() else math.nan
 
 
 #: Step of the example's main run. The checks are stated at h = 1e-4; the example runs at
