@@ -27,7 +27,8 @@ import numpy as np
 from . import Check, Example, ExampleResult, check, verdict_from
 
 __all__ = ["RESTITUTIONS", "MODEL_SCALES", "DELAYS", "NOISES", "grids", "robustness_maps",
-           "critical_model_scale", "hover_height", "model_error_bound", "robustness_checks", "EXAMPLES"]
+           "critical_model_scale", "hover_height", "model_error_bound", "robustness_checks",
+           "EXAMPLES"]
 
 #: Restitution coefficients of the first map (0: plastic; 0.7: the nominal ground).
 RESTITUTIONS = (0.0, 0.7, 0.95)
@@ -76,11 +77,12 @@ def robustness_maps(result: Any, shape: tuple[int, int]) -> dict[str, Any]:
     Returns
     -------
     dict
-        One ``shape`` array per name of :data:`FIELDS`, and ``"errors"``: the failed points as
-        ``{"index", "point", "error"}``.
+        One ``shape`` array per name of :data:`FIELDS`, ``"most_impacts"`` (most impact events
+        in a cycle) and ``"errors"``: the failed points as ``{"index", "point", "error"}``.
     """
     maps: dict[str, Any] = {f: np.full(shape, np.nan) for f in FIELDS}
     maps["weakly_stable"] = np.zeros(shape, dtype=bool)
+    maps["most_impacts"] = np.full(shape, np.nan)
     errors = []
     for i, (point, value, err) in enumerate(zip(result.grid, result.values, result.errors,
                                                 strict=True)):
@@ -90,6 +92,7 @@ def robustness_maps(result: Any, shape: tuple[int, int]) -> dict[str, Any]:
             continue
         for f in FIELDS:
             maps[f][idx] = value[f]
+        maps["most_impacts"][idx] = max(value.get("impacts_per_cycle") or [np.nan])
     maps["errors"] = errors
     return maps
 
@@ -209,6 +212,15 @@ def robustness_checks(m1: dict[str, Any], m2: dict[str, Any]) -> list[Check]:
               "critical one", float(np.nanmin(m1["cycles_completed"][e_idx[0.0], inside])),
               CYCLES, ">=", key="plastic_completes"),
     ]
+    impacts = m1["most_impacts"][:, s_idx[1.0]]
+    checks.append(check("Plastic ground (e = 0), exact model: most impact events in a cycle",
+                        float(impacts[e_idx[0.0]]), 1, "==",
+                        note="e = 0 stops the normal velocity at the first impact",
+                        key="plastic_single_impact"))
+    checks.append(check("Impact events per cycle grow with e (exact model; smallest "
+                        "increase from one e to the next)", float(np.min(np.diff(impacts))),
+                        0, ">", note="flight times shrink by about e per rebound: about "
+                                     "log(eps)/log(e) rebounds", key="impacts_grow_with_e"))
     ratio = max(float(m1["worst_tau0_error"][i, j]) / model_error_bound(s)
                 for i in range(len(RESTITUTIONS)) for j, s in enumerate(MODEL_SCALES)
                 if s != 1.0 and s < s_crit)
@@ -279,7 +291,7 @@ def run(out_dir: Path | None) -> ExampleResult:
 
 def _json_map(m: dict[str, Any], rows: tuple, cols: tuple) -> dict[str, Any]:
     return {"rows": list(rows), "columns": list(cols),
-            **{f: np.asarray(m[f]).tolist() for f in FIELDS}}
+            **{f: np.asarray(m[f]).tolist() for f in (*FIELDS, "most_impacts")}}
 
 
 def _map_figure(m: dict[str, Any], xticks: list[str], yticks: list[str], xlabel: str,
