@@ -27,13 +27,14 @@ the published descriptions leave the design open (see ``docs/ch03.md``).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any, Protocol
 
 import numpy as np
 
-from .._validation import FloatArray, check_positive
+from .._validation import FloatArray, check_integer, check_positive
 from ..errors import ModelError
 
 __all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
@@ -483,6 +484,18 @@ class SwitchingTrackingController:
         Multiplies ``K_f (λ̂ - λ_d)`` (1: the law as stated). The 2007 Siconos code fed back
         the impulse ``P = h λ̂`` instead of the force: ``h`` reproduces that scaling, which
         keeps its ``K_f = 3`` from destabilising the one-step-delayed force loop.
+    detection_delay : int
+        Steps by which the phase logic sees the contact impulse late (0: the last step's, as
+        designed). Only the detection of the first impact and of persistent contact is
+        delayed; the force feedback ``λ̂`` is not. The recorded ``t_first_impact`` is the true
+        step of the impulse; the phase switch happens ``detection_delay`` steps later.
+    position_noise : float
+        Standard deviation (rad) of white Gaussian noise added to the measured joint angles
+        at every step (0: exact measurement). The log and the ``V(τ0ᵏ)`` of each cycle are
+        those of the true state (what the analysis judges); the control law and the depth
+        ``d_k`` use the measured one.
+    noise_seed : int
+        Seed of the noise generator, reset by :meth:`reset_run`: a run is reproducible.
 
     Examples
     --------
@@ -496,7 +509,9 @@ class SwitchingTrackingController:
                  transition: TransitionDesign = TransitionDesign(),
                  contact: ContactPhaseDesign = ContactPhaseDesign(), model_scale: float = 1.0,
                  switching: str = "designed", trigger_q2: float = 0.65,
-                 q2_end: float = 0.75, force_feedback_scale: float = 1.0) -> None:
+                 q2_end: float = 0.75, force_feedback_scale: float = 1.0,
+                 detection_delay: int = 0, position_noise: float = 0.0,
+                 noise_seed: int = 0) -> None:
         if switching not in ("designed", "impact-triggered"):
             raise ModelError(f"switching: expected 'designed' or 'impact-triggered', got "
                              f"{switching!r}")
@@ -506,6 +521,10 @@ class SwitchingTrackingController:
         self.switching, self.trigger_q2, self.q2_end = switching, trigger_q2, q2_end
         self.force_feedback_scale = check_positive("force_feedback_scale",
                                                    force_feedback_scale, allow_zero=True)
+        self.detection_delay = check_integer("detection_delay", detection_delay, minimum=0)
+        self.position_noise = check_positive("position_noise", position_noise,
+                                             allow_zero=True)
+        self.noise_seed = check_integer("noise_seed", noise_seed, minimum=0)
         self.n = int(model.n_dof)
         self.reset_run()
 
@@ -588,6 +607,10 @@ class SwitchingTrackingController:
         self.cycles: list[_Cycle] = [_Cycle(0)]
         self._log: list[tuple] = []
         self._t_prev = -math.inf
+        # (step start, impulse over h) of the last detection_delay + 1 steps: the phase
+        # logic reads the oldest one
+        self._seen: deque[tuple[float, float]] = deque(maxlen=self.detection_delay + 1)
+        self._rng = np.random.default_rng(self.noise_seed)
 
     @property
     def current(self) -> _Cycle:
@@ -607,8 +630,13 @@ class SwitchingTrackingController:
             Last step's impulse over ``h`` (unsaturated).
         """
         n = self.n
+        x_true = x
+        if self.position_noise > 0.0:   # no draw at σ = 0: the noiseless run is unchanged
+            x = x.copy()
+            x[:n] += self._rng.normal(0.0, self.position_noise, n)
         q, dq, Mq, Cq, gq, J = self.model.task_model(x[:n], x[n:])
-        self._advance(t, q, dq, Mq, lam_raw)
+        cycle, phase = self.cycle, self.phase
+        self._advance(t, q, dq, Mq, self._detected(lam_raw))
         qd, dqd, ddqd, q_star, lam_d = self._reference(t, q)
         sc = self.model_scale
         tau = slotine_li_force(sc * Mq, sc * Cq, sc * gq, q, dq, qd, dqd, ddqd, self.gains,
@@ -616,7 +644,13 @@ class SwitchingTrackingController:
         lam_hat = min(lam_raw, self.contact.lam_sat)
         if self.phase == Phase.CONSTRAINED:
             tau[0] += -lam_d + self.force_feedback_scale * self.gains.Kf * (lam_hat - lam_d)
+        if x is not x_true:             # log and judge the true state, not the measured one
+            q, dq = self.model.task_state(x_true[:n], x_true[n:])
+            Mq = self.model.task_dynamics(x_true[:n], x_true[n:])[0]
         V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
+        if x is not x_true and (cycle, phase) == (self.cycle, Phase.FREE) \
+                and self.phase == Phase.APPROACH:
+            self.current.V_tau0, self.current.V1_tau0 = V, V1
         self._log.append((t, int(self.phase), self.cycle, V, V1, lam_d, lam_hat,
                           self.current.depth, *q.tolist(), *dq.tolist(), *qd.tolist()))
         self._t_prev = t
@@ -647,6 +681,16 @@ class SwitchingTrackingController:
         return self._lyapunov(Mq, q, dq, qd, dqd)
 
     # -- phase logic --------------------------------------------------------------------
+    def _detected(self, lam_raw: float) -> float:
+        """The impulse over ``h`` the phase logic sees: the one ``detection_delay`` steps
+        old (0 before that many steps have been taken); ``self._t_seen`` is its step start."""
+        self._seen.append((self._t_prev, lam_raw))
+        if len(self._seen) < self._seen.maxlen:
+            self._t_seen = -math.inf
+            return 0.0
+        self._t_seen, lam = self._seen[0]
+        return lam
+
     def _advance(self, t: float, q: FloatArray, dq: FloatArray, Mq: FloatArray,
                  lam_raw: float) -> None:
         if self.switching == "designed":
@@ -668,7 +712,7 @@ class SwitchingTrackingController:
             cyc.t_star, cyc.u_star = self._dive_crossing(cyc)
             self.phase = Phase.APPROACH
         elif self.phase == Phase.APPROACH and lam_raw > 0.0:
-            cyc.t_first_impact = self._t_prev
+            cyc.t_first_impact = self._t_seen
             self.phase, self.contact_steps = Phase.IMPACTS, 1
         elif self.phase == Phase.IMPACTS:
             self.contact_steps = self.contact_steps + 1 if lam_raw > 0.0 else 0
@@ -684,7 +728,7 @@ class SwitchingTrackingController:
         if self.phase == Phase.FREE and lam_raw > 0.0 and q[1] < self.trigger_q2:
             qd, dqd, _, _, _ = self._reference(t, q)
             V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
-            cyc.tau0 = cyc.t_first_impact = self._t_prev
+            cyc.tau0 = cyc.t_first_impact = self._t_seen
             cyc.V_tau0, cyc.V1_tau0 = V, V1
             cyc.depth = math.sqrt(self.gains.gamma2 * V / self.gains.gamma1)
             cyc.q10, cyc.q2_star = 0.0, q[1:].copy()

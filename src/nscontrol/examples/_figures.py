@@ -38,10 +38,17 @@ def save_figure(fig: Any, out_dir: Path | None, name: str, figures: list[Path]) 
 
 def unlabelled_axes(fig: Any) -> list[str]:
     """The panels of ``fig`` that draw data without an x or a y label (``[]`` when all are
-    labelled); a panel sharing its x axis with a labelled one below it needs no x label."""
+    labelled); a panel sharing its x axis with a labelled one below it needs no x label, and a
+    colour bar needs only the label along its length."""
     missing = []
     for k, ax in enumerate(fig.axes):
         if not (ax.lines or ax.collections or ax.patches or ax.images):
+            continue
+        bar = getattr(ax, "_colorbar", None)   # set by Figure.colorbar on the bar's axes
+        if bar is not None:
+            label = ax.get_ylabel() if bar.orientation == "vertical" else ax.get_xlabel()
+            if not label:
+                missing.append(f"panel {k} (colour bar): no label")
             continue
         shared = [o for o in ax.get_shared_x_axes().get_siblings(ax) if o is not ax]
         has_x = bool(ax.get_xlabel()) or any(o.get_xlabel() for o in shared)

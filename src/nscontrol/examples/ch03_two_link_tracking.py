@@ -132,7 +132,8 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
 def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float | None = None,
                       restitution: float | None = None, model_scale: float = 1.0,
                       depth_law: str = "sqrt", depth_min: float = 0.005,
-                      phi: float = 1e5) -> TrackingRun:
+                      phi: float = 1e5, detection_delay: int = 0,
+                      position_noise: float = 0.0, noise_seed: int = 0) -> TrackingRun:
     """The two-link arm tracking the circle cut by the ground.
 
     Parameters
@@ -149,6 +150,10 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         Controller's ``M, C, g`` over the plant's.
     depth_law, depth_min, phi : str, float, float
         Depth law of the virtual dive (designed switching only).
+    detection_delay : int
+        Steps by which the controller detects the impacts and the persistent contact late.
+    position_noise, noise_seed : float, int
+        Standard deviation (rad) and seed of the noise on the measured joint angles.
     """
     from ..design.complementarity_tracking import (
         CircleTask,
@@ -172,7 +177,8 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         switching=cfg.switching,
         # the 2007 code fed back the impulse h λ̂, not λ̂ (its K_f = 3 > 1 would otherwise
         # make the one-step-delayed force loop unstable)
-        force_feedback_scale=(cfg.h if h is None else h) if config == "siconos-2007" else 1.0)
+        force_feedback_scale=(cfg.h if h is None else h) if config == "siconos-2007" else 1.0,
+        detection_delay=detection_delay, position_noise=position_noise, noise_seed=noise_seed)
     x0 = np.array([*cfg.theta0, 0.0, 0.0])
     e = cfg.restitution if restitution is None else restitution
     step = cfg.h if h is None else h
@@ -226,15 +232,18 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
     ----------
     point : dict
         Any of ``restitution`` (default 0.7), ``model_scale`` (1.0), ``h`` (1e-3),
-        ``cycles`` (2), ``config`` (``"siconos-current"``).
+        ``cycles`` (2), ``config`` (``"siconos-current"``), ``detection_delay`` (0 steps),
+        ``position_noise`` (0 rad), ``noise_seed`` (0).
 
     Returns
     -------
     dict
         The point's parameters and ``cycles_completed``, ``worst_tau0_error`` (m),
         ``worst_V_growth`` (largest ``V(τ0ᵏ⁺¹)/V(τ0ᵏ)``), ``penetration`` (m, ``>= 0``),
-        ``impacts_per_cycle`` and ``weakly_stable`` (growth allowance 1.1, floor
-        ``1e-8 (h/1e-4)²``).
+        ``impacts_per_cycle``, ``weakly_stable`` (growth allowance 1.1, floor
+        ``1e-8 (h/1e-4)²``) and ``gap_before_first_takeoff`` (m, smallest gap over the last
+        second before the first planned take-off: 0 when the arm slides on the ground,
+        positive when it hovers above it).
 
     Examples
     --------
@@ -248,7 +257,10 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
     run = two_link_tracking(point.get("config", "siconos-current"),
                             cycles=int(point.get("cycles", 2)), h=h,
                             restitution=float(point.get("restitution", 0.7)),
-                            model_scale=float(point.get("model_scale", 1.0)))
+                            model_scale=float(point.get("model_scale", 1.0)),
+                            detection_delay=int(point.get("detection_delay", 0)),
+                            position_noise=float(point.get("position_noise", 0.0)),
+                            noise_seed=int(point.get("noise_seed", 0)))
     reports = cycle_reports(run.traj, run.controller, run.model, run.restitution)
     verdict = check_weak_stability(reports, v_floor=1e-8 * max(1.0, (h / 1e-4) ** 2),
                                    growth=1.1)
@@ -259,7 +271,15 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
             "worst_V_growth": growth,
             "penetration": max(0.0, -float(run.traj.signals["gap"].min())),
             "impacts_per_cycle": [r.n_impacts for r in reports],
-            "weakly_stable": verdict.holds}
+            "weakly_stable": verdict.holds,
+            "gap_before_first_takeoff": _gap_before(run, run.controller.task.t_detach(0))}
+
+
+def _gap_before(run: TrackingRun, t_detach: float) -> float:
+    """Smallest gap over ``[t_detach - 1 s, t_detach)`` (NaN when the run ends before)."""
+    t = run.traj.t
+    window = (t >= t_detach - 1.0) & (t < t_detach)
+    return float(run.traj.signals["gap"][window, 0].min()) if window.any() else math.nan
 
 
 #: Step of the example's main run. The checks are stated at h = 1e-4; the example runs at
