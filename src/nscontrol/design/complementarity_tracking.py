@@ -685,7 +685,7 @@ class SwitchingTrackingController:
         """The impulse over ``h`` the phase logic sees: the one ``detection_delay`` steps
         old (0 before that many steps have been taken); ``self._t_seen`` is its step start."""
         self._seen.append((self._t_prev, lam_raw))
-        if len(self._seen) < self._seen.maxlen:
+        if len(self._seen) < (self._seen.maxlen or 1):
             self._t_seen = -math.inf
             return 0.0
         self._t_seen, lam = self._seen[0]

@@ -169,10 +169,10 @@ def model_error_bound(scale: float, samples: int = 200) -> float:
     for t in np.linspace(0.0, task.period / 2, samples):
         q, dq, ddq = task.nominal(float(t))
         theta = arm.inverse(q)
-        dtheta = np.linalg.solve(arm.jacobian(theta), dq)
+        dtheta = np.asarray(np.linalg.solve(arm.jacobian(theta), dq), float)
         Mq, Cq, gq, _ = arm.task_dynamics(theta, dtheta)
-        delta = abs(scale - 1.0) * np.linalg.norm(Mq @ ddq + Cq @ dq + gq)
-        worst = max(worst, math.sqrt(np.linalg.cond(Mq)) * delta / (g1 * g2))
+        delta = abs(scale - 1.0) * float(np.linalg.norm(Mq @ ddq + Cq @ dq + gq))
+        worst = max(worst, math.sqrt(float(np.linalg.cond(Mq))) * delta / (g1 * g2))
     return worst
 
 
