@@ -36,6 +36,7 @@ import numpy as np
 
 from .._validation import FloatArray, check_integer, check_positive
 from ..errors import ModelError
+from ..systems.feedback import StaticLaw
 
 __all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
            "CircleTask", "HalfSineTask", "TaskSpaceModel", "SwitchingTrackingController",
@@ -451,7 +452,7 @@ class _Cycle:
     u_star: float = math.nan
 
 
-class SwitchingTrackingController:
+class SwitchingTrackingController(StaticLaw):
     """The switching passivity-based tracking controller (module docstring) as a
     continuous-time :class:`~nscontrol.systems.Controller` for :func:`nscontrol.closed_loop`.
 
@@ -528,8 +529,8 @@ class SwitchingTrackingController:
         self.n = int(model.n_dof)
         self.reset_run()
 
-    # -- Controller protocol ---------------------------------------------------------------
-    n_states = 0
+    # -- Controller protocol (update and reset from StaticLaw: the phase logic is Python
+    # state of the object, not a vector state; impacts are detected from λ̂) --------------
     period = None
 
     @property
@@ -551,34 +552,6 @@ class SwitchingTrackingController:
         """
         lam = 0.0 if m.lam is None or np.size(m.lam) == 0 else float(np.asarray(m.lam)[0])
         return self.step(t, np.asarray(m.x, float), lam)
-
-    def update(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
-        """No vector state.
-
-        Parameters
-        ----------
-        t : float
-            Time.
-        xc : ndarray
-            Empty internal state.
-        m : Measurement
-            Unused.
-        """
-        return xc
-
-    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
-        """Nothing to reset: impacts are detected from ``λ̂``.
-
-        Parameters
-        ----------
-        t : float
-            Time.
-        xc : ndarray
-            Empty internal state.
-        jump : Jump
-            Unused.
-        """
-        return xc
 
     def __call__(self, t: float, q: FloatArray, v: FloatArray, *,
                  lam_hat: FloatArray) -> FloatArray:

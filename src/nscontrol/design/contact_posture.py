@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_square, as_vector, check_positive, check_symmetric
 from ..errors import DimensionError, InfeasibleDesignError, ModelError, NscontrolWarning
+from ..systems.feedback import StaticLaw
 
 __all__ = ["StaticPostureDesign", "ContactRegulator", "static_contact_forces",
            "design_contact_regulator"]
@@ -262,7 +263,7 @@ def _null_space(S: FloatArray) -> FloatArray:
 
 
 @dataclass(frozen=True, eq=False)
-class ContactRegulator:
+class ContactRegulator(StaticLaw):
     """The posture regulator ``τ = -K_p (S q - θ*) - K_d S v + τ*`` as a static
     :class:`~nscontrol.systems.Controller`.
 
@@ -315,14 +316,6 @@ class ContactRegulator:
         """``τ`` at the plant state ``m.x = [q; v]``."""
         n = self.model.n_dof
         return self.torque(m.x[:n], m.x[n:])
-
-    def update(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
-        """Static law: no internal state."""
-        return xc
-
-    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
-        """Static law: nothing to reset at impacts."""
-        return xc
 
     # -- the law and its potential ---------------------------------------------------------
     def torque(self, q: ArrayLike, v: ArrayLike) -> FloatArray:

@@ -43,6 +43,7 @@ import numpy as np
 
 from .._validation import FloatArray, check_positive
 from ..errors import ModelError, NscontrolWarning
+from ..systems.feedback import StaticLaw
 
 __all__ = ["SetPoint", "Sinusoid", "PDLaw", "compensation_model", "FrictionCompensatingPD",
            "ReducedOrderVelocityObserver", "OneLinkGains", "one_link_gains",
@@ -166,7 +167,7 @@ def _curve(law: Any) -> tuple[float, float, float, float, float]:
 
 
 @dataclass(frozen=True, eq=False)
-class FrictionCompensatingPD:
+class FrictionCompensatingPD(StaticLaw):
     """The digital controller ``u = u_pd + T_hat(omega_hat)`` (a ``Controller``).
 
     Reads ``omega_hat`` from the observer's estimate; without an observer in the loop it
@@ -227,14 +228,6 @@ class FrictionCompensatingPD:
         """``[u]`` at the tick ``t``."""
         v = self.velocity(m)
         return np.array([self.pd.torque(t, float(m.y[0]), v) + self.friction_estimate(v)])
-
-    def update(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
-        """No internal state."""
-        return xc
-
-    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
-        """No internal state."""
-        return xc
 
 
 @dataclass(frozen=True, eq=False)

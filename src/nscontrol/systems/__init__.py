@@ -34,6 +34,7 @@ _EXPORTS: dict[str, str] = {
     "LinearHybridSystem": "hybrid",
     # feedback.py
     "Measurement": "feedback", "Jump": "feedback", "Controller": "feedback",
+    "StaticLaw": "feedback",
     "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
     "LinearController": "feedback", "LinearObserver": "feedback",
     "PiecewiseObserver": "feedback",

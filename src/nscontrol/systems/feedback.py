@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike
 from .._validation import FloatArray, as_matrix, as_vector, check_positive
 from ..errors import DimensionError, ModelError
 
-__all__ = ["Measurement", "Jump", "Controller", "Observer", "StateFeedback",
+__all__ = ["Measurement", "Jump", "Controller", "Observer", "StaticLaw", "StateFeedback",
            "PiecewiseStateFeedback", "LinearController", "LinearObserver", "PiecewiseObserver"]
 
 
@@ -155,11 +155,68 @@ class _Block:
     period: float | None = None
 
     def reset(self, t: float, xc: FloatArray, jump: Jump) -> FloatArray:
+        """The internal state after a plant jump: unchanged.
+
+        Parameters
+        ----------
+        t : float
+            Time of the jump.
+        xc : ndarray
+            The block's internal state.
+        jump : Jump
+            The plant's jump.
+        """
+        return xc
+
+
+class StaticLaw:
+    """Base of a feedback law without internal state (``n_states = 0``): a subclass gives
+    ``n_outputs``, ``period`` (``None``: continuous-time) and ``output``; ``update`` and
+    ``reset`` leave the empty state as it is.
+
+    Examples
+    --------
+    >>> class Saturated(StaticLaw):
+    ...     n_outputs, period = 1, None
+    ...     def output(self, t, xc, m):
+    ...         return np.clip(-m.x[:1], -1.0, 1.0)
+    >>> isinstance(Saturated(), Controller)
+    True
+    """
+
+    n_states: int = 0
+
+    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        """No internal state: the empty state, unchanged.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        xc : ndarray
+            The (empty) internal state.
+        m : Measurement
+            Unused.
+        """
+        return xc
+
+    def reset(self, t: float, xc: FloatArray, jump: Jump) -> FloatArray:
+        """No internal state: the empty state, unchanged by a plant jump.
+
+        Parameters
+        ----------
+        t : float
+            Time of the jump.
+        xc : ndarray
+            The (empty) internal state.
+        jump : Jump
+            Unused.
+        """
         return xc
 
 
 @dataclass(frozen=True, eq=False)
-class StateFeedback(_Block):
+class StateFeedback(StaticLaw):
     """Static state feedback ``u = K x + k`` (continuous-time, or sampled with ``period``).
 
     Parameters
@@ -207,12 +264,9 @@ class StateFeedback(_Block):
                              "observer= to closed_loop, or use on='state'")
         return self.K @ x + self.k
 
-    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        return xc
-
 
 @dataclass(frozen=True, eq=False)
-class PiecewiseStateFeedback(_Block):
+class PiecewiseStateFeedback(StaticLaw):
     """Region-wise affine state feedback ``u = K_i x + k_i`` for a piecewise-affine plant
     (``i``: the plant's region), continuous-time.
 
@@ -232,6 +286,7 @@ class PiecewiseStateFeedback(_Block):
     k: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
     on: str = "state"
     n_states: int = field(default=0, init=False)
+    period: float | None = field(default=None, init=False)   # runs in continuous time
 
     if TYPE_CHECKING:
         def __init__(self, K: Sequence[ArrayLike], k: Sequence[ArrayLike] | None = None,
@@ -261,9 +316,6 @@ class PiecewiseStateFeedback(_Block):
     def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
         raise ModelError("PiecewiseStateFeedback: its region is the plant's; it runs only "
                          "stacked into a PiecewiseAffineSystem by closed_loop")
-
-    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        return xc
 
 
 @dataclass(frozen=True, eq=False)
