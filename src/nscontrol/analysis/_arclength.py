@@ -23,6 +23,13 @@ from .._validation import FloatArray
 from ..errors import SolverError
 
 
+def parameter_derivative(G: Callable[[float], FloatArray], p: float) -> FloatArray:
+    """``∂G/∂p`` by a central difference with step ``ε^{1/3}·max(1, |p|)`` (truncation
+    ``O(δ²)`` against rounding ``O(ε/δ)``; exact up to rounding when ``p`` enters affinely)."""
+    dp = float(np.finfo(float).eps) ** (1 / 3) * max(1.0, abs(p))
+    return (G(p + dp) - G(p - dp)) / (2 * dp)
+
+
 class FactoryMemo:
     """``factory(p)`` remembered for the last few parameter values: the corrector and the
     central difference in ``p`` ask for the same few ``p`` again and again, and a factory may

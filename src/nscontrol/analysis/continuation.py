@@ -48,12 +48,11 @@ import numpy as np
 from .._files import replaced_atomically
 from .._validation import FloatArray, check_integer, check_positive
 from ..errors import ModelError, SolverError
-from ._arclength import ArclengthProblem, FactoryMemo, Point, locate
+from ._arclength import ArclengthProblem, FactoryMemo, Point, locate, parameter_derivative
 from .orbits import Forced, Orbit, _initial_nodes, _shooting_system, make_orbit
 
 __all__ = ["SpecialPoint", "Branch", "continue_orbit", "switch_at_flip"]
 
-_EPS = float(np.finfo(float).eps)
 
 
 @dataclass(frozen=True, eq=False)
@@ -305,10 +304,7 @@ class _Problem(ArclengthProblem):
     def parameter_derivative(self, y: FloatArray) -> FloatArray:
         """``∂G/∂p`` by central differences (step ``ε^{1/3}·max(1, |p|)``)."""
         X, p = self.split(y)
-        dp = _EPS ** (1 / 3) * max(1.0, abs(p))
-        Rp = _shooting_system(self.forced(p + dp), X)[0]
-        Rm = _shooting_system(self.forced(p - dp), X)[0]
-        return (Rp - Rm) / (2 * dp)
+        return parameter_derivative(lambda q: _shooting_system(self.forced(q), X)[0], p)
 
     def solution(self, y: FloatArray, aux: Any, iterations: int, residual: float) -> Orbit:
         X, p = self.split(y)

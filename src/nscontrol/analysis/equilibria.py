@@ -45,14 +45,18 @@ from .._validation import FloatArray, as_vector, check_integer, check_positive
 from ..errors import ModelError, SolverError
 from ..numerics.differences import central_difference_jacobian
 from ..systems.nonlinear import NonlinearSystem
-from ._arclength import ArclengthProblem, FactoryMemo, Point, locate, unit_tangent
+from ._arclength import (
+    ArclengthProblem,
+    FactoryMemo,
+    Point,
+    locate,
+    parameter_derivative,
+    unit_tangent,
+)
 from .continuation import Branch, SpecialPoint
 
 __all__ = ["EquilibriumPoint", "continue_equilibrium"]
 
-_EPS = float(np.finfo(float).eps)
-#: Central-difference step factor: truncation ``O(δ²)`` against rounding ``O(ε/δ)``.
-_DELTA = _EPS ** (1 / 3)
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,8 +179,7 @@ class _EquilibriumProblem(ArclengthProblem):
         ``ε^{1/3}·max(1, |p|)``; exact up to rounding when ``p`` enters affinely) and
         ``F_x``. ``G_p`` is not reused: it costs two field evaluations."""
         x, p = y[:-1], float(y[-1])
-        dp = _DELTA * max(1.0, abs(p))
-        F_p = (self.value(x, p + dp) - self.value(x, p - dp)) / (2 * dp)
+        F_p = parameter_derivative(lambda q: self.value(x, q), p)
         Jx = self.jacobian_x(x, p)
         return self.value(x, p), np.column_stack([Jx, F_p]), Jx
 
