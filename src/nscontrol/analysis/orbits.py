@@ -621,13 +621,23 @@ def _transition_run(system: Any, x0: FloatArray, tf: float, method: Any,
     return simulate(system, x0, (0.0, tf), method=method, t_eval=te, sensitivity=True)
 
 
+def _velocity_samples(tf: float) -> FloatArray:
+    """The ``t_eval`` a run to ``tf`` needs for :func:`_flow_velocity`: ``0, tf - δ, tf``."""
+    return np.array([0.0, tf - _velocity_step(tf), tf])
+
+
+def _velocity_step(tf: float) -> float:
+    """``δ = ε^{1/3}·tf``: truncation ``O(δ²)`` against rounding ``O(ε/δ)``."""
+    return float(np.finfo(float).eps) ** (1 / 3) * tf
+
+
 def _flow_velocity(system: Any, tr: Any, tf: float, method: Any) -> FloatArray:
-    """``ẋ(tf)`` by central differences of the flow (step ``δ = ε^{1/3}·tf``: truncation
-    ``O(δ²)`` against rounding ``O(ε/δ)``): ``x(tf - δ)`` from the run's samples, ``x(tf + δ)``
+    """``ẋ(tf)`` by central differences of the flow (step :func:`_velocity_step`):
+    ``x(tf - δ)`` from the run's samples (run with :func:`_velocity_samples`), ``x(tf + δ)``
     from a short continuation."""
     from ..simulate import simulate
 
-    delta = float(np.finfo(float).eps) ** (1 / 3) * tf
+    delta = _velocity_step(tf)
     x_minus = at_times(tr, [tf - delta])[0]
     after = simulate(system, tr.x[-1], (0.0, delta), method=method,
                      t_eval=np.array([0.0, delta]))
@@ -754,8 +764,7 @@ def _cycle_equations(system: Any, x: FloatArray, T: float, normal: FloatArray, o
     bordered Jacobian ``[[M - I, ẋ(T)], [normalᵀ, 0]]``, the monodromy ``M``, the velocity
     ``ẋ(T)`` and the run."""
     n = x.shape[0]
-    delta = float(np.finfo(float).eps) ** (1 / 3) * T
-    tr = _transition_run(system, x, T, method, t_eval=np.array([0.0, T - delta, T]))
+    tr = _transition_run(system, x, T, method, t_eval=_velocity_samples(T))
     M = np.asarray(tr.stats["state_transition"], float)
     r = np.append(tr.x[-1] - x, normal @ x - offset)
     f = _flow_velocity(system, tr, T, method)
@@ -945,9 +954,7 @@ def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: f
         if abs(s1 - s0) <= 4 * np.finfo(float).eps * max(1.0, ta + s1):
             break
     tau = ta + s1
-    run = _transition_run(system, x0, tau, method,
-                          t_eval=np.array([0.0, tau - float(np.finfo(float).eps) ** (1 / 3) * tau,
-                                           tau]))
+    run = _transition_run(system, x0, tau, method, t_eval=_velocity_samples(tau))
     M = np.asarray(run.stats["state_transition"], float)
     f = _flow_velocity(system, run, tau, method)
     P = np.eye(n) - np.outer(f, nv) / float(nv @ f)
