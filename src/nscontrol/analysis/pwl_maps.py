@@ -229,7 +229,7 @@ def linear_reference(lin: PWLLinearization, z0: ArrayLike, t: ArrayLike, v: Any 
     z0 : (n,) array_like
         Initial point.
     t : (k,) array_like
-        Times (from 0, the exosystem's time origin).
+        Increasing times, from 0 (the exosystem's time origin).
     v : Exosystem or float, optional
         The new input (as given to :meth:`PWLLinearization.closed_loop`).
     outer : (m, n) or (n,) array_like, optional
@@ -245,8 +245,20 @@ def linear_reference(lin: PWLLinearization, z0: ArrayLike, t: ArrayLike, v: Any 
     kappa = np.zeros((m, n)) if outer is None else np.atleast_2d(np.asarray(outer, float))
     M = np.block([[lin.A_target - lin.B_target @ kappa, lin.B_target @ exo.Cu],
                   [np.zeros((q, n)), exo.S]])
-    xi0 = np.concatenate([np.asarray(z0, float), exo.w0])
-    return np.array([expm(M * tk) @ xi0 for tk in np.asarray(t, float)])[:, :n]
+    xi = np.concatenate([np.asarray(z0, float), exo.w0])
+    # step by step from t = 0, one exponential per distinct step (a uniform grid needs one):
+    # k steps add about k roundoffs relative to the size of the solution
+    steps: dict[float, FloatArray] = {}
+    out, t_prev = [], 0.0
+    for tk in np.asarray(t, float):
+        h = float(tk - t_prev)
+        key = round(h, 12)
+        if key not in steps:
+            steps[key] = expm(M * h)
+        xi = steps[key] @ xi
+        out.append(xi[:n])
+        t_prev = float(tk)
+    return np.array(out)
 
 
 def conjugacy_error(lin: PWLLinearization, trajectory: Any, v: Any = None,

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -70,8 +70,8 @@ class ConewiseLinearSystem:
         The facets of the fan (:class:`Facet`), one per pair of adjacent cones.
     pwa
         The same model as a continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`
-        (input matrix ``E = B``), whose partition machinery found the facets; simulate it
-        for the open loop.
+        (input matrix ``E = B``), whose partition machinery checks the fan and finds the
+        facets (two opposite half-spaces need no search); simulate it for the open loop.
 
     Raises
     ------
@@ -98,7 +98,7 @@ class ConewiseLinearSystem:
     cones: tuple[FloatArray, ...]
     state_names: tuple[str, ...] = ()
     facets: tuple[Facet, ...] = field(default=(), init=False)
-    pwa: PiecewiseAffineSystem = field(default=None, init=False, repr=False)  # type: ignore[assignment]  # set in __post_init__
+    _pwa: PiecewiseAffineSystem | None = field(default=None, init=False, repr=False)
 
     default_method = "switching"
 
@@ -124,16 +124,24 @@ class ConewiseLinearSystem:
         if self.state_names and len(self.state_names) != n:
             raise DimensionError(f"state_names: expected {n} names, got "
                                  f"{len(self.state_names)}")
-        # the partition (overlaps, cover, neighbours) is PiecewiseAffineSystem's; continuity
-        # is tested below exactly, so that the message can name the facet and the residual
-        pwa = PiecewiseAffineSystem.conewise(As, [-E for E in cones], E=B, continuous=False,
-                                             state_names=tuple(self.state_names))
-        facets = _facets(pwa, cones)
+        pwa = None
+        if _is_half_space_pair(cones):   # two half-spaces: a fan, one facet, nothing to search
+            facets: tuple[Facet, ...] = (Facet(0, 1, cones[0][0] / np.linalg.norm(cones[0][0])),)
+        else:
+            # the partition (overlaps, cover, neighbours) is PiecewiseAffineSystem's; the
+            # continuity is tested below exactly, so that the message names facet and residual
+            pwa = PiecewiseAffineSystem.conewise(As, [-E for E in cones], E=B,
+                                                 continuous=False,
+                                                 state_names=tuple(self.state_names))
+            facets = _facets(pwa, cones)
         for fac in facets:
             _check_facet_continuity(As, fac)
-        pwa = replace(pwa, continuous=True)   # now known continuous: say so to analyses
+        if pwa is not None:
+            # the exact test above is stronger than the sampled one continuous=True would
+            # repeat (with its LPs): record its outcome on the partition already built
+            object.__setattr__(pwa, "continuous", True)
         for key, value in (("A", As), ("B", B), ("cones", cones), ("facets", facets),
-                           ("state_names", tuple(self.state_names)), ("pwa", pwa)):
+                           ("state_names", tuple(self.state_names)), ("_pwa", pwa)):
             object.__setattr__(self, key, value)
 
     # -- construction helpers -----------------------------------------------------------
@@ -165,6 +173,18 @@ class ConewiseLinearSystem:
                    state_names=tuple(state_names))
 
     # -- queries --------------------------------------------------------------------------
+    @property
+    def pwa(self) -> PiecewiseAffineSystem:
+        """The same model as a continuous :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem`
+        (regions ``{-E_i x <= 0}``, input matrix ``E = B``); built on first use for a
+        bimodal fan."""
+        if self._pwa is None:
+            object.__setattr__(self, "_pwa", PiecewiseAffineSystem.conewise(
+                self.A, [-E for E in self.cones], E=self.B, continuous=True,
+                state_names=self.state_names))
+        assert self._pwa is not None
+        return self._pwa
+
     @property
     def n_states(self) -> int:
         """Dimension ``n`` of the state."""
@@ -268,6 +288,12 @@ def _input_matrix(B: Any, n: int) -> FloatArray:
                          f"{Bm.shape} with singular values {np.array2string(s, precision=3)}; "
                          f"drop the dependent columns")
     return Bm
+
+
+def _is_half_space_pair(cones: tuple[FloatArray, ...]) -> bool:
+    return (len(cones) == 2 and cones[0].shape[0] == 1 and cones[1].shape[0] == 1 and
+            bool(np.allclose(cones[0][0] / np.linalg.norm(cones[0][0]),
+                             -cones[1][0] / np.linalg.norm(cones[1][0]), rtol=0.0, atol=1e-15)))
 
 
 def _facets(pwa: PiecewiseAffineSystem, cones: tuple[FloatArray, ...]) -> tuple[Facet, ...]:
