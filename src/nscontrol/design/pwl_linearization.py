@@ -328,7 +328,10 @@ def pwl_feedback_linearize(system: ConewiseLinearSystem, feedback_class: str = "
         Relative tolerance of the float tests (a residual ``<= tol`` times its scale counts
         as zero); unused with ``exact=True``.
     exact : bool, optional
-        Run the tests in rational arithmetic (the exact values of the stored doubles).
+        Run the tests in rational arithmetic on the exact values of the stored doubles:
+        give data that are exact in binary (integers, halves, …) or whose structure does not
+        rest on roundoff — a mode ``A_2 + e cᵀ`` computed in floating point is, exactly, not
+        rank-one away from ``A_2`` (the float mode accepts it within ``tol``).
     force : bool, optional
         Build the single-input construction of the requested class even when only the
         orientation or equality of the ``γ_i`` fails (chain intact, ``γ_i ≠ 0``), marked
