@@ -52,7 +52,7 @@ def coherent_orientation(T_modes: Any) -> tuple[bool, FloatArray]:
     return bool(np.all(dets > 0) or np.all(dets < 0)), dets
 
 
-def preimage_counts(lin: PWLLinearization, z: ArrayLike, tol: float = 1e-9) -> FloatArray:
+def preimage_counts(lin: PWLLinearization, z: ArrayLike, tol: float = 1e-9) -> np.ndarray:
     """The number of distinct preimages of each point under ``T``.
 
     For every cone ``i`` the candidate ``x = T_i⁻¹ z`` is a preimage when it lies in ``C_i``;
@@ -109,7 +109,7 @@ class HomeomorphismReport:
     continuity_residual: float
     coherent: bool
     dets: FloatArray
-    counts: FloatArray
+    counts: np.ndarray
     reasons: tuple[str, ...]
 
 

@@ -155,7 +155,7 @@ class PWLLinearization:
         """
         z = as_vector("z", z, self.system.n_states)
         for i, Ti in enumerate(self.T_modes):
-            x = np.linalg.solve(Ti, z)
+            x: FloatArray = np.asarray(np.linalg.solve(Ti, z), float)
             if self.system.contains(i, x, tol):
                 return x
         raise ModelError(f"z: {np.array2string(z, precision=6)} has no preimage under T (no "
@@ -501,7 +501,7 @@ def _single_input(system: ConewiseLinearSystem, requested: str, ar: Any, force: 
     As = [ar.array(A) for A in system.A]
     b = ar.array(system.B[:, 0])
     ctrb = _krylov(As[0], b, n)
-    no = {c: False for c in FEEDBACK_CLASSES}
+    no: dict[str, bool | None] = {c: False for c in FEEDBACK_CLASSES}
     if ar.rank(ctrb) < n:
         why = [f"mode 0 is not controllable: rank [b, A_0 b, …, A_0^{n - 1} b] = "
                f"{ar.rank(ctrb)} < {n} (a linearizable system is controllable in every mode)"]
@@ -516,7 +516,7 @@ def _single_input(system: ConewiseLinearSystem, requested: str, ar: Any, force: 
     rows = [chain[i][n - 1] for i in range(N)]
     gammas = [r @ b for r in rows]
     reasons = _class_reasons(rows, gammas, ar, n)
-    verdict = {c: not reasons[c] for c in FEEDBACK_CLASSES}
+    verdict: dict[str, bool | None] = {c: not reasons[c] for c in FEEDBACK_CLASSES}
     gam = ar.to_float(np.array(gammas, dtype=object))
     transform = None
     buildable = all(ar.sign(g, ar.norm(r) * ar.norm(b)) != 0

@@ -163,9 +163,9 @@ def _verdict_checks(out: dict[str, Any]) -> list[Any]:
 
 
 def _formula_check(out: dict[str, Any]) -> list[Any]:
-    from ..design.pwl_linearization import pwl_feedback_linearize
+    from ..design.pwl_linearization import linearize_or_raise
 
-    lin = pwl_feedback_linearize(ex9_2_one_layer()).transform
+    lin = linearize_or_raise(ex9_2_one_layer())
     rng = np.random.default_rng(9)
     X, V = rng.standard_normal((200, 3)), rng.standard_normal(200)
     T_ref = np.column_stack([X[:, 0], X[:, 1], X[:, 2] + np.maximum(X[:, 0], 0.0)])
@@ -190,7 +190,7 @@ def _run(lin: Any, x0: Any, t_final: float, v: Any = None, outer: Any = None,
 
 def _conjugacy_checks(out: dict[str, Any], runs: dict[str, Any]) -> list[Any]:
     from ..analysis.pwl_maps import conjugacy_error, homeomorphism_report
-    from ..design.pwl_linearization import pwl_feedback_linearize
+    from ..design.pwl_linearization import linearize_or_raise, pwl_feedback_linearize
     from ..errors import SlidingError
     from ..numerics.lti import Exosystem
 
@@ -205,7 +205,7 @@ def _conjugacy_checks(out: dict[str, Any], runs: dict[str, Any]) -> list[Any]:
             cases.append(("random_4d", system, v3, tuple(0.5 * rng.standard_normal(4))))
     errors, crossings, sliding, failures = {}, {}, 0, 0
     for name, system, v, x0 in cases:
-        lin = pwl_feedback_linearize(system).transform
+        lin = linearize_or_raise(system)
         failures += not homeomorphism_report(lin, n_samples=500).homeomorphism
         try:
             tr = _run(lin, x0, 6.0, v)
@@ -216,7 +216,7 @@ def _conjugacy_checks(out: dict[str, Any], runs: dict[str, Any]) -> list[Any]:
         errors[name] = conjugacy_error(lin, tr, v)
         crossings[name] = sum(e.kind == "crossing" for e in tr.events)
     out.update(conjugacy_error=errors, conjugacy_crossings=crossings)
-    lin = pwl_feedback_linearize(ex9_2_one_layer()).transform
+    lin = linearize_or_raise(ex9_2_one_layer())
     kappa = np.array(KAPPA)
     tr = _run(lin, X0_3D, 8.0, outer=kappa, n_samples=401)
     runs["outer"] = (lin, tr, None)
@@ -234,9 +234,9 @@ def _conjugacy_checks(out: dict[str, Any], runs: dict[str, Any]) -> list[Any]:
 
 def _fold_check(out: dict[str, Any]) -> list[Any]:
     from ..analysis.pwl_maps import homeomorphism_report
-    from ..design.pwl_linearization import pwl_feedback_linearize
+    from ..design.pwl_linearization import linearize_or_raise
 
-    lin = pwl_feedback_linearize(ex9_4_pwl_gain(-1.0, 1.0), force=True).transform
+    lin = linearize_or_raise(ex9_4_pwl_gain(-1.0, 1.0), force=True)
     rep = homeomorphism_report(lin, n_samples=1000)
     counts = rep.counts.tolist()
     out["fold_preimage_counts (0, 1, 2 preimages)"] = counts
@@ -272,11 +272,11 @@ def _robustness_checks(out: dict[str, Any]) -> list[Any]:
 
 def _refusal_checks(out: dict[str, Any]) -> list[Any]:
     from .. import simulate
-    from ..design.pwl_linearization import pwl_feedback_linearize
+    from ..design.pwl_linearization import linearize_or_raise
     from ..errors import ModelError, SlidingError
     from ..systems.conewise import ConewiseLinearSystem
 
-    lin = pwl_feedback_linearize(ex9_4_pwl_gain(-1.0, 1.0), force=True).transform
+    lin = linearize_or_raise(ex9_4_pwl_gain(-1.0, 1.0), force=True)
     refused = 0
     try:
         lin.closed_loop(-0.5)
