@@ -100,8 +100,6 @@ class ConewiseLinearSystem:
     facets: tuple[Facet, ...] = field(default=(), init=False)
     _pwa: PiecewiseAffineSystem | None = field(default=None, init=False, repr=False)
 
-    default_method = "switching"
-
     if TYPE_CHECKING:
         def __init__(self, A: Sequence[ArrayLike], B: ArrayLike, cones: Sequence[ArrayLike],
                      state_names: Sequence[str] = ()) -> None: ...
