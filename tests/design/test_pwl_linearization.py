@@ -194,3 +194,46 @@ def test_forced_feedback_with_sign_changing_gains_is_refused_before_the_run():
                                            "the facet between cones 0 and 1.*= -1 < 0"):
         res.transform.closed_loop(-0.5)
     assert pwl_feedback_linearize(ex9_4_pwl_gain(-1.0, 1.0)).transform is None  # not forced
+
+
+def _planar_fan(rng, n_cones, linear_first_row):
+    """A continuous planar fan built from the field's values on its rays:
+    ``A_i = [f(d_i), f(d_i+1)] [d_i, d_i+1]⁻¹`` (continuous by construction: the two cones
+    sharing a ray agree on it). Gaps between rays stay below π so every cone is pointed (so at
+    least three cones; two make half-planes, the bimodal case tested above)."""
+    while True:
+        gaps = rng.dirichlet(np.ones(n_cones)) * 2 * np.pi
+        if np.all(gaps < 0.9 * np.pi) and np.all(gaps > 0.1):
+            break
+    angles = rng.uniform(0, 2 * np.pi) + np.concatenate([[0.0], np.cumsum(gaps)[:-1]])
+    rays = [np.array([np.cos(a), np.sin(a)]) for a in angles]
+    p = rng.standard_normal(2)
+    values = [np.array([p @ d if linear_first_row else rng.standard_normal(),
+                        rng.standard_normal()]) for d in rays]
+    A, cones = [], []
+    rot = np.array([[0.0, -1.0], [1.0, 0.0]])             # +90°: inward normal of the first ray
+    for i in range(n_cones):
+        d0, d1 = rays[i], rays[(i + 1) % n_cones]
+        A.append(np.column_stack([values[i], values[(i + 1) % n_cones]])
+                 @ np.linalg.inv(np.column_stack([d0, d1])))
+        cones.append(np.vstack([rot @ d0, -(rot @ d1)]))
+    return ConewiseLinearSystem(A, [0.0, 1.0], cones)
+
+
+def test_planar_corollary_on_random_fans():
+    # b = e2: the verdicts are read off (A_i)_12 = ∂(x1')/∂x2 per cone and the first rows
+    rng = np.random.default_rng(34)
+    seen = set()
+    for trial in range(24):
+        system = _planar_fan(rng, 3 + trial % 3, linear_first_row=trial % 4 == 0)
+        a12 = np.array([A[0, 1] for A in system.A])
+        if np.min(np.abs(a12)) < 1e-3:
+            continue                      # too close to the orientation boundary for floats
+        f2 = bool(np.all(a12 > 0) or np.all(a12 < 0))
+        # first rows equal up to the roundoff of the construction (cond of [d_i, d_i+1] ≤ ~10)
+        f0 = f2 and all(np.allclose(A[0], system.A[0][0], rtol=0, atol=1e-12)
+                        for A in system.A)
+        res = pwl_feedback_linearize(system)
+        assert res.verdict["pwl_gain"] == f2 and res.verdict["continuous"] == f0, trial
+        seen.add((f0, f2))
+    assert {(False, True), (False, False), (True, True)} <= seen
