@@ -31,8 +31,8 @@ from . import Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
 
 __all__ = ["EXAMPLES", "SIGMA", "OMEGA", "EPS", "example_a", "example_b", "design_a",
-           "design_b", "zdm_convergence", "sliding_cycles", "stabilisation", "suppression",
-           "diagram", "fd_slope", "run"]
+           "design_b", "design_point", "DESIGN_TARGETS", "zdm_convergence",
+           "sliding_cycles", "stabilisation", "suppression", "diagram", "fd_slope", "run"]
 
 SIGMA, OMEGA, EPS = 0.02, 1.0, 0.1
 #: DOP853 tolerance of the switching method (its default).
@@ -85,6 +85,21 @@ def design_b(lam_d: float, z_d: float, problem: Any = None) -> Any:
     return verify_corner_design(design_corner_controller(
         plant, cyc, b=[0.0, 1.0], target_multiplier=lam_d, target_offset=z_d,
         anchor=[0.0, 2.0], axis=[0.0, 1.0], section=sec))
+
+
+def design_point(target: tuple[str, float, float]) -> dict[str, float]:
+    """One verified design, ``(example, λ_d, z_d)`` -> measured multiplier and offset ratio
+    (module level: a task for :func:`nscontrol.sweep.run` on processes or Dask)."""
+    example, lam_d, z_d = target
+    d = design_a(z_d, lam_d) if example == "A" else design_b(lam_d, z_d)
+    return {"k": d.k, "mu_c": d.mu_c, "multiplier": d.verified.multiplier,
+            "offset_ratio": d.verified.offset / d.predicted_section_offset}
+
+
+#: The designs of the convergence study: ``(example, λ_d, z_d)``.
+DESIGN_TARGETS = tuple([("A", 0.5, z) for z in (0.01, 0.005, 0.0025)]
+                       + [("B", 0.2, z) for z in (-0.01, -0.005, -0.0025)]
+                       + [("B", 0.9, z) for z in (0.01, 0.005, 0.0025)])
 
 
 def fd_slope(design: Any, h: float = 1e-7) -> float:
