@@ -21,7 +21,7 @@ orbit that meets the wedge leaves it at the corner, ``λ_new = 0`` whatever ``k`
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -416,6 +416,9 @@ class Section:
     offset: float
     direction: FloatArray
 
+    if TYPE_CHECKING:
+        def __init__(self, normal: ArrayLike, offset: float, direction: ArrayLike) -> None: ...
+
     def __post_init__(self) -> None:
         nv = _vec("normal", self.normal)
         d = _vec("direction", self.direction)
@@ -590,7 +593,7 @@ def corner_site(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike,
         ps = (simulate(plant, cycle.x0, (0.0, t_s), t_eval=np.array([0.0, t_s])).x[-1]
               if t_s > 0.0 else np.asarray(cycle.x0, float))
         fs = plant.rhs(0.0, ps)
-        section = Section(fs / np.linalg.norm(fs), float(fs @ ps) / np.linalg.norm(fs),
+        section = Section(fs / np.linalg.norm(fs), float(fs @ ps) / float(np.linalg.norm(fs)),
                           _outward(fs, orient))
     _, ps = _first_crossing(plant, p, section.normal, section.offset, 2.0 * T)
     tau = _transport(plant, ps, section.direction, p, e, T)

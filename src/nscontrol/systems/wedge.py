@@ -59,7 +59,8 @@ def cross(u: ArrayLike, v: ArrayLike) -> float:
     u, v : (2,) array_like
         Planar vectors.
     """
-    return float(u[0] * v[1] - u[1] * v[0])  # type: ignore[index]
+    a, b = np.asarray(u, float), np.asarray(v, float)
+    return float(a[0] * b[1] - a[1] * b[0])
 
 
 @dataclass(frozen=True)
