@@ -39,6 +39,9 @@ SIGMA, OMEGA, EPS = 0.02, 1.0, 0.1
 RTOL = 1e-11
 #: Tolerance of the long brute-force runs that only decide where an orbit goes.
 RTOL_BRUTE = 1e-9
+#: Corner offsets of the diagram (figure) and those its check is made at.
+DIAGRAM_MUS = (0.0005, 0.001, 0.002, 0.004, 0.008)
+CHECKED_MUS = (0.001, 0.002, 0.004)
 
 
 def example_a() -> tuple[Any, Any, Any]:
@@ -219,11 +222,12 @@ def stabilisation(design: Any, n_returns: int = 30) -> dict[str, Any]:
                               period=site.period, rtol=RTOL_BRUTE, atol=1e-12)
         z = np.array([site.section_offset(p) for p in pts])
         out["to_cycle"].append(abs(z[-1] - z_star))
-        out["paths"][f"r0 = 1 + {z0:g}"] = np.hypot(pts[:, 0], pts[:, 1])
+        out["paths"][f"from r0 = 1 + {z0:g}: distance to the controlled cycle"] = \
+            np.abs(z - z_star)
     pts = section_returns(design.system, site.section_state(-0.01), site.section, n_returns,
                           period=site.period, rtol=RTOL_BRUTE, atol=1e-12)
     out["inner_radius"] = float(np.hypot(*pts[-1]))
-    out["paths"]["r0 = 0.99"] = np.hypot(pts[:, 0], pts[:, 1])
+    out["paths"]["from r0 = 0.99: radius (to the origin)"] = np.hypot(pts[:, 0], pts[:, 1])
     return out
 
 
@@ -378,9 +382,10 @@ def run(out_dir: Path | None) -> ExampleResult:
         switched += d8.regime == "sliding"
     # check 9
     t0 = time.perf_counter()
-    dia = diagram(main)
+    dia = diagram(main, DIAGRAM_MUS)
     diagram_seconds = time.perf_counter() - t0
-    q_err = np.abs(dia.offset_sigma / dia.mu / dia.q - 1.0)
+    at = np.isin(dia.mu, CHECKED_MUS)         # the acceptance check's corner offsets
+    q_err = np.abs(dia.offset_sigma / dia.mu / dia.q - 1.0)[at]
     # check 10
     supp = suppression(main)
     inner_max = max(max(s_["inner_radii"]) for s_ in supp)
@@ -571,12 +576,12 @@ def _figure_suppression(out_dir: Path | None, figures: list[Path], supp: list[di
                         stab: dict[str, Any]) -> None:
     fig, (ax1, ax2) = new_figure(1, 2, figsize=(9.5, 4.2))
     for i, (name, rr) in enumerate(stab["paths"].items()):
-        ax1.semilogy(np.arange(1, len(rr) + 1), np.abs(rr - 1.0) + 1e-16, ".-", color=f"C{i}",
-                     label=name)
+        ax1.semilogy(np.arange(1, len(rr) + 1), rr + 1e-16, ".-", color=f"C{i}", label=name)
     ax1.set_xlabel("return n")
-    ax1.set_ylabel("|r − 1| on the section")
+    ax1.set_ylabel("distance on the section")
     ax1.set_title("Corner outside: stabilised (μ_c > 0)")
-    ax1.legend(loc="lower left", fontsize="small")
+    ax1.set_ylim(1e-12, 10.0)
+    ax1.legend(loc="upper right", fontsize="small")
     s0 = supp[0]
     for i, (r0, rr) in enumerate(s0["paths"].items()):
         ax2.semilogy(np.arange(1, len(rr) + 1), rr, ".-", ms=3, color=f"C{i}",
@@ -613,6 +618,7 @@ EXAMPLES = [Example(
         "offset: first order (halving the offset halves the error) and under 3|z_d|.",
         "ch12_corner_diagram": "The controlled cycle's offset divided by the corner's, "
         "against the corner's offset at fixed gain: it tends to the predicted q.",
-        "ch12_suppression": "Left: with the corner outside, orbits near r = 1 converge to "
-        "the controlled cycle; from inside they go to the origin. Right: with the corner "
+        "ch12_suppression": "Left: with the corner outside, orbits started next to r = 1 "
+        "converge to the controlled cycle (0.51 per return), one started inside goes to the "
+        "origin. Right: with the corner "
         "inside the cycle, every orbit from r in [1, 1.3] goes to the origin."})]
