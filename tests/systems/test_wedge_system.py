@@ -116,3 +116,10 @@ def test_van_der_pol_wedge_on_the_top():
     vdp = van_der_pol(0.1)
     w = Wedge.symmetric([0.0, 2.0], [0.0, 1.0], np.pi / 4, flow=vdp.rhs(0.0, [0.0, 2.0]))
     assert np.allclose(w.n_in, [S, S]) and np.allclose(w.n_out, [-S, S])
+
+
+def test_passes_the_system_contract(plant):
+    from nscontrol.testing import check_system
+
+    system = WedgeSwitchedSystem(plant, wedge_at(1.01), [1.0, 0.0], -0.62)
+    assert check_system(system).passed
