@@ -273,7 +273,10 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
         positive when it hovers above it). Also, per cycle, ``V_tau0`` and ``depths``
         (``d_k``, m); ``first_impact_speed`` (largest ``|u-|`` of the first impacts, m/s);
         ``contact_gap`` (largest gap in the constrained phases, m; NaN without one);
+        ``first_impact_speeds`` (the same per cycle, NaN without an impact);
         ``contact_lost_steps`` (steps of the constrained phases without a contact impulse);
+        ``contact_held`` (s, from the start of the first constrained phase to the first
+        opening of the gap);
         ``takeoff_shift`` (s: when the gap first opens after the first constrained phase
         starts, minus the planned take-off; negative when the arm lifts off early);
         ``force_error`` (N) and ``force_ratio``: medians of ``λ - λ_d`` and ``λ/λ_d`` over
@@ -315,6 +318,8 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
             "V_tau0": V, "depths": [r.depth for r in reports],
             "first_impact_speed": max((abs(r.events[0].u_minus) for r in reports
                                        if r.events), default=math.nan),
+            "first_impact_speeds": [abs(r.events[0].u_minus) if r.events else math.nan
+                                    for r in reports],
             **_contact_phase_record(run)}
 
 
@@ -325,13 +330,14 @@ def _contact_phase_record(run: TrackingRun) -> dict[str, float]:
     gap, P, phase = sig["gap"][:, 0], sig["impulse"][:, 0], sig["phase"]
     steps = np.flatnonzero(phase[:-1] == 3)    # the impulse of step k is stored at k + 1
     first = run.controller.cycles[0]
-    shift, f_err, f_ratio = math.nan, math.nan, math.nan
+    shift, held_for, f_err, f_ratio = math.nan, math.nan, math.nan, math.nan
     if math.isfinite(first.t_constrained):
         # 1 µm: above the O(h u-) drift of the landing, far below a real lift-off
         opened = t[(t > first.t_constrained) & (gap > 1e-6)]
         t_open = float(opened[0]) if opened.size else math.inf
         if opened.size:
             shift = t_open - run.controller.task.t_detach(0)
+            held_for = t_open - first.t_constrained
         lam, lam_d = P[1:] / run.h, sig["lam_d"][:-1]       # step k: row k, impulse k + 1
         held = (phase[:-1] == 3) & (t[:-1] >= first.t_constrained) & (t[:-1] < t_open) \
             & (lam_d >= 1.0)
@@ -340,7 +346,8 @@ def _contact_phase_record(run: TrackingRun) -> dict[str, float]:
             f_ratio = float(np.median(lam[held] / lam_d[held]))
     return {"contact_gap": float(gap[steps].max()) if steps.size else math.nan,
             "contact_lost_steps": int(np.sum(P[steps + 1] <= 0.0)),
-            "takeoff_shift": shift, "force_error": f_err, "force_ratio": f_ratio}
+            "takeoff_shift": shift, "contact_held": held_for, "force_error": f_err,
+            "force_ratio": f_ratio}
 
 
 def _gap_before(run: TrackingRun, t_detach: float) -> float:
