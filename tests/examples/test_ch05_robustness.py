@@ -18,9 +18,9 @@ from nscontrol.examples.ch05_robustness import (
     critical_model_scale,
     crossing_speed,
     ground_force_offset,
-    sensor_force_ratio,
     model_error_bound,
     robustness_maps,
+    sensor_force_ratio,
 )
 from nscontrol.sweep import PointError, SweepResult
 

@@ -100,7 +100,7 @@ def _nominal_key(point: dict[str, Any]) -> tuple:
     return tuple(sorted((k, v) for k, v in point.items() if defaults.get(k, None) != v))
 
 
-def robustness_maps(result: Any, shape: tuple[int, int]) -> dict[str, Any]:
+def robustness_maps(result: Any, shape: tuple[int, ...]) -> dict[str, Any]:
     """Arrays of the per-point values of a sweep; a failed point is NaN (``False`` for the
     verdict) and its error is kept.
 
@@ -109,7 +109,7 @@ def robustness_maps(result: Any, shape: tuple[int, int]) -> dict[str, Any]:
     result : SweepResult
         Outcome of ``sweep.run(robustness_point, grid)`` on a row-major grid.
     shape : tuple of int
-        ``(rows, columns)`` of the grid.
+        ``(rows, columns)`` of a map, ``(points,)`` of a curve.
 
     Returns
     -------
@@ -795,8 +795,10 @@ EXAMPLES = [Example(
         "ch05_map_delay_noise":
             "Detection delay against joint-angle noise: colour is the largest ratio "
             "V(tau0 of cycle k+1) / V(tau0 of cycle k) (log scale; weak stability needs at "
-            "most 1.1), rings mark weakly stable points. Every point is weakly stable: noise "
-            "raises the ratio from 0.003 to about 0.05, the delay leaves it unchanged.",
+            "most 1.1 above the step's floor of V), rings mark weakly stable points. Every "
+            "point is weakly stable and the delay changes nothing; with noise the V(tau0) "
+            "are snapshots of a noise floor (1e-6) below the scheme's floor allowance, so "
+            "their ratio is not a growth.",
         "ch05_curve_step_size":
             "Step size h: V at the transition start of cycle 1 (left) follows the h² line; "
             "the largest penetration (right) stays below h |u-| (1 - e/2), u- the landing "
