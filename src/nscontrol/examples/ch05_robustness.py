@@ -782,7 +782,10 @@ EXAMPLES = [Example(
                                                          "critical scale"),
                          ("fails_above_critical_scale", "points above it completing a "
                                                         "cycle"),
-                         ("failure_is_hovering", "their hover gap")),
+                         ("failure_is_hovering", "their hover gap"),
+                         ("step_V_floor_h2", "V floor off h² (slope error)"),
+                         ("ground_force_offset", "ground-offset force, relative error"),
+                         ("sensor_scale_ratio", "sensor force ratio, relative error")),
     key_figure="ch05_map_restitution_model",
     captions={
         "ch05_map_restitution_model":
