@@ -690,36 +690,43 @@ def _ground_figure(m: dict[str, Any], out_dir: Path | None, figures: list[Path])
     recs = _records(m)
     c = np.array(GROUND_OFFSETS)
     nom = recs[GROUND_OFFSETS.index(0.0)]
+    from ..design.complementarity_tracking import TransitionDesign
+
     fine = np.linspace(c.min(), c.max(), 200)
-    fig, (a1, a2, a3) = new_figure(1, 3, figsize=(11, 3.8))
+    reach = fine[fine > -TransitionDesign().depth_max]     # where contact is possible
+    fig, (a1, a2, a3) = new_figure(1, 3, figsize=(11, 4.4))
     u0 = [r["first_impact_speeds"][0] if r.get("first_impact_speeds") else np.nan
           for r in recs]
     a1.plot(c * 1e3, u0, "o", label="measured, cycle 0")
     a1.plot(fine * 1e3, [crossing_speed(x) for x in fine], "k--",
             label="dive speed where it crosses y = c")
+    missed = [x for x, u in zip(c, u0, strict=True) if not np.isfinite(u)]
+    if missed:
+        a1.plot(np.array(missed) * 1e3, np.zeros(len(missed)), "x", color="C3", mew=2,
+                label="no contact (ground below the deepest dive)")
     a1.set_xlabel("ground height c [mm] (controller believes 0)")
     a1.set_ylabel("landing speed |u-| [m/s]")
     a1.set_title("Landing (none below -d_max)")
-    a1.legend(fontsize="small")
+    a1.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize="small")
     df = np.asarray(m["force_error"], float) - float(nom["force_error"])
     a2.plot(c * 1e3, df, "o", label="measured (minus nominal)")
-    a2.plot(fine * 1e3, [ground_force_offset(x) for x in fine], "k--",
+    a2.plot(reach * 1e3, [ground_force_offset(x) for x in reach], "k--",
             label="g1 g2 c / (1 + K_f)")
     a2.set_xlabel("ground height c [mm]")
     a2.set_ylabel("contact force offset lambda - lambda_d [N]")
     a2.set_title("Force on the ground")
-    a2.legend(fontsize="small")
+    a2.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize="small")
     ds = np.asarray(m["takeoff_shift"], float) - float(nom["takeoff_shift"])
     c_lam = 1.0 + _gains()[2]
     a3.plot(c * 1e3, ds, "o", label="measured (minus nominal)")
-    low = fine[fine < 0]
+    low = reach[reach < 0]
     a3.plot(low * 1e3, [ground_force_offset(x) / c_lam for x in low], "k--",
             label="offset / c_lambda (lower ground)")
     a3.axhline(0.0, color="0.6", lw=1)
     a3.set_xlabel("ground height c [mm]")
     a3.set_ylabel("take-off shift [s] (< 0: early)")
     a3.set_title("Take-off")
-    a3.legend(fontsize="small")
+    a3.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize="small")
     save_figure(fig, out_dir, "ch05_curve_ground_offset", figures)
 
 
