@@ -16,8 +16,11 @@ from nscontrol.examples.ch03_two_link_tracking import robustness_point, two_link
 from nscontrol.examples.ch05_robustness import (
     MODEL_SCALES,
     critical_model_scale,
+    crossing_speed,
+    ground_force_offset,
     model_error_bound,
     robustness_maps,
+    sensor_force_ratio,
 )
 from nscontrol.sweep import PointError, SweepResult
 
@@ -36,7 +39,9 @@ def _first_index(run, phase):
 def test_registered_with_claim_and_captions():
     ex = get_example("ch05-robustness")
     assert ex.claim and ex.key_figure in ex.captions
-    assert set(ex.captions) == {"ch05_map_restitution_model", "ch05_map_delay_noise"}
+    assert set(ex.captions) == {"ch05_map_restitution_model", "ch05_map_delay_noise",
+                                "ch05_curve_step_size", "ch05_curve_ground_offset",
+                                "ch05_curve_force_sensor"}
 
 
 def test_zero_delay_and_zero_noise_reproduce_the_nominal_run_exactly(nominal):
@@ -71,11 +76,56 @@ def test_position_noise_is_seeded_and_the_log_holds_the_true_state(nominal):
     assert np.array_equal(a.traj.signals["q_task"][::500], q_true)
 
 
+def test_a_moved_ground_changes_nothing_before_the_first_contact(nominal):
+    """The controller is not told where the ground is: until the arm first touches the
+    higher ground, plant and controller run the same operations as in the nominal run, and
+    the logged gap is the height above the real ground."""
+    c = 0.003
+    run = two_link_tracking(cycles=1, h=H, ground_offset=c)
+    P = run.traj.signals["impulse"][:, 0]
+    first = int(np.flatnonzero(P > 0.0)[0])        # sample after the first contact step
+    assert np.array_equal(run.traj.x[:first], nominal.traj.x[:first])
+    # the ground is reached earlier than in the nominal run, higher up
+    assert first < int(np.flatnonzero(nominal.traj.signals["impulse"][:, 0] > 0.0)[0])
+    # gap and task height come from the same sines: equal up to a few roundings of 0.5 m
+    y = run.traj.signals["q_task"][:, 0]
+    assert np.allclose(run.traj.signals["gap"][:, 0], y - c, rtol=0.0, atol=8 * 2.2e-16)
+
+
+def test_force_sensor_model_is_what_the_force_loop_reads(nominal):
+    """λ̂ = min(a P/h + b, λ_sat) at every step (one step old, as designed), while the
+    contact detection and the motion before the constrained phase are untouched."""
+    a, b = 1.5, 0.2
+    run = two_link_tracking(cycles=1, h=H, force_scale=a, force_bias=b)
+    sig = run.traj.signals
+    lam_raw = sig["impulse"][:-1, 0] / H           # row k reads the impulse of step k - 1
+    expected = np.minimum(a * lam_raw + b, run.controller.contact.lam_sat)
+    assert np.array_equal(sig["lam_hat"][1:-1], expected[1:])
+    i3 = _first_index(nominal, 3)                  # the force loop starts acting here
+    assert _first_index(run, 3) == i3
+    assert np.array_equal(run.traj.x[:i3 + 1], nominal.traj.x[:i3 + 1])
+
+
+def test_exact_force_sensor_and_zero_noise_reproduce_the_nominal_run(nominal):
+    run = two_link_tracking(cycles=1, h=H, force_scale=1.0, force_bias=0.0, force_noise=0.0,
+                            ground_offset=0.0, noise_seed=3)
+    assert np.array_equal(run.traj.x, nominal.traj.x)
+    a = two_link_tracking(cycles=1, h=H, force_noise=0.5, noise_seed=2)
+    b = two_link_tracking(cycles=1, h=H, force_noise=0.5, noise_seed=2)
+    assert np.array_equal(a.traj.signals["lam_hat"], b.traj.signals["lam_hat"])
+
+
 def test_invalid_robustness_parameters_are_refused():
     with pytest.raises(ModelError, match="detection_delay"):
         two_link_tracking(cycles=1, h=H, detection_delay=-1)
     with pytest.raises(ModelError, match="position_noise"):
         two_link_tracking(cycles=1, h=H, position_noise=-1e-3)
+    with pytest.raises(ModelError, match="force_scale"):
+        two_link_tracking(cycles=1, h=H, force_scale=-1.0)
+    with pytest.raises(ModelError, match="force_noise"):
+        two_link_tracking(cycles=1, h=H, force_noise=-1.0)
+    with pytest.raises(ModelError, match="ground_offset"):
+        two_link_tracking(cycles=1, h=H, ground_offset=float("nan"))
 
 
 def test_a_failed_point_is_nan_in_its_map_with_its_error():
@@ -100,11 +150,36 @@ def test_model_grid_straddles_the_predicted_critical_scale():
     assert model_error_bound(1.0) == 0.0       # exact model: no model-error force
 
 
+def test_crossing_speed_is_the_dive_speed_at_the_ground():
+    """The closed-form crossing of ``y = c`` against the controller's own dive function."""
+    from nscontrol.design.complementarity_tracking import (
+        CircleTask,
+        TransitionDesign,
+        virtual_dive,
+    )
+    task, tr = CircleTask(), TransitionDesign()
+    tau0 = task.tau0(0)
+    q10 = float(task.nominal(tau0)[0][0])
+    for c in (-0.003, 0.0, 0.006):
+        u = crossing_speed(c, depth=0.05)
+        lo, hi = tau0 + tr.delta, tau0 + tr.delta + tr.Delta
+        for _ in range(80):                  # bisection on the monotone dive to 2^-80 s
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if virtual_dive(mid, tau0, q10, 0.05, tr.delta,
+                                               tr.Delta)[0] > c else (lo, mid)
+        speed = -virtual_dive(lo, tau0, q10, 0.05, tr.delta, tr.Delta)[1]
+        # both locate θ to rounding; the speed's slope in θ is at most 6 (q10 + d) / Δ
+        assert speed == pytest.approx(u, rel=1e-12)
+    assert np.isnan(crossing_speed(-0.06, depth=0.05))   # below the deepest dive
+    assert sensor_force_ratio(1.0) == 1.0 and np.isnan(sensor_force_ratio(2.5))
+    assert ground_force_offset(0.003) == pytest.approx(8 * 7 * 0.003 / 1.5, rel=1e-15)
+
+
 @pytest.mark.slow
 def test_example_run_passes_every_check(tmp_path):
     """Both sweeps (about 20 points of 2 cycles at h = 1e-3) with the figures."""
     result = get_example("ch05-robustness").run(tmp_path)
     failed = [(c.name, c.value, c.threshold) for c in result.checks if not c.passed]
     assert not failed
-    assert len(result.figures) == 2
+    assert len(result.figures) == 5
     assert result.metrics["failed_points"] == []

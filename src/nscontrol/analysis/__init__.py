@@ -83,6 +83,16 @@ _EXPORTS: dict[str, str] = {
     "closed_loop_lure_form": "friction_equilibria",
     "lure_form_certificate": "friction_equilibria",
     "limit_cycle_summary": "friction_equilibria",
+    # corner_maps.py
+    "corner_gain": "corner_maps", "gain_for_corner_gain": "corner_maps",
+    "crossing_gain_interval": "corner_maps", "reachable_multipliers": "corner_maps",
+    "CornerDiscontinuityMap": "corner_maps", "corner_discontinuity_map": "corner_maps",
+    "PWLFixedPoint": "corner_maps", "PWLReturnMap": "corner_maps", "Section": "corner_maps",
+    "CornerSite": "corner_maps", "corner_site": "corner_maps", "section_returns": "corner_maps",
+    "ControlledCycle": "corner_maps", "controlled_cycle": "corner_maps",
+    "wedge_events": "corner_maps", "verify_corner_design": "corner_maps",
+    "CornerFamily": "corner_maps", "CornerDiagram": "corner_maps",
+    "corner_diagram": "corner_maps",
 }
 
 __all__ = list(_EXPORTS)

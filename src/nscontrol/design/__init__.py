@@ -63,6 +63,17 @@ _EXPORTS: dict[str, str] = {
     "slotine_li_force": "complementarity_tracking",
     "lyapunov_decay_rate": "complementarity_tracking",
     "virtual_dive": "complementarity_tracking", "liftoff_blend": "complementarity_tracking",
+    # limit_cycle_switching.py
+    "corner_gain": "limit_cycle_switching", "gain_for_corner_gain": "limit_cycle_switching",
+    "crossing_gain_interval": "limit_cycle_switching",
+    "reachable_multipliers": "limit_cycle_switching",
+    "CornerDiscontinuityMap": "limit_cycle_switching",
+    "corner_discontinuity_map": "limit_cycle_switching",
+    "PWLFixedPoint": "limit_cycle_switching", "PWLReturnMap": "limit_cycle_switching",
+    "Section": "limit_cycle_switching", "CornerSite": "limit_cycle_switching",
+    "corner_site": "limit_cycle_switching", "CornerDesign": "limit_cycle_switching",
+    "design_corner_controller": "limit_cycle_switching",
+    "SLIDING_GAIN_FACTOR": "limit_cycle_switching",
 }
 
 __all__ = list(_EXPORTS)

@@ -496,7 +496,14 @@ class SwitchingTrackingController(StaticLaw):
         those of the true state (what the analysis judges); the control law and the depth
         ``d_k`` use the measured one.
     noise_seed : int
-        Seed of the noise generator, reset by :meth:`reset_run`: a run is reproducible.
+        Seed of the noise generators, reset by :meth:`reset_run`: a run is reproducible.
+    force_scale, force_bias, force_noise : float
+        Model of the contact-force sensor the force loop reads: ``λ̂ = a P/h + b + n``,
+        ``a = force_scale``, ``b = force_bias`` (N), ``n`` white Gaussian of standard
+        deviation ``force_noise`` (N), then saturated at ``lam_sat``. Defaults (1, 0, 0): the
+        exact impulse over ``h``, as designed. The detection of impacts and persistent
+        contact reads the true impulse (a separate contact switch), so these act on the
+        force feedback ``K_f (λ̂ - λ_d)`` only.
 
     Examples
     --------
@@ -512,7 +519,8 @@ class SwitchingTrackingController(StaticLaw):
                  switching: str = "designed", trigger_q2: float = 0.65,
                  q2_end: float = 0.75, force_feedback_scale: float = 1.0,
                  detection_delay: int = 0, position_noise: float = 0.0,
-                 noise_seed: int = 0) -> None:
+                 noise_seed: int = 0, force_scale: float = 1.0, force_bias: float = 0.0,
+                 force_noise: float = 0.0) -> None:
         if switching not in ("designed", "impact-triggered"):
             raise ModelError(f"switching: expected 'designed' or 'impact-triggered', got "
                              f"{switching!r}")
@@ -526,6 +534,11 @@ class SwitchingTrackingController(StaticLaw):
         self.position_noise = check_positive("position_noise", position_noise,
                                              allow_zero=True)
         self.noise_seed = check_integer("noise_seed", noise_seed, minimum=0)
+        self.force_scale = check_positive("force_scale", force_scale, allow_zero=True)
+        if not math.isfinite(force_bias):
+            raise ModelError(f"force_bias: expected a finite force (N), got {force_bias}")
+        self.force_bias = float(force_bias)
+        self.force_noise = check_positive("force_noise", force_noise, allow_zero=True)
         self.n = int(model.n_dof)
         self.reset_run()
 
@@ -584,6 +597,8 @@ class SwitchingTrackingController(StaticLaw):
         # logic reads the oldest one
         self._seen: deque[tuple[float, float]] = deque(maxlen=self.detection_delay + 1)
         self._rng = np.random.default_rng(self.noise_seed)
+        # the force sensor's own stream: adding force noise leaves the position noise alone
+        self._force_rng = np.random.default_rng((self.noise_seed, 1))
 
     @property
     def current(self) -> _Cycle:
@@ -614,7 +629,7 @@ class SwitchingTrackingController(StaticLaw):
         sc = self.model_scale
         tau = slotine_li_force(sc * Mq, sc * Cq, sc * gq, q, dq, qd, dqd, ddqd, self.gains,
                                q_star)
-        lam_hat = min(lam_raw, self.contact.lam_sat)
+        lam_hat = min(self._force_reading(lam_raw), self.contact.lam_sat)
         if self.phase == Phase.CONSTRAINED:
             tau[0] += -lam_d + self.force_feedback_scale * self.gains.Kf * (lam_hat - lam_d)
         if x is not x_true:             # log and judge the true state, not the measured one
@@ -628,6 +643,16 @@ class SwitchingTrackingController(StaticLaw):
                           self.current.depth, *q.tolist(), *dq.tolist(), *qd.tolist()))
         self._t_prev = t
         return J.T @ tau
+
+    def _force_reading(self, lam_raw: float) -> float:
+        """What the force sensor reports for the true impulse over ``h`` (``force_scale``,
+        ``force_bias``, ``force_noise``); the exact value, untouched, by default."""
+        lam = lam_raw
+        if self.force_scale != 1.0 or self.force_bias != 0.0:
+            lam = self.force_scale * lam + self.force_bias
+        if self.force_noise > 0.0:      # no draw at σ = 0: the exact-sensor run is unchanged
+            lam += float(self._force_rng.normal(0.0, self.force_noise))
+        return lam
 
     def _lyapunov(self, Mq: FloatArray, q: FloatArray, dq: FloatArray, qd: FloatArray,
                   dqd: FloatArray) -> tuple[float, float]:

@@ -99,14 +99,17 @@ class TrackingRun:
 
 
 def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
-              theta: float, restitution: float) -> TrackingRun:
+              theta: float, restitution: float, ground_offset: float = 0.0) -> TrackingRun:
     """Simulate plant + controller with Moreau–Jean and merge the controller's log."""
     from ..simulate import simulate
 
     controller.reset_run()
+    plant = model.system(restitution)
+    if ground_offset != 0.0:
+        plant = _ground_moved(plant, ground_offset)
     # the controller as the integrator's own step controller (its reset at impacts is
     # trivial, so the closed-loop block machinery is not needed): the fast path
-    traj = simulate(model.system(restitution), x0, (0.0, T), method="moreau_jean", h=h,
+    traj = simulate(plant, x0, (0.0, T), method="moreau_jean", h=h,
                     theta=theta, controller=controller, signals=("impulse", "gap"),
                     progress=False)
     log = controller.signals()
@@ -129,11 +132,24 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
     return TrackingRun(replace(traj, signals=signals), controller, restitution, h, model)
 
 
+def _ground_moved(plant: Any, offset: float) -> Any:
+    """The plant with its ground at ``y = offset`` instead of ``y = 0`` (same Jacobian); the
+    controller, which is not told, still believes the ground is at ``y = 0``."""
+    base_gap = plant.gap
+
+    def gap(q: np.ndarray) -> np.ndarray:
+        return base_gap(q) - offset
+
+    return replace(plant, gap=gap)
+
+
 def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float | None = None,
                       restitution: float | None = None, model_scale: float = 1.0,
                       depth_law: str = "sqrt", depth_min: float = 0.005,
                       phi: float = 1e5, detection_delay: int = 0,
-                      position_noise: float = 0.0, noise_seed: int = 0) -> TrackingRun:
+                      position_noise: float = 0.0, noise_seed: int = 0,
+                      ground_offset: float = 0.0, force_scale: float = 1.0,
+                      force_bias: float = 0.0, force_noise: float = 0.0) -> TrackingRun:
     """The two-link arm tracking the circle cut by the ground.
 
     Parameters
@@ -154,6 +170,12 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         Steps by which the controller detects the impacts and the persistent contact late.
     position_noise, noise_seed : float, int
         Standard deviation (rad) and seed of the noise on the measured joint angles.
+    ground_offset : float
+        Height ``c`` (m) of the plant's ground, ``y >= c``; the controller still believes
+        ``y >= 0`` (0: the nominal ground; ``c > 0``: a ground higher than modelled).
+    force_scale, force_bias, force_noise : float
+        The contact-force sensor ``λ̂ = a P/h + b + n`` the force loop reads (scale, bias in N,
+        noise standard deviation in N; ``1, 0, 0``: exact).
     """
     from ..design.complementarity_tracking import (
         CircleTask,
@@ -178,11 +200,15 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         # the 2007 code fed back the impulse h λ̂, not λ̂ (its K_f = 3 > 1 would otherwise
         # make the one-step-delayed force loop unstable)
         force_feedback_scale=(cfg.h if h is None else h) if config == "siconos-2007" else 1.0,
-        detection_delay=detection_delay, position_noise=position_noise, noise_seed=noise_seed)
+        detection_delay=detection_delay, position_noise=position_noise, noise_seed=noise_seed,
+        force_scale=force_scale, force_bias=force_bias, force_noise=force_noise)
+    if not math.isfinite(ground_offset):
+        raise ModelError(f"ground_offset: expected a finite height (m), got {ground_offset}")
     x0 = np.array([*cfg.theta0, 0.0, 0.0])
     e = cfg.restitution if restitution is None else restitution
     step = cfg.h if h is None else h
-    return _run_loop(arm, ctrl, x0, cycles * cfg.period, step, cfg.theta, e)
+    return _run_loop(arm, ctrl, x0, cycles * cfg.period, step, cfg.theta, e,
+                     ground_offset=float(ground_offset))
 
 
 def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
@@ -233,7 +259,8 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
     point : dict
         Any of ``restitution`` (default 0.7), ``model_scale`` (1.0), ``h`` (1e-3),
         ``cycles`` (2), ``config`` (``"siconos-current"``), ``detection_delay`` (0 steps),
-        ``position_noise`` (0 rad), ``noise_seed`` (0).
+        ``position_noise`` (0 rad), ``noise_seed`` (0), ``ground_offset`` (0 m),
+        ``force_scale`` (1), ``force_bias`` (0 N), ``force_noise`` (0 N).
 
     Returns
     -------
@@ -243,7 +270,18 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
         ``impacts_per_cycle``, ``weakly_stable`` (growth allowance 1.1, floor
         ``1e-8 (h/1e-4)²``) and ``gap_before_first_takeoff`` (m, smallest gap over the last
         second before the first planned take-off: 0 when the arm slides on the ground,
-        positive when it hovers above it).
+        positive when it hovers above it). Also, per cycle, ``V_tau0`` and ``depths``
+        (``d_k``, m); ``first_impact_speed`` (largest ``|u-|`` of the first impacts, m/s);
+        ``contact_gap`` (largest gap in the constrained phases, m; NaN without one);
+        ``first_impact_speeds`` (the same per cycle, NaN without an impact);
+        ``contact_lost_steps`` (steps of the constrained phases without a contact impulse);
+        ``contact_held`` (s, from the start of the first constrained phase to the first
+        opening of the gap);
+        ``takeoff_shift`` (s: when the gap first opens after the first constrained phase
+        starts, minus the planned take-off; negative when the arm lifts off early);
+        ``force_error`` (N) and ``force_ratio``: medians of ``λ - λ_d`` and ``λ/λ_d`` over
+        the first constrained phase while ``λ_d >= 1 N`` and the gap is closed, ``λ`` the
+        true contact force (impulse over ``h``), not the sensor's reading.
 
     Examples
     --------
@@ -260,7 +298,11 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
                             model_scale=float(point.get("model_scale", 1.0)),
                             detection_delay=int(point.get("detection_delay", 0)),
                             position_noise=float(point.get("position_noise", 0.0)),
-                            noise_seed=int(point.get("noise_seed", 0)))
+                            noise_seed=int(point.get("noise_seed", 0)),
+                            ground_offset=float(point.get("ground_offset", 0.0)),
+                            force_scale=float(point.get("force_scale", 1.0)),
+                            force_bias=float(point.get("force_bias", 0.0)),
+                            force_noise=float(point.get("force_noise", 0.0)))
     reports = cycle_reports(run.traj, run.controller, run.model, run.restitution)
     verdict = check_weak_stability(reports, v_floor=1e-8 * max(1.0, (h / 1e-4) ** 2),
                                    growth=1.1)
@@ -272,7 +314,40 @@ def robustness_point(point: dict[str, Any]) -> dict[str, Any]:
             "penetration": max(0.0, -float(run.traj.signals["gap"].min())),
             "impacts_per_cycle": [r.n_impacts for r in reports],
             "weakly_stable": verdict.holds,
-            "gap_before_first_takeoff": _gap_before(run, run.controller.task.t_detach(0))}
+            "gap_before_first_takeoff": _gap_before(run, run.controller.task.t_detach(0)),
+            "V_tau0": V, "depths": [r.depth for r in reports],
+            "first_impact_speed": max((abs(r.events[0].u_minus) for r in reports
+                                       if r.events), default=math.nan),
+            "first_impact_speeds": [abs(r.events[0].u_minus) if r.events else math.nan
+                                    for r in reports],
+            **_contact_phase_record(run)}
+
+
+def _contact_phase_record(run: TrackingRun) -> dict[str, float]:
+    """Largest gap and steps without impulse in the constrained phases, and the take-off
+    shift of the first cycle (see :func:`robustness_point`)."""
+    t, sig = run.traj.t, run.traj.signals
+    gap, P, phase = sig["gap"][:, 0], sig["impulse"][:, 0], sig["phase"]
+    steps = np.flatnonzero(phase[:-1] == 3)    # the impulse of step k is stored at k + 1
+    first = run.controller.cycles[0]
+    shift, held_for, f_err, f_ratio = math.nan, math.nan, math.nan, math.nan
+    if math.isfinite(first.t_constrained):
+        # 1 µm: above the O(h u-) drift of the landing, far below a real lift-off
+        opened = t[(t > first.t_constrained) & (gap > 1e-6)]
+        t_open = float(opened[0]) if opened.size else math.inf
+        if opened.size:
+            shift = t_open - run.controller.task.t_detach(0)
+            held_for = t_open - first.t_constrained
+        lam, lam_d = P[1:] / run.h, sig["lam_d"][:-1]       # step k: row k, impulse k + 1
+        held = (phase[:-1] == 3) & (t[:-1] >= first.t_constrained) & (t[:-1] < t_open) \
+            & (lam_d >= 1.0)
+        if held.any():
+            f_err = float(np.median(lam[held] - lam_d[held]))
+            f_ratio = float(np.median(lam[held] / lam_d[held]))
+    return {"contact_gap": float(gap[steps].max()) if steps.size else math.nan,
+            "contact_lost_steps": int(np.sum(P[steps + 1] <= 0.0)),
+            "takeoff_shift": shift, "contact_held": held_for, "force_error": f_err,
+            "force_ratio": f_ratio}
 
 
 def _gap_before(run: TrackingRun, t_detach: float) -> float:

@@ -47,6 +47,9 @@ _EXPORTS: dict[str, str] = {
     # protocols.py
     "SimulableSystem": "protocols", "StateChecked": "protocols", "InputFunction": "protocols",
     "Exogenous": "protocols", "InputSignal": "protocols",
+    # wedge.py
+    "Wedge": "wedge", "WedgeSwitchedSystem": "wedge", "with_marker_line": "wedge",
+    "marker_crossings": "wedge", "cross": "wedge",
 }
 
 __all__ = list(_EXPORTS)
