@@ -22,6 +22,7 @@ __all__ = [
     "SolverError",
     "NonFiniteStateError",
     "ZenoError",
+    "SlidingError",
     "NscontrolWarning",
     "ZenoWarning",
     "ChatteringWarning",
@@ -93,6 +94,18 @@ class ZenoError(NscontrolError, RuntimeError):
     def __init__(self, message: str, *, time: float | None = None, trajectory: Any = None):
         super().__init__(message, trajectory=trajectory)
         self.time = time
+
+
+class SlidingError(ModelError):
+    """A switching run reached a facet where no region's field points inward: the solution
+    would slide along the facet (or stop being unique), which a piecewise-affine model with
+    crossings only cannot continue. ``time`` and ``state`` say where."""
+
+    def __init__(self, message: str, *, time: float | None = None, state: Any = None,
+                 trajectory: Any = None):
+        super().__init__(message, trajectory=trajectory)
+        self.time = time
+        self.state = state
 
 
 class NscontrolWarning(UserWarning):

@@ -20,6 +20,11 @@ _EXPORTS: dict[str, str] = {
     "alpha_limit": "observability", "observer_flow_norms": "observability",
     "search_epsilon": "observability", "certified_rate": "observability",
     "impact_decay_rate": "observability",
+    # pwl_maps.py
+    "coherent_orientation": "pwl_maps", "preimage_counts": "pwl_maps",
+    "HomeomorphismReport": "pwl_maps", "homeomorphism_report": "pwl_maps",
+    "CrossingRatios": "pwl_maps", "crossing_ratios": "pwl_maps",
+    "linear_reference": "pwl_maps", "conjugacy_error": "pwl_maps",
     # convergence.py
     "ConvergenceCertificate": "convergence", "quadratic_convergence": "convergence",
     "decay_rate": "convergence", "BimodalTests": "convergence", "bimodal_tests": "convergence",

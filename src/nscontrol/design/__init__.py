@@ -40,6 +40,11 @@ _EXPORTS: dict[str, str] = {
     "one_link_gains": "friction_compensation",
     "FrictionLoopRun": "friction_compensation",
     "simulate_friction_loop": "friction_compensation",
+    # pwl_linearization.py
+    "FEEDBACK_CLASSES": "pwl_linearization", "PWLLinearization": "pwl_linearization",
+    "LinearizationResult": "pwl_linearization", "pwl_feedback_linearize": "pwl_linearization",
+    "linearize_or_raise": "pwl_linearization", "brunovsky": "pwl_linearization",
+    "input_generator": "pwl_linearization",
     # convergent_pwa.py
     "ConvergentStateFeedback": "convergent_pwa", "PWAStateFeedback": "convergent_pwa",
     "ConvergentObserver": "convergent_pwa", "EstimateFeedback": "convergent_pwa",

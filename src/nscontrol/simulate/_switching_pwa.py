@@ -27,7 +27,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .._validation import FloatArray
-from ..errors import InadmissibleStateError, ModelError, SolverError
+from ..errors import InadmissibleStateError, ModelError, SlidingError, SolverError
 from .switching import saltation_matrix
 
 
@@ -212,11 +212,11 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
         j = _choose_region(system, modes, xi, exclude=i)
         if ev.grazing or j < 0:
             if j < 0 and not ev.grazing and not _entering(system, modes, i, xi, 1e-9):
-                raise ModelError(
+                raise SlidingError(
                     f"switching: at t = {t:.12g} the flow leaves region {i} through facet "
                     f"{row} but no region's field points inward at x = {x_e}: a sliding motion "
                     f"on a facet of a discontinuous PWA system. Simulate "
-                    f"FilippovSystem.from_pwa(system) instead")
+                    f"FilippovSystem.from_pwa(system) instead", time=t, state=x_e.copy())
             run.event(t, "grazing", row, x_e, x_e, i, i)
             continue
         fm = modes.derivatives(i, xi, 1)[0]
@@ -324,9 +324,10 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         row = kinds[hit[0]][1]
         j = mode_at(x, t, exclude=i)
         if j < 0:
-            raise ModelError(f"switching: at t = {t:.12g} no region's field points inward at "
-                             f"x = {x} (sliding on a discontinuous PWA facet); simulate "
-                             f"FilippovSystem.from_pwa(system) instead")
+            raise SlidingError(f"switching: at t = {t:.12g} no region's field points inward "
+                               f"at x = {x} (sliding on a discontinuous PWA facet); simulate "
+                               f"FilippovSystem.from_pwa(system) instead", time=t,
+                               state=x.copy())
         S = (saltation_matrix(field(i, t, x), field(j, t, x), H[row])
              if run.sensitivity else None)
         run.event(t, "crossing", row, x, x, i, j, S)

@@ -481,8 +481,11 @@ def _stack_pwa(loop: ClosedLoop) -> Any:
         if on == "estimate":
             raise ModelError("controller: feedback on the estimate needs an observer")
         maps = {"u": (ctrl.K, ctrl.k)} if isinstance(ctrl, StateFeedback) else {}
+        # a law declared discontinuous makes the loop discontinuous whatever the plant
+        jumps = isinstance(ctrl, PiecewiseStateFeedback) and ctrl.discontinuous
         return replace(p, A=tuple(A + B @ K for A, K in zip(p.A, Ks, strict=True)),
-                       b=tuple(b + B @ k for b, k in zip(p.b, ks, strict=True))), maps
+                       b=tuple(b + B @ k for b, k in zip(p.b, ks, strict=True)),
+                       continuous=p.continuous and not jumps), maps
     return _stack_pwa_observer(p, obs, B, Ks, ks, on)
 
 

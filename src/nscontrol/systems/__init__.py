@@ -18,6 +18,8 @@ _EXPORTS: dict[str, str] = {
     "OneLinkRobot": "one_link",
     # pwa.py
     "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
+    # conewise.py
+    "ConewiseLinearSystem": "conewise", "Facet": "conewise", "orthant_cones": "conewise",
     # switched.py
     "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
     # nonlinear.py

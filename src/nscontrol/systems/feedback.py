@@ -279,18 +279,24 @@ class PiecewiseStateFeedback(StaticLaw):
     on : {"state", "estimate"}
         Read the plant state (region of ``x``) or the observer's estimate (region of ``x̂``:
         ``u = K_j x̂ + k_j``, output feedback).
+    discontinuous : bool, optional
+        The law may jump across the plant's facets (default False: the stacked loop of a
+        continuous plant is checked continuous). With True the loop is a discontinuous
+        piecewise-affine model; the switching integrator checks every crossing and raises
+        :class:`~nscontrol.errors.SlidingError` where the loop would slide.
     """
 
     # The fields hold the validated arrays; __init__ accepts sequences of array_like.
     K: tuple[FloatArray, ...]
     k: tuple[FloatArray, ...] = None  # type: ignore[assignment]  # None -> zeros at init
     on: str = "state"
+    discontinuous: bool = False
     n_states: int = field(default=0, init=False)
     period: float | None = field(default=None, init=False)   # runs in continuous time
 
     if TYPE_CHECKING:
         def __init__(self, K: Sequence[ArrayLike], k: Sequence[ArrayLike] | None = None,
-                     on: str = "state") -> None: ...
+                     on: str = "state", discontinuous: bool = False) -> None: ...
 
     def __post_init__(self) -> None:
         Ks = tuple(as_matrix(f"K[{i}]", Ki) for i, Ki in enumerate(self.K))
