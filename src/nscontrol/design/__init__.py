@@ -58,6 +58,13 @@ _EXPORTS: dict[str, str] = {
     "slotine_li_force": "complementarity_tracking",
     "lyapunov_decay_rate": "complementarity_tracking",
     "virtual_dive": "complementarity_tracking", "liftoff_blend": "complementarity_tracking",
+    # converter_regulation.py
+    "ZADController": "converter_regulation", "ZADLoopMap": "converter_regulation",
+    "ZADOrbit": "converter_regulation", "ZADRun": "converter_regulation",
+    "ZADDesign": "converter_regulation", "zad_flip_coefficients": "converter_regulation",
+    "zad_flip_boundary": "converter_regulation", "zad_multipliers_series": "converter_regulation",
+    "leading_duty": "converter_regulation", "critical_ks": "converter_regulation",
+    "design_zad": "converter_regulation",
 }
 
 __all__ = list(_EXPORTS)
