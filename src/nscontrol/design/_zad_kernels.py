@@ -26,8 +26,9 @@ N_PARAMS = 8
 
 
 @njit(cache=True)
-def flow_matrix(delta, t):
-    """``e^{At}`` for ``A = [[0, 1], [-1, -delta]]`` (closed form, any ``delta``)."""
+def flow_coefficients(delta, t):
+    """``e^{At}`` for ``A = [[0, 1], [-1, -delta]]`` as the tuple ``(E00, E01, E10, E11)``
+    (closed form, any ``delta``; no allocation in the inner loops)."""
     mu = -0.5 * delta
     q = mu * mu - 1.0                      # N = A - μI satisfies N² = qI (det A = 1)
     qt2 = q * t * t
@@ -43,20 +44,25 @@ def flow_matrix(delta, t):
         c = math.cosh(w * t)
         s = math.sinh(w * t) / w
     e = math.exp(mu * t)
+    es = e * s
+    return e * c - mu * es, es, -es, e * c + mu * es
+
+
+@njit(cache=True)
+def flow_matrix(delta, t):
+    """``e^{At}`` as a 2×2 array."""
+    e00, e01, e10, e11 = flow_coefficients(delta, t)
     E = np.empty((2, 2))
-    E[0, 0] = e * (c - mu * s)
-    E[0, 1] = e * s
-    E[1, 0] = -e * s
-    E[1, 1] = e * (c + mu * s)
+    E[0, 0], E[0, 1], E[1, 0], E[1, 1] = e00, e01, e10, e11
     return E
 
 
 @njit(cache=True)
 def piece(delta, u, x0, x1, tau):
     """State after ``tau`` in the mode of input ``u`` from ``(x0, x1)``."""
-    E = flow_matrix(delta, tau)
+    e00, e01, e10, e11 = flow_coefficients(delta, tau)
     y0 = x0 - u
-    return (u + E[0, 0] * y0 + E[0, 1] * x1, E[1, 0] * y0 + E[1, 1] * x1)
+    return (u + e00 * y0 + e01 * x1, e10 * y0 + e11 * x1)
 
 
 @njit(cache=True)
@@ -177,8 +183,44 @@ def duty_and_gradient(p, x0, x1):
 
 
 @njit(cache=True)
+def pl_step(p, ET, x0, x1):
+    """One period of the PL-ZAD loop without allocation (the diagrams' inner loop).
+
+    ``ET = E(T)`` (a tuple, computed once per run); ``E(T - d) = E(T) E(d/2)⁻²`` saves one
+    exponential per period (``E(d/2)`` is near the identity, so its inverse loses nothing:
+    its condition number is ``e^{δ d/2}``-close to 1)."""
+    T, u_off, u_on = p[P_T], p[P_U_OFF], p[P_U_ON]
+    ks, dm = p[P_KS], p[P_DELTA_MODEL]
+    s = x0 - p[P_XREF] + ks * x1
+    sdot_off = x1 + ks * (-x0 - dm * x1 + u_off)
+    d = (2.0 * s + T * sdot_off) / (-ks * (u_on - u_off))
+    d = min(max(d, 0.0), T)
+    h0, h1, h2, h3 = flow_coefficients(p[P_DELTA], 0.5 * d)    # both on-pieces last d/2
+    g0 = h0 * h0 + h1 * h2                                     # E(d) = E(d/2)²
+    g1 = h0 * h1 + h1 * h3
+    g2 = h2 * h0 + h3 * h2
+    g3 = h2 * h1 + h3 * h3
+    det = g0 * g3 - g1 * g2
+    i0, i1, i2, i3 = g3 / det, -g1 / det, -g2 / det, g0 / det
+    f0 = ET[0] * i0 + ET[1] * i2                               # E(T - d) = E(T) E(d)⁻¹
+    f1 = ET[0] * i1 + ET[1] * i3
+    f2 = ET[2] * i0 + ET[3] * i2
+    f3 = ET[2] * i1 + ET[3] * i3
+    y0 = x0 - u_on
+    a0 = u_on + h0 * y0 + h1 * x1
+    a1 = h2 * y0 + h3 * x1
+    y0 = a0 - u_off
+    b0 = u_off + f0 * y0 + f1 * a1
+    b1 = f2 * y0 + f3 * a1
+    y0 = b0 - u_on
+    return u_on + h0 * y0 + h1 * b1, h2 * y0 + h3 * b1, d
+
+
+@njit(cache=True)
 def step(p, x0, x1):
     """One period of the closed loop: ``(x0', x1', d)``."""
+    if p[P_VARIANT] == 0.0:
+        return pl_step(p, flow_coefficients(p[P_DELTA], p[P_T]), x0, x1)
     d, _, _ = duty_and_gradient(p, x0, x1)
     st = pwm_period(p[P_DELTA], p[P_U_OFF], p[P_U_ON], p[P_T], d, x0, x1)
     return st[2, 0], st[2, 1], d
@@ -203,8 +245,13 @@ def jacobian(p, x0, x1):
 def iterate(p, x0, x1, n_transient, n_record):
     """``n_transient`` periods discarded, then ``n_record`` recorded: states ``x_k`` (rows),
     duties ``d_k`` and the mean of ``x1`` over each recorded period; and the final state."""
-    for _ in range(n_transient):
-        x0, x1, _ = step(p, x0, x1)
+    if p[P_VARIANT] == 0.0:
+        ET = flow_coefficients(p[P_DELTA], p[P_T])
+        for _ in range(n_transient):
+            x0, x1, _ = pl_step(p, ET, x0, x1)
+    else:
+        for _ in range(n_transient):
+            x0, x1, _ = step(p, x0, x1)
     X = np.empty((n_record, 2))
     D = np.empty(n_record)
     M = np.empty(n_record)
