@@ -86,7 +86,7 @@ def _dask(quick: bool, serial: Any) -> dict[str, Any]:
             times[workers] = time.perf_counter() - t0
             same = same and bool(np.array_equal(dd.duty_ratios, serial.duty_ratios,
                                                 equal_nan=True))
-    return {"scenario": f"ch10_diagram_dask: the same diagram on 2 Dask workers",
+    return {"scenario": "ch10_diagram_dask: the same diagram on 2 Dask workers",
             "size": ks.size, "ours_s_per_solve": times[2], "reference": "1 Dask worker",
             "reference_s_per_solve": times[1], "ratio": times[1] / times[2],
             "accuracy": {"parallel_efficiency": times[1] / (2 * times[2]),

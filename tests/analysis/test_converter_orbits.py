@@ -4,8 +4,13 @@ the bisected boundary (check 6), it is a flip (check 7), saturation is handled (
 import numpy as np
 import pytest
 
-from nscontrol.analysis import (brute_force_flip, duty_diagram, duty_period, multiplier_branch,
-                                mean_error_against_period)
+from nscontrol.analysis import (
+    brute_force_flip,
+    duty_diagram,
+    duty_period,
+    mean_error_against_period,
+    multiplier_branch,
+)
 from nscontrol.design import ZADController, critical_ks
 from nscontrol.systems import BuckConverter
 

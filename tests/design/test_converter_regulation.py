@@ -7,8 +7,15 @@ import pytest
 from scipy.linalg import expm
 
 from nscontrol import simulate
-from nscontrol.design import (ZADController, critical_ks, design_zad, leading_duty,
-                              zad_flip_boundary, zad_flip_coefficients, zad_multipliers_series)
+from nscontrol.design import (
+    ZADController,
+    critical_ks,
+    design_zad,
+    leading_duty,
+    zad_flip_boundary,
+    zad_flip_coefficients,
+    zad_multipliers_series,
+)
 from nscontrol.design import _zad_kernels as K
 from nscontrol.errors import InfeasibleDesignError, ModelError
 from nscontrol.numerics.differences import central_difference_jacobian

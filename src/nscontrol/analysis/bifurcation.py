@@ -31,7 +31,7 @@ import numpy as np
 from .._files import replaced_atomically
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import ModelError
-from .orbits import Forced, at_times, sample_on_grid
+from .orbits import at_times, sample_on_grid
 from .periodic import period_multiplicity
 
 __all__ = ["BifurcationDiagram", "bifurcation_diagram", "parse_grid"]

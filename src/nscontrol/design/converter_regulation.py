@@ -482,8 +482,8 @@ def zad_flip_boundary(delta: float, D: float, T: float,
 
     Examples
     --------
-    >>> round(zad_flip_boundary(0.35, 0.9, 0.18, 0), 4), round(zad_flip_boundary(0.35, 0.9, 0.18), 4)
-    (2.8571, 3.2206)
+    >>> [round(zad_flip_boundary(0.35, 0.9, 0.18, order), 4) for order in (0, 1, "poly3")]
+    [2.8571, 3.2208, 3.253]
     """
     d = check_positive("delta", delta)
     T = check_positive("T", T)

@@ -23,24 +23,23 @@ from ._figures import new_figure, save_figure
 __all__ = ["EXAMPLES", "REFERENCE", "run"]
 
 #: The reference example (normalised values of the ZAD literature, our choice of levels).
-REFERENCE = {"delta": 0.35, "T": 0.18, "x_ref": 0.8, "u_levels": (-1.0, 1.0)}
+REFERENCE: dict[str, Any] = {"delta": 0.35, "T": 0.18, "x_ref": 0.8, "u_levels": (-1.0, 1.0)}
 #: The diagram's grid: k_s step 0.005 around the flip and down into saturation.
 DIAGRAM_KS = (1.5, 4.5, 0.005)
 N_TRANSIENT = 40_000
 
 
-def _model(levels: tuple[float, float] = REFERENCE["u_levels"], delta: float | None = None
-           ) -> Any:
+def _model(levels: tuple[float, float] = (-1.0, 1.0), delta: float | None = None) -> Any:
     from ..systems.buck import BuckConverter
 
     return BuckConverter.normalized(REFERENCE["delta"] if delta is None else delta, levels)
 
 
-def _controller(ks: float, T: float = REFERENCE["T"], variant: str = "pl",
-                levels: tuple[float, float] = REFERENCE["u_levels"]) -> Any:
+def _controller(ks: float, T: float = REFERENCE["T"], variant: Any = "pl",
+                levels: tuple[float, float] = (-1.0, 1.0)) -> Any:
     from ..design.converter_regulation import ZADController
 
-    return ZADController(_model(levels), ks, T, REFERENCE["x_ref"], variant)  # type: ignore[arg-type]
+    return ZADController(_model(levels), ks, T, REFERENCE["x_ref"], variant)
 
 
 def _random_states(n: int) -> np.ndarray:
