@@ -709,9 +709,15 @@ def _certify(system: BuckConverter, ctrl: ZADController, orbit: ZADOrbit, ks_c: 
         warnings.warn(f"design_zad: the re-checked multipliers {np.round(lam_fd, 8).tolist()} "
                       f"differ from the closed form by {err:.3g}", InaccurateCertificateWarning,
                       stacklevel=3)
+    i_min = _min_current(system, x_star, float(orbit.duties[0]), ctrl.T)
+    if system.u_off == 0.0 and i_min <= 0.0:   # a diode blocks: the model assumes i > 0
+        status = f"discontinuous_conduction: min current {i_min:.3g}"
+        warnings.warn(f"design_zad: the inductor current reaches {i_min:.3g} <= 0 on the "
+                      "orbit: the converter leaves continuous conduction and the model does "
+                      "not hold; raise the load current or lower the period",
+                      InaccurateCertificateWarning, stacklevel=3)
     return ZADDesign(ctrl, orbit, ks_c, zad_flip_boundary(system.delta, D0, ctrl.T, 1),
-                     margin, orbit.mean_x1 - ctrl.x_ref, lam_fd, err,
-                     _min_current(system, x_star, float(orbit.duties[0]), ctrl.T), status)
+                     margin, orbit.mean_x1 - ctrl.x_ref, lam_fd, err, i_min, status)
 
 
 def _min_current(system: BuckConverter, x: FloatArray, d: float, T: float,
