@@ -625,8 +625,8 @@ class ZADDesign:
         return float(1.0 + np.min(self.orbit.multipliers.real))
 
 
-#: Multipliers of the central-difference Jacobian (step ~1e-6, error ~(1e-6)² |P'''| +
-#: u/1e-6 ≈ 1e-10) agree with the closed form to far better than this; a larger gap means the
+#: Multipliers of the central-difference Jacobian (step ``h ~ 1e-6``, error
+#: ``h² |P'''| + u/h ≈ 1e-10``) agree with the closed form to far better than this; a larger gap means the
 #: certificate and the map disagree.
 RECHECK_TOL = 1e-6
 
