@@ -236,16 +236,18 @@ def _figure_multipliers(ctx: dict[str, Any], out_dir: Path | None, figs: list[Pa
     ks = np.linspace(8.0, 2.0, 120)
     lam, _ = multiplier_branch(_model(), ks, T=T, x_ref=REFERENCE["x_ref"])
     series = np.array([zad_multipliers_series(d, k, 0.9, T) for k in ks])
-    fig, ax = new_figure(figsize=(8, 4.5))
-    ax.plot(ks, lam[:, 1].real, color="C0", label="λ_slow (exact map)")
-    ax.plot(ks, lam[:, 0].real, color="C3", label="λ_fast (exact map)")
-    ax.plot(ks, series[:, 0], "--", color="C0", label="1 - T/k_s (series)")
-    ax.plot(ks, series[:, 1], "--", color="C3", label="-1 + T(δ - 1/k_s) (series)")
-    ax.axhline(-1.0, color="grey", lw=0.8)
-    ax.axvline(ctx["kc"][T], color="C4", lw=1.0, label=f"flip at k_s = {ctx['kc'][T]:.4f}")
-    ax.set_xlabel("surface slope k_s")
-    ax.set_ylabel("Floquet multiplier of the 1T orbit")
-    ax.legend(fontsize=10, loc="center right")
+    fig, (top, bottom) = new_figure(2, 1, figsize=(8, 6), sharex=True)
+    top.plot(ks, lam[:, 1].real, color="C0", label="λ_slow, exact map")
+    top.plot(ks, series[:, 0], "--", color="C0", label="1 - T/k_s (series)")
+    top.set_ylabel("λ_slow")
+    bottom.plot(ks, 1.0 + lam[:, 0].real, color="C3", label="1 + λ_fast, exact map")
+    bottom.plot(ks, 1.0 + series[:, 1], "--", color="C3", label="T(δ - 1/k_s) (series)")
+    bottom.axhline(0.0, color="grey", lw=0.8)
+    bottom.set_ylabel("1 + λ_fast (distance from -1)")
+    bottom.set_xlabel("surface slope k_s")
+    for ax in (top, bottom):
+        ax.axvline(ctx["kc"][T], color="C4", lw=1.0, label=f"flip at k_s = {ctx['kc'][T]:.4f}")
+        ax.legend(fontsize=10, loc="lower right")
     save_figure(fig, out_dir, "ch10_multipliers", figs)
 
 
@@ -345,8 +347,9 @@ EXAMPLES = [Example(
                              "(step 0.005): one value above the flip, two below, saturated "
                              "periods (red) soon after; the vertical lines are the predicted "
                              "and exact boundaries.",
-        "ch10_multipliers": "Floquet multipliers of the 1T orbit against k_s: the fast one "
-                            "crosses -1 at the flip; dashed, the first-order series.",
+        "ch10_multipliers": "Floquet multipliers of the 1T orbit against k_s: the slow one "
+                            "(top) and the distance of the fast one from -1 (bottom), which "
+                            "vanishes at the flip; dashed, the first-order series in T.",
         "ch10_time_responses": "Output voltage over six periods on the 1T orbit (k_s = 5) and "
                                "on the 2T orbit below the flip, simulated through the generic "
                                "switching integrator.",
