@@ -626,8 +626,8 @@ class ZADDesign:
 
 
 #: Multipliers of the central-difference Jacobian (step ``h ~ 1e-6``, error
-#: ``h² |P'''| + u/h ≈ 1e-10``) agree with the closed form to far better than this; a larger gap means the
-#: certificate and the map disagree.
+#: ``h² |P'''| + u/h ≈ 1e-10``) agree with the closed form to far better than this; a larger
+#: gap means the certificate and the map disagree.
 RECHECK_TOL = 1e-6
 
 
