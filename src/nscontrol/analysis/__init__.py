@@ -58,6 +58,11 @@ _EXPORTS: dict[str, str] = {
     # bifurcation.py
     "BifurcationDiagram": "bifurcation", "bifurcation_diagram": "bifurcation",
     "parse_grid": "bifurcation",
+    # converter_orbits.py
+    "ZADFamily": "converter_orbits", "DutyDiagram": "converter_orbits",
+    "duty_diagram": "converter_orbits", "duty_period": "converter_orbits",
+    "brute_force_flip": "converter_orbits", "multiplier_branch": "converter_orbits",
+    "mean_error_against_period": "converter_orbits",
     # impact_oscillator.py
     "ImpactOscillator": "impact_oscillator", "OneImpactOrbit": "impact_oscillator",
     "OscillatorFamily": "impact_oscillator",

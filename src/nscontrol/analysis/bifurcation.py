@@ -31,7 +31,7 @@ import numpy as np
 from .._files import replaced_atomically
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import ModelError
-from .orbits import Forced, at_times, sample_on_grid
+from .orbits import at_times, sample_on_grid
 from .periodic import period_multiplicity
 
 __all__ = ["BifurcationDiagram", "bifurcation_diagram", "parse_grid"]
@@ -150,11 +150,12 @@ class BifurcationDiagram:
 class _ChunkTask:
     """One warm-start chain: picklable (module-level class holding a picklable factory)."""
 
-    factory: Callable[[float], Forced]
+    factory: Callable[[float], Any]
     x0: FloatArray | None
     n_transient: int
     n_sample: int
     rtol: float
+    warm_start: bool = True
 
     def __call__(self, chunk: tuple[str, tuple[int, ...], tuple[float, ...]]
                  ) -> list[tuple[int, FloatArray | None, int, str]]:
@@ -167,17 +168,23 @@ class _ChunkTask:
                 x = self._start(forced) if x is None else x
                 samples, x = self._point(forced, x)
                 out.append((i, samples, period_multiplicity(samples, rtol=self.rtol), ""))
+                x = x if self.warm_start else None
             except Exception as exc:   # recorded per point; the chain restarts cold
                 out.append((i, None, -1, f"{type(exc).__name__}: {exc}"))
                 x = None
         return out
 
-    def _start(self, forced: Forced) -> FloatArray:
+    def _start(self, forced: Any) -> FloatArray:
         n = forced.n_states
+        if self.x0 is None and hasattr(forced, "initial_state"):   # a map's own cold start
+            return as_vector("initial_state()", forced.initial_state(), n)
         return np.zeros(n) if self.x0 is None else as_vector("x0", self.x0, n)
 
-    def _point(self, forced: Forced, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _point(self, forced: Any, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         T, nt, ns = forced.period, self.n_transient, self.n_sample
+        if hasattr(forced, "stroboscopic_samples"):   # a map in closed form: iterate it
+            samples, last = forced.stroboscopic_samples(x, nt, ns)
+            return np.asarray(samples, float), np.asarray(last, float)
         tr = sample_on_grid(forced, x, T, nt + ns)
         X = at_times(tr, T * np.arange(nt, nt + ns + 1, dtype=float))
         return X[:-1], X[-1]
@@ -194,19 +201,24 @@ def _chunks(n: int, size: int, directions: tuple[str, ...], values: FloatArray
     return out
 
 
-def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
+def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
                         n_transient: int = 200, n_sample: int = 100, x0: Any = None,
                         directions: tuple[str, ...] = ("up", "down"), chunk_size: int = 100,
                         executor: Any = "serial", progress: bool | None = None,
                         rtol: float = 1e-6, parameter_name: str = "p",
-                        state_names: tuple[str, ...] = ()) -> BifurcationDiagram:
+                        state_names: tuple[str, ...] = (),
+                        warm_start: bool = True) -> BifurcationDiagram:
     """Brute-force bifurcation diagram of ``factory(p)`` over ``values``.
 
     Parameters
     ----------
     factory
         ``p -> Forced`` (a module-level callable for process or Dask executors, e.g.
-        :class:`~nscontrol.analysis.impact_oscillator.OscillatorFamily`).
+        :class:`~nscontrol.analysis.impact_oscillator.OscillatorFamily`), or ``p -> map``: an
+        object with ``n_states``, ``period`` and ``stroboscopic_samples(x, n_transient,
+        n_sample) -> (samples, last)`` (a stroboscopic map in closed form, iterated instead
+        of simulated; with ``initial_state()`` it also gives its own cold start, used when
+        ``x0`` is None).
     values : array_like
         Parameter values (sorted increasingly here).
     n_transient, n_sample
@@ -228,6 +240,9 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
         Name of the parameter (axis labels, saved files).
     state_names : tuple of str
         Names of the state components (default ``x0, x1, ...``).
+    warm_start : bool
+        ``True``: each point starts where the previous one of its chunk ended; ``False``:
+        every point starts cold (from ``x0`` or the map's ``initial_state()``).
 
     Returns
     -------
@@ -253,7 +268,7 @@ def bifurcation_diagram(factory: Callable[[float], Forced], values: Any, *,
         raise ModelError(f"directions: expected a non-empty subset of ('up', 'down'), got "
                          f"{directions!r}")
     task = _ChunkTask(factory, None if x0 is None else np.asarray(x0, float), nt, ns,
-                      float(rtol))
+                      float(rtol), bool(warm_start))
     chunks = _chunks(len(vals), cs, dirs, vals)
     res = sweep.run(task, chunks, executor=executor, progress=progress, desc="bifurcation")
     n = factory(float(vals[0])).n_states

@@ -74,6 +74,13 @@ _EXPORTS: dict[str, str] = {
     "corner_site": "limit_cycle_switching", "CornerDesign": "limit_cycle_switching",
     "design_corner_controller": "limit_cycle_switching",
     "SLIDING_GAIN_FACTOR": "limit_cycle_switching",
+    # converter_regulation.py
+    "ZADController": "converter_regulation", "ZADLoopMap": "converter_regulation",
+    "ZADOrbit": "converter_regulation", "ZADRun": "converter_regulation",
+    "ZADDesign": "converter_regulation", "zad_flip_coefficients": "converter_regulation",
+    "zad_flip_boundary": "converter_regulation", "zad_multipliers_series": "converter_regulation",
+    "leading_duty": "converter_regulation", "critical_ks": "converter_regulation",
+    "design_zad": "converter_regulation",
 }
 
 __all__ = list(_EXPORTS)

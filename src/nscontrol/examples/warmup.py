@@ -77,12 +77,24 @@ def _lure_lcp() -> None:
     simulate(coupled, [1.0, -1.0], (0.0, 0.1), h=1e-2, progress=False)
 
 
+def _zad_buck() -> None:
+    """The ZAD buck's map, Jacobian, orbit search and loop, both duty variants."""
+    from ..design.converter_regulation import ZADController
+    from ..systems.buck import BuckConverter
+
+    for variant in ("pl", "exact"):
+        loop = ZADController(BuckConverter.normalized(0.35), 5.0, 0.18, 0.8, variant).loop()
+        loop.run(loop.fixed_point().states[0], 2, n_transient=2)
+        loop.duties([[0.8, 0.0]])
+
+
 #: (what, how): one step of the warm-up each.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
     ("event-driven and Moreau-Jean mechanics", _mechanics),
     ("impacting bodies with an observer", _impacting_bodies),
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
+    ("ZAD-controlled buck converter", _zad_buck),
 ]
 
 #: Step name to the kernel modules (``subpackage._module``, as
@@ -95,6 +107,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "impacting bodies with an observer": ("numerics._lti_kernels", "simulate._event_kernels"),
     "Lur'e systems (implicit Euler) and switching": (
         "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels"),
+    "ZAD-controlled buck converter": ("design._zad_kernels",),
 }
 
 

@@ -24,6 +24,8 @@ _EXPORTS: dict[str, str] = {
     "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
     # nonlinear.py
     "NonlinearSystem": "nonlinear",
+    # buck.py
+    "BuckConverter": "buck",
     # lagrangian.py
     "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
