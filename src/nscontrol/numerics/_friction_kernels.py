@@ -88,13 +88,13 @@ def relative_error(q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
 
 
 @njit(cache=True)
-def _local_1d(w: float, qn: float, r: np.ndarray) -> int:
+def local_1d(w: float, qn: float, r: np.ndarray) -> int:
     r[0] = max(-qn / w, 0.0) if qn < 0.0 else 0.0
     return OPEN if r[0] == 0.0 else STICK
 
 
 @njit(cache=True)
-def _local_2d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
+def local_2d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
     """Exact solution of one planar contact: take-off, stick, slip forward or backward."""
     if q[0] >= 0.0:
         r[0], r[1] = 0.0, 0.0
@@ -139,7 +139,7 @@ def _slip_residual(W: np.ndarray, q: np.ndarray, mu: float, phi: float
 
 
 @njit(cache=True)
-def _local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray
+def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray
               ) -> int:
     """Exact solution of one spatial contact: take-off, stick, or slip (angle root)."""
     if q[0] >= 0.0:
@@ -245,11 +245,11 @@ def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np
                         s += data[p] * r[col]
                 qloc[k] = s
             if dim == 1:
-                states[i] = _local_1d(blocks[i, 0, 0], qloc[0], rloc)
+                states[i] = local_1d(blocks[i, 0, 0], qloc[0], rloc)
             elif dim == 2:
-                states[i] = _local_2d(blocks[i], qloc, mu[i], rloc)
+                states[i] = local_2d(blocks[i], qloc, mu[i], rloc)
             else:
-                states[i] = _local_3d(blocks[i], inverses[i], qloc, mu[i], rloc)
+                states[i] = local_3d(blocks[i], inverses[i], qloc, mu[i], rloc)
             for k in range(dim):
                 r[b + k] = rloc[k]
         csr_matvec_add(indptr, indices, data, r, q, u)

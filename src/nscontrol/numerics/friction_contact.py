@@ -38,7 +38,7 @@ from ..errors import DimensionError, ModelError, SolverError
 from . import _friction_kernels as kernels
 
 __all__ = ["FrictionContactResult", "solve_friction_contact", "friction_residual",
-           "contact_states", "planar_friction_lcp", "CONTACT_STATES"]
+           "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
 CONTACT_STATES = ("open", "stick", "slip")
@@ -274,7 +274,7 @@ def _solve_lcp(W: Any, q: FloatArray, mu: FloatArray) -> FrictionContactResult:
 
 def _solve_nsgs(W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
                 max_sweeps: int, r0: Any) -> FrictionContactResult:
-    r = _normal_guess(W, q, dim) if r0 is None else as_vector("r0", r0, q.shape[0]).copy()
+    r = frictionless_impulses(W, q, dim) if r0 is None else as_vector("r0", r0, q.shape[0]).copy()
     u = np.empty_like(q)
     states = np.zeros(mu.shape[0], np.int64)
     code, sweeps, err = kernels.nsgs_kernel(W.indptr, W.indices, W.data, q, mu, dim, r, u,
@@ -286,11 +286,29 @@ def _solve_nsgs(W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
                                  "solved" if code == 0 else "max_iter")
 
 
-def _normal_guess(W: Any, q: FloatArray, dim: int) -> FloatArray:
-    """Impulses of the frictionless problem (normal rows only), by the one LCP entry point;
-    zeros when that LCP is not solved."""
+def frictionless_impulses(W: Any, q: Any, dim: int) -> FloatArray:
+    """Impulses of the problem without friction (normal rows only, one LCP by
+    :func:`~nscontrol.numerics.lcp.solve_lcp`), tangential impulses zero: NSGS's start, exact
+    when no tangential load acts. Zeros when that LCP is not solved.
+
+    Parameters
+    ----------
+    W : array_like or scipy.sparse matrix (m dim, m dim)
+        Delassus matrix.
+    q : array_like (m dim,)
+        Free local velocity.
+    dim : int
+        Unknowns per contact.
+
+    Examples
+    --------
+    >>> frictionless_impulses(np.eye(2), [-1.0, 0.3], 2).tolist()
+    [1.0, 0.0]
+    """
     from .lcp import solve_lcp
 
+    W = sparse.csr_matrix(W, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
     n_ = np.arange(0, q.shape[0], dim)
     r = np.zeros_like(q)
     if not np.any(q[n_] < 0.0):

@@ -222,7 +222,7 @@ class LagrangianSystem:
             if np.ndim(self.friction) == 0 else as_vector("friction", self.friction, m)
         for j, mu_j in enumerate(mu):
             check_positive(f"friction[{j}]", mu_j, allow_zero=True)
-        T = as_matrix("tangent_matrix", self.tangent_matrix, cols=n)
+        T = _as_gap_matrix(self.tangent_matrix, n, "tangent_matrix")
         if T.shape[0] not in (m, 2 * m):
             raise DimensionError(f"tangent_matrix: expected {m} rows (planar contacts, one "
                                  f"tangent each) or {2 * m} (spatial, two each), got shape "
@@ -819,23 +819,24 @@ def _central_force_jacobians(force: ForceFn, t: float, q: FloatArray, v: FloatAr
     return out[0], out[1]
 
 
-def _as_gap_matrix(value: Any, n: int) -> Any:
+def _as_gap_matrix(value: Any, n: int, name: str = "gap_matrix") -> Any:
     """A dense (m, n) array, or a scipy.sparse CSR matrix kept sparse (large chains); no zero
     row (a contact that no motion opens or closes has no normal direction)."""
     if hasattr(value, "tocsr"):
         G = value.tocsr().astype(np.float64)
         if G.shape[1] != n:
-            raise DimensionError(f"gap_matrix: expected {n} columns, got shape {G.shape}")
+            raise DimensionError(f"{name}: expected {n} columns, got shape {G.shape}")
         if not np.all(np.isfinite(G.data)):
-            raise ModelError("gap_matrix: expected finite entries, got NaN or infinite ones")
+            raise ModelError(f"{name}: expected finite entries, got NaN or infinite ones")
         row_norms = np.asarray(abs(G).sum(axis=1)).ravel()
     else:
-        G = as_matrix("gap_matrix", value, cols=n)
+        G = as_matrix(name, value, cols=n)
         row_norms = np.abs(G).sum(axis=1)
     zero = np.flatnonzero(row_norms == 0.0)
     if zero.size:
-        raise ModelError(f"gap_matrix: row {int(zero[0])} is zero; every contact needs a "
-                         "normal direction (drop the row, or give the coordinates it constrains)")
+        raise ModelError(f"{name}: row {int(zero[0])} is zero; every contact needs a "
+                         "normal (and tangent) direction (drop the row, or give the "
+                         "coordinates it constrains)")
     return G
 
 
