@@ -89,6 +89,7 @@ def relative_error(q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
 
 @njit(cache=True)
 def local_1d(w: float, qn: float, r: np.ndarray) -> int:
+    """One frictionless contact: ``r = max(-q_N / w, 0)``."""
     r[0] = max(-qn / w, 0.0) if qn < 0.0 else 0.0
     return OPEN if r[0] == 0.0 else STICK
 
@@ -139,9 +140,35 @@ def _slip_residual(W: np.ndarray, q: np.ndarray, mu: float, phi: float
 
 
 @njit(cache=True)
+def _local_fixed_point(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
+    """The projected fixed point ``r <- P_K(r - ρ û(r))``, ``ρ = 1 / trace W``, from the
+    current ``r``, until it stops moving: the fallback of :func:`local_3d`."""
+    rho = 1.0 / (W[0, 0] + W[1, 1] + W[2, 2])
+    u = np.empty(3)
+    x = np.empty(3)
+    nxt = np.empty(3)
+    for _ in range(20000):
+        for k in range(3):
+            u[k] = W[k, 0] * r[0] + W[k, 1] * r[1] + W[k, 2] * r[2] + q[k]
+        x[0] = r[0] - rho * (u[0] + mu * np.sqrt(u[1] ** 2 + u[2] ** 2))
+        x[1] = r[1] - rho * u[1]
+        x[2] = r[2] - rho * u[2]
+        cone_projection(x, mu, nxt)
+        change = abs(nxt[0] - r[0]) + abs(nxt[1] - r[1]) + abs(nxt[2] - r[2])
+        r[0], r[1], r[2] = nxt[0], nxt[1], nxt[2]
+        if change <= 4.0 * _EPS * (abs(r[0]) + abs(r[1]) + abs(r[2])):
+            break
+    if r[0] == 0.0:
+        return OPEN
+    slip = np.sqrt(u[1] ** 2 + u[2] ** 2)
+    return SLIP if slip > 1e-12 * (abs(u[0]) + slip + abs(q[0])) else STICK
+
+
+@njit(cache=True)
 def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray
               ) -> int:
-    """Exact solution of one spatial contact: take-off, stick, or slip (angle root)."""
+    """Exact solution of one spatial contact: take-off, stick, or slip (angle root); writes
+    ``r`` (read as the fallback's start) and returns the state."""
     if q[0] >= 0.0:
         r[0], r[1], r[2] = 0.0, 0.0, 0.0
         return OPEN
@@ -153,9 +180,9 @@ def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.nd
         return STICK
     two_pi = 2.0 * np.pi
     step = two_pi / _ANGLE_GRID
-    # start the grid at the direction of -r_T of the stick guess (the slip direction when W
-    # is isotropic): the root is then found at a grid node or close to one
-    phi0 = np.arctan2(-rs[2], -rs[1])
+    # centre the first bracket on the direction of -r_T of the stick guess (the slip
+    # direction when W is isotropic): that root is then inside it, never at a node
+    phi0 = np.arctan2(-rs[2], -rs[1]) - 0.5 * step
     best_rn, best_phi, found = 0.0, phi0, False
     fa, pa, _, da = _slip_residual(W, q, mu, phi0)
     for g in range(_ANGLE_GRID):
@@ -182,11 +209,8 @@ def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.nd
                 best_rn, best_phi, found = rn, phi, True
                 break
         fa, pa, da = fb, pb, db
-    if not found:   # no slip root (round-off at the stick/slip boundary): the cone's point
-        xs = np.empty(3)
-        cone_projection(rs, mu, xs)
-        r[0], r[1], r[2] = xs[0], xs[1], xs[2]
-        return SLIP
+    if not found:   # no bracketed slip root (strong normal-tangent coupling, large μ)
+        return _local_fixed_point(W, q, mu, r)
     r[0] = best_rn
     r[1] = -mu * best_rn * np.cos(best_phi)
     r[2] = -mu * best_rn * np.sin(best_phi)
@@ -244,6 +268,7 @@ def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np
                     if col < b or col >= b + dim:
                         s += data[p] * r[col]
                 qloc[k] = s
+                rloc[k] = r[row]   # the local fallback's start
             if dim == 1:
                 states[i] = local_1d(blocks[i, 0, 0], qloc[0], rloc)
             elif dim == 2:

@@ -130,6 +130,8 @@ def frictional_mj_kernel(q: np.ndarray, v: np.ndarray, minv: np.ndarray, kdiag: 
                             s -= blocks[j, c, c2] * r[b + c2]
                         qloc[c] = s
                     qloc[0] += e[j] * un_k[j]
+                    for c in range(dim):   # the local fallback's start
+                        rloc[c] = r[b + c]
                     if dim == 1:
                         states[j] = local_1d(blocks[j, 0, 0], qloc[0], rloc)
                     elif dim == 2:

@@ -222,11 +222,12 @@ class LagrangianSystem:
             if np.ndim(self.friction) == 0 else as_vector("friction", self.friction, m)
         for j, mu_j in enumerate(mu):
             check_positive(f"friction[{j}]", mu_j, allow_zero=True)
-        T = _as_gap_matrix(self.tangent_matrix, n, "tangent_matrix")
-        if T.shape[0] not in (m, 2 * m):
+        shape = getattr(self.tangent_matrix, "shape", None) or np.shape(self.tangent_matrix)
+        if len(shape) != 2 or shape[0] not in (m, 2 * m):
             raise DimensionError(f"tangent_matrix: expected {m} rows (planar contacts, one "
                                  f"tangent each) or {2 * m} (spatial, two each), got shape "
-                                 f"{T.shape}")
+                                 f"{shape}")
+        T = _as_gap_matrix(self.tangent_matrix, n, "tangent_matrix")
         set_(self, "friction", mu)
         set_(self, "tangent_matrix", T)
         set_(self, "friction_dim", T.shape[0] // m if m else 0)
