@@ -140,6 +140,45 @@ def _slip_residual(W: np.ndarray, q: np.ndarray, mu: float, phi: float
 
 
 @njit(cache=True)
+def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: float
+                    ) -> tuple[bool, float, float]:
+    """A slip root in ``[lo, hi]`` by the Illinois variant of regula falsi (superlinear,
+    never leaves the bracket), to the bracket's machine resolution: ``(found, φ, r_N)``."""
+    fa, pa, _, da = _slip_residual(W, q, mu, lo)
+    fb, pb, _, db = _slip_residual(W, q, mu, hi)
+    if not (da > 0.0 and db > 0.0 and (pa > 0.0 or pb > 0.0)):
+        return False, 0.0, 0.0
+    if fa == 0.0:
+        phi = lo
+    elif fb == 0.0:
+        phi = hi
+    elif fa * fb > 0.0:
+        return False, 0.0, 0.0
+    else:
+        a, b, side = lo, hi, 0
+        phi = lo
+        for _ in range(200):
+            phi = (a * fb - b * fa) / (fb - fa)
+            if phi == a or phi == b or abs(b - a) <= 4.0 * _EPS * (1.0 + abs(phi)):
+                break
+            fm, _, _, _ = _slip_residual(W, q, mu, phi)
+            if fm == 0.0:
+                break
+            if fm * fb > 0.0:      # phi replaces b; halve fa if b moved twice in a row
+                b, fb = phi, fm
+                if side == -1:
+                    fa *= 0.5
+                side = -1
+            else:                  # phi replaces a
+                a, fa = phi, fm
+                if side == 1:
+                    fb *= 0.5
+                side = 1
+    _, p, rn, den = _slip_residual(W, q, mu, phi)
+    return (p > 0.0 and den > 0.0), phi, rn
+
+
+@njit(cache=True)
 def _local_fixed_point(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
     """The projected fixed point ``r <- P_K(r - ρ û(r))``, ``ρ = 1 / trace W``, from the
     current ``r``, until it stops moving: the fallback of :func:`local_3d`."""
@@ -178,37 +217,25 @@ def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.nd
     if rs[0] >= 0.0 and np.sqrt(rs[1] ** 2 + rs[2] ** 2) <= mu * rs[0] * (1.0 + 4.0 * _EPS):
         r[0], r[1], r[2] = rs[0], rs[1], rs[2]
         return STICK
-    two_pi = 2.0 * np.pi
-    step = two_pi / _ANGLE_GRID
-    # centre the first bracket on the direction of -r_T of the stick guess (the slip
-    # direction when W is isotropic): that root is then inside it, never at a node
-    phi0 = np.arctan2(-rs[2], -rs[1]) - 0.5 * step
-    best_rn, best_phi, found = 0.0, phi0, False
-    fa, pa, _, da = _slip_residual(W, q, mu, phi0)
-    for g in range(_ANGLE_GRID):
-        lo = phi0 + g * step
-        hi = lo + step
-        fb, pb, _, db = _slip_residual(W, q, mu, hi)
-        if da > 0.0 and db > 0.0 and (fa == 0.0 or fa * fb < 0.0) and (pa > 0.0 or pb > 0.0):
-            f_lo = fa
-            for _ in range(80 if fa != 0.0 else 0):
-                mid = 0.5 * (lo + hi)
-                if mid <= lo or mid >= hi:
-                    break
-                fm, _, _, _ = _slip_residual(W, q, mu, mid)
-                if fm == 0.0:
-                    lo = hi = mid
-                    break
-                if f_lo * fm < 0.0:
-                    hi = mid
-                else:
-                    lo, f_lo = mid, fm
-            phi = lo if fa == 0.0 else 0.5 * (lo + hi)
-            _, p, rn, den = _slip_residual(W, q, mu, phi)
-            if p > 0.0 and den > 0.0:
-                best_rn, best_phi, found = rn, phi, True
+    best_rn, best_phi, found = 0.0, 0.0, False
+    if r[0] > 0.0 and r[1] * r[1] + r[2] * r[2] > 0.0:
+        # the previous sweep's slip direction: the root is usually within a narrow bracket
+        phi_w = np.arctan2(-r[2], -r[1])
+        for width in (1e-6, 1e-3, 0.1):
+            found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi_w - width,
+                                                       phi_w + width)
+            if found:
                 break
-        fa, pa, da = fb, pb, db
+    if not found:
+        step = 2.0 * np.pi / _ANGLE_GRID
+        # centre the first bracket on the direction of -r_T of the stick guess (the slip
+        # direction when W is isotropic): that root is then inside it, never at a node
+        phi0 = np.arctan2(-rs[2], -rs[1]) - 0.5 * step
+        for g in range(_ANGLE_GRID):
+            found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi0 + g * step,
+                                                       phi0 + (g + 1) * step)
+            if found:
+                break
     if not found:   # no bracketed slip root (strong normal-tangent coupling, large μ)
         return _local_fixed_point(W, q, mu, r)
     r[0] = best_rn

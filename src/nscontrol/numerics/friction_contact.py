@@ -159,8 +159,9 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     max_sweeps : int
         NSGS sweep limit.
     r0 : array_like (m dim,), optional
-        NSGS starting impulses (a warm start); by default the solution of the frictionless
-        problem (normal impulses only), which is exact when no tangential load acts.
+        NSGS starting impulses (a warm start); by default zeros, or for more than
+        :data:`AUTO_LCP_MAX_CONTACTS` contacts the solution of the frictionless problem
+        (normal impulses only, one LCP), which is exact when no tangential load acts.
 
     Returns
     -------
@@ -274,7 +275,12 @@ def _solve_lcp(W: Any, q: FloatArray, mu: FloatArray) -> FrictionContactResult:
 
 def _solve_nsgs(W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
                 max_sweeps: int, r0: Any) -> FrictionContactResult:
-    r = frictionless_impulses(W, q, dim) if r0 is None else as_vector("r0", r0, q.shape[0]).copy()
+    if r0 is not None:
+        r = as_vector("r0", r0, q.shape[0]).copy()
+    elif mu.shape[0] > AUTO_LCP_MAX_CONTACTS:   # a cold start of a large (stacked) set
+        r = frictionless_impulses(W, q, dim)
+    else:
+        r = np.zeros_like(q)
     u = np.empty_like(q)
     states = np.zeros(mu.shape[0], np.int64)
     code, sweeps, err = kernels.nsgs_kernel(W.indptr, W.indices, W.data, q, mu, dim, r, u,
