@@ -231,6 +231,8 @@ class LagrangianSystem:
         set_(self, "friction", mu)
         set_(self, "tangent_matrix", T)
         set_(self, "friction_dim", T.shape[0] // m if m else 0)
+        if self.friction_dim:   # the integrator that resolves Coulomb's law at the contacts
+            set_(self, "default_method", "moreau_jean")
 
     def _check_force_jacobian(self, n: int) -> None:
         """Probe ``force_jacobian`` at ``(t, q, v) = (0, 0, 0)``: shapes, and agreement with
