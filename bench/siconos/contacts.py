@@ -3,9 +3,9 @@ stack by Moreau-Jean with friction.
 
 Run by /usr/bin/python3 (Debian's python3-siconos). Reads JSON on stdin:
 ``{"kind": "one_step", "dim", "W" (rows), "q", "mu", "solver": "nsgs"|"lemke", "tol",
-"max_iter", "budget"}`` or ``{"kind": "stack", "n", "mu", "width", "height", "mass", "g",
-"angle", "h", "steps", "solver", "tol", "max_iter"}`` or ``{"kind": "file", "path", "tol", "max_iter", "budget"}``; prints one
-JSON line.
+"max_iter", "budget"}``, ``{"kind": "stack", "n", "mu", "width", "height", "mass", "g",
+"angle", "h", "steps", "solver", "tol", "max_iter"}`` or ``{"kind": "file", "path", "tol",
+"max_iter", "budget"}``; prints one JSON line.
 """
 
 import json

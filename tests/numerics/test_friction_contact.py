@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from nscontrol.errors import DimensionError, ModelError
-from nscontrol.numerics import (friction_residual, planar_friction_lcp,
-                                solve_friction_contact)
+from nscontrol.numerics import friction_residual, planar_friction_lcp, solve_friction_contact
 
 EPS = np.finfo(float).eps
 

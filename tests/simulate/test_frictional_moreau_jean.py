@@ -7,8 +7,14 @@ import pytest
 
 import nscontrol as nsc
 from nscontrol.errors import ModelError
-from nscontrol.systems import (LagrangianSystem, brick_stack, brick_stack_rest_state,
-                               inclined_block, rolling_disk, rolling_sphere)
+from nscontrol.systems import (
+    LagrangianSystem,
+    brick_stack,
+    brick_stack_rest_state,
+    inclined_block,
+    rolling_disk,
+    rolling_sphere,
+)
 
 EPS = np.finfo(float).eps
 G = 9.81

@@ -5,8 +5,14 @@ import pytest
 from scipy import sparse
 
 from nscontrol.errors import DimensionError, ModelError
-from nscontrol.systems import (LagrangianSystem, brick_stack, brick_stack_rest_state,
-                               inclined_block, rolling_disk, rolling_sphere)
+from nscontrol.systems import (
+    LagrangianSystem,
+    brick_stack,
+    brick_stack_rest_state,
+    inclined_block,
+    rolling_disk,
+    rolling_sphere,
+)
 
 
 def _block(**kwargs):

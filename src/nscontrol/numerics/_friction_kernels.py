@@ -82,7 +82,7 @@ def natural_map_error(u: np.ndarray, r: np.ndarray, mu: np.ndarray, dim: int) ->
 def relative_error(q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
                    dim: int) -> float:
     """The natural-map error over ``max(‖q‖, ‖r‖, ‖u‖)`` (1 when all three vanish)."""
-    scale = max(np.linalg.norm(q), np.linalg.norm(r), np.linalg.norm(u))
+    scale = float(max(np.linalg.norm(q), np.linalg.norm(r), np.linalg.norm(u)))
     err = natural_map_error(u, r, mu, dim)
     return err / scale if scale > 0.0 else err
 

@@ -39,7 +39,7 @@ class _Contacts:
     """``H``, ``M̂⁻¹`` and the Delassus matrices of the active sets met so far."""
 
     def __init__(self, system: Any, h: float, theta: float) -> None:
-        n, m = system.n_dof, system.n_contacts
+        m = system.n_contacts
         self.d = system.friction_dim
         self.dim = 1 + self.d
         self.mu = np.zeros(m) if system.friction is None else np.asarray(system.friction)
@@ -122,7 +122,7 @@ def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float, *, h
             step = h if k < n_full else h_last
             compiled = run.compiled and step == h
             size = max(1, min(n_full - k, 2000)) if compiled else 1
-            times = t0 + h * np.arange(k, k + size)
+            times: FloatArray = t0 + h * np.arange(k, k + size, dtype=np.float64)
             q_pre, v_pre, r_pre = q.copy(), v.copy(), run.r.copy()
             done = 0
             if compiled:
@@ -137,9 +137,9 @@ def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float, *, h
                 done = 1
             q_out, v_out = out[0][:done], out[1][:done]
             q, v = q_out[-1].copy(), v_out[-1].copy()
-            _record(rec, system, run.c, times[:done] + step, q_out, v_out,
-                    *(a[:done] for a in out[2:6]), run.proj["energy"], q_pre, v_pre, r_pre,
-                    step)
+            _record(rec, system, run.c, times[:done] + step, q_out, v_out, out[2][:done],
+                    out[3][:done], out[4][:done], out[5][:done], run.proj["energy"], q_pre,
+                    v_pre, r_pre, step)
             k += done
             bar.update(t0 + h * k)
     traj = rec.finish(status=status, message=message, method="moreau_jean", stats={
