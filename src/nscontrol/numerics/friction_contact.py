@@ -2,7 +2,7 @@
 
 Given the Delassus matrix ``W`` and the free local velocity ``q`` (unknowns ordered per
 contact: normal, then ``dim - 1`` tangents), find the impulses ``r`` and velocities
-``u = W r + q`` with, for every contact ``i``,
+``u = W r + q`` with, for every contact ``i``::
 
     r_i ∈ K_μ = {|r_T| <= μ r_N},   û_i = u_i + μ |u_{T,i}| e_N ∈ K_μ*,   r_i ⟂ û_i,
 
