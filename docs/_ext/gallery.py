@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 CHAPTER_PAGES = {"ch02": "ch02", "ch08": "ch08", "ch11": "ch11", "mechanics": "mechanics",
-                 "set-valued": "setvalued", "foundation": "lcp"}
+                 "set-valued": "setvalued", "foundation": "lcp",
+                 "contacts": "frictional_contacts"}
 FIGURE_DIR = "_gallery"          # under the docs source folder, ignored by git
 
 

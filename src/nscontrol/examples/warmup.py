@@ -88,6 +88,22 @@ def _zad_buck() -> None:
         loop.duties([[0.8, 0.0]])
 
 
+def _frictional_contacts() -> None:
+    """Planar and spatial frictional contacts: the one-step solver and Moreau-Jean's
+    compiled frictional step."""
+    import numpy as np
+
+    from ..numerics.friction_contact import solve_friction_contact
+    from ..simulate import simulate
+    from ..systems.frictional_bodies import inclined_block, rolling_sphere
+
+    solve_friction_contact(np.eye(3), [-1.0, 1.0, 0.0], 0.5, dim=3)
+    solve_friction_contact(np.eye(2), [-1.0, 1.0], 0.5, dim=2, method="nsgs")
+    simulate(inclined_block(0.5, 0.6), [0.0] * 4, (0.0, 0.01), h=1e-3, progress=False)
+    simulate(rolling_sphere(0.3), [0, 0, 0.1, 0, 0, 0, 1.0, 0, 0, 0, 0, 0], (0.0, 0.01),
+             h=1e-3, progress=False)
+
+
 #: (what, how): one step of the warm-up each.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
@@ -95,6 +111,7 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("impacting bodies with an observer", _impacting_bodies),
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
     ("ZAD-controlled buck converter", _zad_buck),
+    ("frictional contacts", _frictional_contacts),
 ]
 
 #: Step name to the kernel modules (``subpackage._module``, as
@@ -108,6 +125,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "Lur'e systems (implicit Euler) and switching": (
         "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels"),
     "ZAD-controlled buck converter": ("design._zad_kernels",),
+    "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
+                            "simulate._frictional_mj_kernels"),
 }
 
 

@@ -107,7 +107,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
               listeners: Sequence[Listener] = (), record_every: int = 1,
               signals: Sequence[str] | None = None, progress: bool | None = None,
               activation: float | None = None,
-              forces: str = "implicit", mass_at: str = "start") -> Trajectory:
+              forces: str = "implicit", mass_at: str = "start",
+              projection: bool = False, contact_tol: float = 1e-12) -> Trajectory:
     """Moreau–Jean time-stepping from ``x0 = [q0; v0]`` over ``t_span``.
 
     Parameters
@@ -161,6 +162,15 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         Where a configuration-dependent ``M(q)`` is evaluated: at ``q_k`` (the scheme of the
         module docstring; first order whatever θ), or at the predicted
         ``q_k + θ h v_k`` (``O(h²)`` from ``q_{k+θ}``: second order for ``θ = ½``).
+    projection : bool
+        After each step, project ``q`` on the admissible set ``{g(q) >= 0}`` in the kinetic
+        metric (one LCP; the velocity and the impulse law are kept): no penetration beyond
+        round-off. Stats ``projection_energy`` (the energy the corrections added) and
+        ``max_penetration_before_projection``; signal ``projection_energy``.
+    contact_tol : float
+        Tolerance of the relative natural-map error of each step's frictional contact
+        problem (systems with ``friction``; see
+        :func:`~nscontrol.numerics.friction_contact.solve_friction_contact`).
 
     Returns
     -------
@@ -242,7 +252,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
                              listeners=reorder_listeners(listeners, back),
                              record_every=record_every, signals=signals, progress=progress,
                              activation=activation, forces=forces,
-                             mass_at=mass_at)
+                             mass_at=mass_at, projection=projection,
+                             contact_tol=contact_tol)
         except NscontrolError as err:  # the partial run in the chapter's state order too
             if isinstance(err.trajectory, Trajectory):
                 err.trajectory = reorder_states(err.trajectory, back, system.state_names)
@@ -271,6 +282,16 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         activation = 1e-12 * (1.0 + float(np.max(np.abs(x0[: system.n_dof]), initial=0.0)))
     activation = check_positive("activation", activation, allow_zero=True)
     t0, tf = (float(t) for t in t_span)
+    if system.friction_dim or projection:   # Coulomb friction, or the position projection
+        from ._frictional_moreau_jean import integrate_frictional
+
+        if controller is not None or listeners:
+            raise ModelError("controller, listeners: not supported yet with friction or "
+                             "projection=True; simulate without them")
+        return integrate_frictional(system, x0, t0, tf, h=h, theta=theta, gamma=gamma, u=u,
+                                    record_every=record_every, signals=signals,
+                                    progress=progress, activation=activation,
+                                    projection=bool(projection), contact_tol=contact_tol)
     # whole steps of h, then one shorter step so that the run ends exactly at tf
     n_full = int(np.floor((tf - t0) / h + 1e-9))
     h_last = (tf - t0) - n_full * h

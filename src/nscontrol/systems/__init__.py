@@ -30,6 +30,10 @@ _EXPORTS: dict[str, str] = {
     "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
     "two_link_arm_force_jacobian": "lagrangian",
+    # frictional_bodies.py
+    "inclined_block": "frictional_bodies", "rolling_disk": "frictional_bodies",
+    "rolling_sphere": "frictional_bodies", "brick_stack": "frictional_bodies",
+    "brick_stack_rest_state": "frictional_bodies",
     # two_link.py
     "TwoLinkParams": "two_link", "TwoLinkArm": "two_link", "OneDofMass": "two_link",
     # impacting_bodies.py

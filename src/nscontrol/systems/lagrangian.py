@@ -79,15 +79,25 @@ class LagrangianSystem:
         Potential of ``force`` (added to ``½ qᵀKq - f0ᵀq`` in :meth:`energy`).
     names : sequence of str, optional
         Names of the coordinates (states are named ``q_name``, ``v_name``).
+    friction : float or array_like (m,), optional
+        Coulomb coefficients ``μ_j >= 0`` of the contacts (with ``tangent_matrix``); the
+        contact impulse ``(P_n, P_t)`` then lies in the cone ``|P_t| <= μ_j P_n`` and opposes
+        slip (``docs/frictional_contacts.md``). Only with affine gaps.
+    tangent_matrix : array_like (m d, n), optional
+        Constant tangent Jacobian: rows ``d j .. d j + d - 1`` map ``v`` to the tangential
+        (slip) velocity of contact ``j``; ``d = 1`` for planar contacts, ``d = 2`` for
+        spatial ones.
 
     Raises
     ------
     ModelError
         Non-symmetric or indefinite mass matrix, restitution outside ``[0, 1]``, neither or both
         of ``gap_matrix`` and ``gap``, ``force_jacobian`` without ``force`` or not a pair of
-        finite matrices.
+        finite matrices; a negative or non-finite ``friction``, ``friction`` without
+        ``tangent_matrix`` (or the converse), friction on nonlinear gaps.
     DimensionError
-        Shapes that disagree with ``n`` or ``m`` (``force_jacobian``'s too).
+        Shapes that disagree with ``n`` or ``m`` (``force_jacobian``'s too; ``tangent_matrix``
+        rows not ``m`` or ``2 m``).
 
     Notes
     -----
@@ -129,8 +139,12 @@ class LagrangianSystem:
     potential: Callable[[FloatArray], float] | None = None
     names: Sequence[str] = ()
     force_jacobian: ForceJacobianFn | None = None
+    friction: FloatArray | None = None
+    tangent_matrix: FloatArray | None = None
     n_dof: int = field(init=False)
     n_contacts: int = field(init=False)
+    #: Tangent directions per contact: 0 (frictionless), 1 (planar) or 2 (spatial).
+    friction_dim: int = field(init=False)
 
     if TYPE_CHECKING:
         # What the constructor accepts (the dataclass fields hold the normalised values).
@@ -143,7 +157,9 @@ class LagrangianSystem:
                      actuation: ArrayLike | None = None,
                      potential: Callable[[FloatArray], float] | None = None,
                      names: Sequence[str] = (),
-                     force_jacobian: ForceJacobianFn | None = None) -> None: ...
+                     force_jacobian: ForceJacobianFn | None = None,
+                     friction: ArrayLike | None = None,
+                     tangent_matrix: ArrayLike | None = None) -> None: ...
 
     default_method = "event_driven"
 
@@ -185,6 +201,38 @@ class LagrangianSystem:
             raise DimensionError(f"names: expected {n} coordinate names, got {len(names)}")
         set_(self, "names", names)
         self._check_force_jacobian(n)
+        self._check_friction(n, m)
+
+    def _check_friction(self, n: int, m: int) -> None:
+        """``friction`` (μ_j >= 0, one per contact) and ``tangent_matrix`` (``m d`` rows,
+        ``d`` 1 or 2) come together, on affine gaps only."""
+        set_ = object.__setattr__
+        if self.friction is None and self.tangent_matrix is None:
+            set_(self, "friction_dim", 0)
+            return
+        if self.friction is None or self.tangent_matrix is None:
+            given, missing = (("friction", "tangent_matrix") if self.tangent_matrix is None
+                              else ("tangent_matrix", "friction"))
+            raise ModelError(f"{missing}: {given} was given without it; Coulomb friction needs "
+                             "both the coefficients and the tangent Jacobian")
+        if self.gap_matrix is None:
+            raise ModelError("friction: supported on affine gaps (gap_matrix) only; linearise "
+                             "the gaps about the working configuration")
+        mu = np.full(m, as_real_scalar("friction", self.friction)) \
+            if np.ndim(self.friction) == 0 else as_vector("friction", self.friction, m)
+        for j, mu_j in enumerate(mu):
+            check_positive(f"friction[{j}]", mu_j, allow_zero=True)
+        shape = getattr(self.tangent_matrix, "shape", None) or np.shape(self.tangent_matrix)
+        if len(shape) != 2 or shape[0] not in (m, 2 * m):
+            raise DimensionError(f"tangent_matrix: expected {m} rows (planar contacts, one "
+                                 f"tangent each) or {2 * m} (spatial, two each), got shape "
+                                 f"{shape}")
+        T = _as_gap_matrix(self.tangent_matrix, n, "tangent_matrix")
+        set_(self, "friction", mu)
+        set_(self, "tangent_matrix", T)
+        set_(self, "friction_dim", T.shape[0] // m if m else 0)
+        if self.friction_dim:   # the integrator that resolves Coulomb's law at the contacts
+            set_(self, "default_method", "moreau_jean")
 
     def _check_force_jacobian(self, n: int) -> None:
         """Probe ``force_jacobian`` at ``(t, q, v) = (0, 0, 0)``: shapes, and agreement with
@@ -774,23 +822,24 @@ def _central_force_jacobians(force: ForceFn, t: float, q: FloatArray, v: FloatAr
     return out[0], out[1]
 
 
-def _as_gap_matrix(value: Any, n: int) -> Any:
+def _as_gap_matrix(value: Any, n: int, name: str = "gap_matrix") -> Any:
     """A dense (m, n) array, or a scipy.sparse CSR matrix kept sparse (large chains); no zero
     row (a contact that no motion opens or closes has no normal direction)."""
     if hasattr(value, "tocsr"):
         G = value.tocsr().astype(np.float64)
         if G.shape[1] != n:
-            raise DimensionError(f"gap_matrix: expected {n} columns, got shape {G.shape}")
+            raise DimensionError(f"{name}: expected {n} columns, got shape {G.shape}")
         if not np.all(np.isfinite(G.data)):
-            raise ModelError("gap_matrix: expected finite entries, got NaN or infinite ones")
+            raise ModelError(f"{name}: expected finite entries, got NaN or infinite ones")
         row_norms = np.asarray(abs(G).sum(axis=1)).ravel()
     else:
-        G = as_matrix("gap_matrix", value, cols=n)
+        G = as_matrix(name, value, cols=n)
         row_norms = np.abs(G).sum(axis=1)
     zero = np.flatnonzero(row_norms == 0.0)
     if zero.size:
-        raise ModelError(f"gap_matrix: row {int(zero[0])} is zero; every contact needs a "
-                         "normal direction (drop the row, or give the coordinates it constrains)")
+        raise ModelError(f"{name}: row {int(zero[0])} is zero; every contact needs a "
+                         "normal (and tangent) direction (drop the row, or give the "
+                         "coordinates it constrains)")
     return G
 
 

@@ -42,7 +42,9 @@ contacts).
 3. a short run of ``simulate(obj, x0, t_span)`` with the default method returns a
    ``Trajectory`` of that method whose ``t`` is nondecreasing from ``t0`` to ``tf`` (or to a
    terminal event), ``x`` has shape ``(len(t), n_states)`` and starts at ``x0``, every signal
-   has ``len(t)`` rows, every value is finite and every event lies in the span, in time order.
+   has ``len(t)`` rows, every value is finite and every event lies in the span, in time order;
+4. with Coulomb friction (``friction_dim > 0``), the run's friction impulses lie in the cone
+   and oppose the slip velocity (maximal dissipation), to the contact solver's tolerance.
 """
 
 from __future__ import annotations
@@ -460,6 +462,27 @@ def _check_system(chk: _Checker, system: Any, x0: Any, t_span: tuple[float, floa
     chk.fact("every event lies in the span, in time order",
              outside.size == 0 and bool(np.all(np.diff(times) >= 0.0)),
              f"{times.size} events, outside: {outside.tolist()[:5]}")
+    if getattr(system, "friction_dim", 0):
+        _check_friction(chk, system, traj)
+
+
+def _check_friction(chk: _Checker, system: Any, traj: Any) -> None:
+    """Coulomb's law on the recorded impulses: in the cone, and maximal dissipation (the
+    friction impulse opposes the slip velocity at the step's end, ``P_T · u_T <= 0``), to
+    the contact solver's tolerance ``max_contact_residual`` (relative)."""
+    d, n = system.friction_dim, system.n_dof
+    pn = traj.signals["impulse"][1:]
+    pt = traj.signals["friction_impulse"][1:].reshape(pn.shape[0], -1, d)
+    tol = 10.0 * max(float(traj.stats.get("max_contact_residual", 0.0)), 1e-15)
+    scale = 1.0 + float(np.max(np.abs(pn), initial=0.0))
+    excess = np.linalg.norm(pt, axis=2) - system.friction * pn
+    chk.bound("friction impulses lie in the Coulomb cone (|P_T| - mu P_N, relative)",
+              float(np.max(excess, initial=0.0)) / scale, tol)
+    ut = np.asarray(system.tangent_matrix @ traj.x[1:, n:].T).T.reshape(pn.shape[0], -1, d)
+    vscale = 1.0 + float(np.max(np.abs(traj.x[:, n:]), initial=0.0))
+    power = np.einsum("kjd,kjd->kj", pt, ut)
+    chk.bound("friction impulses oppose the slip (max P_T · u_T, relative)",
+              float(np.max(power, initial=0.0)) / (scale * vscale), tol)
 
 
 def _initial_state(system: Any, x0: Any, n: int, rng: np.random.Generator) -> FloatArray:

@@ -205,6 +205,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
                                            atol=atol, record_every=record_every,
                                            signals=signals, progress=progress)
     if isinstance(system, LagrangianSystem):
+        if system.friction_dim:   # Coulomb friction is not located by this integrator
+            raise ModelError("event_driven: this system has Coulomb friction (friction=...); "
+                             "simulate it with method='moreau_jean' and a step h")
         return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
                                        _check_input(system, u), controller, opts,
                                        bool(sensitivity)))
