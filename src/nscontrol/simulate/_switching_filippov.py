@@ -311,18 +311,18 @@ def _two_sliding_onset(fields: _Fields, t: float, x: FloatArray, signs: tuple[in
 
 def _enter_two_sliding(fields: _Fields, run: Any, t: float, x: FloatArray,
                        signs: tuple[int, ...], k: int) -> FloatArray:
-    """Project ``x`` onto ``σ̂_k = 0`` (one Newton step along its gradient) and ``h_k = 0``,
-    record ``"two_sliding_start"``; returns the projected state."""
+    """Project ``x`` onto ``h_k = 0``, then onto ``σ̂_k = 0`` by one Newton step along
+    ``F⁺ - F⁻`` (the only direction the switching moves the state in, tangent to the surface;
+    a state the switching does not act on, such as an exosystem's, is left alone); record
+    ``"two_sliding_start"`` and return the projected state."""
     if run.sensitivity:
         raise ModelError(f"sensitivity: not available through second-order sliding (reached "
                          f"on surface {k} at t = {t:.12g}); run with sensitivity=False")
     system = fields.s
     y = _project(system, k, x)
-    g = central_difference_jacobian(
-        lambda z: np.array([fields.sigma_hat(t, z, signs, k)]), y)[0]
-    gg = float(g @ g)
-    if gg > 0.0:
-        y = _project(system, k, y - fields.sigma_hat(t, y, signs, k) / gg * g)
+    _, a1, fm, fp = fields.two_sliding_terms(t, y, signs, k)
+    if a1 != 0.0:
+        y = y - fields.sigma_hat(t, y, signs, k) / a1 * (fp - fm)
     run.event(t, "two_sliding_start", k, x, y, _mode_code(signs, -1),
               _two_sliding_code(signs, k))
     run.rec.sample(t, y, force=True)
