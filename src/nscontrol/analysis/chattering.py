@@ -105,7 +105,7 @@ def reaching_time(t: ArrayLike, s: ArrayLike, tol: float) -> float:
 class OrderFit(NamedTuple):
     """A least-squares fit ``log y = log C + p log h``.
 
-    Attributes
+    Parameters
     ----------
     order
         The slope ``p``.

@@ -496,7 +496,7 @@ def run_sampled(plant: SlidingModePlant, controller: FirstOrderSMC | SuperTwisti
         getattr(controller, "k1", 0.0), getattr(controller, "k2", 0.0), h,
         getattr(controller, "x0", 0.0), steps,
         bool(getattr(controller, "estimate_disturbance", False)))
-    t = t0 + h * np.arange(steps + 1)
+    t: FloatArray = t0 + h * np.arange(steps + 1, dtype=np.float64)
     signals: dict[str, np.ndarray] = {"s": X[:, :n] @ plant.c, "u": U[:, None]}
     if not first:
         signals["nu"] = NU[:, None]

@@ -176,15 +176,15 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
     save_figure(fig, out_dir, "smc_time_series", figures)
 
     fig, ax = new_figure(figsize=(7, 5))
-    h = np.array(STEPS)
+    hs = np.array(STEPS)
     names = {"fo_explicit": "explicit first order", "st_explicit": "explicit super-twisting",
              "st_implicit": "implicit super-twisting",
              "st_plain": "implicit super-twisting, no disturbance estimate"}
     for key, label in names.items():
-        ax.loglog(h, ctx["amps"][key], "o-", label=f"{label} (order "
+        ax.loglog(hs, ctx["amps"][key], "o-", label=f"{label} (order "
                   f"{ctx['orders'][key]:.2f})")
     for p, ls in ((1, ":"), (2, "--")):
-        ax.loglog(h, 1e-2 * (h / h[0]) ** p * (0.1 if p == 2 else 1.0), "k" + ls, lw=0.8,
+        ax.loglog(hs, 1e-2 * (hs / hs[0]) ** p * (0.1 if p == 2 else 1.0), "k" + ls, lw=0.8,
                   label=f"slope {p}")
     ax.set_xlabel("sampling period h [s]")
     ax.set_ylabel("max |s_k| after reaching")

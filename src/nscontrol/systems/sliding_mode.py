@@ -18,9 +18,10 @@ integrates: first-order sliding mode with the equivalent control
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector, check_positive
 from ..errors import DimensionError, ModelError
@@ -72,6 +73,11 @@ class SlidingModePlant:
     c: FloatArray
     disturbance: Exosystem | None = None
     state_names: tuple[str, ...] = ()
+
+    if TYPE_CHECKING:
+        def __init__(self, A: ArrayLike, B: ArrayLike, c: ArrayLike,
+                     disturbance: Exosystem | None = None,
+                     state_names: tuple[str, ...] = ()) -> None: ...
 
     def __post_init__(self) -> None:
         A = as_square("A", self.A)
