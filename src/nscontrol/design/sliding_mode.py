@@ -185,7 +185,7 @@ class SuperTwistingController:
         Sampling period ``h > 0``.
     discretization : {"implicit", "explicit"}
         See the module's notes.
-    x0 : float
+    nu0 : float
         Initial ``ν`` (default 0).
     estimate_disturbance : bool
         Implicit law only (default True): predict ``s_{k+1}`` with the one-step disturbance
@@ -217,7 +217,7 @@ class SuperTwistingController:
     k2: float
     period: float
     discretization: str = "implicit"
-    x0: float = 0.0
+    nu0: float = 0.0
     estimate_disturbance: bool = True
     n_outputs: int = field(default=1, init=False)
     _model: tuple[FloatArray, FloatArray, float] = field(init=False, repr=False)
@@ -229,15 +229,16 @@ class SuperTwistingController:
         return 4 if self.discretization == "implicit" else 1
 
     @property
-    def initial_state(self) -> FloatArray:
-        """The internal state at the first sample (``ν = x0``)."""
-        return np.array([self.x0, 0.0, 0.0, 0.0][:self.n_states])
+    def x0(self) -> FloatArray:
+        """The internal state at the first sample (``ν = nu0``, what ``closed_loop`` starts
+        the block from)."""
+        return np.array([self.nu0, 0.0, 0.0, 0.0][:self.n_states])
 
     def __post_init__(self) -> None:
         for name in ("k1", "k2", "period"):
             object.__setattr__(self, name, check_positive(name, getattr(self, name)))
         object.__setattr__(self, "discretization", _check_discretization(self.discretization))
-        object.__setattr__(self, "x0", float(as_vector("x0", [self.x0], 1)[0]))
+        object.__setattr__(self, "nu0", float(as_vector("nu0", [self.nu0], 1)[0]))
         model = _plant_model(self.plant, self.period)
         if model[2] <= 0.0:
             raise ModelError(f"plant: expected c Γ > 0 (u pushing s up; got {model[2]:.3g}); "
@@ -494,7 +495,7 @@ def run_sampled(plant: SlidingModePlant, controller: FirstOrderSMC | SuperTwisti
         controller.discretization == "implicit", Phi, np.ascontiguousarray(Gam[:, 0]), X0, n,
         plant.c, cPhi, cPhiI, cG, getattr(controller, "alpha", 0.0),
         getattr(controller, "k1", 0.0), getattr(controller, "k2", 0.0), h,
-        getattr(controller, "x0", 0.0), steps,
+        getattr(controller, "nu0", 0.0), steps,
         bool(getattr(controller, "estimate_disturbance", False)))
     t: FloatArray = t0 + h * np.arange(steps + 1, dtype=np.float64)
     signals: dict[str, np.ndarray] = {"s": X[:, :n] @ plant.c, "u": U[:, None]}
