@@ -641,8 +641,9 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         ``lcp`` or ``python``), ``structure`` of ``D_h`` (``diagonal``, ``triangular``,
         ``block_triangular``, ``full`` or ``shared_argument``), ``blocks``, ``input``
         (``exact_mean``, ``samples`` or ``none``) and, for the LCP and Python paths,
-        ``max_residual`` (the largest accepted per-step residual); with ``sensitivity=True`` also ``state_transition``,
-        ``degenerate_steps`` and ``first_degenerate_time``.
+        ``max_residual`` (the largest accepted per-step residual); with
+        ``sensitivity=True`` also ``state_transition``, ``degenerate_steps`` and
+        ``first_degenerate_time``.
 
     Raises
     ------
