@@ -45,6 +45,26 @@ def _continuous(ctx: dict[str, Any]) -> None:
     ctx["ct_s_after"] = float(np.max(np.abs(tr.x[after, 0] + tr.x[after, 1])))
 
 
+def _implicit_euler(ctx: dict[str, Any]) -> None:
+    """The same loop as a Lur'e system (two multipliers of one s), by implicit Euler."""
+    from .. import simulate
+    from ..laws import Product, Relay, SuperTwistingLaw
+    from ..numerics.lti import Exosystem
+    from ..systems import LureSystem
+
+    lure = LureSystem([[0, 1, 0], [0, 0, 1], [0, 0, 0]], [[0, 0], [1, 0], [0, 1]],
+                      [[1, 1, 0], [1, 1, 0]],
+                      Product(SuperTwistingLaw(ctx["k1"], 0.0), Relay(ctx["k2"])),
+                      B=[[0], [1], [0]], u=Exosystem.sinusoid(0.3, omega=5.0))
+    h = 1e-3
+    tr = simulate(lure, [0.5, 0.0, 0.0], (0.0, T_FINAL), method="implicit_euler", h=h,
+                  progress=False)
+    z = tr.signal("z")[:, 0]
+    k = int(np.flatnonzero(z != 0.0)[-1]) + 1
+    ctx["ie_h"], ctx["ie_reach_error"] = h, abs(float(tr.t[k]) - T_REF)
+    ctx["ie_s_after"] = float(np.max(np.abs(tr.x[k:, 0] + tr.x[k:, 1])))
+
+
 def _sampled(ctx: dict[str, Any]) -> None:
     from ..analysis import chattering_amplitude, fitted_order, reaching_time
     from ..design import FirstOrderSMC, SuperTwistingController, run_sampled
@@ -145,6 +165,10 @@ def _checks(ctx: dict[str, Any]) -> list[Check]:
               "worst of implicit and explicit", max(abs(do["implicit"] - 1.0),
                                                     abs(do["explicit"] - 1.0)), 0.15,
               key="check_11"),
+        check("implicit Euler on the Lur'e form (two multipliers of one s): |s| after "
+              "reaching", ctx["ie_s_after"], 4 * EPS, key="check_12",
+              note=f"reaching-time error {ctx['ie_reach_error']:.2g} s at h = "
+                   f"{ctx['ie_h']:g} (first order)"),
     ]
 
 
@@ -215,6 +239,7 @@ def run(out_dir: Path | None = None) -> ExampleResult:
     """The continuous-time loop, the sampled controllers and the differentiator, checked."""
     ctx = _problem()
     _continuous(ctx)
+    _implicit_euler(ctx)
     _sampled(ctx)
     _differentiator(ctx)
     checks = _checks(ctx)
@@ -223,7 +248,8 @@ def run(out_dir: Path | None = None) -> ExampleResult:
     metrics = {"reaching_time": ctx["t_reach"], "orders": ctx["orders"],
                "amplitudes": dict(ctx["amps"]), "steps": list(STEPS),
                "differentiator_orders": ctx["diff_orders"],
-               "differentiator_convergence_time": ctx["diff_t_conv"]}
+               "differentiator_convergence_time": ctx["diff_t_conv"],
+               "implicit_euler_reaching_time_error": ctx["ie_reach_error"]}
     return ExampleResult("smc-implicit", metrics=metrics, checks=checks, figures=figures)
 
 
