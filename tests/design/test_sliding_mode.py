@@ -1,4 +1,4 @@
-"""Sampled sliding-mode blocks: the issue's known answers for the explicit and implicit
+"""Sampled sliding-mode blocks: the known answers for the explicit and implicit
 discretizations (reaching, exact zero, chattering orders) and Levant's differentiator."""
 
 import math

@@ -71,9 +71,9 @@ def test_super_twisting_reaches_second_order_sliding_at_the_reference_time(
     t_ref = _reference_reaching_time()
     # the reference's accumulation point is within a few crossing gaps (< 1e-10) of its
     # last crossing; ours enters at |s'| <= 1e-7 x field scale, i.e. about 1e-7 time units
-    # early (homogeneous approximation); the issue's acceptance band is 1e-4
+    # early (homogeneous approximation); the acceptance band is 1e-4
     assert abs(t_reach - t_ref) <= 1e-4
-    assert abs(t_reach - 2.13636) <= 1e-4 + 2e-5      # the issue's published value +- 2e-5
+    assert abs(t_reach - 2.13636) <= 1e-4 + 2e-5      # the stated reference value +- 2e-5
 
 
 def test_super_twisting_holds_s_zero_and_follows_the_closed_form(super_twisting_run):
@@ -81,7 +81,7 @@ def test_super_twisting_holds_s_zero_and_follows_the_closed_form(super_twisting_
     t_reach = float(tr.event_times("two_sliding_start")[0])
     after = tr.t > t_reach
     s = tr.x[after, 0] + tr.x[after, 1]
-    assert np.max(np.abs(s)) <= 1e-12               # the issue's bound: samples lie on s = 0
+    assert np.max(np.abs(s)) <= 1e-12               # the acceptance bound: samples on s = 0
     # on s = 0: x' = -x, so x(t) = x(t_r) e^{-(t - t_r)}. The 2-sliding field keeps s' = 0
     # with an equivalent control from central differences (relative error ~ 1e-10) and
     # DOP853 at rtol 1e-11: the deviation stays below 1e-8 x |x(t_r)| over 4 time units.

@@ -17,7 +17,7 @@ from . import Check, Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
 
 T_FINAL = 6.0
-T_REF = 2.13636            # the issue's event-driven reference reaching time (± 2e-5)
+T_REF = 2.13636            # an event-driven reference reaching time (± 2e-5)
 STEPS = (4e-3, 2e-3, 1e-3, 5e-4)
 EPS = float(np.finfo(float).eps)
 
@@ -139,7 +139,7 @@ def _checks(ctx: dict[str, Any]) -> list[Check]:
     return [
         check("continuous-time super-twisting reaches s = s' = 0 at the event-driven "
               "reference time: error [s]", abs(ctx["t_reach"] - T_REF), 1e-4 + 2e-5,
-              key="check_1", note="reference 2.13636 ± 2e-5; the issue's band 1e-4"),
+              key="check_1", note="event-driven reference 2.13636 ± 2e-5; acceptance band 1e-4"),
         check("after reaching, the continuous-time loop keeps |s| at most", ctx["ct_s_after"],
               1e-12, key="check_2"),
         check("implicit super-twisting without disturbance: |s_k| after reaching (rounding "
