@@ -21,8 +21,9 @@ continues on ``h_j = σ̂_j = 0`` (event ``"two_sliding_start"``) with the field
 ``F₂ = F⁻ + α (F⁺ - F⁻)``, ``α = -(∂_t σ̂ + ∇σ̂ᵀF⁻) / ∇σ̂ᵀ(F⁺ - F⁻)`` (the equivalent control
 that keeps ``σ̂`` at zero; ``σ̂`` is ``∇h_jᵀ(F⁺ + F⁻)/2`` evaluated at the point projected onto
 the surface, so a non-smooth term that vanishes on the surface, such as ``|s|^{1/2}``, does not
-enter its central differences). The entry state is projected onto ``σ̂ = 0`` and ``h_j = 0``;
-the samples onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0
+enter its central differences). The entry state is projected onto ``h_j = 0``, then onto
+``σ̂ = 0`` along ``F⁺ - F⁻`` (the only direction the switching moves the state in); the samples
+onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0
 or 1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
 
 A tangential touch without a sign change of ``h_k`` is caught by a non-terminal event on
