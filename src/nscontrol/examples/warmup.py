@@ -77,12 +77,25 @@ def _lure_lcp() -> None:
     simulate(coupled, [1.0, -1.0], (0.0, 0.1), h=1e-2, progress=False)
 
 
+def _sliding_mode() -> None:
+    """The sampled sliding-mode loop (first order and super-twisting, both discretizations)."""
+    from ..design.sliding_mode import FirstOrderSMC, SuperTwistingController, run_sampled
+    from ..systems.sliding_mode import SlidingModePlant
+
+    plant = SlidingModePlant.double_integrator()
+    for disc in ("implicit", "explicit"):
+        run_sampled(plant, FirstOrderSMC(plant, 1.0, 1e-2, disc), [1.0, 0.0], (0.0, 0.1))
+        run_sampled(plant, SuperTwistingController(plant, 1.8, 1.65, 1e-2, disc), [1.0, 0.0],
+                    (0.0, 0.1))
+
+
 #: (what, how): one step of the warm-up each.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
     ("event-driven and Moreau-Jean mechanics", _mechanics),
     ("impacting bodies with an observer", _impacting_bodies),
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
+    ("sampled sliding-mode control", _sliding_mode),
 ]
 
 #: Step name to the kernel modules (``subpackage._module``, as
@@ -95,6 +108,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "impacting bodies with an observer": ("numerics._lti_kernels", "simulate._event_kernels"),
     "Lur'e systems (implicit Euler) and switching": (
         "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels"),
+    "sampled sliding-mode control": ("design._sliding_mode_kernels",),
 }
 
 
