@@ -140,3 +140,16 @@ def test_implicit_euler_accepts_the_super_twisting_inclusion():
     # implicit Euler is first order: the reaching-time error shrinks by about 10 with h
     # (the next term, O(h^2), changes the ratio by a factor 1 +- 0.3 at h = 1e-2)
     assert 10 ** 0.85 <= errors[0] / errors[1] <= 10 ** 1.15
+
+
+def test_second_order_sliding_is_left_where_the_equivalent_sign_leaves_its_bounds():
+    # differentiating f = 1.5 sin t with k2 = 1.1 < sup|f''| = 1.5: on z0 = f, z1 = f' the
+    # sign's equivalent value is f''/k2-like, |1.5 sin t| / 1.1, which reaches 1 at
+    # t = arcsin(1.1 / 1.5): the motion must leave there
+    tr = nsc.simulate(differentiator_loop(Exosystem.sinusoid(1.5, omega=1.0), 3.0, 1.1),
+                      [0.1, 1.5, 0.0, 1.0], (0.0, 1.0), progress=False)
+    assert [e.kind for e in tr.events if e.kind.startswith("two_")] == \
+        ["two_sliding_start", "two_sliding_exit"]
+    # the exit is located by DOP853 on the weight alpha(t), itself from central differences
+    # with relative error ~1e-10 and slope ~1: 1e-8 leaves a factor 100
+    assert abs(tr.event_times("two_sliding_exit")[0] - np.arcsin(1.1 / 1.5)) <= 1e-8

@@ -88,7 +88,7 @@ class _Fields:
 
     def sigma_hat(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> float:
         """``∇h_jᵀ(F⁺ + F⁻)/2`` at ``x`` projected onto ``h_j = 0``."""
-        sm, sp, _, _, _ = self.sigmas(t, _project(self.s, j, x), signs, j)
+        sm, sp, _, _, _ = self.sigmas(t, _on_surface(self.s, j, x), signs, j)
         return 0.5 * (sm + sp)
 
     def two_sliding_terms(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
@@ -96,7 +96,7 @@ class _Fields:
         """``(a0, a1, F⁻, F⁺)``: ``dσ̂/dt = a0 + α a1`` along ``F⁻ + α (F⁺ - F⁻)``, all at
         ``x`` projected onto ``h_j = 0`` (a term like ``|h|^{1/2}`` would otherwise turn the
         integrator's O(1e-14) departures from the surface into O(1e-7) jumps of the field)."""
-        x = _project(self.s, j, x)
+        x = _on_surface(self.s, j, x)
         fm, fp = self.side(t, x, signs, j, -1), self.side(t, x, signs, j, 1)
         scale = 1.0 + float(np.linalg.norm(x)) + abs(t)
 
@@ -365,6 +365,29 @@ def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: 
         events.append(exit_event(bound))
         kinds.append(("exit2", bound))
     return (lambda t, x: fields.two_sliding(t, x, signs, j)), (events, kinds)
+
+
+def _on_surface(system: Any, j: int, x: FloatArray) -> FloatArray:
+    """``x`` projected onto ``h_j = 0``, then nudged (Newton steps on one coordinate, down to
+    one ulp) until ``h_j`` is exactly zero in floating point when such a nudge exists: a term
+    like ``|h|^{1/2}`` of the field turns a rounding-level ``h`` of 1e-16 into a 1e-8 jump,
+    which central differences and the integrator's error control would amplify."""
+    y = _project(system, j, x)
+    g = system.gradient(j, y)
+    hv = float(system.surfaces[j](y))
+    for i in np.argsort(-np.abs(g))[:2]:
+        for _ in range(4):
+            if hv == 0.0 or g[i] == 0.0:
+                return y
+            cand = y.copy()
+            step = cand[i] - hv / g[i]
+            cand[i] = step if step != cand[i] else np.nextafter(
+                cand[i], -np.inf if hv * g[i] > 0 else np.inf)
+            hc = float(system.surfaces[j](cand))
+            if not abs(hc) < abs(hv):
+                break
+            y, hv = cand, hc
+    return y
 
 
 def _project(system: Any, j: int, x: FloatArray) -> FloatArray:
