@@ -153,3 +153,12 @@ def test_second_order_sliding_is_left_where_the_equivalent_sign_leaves_its_bound
     # the exit is located by DOP853 on the weight alpha(t), itself from central differences
     # with relative error ~1e-10 and slope ~1: 1e-8 leaves a factor 100
     assert abs(tr.event_times("two_sliding_exit")[0] - np.arcsin(1.1 / 1.5)) <= 1e-8
+
+
+def test_a_start_on_the_second_order_sliding_set_stays_there():
+    # x0 on s = 0 with s' = x2 + nu + d(0) = 0: no first-order sliding field exists there
+    # (both sides give the same s'), the motion starts in second-order sliding
+    tr = nsc.simulate(_disturbed().super_twisting_loop(K1, K2), [0.1, -0.1, 0.1], (0.0, 1.0),
+                      progress=False)
+    assert [e.kind for e in tr.events] == ["two_sliding_start"]
+    assert np.max(np.abs(tr.x[:, 0] + tr.x[:, 1])) <= 1e-12

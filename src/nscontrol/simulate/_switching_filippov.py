@@ -212,13 +212,16 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     n = system.n_states
     t, x = run.t0, x0.copy()
     signs, sliding = _initial_mode(fields, t, x)
+    second = -1                      # the surface of second-order sliding, -1 when none
+    if sliding >= 0 and _two_sliding_onset(fields, t, x, signs, sliding, -np.inf):
+        second, sliding = sliding, -1    # starts on s = s' = 0: no first-order sliding field
+        x = _enter_two_sliding(fields, run, t, x, signs, second)
     run.rec.sample(t, x, force=True)
     if sliding >= 0:
         run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
                   _mode_code(signs, sliding), np.eye(n))
     pieces = 0
     last_graze: dict[int, float] = {}
-    second = -1                      # the surface of second-order sliding, -1 when none
     last_cross: dict[int, float] = {}
     while t < run.tf:
         if second >= 0:
