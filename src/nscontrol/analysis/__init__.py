@@ -11,6 +11,9 @@ from .._lazy import lazy_exports
 
 #: Public name -> the module of this package that defines it.
 _EXPORTS: dict[str, str] = {
+    # chattering.py
+    "chattering_amplitude": "chattering", "switching_frequency": "chattering",
+    "fitted_order": "chattering", "OrderFit": "chattering", "reaching_time": "chattering",
     # observability.py
     "Theorem1Result": "observability", "ReconstructibilityResult": "observability",
     "EpsilonCertificate": "observability", "DecayMeasurement": "observability",

@@ -11,6 +11,10 @@ from .._lazy import lazy_exports
 
 #: Public name -> the module of this package that defines it.
 _EXPORTS: dict[str, str] = {
+    # sliding_mode.py
+    "super_twisting_gains": "sliding_mode", "FirstOrderSMC": "sliding_mode",
+    "SuperTwistingController": "sliding_mode", "LevantDifferentiator": "sliding_mode",
+    "differentiate": "sliding_mode", "run_sampled": "sliding_mode",
     # impact_conditions.py
     "Theorem1Result": "impact_conditions", "EpsilonCertificate": "impact_conditions",
     "theorem1_test": "impact_conditions", "jury_second_order": "impact_conditions",

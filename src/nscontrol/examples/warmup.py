@@ -104,6 +104,18 @@ def _frictional_contacts() -> None:
              h=1e-3, progress=False)
 
 
+def _sliding_mode() -> None:
+    """The sampled sliding-mode loop (first order and super-twisting, both discretizations)."""
+    from ..design.sliding_mode import FirstOrderSMC, SuperTwistingController, run_sampled
+    from ..systems.sliding_mode import SlidingModePlant
+
+    plant = SlidingModePlant.double_integrator()
+    for disc in ("implicit", "explicit"):
+        run_sampled(plant, FirstOrderSMC(plant, 1.0, 1e-2, disc), [1.0, 0.0], (0.0, 0.1))
+        run_sampled(plant, SuperTwistingController(plant, 1.8, 1.65, 1e-2, disc), [1.0, 0.0],
+                    (0.0, 0.1))
+
+
 #: (what, how): one step of the warm-up each.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
@@ -112,6 +124,7 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
     ("ZAD-controlled buck converter", _zad_buck),
     ("frictional contacts", _frictional_contacts),
+    ("sampled sliding-mode control", _sliding_mode),
 ]
 
 #: Step name to the kernel modules (``subpackage._module``, as
@@ -127,6 +140,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "ZAD-controlled buck converter": ("design._zad_kernels",),
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
                             "simulate._frictional_mj_kernels"),
+    "sampled sliding-mode control": ("design._sliding_mode_kernels",),
 }
 
 

@@ -24,6 +24,8 @@ _EXPORTS: dict[str, str] = {
     "Coulomb": "friction", "Stribeck": "friction", "AsymmetricStribeck": "friction",
     # monotone_function.py
     "MonotoneFunction": "monotone_function", "PiecewiseLinearFunction": "monotone_function",
+    # super_twisting.py
+    "SuperTwistingLaw": "super_twisting", "super_twisting_resolvent": "super_twisting",
     # product.py
     "Product": "product",
     # inclusion.py

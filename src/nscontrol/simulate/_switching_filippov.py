@@ -12,6 +12,20 @@ surface never re-triggers it). At a hit of surface ``j`` with ``σ± = ∇h_jᵀ
 * the arrival side's ``σ`` zero: grazing (recorded, the mode is kept);
 * ``σ⁻ < 0 < σ⁺``: repelling sliding, refused (non-unique forward solutions).
 
+Second-order sliding (relative degree two of the switching: ``∇h_jᵀ(F⁺ - F⁻) = 0`` on the
+surface, as for the super-twisting controller whose sign acts on an integrator): the crossings
+of ``h_j = 0`` accumulate in finite time at a point where ``h_j = σ_j = 0``. At a crossing where
+``|σ|`` is below ``_TWO_SLIDING_SIGMA`` times its scale ``|∇h_j| |F|`` (or that follows the
+previous crossing within ``1e-9 (1 + |t|)``), and the weight below lies in ``[0, 1]``, the motion
+continues on ``h_j = σ̂_j = 0`` (event ``"two_sliding_start"``) with the field
+``F₂ = F⁻ + α (F⁺ - F⁻)``, ``α = -(∂_t σ̂ + ∇σ̂ᵀF⁻) / ∇σ̂ᵀ(F⁺ - F⁻)`` (the equivalent control
+that keeps ``σ̂`` at zero; ``σ̂`` is ``∇h_jᵀ(F⁺ + F⁻)/2`` evaluated at the point projected onto
+the surface, so a non-smooth term that vanishes on the surface, such as ``|s|^{1/2}``, does not
+enter its central differences). The entry state is projected onto ``h_j = 0``, then onto
+``σ̂ = 0`` along ``F⁺ - F⁻`` (the only direction the switching moves the state in); the samples
+onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0
+or 1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
+
 A tangential touch without a sign change of ``h_k`` is caught by a non-terminal event on
 ``σ_k = ∇h_kᵀF`` of the current field, armed in the direction of an extremum of ``h_k`` towards
 the surface: at a root where ``|h_k| <= 100 (atol + rtol |x|) |∇h_k|`` a ``grazing`` event is
@@ -41,6 +55,14 @@ from ..numerics.differences import central_difference_jacobian
 from .switching import saltation_matrix
 
 _GRAZE_FACTOR = 100.0
+#: Onset of second-order sliding at a crossing: |σ| below this times |∇h| |F|. In the
+#: homogeneous (super-twisting) approximation the time still to go to the accumulation point
+#: is proportional to |σ|, so this bounds the error of the reaching time by about 1e-7 times
+#: the field's time scale.
+_TWO_SLIDING_SIGMA = 1e-7
+#: Central-difference step (relative) for the derivatives of σ̂: about eps^(1/3), balancing
+#: the O(δ²) truncation against the O(eps/δ) rounding.
+_FD_STEP = 6e-6
 
 
 class _Fields:
@@ -63,6 +85,39 @@ class _Fields:
     def sliding(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> FloatArray:
         sm, sp, fm, fp, _ = self.sigmas(t, x, signs, j)
         return (sp * fm - sm * fp) / (sp - sm)
+
+    def sigma_hat(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> float:
+        """``∇h_jᵀ(F⁺ + F⁻)/2`` at ``x`` projected onto ``h_j = 0``."""
+        sm, sp, _, _, _ = self.sigmas(t, _on_surface(self.s, j, x), signs, j)
+        return 0.5 * (sm + sp)
+
+    def two_sliding_terms(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
+                          ) -> tuple[float, float, FloatArray, FloatArray]:
+        """``(a0, a1, F⁻, F⁺)``: ``dσ̂/dt = a0 + α a1`` along ``F⁻ + α (F⁺ - F⁻)``, all at
+        ``x`` projected onto ``h_j = 0`` (a term like ``|h|^{1/2}`` would otherwise turn the
+        integrator's O(1e-14) departures from the surface into O(1e-7) jumps of the field)."""
+        x = _on_surface(self.s, j, x)
+        fm, fp = self.side(t, x, signs, j, -1), self.side(t, x, signs, j, 1)
+        scale = 1.0 + float(np.linalg.norm(x)) + abs(t)
+
+        def along(dt: float, v: FloatArray) -> float:
+            eps = _FD_STEP * scale / max(1.0, float(np.linalg.norm(v)), abs(dt))
+            return (self.sigma_hat(t + eps * dt, x + eps * v, signs, j)
+                    - self.sigma_hat(t - eps * dt, x - eps * v, signs, j)) / (2.0 * eps)
+
+        return along(1.0, fm), along(0.0, fp - fm), fm, fp
+
+    def two_sliding_weight(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
+                           ) -> float:
+        """The weight ``α`` of ``F⁺`` that keeps ``σ̂`` at zero (NaN when none does)."""
+        a0, a1 = self.two_sliding_terms(t, x, signs, j)[:2]
+        return -a0 / a1 if a1 != 0.0 else float("nan")
+
+    def two_sliding(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
+                    ) -> FloatArray:
+        """The second-order sliding field ``F⁻ + α (F⁺ - F⁻)``."""
+        a0, a1, fm, fp = self.two_sliding_terms(t, x, signs, j)
+        return fm + (-a0 / a1) * (fp - fm)
 
     def rhs(self, signs: tuple[int, ...], sliding: int) -> Any:
         if sliding < 0:
@@ -157,15 +212,23 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     n = system.n_states
     t, x = run.t0, x0.copy()
     signs, sliding = _initial_mode(fields, t, x)
+    second = -1                      # the surface of second-order sliding, -1 when none
+    if sliding >= 0 and _two_sliding_onset(fields, t, x, signs, sliding, -np.inf):
+        second, sliding = sliding, -1    # starts on s = s' = 0: no first-order sliding field
+        x = _enter_two_sliding(fields, run, t, x, signs, second)
     run.rec.sample(t, x, force=True)
     if sliding >= 0:
         run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
                   _mode_code(signs, sliding), np.eye(n))
     pieces = 0
     last_graze: dict[int, float] = {}
+    last_cross: dict[int, float] = {}
     while t < run.tf:
-        f = fields.rhs(signs, sliding)
-        events, kinds = _events(system, fields, signs, sliding)
+        if second >= 0:
+            f, (events, kinds) = _two_sliding_piece(system, fields, signs, second)
+        else:
+            f = fields.rhs(signs, sliding)
+            events, kinds = _events(system, fields, signs, sliding)
         if run.sensitivity:
             rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
                 np.concatenate([x, np.eye(n).ravel()])
@@ -177,8 +240,8 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         ts = run.samples(t, t_end, last=sol.status == 0)
         if ts.size and sol.sol is not None:
             X = sol.sol(ts)[:n].T
-            if sliding >= 0:
-                X = np.array([_project(system, sliding, xs) for xs in X])
+            if max(sliding, second) >= 0:
+                X = np.array([_project(system, max(sliding, second), xs) for xs in X])
             run.rec.extend(ts, X)
         if sol.status < 0:
             raise SolverError(f"switching: DOP853 failed at t = {t_end:.6g} "
@@ -193,14 +256,18 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             run.zero_length(t_end)
         pieces += 1
         t, x = t_end, sol.y[:n, -1].copy()
-        if sliding >= 0:
-            x = _project(system, sliding, x)
+        if max(sliding, second) >= 0:
+            x = _project(system, max(sliding, second), x)
         run.bar.update(t)
         if sol.status != 1:
             break
         which = next(i for i, te in enumerate(sol.t_events)
                      if te.size and kinds[i][0] != "graze")
         kind, k = kinds[which]
+        if kind == "exit2":
+            signs = _leave_two_sliding(fields, run, t, x, signs, second, k)
+            second = -1
+            continue
         if kind == "exit":
             old = _mode_code(signs, sliding)
             new_signs = list(signs)
@@ -210,6 +277,12 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             run.rec.sample(t, x, force=True)
             last_graze[j] = t   # a tangential exit: the σ root at its start is not a graze
             continue
+        if sliding < 0 and second < 0 and _two_sliding_onset(fields, t, x, signs, k,
+                                                              last_cross.get(k, -np.inf)):
+            x = _enter_two_sliding(fields, run, t, x, signs, k)
+            second = k
+            continue
+        last_cross[k] = t
         signs, sliding = _hit_surface(fields, run, t, x, signs, sliding, k)
         last = run.rec.events[-1] if run.rec.events else None
         if last is not None and last.kind == "grazing" and last.index == k:
@@ -217,8 +290,107 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         run.rec.sample(t, x, force=True)
     if run.rec.last_time < run.tf:
         run.rec.sample(run.tf, x, force=True)
-    return {"pieces": pieces, "final_mode": _mode_code(signs, sliding),
+    final = _two_sliding_code(signs, second) if second >= 0 else _mode_code(signs, sliding)
+    return {"pieces": pieces, "final_mode": final,
             "propagation": "dop853"}
+
+
+def _two_sliding_code(signs: tuple[int, ...], j: int) -> int:
+    """Mode number of second-order sliding on surface ``j``: after those of first order."""
+    return _mode_code(signs, j) + (len(signs) + 1) * (1 << len(signs))
+
+
+def _two_sliding_onset(fields: _Fields, t: float, x: FloatArray, signs: tuple[int, ...],
+                       k: int, previous: float) -> bool:
+    """Whether a crossing of surface ``k`` at ``(t, x)`` is the accumulation point of a
+    second-order sliding motion (see the module's notes)."""
+    sm, sp, fm, fp, nrm = fields.sigmas(t, x, signs, k)
+    scale = float(np.linalg.norm(nrm)) * max(float(np.linalg.norm(fm)),
+                                             float(np.linalg.norm(fp))) + 1e-300
+    if abs(sp - sm) > 1e-10 * scale:        # the switching acts on h' itself: first order
+        return False
+    near = abs(sm) <= _TWO_SLIDING_SIGMA * scale or t - previous <= 1e-9 * (1.0 + abs(t))
+    return near and 0.0 <= fields.two_sliding_weight(t, x, signs, k) <= 1.0
+
+
+def _enter_two_sliding(fields: _Fields, run: Any, t: float, x: FloatArray,
+                       signs: tuple[int, ...], k: int) -> FloatArray:
+    """Project ``x`` onto ``h_k = 0``, then onto ``σ̂_k = 0`` by one Newton step along
+    ``F⁺ - F⁻`` (the only direction the switching moves the state in, tangent to the surface;
+    a state the switching does not act on, such as an exosystem's, is left alone); record
+    ``"two_sliding_start"`` and return the projected state."""
+    if run.sensitivity:
+        raise ModelError(f"sensitivity: not available through second-order sliding (reached "
+                         f"on surface {k} at t = {t:.12g}); run with sensitivity=False")
+    system = fields.s
+    y = _project(system, k, x)
+    _, a1, fm, fp = fields.two_sliding_terms(t, y, signs, k)
+    if a1 != 0.0:
+        y = y - fields.sigma_hat(t, y, signs, k) / a1 * (fp - fm)
+    run.event(t, "two_sliding_start", k, x, y, _mode_code(signs, -1),
+              _two_sliding_code(signs, k))
+    run.rec.sample(t, y, force=True)
+    return y
+
+
+def _leave_two_sliding(fields: _Fields, run: Any, t: float, x: FloatArray,
+                       signs: tuple[int, ...], k: int, bound: int) -> tuple[int, ...]:
+    """Leave second-order sliding on surface ``k`` (``α`` reached ``bound`` 0 or 1) to the side
+    ``σ̂`` moves to: beyond the bound both fields move it the same way, with the sign of
+    ``a1`` (bound 0) or of ``-a1`` (bound 1)."""
+    a1 = fields.two_sliding_terms(t, x, signs, k)[1]
+    side = (1 if a1 > 0 else -1) * (1 if bound == 0 else -1)
+    new = list(signs)
+    new[k] = side
+    out = tuple(new)
+    run.event(t, "two_sliding_exit", k, x, x, _two_sliding_code(signs, k), _mode_code(out, -1))
+    run.rec.sample(t, x, force=True)
+    return out
+
+
+def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: int
+                       ) -> tuple[Any, tuple[list[Any], list[tuple[str, int]]]]:
+    """Field and events of a piece in second-order sliding on surface ``j``: the other
+    surfaces' events as in first order, and the exits ``α = 0`` (falling) and ``α = 1``
+    (rising), both terminal."""
+    events, kinds = _events(system, fields, signs, -1)
+    keep = [i for i, (_, k) in enumerate(kinds) if k != j]
+    events, kinds = [events[i] for i in keep], [kinds[i] for i in keep]
+    n = system.n_states
+
+    def exit_event(bound: int) -> Any:
+        def ev(t: float, y: FloatArray) -> float:
+            return fields.two_sliding_weight(t, y[:n], signs, j) - bound
+        ev.terminal, ev.direction = True, -1.0 if bound == 0 else 1.0  # type: ignore[attr-defined]  # solve_ivp reads these
+        return ev
+
+    for bound in (0, 1):
+        events.append(exit_event(bound))
+        kinds.append(("exit2", bound))
+    return (lambda t, x: fields.two_sliding(t, x, signs, j)), (events, kinds)
+
+
+def _on_surface(system: Any, j: int, x: FloatArray) -> FloatArray:
+    """``x`` projected onto ``h_j = 0``, then nudged (Newton steps on one coordinate, down to
+    one ulp) until ``h_j`` is exactly zero in floating point when such a nudge exists: a term
+    like ``|h|^{1/2}`` of the field turns a rounding-level ``h`` of 1e-16 into a 1e-8 jump,
+    which central differences and the integrator's error control would amplify."""
+    y = _project(system, j, x)
+    g = system.gradient(j, y)
+    hv = float(system.surfaces[j](y))
+    for i in np.argsort(-np.abs(g))[:2]:
+        for _ in range(4):
+            if hv == 0.0 or g[i] == 0.0:
+                return y
+            cand = y.copy()
+            step = cand[i] - hv / g[i]
+            cand[i] = step if step != cand[i] else np.nextafter(
+                cand[i], -np.inf if hv * g[i] > 0 else np.inf)
+            hc = float(system.surfaces[j](cand))
+            if not abs(hc) < abs(hv):
+                break
+            y, hv = cand, hc
+    return y
 
 
 def _project(system: Any, j: int, x: FloatArray) -> FloatArray:

@@ -25,6 +25,14 @@ with ``W = I - hθA``, ``Φ = W⁻¹(I + h(1-θ)A)``, ``Γ = hW⁻¹B``, ``G_h =
   diagonal, else forward–backward splitting on ``0 ∈ D_h⁻¹(z - a) + φ(z)``, in Python, each
   solution verified by the law's graph residual.
 
+Multipliers that read one argument (the super-twisting controller ``u = -k1|s|^{1/2}sign(s) +
+ν``, ``ν' = -k2 Sign(s)``: two laws of the same ``s``, entering different states): ``D_h`` then
+has identical rows ``1 dᵀ`` and is singular, but the step is the scalar inclusion
+``s + Σ_j d_j φ_j(s) ∋ a``. When every part of the ``Product`` law is a scalar
+:class:`~nscontrol.laws.super_twisting.SuperTwistingLaw` or :class:`~nscontrol.laws.relay.Relay`,
+``d > 0`` and ``D = 0``, it is solved in closed form (the quadratic in ``|s|^{1/2}`` of
+:func:`~nscontrol.laws.super_twisting.super_twisting_resolvent`), in Python.
+
 Block structure: when the law is a ``Product`` whose parts are coupled one way only through
 ``D_h`` (a plant and its observer: the observer sees the plant, not the reverse), ``D_h`` is
 block triangular up to a permutation of the parts. Each diagonal block is then solved after the
@@ -429,6 +437,9 @@ def _plan(system: Any, Dh: FloatArray, h: float) -> _Plan:
     blocks = _blocks(system.law, D)
     if len(blocks) == 1:
         lam = _min_sym_eig(D)
+        if lam <= 0.0 and _shared_argument_weights(system.law, D) is not None \
+                and not np.any(system.D):
+            return _Plan("python", "shared_argument", D, None, tuple(blocks))
         if lam <= 0.0:
             raise ModelError(
                 f"h: the one-step matrix D_h = h·H(I - hθA)⁻¹G + D is not positive definite for "
@@ -520,6 +531,9 @@ def _solve_inclusion_python(law: Any, a: FloatArray, Dh: FloatArray
     """
     from ..laws.inclusion import solve_inclusion
 
+    if _shared_argument_weights(law, Dh) is not None:
+        z, w = _shared_argument_step(law, a, Dh)
+        return z, w, law.graph_residual(z, -w)
     if _is_diagonal(Dh) or lcp_step_data(law, Dh) is not None:
         sol = solve_inclusion(law, Dh, a)
         z, w, res = sol.z, sol.w, float(sol.residual)
@@ -532,6 +546,45 @@ def _solve_inclusion_python(law: Any, a: FloatArray, Dh: FloatArray
                           f"(graph residual {res:.3g} > {GRAPH_TOL:g}·{scale:.3g}); the step "
                           f"matrix is badly conditioned (reduce h)", status="residual")
     return z, w, res
+
+
+def _shared_argument_weights(law: Any, Dh: FloatArray) -> FloatArray | None:
+    """``d`` when ``D_h = 1 dᵀ`` (identical rows, ``d > 0``, at least two components) and
+    every part of ``law`` is a scalar super-twisting law or relay; else ``None``."""
+    from ..laws.relay import Relay
+    from ..laws.super_twisting import SuperTwistingLaw
+
+    if Dh.ndim != 2 or Dh.shape[0] < 2:
+        return None
+    d = Dh[0]
+    if np.any(d <= 0.0) or np.max(np.abs(Dh - d[None, :])) > 1e-14 * float(np.max(d)):
+        return None
+    if not all(isinstance(p, (Relay, SuperTwistingLaw)) and p.dim == 1
+               for _, p in _law_parts(law)):
+        return None
+    return d.copy()
+
+
+def _shared_argument_step(law: Any, a: FloatArray, Dh: FloatArray
+                          ) -> tuple[FloatArray, FloatArray]:
+    """Solve ``w ∈ -φ(a + D_h w)`` with ``D_h = 1 dᵀ``: the common argument ``s`` solves
+    ``s + Σ_j d_j φ_j(s) ∋ a_0`` (each ``φ_j = k1_j |·|^{1/2} sign + k2_j Sign``, a relay having
+    ``k1 = 0``), in closed form; at ``s = 0`` the set-valued parts share ``a_0`` in proportion
+    to their bounds."""
+    from ..laws.relay import Relay
+    from ..laws.super_twisting import super_twisting_resolvent
+
+    d = Dh[0]
+    k1 = np.array([0.0 if isinstance(p, Relay) else float(p.k1[0]) for _, p in _law_parts(law)])
+    k2 = np.array([float(p.bound[0]) if isinstance(p, Relay) else float(p.k2[0])
+                   for _, p in _law_parts(law)])
+    a0 = float(a[0])
+    s = float(super_twisting_resolvent(a0, float(d @ k1), float(d @ k2)))
+    if s != 0.0:
+        w = -(k1 * math.sqrt(abs(s)) + k2) * math.copysign(1.0, s)
+    else:
+        w = -k2 * (a0 / float(d @ k2))
+    return np.full(a.shape[0], s), w
 
 
 def _forward_backward(law: Any, a: FloatArray, Dh: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -586,10 +639,11 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         States at the step times and signals ``z`` (law argument), ``w`` (multiplier) and
         ``y = C x``; ``stats`` has ``steps``, ``h``, ``theta``, ``solver`` (``closed_form``,
         ``lcp`` or ``python``), ``structure`` of ``D_h`` (``diagonal``, ``triangular``,
-        ``block_triangular`` or ``full``), ``blocks``, ``input`` (``exact_mean``, ``samples``
-        or ``none``) and, for the LCP and Python paths, ``max_residual`` (the largest accepted
-        per-step residual); with ``sensitivity=True`` also ``state_transition``,
-        ``degenerate_steps`` and ``first_degenerate_time``.
+        ``block_triangular``, ``full`` or ``shared_argument``), ``blocks``, ``input``
+        (``exact_mean``, ``samples`` or ``none``) and, for the LCP and Python paths,
+        ``max_residual`` (the largest accepted per-step residual); with
+        ``sensitivity=True`` also ``state_transition``, ``degenerate_steps`` and
+        ``first_degenerate_time``.
 
     Raises
     ------

@@ -20,7 +20,9 @@ Accepted systems:
   switching instants ``t_k + o_j`` follow from the state sampled at the exact ``t_k = t0 + kT``
   in closed form, and each sub-interval is propagated exactly by the mode's ``LTIFlow``.
 
-Event kinds: ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"grazing"``,
+Event kinds: ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"two_sliding_start"``,
+``"two_sliding_exit"`` (second-order sliding of a Filippov system, see
+``_switching_filippov``), ``"grazing"``,
 ``"domain_exit"`` (PWA with a domain) and ``"switch"`` (PWM instants), each with ``mode_from``
 / ``mode_to`` and the surface/facet (or domain row) in ``index``.
 

@@ -50,6 +50,8 @@ _EXPORTS: dict[str, str] = {
     "ActuatedContactModel": "foot_body", "FootBodyParameters": "foot_body",
     "foot_body_model": "foot_body", "foot_body_points": "foot_body",
     "wall_mass_model": "foot_body",
+    # sliding_mode.py
+    "SlidingModePlant": "sliding_mode", "differentiator_loop": "sliding_mode",
     # protocols.py
     "SimulableSystem": "protocols", "StateChecked": "protocols", "InputFunction": "protocols",
     "Exogenous": "protocols", "InputSignal": "protocols",
