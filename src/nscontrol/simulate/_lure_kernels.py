@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._block_kernels import step_blocks
+
 KIND_SOFT = 0
 KIND_CLIP = 1
 KIND_CURVE = 2
@@ -153,3 +155,44 @@ def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2,
                 x[ucol[i]] = (Z[k, i] - gnext[k, i]) / H[i, ucol[i]]
         for i in range(n):
             X[k, i] = x[i]
+
+
+@njit(cache=True)
+def controlled_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2, curve, H,
+                     ucol, Cy, times, x0, gnext, X, Z, Wout, has_obs, obs_out, obs_upd,
+                     obs_params, obs_period, xo, xhat, has_ctrl, ctrl_out, ctrl_upd,
+                     ctrl_params, ctrl_period, xc, u, prev_y, prev_x, prev_xhat, prev_lam,
+                     sched, XO, XC, U):
+    """:func:`triangular_steps` one step at a time with the input of compiled blocks held
+    over each step (zero-order hold): at ``times[k]`` the blocks read ``y = Cy x_k``
+    (:func:`~nscontrol.simulate._block_kernels.step_blocks`), their states and ``u`` are
+    logged in ``XO[k]``, ``XC[k]``, ``U[k]``, then the plant steps with ``ū = u``.
+
+    Returns ``(k, status)``: the steps completed and the blocks' status (0: all done).
+    """
+    n = Phi.shape[0]
+    p = Cy.shape[0]
+    y = np.empty(p)
+    lam = np.zeros(0)
+    ub = np.empty((1, u.size))
+    x = x0.copy()
+    for k in range(times.size - 1):
+        for i in range(p):
+            s = 0.0
+            for j in range(n):
+                s += Cy[i, j] * x[j]
+            y[i] = s
+        status = step_blocks(times[k], x, y, lam, has_obs, obs_out, obs_upd, obs_params,
+                             obs_period, xo, xhat, has_ctrl, ctrl_out, ctrl_upd, ctrl_params,
+                             ctrl_period, xc, u, prev_y, prev_x, prev_xhat, prev_lam, sched)
+        if status != 0:
+            return k, status
+        XO[k, :] = xo
+        XC[k, :] = xc
+        U[k, :] = u
+        ub[0, :] = u
+        triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2, curve, H,
+                         ucol, x, ub, gnext[k:k + 1], X[k:k + 1], Z[k:k + 1], Wout[k:k + 1])
+        for i in range(n):
+            x[i] = X[k, i]
+    return times.size - 1, 0

@@ -83,7 +83,8 @@ class ImplicitEuler(_ModuleIntegrator):
     name = "implicit_euler"
     module = "nscontrol.simulate.implicit_euler"
     capabilities = frozenset({"time_stepping", "multipliers", "sensitivity", "controller"})
-    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u", "controller"})
+    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u", "controller",
+                                                   "compiled_blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:
