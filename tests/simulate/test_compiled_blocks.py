@@ -25,7 +25,12 @@ from nscontrol.design.friction_compensation import (
 from nscontrol.errors import DimensionError, ModelError
 from nscontrol.laws import Relay, Stribeck
 from nscontrol.systems import LinearController, OneLinkRobot, StateFeedback
-from nscontrol.systems.feedback import CompiledBlock, StaticLaw, compiled_form
+from nscontrol.systems.feedback import (
+    BLOCK_SIGNATURE,
+    CompiledBlock,
+    StaticLaw,
+    compiled_form,
+)
 from nscontrol.systems.lure import LureSystem
 
 U = np.finfo(float).eps / 2
@@ -98,17 +103,17 @@ def test_linear_blocks_compiled_match_python_within_roundoff(make):
                                atol=bound * 10)   # |K| <= 5 times the state's bound
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def _nan_output(t, xb, y, x, xhat, lam, p):
     return np.full(1, np.nan)
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def _grow(t, xb, y, x, xhat, lam, p):
     return np.zeros(xb.size + 1)
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def _zero_output(t, xb, y, x, xhat, lam, p):
     return np.zeros(1)
 
@@ -127,8 +132,11 @@ class _Compiled(StaticLaw):
 
 
 def test_bad_compiled_blocks_are_refused():
-    with pytest.raises(ModelError, match=r"^output: a CompiledBlock needs numba-jitted"):
+    with pytest.raises(ModelError, match=r"^output: a CompiledBlock needs a function "
+                                         r"compiled by numba.njit\(BLOCK_SIGNATURE\)"):
         CompiledBlock(lambda *a: None, _grow, [])
+    with pytest.raises(ModelError, match=r"^update: a CompiledBlock needs a function"):
+        CompiledBlock(_grow, njit(lambda t, xb, y, x, xh, lam, p: xb), [])   # undeclared
     with pytest.raises(ModelError, match=r"^compiled: _Compiled.compiled\(\) must return"):
         compiled_form(_Compiled(3.0))
     loop = nsc.closed_loop(relay_plant(), _Compiled(CompiledBlock(_nan_output, _grow, [])))

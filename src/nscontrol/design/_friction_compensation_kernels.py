@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ..systems._feedback_kernels import BLOCK_SIGNATURE
+
 PD_SIZE = 7
 
 
@@ -51,7 +53,7 @@ def friction_estimate(v, p):
     return math.copysign(mag, v)
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def controller_output(t, xb, y, x, xhat, lam, p):
     """``[u_pd + T_hat(omega_hat)]``; ``omega_hat`` the estimate, else the measured velocity."""
     v = xhat[0] if xhat.size > 0 else x[1]
@@ -66,7 +68,7 @@ def _xi(xo, theta, p):
     return (xo[0] + T * (-l * l * theta + xo[1] / J)) / (1.0 + T * l)
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def observer_output(t, xb, y, x, xhat, lam, p):
     """``[omega_hat]`` at a tick (``ReducedOrderVelocityObserver.output``)."""
     out = np.empty(1)
@@ -74,7 +76,7 @@ def observer_output(t, xb, y, x, xhat, lam, p):
     return out
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def observer_update(t, xb, y, x, xhat, lam, p):
     """``[xi, u_pd, omega_hat]`` carried into the next tick."""
     theta = y[0]

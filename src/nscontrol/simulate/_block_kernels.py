@@ -40,13 +40,13 @@ def _finite(a):
 
 
 @njit(cache=True)
-def _advance(out_fn, upd_fn, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
+def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
              prev_y, prev_x, prev_xhat, prev_lam, bad_size, bad_value, bad_out):
     """One block at the step start ``t``; writes its (held) output into ``held``."""
     due = sched[slot]
     if period <= 0.0:                      # continuous: explicit Euler over the last step
         if h > 0.0:
-            d = upd_fn(t - h, xb, prev_y, prev_x, prev_xhat, prev_lam, params)
+            d = fns[1](t - h, xb, prev_y, prev_x, prev_xhat, prev_lam, params)
             if d.size != xb.size:
                 return bad_size
             if not _finite(d):
@@ -55,7 +55,7 @@ def _advance(out_fn, upd_fn, params, period, xb, held, sched, slot, t, h, y, x, 
                 xb[i] = xb[i] + h * d[i]
             if not _finite(xb):
                 return bad_value
-        out = out_fn(t, xb, y, x, xhat, lam, params)
+        out = fns[0](t, xb, y, x, xhat, lam, params)
         if out.size != held.size:
             return bad_out
         if not _finite(out):
@@ -63,12 +63,12 @@ def _advance(out_fn, upd_fn, params, period, xb, held, sched, slot, t, h, y, x, 
         held[:] = out
         return STATUS_OK
     if np.isnan(due) or t >= due - _SAMPLE_SLACK * period:
-        out = out_fn(t, xb, y, x, xhat, lam, params)
+        out = fns[0](t, xb, y, x, xhat, lam, params)
         if out.size != held.size:
             return bad_out
         if not _finite(out):
             return bad_value
-        new = upd_fn(t, xb, y, x, xhat, lam, params)
+        new = fns[1](t, xb, y, x, xhat, lam, params)
         if new.size != xb.size:
             return bad_size
         if not _finite(new):
@@ -80,10 +80,11 @@ def _advance(out_fn, upd_fn, params, period, xb, held, sched, slot, t, h, y, x, 
 
 
 @njit(cache=True)
-def step_blocks(t, x, y, lam, has_obs, obs_out, obs_upd, obs_params, obs_period, xo, xhat,
-                has_ctrl, ctrl_out, ctrl_upd, ctrl_params, ctrl_period, xc, u,
+def step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat,
+                has_ctrl, ctrl_fns, ctrl_params, ctrl_period, xc, u,
                 prev_y, prev_x, prev_xhat, prev_lam, sched):
-    """The observer, then the controller, at the step start ``t`` with the plant in ``x``
+    """The observer, then the controller (``*_fns = (output, update)``, first-class
+    functions of ``BLOCK_SIGNATURE``), at the step start ``t`` with the plant in ``x``
     (``y = C x``, ``lam``: the last step's multipliers, empty if none). Updates ``xo``,
     ``xc`` in place, writes the estimate into ``xhat`` and the input into ``u`` (zeros
     without a controller), keeps this step's measurement in ``prev_*``; returns a status."""
@@ -91,14 +92,14 @@ def step_blocks(t, x, y, lam, has_obs, obs_out, obs_upd, obs_params, obs_period,
     sched[0] = t
     none = xhat[:0]
     if has_obs:
-        status = _advance(obs_out, obs_upd, obs_params, obs_period, xo, xhat, sched, 1, t, h,
+        status = _advance(obs_fns, obs_params, obs_period, xo, xhat, sched, 1, t, h,
                           y, x, none, lam, prev_y, prev_x, none, prev_lam,
                           STATUS_OBSERVER_SIZE, STATUS_OBSERVER_NONFINITE,
                           STATUS_OBSERVER_OUTPUT_SIZE)
         if status != STATUS_OK:
             return status
     if has_ctrl:
-        status = _advance(ctrl_out, ctrl_upd, ctrl_params, ctrl_period, xc, u, sched, 2, t,
+        status = _advance(ctrl_fns, ctrl_params, ctrl_period, xc, u, sched, 2, t,
                           h, y, x, xhat, lam, prev_y, prev_x, prev_xhat, prev_lam,
                           STATUS_CONTROLLER_SIZE, STATUS_CONTROLLER_NONFINITE,
                           STATUS_CONTROLLER_OUTPUT_SIZE)
@@ -114,14 +115,14 @@ def step_blocks(t, x, y, lam, has_obs, obs_out, obs_upd, obs_params, obs_period,
 @njit(cache=True)
 def reset_blocks(t, x_minus, x_plus, impulse, has_obs, obs_reset, obs_params, xo,
                  has_ctrl, ctrl_reset, ctrl_params, xc):
-    """The blocks' states after a plant jump; returns a status."""
+    """The blocks' states after a plant jump (``*_reset = (reset,)``); returns a status."""
     if has_obs:
-        new = obs_reset(t, xo, x_minus, x_plus, impulse, obs_params)
+        new = obs_reset[0](t, xo, x_minus, x_plus, impulse, obs_params)
         if new.size != xo.size:
             return STATUS_OBSERVER_SIZE
         xo[:] = new
     if has_ctrl:
-        new = ctrl_reset(t, xc, x_minus, x_plus, impulse, ctrl_params)
+        new = ctrl_reset[0](t, xc, x_minus, x_plus, impulse, ctrl_params)
         if new.size != xc.size:
             return STATUS_CONTROLLER_SIZE
         xc[:] = new

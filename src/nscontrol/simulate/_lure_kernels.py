@@ -159,8 +159,8 @@ def triangular_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2,
 
 @njit(cache=True)
 def controlled_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2, curve, H,
-                     ucol, Cy, times, x0, gnext, X, Z, Wout, has_obs, obs_out, obs_upd,
-                     obs_params, obs_period, xo, xhat, has_ctrl, ctrl_out, ctrl_upd,
+                     ucol, Cy, times, x0, gnext, X, Z, Wout, has_obs, obs_fns,
+                     obs_params, obs_period, xo, xhat, has_ctrl, ctrl_fns,
                      ctrl_params, ctrl_period, xc, u, prev_y, prev_x, prev_xhat, prev_lam,
                      sched, XO, XC, U):
     """:func:`triangular_steps` one step at a time with the input of compiled blocks held
@@ -182,8 +182,8 @@ def controlled_steps(Phi, Gam, Gh, HPhi, HGam, Dh, order, coupled, kind, p1, p2,
             for j in range(n):
                 s += Cy[i, j] * x[j]
             y[i] = s
-        status = step_blocks(times[k], x, y, lam, has_obs, obs_out, obs_upd, obs_params,
-                             obs_period, xo, xhat, has_ctrl, ctrl_out, ctrl_upd, ctrl_params,
+        status = step_blocks(times[k], x, y, lam, has_obs, obs_fns, obs_params,
+                             obs_period, xo, xhat, has_ctrl, ctrl_fns, ctrl_params,
                              ctrl_period, xc, u, prev_y, prev_x, prev_xhat, prev_lam, sched)
         if status != 0:
             return k, status

@@ -814,14 +814,14 @@ class _CompiledBlocks:
         u, prev_y, prev_x, prev_xhat, prev_lam, sched`` for
         :func:`~nscontrol.simulate._block_kernels.step_blocks`."""
         o, c = self.obs_parts, self.ctrl_parts
-        return (o[0], o[1], o[2], o[4], o[5], o[6], o[7], c[0], c[1], c[2], c[4], c[5], c[6],
-                c[7], *self.prev, self.sched)
+        return (o[0], (o[1], o[2]), o[4], o[5], o[6], o[7], c[0], (c[1], c[2]), c[4], c[5],
+                c[6], c[7], *self.prev, self.sched)
 
     def resets(self) -> tuple[Any, ...]:
         """``has_obs, obs_reset, obs_params, xo, has_ctrl, ctrl_reset, ctrl_params, xc`` for
         :func:`~nscontrol.simulate._block_kernels.reset_blocks`."""
         o, c = self.obs_parts, self.ctrl_parts
-        return (o[0], o[3], o[4], o[6], c[0], c[3], c[4], c[6])
+        return (o[0], (o[3],), o[4], o[6], c[0], (c[3],), c[4], c[6])
 
     def log_arrays(self, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Empty logs for ``k`` steps: the blocks' states and ``u`` at each step start."""

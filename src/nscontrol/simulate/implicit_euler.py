@@ -855,6 +855,10 @@ class _Stepper:
         """Steps over ``times`` in one compiled loop with the compiled blocks of a closed loop
         (``blocks``, from :func:`nscontrol.closed_loop`): the same operations, in the same
         order, as :meth:`run_with_controller` with the blocks' Python methods."""
+        import warnings
+
+        from numba.core.errors import NumbaExperimentalFeatureWarning
+
         from ._lure_kernels import controlled_steps
 
         k = times.size - 1
@@ -864,12 +868,14 @@ class _Stepper:
             np.zeros((k, mm))
         XO, XC, U = blocks.log_arrays(k)
         m, plan, (kind, p1, p2) = self.m, self.plan, self.spec
-        done, status = controlled_steps(
-            m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
-            plan.structure != "diagonal", kind, p1, p2, self.curve, self.system.H, self.ucol,
-            blocks.Cy, times, np.ascontiguousarray(x, dtype=float),
-            np.ascontiguousarray(gnext, dtype=float), X, Z, W, *blocks.kernel_state(), XO,
-            XC, U)
+        with warnings.catch_warnings():   # numba flags its first-class functions experimental
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            done, status = controlled_steps(
+                m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
+                plan.structure != "diagonal", kind, p1, p2, self.curve, self.system.H,
+                self.ucol, blocks.Cy, times, np.ascontiguousarray(x, dtype=float),
+                np.ascontiguousarray(gnext, dtype=float), X, Z, W, *blocks.kernel_state(),
+                XO, XC, U)
         blocks.log(times[:done], XO[:done], XC[:done], U[:done])
         if status != 0:
             blocks.raise_status(int(status), float(times[done]))

@@ -9,22 +9,30 @@ matrices row by row.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+
+_VEC = types.float64[::1]
+#: The signature of a compiled block's ``output`` and ``update``
+#: ``(t, xb, y, x, xhat, lam, params) -> array``.
+BLOCK_SIGNATURE = _VEC(types.float64, _VEC, _VEC, _VEC, _VEC, _VEC, _VEC)
+#: The signature of a compiled block's ``reset``
+#: ``(t, xb, x_minus, x_plus, impulse, params) -> array``.
+RESET_SIGNATURE = _VEC(types.float64, _VEC, _VEC, _VEC, _VEC, _VEC)
 
 
-@njit(cache=True)
+@njit(RESET_SIGNATURE, cache=True)
 def keep_state(t, xb, x_minus, x_plus, impulse, params):
     """Reset that leaves the block's state unchanged."""
     return xb.copy()
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def static_update(t, xb, y, x, xhat, lam, params):
     """Update of a block without state dynamics: the state unchanged."""
     return xb.copy()
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def empty_output(t, xb, y, x, xhat, lam, params):
     """Output of an absent block: nothing."""
     return np.zeros(0)
@@ -41,7 +49,7 @@ def _matvec(params, offset, rows, cols, v, out):
     return offset + rows * cols
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def affine_output(t, xb, y, x, xhat, lam, params):
     """``u = K v + k`` with ``v = x`` or ``x̂``: ``params = [m, n, on_estimate, K, k]``."""
     m, n = int(params[0]), int(params[1])
@@ -53,7 +61,7 @@ def affine_output(t, xb, y, x, xhat, lam, params):
     return out
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def linear_output(t, xb, y, x, xhat, lam, params):
     """``C xb + D y``: ``params = [r, p, m, A, B, C, D]``."""
     r, p, m = int(params[0]), int(params[1]), int(params[2])
@@ -64,7 +72,7 @@ def linear_output(t, xb, y, x, xhat, lam, params):
     return out
 
 
-@njit(cache=True)
+@njit(BLOCK_SIGNATURE, cache=True)
 def linear_update(t, xb, y, x, xhat, lam, params):
     """``A xb + B y``: ``params = [r, p, m, A, B, C, D]``."""
     r, p = int(params[0]), int(params[1])

@@ -44,7 +44,7 @@ from ..errors import DimensionError, ModelError
 
 __all__ = ["Measurement", "Jump", "Controller", "Observer", "StaticLaw", "StateFeedback",
            "PiecewiseStateFeedback", "LinearController", "LinearObserver", "PiecewiseObserver",
-           "CompiledBlock", "compiled_form"]
+           "CompiledBlock", "compiled_form", "BLOCK_SIGNATURE", "RESET_SIGNATURE"]
 
 
 @dataclass(frozen=True)
@@ -161,8 +161,12 @@ class CompiledBlock:
     """The compiled form of a controller or an observer, called by the integrators' compiled
     loops in place of the block's Python methods.
 
-    The three functions are numba-jitted (``numba.njit``, ideally ``cache=True``) and take
-    plain arrays (``float64``, one-dimensional)::
+    The three functions are compiled by ``numba.njit`` with their signature declared,
+    ``@njit(BLOCK_SIGNATURE, cache=True)`` for ``output``/``update`` and
+    ``@njit(RESET_SIGNATURE, cache=True)`` for ``reset`` (both importable from
+    ``nscontrol.systems.feedback``): the compiled loops then receive them as first-class
+    functions, and stay compiled once for every block. They take plain arrays (``float64``,
+    one-dimensional, contiguous)::
 
         output(t, xb, y, x, xhat, lam, params) -> out      (the block's output)
         update(t, xb, y, x, xhat, lam, params) -> xb_next  (xb' or the next sample's xb)
@@ -189,17 +193,44 @@ class CompiledBlock:
     reset: Any = None
 
     def __post_init__(self) -> None:
-        for name in ("output", "update", "reset"):
-            fn = getattr(self, name)
-            if (fn is not None or name != "reset") and not hasattr(fn, "py_func"):
-                raise ModelError(f"{name}: a CompiledBlock needs numba-jitted functions "
-                                 f"(numba.njit), got {type(fn).__name__}")
+        from ._feedback_kernels import BLOCK_SIGNATURE, RESET_SIGNATURE, keep_state
+
+        if self.reset is None:
+            object.__setattr__(self, "reset", keep_state)
+        for name, sig, sig_name in (("output", BLOCK_SIGNATURE, "BLOCK_SIGNATURE"),
+                                    ("update", BLOCK_SIGNATURE, "BLOCK_SIGNATURE"),
+                                    ("reset", RESET_SIGNATURE, "RESET_SIGNATURE")):
+            if not _has_signature(getattr(self, name), sig):
+                raise ModelError(f"{name}: a CompiledBlock needs a function compiled by "
+                                 f"numba.njit({sig_name}) (from "
+                                 f"nscontrol.systems.feedback), the signature declared, got "
+                                 f"{getattr(self, name)!r}")
         params = np.ascontiguousarray(np.asarray(self.params, dtype=np.float64).reshape(-1))
         object.__setattr__(self, "params", params)
-        if self.reset is None:
-            from ._feedback_kernels import keep_state
 
-            object.__setattr__(self, "reset", keep_state)
+
+def _has_signature(fn: Any, sig: Any) -> bool:
+    """``fn`` is a numba dispatcher compiled for ``sig`` only (declared, so that the compiled
+    loops receive it as a first-class function of that type and stay cached)."""
+    import warnings
+
+    from numba import typeof, types
+    from numba.core.errors import NumbaExperimentalFeatureWarning
+
+    if not hasattr(fn, "py_func"):
+        return False
+    with warnings.catch_warnings():   # numba flags its first-class functions experimental
+        warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        return bool(typeof((fn,)) == types.UniTuple(types.FunctionType(sig), 1))
+
+
+def __getattr__(name: str) -> Any:
+    """``BLOCK_SIGNATURE`` and ``RESET_SIGNATURE`` load numba only when asked for."""
+    if name in ("BLOCK_SIGNATURE", "RESET_SIGNATURE"):
+        from . import _feedback_kernels
+
+        return getattr(_feedback_kernels, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def compiled_form(block: Any) -> CompiledBlock | None:
