@@ -499,7 +499,8 @@ class FrictionLoopRun:
 def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float,
                            h: float, T: float, theta0: float = 0.0, omega0: float = 0.0,
                            omega_hat0: float = 0.0, value_at_zero: float = 0.0,
-                           smooth_eps: float | None = None) -> FrictionLoopRun:
+                           smooth_eps: float | None = None,
+                           compiled: bool = True) -> FrictionLoopRun:
     """Run the digital friction-compensating loop (control period ``h``) by implicit Euler.
 
     Parameters
@@ -520,6 +521,9 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
         Initial angle, velocity and velocity estimate.
     value_at_zero, smooth_eps
         Passed to :class:`FrictionCompensatingPD`.
+    compiled
+        Run the blocks' compiled forms in implicit Euler's compiled loop (default; the
+        same numbers as their Python methods, ``False``).
 
     Returns
     -------
@@ -542,7 +546,7 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
     if l is not None:
         obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
     plant = robot.lure_system()
-    loop = closed_loop(plant, ctrl, obs)
+    loop = closed_loop(plant, ctrl, obs, compiled=compiled)
     traj = simulate(loop, [theta0, omega0], (0.0, T), method="implicit_euler", h=h,
                     progress=False)
     t, x = traj.t, traj.x

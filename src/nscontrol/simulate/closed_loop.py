@@ -629,6 +629,9 @@ def _lower_python_blocks(loop: ClosedLoop, method: type[Integrator], x0: Any) ->
     options: dict[str, Any] = {"controller": runner.step, "listeners": [runner.on_jump]}
     if loop.exosystem is not None:
         options["u"] = loop.exosystem
+    compiled = _CompiledBlocks.of(runner)
+    if compiled is not None:       # used when the plant has a compiled model too
+        options["compiled_blocks"] = compiled
     return Lowered(loop.plant, x0, options, runner.finish)
 
 
@@ -673,6 +676,7 @@ class _BlockRunner:
         else:
             mech = p.lagrangian() if isinstance(p, ImpactingBodies) else p
             self.n_inputs = mech.n_dof if mech.actuation is None else mech.actuation.shape[1]
+            self.n_lam = int(mech.n_contacts)      # the size of λ̂ (compiled blocks)
         self.xo = np.zeros(0 if self.obs is None else self.obs.n_states)
         self.xc = np.zeros(0 if self.ctrl is None else self.ctrl.n_states)
         for name, block in (("observer", self.obs), ("controller", self.ctrl)):

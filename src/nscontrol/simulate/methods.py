@@ -62,7 +62,8 @@ class MoreauJean(_ModuleIntegrator):
     module = "nscontrol.simulate.moreau_jean"
     capabilities = frozenset({"time_stepping", "listeners", "controller", "multipliers"})
     options: ClassVar[frozenset[str]] = frozenset(
-        {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at"})
+        {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at",
+         "compiled_blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:

@@ -33,7 +33,7 @@ from .._validation import (
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolWarning
 
-__all__ = ["LagrangianSystem", "two_link_arm_mass", "two_link_arm_coriolis",
+__all__ = ["LagrangianSystem", "CompiledModel", "two_link_arm_mass", "two_link_arm_coriolis",
            "two_link_arm_gravity", "two_link_arm_force_jacobian"]
 
 ForceFn = Callable[[float, FloatArray, FloatArray], FloatArray]
@@ -43,6 +43,108 @@ ForceJacobianFn = Callable[[float, FloatArray, FloatArray], tuple[FloatArray, Fl
 ConfigurationFn = Callable[[FloatArray], FloatArray]
 #: ε^(1/3): the central-difference step (relative) balancing truncation and roundoff.
 _CBRT_EPS = float(np.finfo(float).eps) ** (1.0 / 3.0)
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledModel:
+    """Compiled forms of a :class:`LagrangianSystem`'s callables, for Moreau–Jean's compiled
+    loop (a configuration-dependent ``M(q)``, a nonlinear force, nonlinear gaps).
+
+    Each function is compiled by ``numba.njit`` with its signature declared (from
+    ``nscontrol.systems.lagrangian``'s kernels module ``_lagrangian_kernels``:
+    ``MASS_SIGNATURE`` etc.), takes plain ``float64`` arrays and the parameter array last::
+
+        mass(q, params) -> M (n, n)
+        force(t, q, v, params) -> the system's force term (n,)   (zeros if it has none)
+        force_jacobian(t, q, v, params) -> [∂force/∂q; ∂force/∂v] stacked (2n, n)
+        gaps(q, params) -> g (m,),   gap_jacobian(q, params) -> ∂g/∂q (m, n)
+        potential(q, params) -> V   (optional: the recorded energy's potential)
+
+    The linear terms (``f0, K, D``), the actuation and the restitution stay the system's.
+    The system probes the compiled functions against its Python callables at
+    construction (:meth:`check_against`).
+
+    Attributes
+    ----------
+    mass, force, force_jacobian, gaps, gap_jacobian : numba dispatcher
+        The compiled functions.
+    params : ndarray of float64, shape (p,)
+        The model's parameters, passed to every function.
+    potential : numba dispatcher, optional
+        The compiled ``potential`` (the energy signal otherwise calls the Python one).
+    """
+
+    mass: Any
+    force: Any
+    force_jacobian: Any
+    gaps: Any
+    gap_jacobian: Any
+    params: FloatArray
+    potential: Any = None
+
+    def __post_init__(self) -> None:
+        from . import _lagrangian_kernels as lk
+        from .feedback import _has_signature
+
+        for name, sig in (("mass", lk.MASS_SIGNATURE), ("force", lk.FORCE_SIGNATURE),
+                          ("force_jacobian", lk.FORCE_JACOBIAN_SIGNATURE),
+                          ("gaps", lk.GAP_SIGNATURE),
+                          ("gap_jacobian", lk.GAP_JACOBIAN_SIGNATURE),
+                          ("potential", lk.POTENTIAL_SIGNATURE)):
+            if name == "potential" and self.potential is None:
+                continue
+            if not _has_signature(getattr(self, name), sig):
+                raise ModelError(f"{name}: a CompiledModel needs a function compiled by "
+                                 f"numba.njit({name.upper()}_SIGNATURE) (declared), got "
+                                 f"{getattr(self, name)!r}")
+        object.__setattr__(self, "params", np.ascontiguousarray(
+            np.asarray(self.params, dtype=np.float64).reshape(-1)))
+
+    def check_against(self, system: LagrangianSystem, tol: float = 1e-10) -> None:
+        """Compare with the system's Python callables at a fixed configuration
+        ``q = 0.1 (1, 2, ..., n) / n``, ``v = -q``, ``t = 0.3``; the compiled and Python forms
+        differ by the order of their operations only, so ``tol`` (relative to each value's
+        largest entry) is far above their roundoff and far below a modelling slip.
+
+        Parameters
+        ----------
+        system : LagrangianSystem
+            The system this model compiles.
+        tol : float
+            Relative tolerance.
+
+        Raises
+        ------
+        ModelError
+            A compiled function disagrees (its name and the difference in the message).
+        """
+        n, p = system.n_dof, self.params
+        q = 0.1 * np.arange(1.0, n + 1.0) / n
+        v, t = -q, 0.3
+        force = (np.zeros(n) if system.force is None else
+                 np.asarray(system.force(t, q, v), float))
+        pairs = [("mass", self.mass(q, p), system.mass_matrix(q)),
+                 ("force", self.force(t, q, v, p), force),
+                 ("gaps", self.gaps(q, p), system.gaps(q)),
+                 ("gap_jacobian", self.gap_jacobian(q, p), system.gap_jacobian(q))]
+        if self.potential is not None and system.potential is not None:
+            pairs.append(("potential", np.array(self.potential(q, p)),
+                          np.array(system.potential(q))))
+        if system.force_jacobian is not None:
+            Jq, Jv = system.force_jacobian(t, q, v)
+            pairs.append(("force_jacobian", self.force_jacobian(t, q, v, p),
+                          np.vstack([Jq, Jv])))
+        for name, ours, theirs in pairs:
+            theirs = np.asarray(theirs, float)
+            if np.shape(ours) != theirs.shape:
+                raise DimensionError(f"compiled.{name}: returned shape {np.shape(ours)}, the "
+                                     f"system's {name} {theirs.shape}")
+            scale = max(1.0, float(np.abs(theirs).max(initial=0.0)))
+            err = float(np.abs(ours - theirs).max(initial=0.0))
+            if not err <= tol * scale:
+                raise ModelError(f"compiled.{name}: disagrees with the system's {name} at "
+                                 f"q = {q!r} (max difference {err:.3g}); it must compute the "
+                                 f"same function")
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +181,10 @@ class LagrangianSystem:
         Potential of ``force`` (added to ``½ qᵀKq - f0ᵀq`` in :meth:`energy`).
     names : sequence of str, optional
         Names of the coordinates (states are named ``q_name``, ``v_name``).
+    compiled : CompiledModel, optional
+        Compiled forms of ``mass``, ``force``, ``force_jacobian``, ``gap`` and ``jacobian``
+        (numba-jitted): Moreau–Jean then runs the model in a compiled loop instead of its
+        Python one (probed against the Python callables here).
 
     Raises
     ------
@@ -129,6 +235,7 @@ class LagrangianSystem:
     potential: Callable[[FloatArray], float] | None = None
     names: Sequence[str] = ()
     force_jacobian: ForceJacobianFn | None = None
+    compiled: Any = None   # a CompiledModel
     n_dof: int = field(init=False)
     n_contacts: int = field(init=False)
 
@@ -143,7 +250,8 @@ class LagrangianSystem:
                      actuation: ArrayLike | None = None,
                      potential: Callable[[FloatArray], float] | None = None,
                      names: Sequence[str] = (),
-                     force_jacobian: ForceJacobianFn | None = None) -> None: ...
+                     force_jacobian: ForceJacobianFn | None = None,
+                     compiled: CompiledModel | None = None) -> None: ...
 
     default_method = "event_driven"
 
@@ -185,6 +293,11 @@ class LagrangianSystem:
             raise DimensionError(f"names: expected {n} coordinate names, got {len(names)}")
         set_(self, "names", names)
         self._check_force_jacobian(n)
+        if self.compiled is not None:
+            if not isinstance(self.compiled, CompiledModel):
+                raise ModelError(f"compiled: expected a CompiledModel, got "
+                                 f"{type(self.compiled).__name__}")
+            self.compiled.check_against(self)
 
     def _check_force_jacobian(self, n: int) -> None:
         """Probe ``force_jacobian`` at ``(t, q, v) = (0, 0, 0)``: shapes, and agreement with
