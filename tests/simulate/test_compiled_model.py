@@ -160,7 +160,7 @@ def test_bad_compiled_models_are_refused():
         CompiledModel(lambda q, p: q, _ball_force, _ball_jacobian, _ball_gap,
                       _ball_gap_jacobian, [])
     with pytest.raises(ModelError, match=r"^compiled.mass: disagrees with the system's mass"):
-        LagrangianSystem(lambda q: np.array([[3.0]]), constant_force=[0.0],
+        LagrangianSystem(lambda q: np.array([[3.0]]), names=("y",),
                          gap=lambda q: q.copy(), jacobian=lambda q: np.ones((1, 1)),
                          compiled=ball().compiled)
     with pytest.raises(ModelError, match=r"^compiled: expected a CompiledModel"):
