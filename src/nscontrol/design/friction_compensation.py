@@ -561,6 +561,8 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
     u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
     if type(pd.reference) is SetPoint:
         ref = np.full(t.size, float(pd.reference.value))
+    elif type(pd.reference) is Sinusoid:    # the same formula on the whole time grid
+        ref = pd.reference.amplitude * np.sin(pd.reference.frequency * t)
     else:
         ref = np.array([pd.reference(tk)[0] for tk in t])
     return FrictionLoopRun(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(),
