@@ -72,7 +72,7 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
                 (np.empty((size, 0)), np.empty((size, 0)), np.empty((size, S.shape[1])))
             with warnings.catch_warnings():   # numba's first-class functions: "experimental"
                 warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-                done, code = kern.mj_model_steps(
+                done, code = kern.mj_model_steps(  # type: ignore[call-arg]  # numba's stub
                     model, cm.params, K, D, system.constant_force, S, system.restitution,
                     step, setup.theta, setup.gamma, activation, setup.mass_at == "predicted",
                     times, q_pre, v_pre, p_prev, fext, *block_args, XO, XC, U, q_out, v_out,

@@ -870,7 +870,7 @@ class _Stepper:
         m, plan, (kind, p1, p2) = self.m, self.plan, self.spec
         with warnings.catch_warnings():   # numba flags its first-class functions experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-            done, status = controlled_steps(
+            done, status = controlled_steps(  # type: ignore[call-arg]  # numba's stub: 1 tuple
                 m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
                 plan.structure != "diagonal", kind, p1, p2, self.curve, self.system.H,
                 self.ucol, blocks.Cy, times, np.ascontiguousarray(x, dtype=float),

@@ -175,9 +175,10 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
     Trajectory
         Samples at ``t0 + k h`` and at ``tf`` (when ``h`` does not divide the span the last
         step is shortened to end there). ``stats``: ``steps``, ``path`` (``"tridiagonal"``,
-        ``"dense"``, ``"compiled_model"`` or ``"python"``; ``"tridiagonal+dense"`` when a singular Delassus matrix
-        — redundant contacts — sent the run to Lemke), ``max_penetration``; on the Python
-        path ``forces`` and ``force_jacobian`` (``"analytic"`` or ``"central differences"``).
+        ``"dense"``, ``"compiled_model"`` or ``"python"``; ``"tridiagonal+dense"`` when a
+        singular Delassus matrix — redundant contacts — sent the run to Lemke),
+        ``max_penetration``; on the Python path ``forces`` and ``force_jacobian``
+        (``"analytic"`` or ``"central differences"``).
 
     Raises
     ------

@@ -23,7 +23,8 @@ _EXPORTS: dict[str, str] = {
     # nonlinear.py
     "NonlinearSystem": "nonlinear",
     # lagrangian.py
-    "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
+    "LagrangianSystem": "lagrangian", "CompiledModel": "lagrangian",
+    "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
     "two_link_arm_force_jacobian": "lagrangian",
     # two_link.py
@@ -37,7 +38,7 @@ _EXPORTS: dict[str, str] = {
     "StaticLaw": "feedback",
     "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
     "LinearController": "feedback", "LinearObserver": "feedback",
-    "PiecewiseObserver": "feedback",
+    "PiecewiseObserver": "feedback", "CompiledBlock": "feedback", "compiled_form": "feedback",
     # foot_body.py
     "ActuatedContactModel": "foot_body", "FootBodyParameters": "foot_body",
     "foot_body_model": "foot_body", "foot_body_points": "foot_body",

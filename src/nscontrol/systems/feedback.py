@@ -44,7 +44,7 @@ from ..errors import DimensionError, ModelError
 
 __all__ = ["Measurement", "Jump", "Controller", "Observer", "StaticLaw", "StateFeedback",
            "PiecewiseStateFeedback", "LinearController", "LinearObserver", "PiecewiseObserver",
-           "CompiledBlock", "compiled_form", "BLOCK_SIGNATURE", "RESET_SIGNATURE"]
+           "CompiledBlock", "compiled_form"]
 
 
 @dataclass(frozen=True)
