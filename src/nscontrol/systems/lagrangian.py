@@ -699,7 +699,9 @@ class LagrangianSystem:
         """The planar two-link arm of ch03 §4.1, end effector above the ground ``y >= 0``.
 
         Coordinates ``θ = (θ1, θ2)``; force ``-C(θ, θ')θ' - G(θ)`` (Christoffel form);
-        constraint ``y = l1 sin θ1 + l2 sin(θ1 + θ2) >= 0`` with its analytic Jacobian.
+        constraint ``y = l1 sin θ1 + l2 sin(θ1 + θ2) >= 0`` with its analytic Jacobian; a
+        :class:`CompiledModel` of all of them (Moreau–Jean's compiled loop, with compiled
+        blocks or without a controller).
 
         Parameters
         ----------
@@ -744,9 +746,15 @@ class LagrangianSystem:
                            ) -> tuple[FloatArray, FloatArray]:
             return two_link_arm_force_jacobian(q, v, g=g, **p)
 
+        from . import _two_link_kernels as tk
+
+        compiled = CompiledModel(tk.mass, tk.force, tk.force_jacobian, tk.gaps,
+                                 tk.gap_jacobian, [l1, l2, m1, m2, I1, I2, g],
+                                 potential=tk.potential)
         return cls(lambda q: two_link_arm_mass(q, **p), force=force, gap=gap,
                    jacobian=jacobian, restitution=restitution, potential=potential,
-                   names=("theta1", "theta2"), force_jacobian=force_jacobian)
+                   names=("theta1", "theta2"), force_jacobian=force_jacobian,
+                   compiled=compiled)
 
 
 def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: float,
