@@ -165,3 +165,17 @@ def test_bad_compiled_models_are_refused():
                          compiled=ball().compiled)
     with pytest.raises(ModelError, match=r"^compiled: expected a CompiledModel"):
         LagrangianSystem(np.eye(1), gap_matrix=[[1.0]], compiled="fast")
+
+
+def test_listeners_observe_the_compiled_run_as_the_python_one():
+    """Without a controller a compiled model runs compiled; a user's listener sees the same
+    impacts (times, contacts) as on the Python path."""
+    seen = {True: [], False: []}
+    for c in (True, False):
+        system = ball() if c else replace(ball(), compiled=None)
+        traj = nsc.simulate(system, [1.0, 0.0], (0.0, 3.0), method="moreau_jean", h=1e-3,
+                            progress=False,
+                            listeners=[lambda t, xm, xp, idx, imp, c=c:
+                                       seen[c].append((round(t, 9), idx.tolist()))])
+        assert traj.stats["path"] == ("compiled_model" if c else "python")
+    assert seen[True] == seen[False] and len(seen[True]) >= 5

@@ -20,8 +20,10 @@ _CHUNK = 20_000
 
 def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, float],
                        n_full: int, h_last: float, u: Any, blocks: Any, rec: Recorder,
-                       activation: float, progress: Any) -> Trajectory:
-    """The run of :func:`~nscontrol.simulate.moreau_jean.integrate` on the compiled path."""
+                       activation: float, progress: Any, listeners: Any = ()) -> Trajectory:
+    """The run of :func:`~nscontrol.simulate.moreau_jean.integrate` on the compiled path.
+    The compiled loop resets the blocks itself; other listeners observe after each chunk
+    (as on the Python path without a controller)."""
     from numba.core.errors import NumbaExperimentalFeatureWarning
 
     from . import _mj_compiled_kernels as kern
@@ -50,6 +52,9 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
         block_args = (False, np.zeros((0, 2 * n)), False, fns, rs, e0, -1.0, e0, e0, False,
                       fns, rs, e0, -1.0, e0, np.zeros(S.shape[1]), e0, np.zeros(2 * n), e0,
                       np.zeros(m), np.full(3, np.nan))
+    runner = getattr(blocks, "runner", None)
+    observers = [fn for fn in listeners if getattr(fn, "__self__", None) is not runner
+                 or runner is None]
     info = np.zeros(2)
     status, message, code = 0, None, 0
     with TimeProgress(t0, tf, desc="moreau_jean", enable=progress) as bar:
@@ -81,7 +86,7 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
                 blocks.log(times[:done], XO[:done], XC[:done], U[:done])
             if done:
                 _record_chunk(rec, system, times[:done] + step, q_out[:done], v_out[:done],
-                              p_out[:done], state, q_pre, v_pre, (), step,
+                              p_out[:done], state, q_pre, v_pre, observers, step,
                               _signals_compiled(system, q_out[:done], v_out[:done],
                                                 p_out[:done], rec))
                 state["q"], state["v"] = q_out[done - 1].copy(), v_out[done - 1].copy()

@@ -295,7 +295,7 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         from ._mj_compiled import integrate_compiled
 
         return integrate_compiled(system, setup, x0, (t0, tf), n_full, h_last, u,
-                                  compiled_blocks, rec, activation, progress)
+                                  compiled_blocks, rec, activation, progress, listeners)
     runner = _choose_runner(system, setup, activation)
     path = runner.path
     state: dict[str, Any] = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
