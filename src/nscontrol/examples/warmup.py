@@ -96,6 +96,25 @@ def _compiled_blocks() -> None:
     model, reg, plant = foot_body_setup()
     simulate(reg.folded(plant), initial_state(model, reg.design.q_star, -1.0), (0.0, 0.05),
              method="moreau_jean", h=1e-3, progress=False)
+    _block_stepper()
+
+
+def _block_stepper() -> None:
+    """The block stepper on its own (the loops above load it inside their cached code)."""
+    import warnings
+
+    import numpy as np
+    from numba.core.errors import NumbaExperimentalFeatureWarning
+
+    from ..simulate._block_kernels import reset_blocks, step_blocks
+    from ..systems._feedback_kernels import empty_output, keep_state, static_update
+
+    e, fns, rs = np.zeros(0), (empty_output, static_update), (keep_state,)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        step_blocks(0.0, e, e, e, False, fns, e, -1.0, e, e, False, fns, e, -1.0, e, e, e, e,
+                    e, e, np.full(3, np.nan))
+        reset_blocks(0.0, e, e, e, False, rs, e, e, False, rs, e, e)
 
 
 #: (what, how): one step of the warm-up each.
