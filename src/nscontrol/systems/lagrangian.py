@@ -749,7 +749,7 @@ class LagrangianSystem:
         from . import _two_link_kernels as tk
 
         compiled = CompiledModel(tk.mass, tk.force, tk.force_jacobian, tk.gaps,
-                                 tk.gap_jacobian, [l1, l2, m1, m2, I1, I2, g],
+                                 tk.gap_jacobian, np.array([l1, l2, m1, m2, I1, I2, g]),
                                  potential=tk.potential)
         return cls(lambda q: two_link_arm_mass(q, **p), force=force, gap=gap,
                    jacobian=jacobian, restitution=restitution, potential=potential,
