@@ -81,6 +81,15 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
     f_in = np.empty(n)
     minv = np.empty((n, n))
     dv = np.empty(n)
+    f = np.empty(n)
+    Jq = np.empty((n, n))
+    Jv = np.empty((n, n))
+    qm = np.empty(n)
+    v_free = np.empty(n)
+    v_new = np.empty(n)
+    un = np.empty(m)
+    act = np.empty(m, np.int64)
+    MinvGt_buf = np.empty((n, m))
     a = h * theta
     for k in range(times.size):
         t = times[k]
@@ -112,16 +121,15 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
                     s += S[i, j] * u[j]
                 f_in[i] += s
         # -- the step (moreau_jean._PythonRunner._step) --
-        if predicted:
-            qm = q + a * v
-        else:
-            qm = q
+        for i in range(n):
+            qm[i] = q[i] + a * v[i] if predicted else q[i]
         M = model[0][0](qm, params)
         if not _positive_definite(M):
             info[0] = t
             return k, MODEL_ERROR
         tm = t + a
-        f = f0.copy()
+        for i in range(n):
+            f[i] = f0[i]
         for i in range(n):
             s = 0.0
             for j in range(n):
@@ -139,19 +147,19 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
         if not (_finite(f) and _finite(J)):
             info[0] = t
             return k, MODEL_ERROR
-        Jq = J[:n] - K
-        Jv = J[n:] - D
-        rcond = mj_linearised_kernel(np.ascontiguousarray(M), np.ascontiguousarray(Jq),
-                                     np.ascontiguousarray(Jv), f, f_in, v, h, theta, minv, dv)
+        for i in range(n):
+            for j in range(n):
+                Jq[i, j] = J[i, j] - K[i, j]
+                Jv[i, j] = J[n + i, j] - D[i, j]
+        rcond = mj_linearised_kernel(M, Jq, Jv, f, f_in, v, h, theta, minv, dv)
         if not rcond >= n * _EPS:
             info[0] = t
             info[1] = rcond
             return k, SINGULAR
-        v_free = v + dv
+        for i in range(n):
+            v_free[i] = v[i] + dv[i]
         G = model[4][0](q, params)
         gq = model[3][0](q, params)
-        un = np.empty(m)
-        act = np.empty(m, np.int64)
         na = 0
         for j in range(m):
             s = 0.0
@@ -161,11 +169,12 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
             if gq[j] + gamma * h * s <= activation:
                 act[na] = j
                 na += 1
-        v_new = v_free.copy()
+        for i in range(n):
+            v_new[i] = v_free[i]
         for j in range(m):
             p_out[k, j] = 0.0
         if na > 0:
-            MinvGt = np.empty((n, na))
+            MinvGt = MinvGt_buf[:, :na]
             for i in range(n):
                 for c in range(na):
                     s = 0.0
@@ -199,7 +208,6 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
                 v_new[i] = v_free[i] + s
             for c in range(na):
                 p_out[k, act[c]] = z[c]
-        q_new = q + h * ((1 - theta) * v + theta * v_new)
         # -- an impact in this step resets the blocks (closed_loop's jump listener) --
         if has_blocks:
             approaching = False
@@ -208,15 +216,15 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
                     approaching = True
             if approaching:
                 x_minus = np.concatenate((q, v))
-                x_plus = np.concatenate((q_new, v_new))
+                x_plus = np.concatenate((q + h * ((1 - theta) * v + theta * v_new), v_new))
                 status = reset_blocks(t + h, x_minus, x_plus, p_out[k].copy(), has_obs,
                                       obs_reset, obs_params, xo, has_ctrl, ctrl_reset,
                                       ctrl_params, xc)
                 if status != 0:
                     return k, BLOCKS + status
-        q = q_new
-        v = v_new
-        for i in range(n):
+        for i in range(n):    # q + h((1 - θ) v + θ v_new), element by element
+            q[i] = q[i] + h * ((1 - theta) * v[i] + theta * v_new[i])
+            v[i] = v_new[i]
             q_out[k, i] = q[i]
             v_out[k, i] = v[i]
         for j in range(m):
