@@ -179,3 +179,21 @@ def test_listeners_observe_the_compiled_run_as_the_python_one():
                                        seen[c].append((round(t, 9), idx.tolist()))])
         assert traj.stats["path"] == ("compiled_model" if c else "python")
     assert seen[True] == seen[False] and len(seen[True]) >= 5
+
+
+@njit(BLOCK_SIGNATURE, cache=True)
+def _late_nan(t, xb, y, x, xhat, lam, p):
+    return np.full(1, np.nan if t > 0.5 else 0.0)
+
+
+class LateNaN(ImpactCounter):
+    def compiled(self):
+        return CompiledBlock(_late_nan, _count_update, [], _count_reset)
+
+
+def test_a_block_failing_mid_run_stops_it_with_the_steps_so_far():
+    with pytest.raises(ModelError, match=r"^controller: returned a non-finite value at "
+                                         r"t = 0\.5") as info:
+        nsc.simulate(nsc.closed_loop(ball(), LateNaN()), [1.0, 0.0], (0.0, 3.0),
+                     method="moreau_jean", h=1e-3, progress=False)
+    assert info.value.trajectory is not None and info.value.trajectory.t[-1] >= 0.5

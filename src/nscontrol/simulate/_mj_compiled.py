@@ -97,9 +97,7 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
             if code == 0:
                 continue
             t_fail = float(times[done])
-            if code >= kern.BLOCKS:
-                rec.finish(status=-1, message="block failure", method="moreau_jean",
-                           state_names=system.state_names)
+            if code >= kern.BLOCKS:   # the run context attaches the steps so far
                 blocks.raise_status(int(code - kern.BLOCKS), t_fail)
             if code == kern.MODEL_ERROR:
                 message = (f"model: at t = {t_fail:.6g} the compiled model gave a mass matrix "
