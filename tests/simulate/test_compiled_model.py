@@ -197,3 +197,22 @@ def test_a_block_failing_mid_run_stops_it_with_the_steps_so_far():
         nsc.simulate(nsc.closed_loop(ball(), LateNaN()), [1.0, 0.0], (0.0, 3.0),
                      method="moreau_jean", h=1e-3, progress=False)
     assert info.value.trajectory is not None and info.value.trajectory.t[-1] >= 0.5
+
+
+def test_a_linear_plant_under_compiled_blocks_runs_compiled():
+    """A mass regulated against a wall by a sampled state feedback (chapter 4's wall, a
+    linear plant without a compiled model of its own): its affine model runs compiled and
+    matches the Python blocks' run (bound of the module docstring)."""
+    from nscontrol.systems.feedback import StateFeedback
+
+    wall = LagrangianSystem([[1.0]], gap_matrix=[[-1.0]], gap_offset=[0.0],
+                            restitution=0.5, actuation=[[1.0]])
+    ctrl = StateFeedback([[-20.0, -3.0]], k=[1.0], period=1e-2)
+    runs = [nsc.simulate(nsc.closed_loop(wall, ctrl, compiled=c), [-0.2, 0.0], (0.0, 3.0),
+                         method="moreau_jean", h=1e-3, progress=False) for c in (True, False)]
+    # the Python blocks step the plant's own linear path (tridiagonal), one step per chunk
+    assert [r.stats["path"] for r in runs] == ["compiled_model", "tridiagonal"]
+    assert runs[1].events_of("impact")
+    np.testing.assert_allclose(runs[0].x, runs[1].x, rtol=0, atol=bound(runs[1]))
+    np.testing.assert_allclose(runs[0].signal("u"), runs[1].signal("u"), rtol=0,
+                               atol=20 * bound(runs[1]))       # |K| <= 20

@@ -20,7 +20,8 @@ _CHUNK = 20_000
 
 def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, float],
                        n_full: int, h_last: float, u: Any, blocks: Any, rec: Recorder,
-                       activation: float, progress: Any, listeners: Any = ()) -> Trajectory:
+                       activation: float, progress: Any, listeners: Any = (),
+                       model: Any = None) -> Trajectory:
     """The run of :func:`~nscontrol.simulate.moreau_jean.integrate` on the compiled path.
     The compiled loop resets the blocks itself; other listeners observe after each chunk
     (as on the Python path without a controller)."""
@@ -33,7 +34,7 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
     t0, tf = t_span
     h = setup.h
     n_steps = n_full + (1 if h_last > 1e-9 * h else 0)
-    cm = system.compiled
+    cm = system.compiled if model is None else model
     model = ((cm.mass,), (cm.force,), (cm.force_jacobian,), (cm.gaps,), (cm.gap_jacobian,))
     zero = np.zeros((n, n))
     K = zero if system.stiffness is None else np.ascontiguousarray(system.stiffness)
@@ -87,7 +88,7 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
             if done:
                 _record_chunk(rec, system, times[:done] + step, q_out[:done], v_out[:done],
                               p_out[:done], state, q_pre, v_pre, observers, step,
-                              _signals_compiled(system, q_out[:done], v_out[:done],
+                              _signals_compiled(system, cm, q_out[:done], v_out[:done],
                                                 p_out[:done], rec))
                 state["q"], state["v"] = q_out[done - 1].copy(), v_out[done - 1].copy()
                 state["last"] = (times[done - 1] + step, q_out[done - 1], v_out[done - 1],
@@ -134,7 +135,7 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
     return traj
 
 
-def _signals_compiled(system: Any, q: Any, v: Any, p: Any, rec: Recorder
+def _signals_compiled(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
                       ) -> dict[str, Any]:
     """``impulse``, ``gap`` and ``energy`` of a chunk with the compiled model (the Python
     path's :func:`~nscontrol.simulate.moreau_jean._signals`, without a Python call per
@@ -143,13 +144,13 @@ def _signals_compiled(system: Any, q: Any, v: Any, p: Any, rec: Recorder
 
     with warnings.catch_warnings():   # numba's first-class functions: "experimental"
         warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-        return _signals_of_rows(system, q, v, p, rec)
+        return _signals_of_rows(system, cm, q, v, p, rec)
 
 
-def _signals_of_rows(system: Any, q: Any, v: Any, p: Any, rec: Recorder) -> dict[str, Any]:
+def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
+                     ) -> dict[str, Any]:
     from ._mj_compiled_kernels import gap_rows, kinetic_energy_rows, potential_rows
 
-    cm = system.compiled
     out: dict[str, Any] = {}
     if rec.wants("impulse"):
         out["impulse"] = p

@@ -290,12 +290,18 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
     _sample_initial(rec, system, t0, x0)
     setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces,
                    mass_at)
-    if system.compiled is not None and forces == "implicit" and (
+    model = system.compiled
+    if model is None and compiled_blocks is not None:   # a linear plant under compiled blocks
+        from ..systems.lagrangian import affine_compiled_model
+
+        model = affine_compiled_model(system)
+    if model is not None and forces == "implicit" and (
             controller is None or compiled_blocks is not None):
         from ._mj_compiled import integrate_compiled
 
         return integrate_compiled(system, setup, x0, (t0, tf), n_full, h_last, u,
-                                  compiled_blocks, rec, activation, progress, listeners)
+                                  compiled_blocks, rec, activation, progress, listeners,
+                                  model)
     runner = _choose_runner(system, setup, activation)
     path = runner.path
     state: dict[str, Any] = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),

@@ -24,6 +24,7 @@ _EXPORTS: dict[str, str] = {
     "NonlinearSystem": "nonlinear",
     # lagrangian.py
     "LagrangianSystem": "lagrangian", "CompiledModel": "lagrangian",
+    "affine_compiled_model": "lagrangian",
     "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
     "two_link_arm_force_jacobian": "lagrangian",

@@ -35,3 +35,32 @@ def no_force(t, q, v, params):
 def no_force_jacobian(t, q, v, params):
     """The Jacobian of :func:`no_force`: zeros ``(2n, n)``."""
     return np.zeros((2 * q.size, q.size))
+
+
+@njit(MASS_SIGNATURE, cache=True)
+def constant_mass(q, params):
+    """``M`` of an affine model: ``params = [n, m, M (n n), G (m n), g0 (m)]``."""
+    n = q.size
+    return params[2:2 + n * n].copy().reshape((n, n))
+
+
+@njit(GAP_SIGNATURE, cache=True)
+def affine_gaps(q, params):
+    """``G q + g0`` of an affine model (layout of :func:`constant_mass`)."""
+    n, m = q.size, int(params[1])
+    off = 2 + n * n
+    out = np.empty(m)
+    for j in range(m):
+        s = 0.0
+        for i in range(n):
+            s += params[off + j * n + i] * q[i]
+        out[j] = s + params[off + m * n + j]
+    return out
+
+
+@njit(GAP_JACOBIAN_SIGNATURE, cache=True)
+def affine_gap_jacobian(q, params):
+    """``G`` of an affine model (layout of :func:`constant_mass`)."""
+    n, m = q.size, int(params[1])
+    off = 2 + n * n
+    return params[off:off + m * n].copy().reshape((m, n))

@@ -33,8 +33,8 @@ from .._validation import (
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolWarning
 
-__all__ = ["LagrangianSystem", "CompiledModel", "two_link_arm_mass", "two_link_arm_coriolis",
-           "two_link_arm_gravity", "two_link_arm_force_jacobian"]
+__all__ = ["LagrangianSystem", "CompiledModel", "affine_compiled_model", "two_link_arm_mass",
+           "two_link_arm_coriolis", "two_link_arm_gravity", "two_link_arm_force_jacobian"]
 
 ForceFn = Callable[[float, FloatArray, FloatArray], FloatArray]
 #: ``(t, q, v) -> (∂force/∂q, ∂force/∂v)``.
@@ -145,6 +145,31 @@ class CompiledModel:
                 raise ModelError(f"compiled.{name}: disagrees with the system's {name} at "
                                  f"q = {q!r} (max difference {err:.3g}); it must compute the "
                                  f"same function")
+
+
+def affine_compiled_model(system: LagrangianSystem) -> CompiledModel | None:
+    """The compiled model of a system with a constant mass, no nonlinear force and affine
+    gaps (its linear forces stay the system's), or ``None`` for any other system; what
+    Moreau–Jean's compiled loop runs for such a plant closed by compiled blocks.
+
+    Parameters
+    ----------
+    system : LagrangianSystem
+        The system.
+
+    Returns
+    -------
+    CompiledModel or None
+    """
+    if not system.constant_mass or system.force is not None or system.gap_matrix is None:
+        return None
+    from . import _lagrangian_kernels as lk
+
+    n, m = system.n_dof, system.n_contacts
+    params = np.concatenate([[float(n), float(m)], system.mass_matrix().ravel(),
+                             system.dense_gap_matrix().ravel(), system.gap_offset])
+    return CompiledModel(lk.constant_mass, lk.no_force, lk.no_force_jacobian, lk.affine_gaps,
+                         lk.affine_gap_jacobian, params)
 
 
 @dataclass(frozen=True, eq=False)
