@@ -10,6 +10,13 @@
 2. ``two-link`` (no reference): the 30 s, three-cycle run of the arm at h = 1e-3 (1e-4 unless
    ``quick``: 300 000 steps), our steps/s; the Siconos Python bindings would need a
    Python-side ``LagrangianDS`` with plugins for M(q), forces and Jacobians, not done.
+   The switching controller has no compiled form yet: both runs take Moreau–Jean's Python
+   path (``path`` in ``accuracy``).
+3. ``two-link M(q), compiled``: the arm's compiled model (``TwoLinkArm().system()`` carries a
+   ``CompiledModel``) under a sampled joint PD written as a compiled block, 30 s at
+   h = 1e-4 (300 000 steps, impacts on the ground), against the same loop on the Python path
+   (``closed_loop(..., compiled=False)``, a 3 s run) in the same process: what the compiled
+   Moreau–Jean loop does for M(q) once a controller has a compiled form.
 
 Run: ``nscontrol bench ch03 --json``.
 """
@@ -79,7 +86,44 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
            "reference_steps_per_s": None, "ratio": None,
            "note": "no Siconos counterpart (needs a Python-side LagrangianDS with plugins)",
            "accuracy": {"cycles": len([c for c in arm.controller.cycles
-                                       if math.isfinite(c.t_constrained)])}}
+                                       if math.isfinite(c.t_constrained)]),
+                        "path": arm.traj.stats["path"]}}
+    yield _compiled_arm(quick)
+
+
+def _compiled_arm(quick: bool) -> dict[str, Any]:
+    import nscontrol as nsc
+    from nscontrol.systems import StateFeedback, TwoLinkArm
+
+    h, T = (1e-3, 30.0) if quick else (1e-4, 30.0)
+    plant = TwoLinkArm().system(0.7)
+    # joint PD towards a posture below the ground line: the end effector hits and rests
+    pd = StateFeedback([[-30.0, 0.0, -8.0, 0.0], [0.0, -30.0, 0.0, -8.0]],
+                       k=[30.0 * -0.3, 30.0 * 0.4], period=1e-3)
+    x0 = [0.8, -0.6, 0.0, 0.0]
+
+    def run_loop(compiled: bool, T_run: float) -> Any:
+        return nsc.simulate(nsc.closed_loop(plant, pd, compiled=compiled), x0, (0.0, T_run),
+                            method="moreau_jean", h=h, progress=False)
+    run_loop(True, 0.01)                                     # warm-up
+    start = time.perf_counter()
+    fast = run_loop(True, T)
+    seconds = time.perf_counter() - start
+    T_py = 3.0
+    start = time.perf_counter()
+    slow = run_loop(False, T_py)
+    py_seconds = time.perf_counter() - start
+    steps, py_steps = fast.stats["steps"], slow.stats["steps"]
+    k = py_steps + 1
+    return {"scenario": f"ch03 two-link arm, compiled model + compiled PD block, {T:g} s, "
+                        f"h = {h:g}, against the Python path", "size": steps,
+            "ours_steps_per_s": steps / seconds, "ours_seconds": seconds,
+            "reference": "the same loop on Moreau-Jean's Python path",
+            "reference_steps_per_s": py_steps / py_seconds,
+            "ratio": (steps / seconds) / (py_steps / py_seconds),
+            "accuracy": {"path": fast.stats["path"], "impacts": len(fast.events),
+                         "max_x_difference_first_3s": float(np.abs(fast.x[:k]
+                                                                   - slow.x[:k]).max())}}
 
 
 if __name__ == "__main__":

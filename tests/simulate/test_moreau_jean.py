@@ -141,11 +141,16 @@ def test_controller_hook_and_jump_listener() -> None:
     assert traj.signals["impulse"][-1, 0] / h == pytest.approx(0.8, rel=5 * h * approach)
 
 
-def test_configuration_dependent_mass_path() -> None:
+@pytest.mark.parametrize("compiled", [True, False])
+def test_configuration_dependent_mass_path(compiled: bool) -> None:
+    """The arm's M(q) on its compiled model (its own loop) and on the Python path."""
+    from dataclasses import replace
+
     arm = LagrangianSystem.two_link_arm(restitution=0.0)
+    arm = arm if compiled else replace(arm, compiled=None)
     h = 1e-3
     traj = simulate(arm, [0.8, -1.2, 0.0, 0.0], (0.0, 1.5), method="moreau_jean", h=h)
-    assert traj.stats["path"] == "python"
+    assert traj.stats["path"] == ("compiled_model" if compiled else "python")
     assert traj.events_of("impact")
     # the documented h |u-| (u- = J v before the landing step), plus the gap's curvature over
     # the step, h^2 max|g''| (g'' from the recorded flight; 3e-6): 9.56e-4, measured 9.45e-4

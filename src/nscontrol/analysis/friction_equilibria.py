@@ -149,7 +149,10 @@ def _magnitude(law: Any, s: FloatArray) -> FloatArray:
     """``f_hat(s)`` (0 when there is no compensation)."""
     if law is None:
         return np.zeros_like(s)
-    return np.asarray([float(law.magnitude(v)[0]) for v in np.atleast_1d(s)])
+    s = np.atleast_1d(np.asarray(s, float))
+    if int(getattr(law, "dim", 0)) == 1:    # one component: the curve broadcasts over s
+        return np.asarray(law.magnitude(s), float).reshape(s.shape)
+    return np.asarray([float(law.magnitude(v)[0]) for v in s])
 
 
 def stick_margin(c: ArrayLike, J: float, kp: float, kd: float, l: float, friction: Any,

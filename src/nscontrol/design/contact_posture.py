@@ -317,6 +317,11 @@ class ContactRegulator(StaticLaw):
         n = self.model.n_dof
         return self.torque(m.x[:n], m.x[n:])
 
+    def compiled(self) -> Any:
+        """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`): the law
+        as the affine feedback :meth:`state_feedback`."""
+        return self.state_feedback().compiled()
+
     # -- the law and its potential ---------------------------------------------------------
     def torque(self, q: ArrayLike, v: ArrayLike) -> FloatArray:
         """``τ = -K_p (S q - θ*) - K_d S v + τ*``."""

@@ -124,6 +124,19 @@ class PDLaw:
         ff = self.J * ddr if self.feedforward else 0.0
         return ff - self.kp * (theta - r) - self.kd * (omega_hat - dr)
 
+    def compiled_parameters(self) -> FloatArray | None:
+        """The law as the compiled blocks read it (``[kind, a, w, kp, kd, J, feedforward]``),
+        or ``None`` when the reference is not a :class:`SetPoint` or :class:`Sinusoid` (an
+        arbitrary callable has no compiled form)."""
+        ref = self.reference
+        if type(ref) is SetPoint:
+            head = [0.0, float(ref.value), 0.0]
+        elif type(ref) is Sinusoid:
+            head = [1.0, float(ref.amplitude), float(ref.frequency)]
+        else:
+            return None
+        return np.array(head + [self.kp, self.kd, self.J, 1.0 if self.feedforward else 0.0])
+
 
 def compensation_model(friction: Any, kappa: float) -> Any:
     """The plant's friction law with its force levels ``T_s, T_c, b`` scaled by ``kappa``.
@@ -220,6 +233,23 @@ class FrictionCompensatingPD(StaticLaw):
             return float(self.value_at_zero)
         return math.copysign(mag, omega_hat)
 
+    def compiled(self) -> Any:
+        """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`), or
+        ``None`` when the reference has none (see :meth:`PDLaw.compiled_parameters`)."""
+        from ..systems.feedback import CompiledBlock
+        from ._friction_compensation_kernels import controller_output
+
+        head = self.pd.compiled_parameters()
+        if head is None:
+            return None
+        curve = (0.0,) * 5 if self._params is None else self._params
+        eps = self.smooth_eps
+        tail = [0.0 if self._params is None else 1.0, *curve, float(self.value_at_zero),
+                0.0 if eps is None else 1.0, 0.0 if eps is None else float(eps)]
+        from ..systems._feedback_kernels import static_update
+
+        return CompiledBlock(controller_output, static_update, np.concatenate([head, tail]))
+
     def velocity(self, m: Any) -> float:
         """The velocity the controller uses: the estimate, else the measured one."""
         return float(m.xhat[0]) if m.xhat is not None else float(m.x[1])
@@ -291,6 +321,23 @@ class ReducedOrderVelocityObserver:
         """``omega_hat`` at a tick with angle sample ``theta`` and carried state ``xo``."""
         return self._xi(xo, theta) + self.l * theta
 
+    def estimates_at(self, xo: FloatArray, theta: FloatArray) -> FloatArray:
+        """:meth:`estimate` for many ticks at once (rows of ``xo``, entries of ``theta``),
+        with the same operations element by element.
+
+        Parameters
+        ----------
+        xo : ndarray, shape (k, 3)
+            Carried states.
+        theta : ndarray, shape (k,)
+            Angle samples.
+        """
+        T, l, J = self.period, self.l, self.pd.J
+        xo = np.asarray(xo, dtype=float)
+        theta = np.asarray(theta, dtype=float)
+        xi = (xo[:, 0] + T * (-l * l * theta + xo[:, 1] / J)) / (1.0 + T * l)
+        return xi + l * theta
+
     def output(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
         """``[omega_hat]`` at the tick ``t``."""
         return np.array([self.estimate(xo, float(m.y[0]))])
@@ -305,6 +352,18 @@ class ReducedOrderVelocityObserver:
     def reset(self, t: float, xo: FloatArray, jump: Any) -> FloatArray:
         """The plant does not jump."""
         return xo
+
+    def compiled(self) -> Any:
+        """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`), or
+        ``None`` when the PD law's reference has none."""
+        from ..systems.feedback import CompiledBlock
+        from ._friction_compensation_kernels import observer_output, observer_update
+
+        head = self.pd.compiled_parameters()
+        if head is None:
+            return None
+        return CompiledBlock(observer_output, observer_update,
+                             np.concatenate([head, [self.period, self.l]]))
 
 
 # -- gain design -------------------------------------------------------------------------
@@ -440,7 +499,8 @@ class FrictionLoopRun:
 def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float,
                            h: float, T: float, theta0: float = 0.0, omega0: float = 0.0,
                            omega_hat0: float = 0.0, value_at_zero: float = 0.0,
-                           smooth_eps: float | None = None) -> FrictionLoopRun:
+                           smooth_eps: float | None = None,
+                           compiled: bool = True) -> FrictionLoopRun:
     """Run the digital friction-compensating loop (control period ``h``) by implicit Euler.
 
     Parameters
@@ -461,6 +521,9 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
         Initial angle, velocity and velocity estimate.
     value_at_zero, smooth_eps
         Passed to :class:`FrictionCompensatingPD`.
+    compiled
+        Run the blocks' compiled forms in implicit Euler's compiled loop (default; the
+        same numbers as their Python methods, ``False``).
 
     Returns
     -------
@@ -483,7 +546,7 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
     if l is not None:
         obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
     plant = robot.lure_system()
-    loop = closed_loop(plant, ctrl, obs)
+    loop = closed_loop(plant, ctrl, obs, compiled=compiled)
     traj = simulate(loop, [theta0, omega0], (0.0, T), method="implicit_euler", h=h,
                     progress=False)
     t, x = traj.t, traj.x
@@ -492,12 +555,16 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
     if obs is None:
         omega_hat = x[:, 1].copy()
     else:   # the estimate of each tick from its carried state and angle sample
-        xo = traj.signal("xo")
-        omega_hat = np.array([obs.estimate(xo[k], x[k, 0]) for k in range(t.size)])
+        omega_hat = obs.estimates_at(traj.signal("xo"), x[:, 0])
         omega_hat[0] = omega_hat0
     u = traj.signal("u")[:, 0]
     u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
-    ref = np.array([pd.reference(tk)[0] for tk in t])
+    if type(pd.reference) is SetPoint:
+        ref = np.full(t.size, float(pd.reference.value))
+    elif type(pd.reference) is Sinusoid:    # the same formula on the whole time grid
+        ref = pd.reference.amplitude * np.sin(pd.reference.frequency * t)
+    else:
+        ref = np.array([pd.reference(tk)[0] for tk in t])
     return FrictionLoopRun(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(),
                            omega_hat=omega_hat, u=u, friction=friction, reference=ref,
                            trajectory=traj)

@@ -55,7 +55,7 @@ def _pd(reference: Any = None) -> Any:
 
 
 def _run(kappa: float, *, l: float | None = None, h: float | None = None,
-         T: float | None = None, reference: Any = None, **start: float) -> Any:
+         T: float | None = None, reference: Any = None, **start: Any) -> Any:
     from ..design.friction_compensation import simulate_friction_loop
 
     p = REFERENCE

@@ -3,7 +3,8 @@
 Each kernel compiles on its first call and is cached on disk (``cache=True``), so one short
 run of every integrator path that reaches a kernel is enough: the LCP solvers, the exact
 event loop (impacts and guards), Moreau–Jean (linear and nonlinear forces), implicit Euler on
-Lur'e systems (closed-form and LCP steps) and the switching integrator. :data:`COMPILES`
+Lur'e systems (closed-form and LCP steps), the switching integrator, and the compiled loops of
+closed loops with compiled blocks and models. :data:`COMPILES`
 names the kernel modules each step reaches; a test holds it equal to the ``_*_kernel*.py``
 modules of the package, so a new kernel module cannot be forgotten here.
 """
@@ -116,6 +117,45 @@ def _sliding_mode() -> None:
                     (0.0, 0.1))
 
 
+def _compiled_blocks() -> None:
+    """Chapter 7's compiled blocks around its Lur'e plant (implicit Euler's compiled loop),
+    the two-link arm's and the foot + body's compiled models in Moreau–Jean's."""
+    from ..design.friction_compensation import PDLaw, simulate_friction_loop
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
+    from ..systems import OneLinkRobot, StateFeedback, TwoLinkArm
+    from .ch04_posture_regulation import foot_body_setup, initial_state
+    from .ch07_friction_compensation import reference_friction
+
+    robot = OneLinkRobot(0.05, reference_friction())
+    simulate_friction_loop(robot, PDLaw(2.0, 0.3, 0.05), l=150.0, kappa=1.0, h=1e-4, T=1e-2)
+    pd = StateFeedback([[-30.0, 0.0, -8.0, 0.0], [0.0, -30.0, 0.0, -8.0]], period=1e-3)
+    simulate(closed_loop(TwoLinkArm().system(), pd), [0.8, -0.6, 0.0, 0.0], (0.0, 0.05),
+             method="moreau_jean", h=1e-3, progress=False)
+    model, reg, plant = foot_body_setup()
+    simulate(reg.folded(plant), initial_state(model, reg.design.q_star, -1.0), (0.0, 0.05),
+             method="moreau_jean", h=1e-3, progress=False)
+    _block_stepper()
+
+
+def _block_stepper() -> None:
+    """The block stepper on its own (the loops above load it inside their cached code)."""
+    import warnings
+
+    import numpy as np
+    from numba.core.errors import NumbaExperimentalFeatureWarning
+
+    from ..simulate._block_kernels import reset_blocks, step_blocks
+    from ..systems._feedback_kernels import empty_output, keep_state, static_update
+
+    e, fns, rs = np.zeros(0), (empty_output, static_update), (keep_state,)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        step_blocks(0.0, e, e, e, False, fns, e, -1.0, e, e, False, fns, e, -1.0, e, e, e, e,
+                    e, e, np.full(3, np.nan))
+        reset_blocks(0.0, e, e, e, False, rs, e, e, False, rs, e, e)
+
+
 #: (what, how): one step of the warm-up each.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
@@ -125,6 +165,7 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("ZAD-controlled buck converter", _zad_buck),
     ("frictional contacts", _frictional_contacts),
     ("sampled sliding-mode control", _sliding_mode),
+    ("compiled controllers, observers and models", _compiled_blocks),
 ]
 
 #: Step name to the kernel modules (``subpackage._module``, as
@@ -141,6 +182,11 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
                             "simulate._frictional_mj_kernels"),
     "sampled sliding-mode control": ("design._sliding_mode_kernels",),
+    "compiled controllers, observers and models": (
+        "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
+        "systems._two_link_kernels", "design._friction_compensation_kernels",
+        "simulate._block_kernels", "simulate._lure_kernels", "simulate._mj_compiled_kernels",
+        "simulate._mj_linearised_kernel", "numerics._lcp_kernels"),
 }
 
 

@@ -71,7 +71,7 @@ __all__ = ["closed_loop", "ClosedLoop"]
 def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
                 observer: Observer | None = None, exosystem: Exogenous | None = None, *,
                 input_matrix: ArrayLike | None = None,
-                output_matrix: ArrayLike | None = None) -> ClosedLoop:
+                output_matrix: ArrayLike | None = None, compiled: bool = True) -> ClosedLoop:
     """Compose a plant with a controller and/or an observer (and an exogenous input).
 
     Parameters
@@ -91,6 +91,11 @@ def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
     output_matrix : array_like (p, n), optional
         The measured output ``y = C x`` (default: the plant's ``C``, its ``"y"`` output, or
         the whole state).
+    compiled : bool
+        Run blocks that offer a compiled form (``compiled()``, see
+        :class:`~nscontrol.systems.feedback.CompiledBlock`) in the integrator's compiled loop
+        when every block of the loop has one (default); ``False`` runs their Python methods
+        (to compare the two, or to debug a block).
 
     Returns
     -------
@@ -126,7 +131,10 @@ def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
     if observer is not None and isinstance(observer, StateFeedback | LinearController):
         raise ModelError("observer: a StateFeedback/LinearController outputs an input, not an "
                          "estimate; pass it as controller=")
-    return ClosedLoop(plant, controller, observer, exosystem, input_matrix, output_matrix)
+    if not isinstance(compiled, bool):
+        raise ModelError(f"compiled: expected True or False, got {compiled!r}")
+    return ClosedLoop(plant, controller, observer, exosystem, input_matrix, output_matrix,
+                      compiled)
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,6 +147,7 @@ class ClosedLoop:
     exosystem: Any = None
     input_matrix: Any = None
     output_matrix: Any = None
+    compiled: bool = True
     _stacked: Any = field(default=None, init=False, repr=False)
     _maps: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict, init=False,
                                                             repr=False)
@@ -623,6 +632,9 @@ def _lower_python_blocks(loop: ClosedLoop, method: type[Integrator], x0: Any) ->
     options: dict[str, Any] = {"controller": runner.step, "listeners": [runner.on_jump]}
     if loop.exosystem is not None:
         options["u"] = loop.exosystem
+    compiled = _CompiledBlocks.of(runner)
+    if compiled is not None:       # used when the plant has a compiled model too
+        options["compiled_blocks"] = compiled
     return Lowered(loop.plant, x0, options, runner.finish)
 
 
@@ -637,7 +649,11 @@ def _lower_python_blocks_lure(loop: ClosedLoop, method: type[Integrator], x0: An
                          "through the blocks themselves (the plant's input is the controller's "
                          "output)")
     runner = _BlockRunner(loop)
-    return Lowered(loop.plant, x0, {"controller": runner.step_state}, runner.finish)
+    options: dict[str, Any] = {"controller": runner.step_state}
+    compiled = _CompiledBlocks.of(runner)
+    if compiled is not None:
+        options["compiled_blocks"] = compiled
+    return Lowered(loop.plant, x0, options, runner.finish)
 
 
 class _BlockRunner:
@@ -663,6 +679,7 @@ class _BlockRunner:
         else:
             mech = p.lagrangian() if isinstance(p, ImpactingBodies) else p
             self.n_inputs = mech.n_dof if mech.actuation is None else mech.actuation.shape[1]
+            self.n_lam = int(mech.n_contacts)      # the size of λ̂ (compiled blocks)
         self.xo = np.zeros(0 if self.obs is None else self.obs.n_states)
         self.xc = np.zeros(0 if self.ctrl is None else self.ctrl.n_states)
         for name, block in (("observer", self.obs), ("controller", self.ctrl)):
@@ -675,6 +692,8 @@ class _BlockRunner:
         self.held: dict[str, Any] = {}
         self.t_prev: float | None = None
         self.log: list[tuple[float, FloatArray, FloatArray, FloatArray | None]] = []
+        # what a compiled loop logged instead: (times, xo, xc, u) arrays per chunk
+        self.chunks: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
 
     def step(self, t: float, q: FloatArray, v: FloatArray, lam_hat: Any = None,
              active: Any = None) -> FloatArray:
@@ -731,14 +750,18 @@ class _BlockRunner:
 
     def finish(self, traj: Trajectory) -> Trajectory:
         """The blocks' states and outputs as signals, held over each step (ZOH)."""
-        if not self.log:
+        if not self.log and not self.chunks:
             return traj
-        times = np.array([row[0] for row in self.log])
+        if self.chunks:
+            columns = [np.concatenate([c[i] for c in self.chunks]) for i in range(4)]
+        else:
+            columns = [np.array([row[i] for row in self.log]) for i in range(4)]
+        times = columns[0]
         # sample k (end of step k) shows what acted over step k: the value logged at its start
         idx = np.clip(np.searchsorted(times, traj.t, side="left") - 1, 0, len(times) - 1)
         signals = dict(traj.signals)
         for name, col in (("xo", 1), ("xc", 2), ("u", 3)):
-            rows = np.array([row[col] for row in self.log])
+            rows = columns[col]
             if rows.ndim == 2 and rows.shape[1]:
                 signals[name] = rows[idx]
         if self.obs is not None:
@@ -746,6 +769,95 @@ class _BlockRunner:
             xo = signals["xo"]
             signals["xhat"] = xo @ E.T if E is not None else xo
         return replace(traj, signals=signals)
+
+
+class _CompiledBlocks:
+    """The compiled forms of a loop's blocks and the state the compiled loops carry between
+    chunks of steps (the Python runner's ``xo``, ``xc``, held outputs and sampling
+    instants, as arrays). The integrator calls :meth:`kernel_state`, :meth:`log_arrays`,
+    :meth:`log` and :meth:`raise_status`."""
+
+    def __init__(self, runner: _BlockRunner, obs: Any, ctrl: Any) -> None:
+        from ..systems._feedback_kernels import empty_output, keep_state, static_update
+
+        self.runner = runner
+        self.Cy = np.ascontiguousarray(runner.Cy, dtype=float)
+        n, p = int(runner.n), self.Cy.shape[0]
+        empty = np.zeros(0)
+        n_lam = int(getattr(runner, "n_lam", 0))
+
+        def parts(block: Any, form: Any, xb: FloatArray, n_out: int) -> tuple[Any, ...]:
+            if form is None:
+                return (False, empty_output, static_update, keep_state, empty, -1.0,
+                        np.zeros(0), np.zeros(0))
+            period = -1.0 if block.period is None else float(block.period)
+            return (True, form.output, form.update, form.reset, form.params, period,
+                    np.array(xb, dtype=float), np.zeros(n_out))
+        o = parts(runner.obs, obs, runner.xo, 0 if runner.obs is None else
+                  int(runner.obs.n_outputs))
+        c = parts(runner.ctrl, ctrl, runner.xc, int(runner.n_inputs))
+        self.obs_parts, self.ctrl_parts = o, c
+        self.prev = (np.zeros(p), np.zeros(n), np.zeros(o[7].size), np.zeros(n_lam))
+        self.sched = np.full(3, np.nan)
+        if not c[0]:
+            self.ctrl_parts = c[:7] + (np.zeros(int(runner.n_inputs)),)
+
+    @classmethod
+    def of(cls, runner: _BlockRunner) -> _CompiledBlocks | None:
+        """The compiled blocks of the runner's loop, or ``None`` if a block has no compiled
+        form (or the loop has an exosystem, which the compiled loops do not read)."""
+        from ..systems.feedback import compiled_form
+
+        if runner.loop.exosystem is not None or not runner.loop.compiled:
+            return None
+        obs, ctrl = compiled_form(runner.obs), compiled_form(runner.ctrl)
+        if (runner.obs is not None and obs is None) or (runner.ctrl is not None and
+                                                        ctrl is None):
+            return None
+        return cls(runner, obs, ctrl)
+
+    def kernel_state(self) -> tuple[Any, ...]:
+        """``has_obs, obs_out, obs_upd, obs_params, obs_period, xo, xhat, has_ctrl, ...,
+        u, prev_y, prev_x, prev_xhat, prev_lam, sched`` for
+        :func:`~nscontrol.simulate._block_kernels.step_blocks`."""
+        o, c = self.obs_parts, self.ctrl_parts
+        return (o[0], (o[1], o[2]), o[4], o[5], o[6], o[7], c[0], (c[1], c[2]), c[4], c[5],
+                c[6], c[7], *self.prev, self.sched)
+
+    def resets(self) -> tuple[Any, ...]:
+        """``has_obs, obs_reset, obs_params, xo, has_ctrl, ctrl_reset, ctrl_params, xc`` for
+        :func:`~nscontrol.simulate._block_kernels.reset_blocks`."""
+        o, c = self.obs_parts, self.ctrl_parts
+        return (o[0], (o[3],), o[4], o[6], c[0], (c[3],), c[4], c[6])
+
+    def log_arrays(self, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Empty logs for ``k`` steps: the blocks' states and ``u`` at each step start."""
+        return (np.empty((k, self.obs_parts[6].size)), np.empty((k, self.ctrl_parts[6].size)),
+                np.empty((k, self.ctrl_parts[7].size)))
+
+    def log(self, times: FloatArray, xo: FloatArray, xc: FloatArray, u: FloatArray) -> None:
+        """Keep a chunk's log for the loop's signals; the runner's states follow."""
+        if times.size:
+            self.runner.chunks.append((np.array(times), xo.copy(), xc.copy(), u.copy()))
+        self.runner.xo, self.runner.xc = self.obs_parts[6].copy(), self.ctrl_parts[6].copy()
+
+    def raise_status(self, status: int, t: float) -> None:
+        """The error the Python path raises for a block's failure at ``t``."""
+        from . import _block_kernels as bk
+
+        role = "observer" if status in (bk.STATUS_OBSERVER_SIZE,
+                                        bk.STATUS_OBSERVER_NONFINITE,
+                                        bk.STATUS_OBSERVER_OUTPUT_SIZE) else "controller"
+        if status in (bk.STATUS_OBSERVER_SIZE, bk.STATUS_CONTROLLER_SIZE):
+            raise DimensionError(f"{role}: update returned a state of the wrong length (at "
+                                 f"t = {t:.6g})")
+        if status == bk.STATUS_CONTROLLER_OUTPUT_SIZE:
+            raise ModelError(f"controller: expected a finite input of length "
+                             f"{self.ctrl_parts[7].size} at t = {t:.6g}")
+        if status == bk.STATUS_OBSERVER_OUTPUT_SIZE:
+            raise DimensionError(f"observer: output returned an estimate of the wrong length, "
+                                 f"expected {self.obs_parts[7].size} (at t = {t:.6g})")
+        raise ModelError(f"{role}: returned a non-finite value at t = {t:.6g}")
 
 
 def _all_finite(a: FloatArray) -> bool:

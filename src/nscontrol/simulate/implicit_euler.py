@@ -66,6 +66,12 @@ controller : callable ``(t, x) -> u``, optional
     replaces ``u``. What :func:`nscontrol.closed_loop` passes for controllers and observers
     written as Python code around a Lur'e plant (a digital controller with a friction
     compensation, chapter 7). The steps then run one at a time in Python.
+compiled_blocks : object, optional
+    Passed by :func:`nscontrol.closed_loop` with ``controller=`` when every block of the
+    loop has a compiled form (:class:`~nscontrol.systems.feedback.CompiledBlock`): with the
+    closed-form solver the blocks and the steps then run in one compiled loop
+    (``stats["controller"] = "compiled"``); otherwise ``controller=`` runs
+    (``"python"``).
 sensitivity : bool
     Also compute ``stats["state_transition"]``, the exact Jacobian ``∂x_N/∂x_0`` of the
     *discrete* map (the product of the steps' Jacobians ``Φ + G_h (∂w/∂a) HΦ``, each from
@@ -101,7 +107,7 @@ __all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "
 
 _CHUNK = 1 << 16
 _OPTIONS = {"h", "theta", "u", "record_every", "signals", "progress", "sensitivity",
-            "controller"}
+            "controller", "compiled_blocks"}
 _SIGNALS = ("z", "w", "y")
 #: Couplings of ``D_h`` below this fraction of ``max|D_h|`` are structural zeros.
 _STRUCTURAL_ZERO = 1e-14
@@ -677,6 +683,7 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         raise ModelError("h: implicit_euler needs a step, e.g. simulate(sys, x0, t_span, "
                          "method='implicit_euler', h=1e-3)")
     controller = _check_controller(system, options)
+    blocks = options.get("compiled_blocks") if controller is not None else None
     system = _with_input(system, options.get("u"))
     sensitivity = _check_sensitivity(options.get("sensitivity", False))
     if sensitivity and controller is not None:
@@ -697,6 +704,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     z0, w0 = _initial_multiplier(system, x0, t0)
     rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
     stepper = _Stepper(system, mats, plan)
+    if blocks is not None and plan.solver != "closed_form":
+        blocks = None        # the LCP and Python solvers step one at a time in Python
     jac = None
     if sensitivity:
         from ._lure_sensitivity import StepJacobians
@@ -710,6 +719,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
                "solver": plan.solver, "structure": plan.structure,
                "blocks": max(1, len(plan.blocks)),
                "input": "controller" if controller is not None else stepper.input_mode}
+        if controller is not None:
+            out["controller"] = "compiled" if blocks is not None else "python"
         if plan.solver != "closed_form":
             out["max_residual"] = stepper.worst
         if jac is not None:
@@ -723,8 +734,11 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
             k1 = min(n_steps, done + _CHUNK)
             times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
             try:
-                X, Z, W = stepper.run(x, times) if controller is None else \
-                    stepper.run_with_controller(x, times, controller)
+                if blocks is not None:
+                    X, Z, W = stepper.run_with_blocks(x, times, blocks)
+                else:
+                    X, Z, W = stepper.run(x, times) if controller is None else \
+                        stepper.run_with_controller(x, times, controller)
             except SolverError as exc:
                 X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
                 _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
@@ -888,6 +902,37 @@ class _Stepper:
                 raise
             x = X[j] = Xj[0]
             Z[j], W[j] = Zj[0], Wj[0]
+        return X, Z, W
+
+    def run_with_blocks(self, x: FloatArray, times: FloatArray,
+                        blocks: Any) -> tuple[FloatArray, ...]:
+        """Steps over ``times`` in one compiled loop with the compiled blocks of a closed loop
+        (``blocks``, from :func:`nscontrol.closed_loop`): the same operations, in the same
+        order, as :meth:`run_with_controller` with the blocks' Python methods."""
+        import warnings
+
+        from numba.core.errors import NumbaExperimentalFeatureWarning
+
+        from ._lure_kernels import controlled_steps
+
+        k = times.size - 1
+        n, mm = self.system.n_states, self.system.n_multipliers
+        X, Z, W = np.empty((k, n)), np.empty((k, mm)), np.empty((k, mm))
+        gnext = self.system.shift_at(times[1:]) if self.system.has_shift else \
+            np.zeros((k, mm))
+        XO, XC, U = blocks.log_arrays(k)
+        m, plan, (kind, p1, p2) = self.m, self.plan, self.spec
+        with warnings.catch_warnings():   # numba flags its first-class functions experimental
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            done, status = controlled_steps(  # type: ignore[call-arg]  # numba's stub: 1 tuple
+                m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
+                plan.structure != "diagonal", kind, p1, p2, self.curve, self.system.H,
+                self.ucol, blocks.Cy, times, np.ascontiguousarray(x, dtype=float),
+                np.ascontiguousarray(gnext, dtype=float), X, Z, W, *blocks.kernel_state(),
+                XO, XC, U)
+        blocks.log(times[:done], XO[:done], XC[:done], U[:done])
+        if status != 0:
+            blocks.raise_status(int(status), float(times[done]))
         return X, Z, W
 
     def _compiled_step(self) -> Any:

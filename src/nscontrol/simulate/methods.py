@@ -63,7 +63,7 @@ class MoreauJean(_ModuleIntegrator):
     capabilities = frozenset({"time_stepping", "listeners", "controller", "multipliers"})
     options: ClassVar[frozenset[str]] = frozenset(
         {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at",
-         "projection", "contact_tol"})
+         "projection", "contact_tol", "compiled_blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:
@@ -84,7 +84,8 @@ class ImplicitEuler(_ModuleIntegrator):
     name = "implicit_euler"
     module = "nscontrol.simulate.implicit_euler"
     capabilities = frozenset({"time_stepping", "multipliers", "sensitivity", "controller"})
-    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u", "controller"})
+    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u", "controller",
+                                                   "compiled_blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:

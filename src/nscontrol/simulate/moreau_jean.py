@@ -108,7 +108,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
               signals: Sequence[str] | None = None, progress: bool | None = None,
               activation: float | None = None,
               forces: str = "implicit", mass_at: str = "start",
-              projection: bool = False, contact_tol: float = 1e-12) -> Trajectory:
+              projection: bool = False, contact_tol: float = 1e-12,
+              compiled_blocks: Any = None) -> Trajectory:
     """Moreau–Jean time-stepping from ``x0 = [q0; v0]`` over ``t_span``.
 
     Parameters
@@ -171,15 +172,23 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         Tolerance of the relative natural-map error of each step's frictional contact
         problem (systems with ``friction``; see
         :func:`~nscontrol.numerics.friction_contact.solve_friction_contact`).
+    compiled_blocks : object, optional
+        Passed by :func:`nscontrol.closed_loop` with ``controller=`` when every block of the
+        loop has a compiled form. With a compiled model (``system.compiled``, a
+        :class:`~nscontrol.systems.lagrangian.CompiledModel`) and implicit forces, the model,
+        the blocks and their resets at impacts then run in one compiled loop
+        (``stats["path"] = "compiled_model"``; without a controller the same holds for a
+        compiled model alone); otherwise the Python path runs.
 
     Returns
     -------
     Trajectory
         Samples at ``t0 + k h`` and at ``tf`` (when ``h`` does not divide the span the last
         step is shortened to end there). ``stats``: ``steps``, ``path`` (``"tridiagonal"``,
-        ``"dense"`` or ``"python"``; ``"tridiagonal+dense"`` when a singular Delassus matrix
-        — redundant contacts — sent the run to Lemke), ``max_penetration``; on the Python
-        path ``forces`` and ``force_jacobian`` (``"analytic"`` or ``"central differences"``).
+        ``"dense"``, ``"compiled_model"`` or ``"python"``; ``"tridiagonal+dense"`` when a
+        singular Delassus matrix — redundant contacts — sent the run to Lemke),
+        ``max_penetration``; on the Python path ``forces`` and ``force_jacobian``
+        (``"analytic"`` or ``"central differences"``).
 
     Raises
     ------
@@ -302,6 +311,18 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
     _sample_initial(rec, system, t0, x0)
     setup = _Setup(system, h, theta, gamma, _input_matrix(system, u, controller), forces,
                    mass_at)
+    model = system.compiled
+    if model is None and compiled_blocks is not None:   # a linear plant under compiled blocks
+        from ..systems.lagrangian import affine_compiled_model
+
+        model = affine_compiled_model(system)
+    if model is not None and forces == "implicit" and (
+            controller is None or compiled_blocks is not None):
+        from ._mj_compiled import integrate_compiled
+
+        return integrate_compiled(system, setup, x0, (t0, tf), n_full, h_last, u,
+                                  compiled_blocks, rec, activation, progress, listeners,
+                                  model)
     runner = _choose_runner(system, setup, activation)
     path = runner.path
     state: dict[str, Any] = {"q": x0[: system.n_dof].copy(), "v": x0[system.n_dof:].copy(),
@@ -764,9 +785,11 @@ def _sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> No
 def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
                   v: FloatArray, p: FloatArray, state: dict[str, Any], q_pre: FloatArray,
                   v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
-                  h: float) -> None:
-    """Write a chunk of steps and its impact events; call the jump listeners."""
-    rec.extend(times, (q, v), **_signals(system, q, v, p, rec))
+                  h: float, signals: dict[str, FloatArray] | None = None) -> None:
+    """Write a chunk of steps and its impact events; call the jump listeners. ``signals``:
+    the chunk's signals when the caller computed them (the compiled path)."""
+    rec.extend(times, (q, v), **(_signals(system, q, v, p, rec) if signals is None
+                                 else signals))
     prev = np.vstack([state["p_prev"][None, :], p[:-1]])
     rising = (p > 0.0) & (prev == 0.0)
     steps = np.flatnonzero(rising.any(axis=1))

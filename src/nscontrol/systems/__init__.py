@@ -27,7 +27,9 @@ _EXPORTS: dict[str, str] = {
     # buck.py
     "BuckConverter": "buck",
     # lagrangian.py
-    "LagrangianSystem": "lagrangian", "two_link_arm_mass": "lagrangian",
+    "LagrangianSystem": "lagrangian", "CompiledModel": "lagrangian",
+    "affine_compiled_model": "lagrangian",
+    "two_link_arm_mass": "lagrangian",
     "two_link_arm_coriolis": "lagrangian", "two_link_arm_gravity": "lagrangian",
     "two_link_arm_force_jacobian": "lagrangian",
     # frictional_bodies.py
@@ -45,7 +47,7 @@ _EXPORTS: dict[str, str] = {
     "StaticLaw": "feedback",
     "Observer": "feedback", "StateFeedback": "feedback", "PiecewiseStateFeedback": "feedback",
     "LinearController": "feedback", "LinearObserver": "feedback",
-    "PiecewiseObserver": "feedback",
+    "PiecewiseObserver": "feedback", "CompiledBlock": "feedback", "compiled_form": "feedback",
     # foot_body.py
     "ActuatedContactModel": "foot_body", "FootBodyParameters": "foot_body",
     "foot_body_model": "foot_body", "foot_body_points": "foot_body",

@@ -19,6 +19,12 @@ protocols). Linear and affine blocks — :class:`StateFeedback`, :class:`LinearC
 integrators keep exact (event-driven flows by matrix exponentials) or compiled (Moreau–Jean,
 implicit Euler).
 
+Compiled blocks: a block may also offer ``compiled()``, returning a :class:`CompiledBlock`
+(numba-jitted ``output``/``update``/``reset`` functions and a parameter array). When every
+block of a loop has one, the integrator's compiled loop calls them at every step instead of
+the Python methods (implicit Euler on a Lur'e plant, Moreau–Jean on a Lagrangian plant);
+blocks without it run in Python, unchanged. See :func:`compiled_form`.
+
 Conventions: a controller's output ``u`` enters the plant through the plant's input matrix
 (``actuation`` of a Lagrangian system, ``B`` of a Lur'e system, or the ``input_matrix`` given
 to :func:`~nscontrol.closed_loop`); state feedback is ``u = K x + k`` (the sign in ``K``).
@@ -37,7 +43,8 @@ from .._validation import FloatArray, as_matrix, as_vector, check_positive
 from ..errors import DimensionError, ModelError
 
 __all__ = ["Measurement", "Jump", "Controller", "Observer", "StaticLaw", "StateFeedback",
-           "PiecewiseStateFeedback", "LinearController", "LinearObserver", "PiecewiseObserver"]
+           "PiecewiseStateFeedback", "LinearController", "LinearObserver", "PiecewiseObserver",
+           "CompiledBlock", "compiled_form"]
 
 
 @dataclass(frozen=True)
@@ -147,6 +154,119 @@ class Observer(Controller, Protocol):
 
     @property
     def estimates(self) -> FloatArray: ...
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledBlock:
+    """The compiled form of a controller or an observer, called by the integrators' compiled
+    loops in place of the block's Python methods.
+
+    The three functions are compiled by ``numba.njit`` with their signature declared,
+    ``@njit(BLOCK_SIGNATURE, cache=True)`` for ``output``/``update`` and
+    ``@njit(RESET_SIGNATURE, cache=True)`` for ``reset`` (both importable from
+    ``nscontrol.systems.feedback``): the compiled loops then receive them as first-class
+    functions, and stay compiled once for every block. They take plain arrays (``float64``,
+    one-dimensional, contiguous)::
+
+        output(t, xb, y, x, xhat, lam, params) -> out      (the block's output)
+        update(t, xb, y, x, xhat, lam, params) -> xb_next  (xb' or the next sample's xb)
+        reset(t, xb, x_minus, x_plus, impulse, params) -> xb_after_jump
+
+    ``y``, ``x``, ``xhat``, ``lam`` are the fields of :class:`Measurement`, with an empty
+    array for ``None`` (no observer, no contact multipliers); ``impulse`` is empty when the
+    jump has none. They must compute what the Python methods compute (the tests of a block
+    compare the two paths).
+
+    Attributes
+    ----------
+    output, update : numba dispatcher
+        The block's output and state update.
+    params : ndarray of float64, shape (p,)
+        Everything the functions read besides their arguments (gains, reference, ...).
+    reset : numba dispatcher, optional
+        The state after a plant jump; ``None``: unchanged (the shared identity kernel).
+    """
+
+    output: Any
+    update: Any
+    params: FloatArray
+    reset: Any = None
+
+    def __post_init__(self) -> None:
+        from ._feedback_kernels import BLOCK_SIGNATURE, RESET_SIGNATURE, keep_state
+
+        if self.reset is None:
+            object.__setattr__(self, "reset", keep_state)
+        for name, sig, sig_name in (("output", BLOCK_SIGNATURE, "BLOCK_SIGNATURE"),
+                                    ("update", BLOCK_SIGNATURE, "BLOCK_SIGNATURE"),
+                                    ("reset", RESET_SIGNATURE, "RESET_SIGNATURE")):
+            if not _has_signature(getattr(self, name), sig):
+                raise ModelError(f"{name}: a CompiledBlock needs a function compiled by "
+                                 f"numba.njit({sig_name}) (from "
+                                 f"nscontrol.systems.feedback), the signature declared, got "
+                                 f"{getattr(self, name)!r}")
+        params = np.ascontiguousarray(np.asarray(self.params, dtype=np.float64).reshape(-1))
+        object.__setattr__(self, "params", params)
+
+
+def _has_signature(fn: Any, sig: Any) -> bool:
+    """``fn`` is a numba dispatcher compiled for ``sig`` only (declared, so that the compiled
+    loops receive it as a first-class function of that type and stay cached)."""
+    import warnings
+
+    from numba import typeof, types
+    from numba.core.errors import NumbaExperimentalFeatureWarning
+
+    if not hasattr(fn, "py_func"):
+        return False
+    with warnings.catch_warnings():   # numba flags its first-class functions experimental
+        warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        return bool(typeof((fn,)) == types.UniTuple(types.FunctionType(sig), 1))
+
+
+def __getattr__(name: str) -> Any:
+    """``BLOCK_SIGNATURE`` and ``RESET_SIGNATURE`` load numba only when asked for."""
+    if name in ("BLOCK_SIGNATURE", "RESET_SIGNATURE"):
+        from . import _feedback_kernels
+
+        return getattr(_feedback_kernels, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def compiled_form(block: Any) -> CompiledBlock | None:
+    """The block's compiled form (its ``compiled()``), or ``None`` when it has none (no
+    method, or the method returns ``None`` for this configuration).
+
+    Parameters
+    ----------
+    block : Controller or Observer or None
+        The block (``None`` gives ``None``).
+
+    Returns
+    -------
+    CompiledBlock or None
+
+    Raises
+    ------
+    ModelError
+        ``compiled()`` returned something other than a :class:`CompiledBlock`.
+
+    Examples
+    --------
+    >>> form = compiled_form(StateFeedback([[-2.0, -3.0]]))
+    >>> out = form.output(0.0, np.zeros(0), np.zeros(1), np.array([1.0, 1.0]), np.zeros(0),
+    ...                   np.zeros(0), form.params)
+    >>> out.tolist()
+    [-5.0]
+    """
+    make = getattr(block, "compiled", None)
+    if block is None or make is None:
+        return None
+    form = make()
+    if form is not None and not isinstance(form, CompiledBlock):
+        raise ModelError(f"compiled: {type(block).__name__}.compiled() must return a "
+                         f"CompiledBlock or None, got {type(form).__name__}")
+    return form
 
 
 class _Block:
@@ -264,6 +384,15 @@ class StateFeedback(StaticLaw):
                              "observer= to closed_loop, or use on='state'")
         return self.K @ x + self.k
 
+    def compiled(self) -> CompiledBlock:
+        """The compiled form (:class:`CompiledBlock`): ``u = K x + k`` (or on ``x̂``)."""
+        from ._feedback_kernels import affine_output, static_update
+
+        m, n = self.K.shape
+        head = [float(m), float(n), 1.0 if self.on == "estimate" else 0.0]
+        return CompiledBlock(affine_output, static_update,
+                             np.concatenate([head, self.K.ravel(), self.k]))
+
 
 @dataclass(frozen=True, eq=False)
 class PiecewiseStateFeedback(StaticLaw):
@@ -370,6 +499,16 @@ class LinearController(_Block):
     def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
         return self.A @ xc + self.B @ m.y
 
+    def compiled(self) -> CompiledBlock:
+        """The compiled form (:class:`CompiledBlock`) of ``u = C xc + D y``,
+        ``A xc + B y``."""
+        from ._feedback_kernels import linear_output, linear_update
+
+        r, p, m = self.A.shape[0], self.B.shape[1], self.C.shape[0]
+        return CompiledBlock(linear_output, linear_update, np.concatenate(
+            [[float(r), float(p), float(m)], self.A.ravel(), self.B.ravel(), self.C.ravel(),
+             self.D.ravel()]))
+
 
 @dataclass(frozen=True, eq=False)
 class LinearObserver(_Block):
@@ -471,6 +610,19 @@ class LinearObserver(_Block):
             raise ModelError("LinearObserver with B: the known input is stacked by "
                              "closed_loop; it runs only stacked into the plant's model")
         return out
+
+    def compiled(self) -> CompiledBlock | None:
+        """The compiled form (:class:`CompiledBlock`) of ``x̂ = E xo``, ``F xo + L y``;
+        ``None`` with a law, a known input ``B`` or a jump (those run stacked)."""
+        from ._feedback_kernels import linear_output, linear_update
+
+        if self.law is not None or self.B is not None or self.jump is not None:
+            return None
+        r, p, m = self.n_states, self.L.shape[1], self.E.shape[0]
+        zero = np.zeros((m, p))
+        return CompiledBlock(linear_output, linear_update, np.concatenate(
+            [[float(r), float(p), float(m)], self.F.ravel(), self.L.ravel(), self.E.ravel(),
+             zero.ravel()]))
 
     def reset(self, t: float, xc: FloatArray, jump: Jump) -> FloatArray:
         if self.jump is None:

@@ -127,7 +127,21 @@ class ActuatedContactModel:
                                 force_jacobian=self.smooth_force_jacobian, gap=self.gaps,
                                 jacobian=self.gap_jacobian, restitution=restitution,
                                 actuation=self.actuation.T, potential=self.potential,
-                                names=self.names)
+                                names=self.names, compiled=self.compiled_model())
+
+    def compiled_model(self) -> Any:
+        """The compiled form of :meth:`lagrangian`'s callables
+        (:class:`~nscontrol.systems.lagrangian.CompiledModel`), for the models that have one
+        (:func:`foot_body_model`), else ``None``."""
+        if not isinstance(self.parameters, FootBodyParameters):
+            return None
+        from . import _foot_body_kernels as fk
+        from .lagrangian import CompiledModel
+
+        p = self.parameters
+        return CompiledModel(fk.mass, fk.force, fk.force_jacobian, fk.gaps, fk.gap_jacobian,
+                             np.array([p.total_mass, p.m_b, p.L, p.I_f, p.a, p.b, p.d, p.g,
+                                       p.I_b]), potential=fk.potential)
 
 
 @dataclass(frozen=True)

@@ -33,8 +33,8 @@ from .._validation import (
 )
 from ..errors import DimensionError, InadmissibleStateError, ModelError, NscontrolWarning
 
-__all__ = ["LagrangianSystem", "two_link_arm_mass", "two_link_arm_coriolis",
-           "two_link_arm_gravity", "two_link_arm_force_jacobian"]
+__all__ = ["LagrangianSystem", "CompiledModel", "affine_compiled_model", "two_link_arm_mass",
+           "two_link_arm_coriolis", "two_link_arm_gravity", "two_link_arm_force_jacobian"]
 
 ForceFn = Callable[[float, FloatArray, FloatArray], FloatArray]
 #: ``(t, q, v) -> (∂force/∂q, ∂force/∂v)``.
@@ -43,6 +43,133 @@ ForceJacobianFn = Callable[[float, FloatArray, FloatArray], tuple[FloatArray, Fl
 ConfigurationFn = Callable[[FloatArray], FloatArray]
 #: ε^(1/3): the central-difference step (relative) balancing truncation and roundoff.
 _CBRT_EPS = float(np.finfo(float).eps) ** (1.0 / 3.0)
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledModel:
+    """Compiled forms of a :class:`LagrangianSystem`'s callables, for Moreau–Jean's compiled
+    loop (a configuration-dependent ``M(q)``, a nonlinear force, nonlinear gaps).
+
+    Each function is compiled by ``numba.njit`` with its signature declared (from
+    ``nscontrol.systems.lagrangian``'s kernels module ``_lagrangian_kernels``:
+    ``MASS_SIGNATURE`` etc.), takes plain ``float64`` arrays and the parameter array last::
+
+        mass(q, params) -> M (n, n)
+        force(t, q, v, params) -> the system's force term (n,)   (zeros if it has none)
+        force_jacobian(t, q, v, params) -> [∂force/∂q; ∂force/∂v] stacked (2n, n)
+        gaps(q, params) -> g (m,),   gap_jacobian(q, params) -> ∂g/∂q (m, n)
+        potential(q, params) -> V   (optional: the recorded energy's potential)
+
+    The linear terms (``f0, K, D``), the actuation and the restitution stay the system's.
+    The system probes the compiled functions against its Python callables at
+    construction (:meth:`check_against`).
+
+    Attributes
+    ----------
+    mass, force, force_jacobian, gaps, gap_jacobian : numba dispatcher
+        The compiled functions.
+    params : ndarray of float64, shape (p,)
+        The model's parameters, passed to every function.
+    potential : numba dispatcher, optional
+        The compiled ``potential`` (the energy signal otherwise calls the Python one).
+    """
+
+    mass: Any
+    force: Any
+    force_jacobian: Any
+    gaps: Any
+    gap_jacobian: Any
+    params: FloatArray
+    potential: Any = None
+
+    def __post_init__(self) -> None:
+        from . import _lagrangian_kernels as lk
+        from .feedback import _has_signature
+
+        for name, sig in (("mass", lk.MASS_SIGNATURE), ("force", lk.FORCE_SIGNATURE),
+                          ("force_jacobian", lk.FORCE_JACOBIAN_SIGNATURE),
+                          ("gaps", lk.GAP_SIGNATURE),
+                          ("gap_jacobian", lk.GAP_JACOBIAN_SIGNATURE),
+                          ("potential", lk.POTENTIAL_SIGNATURE)):
+            if name == "potential" and self.potential is None:
+                continue
+            if not _has_signature(getattr(self, name), sig):
+                raise ModelError(f"{name}: a CompiledModel needs a function compiled by "
+                                 f"numba.njit({name.upper()}_SIGNATURE) (declared), got "
+                                 f"{getattr(self, name)!r}")
+        object.__setattr__(self, "params", np.ascontiguousarray(
+            np.asarray(self.params, dtype=np.float64).reshape(-1)))
+
+    def check_against(self, system: LagrangianSystem, tol: float = 1e-10) -> None:
+        """Compare with the system's Python callables at a fixed configuration
+        ``q = 0.1 (1, 2, ..., n) / n``, ``v = -q``, ``t = 0.3``; the compiled and Python forms
+        differ by the order of their operations only, so ``tol`` (relative to each value's
+        largest entry) is far above their roundoff and far below a modelling slip.
+
+        Parameters
+        ----------
+        system : LagrangianSystem
+            The system this model compiles.
+        tol : float
+            Relative tolerance.
+
+        Raises
+        ------
+        ModelError
+            A compiled function disagrees (its name and the difference in the message).
+        """
+        n, p = system.n_dof, self.params
+        q = 0.1 * np.arange(1.0, n + 1.0) / n
+        v, t = -q, 0.3
+        force = (np.zeros(n) if system.force is None else
+                 np.asarray(system.force(t, q, v), float))
+        pairs = [("mass", self.mass(q, p), system.mass_matrix(q)),
+                 ("force", self.force(t, q, v, p), force),
+                 ("gaps", self.gaps(q, p), system.gaps(q)),
+                 ("gap_jacobian", self.gap_jacobian(q, p), system.gap_jacobian(q))]
+        if self.potential is not None and system.potential is not None:
+            pairs.append(("potential", np.array(self.potential(q, p)),
+                          np.array(system.potential(q))))
+        if system.force_jacobian is not None:
+            Jq, Jv = system.force_jacobian(t, q, v)
+            pairs.append(("force_jacobian", self.force_jacobian(t, q, v, p),
+                          np.vstack([Jq, Jv])))
+        for name, ours, theirs in pairs:
+            theirs = np.asarray(theirs, float)
+            if np.shape(ours) != theirs.shape:
+                raise DimensionError(f"compiled.{name}: returned shape {np.shape(ours)}, the "
+                                     f"system's {name} {theirs.shape}")
+            scale = max(1.0, float(np.abs(theirs).max(initial=0.0)))
+            err = float(np.abs(ours - theirs).max(initial=0.0))
+            if not err <= tol * scale:
+                raise ModelError(f"compiled.{name}: disagrees with the system's {name} at "
+                                 f"q = {q!r} (max difference {err:.3g}); it must compute the "
+                                 f"same function")
+
+
+def affine_compiled_model(system: LagrangianSystem) -> CompiledModel | None:
+    """The compiled model of a system with a constant mass, no nonlinear force and affine
+    gaps (its linear forces stay the system's), or ``None`` for any other system; what
+    Moreau–Jean's compiled loop runs for such a plant closed by compiled blocks.
+
+    Parameters
+    ----------
+    system : LagrangianSystem
+        The system.
+
+    Returns
+    -------
+    CompiledModel or None
+    """
+    if not system.constant_mass or system.force is not None or system.gap_matrix is None:
+        return None
+    from . import _lagrangian_kernels as lk
+
+    n, m = system.n_dof, system.n_contacts
+    params = np.concatenate([[float(n), float(m)], system.mass_matrix().ravel(),
+                             system.dense_gap_matrix().ravel(), system.gap_offset])
+    return CompiledModel(lk.constant_mass, lk.no_force, lk.no_force_jacobian, lk.affine_gaps,
+                         lk.affine_gap_jacobian, params)
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +214,10 @@ class LagrangianSystem:
         Constant tangent Jacobian: rows ``d j .. d j + d - 1`` map ``v`` to the tangential
         (slip) velocity of contact ``j``; ``d = 1`` for planar contacts, ``d = 2`` for
         spatial ones.
+    compiled : CompiledModel, optional
+        Compiled forms of ``mass``, ``force``, ``force_jacobian``, ``gap`` and ``jacobian``
+        (numba-jitted): Moreau–Jean then runs the model in a compiled loop instead of its
+        Python one (probed against the Python callables here).
 
     Raises
     ------
@@ -141,6 +272,7 @@ class LagrangianSystem:
     force_jacobian: ForceJacobianFn | None = None
     friction: FloatArray | None = None
     tangent_matrix: FloatArray | None = None
+    compiled: Any = None   # a CompiledModel
     n_dof: int = field(init=False)
     n_contacts: int = field(init=False)
     #: Tangent directions per contact: 0 (frictionless), 1 (planar) or 2 (spatial).
@@ -159,7 +291,8 @@ class LagrangianSystem:
                      names: Sequence[str] = (),
                      force_jacobian: ForceJacobianFn | None = None,
                      friction: ArrayLike | None = None,
-                     tangent_matrix: ArrayLike | None = None) -> None: ...
+                     tangent_matrix: ArrayLike | None = None,
+                     compiled: CompiledModel | None = None) -> None: ...
 
     default_method = "event_driven"
 
@@ -201,6 +334,11 @@ class LagrangianSystem:
             raise DimensionError(f"names: expected {n} coordinate names, got {len(names)}")
         set_(self, "names", names)
         self._check_force_jacobian(n)
+        if self.compiled is not None:
+            if not isinstance(self.compiled, CompiledModel):
+                raise ModelError(f"compiled: expected a CompiledModel, got "
+                                 f"{type(self.compiled).__name__}")
+            self.compiled.check_against(self)
         self._check_friction(n, m)
 
     def _check_friction(self, n: int, m: int) -> None:
@@ -634,7 +772,9 @@ class LagrangianSystem:
         """The planar two-link arm of ch03 §4.1, end effector above the ground ``y >= 0``.
 
         Coordinates ``θ = (θ1, θ2)``; force ``-C(θ, θ')θ' - G(θ)`` (Christoffel form);
-        constraint ``y = l1 sin θ1 + l2 sin(θ1 + θ2) >= 0`` with its analytic Jacobian.
+        constraint ``y = l1 sin θ1 + l2 sin(θ1 + θ2) >= 0`` with its analytic Jacobian; a
+        :class:`CompiledModel` of all of them (Moreau–Jean's compiled loop, with compiled
+        blocks or without a controller).
 
         Parameters
         ----------
@@ -679,9 +819,15 @@ class LagrangianSystem:
                            ) -> tuple[FloatArray, FloatArray]:
             return two_link_arm_force_jacobian(q, v, g=g, **p)
 
+        from . import _two_link_kernels as tk
+
+        compiled = CompiledModel(tk.mass, tk.force, tk.force_jacobian, tk.gaps,
+                                 tk.gap_jacobian, np.array([l1, l2, m1, m2, I1, I2, g]),
+                                 potential=tk.potential)
         return cls(lambda q: two_link_arm_mass(q, **p), force=force, gap=gap,
                    jacobian=jacobian, restitution=restitution, potential=potential,
-                   names=("theta1", "theta2"), force_jacobian=force_jacobian)
+                   names=("theta1", "theta2"), force_jacobian=force_jacobian,
+                   compiled=compiled)
 
 
 def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: float,
