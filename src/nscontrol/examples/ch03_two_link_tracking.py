@@ -134,13 +134,14 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
 
 def _ground_moved(plant: Any, offset: float) -> Any:
     """The plant with its ground at ``y = offset`` instead of ``y = 0`` (same Jacobian); the
-    controller, which is not told, still believes the ground is at ``y = 0``."""
+    controller, which is not told, still believes the ground is at ``y = 0``. The compiled
+    model (if any) computes the old gap, so the moved plant runs without it."""
     base_gap = plant.gap
 
     def gap(q: np.ndarray) -> np.ndarray:
         return base_gap(q) - offset
 
-    return replace(plant, gap=gap)
+    return replace(plant, gap=gap, compiled=None)
 
 
 def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float | None = None,

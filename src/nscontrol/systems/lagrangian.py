@@ -334,12 +334,12 @@ class LagrangianSystem:
             raise DimensionError(f"names: expected {n} coordinate names, got {len(names)}")
         set_(self, "names", names)
         self._check_force_jacobian(n)
+        self._check_friction(n, m)
         if self.compiled is not None:
             if not isinstance(self.compiled, CompiledModel):
                 raise ModelError(f"compiled: expected a CompiledModel, got "
                                  f"{type(self.compiled).__name__}")
             self.compiled.check_against(self)
-        self._check_friction(n, m)
 
     def _check_friction(self, n: int, m: int) -> None:
         """``friction`` (μ_j >= 0, one per contact) and ``tangent_matrix`` (``m d`` rows,
