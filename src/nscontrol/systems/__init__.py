@@ -18,6 +18,9 @@ _EXPORTS: dict[str, str] = {
     "OneLinkRobot": "one_link",
     # pwa.py
     "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
+    # beam.py
+    "OneSidedSpring": "beam", "MechanicalPWL": "beam", "Unbalance": "beam",
+    "two_mode_beam": "beam",
     # switched.py
     "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
     # nonlinear.py
