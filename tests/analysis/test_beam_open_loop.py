@@ -11,7 +11,11 @@ from nscontrol import simulate
 from nscontrol.analysis.attenuation import response_amplitude
 from nscontrol.analysis.convergence import quadratic_convergence
 from nscontrol.analysis.periodic import (
-    brute_force_steady_state, check_uniqueness, frequency_response, periodic_steady_state)
+    brute_force_steady_state,
+    check_uniqueness,
+    frequency_response,
+    periodic_steady_state,
+)
 from nscontrol.design.beam_attenuation import design_attenuation
 from nscontrol.systems.beam import Unbalance, two_mode_beam
 

@@ -140,7 +140,7 @@ class AttenuationDesign:
         from .convergent_pwa import output_feedback_loop
 
         pwa = self.plant.to_pwa()
-        if self.structure == "output":
+        if self.observer is not None:
             return output_feedback_loop(pwa, self.observer, self.feedback)
         zero = np.zeros(1)
         return closed_loop(pwa, PiecewiseStateFeedback((self.K, self.K), (zero, zero)),

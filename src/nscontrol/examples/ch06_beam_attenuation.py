@@ -141,7 +141,7 @@ class BeamSweep:
 
 
 def sweep_all(loops: dict[str, tuple[Any, Any, Any]], *, task: BeamSweep | None = None,
-              executor: Any = "auto") -> dict[str, dict[str, Any]]:
+              executor: Any = None) -> dict[str, dict[str, Any]]:
     """Sweep every loop ``name -> (system, control, output)`` up and down, the
     ``2·len(loops)`` directions in parallel through :func:`nscontrol.sweep.run`.
 
@@ -152,7 +152,9 @@ def sweep_all(loops: dict[str, tuple[Any, Any, Any]], *, task: BeamSweep | None 
     task : BeamSweep, optional
         Grid and protocol (default: 5–70 Hz, 0.25 Hz, 3 s).
     executor
-        As in :func:`nscontrol.sweep.run`.
+        As in :func:`nscontrol.sweep.run`; default ``None``, local processes (one sweep
+        direction costs seconds, far above the ~0.05 s of starting a pool; ``"auto"`` would
+        time the first, longest, direction here before going parallel).
     """
     from .. import sweep
 
@@ -212,7 +214,10 @@ def _open_loop_checks(beam: Any, out: dict[str, Any]) -> list[Any]:
     from ..analysis.attenuation import response_amplitude
     from ..analysis.convergence import quadratic_convergence
     from ..analysis.periodic import (
-        brute_force_steady_state, frequency_response, periodic_steady_state)
+        brute_force_steady_state,
+        frequency_response,
+        periodic_steady_state,
+    )
     from ..systems.beam import Unbalance
 
     pwa = beam.to_pwa()
@@ -250,12 +255,13 @@ def _design_checks(beam: Any, out: dict[str, Any]) -> tuple[Any, Any, list[Any]]
 
     ref = design_attenuation(beam, structure="output", decay=DECAY,
                              observer_decay=OBSERVER_DECAY)
-    obs = ref.observer
+    obs, sf = ref.observer, ref.feedback
+    assert obs is not None and sf is not None   # the "output" structure has both
     r_sf = recheck_lyapunov(list(ref.modes()), ref.P, ref.decay).residual
     r_obs = recheck_lyapunov([A - obs.L @ obs.C for A in beam.to_pwa().A], obs.P,
                              obs.sigma).residual
     dstar = min_velocity_gain(beam, bracket=(500.0, 1500.0), rtol=1e-5)
-    out.update(K=ref.K.ravel(), L=obs.L.ravel(), gain_bound=ref.feedback.gain_bound,
+    out.update(K=ref.K.ravel(), L=obs.L.ravel(), gain_bound=sf.gain_bound,
                observer_gain_bound=obs.gain_bound, d_star=dstar.cqlf,
                d_star_product_test=dstar.product, d_star_circle=dstar.circle)
     return ref, dstar, [
@@ -340,7 +346,8 @@ def _sweep_checks(beam: Any, ref: Any, dstar: Any, out: dict[str, Any]
              "pd": (pd.closed_loop(), pd.control(), pd.performance_output)}
     sw = sweep_all(loops)
     f = sw["open"]["up"].omega / (2 * np.pi)
-    points = {"harmonic": (25.0, 30.0), "superharmonic": (12.0, 15.0), "subharmonic": 55.0}
+    points: dict[str, float | tuple[float, float]] = {
+        "harmonic": (25.0, 30.0), "superharmonic": (12.0, 15.0), "subharmonic": 55.0}
     rep = attenuation_report([sw["open"]["up"], sw["open"]["down"]], sw["state"]["up"],
                              points=points)
     rep_pd = attenuation_report([sw["open"]["up"], sw["open"]["down"]], sw["pd"]["up"])

@@ -20,13 +20,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import (
-    as_finite_scalar, as_matrix, as_square, as_vector, check_positive, check_positive_definite,
-    check_symmetric)
+    as_finite_scalar,
+    as_matrix,
+    as_square,
+    as_vector,
+    check_positive,
+    check_positive_definite,
+    check_symmetric,
+)
 from ..errors import DimensionError, ModelError
 
 if TYPE_CHECKING:
-    from .pwa import PiecewiseAffineSystem
     from .protocols import InputSignal
+    from .pwa import PiecewiseAffineSystem
 
 __all__ = ["OneSidedSpring", "MechanicalPWL", "Unbalance", "two_mode_beam"]
 
@@ -98,8 +104,9 @@ class MechanicalPWL:
     Examples
     --------
     >>> beam = two_mode_beam()
-    >>> np.round(beam.frequencies(contact=False)[0], 2), np.round(beam.frequencies(contact=True)[0], 2)
-    (array([ 20., 100.]), array([ 44.18, 110.86]))
+    >>> free, contact = beam.frequencies(contact=False), beam.frequencies(contact=True)
+    >>> np.round(free[0], 2), np.round(contact[0], 2)
+    (array([ 20., 100.]), array([ 44.18, 110.88]))
     """
 
     M: FloatArray
@@ -191,8 +198,8 @@ class MechanicalPWL:
         return A
 
     def frequencies(self, contact: bool) -> tuple[FloatArray, FloatArray]:
-        """Natural frequencies (Hz, increasing) and damping ratios of the linear mode
-        ``contact``.
+        """Natural frequencies ``|λ|/2π`` (Hz, increasing) and damping ratios
+        ``-Re λ/|λ|`` of the linear mode ``contact`` (its damped frequencies are ``Im λ/2π``).
 
         Parameters
         ----------
