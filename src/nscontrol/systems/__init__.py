@@ -20,7 +20,7 @@ _EXPORTS: dict[str, str] = {
     "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
     # beam.py
     "OneSidedSpring": "beam", "MechanicalPWL": "beam", "Unbalance": "beam",
-    "two_mode_beam": "beam",
+    "two_mode_beam": "beam", "beam_fe_model": "beam",
     # switched.py
     "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
     # nonlinear.py
