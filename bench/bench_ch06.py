@@ -68,12 +68,24 @@ def _sweeps(quick: bool) -> dict[str, Any]:
                          "serial_vs_dask_max_relative_difference": same}}
 
 
+class _Pieces:
+    """The dense outputs of the pieces between facet events as one function of time."""
+
+    def __init__(self, pieces: list[Any]) -> None:
+        self.ends = np.array([float(p.t[-1]) for p in pieces])
+        self.sols = [p.sol for p in pieces]
+
+    def __call__(self, ts: np.ndarray) -> np.ndarray:
+        idx = np.minimum(np.searchsorted(self.ends, ts), len(self.sols) - 1)
+        return np.column_stack([self.sols[i](t) for i, t in zip(idx, ts, strict=True)])
+
+
 def _scipy_sweep(freqs: np.ndarray, me_r: float, transient_s: float, n_record: int,
                  rtol: float) -> tuple[np.ndarray, np.ndarray]:
     """Brute-force sweep up with DOP853, facet events and restarts: ``(P, multiplicity)``."""
     from scipy.integrate import solve_ivp
 
-    from nscontrol.analysis.periodic import period_multiplicity
+    from nscontrol.analysis.periodic import period_multiplicity, refined_peak
 
     beam = two_mode_beam()
     A = (beam.state_matrix(True), beam.state_matrix(False))
@@ -98,7 +110,7 @@ def _scipy_sweep(freqs: np.ndarray, me_r: float, transient_s: float, n_record: i
         t_tr = np.ceil(transient_s * f - 1e-9) * T
         t_end = t_tr + n_record * T
         marks = t_tr + T * np.arange(n_record + 1)
-        t, ys, pts = 0.0, [], []
+        t, ys, pts, pieces = 0.0, [], [], []
         # the starting mode: the side of Hx, or on the facet the sign of H x'
         hx = float(H @ x)
         if abs(hx) <= 1e-12 * float(np.abs(H) @ np.abs(x)):
@@ -114,10 +126,17 @@ def _scipy_sweep(freqs: np.ndarray, me_r: float, transient_s: float, n_record: i
                 ys.append(H @ sol.sol(grid))
                 pts += [sol.sol(m) for m in marks if t <= m <= t1]
             x, t = sol.y[:, -1].copy(), t1
+            pieces.append(sol)
             if sol.status == 1:   # left the mode through the facet: restart in the other one
                 i = 1 - i
-        P[k] = float(np.max(np.abs(np.concatenate(ys))))
         mult[k] = period_multiplicity(np.array(pts[-(n_record + 1):]))
+        final = _Pieces(pieces)
+        if mult[k] >= 1:     # refined peak over the last p periods, as ours
+            p = int(mult[k])
+            last = np.linspace(t_end - p * T, t_end, 200 * p + 1)[:-1]
+            P[k] = refined_peak(np.abs(H @ final(last)))
+        else:
+            P[k] = float(np.max(np.abs(np.concatenate(ys))))
     return P, mult
 
 
