@@ -9,8 +9,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = sorted([*ROOT.glob("docs/*.md"), *ROOT.glob("docs/guide/*.md"), ROOT / "README.md"])
 PAGES = [p for p in PAGES if p.name != "gallery.md"]          # written by the docs build
-CHAPTERS = ["ch02", "ch03", "ch04", "ch05", "ch07", "ch08", "ch09", "ch10", "ch11", "ch12",
-            "frictional_contacts", "sliding_mode"]
+CHAPTERS = ["ch02", "ch03", "ch04", "ch05", "ch06", "ch07", "ch08", "ch09", "ch10", "ch11",
+            "ch12", "frictional_contacts", "sliding_mode"]
 # Material outside the repository: internal specification files, a design notebook, the
 # numbered sections of a specification ("spec §6").
 UNSEEN = re.compile(r"shared/|specs?/|DESIGN\.md|\bspec(?:'s)?\s*§|\bthe spec\b", re.I)

@@ -43,6 +43,10 @@ _EXPORTS: dict[str, str] = {
     "refined_peak": "periodic", "dft_harmonics": "periodic", "HarmonicResponse": "periodic",
     "harmonic_response": "periodic", "FrequencyResponse": "periodic",
     "frequency_response": "periodic", "frequency_sweep": "periodic",
+    # attenuation.py
+    "VelocityGainThreshold": "attenuation", "min_velocity_gain": "attenuation",
+    "response_amplitude": "attenuation", "local_maxima": "attenuation",
+    "AttenuationReport": "attenuation", "attenuation_report": "attenuation",
     # orbits.py
     "Forced": "orbits", "MapResult": "orbits", "Orbit": "orbits", "stroboscopic_map": "orbits",
     "find_orbit": "orbits", "Cycle": "orbits", "find_cycle": "orbits", "SectionReturn": "orbits",

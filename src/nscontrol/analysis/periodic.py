@@ -48,6 +48,28 @@ FloatArray = NDArray[np.float64]
 #: ``control=``: the effort ``u`` of time-major states ``x`` (shape ``(k, n)`` -> ``(k, p)``).
 ControlMap = Callable[[FloatArray], ArrayLike]
 
+#: ``amplitude=``: a constant ``a`` or a picklable callable ``ω -> a(ω)`` (a forcing whose
+#: amplitude grows with frequency, e.g. a rotating unbalance ``m_e r_e ω²``).
+AmplitudeSpec = float | Callable[[float], float]
+
+
+def _amplitude_spec(amplitude: Any) -> Any:
+    """A validated ``amplitude=``: a positive number, or a callable kept as it is (checked
+    at every frequency by :func:`_amplitude_at`)."""
+    return amplitude if callable(amplitude) else float(check_positive("amplitude", amplitude))
+
+
+def _amplitude_at(amplitude: Any, omega: float) -> float:
+    """``a(ω)`` of an :data:`AmplitudeSpec`."""
+    if not callable(amplitude):
+        return float(amplitude)
+    a = amplitude(float(omega))
+    try:
+        return float(check_positive("amplitude", a))
+    except ModelError:
+        raise ModelError(f"amplitude: the callable returned {a!r} at ω = {omega:g}; expected "
+                         f"a finite number > 0") from None
+
 
 @dataclass(frozen=True, eq=False)
 class PeriodicOrbit:
@@ -700,7 +722,7 @@ class _ShootPoint:
     """Picklable per-frequency task of :func:`frequency_response`."""
 
     system: Any
-    amplitude: float
+    amplitude: Any
     output: Any
     n_samples: int
     n_harmonics: int
@@ -712,10 +734,11 @@ class _ShootPoint:
         from ..numerics.lti import Exosystem
 
         T = 2 * np.pi / omega
-        orbit = periodic_steady_state(self.system, T, u=Exosystem.sinusoid(self.amplitude, omega),
+        a = _amplitude_at(self.amplitude, omega)
+        orbit = periodic_steady_state(self.system, T, u=Exosystem.sinusoid(a, omega),
                                       method=self.method, n_samples=self.n_samples + 1,
                                       **self.options)
-        return harmonic_response(orbit, amplitude=self.amplitude, output=self.output,
+        return harmonic_response(orbit, amplitude=a, output=self.output,
                                  system=self.system, n_harmonics=self.n_harmonics,
                                  control=self.control)
 
@@ -739,7 +762,7 @@ class FrequencyResponse:
     direction
         ``"independent"`` (shooting, every point on its own), ``"up"`` or ``"down"``.
     amplitude
-        Input amplitude ``a``.
+        Input amplitude ``a`` (NaN when it depends on ``ω``: see :attr:`amplitudes`).
     errors
         Per-point :class:`~nscontrol.sweep.PointError` or ``None`` (one entry per frequency,
         its ``index`` the position in :attr:`omega`).
@@ -747,6 +770,9 @@ class FrequencyResponse:
         :func:`frequency_sweep`: the orbit branches continued in ``ω`` (one
         :class:`~nscontrol.analysis.continuation.Branch` per attractor the sweep landed on,
         unstable parts past a fold included: the coexisting orbits); ``()`` otherwise.
+    amplitudes
+        The input amplitude ``a(ω)`` per frequency (``gamma·amplitudes`` is the response
+        amplitude ``max|z̄|``).
     """
 
     omega: FloatArray
@@ -762,22 +788,26 @@ class FrequencyResponse:
     amplitude: float
     errors: tuple[Any, ...] = ()
     branches: tuple[Any, ...] = ()
+    amplitudes: FloatArray = field(default_factory=lambda: np.empty(0))
 
     @classmethod
     def from_points(cls, omegas: ArrayLike, points: Sequence[HarmonicResponse | None],
-                    *, direction: str, amplitude: float, n_harmonics: int,
+                    *, direction: str, amplitude: Any, n_harmonics: int,
                     errors: Sequence[Any] = (), branches: Sequence[Any] = ()
                     ) -> FrequencyResponse:
         def col(attr: str, fill: Any) -> np.ndarray:
             return np.array([getattr(p, attr) if p is not None else fill for p in points])
 
-        return cls(np.asarray(omegas, float), col("gamma", np.nan), col("rms_gain", np.nan),
+        w = np.asarray(omegas, float)
+        a = np.array([_amplitude_at(amplitude, wi) for wi in w])
+        return cls(w, col("gamma", np.nan), col("rms_gain", np.nan),
                    np.array([p.harmonics if p is not None else np.full(n_harmonics, np.nan)
                              for p in points]),
                    col("max_floquet", np.nan), col("multiplicity", -1).astype(np.int64),
                    col("n_crossings", -1).astype(np.int64), col("state_peak", np.nan),
-                   col("effort", np.nan), direction, float(amplitude), tuple(errors),
-                   tuple(branches))
+                   col("effort", np.nan), direction,
+                   np.nan if callable(amplitude) else float(amplitude), tuple(errors),
+                   tuple(branches), a)
 
 
 def _omega_grid(omegas: Any) -> FloatArray:
@@ -788,7 +818,8 @@ def _omega_grid(omegas: Any) -> FloatArray:
     return w
 
 
-def frequency_response(system: SimulableSystem, omegas: ArrayLike, *, amplitude: float = 1.0,
+def frequency_response(system: SimulableSystem, omegas: ArrayLike, *,
+                       amplitude: AmplitudeSpec = 1.0,
                        output: ArrayLike | None = None, n_samples: int = 1000,
                        n_harmonics: int = 5, method: str = "switching",
                        control: ControlMap | None = None,
@@ -806,7 +837,9 @@ def frequency_response(system: SimulableSystem, omegas: ArrayLike, *, amplitude:
     omegas
         Positive frequencies (rad per time unit).
     amplitude
-        ``a``.
+        ``a``, or a picklable callable ``ω -> a(ω)`` (e.g.
+        :class:`~nscontrol.systems.beam.Unbalance`: ``m_e r_e ω²``); the gains are divided
+        by ``a(ω)``.
     output
         Performance output matrix ``C_z`` (default: the model's ``C``, else the first state).
     n_samples
@@ -885,7 +918,7 @@ def frequency_response(system: SimulableSystem, omegas: ArrayLike, *, amplitude:
     w = _omega_grid(omegas)
     _output_matrix(system, output)  # bad shapes fail here, not once per point
     _check_control(control)
-    task = _ShootPoint(system, float(check_positive("amplitude", amplitude)), output,
+    task = _ShootPoint(system, _amplitude_spec(amplitude), output,
                        int(n_samples), int(n_harmonics), method, dict(options), control)
     res = sweep.run(task, list(w), executor=executor, progress=progress, desc="FRF")
     return FrequencyResponse.from_points(w, res.values, direction="independent",
@@ -938,7 +971,7 @@ class _FrequencyFamily:
     """Picklable continuation factory ``ω -> Forced(system, a sin(ωt), 2π/ω)``."""
 
     system: Any
-    amplitude: float
+    amplitude: Any
     method: Any
     options: tuple[tuple[str, Any], ...] = ()
 
@@ -946,7 +979,8 @@ class _FrequencyFamily:
         from ..numerics.lti import Exosystem
         from .orbits import Forced
 
-        return Forced(self.system, Exosystem.sinusoid(self.amplitude, omega), 2 * np.pi / omega,
+        return Forced(self.system, Exosystem.sinusoid(_amplitude_at(self.amplitude, omega),
+                                                      omega), 2 * np.pi / omega,
                       self.method, self.options)
 
 
@@ -958,7 +992,7 @@ class _SweepBranch:
     the sweep goes on from the last good state."""
 
     system: Any
-    amplitude: float
+    amplitude: Any
     output: Any
     n_transient: int
     n_record: int
@@ -967,6 +1001,7 @@ class _SweepBranch:
     method: str
     options: dict[str, Any] = field(default_factory=dict)
     control: Any = None
+    transient_time: float | None = None
 
     def __call__(self, branch: tuple[str, tuple[tuple[int, float], ...]]
                  ) -> tuple[list[Any], list[Any]]:
@@ -987,8 +1022,8 @@ class _SweepBranch:
             idx, w = points[i]
             try:        # land on the attractor: transient, record, multiplicity
                 bf = self._brute_force(w, x)
-                out[i] = _brute_response(bf, w, self.amplitude, Cz, self.n_harmonics,
-                                         self.control)
+                out[i] = _brute_response(bf, w, _amplitude_at(self.amplitude, w), Cz,
+                                         self.n_harmonics, self.control)
             except Exception as exc:  # this frequency's error; the sweep continues
                 out[i] = PointError(int(idx), type(exc).__name__,
                                     f"ω = {w:g} ({direction} sweep): {exc}",
@@ -1013,9 +1048,11 @@ class _SweepBranch:
     def _brute_force(self, w: float, x: FloatArray) -> BruteForceResult:
         from ..numerics.lti import Exosystem
 
+        n_transient = self.n_transient if self.transient_time is None else \
+            int(np.ceil(self.transient_time * w / (2 * np.pi) - 1e-9))
         return brute_force_steady_state(
-            self.system, 2 * np.pi / w, u=Exosystem.sinusoid(self.amplitude, w), x0=x,
-            n_transient=self.n_transient, n_record=self.n_record,
+            self.system, 2 * np.pi / w, u=Exosystem.sinusoid(_amplitude_at(self.amplitude, w), w),
+            x0=x, n_transient=n_transient, n_record=self.n_record,
             samples_per_period=self.samples_per_period, method=self.method, **self.options)
 
     def _orbit_response(self, family: _FrequencyFamily, w: float, orbit: Any,
@@ -1031,7 +1068,8 @@ class _SweepBranch:
                                       samples_per_period=self.samples_per_period,
                                       method=self.method, **self.options)
         bf = replace(bf, multiplicity=p)     # exact by construction (shooting residual)
-        resp = _brute_response(bf, w, self.amplitude, Cz, self.n_harmonics, self.control)
+        resp = _brute_response(bf, w, _amplitude_at(self.amplitude, w), Cz, self.n_harmonics,
+                               self.control)
         return replace(resp, max_floquet=float(np.abs(orbit.multipliers[0])))
 
     def _follow(self, family: _FrequencyFamily, w0: float, orbit: Any, ahead: list[float],
@@ -1219,9 +1257,10 @@ def _stable_orbit(forced: Any, bf: BruteForceResult) -> Any:
     return orbit if orbit.stable else None
 
 
-def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: float = 1.0,
-                    output: ArrayLike | None = None,
+def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *,
+                    amplitude: AmplitudeSpec = 1.0, output: ArrayLike | None = None,
                     directions: Sequence[str] = ("up", "down"), n_transient: int = 100,
+                    transient_time: float | None = None,
                     n_record: int = 12, n_harmonics: int = 5, samples_per_period: int = 200,
                     method: str = "switching", control: ControlMap | None = None,
                     executor: Any = "auto",
@@ -1251,6 +1290,10 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
     n_transient, n_record, samples_per_period
         Per landing, as in :func:`brute_force_steady_state` (``samples_per_period`` also
         samples the shot orbits).
+    transient_time
+        When given, the transient of a landing lasts this long in time units instead of
+        ``n_transient`` periods (``⌈transient_time·ω/2π⌉`` periods: the same decay at every
+        frequency, as in an experiment's fixed settling time).
     executor
         As in :func:`nscontrol.sweep.run`. Default ``"auto"``: local processes when two
         directions run on a machine with two or more CPUs (a direction costs one landing of
@@ -1315,9 +1358,12 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *, amplitude: fl
     _output_matrix(system, output)
     _check_control(control)
     options.setdefault("progress", False)  # one bar for the sweep, not one per simulation
-    task = _SweepBranch(system, float(check_positive("amplitude", amplitude)), output,
+    if transient_time is not None:
+        transient_time = check_positive("transient_time", transient_time)
+    task = _SweepBranch(system, _amplitude_spec(amplitude), output,
                         int(n_transient), int(n_record), int(n_harmonics),
-                        int(samples_per_period), method, dict(options), control)
+                        int(samples_per_period), method, dict(options), control,
+                        transient_time)
     order = np.arange(w.size)
     grids = [(d, tuple((int(i), float(w[i])) for i in (order if d == "up" else order[::-1])))
              for d in directions]

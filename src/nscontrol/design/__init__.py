@@ -55,6 +55,10 @@ _EXPORTS: dict[str, str] = {
     "design_state_feedback": "convergent_pwa", "design_pwa_state_feedback": "convergent_pwa",
     "tune_pwa_state_feedback": "convergent_pwa", "design_observer": "convergent_pwa",
     "output_feedback_loop": "convergent_pwa",
+    # beam_attenuation.py
+    "AttenuationDesign": "beam_attenuation", "LinearLaw": "beam_attenuation",
+    "beam_scaling": "beam_attenuation", "design_attenuation": "beam_attenuation",
+    "pd_gain": "beam_attenuation",
     # contact_posture.py
     "StaticPostureDesign": "contact_posture", "ContactRegulator": "contact_posture",
     "static_contact_forces": "contact_posture", "design_contact_regulator": "contact_posture",

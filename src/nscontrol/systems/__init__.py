@@ -20,6 +20,9 @@ _EXPORTS: dict[str, str] = {
     "PiecewiseAffineSystem": "pwa", "CONTINUITY_RTOL": "pwa",
     # conewise.py
     "ConewiseLinearSystem": "conewise", "Facet": "conewise", "orthant_cones": "conewise",
+    # beam.py
+    "OneSidedSpring": "beam", "MechanicalPWL": "beam", "Unbalance": "beam",
+    "two_mode_beam": "beam", "beam_fe_model": "beam",
     # switched.py
     "FilippovSystem": "switched", "SwitchedAffineSystem": "switched", "PWMController": "switched",
     # nonlinear.py

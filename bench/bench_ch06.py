@@ -1,0 +1,170 @@
+"""Chapter 6: frequency sweeps of the beam with a one-sided support.
+
+Scenarios:
+
+* the sweeps of the example (open loop and the reference closed loop, 5–70 Hz on a 0.25 Hz
+  grid, up and down, 3 s settling transient per landing, 12 recorded periods, shooting and
+  continuation in between): wall time serial and on 2 Dask workers (``LocalCluster``, one
+  thread each), parallel efficiency ``t_serial / (2 t_dask)``;
+* the open-loop sweep up against SciPy ``solve_ivp`` (DOP853, one terminal event on the
+  support facet, restarted in the other mode after each crossing), brute force with the same
+  protocol on a coarser grid: time per frequency of both and ``max |P_ours/P_scipy - 1|`` over
+  the frequencies where both responses are period-T (equal accuracy of ``P(f)``).
+
+Run: ``OPENBLAS_NUM_THREADS=1 nscontrol bench ch06 --json`` (``--quick``: a 1 Hz grid and
+3 reference frequencies).
+"""
+
+# No `from __future__ import annotations`: the CLI loads this file without registering it.
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from nscontrol.analysis.attenuation import response_amplitude
+from nscontrol.analysis.periodic import frequency_sweep
+from nscontrol.design.beam_attenuation import design_attenuation
+from nscontrol.examples import ch06_beam_attenuation as ex
+from nscontrol.systems.beam import Unbalance, two_mode_beam
+
+
+def _timed(fn: Any) -> tuple[Any, float]:
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+def _loops() -> dict[str, Any]:
+    beam = two_mode_beam()
+    pwa = beam.to_pwa()
+    sf = design_attenuation(beam, structure="state", decay=ex.DECAY)
+    return {"open": (pwa, None, pwa.C),
+            "state": (sf.closed_loop(), sf.control(), sf.performance_output)}
+
+
+def _sweeps(quick: bool) -> dict[str, Any]:
+    from dask.distributed import Client, LocalCluster
+
+    task = ex.BeamSweep(step_hz=1.0 if quick else ex.STEP_HZ)
+    loops = _loops()
+    ex.sweep_all(loops, task=ex.BeamSweep(step_hz=5.0), executor="serial")   # warm-up
+    res, serial = _timed(lambda: ex.sweep_all(loops, task=task, executor="serial"))
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        ex.sweep_all(loops, task=ex.BeamSweep(step_hz=5.0), executor=client)  # warm workers
+        res2, dask = _timed(lambda: ex.sweep_all(loops, task=task, executor=client))
+    same = max(float(np.nanmax(np.abs(response_amplitude(res[k][d])
+                                      / response_amplitude(res2[k][d]) - 1)))
+               for k in res for d in ("up", "down"))
+    n = task.grid().size
+    return {"scenario": f"ch06 sweeps: open loop + closed loop, up and down, {n} frequencies "
+                        f"({task.step_hz:g} Hz grid), {task.transient_s:g} s transients: "
+                        f"serial vs 2 Dask workers",
+            "size": 4 * n, "ours_steps_per_s": None, "reference": "serial",
+            "reference_steps_per_s": None, "ratio": serial / dask,
+            "accuracy": {"serial_seconds": serial, "dask_2_workers_seconds": dask,
+                         "parallel_efficiency": serial / (2 * dask),
+                         "serial_vs_dask_max_relative_difference": same}}
+
+
+class _Pieces:
+    """The dense outputs of the pieces between facet events as one function of time."""
+
+    def __init__(self, pieces: list[Any]) -> None:
+        self.ends = np.array([float(p.t[-1]) for p in pieces])
+        self.sols = [p.sol for p in pieces]
+
+    def __call__(self, ts: np.ndarray) -> np.ndarray:
+        idx = np.minimum(np.searchsorted(self.ends, ts), len(self.sols) - 1)
+        return np.column_stack([self.sols[i](t) for i, t in zip(idx, ts, strict=True)])
+
+
+def _scipy_sweep(freqs: np.ndarray, me_r: float, transient_s: float, n_record: int,
+                 rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Brute-force sweep up with DOP853, facet events and restarts: ``(P, multiplicity)``."""
+    from scipy.integrate import solve_ivp
+
+    from nscontrol.analysis.periodic import period_multiplicity, refined_peak
+
+    beam = two_mode_beam()
+    A = (beam.state_matrix(True), beam.state_matrix(False))
+    D, H = beam.D.ravel(), beam.H
+    x = np.zeros(4)
+    P, mult = np.empty(freqs.size), np.empty(freqs.size, int)
+
+    def leave(direction: int) -> Any:
+        """Terminal event ``Hx = 0`` crossed in ``direction`` (leaving the current mode)."""
+        def facet(t: float, x: np.ndarray) -> float:
+            return float(H @ x)
+
+        facet.terminal = True  # type: ignore[attr-defined]
+        facet.direction = direction  # type: ignore[attr-defined]
+        return facet
+
+    events = (leave(+1), leave(-1))   # in contact (Hx < 0) leave upwards; free, downwards
+    for k, f in enumerate(freqs):
+        w = 2 * np.pi * f
+        amp = me_r * w * w
+        T = 1.0 / f
+        t_tr = np.ceil(transient_s * f - 1e-9) * T
+        t_end = t_tr + n_record * T
+        marks = t_tr + T * np.arange(n_record + 1)
+        t, ys, pts, pieces = 0.0, [], [], []
+        # the starting mode: the side of Hx, or on the facet the sign of H x'
+        hx = float(H @ x)
+        if abs(hx) <= 1e-12 * float(np.abs(H) @ np.abs(x)):
+            hx = float(H @ (A[1] @ x + D * amp * np.sin(w * t)))
+        i = 0 if hx < 0 else 1
+        while t < t_end - 1e-14 * t_end:
+            sol = solve_ivp(lambda s, z, i=i, a=amp, w=w: A[i] @ z + D * (a * np.sin(w * s)),
+                            (t, t_end), x, method="DOP853", rtol=rtol, atol=rtol * 1e-6,
+                            events=events[i], dense_output=True)
+            t1 = float(sol.t[-1])
+            grid = np.linspace(max(t, t_tr), t1, max(2, int((t1 - max(t, t_tr)) / T * 200)))
+            if t1 > t_tr:
+                ys.append(H @ sol.sol(grid))
+                pts += [sol.sol(m) for m in marks if t <= m <= t1]
+            x, t = sol.y[:, -1].copy(), t1
+            pieces.append(sol)
+            if sol.status == 1:   # left the mode through the facet: restart in the other one
+                i = 1 - i
+        mult[k] = period_multiplicity(np.array(pts[-(n_record + 1):]))
+        final = _Pieces(pieces)
+        if mult[k] >= 1:     # refined peak over the last p periods, as ours
+            p = int(mult[k])
+            last = np.linspace(t_end - p * T, t_end, 200 * p + 1)[:-1]
+            P[k] = refined_peak(np.abs(H @ final(last)))
+        else:
+            P[k] = float(np.max(np.abs(np.concatenate(ys))))
+    return P, mult
+
+
+def _against_scipy(quick: bool) -> dict[str, Any]:
+    freqs = np.linspace(10.0, 66.0, 3 if quick else 8)
+    pwa = two_mode_beam().to_pwa()
+    kw = dict(amplitude=Unbalance(ex.ME_R), directions=("up",), transient_time=ex.TRANSIENT_S,
+              n_record=12, executor="serial", progress=False)
+    frequency_sweep(pwa, 2 * np.pi * freqs[:2], **kw)   # warm-up
+    ours, t_ours = _timed(lambda: frequency_sweep(pwa, 2 * np.pi * freqs, **kw)["up"])
+    rtol = 1e-10
+    (P_ref, m_ref), t_ref = _timed(lambda: _scipy_sweep(freqs, ex.ME_R, ex.TRANSIENT_S, 12, rtol))
+    P = response_amplitude(ours)
+    both = (ours.multiplicity == 1) & (m_ref == 1)
+    err = float(np.max(np.abs(P[both] / P_ref[both] - 1))) if np.any(both) else float("nan")
+    return {"scenario": f"ch06 open-loop sweep up, {freqs.size} frequencies 10-66 Hz, 3 s "
+                        f"transient + 12 periods each: ours vs SciPy DOP853 with facet events",
+            "size": int(freqs.size), "ours_steps_per_s": freqs.size / t_ours,
+            "reference": f"scipy solve_ivp DOP853 rtol={rtol:g}, event restarts",
+            "reference_steps_per_s": freqs.size / t_ref, "ratio": t_ref / t_ours,
+            "accuracy": {"ours_seconds": t_ours, "scipy_seconds": t_ref,
+                         "period_T_points_compared": int(np.count_nonzero(both)),
+                         "max_relative_P_difference": err,
+                         "multiplicity_ours": ours.multiplicity.tolist(),
+                         "multiplicity_scipy": m_ref.tolist()},
+            "note": "steps_per_s fields are frequencies per second"}
+
+
+def run(quick: bool = False) -> Iterator[dict[str, Any]]:
+    yield _against_scipy(quick)
+    yield _sweeps(quick)
