@@ -48,10 +48,12 @@ unchanged. Listeners are called for the compiled events too, in time order, once
 returns (they observe, they cannot alter the run).
 
 Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"``,
-``"contact_end"`` (mechanics), ``"stick"``, ``"slip"``, ``"slip_reversal"`` (friction), ``"jump"`` and ``"grazing"`` (linear hybrid systems).
+``"contact_end"`` (mechanics), ``"stick"``, ``"slip"``, ``"slip_reversal"`` (friction),
+``"jump"`` and ``"grazing"`` (linear hybrid systems).
 
 The package: :func:`integrate` here chooses the runner — :mod:`.hybrid_run`,
-:mod:`.linear_mechanics` or :mod:`.nonlinear_mechanics` — which share the options
+:mod:`.linear_mechanics`, :mod:`.frictional_contact` or :mod:`.nonlinear_mechanics` —
+which share the options
 (``_options``), the recording (``_recording``: one sample buffer in front of the
 :class:`~nscontrol.simulate.trajectory.Recorder`), the Zeno history (``_zeno``) and the
 compiled flights with the arrays a run writes into (``_flight``).
@@ -148,13 +150,16 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
     Trajectory
         ``signals``: the system's outputs (hybrid), ``gap`` and ``energy`` (mechanics);
         ``stats["impulses"]`` (mechanics): one row of contact impulses per ``"impact"``
-        event, in the order of ``traj.events_of("impact")``. With ``sensitivity=True``:
+        event, in the order of ``traj.events_of("impact")``. With friction (one planar
+        contact held closed) also ``contact_state`` (1 stick, 2 slip), ``friction`` and
+        ``normal_force`` (the contact forces). With ``sensitivity=True``:
         ``stats["state_transition"]`` and ``stats["saltation_matrices"]`` (one per impact).
 
     Raises
     ------
     ModelError
-        Unsupported system or option.
+        Unsupported system or option; with friction, anything but one planar contact held
+        closed (impacts, several contacts, the normal force reaching zero).
     InadmissibleStateError
         ``x0`` violates a constraint.
     ZenoError
