@@ -135,3 +135,24 @@ def test_lift_off_is_refused_with_the_run_so_far():
         _ed(inclined_block(MU, 0.0), [0.0, 0.0, 1.0, 0.0], 1.0, u=pull)
     traj = err.value.trajectory
     assert abs(traj.t[-1] - np.pi / 6) <= REL * np.pi
+
+
+def test_block_under_a_ramp_force_slips_when_the_force_reaches_mu_m_g():
+    # a horizontal push c t: stuck until c t* = μ m g, then m x'' = c (t - t*), so
+    # x = c (t - t*)³ / 6 (m = 1)
+    c = 2.0
+    push = Exosystem.polynomial([[0.0, 0.0], [c, 0.0]])
+    traj = _ed(inclined_block(MU, 0.0), [0.0, 0.0, 0.0, 0.0], 3.0, u=push, dt=0.1)
+    t_star = MU * G / c
+    (ev,) = traj.events
+    assert ev.kind == "slip" and (ev.mode_from, ev.mode_to) == (0, 1)
+    assert abs(ev.time - t_star) <= REL * t_star
+    after = traj.t > ev.time
+    # an error δ <= REL t* in the slip's start shifts x by c (t - t*)² δ / 2 at most
+    shift = c * 3.0 ** 2 / 2 * REL * t_star
+    np.testing.assert_allclose(traj.x[after, 0], c * (traj.t[after] - t_star) ** 3 / 6,
+                               rtol=REL, atol=shift)
+    # stuck before: the friction balances the push exactly (a few ulps of c t)
+    before = traj.t < ev.time
+    np.testing.assert_allclose(traj.signals["friction"][before], -c * traj.t[before],
+                               rtol=8 * EPS, atol=8 * EPS * c * t_star)
