@@ -12,6 +12,10 @@ Integrates
   linear in the state, reaches zero;
 * :class:`~nscontrol.systems.ImpactingBodies` through its Lagrangian form (state order
   ``[x_a; x_b]`` kept);
+* a linear :class:`~nscontrol.systems.LagrangianSystem` resting on one planar frictional
+  contact (Coulomb friction, the contact closed throughout) — exact: the modes stick,
+  slip forward and slip backward are linear flows, switched where the slip velocity or the
+  friction needed to stick reaches its bound (:mod:`.frictional_contact`);
 * any other :class:`~nscontrol.systems.LagrangianSystem` (``M(q)``, nonlinear forces or gaps)
   with scipy's DOP853 and event location (no persistent contact: an accumulation of impacts
   there is reported as Zeno).
@@ -44,10 +48,12 @@ unchanged. Listeners are called for the compiled events too, in time order, once
 returns (they observe, they cannot alter the run).
 
 Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"``,
-``"contact_end"`` (mechanics), ``"jump"`` and ``"grazing"`` (linear hybrid systems).
+``"contact_end"`` (mechanics), ``"stick"``, ``"slip"``, ``"slip_reversal"`` (friction),
+``"jump"`` and ``"grazing"`` (linear hybrid systems).
 
 The package: :func:`integrate` here chooses the runner — :mod:`.hybrid_run`,
-:mod:`.linear_mechanics` or :mod:`.nonlinear_mechanics` — which share the options
+:mod:`.linear_mechanics`, :mod:`.frictional_contact` or :mod:`.nonlinear_mechanics` —
+which share the options
 (``_options``), the recording (``_recording``: one sample buffer in front of the
 :class:`~nscontrol.simulate.trajectory.Recorder`), the Zeno history (``_zeno``) and the
 compiled flights with the arrays a run writes into (``_flight``).
@@ -70,6 +76,7 @@ from ..callbacks import Listener
 from ..trajectory import Trajectory
 from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
 from ._recording import _guarded, partial_in_caller_order, reorder_listeners, reorder_states
+from .frictional_contact import FrictionalContactRun, check_frictional_system
 from .hybrid_run import HybridRun
 from .linear_mechanics import LinearMechanicsRun, checked_state
 from .nonlinear_mechanics import NonlinearMechanicsRun
@@ -143,13 +150,16 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
     Trajectory
         ``signals``: the system's outputs (hybrid), ``gap`` and ``energy`` (mechanics);
         ``stats["impulses"]`` (mechanics): one row of contact impulses per ``"impact"``
-        event, in the order of ``traj.events_of("impact")``. With ``sensitivity=True``:
+        event, in the order of ``traj.events_of("impact")``. With friction (one planar
+        contact held closed) also ``contact_state`` (1 stick, 2 slip), ``friction`` and
+        ``normal_force`` (the contact forces). With ``sensitivity=True``:
         ``stats["state_transition"]`` and ``stats["saltation_matrices"]`` (one per impact).
 
     Raises
     ------
     ModelError
-        Unsupported system or option.
+        Unsupported system or option; with friction, anything but one planar contact held
+        closed (impacts, several contacts, the normal force reaching zero).
     InadmissibleStateError
         ``x0`` violates a constraint.
     ZenoError
@@ -205,9 +215,14 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
                                            atol=atol, record_every=record_every,
                                            signals=signals, progress=progress)
     if isinstance(system, LagrangianSystem):
-        if system.friction_dim:   # Coulomb friction is not located by this integrator
-            raise ModelError("event_driven: this system has Coulomb friction (friction=...); "
-                             "simulate it with method='moreau_jean' and a step h")
+        if system.friction_dim:   # one planar contact held closed: stick/slip exactly
+            if sensitivity:
+                raise ModelError("sensitivity: not available with Coulomb friction; simulate "
+                                 "with method='moreau_jean' and a step h")
+            check_frictional_system(system, controller, opts.listeners)
+            gain = None if controller is None else _check_gain(system, controller)
+            return _guarded(FrictionalContactRun(system, checked_state(system, x0), t0, tf,
+                                                 _check_input(system, u), opts, gain))
         return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
                                        _check_input(system, u), controller, opts,
                                        bool(sensitivity)))
