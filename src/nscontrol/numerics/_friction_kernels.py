@@ -53,28 +53,36 @@ def csr_matvec_add(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
 
 
 @njit(cache=True)
+def contact_error2(r: np.ndarray, b: int, u: np.ndarray, ub: int, mu: float, dim: int,
+                   x: np.ndarray, p: np.ndarray) -> float:
+    """``‖r_i - P_K(r_i - û_i)‖²`` for one contact: its impulse ``r[b:b+dim]``, its local
+    velocity ``u[ub:ub+dim]`` (De Saxcé's ``û`` adds ``μ|u_T|`` to the normal row); ``x``
+    and ``p`` are work arrays of length ``dim``."""
+    ut = 0.0
+    for k in range(1, dim):
+        ut += u[ub + k] * u[ub + k]
+    x[0] = r[b] - (u[ub] + mu * np.sqrt(ut))
+    for k in range(1, dim):
+        x[k] = r[b + k] - u[ub + k]
+    if dim == 1:
+        p[0] = max(x[0], 0.0)
+    else:
+        cone_projection(x, mu, p)
+    total = 0.0
+    for k in range(dim):
+        e = r[b + k] - p[k]
+        total += e * e
+    return total
+
+
+@njit(cache=True)
 def natural_map_error(u: np.ndarray, r: np.ndarray, mu: np.ndarray, dim: int) -> float:
     """``sqrt(Σ_i ‖r_i - P_K(r_i - û_i)‖²)``: zero exactly at a solution."""
-    m = mu.shape[0]
     x = np.empty(dim)
     p = np.empty(dim)
     total = 0.0
-    for i in range(m):
-        b = i * dim
-        ut = 0.0
-        for k in range(1, dim):
-            ut += u[b + k] * u[b + k]
-        ut = np.sqrt(ut)
-        x[0] = r[b] - (u[b] + mu[i] * ut)
-        for k in range(1, dim):
-            x[k] = r[b + k] - u[b + k]
-        if dim == 1:
-            p[0] = max(x[0], 0.0)
-        else:
-            cone_projection(x, mu[i], p)
-        for k in range(dim):
-            e = r[b + k] - p[k]
-            total += e * e
+    for i in range(mu.shape[0]):
+        total += contact_error2(r, i * dim, u, i * dim, mu[i], dim, x, p)
     return np.sqrt(total)
 
 

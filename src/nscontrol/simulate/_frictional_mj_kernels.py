@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._friction_kernels import cone_projection, local_1d, local_2d, local_3d
+from ..numerics._friction_kernels import contact_error2, local_1d, local_2d, local_3d
 
 
 @njit(cache=True)
@@ -38,23 +38,11 @@ def _step_error(Hp: np.ndarray, Hi: np.ndarray, Hx: np.ndarray, vc: np.ndarray,
         if not active[j]:
             continue
         b = j * dim
-        ut = 0.0
         for k in range(dim):
             u[k] = _row_dot(Hp, Hi, Hx, b + k, vc)
         u[0] += e[j] * un_k[j]
-        for k in range(1, dim):
-            ut += u[k] * u[k]
-        ut = np.sqrt(ut)
-        x[0] = r[b] - (u[0] + mu[j] * ut)
-        for k in range(1, dim):
-            x[k] = r[b + k] - u[k]
-        if dim == 1:
-            p[0] = max(x[0], 0.0)
-        else:
-            cone_projection(x, mu[j], p)
+        err2 += contact_error2(r, b, u, 0, mu[j], dim, x, p)
         for k in range(dim):
-            d = r[b + k] - p[k]
-            err2 += d * d
             rn2 += r[b + k] * r[b + k]
             un2 += u[k] * u[k]
     scale = np.sqrt(max(qnorm2, rn2, un2))
