@@ -14,7 +14,11 @@ With ``θ = ½`` the discrete energy balance is exact: ``E_{k+1} - E_k = r · (u
 ``projection=True`` adds a position correction after each step: ``q`` is replaced by its
 projection on ``{g(q) >= 0}`` in the kinetic metric, ``min ½ (q' - q)ᵀ M (q' - q)``, i.e.
 ``q' = q + M⁻¹ Gᵀ λ`` with ``0 <= λ ⟂ G M⁻¹ Gᵀ λ + g(q) >= 0`` (one LCP by
-:func:`~nscontrol.numerics.lcp.solve_lcp`); the velocity, hence the impulse law, is kept.
+:func:`~nscontrol.numerics.lcp.solve_lcp`). The lift raises the potential energy by ``ΔV``;
+the velocity keeps its direction (the impulse law's outcome) and gives that energy back,
+``v' = v sqrt(1 - ΔV / T)`` with ``T = ½ vᵀ M v`` (``v' = 0`` when ``T <= ΔV``), so the
+projection adds no energy: without this, the lifts add ``m g`` times the penetration at every
+landing and later impacts drift by a step per bounce.
 """
 
 from __future__ import annotations
@@ -149,6 +153,7 @@ def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float, *, h
         "contact_sweeps": run.sweeps, "contact_python_steps": run.python_steps,
         "max_contact_residual": run.max_residual, "projection": bool(projection),
         "projections": run.proj["count"], "projection_energy": run.proj["energy"],
+        "projection_lift_energy": run.proj["lift_energy"],
         "max_penetration_before_projection": run.proj["before"]},
         state_names=system.state_names)
     if "gap" in traj.signals and traj.signals["gap"].size:
@@ -174,7 +179,7 @@ class _Run:
         self.u = u
         self.S = None if u is None else (np.eye(n) if system.actuation is None
                                          else np.asarray(system.actuation, float))
-        self.proj = {"energy": 0.0, "before": 0.0, "count": 0}
+        self.proj = {"energy": 0.0, "lift_energy": 0.0, "before": 0.0, "count": 0}
         self.sweeps, self.python_steps, self.max_residual = 0, 0, 0.0
         diag_forces = all(X is None or np.array_equal(X, np.diag(np.diag(X)))
                           for X in (self.c.K, self.c.D))
@@ -308,7 +313,7 @@ class _Run:
         self.work[1] += prod.sum() - prod[0::dim].sum()
         gap_new = s.gaps(q_new)
         if self.projection and np.min(gap_new, initial=0.0) < 0.0:
-            q_new = _project(s, c, q_new, v_new, gap_new, self.proj)
+            q_new, v_new = _project(s, c, q_new, v_new, gap_new, self.proj)
         self.r = r_full
         return (q_new[None], v_new[None], r_full[None], states[None], self.work[None].copy(),
                 np.array([residual]))
@@ -333,9 +338,10 @@ def _solve(fk: Any, W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
 
 
 def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: FloatArray,
-             proj: dict[str, Any]) -> FloatArray:
+             proj: dict[str, Any]) -> tuple[FloatArray, FloatArray]:
     """``q`` projected on ``{G q + g0 >= 0}`` in the metric of ``M`` (one LCP per round;
-    a contact opened by none of the rounds' corrections is never touched)."""
+    a contact opened by none of the rounds' corrections is never touched), and ``v`` scaled
+    to give back the potential energy the lift cost (the module docstring)."""
     from ..numerics.lcp import solve_lcp
 
     proj["before"] = max(proj["before"], float(-np.min(gap)))
@@ -357,8 +363,14 @@ def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: Float
         if more.size == 0:
             break
         chosen = np.union1d(chosen, more)
+    lift = float(system.energy(np.concatenate([q, v]))) - e0    # ΔV: v is unchanged so far
+    diag = system.mass_diagonal
+    kinetic = 0.5 * float(v @ (diag * v if diag is not None else system.mass_matrix(q) @ v))
+    if lift > 0.0 and kinetic > 0.0:
+        v = v * np.sqrt(max(0.0, 1.0 - lift / kinetic))
+    proj["lift_energy"] += lift
     proj["energy"] += float(system.energy(np.concatenate([q, v]))) - e0
-    return q
+    return q, v
 
 
 def _record(rec: Recorder, system: Any, c: _Contacts, times: FloatArray, q: FloatArray,

@@ -165,8 +165,11 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         ``q_k + θ h v_k`` (``O(h²)`` from ``q_{k+θ}``: second order for ``θ = ½``).
     projection : bool
         After each step, project ``q`` on the admissible set ``{g(q) >= 0}`` in the kinetic
-        metric (one LCP; the velocity and the impulse law are kept): no penetration beyond
-        round-off. Stats ``projection_energy`` (the energy the corrections added) and
+        metric (one LCP; the velocity keeps its direction, so the impulse law's outcome is
+        kept, and gives back the potential energy the lift cost): no penetration beyond
+        round-off, no energy added. Stats ``projection_energy`` (the net energy the
+        corrections added: round-off unless the kinetic energy was smaller than the lift's),
+        ``projection_lift_energy`` (what the lifts alone would have added) and
         ``max_penetration_before_projection``; signal ``projection_energy``.
     contact_tol : float
         Tolerance of the relative natural-map error of each step's frictional contact
