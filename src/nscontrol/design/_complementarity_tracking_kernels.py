@@ -117,61 +117,59 @@ def _task_model(x, p, q, dq, Mq, Cq, gq, J):
     t1, t2, w1, w2 = x[0], x[1], x[2], x[3]
     s1, c1, s2, c2 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2)
     s12, c12 = math.sin(t1 + t2), math.cos(t1 + t2)
-    J[0, 0], J[0, 1], J[1, 0], J[1, 1] = l1 * c1 + l2 * c12, l2 * c12, -l1 * s1 - l2 * s12, \
-        -l2 * s12
-    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
-    Ji = np.empty((2, 2))
-    Ji[0, 0], Ji[0, 1], Ji[1, 0], Ji[1, 1] = J[1, 1] / det, -J[0, 1] / det, -J[1, 0] / det, \
-        J[0, 0] / det
+    # 2x2 matrices as row-major 4-tuples (the Python closed form's order; no allocation)
+    Jt = (l1 * c1 + l2 * c12, l2 * c12, -l1 * s1 - l2 * s12, -l2 * s12)
+    det = Jt[0] * Jt[3] - Jt[1] * Jt[2]
+    Ji = (Jt[3] / det, -Jt[1] / det, -Jt[2] / det, Jt[0] / det)
     m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
     m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + I2
-    M = np.empty((2, 2))
-    M[0, 0], M[0, 1], M[1, 0], M[1, 1] = m11, m12, m12, m2 * l2**2 / 4 + I2
+    M = (m11, m12, m12, m2 * l2**2 / 4 + I2)
     hh = m2 * l1 * l2 / 2 * s2
-    C = np.empty((2, 2))
-    C[0, 0], C[0, 1], C[1, 0], C[1, 1] = -hh * w2, -hh * (w1 + w2), hh * w1, 0.0
+    C = (-hh * w2, -hh * (w1 + w2), hh * w1, 0.0)
     w12 = w1 + w2
-    Jd = np.empty((2, 2))
-    Jd[0, 0], Jd[0, 1] = -l1 * s1 * w1 - l2 * s12 * w12, -l2 * s12 * w12
-    Jd[1, 0], Jd[1, 1] = -l1 * c1 * w1 - l2 * c12 * w12, -l2 * c12 * w12
-    JiT = Ji.T.copy()
+    Jd = (-l1 * s1 * w1 - l2 * s12 * w12, -l2 * s12 * w12,
+          -l1 * c1 * w1 - l2 * c12 * w12, -l2 * c12 * w12)
+    JiT = (Ji[0], Ji[2], Ji[1], Ji[3])
     Mq2 = _mm(_mm(JiT, M), Ji)
-    Cq[:, :] = _mm(_mm(JiT, C - _mm(_mm(M, Ji), Jd)), Ji)
+    MJiJd = _mm(_mm(M, Ji), Jd)
+    Cq2 = _mm(_mm(JiT, (C[0] - MJiJd[0], C[1] - MJiJd[1], C[2] - MJiJd[2],
+                        C[3] - MJiJd[3])), Ji)
     G1 = grav / 2 * (l1 * (m1 + 2 * m2) * c1 + m2 * l2 * c12)
     G2 = m2 * grav * l2 / 2 * c12
-    gq[0] = JiT[0, 0] * G1 + JiT[0, 1] * G2
-    gq[1] = JiT[1, 0] * G1 + JiT[1, 1] * G2
-    off = 0.5 * (Mq2[0, 1] + Mq2[1, 0])
-    Mq[0, 0], Mq[0, 1], Mq[1, 0], Mq[1, 1] = Mq2[0, 0], off, off, Mq2[1, 1]
-    q[0], q[1] = -J[1, 0], J[0, 0]
-    dq[0] = J[0, 0] * w1 + J[0, 1] * w2
-    dq[1] = J[1, 0] * w1 + J[1, 1] * w2
+    gq[0] = JiT[0] * G1 + JiT[1] * G2
+    gq[1] = JiT[2] * G1 + JiT[3] * G2
+    off = 0.5 * (Mq2[1] + Mq2[2])
+    Mq[0, 0], Mq[0, 1], Mq[1, 0], Mq[1, 1] = Mq2[0], off, off, Mq2[3]
+    Cq[0, 0], Cq[0, 1], Cq[1, 0], Cq[1, 1] = Cq2[0], Cq2[1], Cq2[2], Cq2[3]
+    J[0, 0], J[0, 1], J[1, 0], J[1, 1] = Jt[0], Jt[1], Jt[2], Jt[3]
+    q[0], q[1] = -Jt[2], Jt[0]
+    dq[0] = Jt[0] * w1 + Jt[1] * w2
+    dq[1] = Jt[2] * w1 + Jt[3] * w2
 
 
 @njit(cache=True)
 def _mm(A, B):
-    """2x2 product in the Python code's order of operations."""
-    out = np.empty((2, 2))
-    out[0, 0] = A[0, 0] * B[0, 0] + A[0, 1] * B[1, 0]
-    out[0, 1] = A[0, 0] * B[0, 1] + A[0, 1] * B[1, 1]
-    out[1, 0] = A[1, 0] * B[0, 0] + A[1, 1] * B[1, 0]
-    out[1, 1] = A[1, 0] * B[0, 1] + A[1, 1] * B[1, 1]
-    return out
+    """Product of two 2x2 matrices stored row-major as 4-tuples."""
+    return (A[0] * B[0] + A[1] * B[2], A[0] * B[1] + A[1] * B[3],
+            A[2] * B[0] + A[3] * B[2], A[2] * B[1] + A[3] * B[3])
 
 
 @njit(cache=True)
 def _lyapunov(Mq, q, dq, qd, dqd, p):
-    """``(V, V1)`` with ``V1 = ½ sᵀ M s``, ``V = V1 + γ1 γ2 |q̃|²``."""
+    """``(V, V1)`` with ``V1 = ½ sᵀ M s``, ``V = V1 + γ1 γ2 |q̃|²`` (scalar loops: no
+    temporaries at every step)."""
     n = q.size
     g1, g2 = p[P_G1], p[P_G2]
-    e = q - qd
-    s = dq - dqd + g2 * e
-    V1 = 0.0
+    V1, ee = 0.0, 0.0
     for i in range(n):
+        ei = q[i] - qd[i]
+        si = dq[i] - dqd[i] + g2 * ei
+        ee += ei * ei
         for j in range(n):
-            V1 += s[i] * Mq[i, j] * s[j]
+            sj = dq[j] - dqd[j] + g2 * (q[j] - qd[j])
+            V1 += si * Mq[i, j] * sj
     V1 *= 0.5
-    return V1 + g1 * g2 * np.dot(e, e), V1
+    return V1 + g1 * g2 * ee, V1
 
 
 @njit(cache=True)
@@ -277,12 +275,12 @@ def _reference(t, xb, p, qd, dqd, ddqd, q_star):
         return True, 0.0
     t_d = xb[X_T_DETACH]                  # constrained
     qd[0] = dqd[0] = ddqd[0] = 0.0
-    if n > 1:
-        pn, vn, an = np.empty(n), np.empty(n), np.empty(n)
-        _nominal(t_d, p, pn, vn, an)
-        for i in range(1, n):
-            qd[i], dqd[i], ddqd[i] = _hermite(t, xb[X_T_CONSTRAINED], t_d, xb[X_Q2STAR], 0.0,
-                                              pn[i], vn[i])
+    if n > 1:             # the circle at t_d (q2 = x): where the slide must end
+        xc, r, P = p[P_TASK0], p[P_TASK0 + 1], p[P_TASK0 + 2]
+        wt = 2 * math.pi / P
+        pn, vn = xc + r * math.cos(wt * t_d), -r * wt * math.sin(wt * t_d)
+        qd[1], dqd[1], ddqd[1] = _hermite(t, xb[X_T_CONSTRAINED], t_d, xb[X_Q2STAR], 0.0,
+                                          pn, vn)
     return False, p[P_LRATE] * max(t_d - t, 0.0)
 
 
@@ -359,23 +357,26 @@ def tracking_output(t, xb, y, x, xhat, lam, p):
     and writes this step's log row into it."""
     n = int(p[P_N])
     lam_raw = lam[0] if lam.size else 0.0
-    q, dq, gq = np.empty(n), np.empty(n), np.empty(n)
-    Mq, Cq, J = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    # one workspace for the step's vectors and matrices (views: no allocation each)
+    w = np.empty(8 * n + 3 * n * n)
+    q, dq, gq, qd = w[:n], w[n:2 * n], w[2 * n:3 * n], w[3 * n:4 * n]
+    dqd, ddqd, qs, tau = w[4 * n:5 * n], w[5 * n:6 * n], w[6 * n:7 * n], w[7 * n:8 * n]
+    mats = w[8 * n:].reshape((3, n, n))
+    Mq, Cq, J = mats[0], mats[1], mats[2]
     _task_model(x, p, q, dq, Mq, Cq, gq, J)
     lam_det, t_seen = _detected(xb, p, lam_raw)
     _advance(t, xb, p, q, dq, Mq, lam_det, t_seen)
-    qd, dqd, ddqd, qs = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     has_star, lam_d = _reference(t, xb, p, qd, dqd, ddqd, qs)
     sc, g1, g2 = p[P_SCALE], p[P_G1], p[P_G2]
-    dqr = dqd - g2 * (q - qd)
-    ddqr = ddqd - g2 * (dq - dqd)
-    s_bar = dq - dqd + g2 * (q - qs) if has_star else dq - dqr
-    tau = np.empty(n)
     for i in range(n):
         acc = 0.0
         for j in range(n):
-            acc += sc * Mq[i, j] * ddqr[j] + sc * Cq[i, j] * dqr[j]
-        tau[i] = acc + sc * gq[i] - g1 * s_bar[i]
+            dqr_j = dqd[j] - g2 * (q[j] - qd[j])
+            ddqr_j = ddqd[j] - g2 * (dq[j] - dqd[j])
+            acc += sc * Mq[i, j] * ddqr_j + sc * Cq[i, j] * dqr_j
+        s_bar = dq[i] - dqd[i] + g2 * (q[i] - qs[i]) if has_star \
+            else dq[i] - (dqd[i] - g2 * (q[i] - qd[i]))
+        tau[i] = acc + sc * gq[i] - g1 * s_bar
     lam_hat = min(lam_raw, p[P_LSAT])
     if xb[X_PHASE] == CONSTRAINED:
         tau[0] += -lam_d + p[P_FFS] * p[P_KF] * (lam_hat - lam_d)

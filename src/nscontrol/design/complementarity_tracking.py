@@ -575,7 +575,8 @@ class SwitchingTrackingController(StaticLaw):
                 and self.force_scale == 1.0 and self.force_bias == 0.0
                 and self.force_noise == 0.0 and type(self.model) in (TwoLinkArm, OneDofMass)
                 and type(self.task) in (CircleTask, HalfSineTask)
-                and (self.n == 2) == isinstance(self.model, TwoLinkArm))
+                and (self.n == 2) == isinstance(self.model, TwoLinkArm)
+                and (self.n == 2) == isinstance(self.task, CircleTask))
 
     def compiled(self) -> Any:
         """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`) for
