@@ -110,3 +110,34 @@ def test_signals_read_back_from_a_compiled_run_are_the_python_log():
         scale = max(1.0, np.nanmax(np.abs(rows)))
         assert np.array_equal(np.isnan(back[key]), np.isnan(rows)), key
         assert np.nanmax(np.abs(back[key] - rows)) <= bound * scale, key
+
+
+def _same_cycles(python, compiled, bound):
+    assert len(python) == len(compiled)
+    for a, b in zip(python, compiled, strict=True):
+        assert a.index == b.index
+        for name in ("tau0", "V_tau0", "V1_tau0", "depth", "q10", "t_first_impact",
+                     "t_constrained", "t_detach", "t_star", "u_star"):
+            x, y = getattr(a, name), getattr(b, name)
+            assert (np.isnan(x) and np.isnan(y)) or abs(x - y) <= bound * max(1.0, abs(x)), \
+                (a.index, name, x, y)
+        assert a.q2_star.shape == b.q2_star.shape
+        assert np.abs(a.q2_star - b.q2_star).max(initial=0.0) <= bound
+
+
+@pytest.mark.parametrize("arm", [False, True])
+def test_cycles_read_back_from_a_compiled_run_are_the_python_cycles(arm):
+    if arm:
+        model = TwoLinkArm()
+        ctrl = SwitchingTrackingController(model, CircleTask(period=10.0),
+                                           PBCGains(8.0, 7.0, 0.5), TransitionDesign(),
+                                           ContactPhaseDesign(lam_rate=1.5))
+        x0, T = np.array([0.9, -1.6, 0.0, 0.0]), 10.5
+    else:
+        model = OneDofMass()
+        ctrl = SwitchingTrackingController(model, HalfSineTask(omega=2 * np.pi / 8),
+                                           PBCGains(5.0, 5.0, 0.5), TransitionDesign(),
+                                           ContactPhaseDesign(lam_rate=1.5))
+        x0, T = np.array([0.05, 0.0]), 9.0
+    ref, fast, log = _both_paths(model, ctrl, x0, T, 1e-3)
+    _same_cycles(ctrl.cycles, ctrl.cycles_of(fast), (ref.t.size - 1) * U * FACTOR)

@@ -951,3 +951,52 @@ class SwitchingTrackingController(StaticLaw):
                 "lam_hat": rows[:, kern.X_LAM_HAT].copy(), "depth": depth,
                 "q_task": task[:, :n], "dq_task": task[:, n:],
                 "qd": rows[:, kern.X_QD:kern.X_QD + n].copy()}
+
+    def cycles_of(self, traj: Any) -> list[_Cycle]:
+        """The per-cycle record (what ``self.cycles`` holds after a Python run) read back
+        from a closed-loop run on the compiled path.
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run (its ``"xc"`` signal, recorded at every step).
+        """
+        from . import _complementarity_tracking_kernels as kern
+
+        self._signals_from_block_state(traj)          # validates the signal's shape
+        rows = np.asarray(traj.signals["xc"])[1:]
+        cyc = rows[:, kern.X_CYCLE]
+        out: list[_Cycle] = []
+        for c in range(int(cyc.max()) + 1 if cyc.size else 1):
+            lo, hi = np.searchsorted(cyc, c, "left"), np.searchsorted(cyc, c, "right")
+            out.append(self._cycle_of_rows(c, rows, lo, hi))
+        return out
+
+    def _cycle_of_rows(self, c: int, rows: FloatArray, lo: int, hi: int) -> _Cycle:
+        """Cycle ``c`` from its rows ``lo:hi`` (phases only move forward in a cycle, and a
+        take-off leaves from the impacts or constrained phase: the last row holds every
+        field fixed so far; the next cycle's first row, the take-off)."""
+        from . import _complementarity_tracking_kernels as kern
+
+        cycle = _Cycle(c)
+        if hi <= lo:
+            return cycle
+        last = rows[hi - 1]
+        phase = last[kern.X_PHASE]
+        if phase >= kern.APPROACH:
+            cycle.tau0, cycle.V_tau0, cycle.V1_tau0 = (float(last[kern.X_TAU0]),
+                                                       float(last[kern.X_V_TAU0]),
+                                                       float(last[kern.X_V1_TAU0]))
+            cycle.depth, cycle.q10 = float(last[kern.X_DEPTH]), float(last[kern.X_Q10])
+            cycle.q2_star = np.array([last[kern.X_Q2STAR]])[:self.n - 1]
+            cycle.t_detach = float(last[kern.X_T_DETACH])
+            cycle.t_star, cycle.u_star = float(last[kern.X_T_STAR]), float(last[kern.X_U_STAR])
+        if phase >= kern.IMPACTS:
+            cycle.t_first_impact = float(last[kern.X_T_IMPACT])
+        if phase >= kern.CONSTRAINED:
+            cycle.t_constrained = float(last[kern.X_T_CONSTRAINED])
+        if hi < rows.shape[0]:                   # taken off: the next cycle's first row
+            cycle.t_detach = float(rows[hi, kern.X_LIFTOFF])
+        if cycle.t_first_impact == kern.NEVER:
+            cycle.t_first_impact = -math.inf
+        return cycle
