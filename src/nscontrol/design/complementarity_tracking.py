@@ -585,7 +585,7 @@ class SwitchingTrackingController(StaticLaw):
         plant or task): the loop then runs the Python methods.
 
         The compiled form keeps the phase logic in the block state (layout in
-        :mod:`nscontrol.design._complementarity_tracking_kernels`), which the loop logs at
+        ``nscontrol.design._complementarity_tracking_kernels``), which the loop logs at
         every step start; this object's own log (:meth:`signals`) stays empty on that path.
         """
         if not self._compilable():
@@ -968,7 +968,7 @@ class SwitchingTrackingController(StaticLaw):
         cyc = rows[:, kern.X_CYCLE]
         out: list[_Cycle] = []
         for c in range(int(cyc.max()) + 1 if cyc.size else 1):
-            lo, hi = np.searchsorted(cyc, c, "left"), np.searchsorted(cyc, c, "right")
+            lo, hi = int(np.searchsorted(cyc, c, "left")), int(np.searchsorted(cyc, c, "right"))
             out.append(self._cycle_of_rows(c, rows, lo, hi))
         return out
 
