@@ -141,3 +141,22 @@ def test_cycles_read_back_from_a_compiled_run_are_the_python_cycles(arm):
         x0, T = np.array([0.05, 0.0]), 9.0
     ref, fast, log = _both_paths(model, ctrl, x0, T, 1e-3)
     _same_cycles(ctrl.cycles, ctrl.cycles_of(fast), (ref.t.size - 1) * U * FACTOR)
+
+
+def test_load_run_gives_the_python_run_state():
+    # after load_run, the object answers as after the Python run: log, cycles, and the
+    # Lyapunov function at the final state (which reads the phase state)
+    model, task = OneDofMass(), HalfSineTask(omega=2 * np.pi / 8)
+    ctrl = SwitchingTrackingController(model, task, PBCGains(5.0, 5.0, 0.5),
+                                       TransitionDesign(), ContactPhaseDesign(lam_rate=1.5))
+    ref, fast, log = _both_paths(model, ctrl, np.array([0.05, 0.0]), 9.0, 1e-3)
+    V_python = ctrl.lyapunov(float(ref.t[-1]), ref.x[-1])
+    cycles = ctrl.cycles
+    ctrl.load_run(fast)
+    bound = (ref.t.size - 1) * U * FACTOR
+    assert np.array_equal(ctrl.signals()["phase"], log["phase"])
+    _same_cycles(cycles, ctrl.cycles, bound)
+    V_loaded = ctrl.lyapunov(float(fast.t[-1]), fast.x[-1, :2])
+    assert np.allclose(V_loaded, V_python, rtol=bound, atol=0.0)
+    ctrl.reset_run()
+    assert ctrl.signals() == {}

@@ -672,6 +672,7 @@ class SwitchingTrackingController(StaticLaw):
         self.liftoff_at = -math.inf
         self.cycles: list[_Cycle] = [_Cycle(0)]
         self._log: list[tuple] = []
+        self._loaded: dict[str, FloatArray] | None = None     # a compiled run's (load_run)
         self._t_prev = -math.inf
         # (step start, impulse over h) of the last detection_delay + 1 steps: the phase
         # logic reads the oldest one
@@ -920,6 +921,8 @@ class SwitchingTrackingController(StaticLaw):
         n = self.n
         if traj is not None and self.n_states and "xc" in traj.signals:
             return self._signals_from_block_state(traj)
+        if self._loaded is not None:
+            return self._loaded
         if not self._log:
             return {}
         a = np.array(self._log, dtype=float)
@@ -1000,3 +1003,28 @@ class SwitchingTrackingController(StaticLaw):
         if cycle.t_first_impact == kern.NEVER:
             cycle.t_first_impact = -math.inf
         return cycle
+
+    def load_run(self, traj: Any) -> None:
+        """Make this object's run state that of a closed-loop run on the compiled path, as
+        if the run had called the Python methods: :meth:`signals` (without argument) gives
+        its log, ``cycles`` its per-cycle record, and the phase, cycle and take-off time
+        are those after its last step start (what :meth:`lyapunov` reads).
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run (its ``"xc"`` signal, recorded at every step).
+        """
+        from . import _complementarity_tracking_kernels as kern
+
+        signals = self._signals_from_block_state(traj)
+        self.reset_run()
+        self.cycles = self.cycles_of(traj)
+        self._loaded = signals
+        if signals["t"].size:
+            last = np.asarray(traj.signals["xc"])[-1]
+            self.phase, self.cycle = Phase(int(last[kern.X_PHASE])), int(last[kern.X_CYCLE])
+            self.contact_steps = int(last[kern.X_CONTACT])
+            lift = float(last[kern.X_LIFTOFF])
+            self.liftoff_at = -math.inf if lift == kern.NEVER else lift
+            self._t_prev = float(last[kern.X_TPREV])

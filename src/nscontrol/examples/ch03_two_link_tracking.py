@@ -107,11 +107,22 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
     plant = model.system(restitution)
     if ground_offset != 0.0:
         plant = _ground_moved(plant, ground_offset)
-    # the controller as the integrator's own step controller (its reset at impacts is
-    # trivial, so the closed-loop block machinery is not needed): the fast path
-    traj = simulate(plant, x0, (0.0, T), method="moreau_jean", h=h,
-                    theta=theta, controller=controller, signals=("impulse", "gap"),
-                    progress=False)
+    if controller.compiled() is not None and ground_offset == 0.0:
+        # the controller's compiled form in the compiled Moreau–Jean loop; its log and
+        # cycles are read back from the block state the run recorded
+        from ..simulate.closed_loop import closed_loop
+
+        traj = simulate(closed_loop(plant, controller), x0, (0.0, T), method="moreau_jean",
+                        h=h, theta=theta, signals=("impulse", "gap"), progress=False)
+        controller.load_run(traj)
+        traj = replace(traj, signals={k: v for k, v in traj.signals.items()
+                                      if k not in ("xc", "u")})
+    else:
+        # the controller as the integrator's own step controller (its reset at impacts is
+        # trivial, so the closed-loop block machinery is not needed)
+        traj = simulate(plant, x0, (0.0, T), method="moreau_jean", h=h,
+                        theta=theta, controller=controller, signals=("impulse", "gap"),
+                        progress=False)
     log = controller.signals()
     # the log holds one row per step start; the final sample gets its own evaluation
     n = model.n_dof
