@@ -10,8 +10,9 @@
 2. ``two-link`` (no reference): the 30 s, three-cycle run of the arm at h = 1e-3 (1e-4 unless
    ``quick``: 300 000 steps), our steps/s; the Siconos Python bindings would need a
    Python-side ``LagrangianDS`` with plugins for M(q), forces and Jacobians, not done.
-   This is the example's run: the controller's compiled form in the compiled Moreau–Jean
-   loop (``path`` in ``accuracy``); record 4 times the same loop against the Python path.
+   This is the example's default run, on Moreau–Jean's Python path (``path`` in
+   ``accuracy``); record 4 runs the controller's compiled form
+   (``two_link_tracking(..., compiled=True)`` does the same).
 3. ``two-link M(q), compiled``: the arm's compiled model (``TwoLinkArm().system()`` carries a
    ``CompiledModel``) under a sampled joint PD written as a compiled block, 30 s at
    h = 1e-4 (300 000 steps, impacts on the ground), against the same loop on the Python path

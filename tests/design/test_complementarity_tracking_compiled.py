@@ -160,3 +160,19 @@ def test_load_run_gives_the_python_run_state():
     assert np.allclose(V_loaded, V_python, rtol=bound, atol=0.0)
     ctrl.reset_run()
     assert ctrl.signals() == {}
+
+
+def test_example_runs_compiled_on_request_with_the_python_signals():
+    from nscontrol.examples.ch03_two_link_tracking import two_link_tracking
+
+    slow = two_link_tracking(cycles=1, h=1e-3)
+    fast = two_link_tracking(cycles=1, h=1e-3, compiled=True)
+    assert slow.traj.stats["path"] == "python"
+    assert fast.traj.stats["path"] == "compiled_model"
+    bound = (slow.traj.t.size - 1) * U * FACTOR
+    assert np.abs(fast.traj.x - slow.traj.x).max() <= bound
+    assert set(fast.traj.signals) == set(slow.traj.signals)
+    for key in ("phase", "cycle"):
+        assert np.array_equal(fast.traj.signals[key], slow.traj.signals[key])
+    assert np.abs(fast.traj.signals["V"] - slow.traj.signals["V"]).max() \
+        <= bound * np.abs(slow.traj.signals["V"]).max()
