@@ -10,13 +10,22 @@
 2. ``two-link`` (no reference): the 30 s, three-cycle run of the arm at h = 1e-3 (1e-4 unless
    ``quick``: 300 000 steps), our steps/s; the Siconos Python bindings would need a
    Python-side ``LagrangianDS`` with plugins for M(q), forces and Jacobians, not done.
-   The switching controller has no compiled form yet: both runs take Moreau–Jean's Python
-   path (``path`` in ``accuracy``).
+   This is the example's default run, on Moreau–Jean's Python path (``path`` in
+   ``accuracy``); record 4 runs the controller's compiled form
+   (``two_link_tracking(..., compiled=True)`` does the same).
 3. ``two-link M(q), compiled``: the arm's compiled model (``TwoLinkArm().system()`` carries a
    ``CompiledModel``) under a sampled joint PD written as a compiled block, 30 s at
    h = 1e-4 (300 000 steps, impacts on the ground), against the same loop on the Python path
    (``closed_loop(..., compiled=False)``, a 3 s run) in the same process: what the compiled
    Moreau–Jean loop does for M(q) once a controller has a compiled form.
+
+4. ``two-link, compiled tracking controller``: the run of 2. (30 s, h = 1e-4) with the
+   switching controller's compiled form in ``closed_loop`` (the compiled Moreau–Jean loop
+   with the arm's compiled model), against the same loop on the Python path
+   (``compiled=False``, a 3 s run) in the same process; ``accuracy``: the largest state
+   difference over those 3 s and the cycles completed.
+5. ``1-DOF, compiled tracking controller``: scenario 1 with the compiled form; ``ratio``:
+   our steps/s over Siconos' (measured in 1.), when Siconos is there.
 
 Run: ``nscontrol bench ch03 --json``.
 """
@@ -54,6 +63,7 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
         "size": steps, "ours_steps_per_s": rate, "reference": None,
         "reference_steps_per_s": None, "ratio": None,
         "accuracy": {"impacts_ours": len(impacts), "first_impact_ours": impacts[0]}}
+    sic_rate = None
     have, why = siconos_available()
     if not have:
         record["note"] = why
@@ -61,7 +71,7 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
         payload = {"h": H, "T": 8.0, "e": 0.7, "q0": 0.05, "A": 0.1, "omega": OMEGA,
                    "g1": 5.0, "g2": 5.0, "Kf": 0.5, "g": 9.81, "sample_every": 1}
         sic = run_siconos("ch03_one_dof.py", payload)[-1]
-        sic_rate = sic["steps"] / sic["seconds"]
+        sic_rate = float(sic["steps"] / sic["seconds"])
         q_sic = np.array(sic["q"])
         first = int(round(impacts[0] / H))
         n = min(first, q_sic.size, ours.traj.t.size)
@@ -89,6 +99,88 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
                                        if math.isfinite(c.t_constrained)]),
                         "path": arm.traj.stats["path"]}}
     yield _compiled_arm(quick)
+    yield _compiled_tracking(quick)
+    yield _compiled_one_dof(sic_rate)
+
+
+def _tracking_loop(arm: bool, compiled: bool) -> tuple[Any, Any, Any]:
+    """The chapter's switching controller on the arm (the ``siconos-current`` set-up) or
+    on the 1-DOF mass, as a ``closed_loop`` block; returns ``(loop, x0, controller)``."""
+    import nscontrol as nsc
+    from nscontrol.design.complementarity_tracking import (
+        CircleTask,
+        ContactPhaseDesign,
+        HalfSineTask,
+        PBCGains,
+        SwitchingTrackingController,
+        TransitionDesign,
+    )
+    from nscontrol.systems.two_link import OneDofMass, TwoLinkArm
+
+    if arm:
+        model: Any = TwoLinkArm()
+        ctrl = SwitchingTrackingController(model, CircleTask(period=10.0),
+                                           PBCGains(8.0, 7.0, 0.5), TransitionDesign(),
+                                           ContactPhaseDesign(lam_rate=1.5))
+        x0 = np.array([0.9, -1.6, 0.0, 0.0])
+    else:
+        model = OneDofMass()
+        ctrl = SwitchingTrackingController(model, HalfSineTask(omega=OMEGA),
+                                           PBCGains(5.0, 5.0, 0.5), TransitionDesign(),
+                                           ContactPhaseDesign(lam_rate=1.5))
+        x0 = np.array([0.05, 0.0])
+    return nsc.closed_loop(model.system(0.7), ctrl, compiled=compiled), x0, ctrl
+
+
+def _compiled_tracking(quick: bool) -> dict[str, Any]:
+    import nscontrol as nsc
+
+    h, T, T_py = (1e-3, 30.0, 3.0) if quick else (1e-4, 30.0, 3.0)
+
+    def run_loop(compiled: bool, T_run: float) -> tuple[Any, Any]:
+        loop, x0, ctrl = _tracking_loop(True, compiled)
+        return nsc.simulate(loop, x0, (0.0, T_run), method="moreau_jean", h=h, theta=0.5,
+                            progress=False), ctrl
+    run_loop(True, 0.01)                                     # warm-up
+    start = time.perf_counter()
+    fast, ctrl = run_loop(True, T)
+    seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    slow, _ = run_loop(False, T_py)
+    py_seconds = time.perf_counter() - start
+    steps, py_steps = fast.stats["steps"], slow.stats["steps"]
+    k = py_steps + 1
+    log = ctrl.signals(fast)
+    return {"scenario": f"ch03 two-link arm, compiled tracking controller, {T:g} s, "
+                        f"h = {h:g}, against the Python path", "size": steps,
+            "ours_steps_per_s": steps / seconds, "ours_seconds": seconds,
+            "reference": "the same loop on Moreau-Jean's Python path",
+            "reference_steps_per_s": py_steps / py_seconds,
+            "ratio": (steps / seconds) / (py_steps / py_seconds),
+            "accuracy": {"path": fast.stats["path"],
+                         "cycles": len([c for c in ctrl.cycles_of(fast)
+                                        if math.isfinite(c.t_constrained)]),
+                         "take_offs": int(log["cycle"].max()),
+                         "max_x_difference_first_3s": float(np.abs(fast.x[:k]
+                                                                   - slow.x[:k]).max())}}
+
+
+def _compiled_one_dof(sic_rate: float | None) -> dict[str, Any]:
+    import nscontrol as nsc
+
+    def run_loop() -> Any:
+        loop, x0, _ = _tracking_loop(False, True)
+        return nsc.simulate(loop, x0, (0.0, 8.0), method="moreau_jean", h=H, theta=0.5,
+                            progress=False)
+    seconds, traj = _timed(run_loop)
+    steps = traj.stats["steps"]
+    rate = steps / seconds
+    return {"scenario": f"ch03 1-DOF tracking, compiled controller, one 8 s cycle, e = 0.7, "
+                        f"h = {H:g}", "size": steps, "ours_steps_per_s": rate,
+            "reference": None if sic_rate is None else "Siconos (record 1)",
+            "reference_steps_per_s": sic_rate,
+            "ratio": None if sic_rate is None else rate / sic_rate,
+            "accuracy": {"path": traj.stats["path"]}}
 
 
 def _compiled_arm(quick: bool) -> dict[str, Any]:

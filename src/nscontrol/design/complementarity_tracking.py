@@ -509,8 +509,8 @@ class SwitchingTrackingController(StaticLaw):
     --------
     >>> from nscontrol.systems.two_link import OneDofMass
     >>> ctrl = SwitchingTrackingController(OneDofMass(), HalfSineTask(), PBCGains(5.0, 5.0))
-    >>> ctrl.n_states, ctrl.period, ctrl.n_outputs
-    (0, None, 1)
+    >>> ctrl.period, ctrl.n_outputs, ctrl.compiled() is not None
+    (None, 1, True)
     """
 
     def __init__(self, model: Any, task: Any, gains: PBCGains = PBCGains(),
@@ -550,6 +550,86 @@ class SwitchingTrackingController(StaticLaw):
     def n_outputs(self) -> int:
         """One torque per joint."""
         return self.n
+
+    @property
+    def n_states(self) -> int:  # type: ignore[override]  # StaticLaw's is a constant 0
+        """Length of the block state: the compiled form's phase logic when it has one
+        (:meth:`compiled`; the Python methods carry it unchanged), else 0."""
+        from ._complementarity_tracking_kernels import state_size
+
+        return state_size(self.detection_delay) if self._compilable() else 0
+
+    @property
+    def x0(self) -> FloatArray:
+        """The block state before a run (see :attr:`n_states`)."""
+        from ._complementarity_tracking_kernels import initial_state
+
+        return initial_state(self.detection_delay) if self._compilable() else np.zeros(0)
+
+    def _compilable(self) -> bool:
+        """The compiled form covers the designed switching with exact measurements on the
+        chapter's two plants and tasks; noise and a force-sensor model stay in Python."""
+        from ..systems.two_link import OneDofMass, TwoLinkArm
+
+        return (self.switching == "designed" and self.position_noise == 0.0
+                and self.force_scale == 1.0 and self.force_bias == 0.0
+                and self.force_noise == 0.0 and type(self.model) in (TwoLinkArm, OneDofMass)
+                and type(self.task) in (CircleTask, HalfSineTask)
+                and (self.n == 2) == isinstance(self.model, TwoLinkArm)
+                and (self.n == 2) == isinstance(self.task, CircleTask))
+
+    def compiled(self) -> Any:
+        """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`) for
+        the integrators' compiled loops, or ``None`` when a setting has none (the
+        ``"impact-triggered"`` switching, position noise, a force-sensor model, another
+        plant or task): the loop then runs the Python methods.
+
+        The compiled form keeps the phase logic in the block state (layout in
+        ``nscontrol.design._complementarity_tracking_kernels``), which the loop logs at
+        every step start; this object's own log (:meth:`signals`) stays empty on that path.
+        """
+        if not self._compilable():
+            return None
+        from ..systems.feedback import CompiledBlock
+        from . import _complementarity_tracking_kernels as kern
+
+        return CompiledBlock(kern.tracking_output, kern.tracking_update, self._kernel_params())
+
+    def _kernel_params(self) -> FloatArray:
+        """The parameter array of the compiled form (``P_*`` layout of the kernels)."""
+        from ..systems.two_link import OneDofMass
+        from . import _complementarity_tracking_kernels as kern
+
+        p = np.zeros(kern.N_PARAMS)
+        p[kern.P_N] = self.n
+        task = self.task
+        if isinstance(task, CircleTask):
+            p[kern.P_TASK] = kern.TASK_CIRCLE
+            p[kern.P_TASK0:kern.P_TASK0 + 4] = (task.centre, task.radius, task.period,
+                                                task.y_threshold)
+        else:
+            p[kern.P_TASK] = kern.TASK_HALF_SINE
+            p[kern.P_TASK0:kern.P_TASK0 + 4] = (task.amplitude, task.omega, task.threshold,
+                                                task.period)
+        if isinstance(self.model, OneDofMass):
+            p[kern.P_MODEL] = kern.MODEL_ONE_DOF
+            p[kern.P_MODEL0:kern.P_MODEL0 + 2] = (self.model.m, self.model.g)
+        else:
+            pr = self.model.params
+            p[kern.P_MODEL] = kern.MODEL_TWO_LINK
+            p[kern.P_MODEL0:kern.P_MODEL0 + 7] = (pr.l1, pr.l2, pr.m1, pr.m2, pr.I1, pr.I2,
+                                                  pr.g)
+        g, tr, c = self.gains, self.transition, self.contact
+        p[kern.P_G1], p[kern.P_G2], p[kern.P_KF] = g.gamma1, g.gamma2, g.Kf
+        p[kern.P_DELTA:kern.P_NCONS + 1] = (tr.delta, tr.Delta,
+                                             0.0 if tr.depth_law == "sqrt" else 1.0,
+                                             tr.alpha, tr.phi, tr.depth_min, tr.depth_max,
+                                             tr.n_consecutive_contact)
+        p[kern.P_LRATE], p[kern.P_LSAT], p[kern.P_TLIFT] = (c.lam_rate, c.lam_sat,
+                                                            c.liftoff_time)
+        p[kern.P_SCALE], p[kern.P_FFS] = self.model_scale, self.force_feedback_scale
+        p[kern.P_DELAY] = self.detection_delay
+        return p
 
     def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
         """Joint torques ``U = Jᵀ τ`` at a step start (also advances the phase logic).
@@ -592,6 +672,7 @@ class SwitchingTrackingController(StaticLaw):
         self.liftoff_at = -math.inf
         self.cycles: list[_Cycle] = [_Cycle(0)]
         self._log: list[tuple] = []
+        self._loaded: dict[str, FloatArray] | None = None     # a compiled run's (load_run)
         self._t_prev = -math.inf
         # (step start, impulse over h) of the last detection_delay + 1 steps: the phase
         # logic reads the oldest one
@@ -824,13 +905,24 @@ class SwitchingTrackingController(StaticLaw):
         return p, v * dpsi, a * dpsi**2 + v * ddpsi
 
     # -- log ----------------------------------------------------------------------------
-    def signals(self) -> dict[str, FloatArray]:
+    def signals(self, traj: Any = None) -> dict[str, FloatArray]:
         """The per-step log as arrays (one row per step start).
 
         Keys: ``t``, ``phase``, ``cycle``, ``V``, ``V1``, ``lam_d``, ``lam_hat``, ``depth``,
         ``q_task``, ``dq_task``, ``qd``.
+
+        Parameters
+        ----------
+        traj : Trajectory, optional
+            A closed-loop run on the compiled path (its ``"xc"`` signal holds the compiled
+            form's block state): the log is read back from it, with the same rows as the
+            Python path's. Without it, the Python path's own log.
         """
         n = self.n
+        if traj is not None and self.n_states and "xc" in traj.signals:
+            return self._signals_from_block_state(traj)
+        if self._loaded is not None:
+            return self._loaded
         if not self._log:
             return {}
         a = np.array(self._log, dtype=float)
@@ -838,3 +930,101 @@ class SwitchingTrackingController(StaticLaw):
                 "V1": a[:, 4], "lam_d": a[:, 5], "lam_hat": a[:, 6], "depth": a[:, 7],
                 "q_task": a[:, 8:8 + n], "dq_task": a[:, 8 + n:8 + 2 * n],
                 "qd": a[:, 8 + 2 * n:8 + 3 * n]}
+
+    def _signals_from_block_state(self, traj: Any) -> dict[str, FloatArray]:
+        """:meth:`signals` of a compiled run: the block state logged at every step start
+        (sample ``k + 1`` shows the row of step start ``k``)."""
+        from . import _complementarity_tracking_kernels as kern
+
+        n = self.n
+        xc = np.asarray(traj.signals["xc"])
+        if xc.ndim != 2 or xc.shape[1] != self.n_states or xc.shape[0] != traj.t.size:
+            raise ModelError(f"traj: expected the 'xc' signal of this controller's compiled "
+                             f"form at every step ({traj.t.size} x {self.n_states}), got "
+                             f"shape {xc.shape}; record every step")
+        rows = xc[1:]
+        x = np.ascontiguousarray(np.asarray(traj.x, float)[:-1, :2 * n])
+        task = kern.task_rows(x, self._kernel_params())
+        phase = rows[:, kern.X_PHASE]
+        # the Python log shows a cycle's depth as NaN until it is fixed (free motion)
+        depth = np.where(phase == kern.FREE, np.nan, rows[:, kern.X_DEPTH])
+        return {"t": rows[:, kern.X_TPREV].copy(), "phase": phase.copy(),
+                "cycle": rows[:, kern.X_CYCLE].copy(), "V": rows[:, kern.X_V].copy(),
+                "V1": rows[:, kern.X_V1].copy(), "lam_d": rows[:, kern.X_LAM_D].copy(),
+                "lam_hat": rows[:, kern.X_LAM_HAT].copy(), "depth": depth,
+                "q_task": task[:, :n], "dq_task": task[:, n:],
+                "qd": rows[:, kern.X_QD:kern.X_QD + n].copy()}
+
+    def cycles_of(self, traj: Any) -> list[_Cycle]:
+        """The per-cycle record (what ``self.cycles`` holds after a Python run) read back
+        from a closed-loop run on the compiled path.
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run (its ``"xc"`` signal, recorded at every step).
+        """
+        from . import _complementarity_tracking_kernels as kern
+
+        self._signals_from_block_state(traj)          # validates the signal's shape
+        rows = np.asarray(traj.signals["xc"])[1:]
+        cyc = rows[:, kern.X_CYCLE]
+        out: list[_Cycle] = []
+        for c in range(int(cyc.max()) + 1 if cyc.size else 1):
+            lo, hi = int(np.searchsorted(cyc, c, "left")), int(np.searchsorted(cyc, c, "right"))
+            out.append(self._cycle_of_rows(c, rows, lo, hi))
+        return out
+
+    def _cycle_of_rows(self, c: int, rows: FloatArray, lo: int, hi: int) -> _Cycle:
+        """Cycle ``c`` from its rows ``lo:hi`` (phases only move forward in a cycle, and a
+        take-off leaves from the impacts or constrained phase: the last row holds every
+        field fixed so far; the next cycle's first row, the take-off)."""
+        from . import _complementarity_tracking_kernels as kern
+
+        cycle = _Cycle(c)
+        if hi <= lo:
+            return cycle
+        last = rows[hi - 1]
+        phase = last[kern.X_PHASE]
+        if phase >= kern.APPROACH:
+            cycle.tau0, cycle.V_tau0, cycle.V1_tau0 = (float(last[kern.X_TAU0]),
+                                                       float(last[kern.X_V_TAU0]),
+                                                       float(last[kern.X_V1_TAU0]))
+            cycle.depth, cycle.q10 = float(last[kern.X_DEPTH]), float(last[kern.X_Q10])
+            cycle.q2_star = np.array([last[kern.X_Q2STAR]])[:self.n - 1]
+            cycle.t_detach = float(last[kern.X_T_DETACH])
+            cycle.t_star, cycle.u_star = float(last[kern.X_T_STAR]), float(last[kern.X_U_STAR])
+        if phase >= kern.IMPACTS:
+            cycle.t_first_impact = float(last[kern.X_T_IMPACT])
+        if phase >= kern.CONSTRAINED:
+            cycle.t_constrained = float(last[kern.X_T_CONSTRAINED])
+        if hi < rows.shape[0]:                   # taken off: the next cycle's first row
+            cycle.t_detach = float(rows[hi, kern.X_LIFTOFF])
+        if cycle.t_first_impact == kern.NEVER:
+            cycle.t_first_impact = -math.inf
+        return cycle
+
+    def load_run(self, traj: Any) -> None:
+        """Make this object's run state that of a closed-loop run on the compiled path, as
+        if the run had called the Python methods: :meth:`signals` (without argument) gives
+        its log, ``cycles`` its per-cycle record, and the phase, cycle and take-off time
+        are those after its last step start (what :meth:`lyapunov` reads).
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run (its ``"xc"`` signal, recorded at every step).
+        """
+        from . import _complementarity_tracking_kernels as kern
+
+        signals = self._signals_from_block_state(traj)
+        self.reset_run()
+        self.cycles = self.cycles_of(traj)
+        self._loaded = signals
+        if signals["t"].size:
+            last = np.asarray(traj.signals["xc"])[-1]
+            self.phase, self.cycle = Phase(int(last[kern.X_PHASE])), int(last[kern.X_CYCLE])
+            self.contact_steps = int(last[kern.X_CONTACT])
+            lift = float(last[kern.X_LIFTOFF])
+            self.liftoff_at = -math.inf if lift == kern.NEVER else lift
+            self._t_prev = float(last[kern.X_TPREV])

@@ -99,7 +99,8 @@ class TrackingRun:
 
 
 def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
-              theta: float, restitution: float, ground_offset: float = 0.0) -> TrackingRun:
+              theta: float, restitution: float, ground_offset: float = 0.0,
+              compiled: bool = False) -> TrackingRun:
     """Simulate plant + controller with Moreau–Jean and merge the controller's log."""
     from ..simulate import simulate
 
@@ -107,11 +108,24 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
     plant = model.system(restitution)
     if ground_offset != 0.0:
         plant = _ground_moved(plant, ground_offset)
-    # the controller as the integrator's own step controller (its reset at impacts is
-    # trivial, so the closed-loop block machinery is not needed): the fast path
-    traj = simulate(plant, x0, (0.0, T), method="moreau_jean", h=h,
-                    theta=theta, controller=controller, signals=("impulse", "gap"),
-                    progress=False)
+    # compiled only on request: the chapter's runs (and the robustness sweeps that compare
+    # runs bit for bit with moved-ground ones, which have no compiled model) stay Python
+    if compiled and controller.compiled() is not None and ground_offset == 0.0:
+        # the controller's compiled form in the compiled Moreau–Jean loop; its log and
+        # cycles are read back from the block state the run recorded
+        from ..simulate.closed_loop import closed_loop
+
+        traj = simulate(closed_loop(plant, controller), x0, (0.0, T), method="moreau_jean",
+                        h=h, theta=theta, signals=("impulse", "gap"), progress=False)
+        controller.load_run(traj)
+        traj = replace(traj, signals={k: v for k, v in traj.signals.items()
+                                      if k not in ("xc", "u")})
+    else:
+        # the controller as the integrator's own step controller (its reset at impacts is
+        # trivial, so the closed-loop block machinery is not needed)
+        traj = simulate(plant, x0, (0.0, T), method="moreau_jean", h=h,
+                        theta=theta, controller=controller, signals=("impulse", "gap"),
+                        progress=False)
     log = controller.signals()
     # the log holds one row per step start; the final sample gets its own evaluation
     n = model.n_dof
@@ -150,7 +164,8 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
                       phi: float = 1e5, detection_delay: int = 0,
                       position_noise: float = 0.0, noise_seed: int = 0,
                       ground_offset: float = 0.0, force_scale: float = 1.0,
-                      force_bias: float = 0.0, force_noise: float = 0.0) -> TrackingRun:
+                      force_bias: float = 0.0, force_noise: float = 0.0,
+                      compiled: bool = False) -> TrackingRun:
     """The two-link arm tracking the circle cut by the ground.
 
     Parameters
@@ -177,6 +192,9 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
     force_scale, force_bias, force_noise : float
         The contact-force sensor ``λ̂ = a P/h + b + n`` the force loop reads (scale, bias in N,
         noise standard deviation in N; ``1, 0, 0``: exact).
+    compiled : bool
+        Run the controller's compiled form in the compiled Moreau–Jean loop when it has one
+        (same results to rounding, tens of times faster); default: the Python path.
     """
     from ..design.complementarity_tracking import (
         CircleTask,
@@ -209,7 +227,7 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
     e = cfg.restitution if restitution is None else restitution
     step = cfg.h if h is None else h
     return _run_loop(arm, ctrl, x0, cycles * cfg.period, step, cfg.theta, e,
-                     ground_offset=float(ground_offset))
+                     ground_offset=float(ground_offset), compiled=compiled)
 
 
 def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,

@@ -135,6 +135,12 @@ def _compiled_blocks() -> None:
     model, reg, plant = foot_body_setup()
     simulate(reg.folded(plant), initial_state(model, reg.design.q_star, -1.0), (0.0, 0.05),
              method="moreau_jean", h=1e-3, progress=False)
+    from ..design.complementarity_tracking import CircleTask, SwitchingTrackingController
+
+    arm = TwoLinkArm()
+    simulate(closed_loop(arm.system(), SwitchingTrackingController(arm, CircleTask())),
+             [0.9, -1.6, 0.0, 0.0], (0.0, 0.05), method="moreau_jean", h=1e-3,
+             progress=False)
     _block_stepper()
 
 
@@ -186,7 +192,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
         "systems._two_link_kernels", "design._friction_compensation_kernels",
         "simulate._block_kernels", "simulate._lure_kernels", "simulate._mj_compiled_kernels",
-        "simulate._mj_linearised_kernel", "numerics._lcp_kernels"),
+        "simulate._mj_linearised_kernel", "numerics._lcp_kernels",
+        "design._complementarity_tracking_kernels"),
 }
 
 

@@ -758,7 +758,11 @@ class _BlockRunner:
             columns = [np.array([row[i] for row in self.log]) for i in range(4)]
         times = columns[0]
         # sample k (end of step k) shows what acted over step k: the value logged at its start
-        idx = np.clip(np.searchsorted(times, traj.t, side="left") - 1, 0, len(times) - 1)
+        # (a sample that rounding puts just past the next step start, t0 + k h + h vs
+        # t0 + (k + 1) h, still shows step k: compare a millionth of a step earlier)
+        eps = 1e-6 * float(np.min(np.diff(times))) if times.size > 1 else 0.0
+        idx = np.clip(np.searchsorted(times, traj.t - eps, side="left") - 1, 0,
+                      len(times) - 1)
         signals = dict(traj.signals)
         for name, col in (("xo", 1), ("xc", 2), ("u", 3)):
             rows = columns[col]
