@@ -183,7 +183,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "simulate._mj_linearised_kernel"),
     "impacting bodies with an observer": ("numerics._lti_kernels", "simulate._event_kernels"),
     "Lur'e systems (implicit Euler) and switching": (
-        "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels"),
+        "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels",
+        "simulate._pwa_kernels"),
     "ZAD-controlled buck converter": ("design._zad_kernels",),
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
                             "simulate._frictional_mj_kernels"),

@@ -5,14 +5,16 @@ linear in the augmented state ``ξ = [x; ω; 1]`` (``ω' = Sω``, ``u = C_u ω``
 
     ξ' = [[A_i, E C_u, b_i], [0, S, 0], [0, 0, 0]] ξ
 
-so a piece is propagated exactly by :class:`~nscontrol.numerics.lti.LTIFlow` and the exit
-through a facet ``H_ir x = h_ir`` is the first root of ``h_ir - H_ir x(t)``, located by
-:func:`~nscontrol.numerics.lti.first_event` (grazing flagged). Any other input function uses
-DOP853 with one terminal, direction-aware event per facet, and a non-terminal event on the
-derivative of each facet's slack, so that a tangential touch without a sign change is reported
-as ``grazing`` there too. In both cases the sensitivity of a piece is ``expm(A_i τ)`` (the
-input does not change it) and a crossing multiplies it by the saltation matrix
-``I + (F⁺ - F⁻)nᵀ/(nᵀF⁻)`` (the identity for a continuous field).
+so a piece is propagated exactly by the region's matrix exponential and the exit through a
+facet ``H_ir x = h_ir`` is the first root of ``h_ir - H_ir x(t)``, located by the exact event
+search of :func:`~nscontrol.numerics.lti.first_event` (grazing flagged). The pieces and the
+plain crossings run in one compiled loop (:mod:`._pwa_kernels`), which hands every other event
+(grazing, the domain's facets, no region to enter) to the Python code here. Any other input
+function uses DOP853 with one terminal, direction-aware event per facet, and a non-terminal
+event on the derivative of each facet's slack, so that a tangential touch without a sign
+change is reported as ``grazing`` there too. In both cases the sensitivity of a piece is
+``expm(A_i τ)`` (the input does not change it) and a crossing multiplies it by the saltation
+matrix ``I + (F⁺ - F⁻)nᵀ/(nᵀF⁻)`` (the identity for a continuous field).
 
 With a ``domain``: ``x0`` outside it raises ``InadmissibleStateError``; its facets are guards
 as well, and a trajectory that leaves it stops there with a ``domain_exit`` event (index: the
@@ -27,7 +29,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .._validation import FloatArray
-from ..errors import InadmissibleStateError, ModelError, SlidingError, SolverError
+from ..errors import InadmissibleStateError, ModelError, SlidingError, SolverError, ZenoError
 from .switching import saltation_matrix
 
 
@@ -42,38 +44,95 @@ def _exosystem(system: Any, options: dict[str, Any]) -> Any:
 
 
 class _Modes:
-    """Augmented matrices and cached flows of the regions for one input."""
+    """The regions' augmented matrices ``M_i`` for one input, and the arrays the compiled loop
+    (:mod:`._pwa_kernels`) reads: facets, and per region its flow and guard data, prepared
+    when the region is first visited. Cached per model and input (:meth:`of`): a period map
+    or a sweep simulates the same model many times."""
 
-    def __init__(self, system: Any, exo: Any, t0: float) -> None:
-        from ..numerics.lti import LTIFlow
+    def __init__(self, system: Any, S: FloatArray, Bu: FloatArray) -> None:
+        from ..numerics.lti import TAYLOR_DEGREE
 
+        n, r, R = system.n_states, S.shape[0], system.n_regions
+        m = n + r + 1
+        self.n, self.r, self.m, self.R = n, r, m, R
+        self.aug = np.zeros((R, m, m))
+        for k, (A, b) in enumerate(zip(system.A, system.b, strict=True)):
+            self.aug[k, :n, :n], self.aug[k, :n, n:n + r], self.aug[k, :n, -1] = A, Bu, b
+            self.aug[k, n:n + r, n:n + r] = S
+        nf = np.array([H.shape[0] for H, _ in system.regions], dtype=np.int64)
+        dom = system.domain
+        nd = 0 if dom is None else dom[0].shape[0]
+        self.nf, self.nd = nf, nd
+        pf = int(nf.max(initial=0))
+        self.H = np.zeros((R, max(pf, 1), n))
+        self.h = np.zeros((R, max(pf, 1)))
+        for k, (H, h) in enumerate(system.regions):
+            self.H[k, :nf[k]], self.h[k, :nf[k]] = H, h
+        # guards of region k: its facets, then the domain's, then padding (g = 1, no root)
+        p = max(pf + nd, 1)
+        self.guards: list[tuple[FloatArray, FloatArray]] = []
+        for H, h in system.regions:
+            Hk = H if dom is None else np.vstack([H, dom[0]])
+            hk = h if dom is None else np.concatenate([h, dom[1]])
+            G = np.zeros((Hk.shape[0], m))
+            G[:, :n] = -Hk
+            self.guards.append((G, np.asarray(hk, float)))
+        K1 = TAYLOR_DEGREE + 1
+        self.kinds = np.zeros(R, dtype=np.int64)
+        self.lams = np.zeros((R, m), dtype=complex)
+        self.Vs = np.zeros((R, m, m), dtype=complex)
+        self.Vinvs = np.zeros((R, m, m), dtype=complex)
+        self.phis = np.zeros((R, m, m))
+        self.taylors = np.zeros((R, K1, m, m))
+        self.ds = np.ones((R, m))
+        self.hs = np.ones(R)
+        self.Ws = np.zeros((R, K1, p, m))
+        self.g0s = np.ones((R, p))
+        self.row_norms = np.ones((R, p))
+        self.ready = np.zeros(R, dtype=np.bool_)
+        self.flows: list[Any] = [None] * R
+
+    @classmethod
+    def of(cls, system: Any, exo: Any) -> _Modes:
+        """The modes of ``system`` under the exosystem ``exo`` (``None``: no input), shared
+        by the runs of an equal model and input (the most recent 32 are kept)."""
         n = system.n_states
-        self.n = n
         if exo is None:
-            S = np.zeros((0, 0))
-            Bu = np.zeros((n, 0))
-            w0 = np.zeros(0)
+            S, Bu = np.zeros((0, 0)), np.zeros((n, 0))
         else:
             S = np.atleast_2d(np.asarray(exo.S, float))
-            Cu = np.atleast_2d(np.asarray(exo.Cu, float))
-            Bu = system.E @ Cu
-            w0 = expm(S * t0) @ np.asarray(exo.w0, float) if S.size else np.zeros(0)
-        r = S.shape[0]
-        self.r = r
-        self.w_t0 = w0
-        self.aug = []
-        for A, b in zip(system.A, system.b, strict=True):
-            M = np.zeros((n + r + 1, n + r + 1))
-            M[:n, :n], M[:n, n:n + r], M[:n, -1] = A, Bu, b
-            M[n:n + r, n:n + r] = S
-            self.aug.append(M)
-        self._flows: dict[int, Any] = {}
-        self._LTIFlow = LTIFlow
+            Bu = system.E @ np.atleast_2d(np.asarray(exo.Cu, float))
+        parts = [S, Bu, *system.A, *system.b, *(a for reg in system.regions for a in reg)]
+        if system.domain is not None:
+            parts += list(system.domain)
+        key = tuple((a.shape, a.tobytes()) for a in (np.asarray(v, float) for v in parts))
+        modes = _MODES.pop(key, None)
+        if modes is None:
+            modes = cls(system, S, Bu)
+            if len(_MODES) >= 32:
+                _MODES.pop(next(iter(_MODES)))
+        _MODES[key] = modes  # most recently used last
+        return modes
 
-    def flow(self, i: int) -> Any:
-        if i not in self._flows:   # shared: a sweep or a period map reuses the decompositions
-            self._flows[i] = self._LTIFlow.shared(self.aug[i])
-        return self._flows[i]
+    def prepare(self, k: int) -> None:
+        """Build region ``k``'s flow and guard data for the compiled loop."""
+        from ..numerics.lti import LTIFlow
+
+        flow = self.flows[k] = LTIFlow.shared(self.aug[k])
+        ctx = flow.guard_context()
+        G, g0 = self.guards[k]
+        W, norms = ctx.guard_data(G)
+        p = G.shape[0]
+        self.kinds[k] = ctx.kind
+        if flow.method == "eig":
+            self.lams[k], self.Vs[k], self.Vinvs[k] = ctx.lam, ctx.V, ctx.Vinv
+        self.phis[k], self.taylors[k], self.ds[k], self.hs[k] = ctx.phi, ctx.taylor, ctx.d, ctx.h
+        self.Ws[k, :, :p], self.g0s[k, :p], self.row_norms[k, :p] = W, g0, norms
+        self.ready[k] = True
+
+    def field(self, i: int, xi: FloatArray) -> FloatArray:
+        """``x'`` of region ``i`` at ``ξ``."""
+        return self.aug[i, :self.n] @ xi
 
     def derivatives(self, i: int, xi: FloatArray, k: int) -> list[FloatArray]:
         """``x', x'', ...`` (``k`` of them) of the flow of region ``i`` at ``ξ``."""
@@ -83,35 +142,19 @@ class _Modes:
             out.append(v[:self.n])
         return out
 
+    def choose(self, xi: FloatArray, exclude: int = -1) -> int:
+        """The region whose flow from ``ξ`` enters it (:func:`._pwa_kernels.choose_region`)."""
+        from ._pwa_kernels import choose_region
 
-def _entering(system: Any, modes: _Modes, j: int, xi: FloatArray, tol: float) -> bool:
-    """Whether the flow of region ``j`` from ``ξ`` (on its boundary) moves into region ``j``."""
-    H, h = system.regions[j]
-    x = xi[:modes.n]
-    slack = h - H @ x
-    scale = 1.0 + np.abs(h) + np.abs(H) @ np.abs(x)
-    if np.any(slack < -tol * scale):
-        return False
-    active = np.abs(slack) <= tol * scale
-    if not np.any(active):
-        return True
-    ders = modes.derivatives(j, xi, 3)
-    for r in np.flatnonzero(active):
-        for d in ders:  # the first nonzero derivative of h_r - H_r x decides
-            v = -float(H[r] @ d)
-            if abs(v) > 1e-12 * (np.abs(H[r]) @ np.abs(d) + 1e-300):
-                if v < 0:
-                    return False
-                break
-    return True
+        return int(choose_region(self.H, self.h, self.nf, self.aug, xi, self.n, exclude))
+
+    def entering(self, j: int, xi: FloatArray, tol: float) -> bool:
+        from ._pwa_kernels import entering
+
+        return bool(entering(self.H, self.h, self.nf, self.aug, j, xi, self.n, tol))
 
 
-def _choose_region(system: Any, modes: _Modes, xi: FloatArray, exclude: int = -1) -> int:
-    for tol in (1e-12, 1e-9):
-        for j in range(system.n_regions):
-            if j != exclude and _entering(system, modes, j, xi, tol):
-                return j
-    return -1
+_MODES: dict[Any, _Modes] = {}
 
 
 def _check_x0(system: Any, x0: FloatArray) -> None:
@@ -153,82 +196,134 @@ def _domain_exit(run: Any, t: float, r: int, x: FloatArray, i: int) -> None:
                    f"not defined beyond it")
 
 
+class _Buffers:
+    """What one call of the compiled loop writes: samples (one row per requested time),
+    the crossings it settles, and the guards of the event it hands back."""
+
+    EVENTS = 256
+
+    def __init__(self, modes: _Modes, n_samples: int) -> None:
+        n, p, cap = modes.n, modes.g0s.shape[1], self.EVENTS
+        self.s_x = np.empty((n_samples, n))
+        self.e_t, self.e_ptr = np.empty(cap), np.empty(cap, dtype=np.int64)
+        self.e_row = np.empty(cap, dtype=np.int64)
+        self.e_from, self.e_to = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
+        self.e_x, self.e_S = np.empty((cap, n)), np.empty((cap, n, n))
+        self.hit, self.graze = np.zeros(p, dtype=np.int8), np.zeros(p, dtype=np.int8)
+
+
+def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int) -> None:
+    """Record the samples and settled crossings of one call of the compiled loop, in time
+    order (the samples up to an event's time come before it)."""
+    te = run.t_eval
+    for k in range(n_e):
+        p = int(buf.e_ptr[k])
+        if p > ptr0:
+            run.rec.extend(te[ptr0:p], buf.s_x[ptr0:p])
+        ptr0 = p
+        x = buf.e_x[k].copy()
+        run.event(float(buf.e_t[k]), "crossing", int(buf.e_row[k]), x, x, int(buf.e_from[k]),
+                  int(buf.e_to[k]))
+        if run.sensitivity:   # already multiplied into Φ by the loop
+            run.saltations.append(buf.e_S[k].copy())
+        run.rec.sample(float(buf.e_t[k]), x, force=True)
+    if ptr > ptr0:
+        run.rec.extend(te[ptr0:ptr], buf.s_x[ptr0:ptr])
+
+
 def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
     _check_x0(system, x0)
     exo = _exosystem(system, options)
     if exo == "function":
         return _run_pwa_ode(system, x0, run, options)
-    from ..numerics.lti import first_event
+    from ..numerics.lti import TAYLOR_REMAINDER, _bernstein_matrices
+    from . import _pwa_kernels as K
 
     n = system.n_states
-    modes = _Modes(system, exo, run.t0)
-    xi = np.concatenate([x0, modes.w_t0, [1.0]])
-    i = _choose_region(system, modes, xi)
+    modes = _Modes.of(system, exo)
+    w_t0 = np.zeros(0) if exo is None else \
+        np.asarray(expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0)
+                   @ np.asarray(exo.w0, float), float).reshape(-1)
+    xi = np.concatenate([x0, w_t0, [1.0]])
+    i = modes.choose(xi)
     if i < 0:
         raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
-    dom = system.domain
+    bern = _bernstein_matrices(modes.taylors.shape[1] - 1)
+    buf = _Buffers(modes, run.t_eval.shape[0])
     t = run.t0
+    ptr = int(np.searchsorted(run.t_eval, t, side="right"))  # t0 itself: the forced sample
     run.rec.sample(t, x0, force=True)
     segments = 0
     while t < run.tf:
-        H, h = system.regions[i]
-        nr = H.shape[0]
-        if dom is not None:   # the domain's facets are guards too: leaving it stops the run
-            H, h = np.vstack([H, dom[0]]), np.concatenate([h, dom[1]])
-        G = np.zeros((H.shape[0], xi.shape[0]))
-        G[:, :n] = -H
-        flow = modes.flow(i)
-        ev = first_event(flow, xi, G, h, run.tf - t)
-        t_end = run.tf if ev is None else min(t + float(ev.t), run.tf)
-        tau = t_end - t
-        ts = run.samples(t, t_end, last=ev is None)
-        if ts.size:
-            X = np.atleast_2d(flow.propagate(xi, ts - t))
-            run.rec.extend(ts, X[:, :n])
-        xi_end = np.asarray(flow.propagate(xi, tau), float).reshape(-1)
-        if run.sensitivity:  # the x-block of the augmented exponential is expm(A_i τ)
-            run.Phi = np.asarray(flow.expm(tau))[:n, :n] @ run.Phi
-        segments += 1
-        run.bar.update(t_end)
-        if tau <= 0.0:
-            run.zero_length(t_end)
-        else:
-            run.stuck = 0
-        xi, t = xi_end, t_end
-        if ev is None or t >= run.tf:
+        ptr0 = ptr
+        code, t, i, ptr, n_e, run.stuck, pieces, index = K.run_pieces(
+            modes.kinds, modes.lams, modes.Vs, modes.Vinvs, modes.phis, modes.taylors,
+            modes.ds, modes.hs, modes.ready, modes.Ws, modes.g0s, modes.row_norms, bern,
+            TAYLOR_REMAINDER, 1e-12, 1e-12, modes.H, modes.h, modes.nf, modes.aug,
+            xi, float(t), float(run.tf), int(i), run.Phi, run.sensitivity, run.t_eval, ptr,
+            buf.s_x, buf.e_t, buf.e_row, buf.e_from, buf.e_to, buf.e_x, buf.e_S, buf.e_ptr,
+            run.max_events - run.n_events + 1, buf.hit, buf.graze, run.stuck)
+        segments += pieces
+        _replay(run, buf, ptr0, ptr, n_e)
+        run.bar.update(t)
+        if code == K.DONE:
             break
-        x_e = xi[:n]
-        hits = [int(r) for r in np.atleast_1d(ev.indices)]
-        dom_rows = [r - nr for r in hits if r >= nr]
-        hits = [r for r in hits if r < nr]
-        if dom_rows and not ev.grazing:
-            r = _leaving_domain(system, modes, i, xi, dom_rows)
-            if r >= 0:
-                _domain_exit(run, t, r, x_e, i)
+        if code == K.NEED_FLOW:
+            modes.prepare(i)
+        elif code == K.STUCK:
+            raise ZenoError(f"switching: {K.MAX_STUCK} consecutive events at t = {t:.12g} "
+                            f"without progress (Zeno point or an undecidable mode)", time=t)
+        elif code == K.INADMISSIBLE:
+            G, g0 = modes.guards[i]
+            raise InadmissibleStateError(
+                f"x0: guard {index} is negative at t = {t:.12g} (g = "
+                f"{float(G[index] @ xi + g0[index]):.3g} < 0); the search needs every guard "
+                f">= 0 at its start — check the state or the guard signs")
+        elif code == K.HANDOFF:
+            hits = [int(r) for r in np.flatnonzero(buf.hit)]
+            grazing = bool(buf.graze[hits].all())
+            stop, i = _settle(system, modes, run, t, i, xi, hits, grazing)
+            if stop:
                 break
-        if not hits:   # touched the domain boundary from inside and stays in: go on
-            continue
-        row = hits[0]
-        j = _choose_region(system, modes, xi, exclude=i)
-        if ev.grazing or j < 0:
-            if j < 0 and not ev.grazing and not _entering(system, modes, i, xi, 1e-9):
-                raise SlidingError(
-                    f"switching: at t = {t:.12g} the flow leaves region {i} through facet "
-                    f"{row} but no region's field points inward at x = {x_e}: a sliding motion "
-                    f"on a facet of a discontinuous PWA system. Simulate "
-                    f"FilippovSystem.from_pwa(system) instead", time=t, state=x_e.copy())
-            run.event(t, "grazing", row, x_e, x_e, i, i)
-            continue
-        fm = modes.derivatives(i, xi, 1)[0]
-        fp = modes.derivatives(j, xi, 1)[0]
-        normal = system.regions[i][0][row]
-        S = saltation_matrix(fm, fp, normal) if run.sensitivity else None
-        run.event(t, "crossing", row, x_e, x_e, i, j, S)
-        run.rec.sample(t, x_e, force=True)
-        i = j
     if run.rec.last_time < run.tf and run.status == 0:
         run.rec.sample(run.tf, xi[:n], force=True)
     return {"segments": segments, "final_mode": i, "propagation": "exact"}
+
+
+def _settle(system: Any, modes: _Modes, run: Any, t: float, i: int, xi: FloatArray,
+            hits: list[int], grazing: bool) -> tuple[bool, int]:
+    """Python's handling of an event the compiled loop hands back (domain facets, grazing,
+    no region to enter, a zero ``nᵀF⁻``): ``(whether the run stops, the region to go on
+    in)``."""
+    n = modes.n
+    nr = int(modes.nf[i])
+    x_e = xi[:n].copy()
+    dom_rows = [r - nr for r in hits if r >= nr]
+    hits = [r for r in hits if r < nr]
+    if dom_rows and not grazing:
+        r = _leaving_domain(system, modes, i, xi, dom_rows)
+        if r >= 0:
+            _domain_exit(run, t, r, x_e, i)
+            return True, i
+    if not hits:   # touched the domain boundary from inside and stays in: go on
+        return False, i
+    row = hits[0]
+    j = modes.choose(xi, exclude=i)
+    if grazing or j < 0:
+        if j < 0 and not grazing and not modes.entering(i, xi, 1e-9):
+            raise SlidingError(
+                f"switching: at t = {t:.12g} the flow leaves region {i} through facet "
+                f"{row} but no region's field points inward at x = {x_e}: a sliding motion "
+                f"on a facet of a discontinuous PWA system. Simulate "
+                f"FilippovSystem.from_pwa(system) instead", time=t, state=x_e)
+        run.event(t, "grazing", row, x_e, x_e, i, i)
+        return False, i
+    normal = system.regions[i][0][row]
+    S = saltation_matrix(modes.field(i, xi), modes.field(j, xi), normal) \
+        if run.sensitivity else None
+    run.event(t, "crossing", row, x_e, x_e, i, j, S)
+    run.rec.sample(t, x_e, force=True)
+    return False, j
 
 
 def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
