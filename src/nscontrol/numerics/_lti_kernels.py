@@ -257,6 +257,29 @@ def guard_taylor_coefficients(W, g0, i, y, a):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def taylor_tables(M, T, phi):  # pragma: no cover - compiled
+    """``T[j] = M^j / j!`` for ``j < len(T)`` and ``phi = Σ_j T[j]``: with ``||M|| <= 1`` the
+    sum is ``e^M`` to within ``e/len(T)!`` relative (summed from the smallest term up)."""
+    K1, n, _ = T.shape
+    for r in range(n):
+        for c in range(n):
+            T[0, r, c] = 1.0 if r == c else 0.0
+    for j in range(1, K1):
+        for r in range(n):
+            for c in range(n):
+                s = 0.0
+                for q in range(n):
+                    s += M[r, q] * T[j - 1, q, c]
+                T[j, r, c] = s / j
+    for r in range(n):
+        for c in range(n):
+            s = 0.0
+            for j in range(K1 - 1, -1, -1):
+                s += T[j, r, c]
+            phi[r, c] = s
+
+
+@njit(cache=True)
 def _matvec(M, x, out):  # pragma: no cover - compiled
     n = M.shape[0]
     for r in range(n):

@@ -438,7 +438,7 @@ class _GuardContext:
     cached (an integrator searches with the same ``G`` at every event)."""
 
     def __init__(self, flow: LTIFlow) -> None:
-        from ._lti_kernels import KIND_CELLS, KIND_EIG
+        from ._lti_kernels import KIND_CELLS, KIND_EIG, taylor_tables
 
         A = flow.A
         n = A.shape[0]
@@ -447,14 +447,14 @@ class _GuardContext:
         self.d = np.ascontiguousarray(d, dtype=float)
         self.h = 1.0 / omega
         self.Ab = Ab
-        self.phi = np.ascontiguousarray(scipy.linalg.expm(Ab * self.h)) if n else np.eye(0)
         K = TAYLOR_DEGREE
         self.bern = _bernstein_matrices(K)
-        M = Ab * self.h
-        T = [np.eye(n)]
-        for j in range(1, K + 1):
-            T.append((M @ T[-1]) / j)
-        self.taylor = np.ascontiguousarray(T)  # (Ab h)^j / j!, j = 0..K
+        # (Ab h)^j / j!, j = 0..K, and Φ = e^{Ab h} as their sum (||Ab h|| = 1: the Taylor
+        # remainder is below TAYLOR_REMAINDER, i.e. rounding)
+        self.taylor = np.empty((K + 1, n, n))
+        self.phi = np.empty((n, n))
+        if n:
+            taylor_tables(np.ascontiguousarray(Ab * self.h), self.taylor, self.phi)
         if flow.method == "eig":
             self.kind = KIND_EIG
             self.lam = np.ascontiguousarray(flow._lam, dtype=complex)

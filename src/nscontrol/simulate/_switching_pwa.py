@@ -241,9 +241,9 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
 
     n = system.n_states
     modes = _Modes.of(system, exo)
-    w_t0 = np.zeros(0) if exo is None else \
-        np.asarray(expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0)
-                   @ np.asarray(exo.w0, float), float).reshape(-1)
+    w_t0 = np.zeros(0) if exo is None else np.asarray(exo.w0, float).reshape(-1)
+    if exo is not None and run.t0 != 0.0:   # the exosystem's state at t0
+        w_t0 = expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0) @ w_t0
     xi = np.concatenate([x0, w_t0, [1.0]])
     i = modes.choose(xi)
     if i < 0:
