@@ -91,6 +91,7 @@ class _Modes:
         self.row_norms = np.ones((R, p))
         self.ready = np.zeros(R, dtype=np.bool_)
         self.flows: list[Any] = [None] * R
+        self.bern = np.zeros((K1, K1, K1))   # the search's Bernstein tables, from a context
 
     @classmethod
     def of(cls, system: Any, exo: Any) -> _Modes:
@@ -128,6 +129,7 @@ class _Modes:
             self.lams[k], self.Vs[k], self.Vinvs[k] = ctx.lam, ctx.V, ctx.Vinv
         self.phis[k], self.taylors[k], self.ds[k], self.hs[k] = ctx.phi, ctx.taylor, ctx.d, ctx.h
         self.Ws[k, :, :p], self.g0s[k, :p], self.row_norms[k, :p] = W, g0, norms
+        self.bern = ctx.bern
         self.ready[k] = True
 
     def field(self, i: int, xi: FloatArray) -> FloatArray:
@@ -236,7 +238,7 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
     exo = _exosystem(system, options)
     if exo == "function":
         return _run_pwa_ode(system, x0, run, options)
-    from ..numerics.lti import TAYLOR_REMAINDER, _bernstein_matrices
+    from ..numerics.lti import TAYLOR_REMAINDER
     from . import _pwa_kernels as K
 
     n = system.n_states
@@ -248,7 +250,8 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
     i = modes.choose(xi)
     if i < 0:
         raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
-    bern = _bernstein_matrices(modes.taylors.shape[1] - 1)
+    if not modes.ready[i]:
+        modes.prepare(i)
     buf = _Buffers(modes, run.t_eval.shape[0])
     t = run.t0
     ptr = int(np.searchsorted(run.t_eval, t, side="right"))  # t0 itself: the forced sample
@@ -258,7 +261,7 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
         ptr0 = ptr
         code, t, i, ptr, n_e, run.stuck, pieces, index = K.run_pieces(
             modes.kinds, modes.lams, modes.Vs, modes.Vinvs, modes.phis, modes.taylors,
-            modes.ds, modes.hs, modes.ready, modes.Ws, modes.g0s, modes.row_norms, bern,
+            modes.ds, modes.hs, modes.ready, modes.Ws, modes.g0s, modes.row_norms, modes.bern,
             TAYLOR_REMAINDER, 1e-12, 1e-12, modes.H, modes.h, modes.nf, modes.aug,
             xi, float(t), float(run.tf), int(i), run.Phi, run.sensitivity, run.t_eval, ptr,
             buf.s_x, buf.e_t, buf.e_row, buf.e_from, buf.e_to, buf.e_x, buf.e_S, buf.e_ptr,
