@@ -166,7 +166,10 @@ def sweep_all(loops: dict[str, tuple[Any, Any, Any]], *, task: BeamSweep | None 
     from .. import sweep
 
     task = task or BeamSweep()
-    points = [(name, *parts, d) for name, parts in loops.items() for d in ("up", "down")]
+    # the open loop's sweeps first, down before up: they are the long ones (the down sweep
+    # meets more bifurcations), so a pool starts them at once and fills in the short ones
+    names = sorted(loops, key=lambda name: loops[name][1] is not None)
+    points = [(name, *loops[name], d) for name in names for d in ("down", "up")]
     res = sweep.run(task, points, executor=executor, progress=False, desc="ch06 sweeps")
     res.raise_on_error()
     out: dict[str, dict[str, Any]] = {name: {} for name in loops}
