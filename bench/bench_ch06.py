@@ -168,16 +168,23 @@ def _against_scipy(quick: bool) -> dict[str, Any]:
     P = response_amplitude(ours)
     both = (ours.multiplicity == 1) & (m_ref == 1)
     err = float(np.max(np.abs(P[both] / P_ref[both] - 1))) if np.any(both) else float("nan")
-    return {"scenario": f"ch06 open-loop sweep up, {freqs.size} frequencies 10-66 Hz, 3 s "
-                        f"transient + 12 periods each: ours vs SciPy DOP853 with facet events",
-            "size": int(freqs.size), "ours_steps_per_s": freqs.size / t_ours,
+    return _record(f"ch06 open-loop sweep up, {freqs.size} frequencies 10-66 Hz, 3 s "
+                   f"transient + 12 periods each: ours vs SciPy DOP853 with facet events",
+                   freqs.size, t_ours, t_ref, rtol, both, err, ours.multiplicity, m_ref)
+
+
+def _record(scenario: str, size: int, t_ours: float, t_ref: float, rtol: float,
+            both: np.ndarray, err: float, m_ours: np.ndarray, m_ref: np.ndarray
+            ) -> dict[str, Any]:
+    """A bench record of ours against SciPy over ``size`` frequencies."""
+    return {"scenario": scenario, "size": int(size), "ours_steps_per_s": size / t_ours,
             "reference": f"scipy solve_ivp DOP853 rtol={rtol:g}, event restarts",
-            "reference_steps_per_s": freqs.size / t_ref, "ratio": t_ref / t_ours,
+            "reference_steps_per_s": size / t_ref, "ratio": t_ref / t_ours,
             "accuracy": {"ours_seconds": t_ours, "scipy_seconds": t_ref,
-                         "period_T_points_compared": int(np.count_nonzero(both)),
+                         "points_compared": int(np.count_nonzero(both)),
                          "max_relative_P_difference": err,
-                         "multiplicity_ours": ours.multiplicity.tolist(),
-                         "multiplicity_scipy": m_ref.tolist()},
+                         "multiplicity_ours": np.asarray(m_ours).tolist(),
+                         "multiplicity_scipy": np.asarray(m_ref).tolist()},
             "note": "steps_per_s fields are frequencies per second"}
 
 
@@ -210,17 +217,10 @@ def _brute_against_scipy(quick: bool) -> dict[str, Any]:
     (P_ref, m_ref), t_ref = _timed(lambda: _scipy_sweep(freqs, ex.ME_R, ex.TRANSIENT_S, 12, rtol))
     both = (m >= 1) & (m == m_ref)
     err = float(np.max(np.abs(P[both] / P_ref[both] - 1))) if np.any(both) else float("nan")
-    return {"scenario": f"ch06 open loop, brute-force sweep up over {freqs.size} frequencies "
-                        f"10-66 Hz (3 s transient + 12 periods each), same protocol: ours "
-                        f"(exact PWA integrator) vs SciPy DOP853 with facet events",
-            "size": int(freqs.size), "ours_steps_per_s": freqs.size / t_ours,
-            "reference": f"scipy solve_ivp DOP853 rtol={rtol:g}, event restarts",
-            "reference_steps_per_s": freqs.size / t_ref, "ratio": t_ref / t_ours,
-            "accuracy": {"ours_seconds": t_ours, "scipy_seconds": t_ref,
-                         "periodic_points_compared": int(np.count_nonzero(both)),
-                         "max_relative_P_difference": err,
-                         "multiplicity_ours": m.tolist(), "multiplicity_scipy": m_ref.tolist()},
-            "note": "steps_per_s fields are frequencies per second"}
+    return _record(f"ch06 open loop, brute-force sweep up over {freqs.size} frequencies "
+                   f"10-66 Hz (3 s transient + 12 periods each), same protocol: ours (exact "
+                   f"PWA integrator) vs SciPy DOP853 with facet events",
+                   freqs.size, t_ours, t_ref, rtol, both, err, m, m_ref)
 
 
 def run(quick: bool = False) -> Iterator[dict[str, Any]]:

@@ -112,11 +112,18 @@ def _times_expm(kind, lam, V, Vinv, phi, T, d, h, tau, n, Phi, unit, col, E, tmp
         unit[k] = 0.0
         for r in range(n):
             E[r, k] = col[r]
+    _premultiply(E, Phi, tmp)
+
+
+@njit(cache=True)
+def _premultiply(F, Phi, tmp):  # pragma: no cover - compiled
+    """``Φ <- F Φ`` (square, loops: no BLAS threads for these small matrices)."""
+    n = Phi.shape[0]
     for r in range(n):
         for c in range(n):
             s = 0.0
             for q in range(n):
-                s += E[r, q] * Phi[q, c]
+                s += F[r, q] * Phi[q, c]
             tmp[r, c] = s
     Phi[:, :] = tmp
 
@@ -223,13 +230,7 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
                 for c in range(n):
                     e_S[n_e, r, c] = (fp[r] - fm[r]) * H[i, row, c] / den
                 e_S[n_e, r, r] += 1.0
-            for r in range(n):
-                for c in range(n):
-                    s = 0.0
-                    for q in range(n):
-                        s += e_S[n_e, r, q] * Phi[q, c]
-                    tmp[r, c] = s
-            Phi[:, :] = tmp
+            _premultiply(e_S[n_e], Phi, tmp)
         e_t[n_e] = t
         e_row[n_e] = row
         e_from[n_e] = i
