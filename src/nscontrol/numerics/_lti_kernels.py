@@ -280,6 +280,18 @@ def taylor_tables(M, T, phi):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def matmul_into(A, B, out):  # pragma: no cover - compiled
+    """``out = A @ B`` for square matrices (loops: no BLAS threads for these small sizes)."""
+    n = out.shape[0]
+    for r in range(n):
+        for c in range(n):
+            s = 0.0
+            for q in range(n):
+                s += A[r, q] * B[q, c]
+            out[r, c] = s
+
+
+@njit(cache=True)
 def _matvec(M, x, out):  # pragma: no cover - compiled
     n = M.shape[0]
     for r in range(n):
@@ -306,12 +318,7 @@ def _power_apply(phi, k, y, out):  # pragma: no cover - compiled
         k >>= 1
         if k == 0:
             break
-        for r in range(n):  # P <- P @ P (loops: no BLAS threads for these small matrices)
-            for c in range(n):
-                s = 0.0
-                for l in range(n):
-                    s += P[r, l] * P[l, c]
-                P2[r, c] = s
+        matmul_into(P, P, P2)  # P <- P @ P
         P[:, :] = P2
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lti_kernels import EVENT, NEGATIVE, propagate, search
+from ..numerics._lti_kernels import EVENT, NEGATIVE, matmul_into, propagate, search
 
 #: Return codes of :func:`run_pieces`.
 DONE, HANDOFF, FULL, NEED_FLOW, INADMISSIBLE, STUCK = 0, 1, 2, 3, 4, 5
@@ -117,14 +117,8 @@ def _times_expm(kind, lam, V, Vinv, phi, T, d, h, tau, n, Phi, unit, col, E, tmp
 
 @njit(cache=True)
 def _premultiply(F, Phi, tmp):  # pragma: no cover - compiled
-    """``Φ <- F Φ`` (square, loops: no BLAS threads for these small matrices)."""
-    n = Phi.shape[0]
-    for r in range(n):
-        for c in range(n):
-            s = 0.0
-            for q in range(n):
-                s += F[r, q] * Phi[q, c]
-            tmp[r, c] = s
+    """``Φ <- F Φ``."""
+    matmul_into(F, Phi, tmp)
     Phi[:, :] = tmp
 
 
