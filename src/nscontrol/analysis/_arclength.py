@@ -141,9 +141,14 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
            whole_state: bool = False) -> Point | None:
     """Zero of ``value`` along the arclength from ``a`` (``s`` in ``(0, 2h)``).
 
-    Secant steps while no sign change is bracketed, Illinois regula falsi once one is; a
-    trial whose corrector fails (past a grazing the map is not smooth) counts as beyond the
-    zero. Stops when the bracket is ``rtol`` (relative) wide: in the parameter, or with
+    Secant steps while no sign change is bracketed, Illinois regula falsi once one is: an end
+    of the bracket kept twice in a row has its value halved. The far end always; the near
+    end (on ``a``'s side) only for a smooth test function (``closest``: plain regula falsi
+    on a convex one would keep it for good, and the bracket would never narrow), not for a
+    grazing, whose one-sided approach from the impacting side is what converges. A trial
+    whose corrector fails (past a grazing the map is not smooth) counts as beyond the zero;
+    from then on the near end is not halved either (the failures may lie on either side of
+    the zero). Stops when the bracket is ``rtol`` (relative) wide: in the parameter, or with
     ``whole_state`` in ``|y|`` — at a fold the parameter is stationary along the branch, so a
     narrow parameter bracket says nothing about the state.
 
@@ -174,11 +179,15 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
     Point or None
         ``None`` when no zero is found within 100 trials or no bracket can be formed.
     """
-    good = [(0.0, value(a), a)]                   # (s, f, point), same sign as at a
+    f_a = value(a)
+    good = [(0.0, f_a, a)]                        # (s, f, point), same sign as at a
     other: tuple[float, float, Point] | None = None
+    w_good = w_other = 1.0                        # Illinois weights of the bracket's ends
+    last = 0                                      # side of the last trial: +1 a's, -1 other
+    failed = False                                # a trial's corrector failed
     s_bad = 2.0 * h                               # smallest s known to fail or overshoot
     s = h if s_first is None else float(s_first)
-    width, side = np.inf, 0
+    width = np.inf
 
     def dist(u: Point, v: Point) -> float:
         return float(np.max(np.abs(u.y - v.y)) if whole_state else abs(u.y[-1] - v.y[-1]))
@@ -195,20 +204,25 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
         except SolverError:
             pt, f = None, np.nan
         if pt is None:
-            s_bad = s
+            s_bad, failed = s, True
             s = 0.5 * (good[-1][0] + s)
         elif f == 0.0:
             good.append((s, f, pt))
             width = 0.0
-        elif f * good[0][1] > 0:
+        elif f * f_a > 0:
             width = dist(pt, other[2] if other is not None else good[-1][2])
             good.append((s, f, pt))
-            side += 1
-            if other is not None and side >= 2:
-                other = (other[0], other[1] / 2, other[2])   # Illinois: retained end halved
+            w_good = 1.0
+            if other is not None and last == 1:
+                w_other /= 2   # Illinois: the end kept twice in a row counts half
+            last = 1
         else:
             width = dist(pt, good[-1][2])
-            other, side = (s, f, pt), 0
+            other = (s, f, pt)
+            w_other = 1.0
+            if last == -1 and closest and not failed:
+                w_good /= 2
+            last = -1
             s_bad = s
         if width <= rtol * size(good[-1][2]):
             break
@@ -216,8 +230,9 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
             continue
         if other is None and len(good) < 2:
             return None
-        (s0, f0, _), (s1, f1) = good[-1], ((other[0], other[1]) if other is not None
-                                           else (good[-2][0], good[-2][1]))
+        s0, f0 = good[-1][0], w_good * good[-1][1]
+        s1, f1 = ((other[0], w_other * other[1]) if other is not None
+                  else (good[-2][0], good[-2][1]))
         s_next = s1 - f1 * (s1 - s0) / (f1 - f0) if f1 != f0 else 0.5 * (s0 + s1)
         if other is not None and not min(s0, s1) < s_next < max(s0, s1):
             s_next = 0.5 * (s0 + s1)
