@@ -187,6 +187,8 @@ class AttenuationReport:
         ``coexistence_rtol`` relative: coexisting steady states.
     closed_loop_maxima
         Frequencies (Hz) of the local maxima of ``P_CL``.
+    max_effort_rms
+        Largest RMS control effort ``RMS(u)`` over the band (NaN without effort data).
     """
 
     frequency: FloatArray
@@ -198,6 +200,7 @@ class AttenuationReport:
     max_effort: float
     coexistence: list[tuple[float, float]]
     closed_loop_maxima: FloatArray
+    max_effort_rms: float = float("nan")
 
 
 def _windows(mask: NDArray[np.bool_], f: FloatArray) -> list[tuple[float, float]]:
@@ -227,8 +230,8 @@ def attenuation_report(open_loop: Sequence[FrequencyResponse], closed_loop: Freq
         :func:`~nscontrol.analysis.periodic.frequency_sweep`); ``P_OL`` is their pointwise
         maximum, the worst steady state the history can select.
     closed_loop : FrequencyResponse
-        The closed loop on the same grid (its ``effort`` gives :attr:`AttenuationReport.
-        max_effort`).
+        The closed loop on the same grid (its ``effort`` and ``effort_rms`` give
+        :attr:`AttenuationReport.max_effort` and :attr:`AttenuationReport.max_effort_rms`).
     points : mapping of str to float or (float, float), optional
         Named frequencies (Hz) or windows ``(lo, hi)`` (Hz) where the ratio is reported: a
         window takes the open loop's largest local maximum inside it (its largest value if it
@@ -296,8 +299,13 @@ def attenuation_report(open_loop: Sequence[FrequencyResponse], closed_loop: Freq
         with np.errstate(invalid="ignore"):
             lo_, hi_ = np.nanmin(P_ol_all, axis=0), np.nanmax(P_ol_all, axis=0)
             coexist = (hi_ - lo_) > rtol * lo_
-    effort = closed_loop.effort
     return AttenuationReport(
         f, P_ol, P_cl, float(np.nanmax(P_ol) / np.nanmax(P_cl)), ratios, at,
-        float(np.nanmax(effort)) if np.any(np.isfinite(effort)) else float("nan"),
-        _windows(coexist, f), f[local_maxima(P_cl)])
+        _band_max(closed_loop.effort), _windows(coexist, f), f[local_maxima(P_cl)],
+        _band_max(closed_loop.effort_rms))
+
+
+def _band_max(values: FloatArray) -> float:
+    """Largest finite entry (NaN when there is none, e.g. no control law)."""
+    v = np.asarray(values, float)
+    return float(np.nanmax(v)) if np.any(np.isfinite(v)) else float("nan")
