@@ -424,7 +424,8 @@ def attenuation_tradeoff(plant: MechanicalPWL, rhos: Any, *, frequencies: Any,
             des.closed_loop(), 2 * np.pi * f, amplitude=amplitude,
             output=des.performance_output, control=des.control(), n_samples=n_samples,
             executor=executor, progress=False))
-    scaled = [float(d.feedback.gain_bound) for d in designs]
+    scaled = [float(d.feedback.gain_bound) if d.feedback is not None else float("nan")
+              for d in designs]
     return AttenuationTradeoff(
         rho, np.array([np.linalg.norm(d.K, 2) for d in designs]), np.array(scaled),
         np.array([d.gamma for d in designs]),

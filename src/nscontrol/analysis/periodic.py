@@ -868,7 +868,8 @@ def frequency_response(system: SimulableSystem, omegas: ArrayLike, *,
         states: ``ConvergentStateFeedback.control``, ``PWAStateFeedback.control``, or
         ``EstimateFeedback(feedback, n)`` for an observer-based loop
         (:mod:`nscontrol.design.convergent_pwa`); gives :attr:`FrequencyResponse.effort`
-        ``= max_t|u|`` and :attr:`FrequencyResponse.effort_rms` ``= RMS_t|u|``. Must be picklable for process executors (those are).
+        ``= max_t|u|`` and :attr:`FrequencyResponse.effort_rms` ``= RMS_t|u|``. Must be
+        picklable for process executors (those are).
     executor
         As in :func:`nscontrol.sweep.run`. Default ``"auto"``: the first frequency runs
         here, timed, and the rest go to a local process pool only when the predicted serial
