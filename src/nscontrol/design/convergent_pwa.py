@@ -20,6 +20,7 @@ solver's status.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from types import SimpleNamespace
@@ -29,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_matrix, as_real_scalar, check_positive
-from ..errors import DimensionError, InfeasibleDesignError, ModelError
+from ..errors import DimensionError, InaccurateCertificateWarning, InfeasibleDesignError, ModelError
 from ..numerics.scaling import Scaling
 from ..numerics.statespace import is_state_space, state_space_matrices
 
@@ -505,7 +506,9 @@ def design_state_feedback_l2(system: PiecewiseAffineSystem, *, rho: float,
          [C_zQ,                           0,     −I,     0  ],
          [ρY,                             0,     0,      −I ]]  <=  −δI,
 
-    giving ``γ_inf``; then, with ``γ = (1 + slack)·γ_inf`` fixed, the most interior
+    giving ``γ_inf`` (when the solver cannot finish it, because the infimum lies where ``Q``
+    turns singular, by bisection on the feasibility of the problem with ``γ`` fixed, to
+    ``1e-3`` on ``γ²``); then, with ``γ = (1 + slack)·γ_inf`` fixed, the most interior
     certificate (``max t`` s.t. ``Q >= tI``), and ``K = YQ⁻¹``. By the Schur complement
     the LMI is ``V' + |C_z x|² + ρ²|u|² − γ²|w|² <= −2σV`` for ``V = xᵀPx`` along every
     mode.
@@ -530,8 +533,8 @@ def design_state_feedback_l2(system: PiecewiseAffineSystem, *, rho: float,
         strictness margin only).
     slack
         Relative slack on ``γ`` (``>= 0``) bought for a finite, well-conditioned gain:
-        ``γ = (1 + slack)·γ_inf``; ``0`` returns the minimiser of the first problem itself,
-        whose gain may be arbitrarily large (see Notes).
+        ``γ = (1 + slack)·γ_inf``; ``0`` asks for the infimum itself, which may have no
+        certificate at all (see Notes).
     scale
         As in :func:`design_state_feedback`. The LMIs are solved for ``x̃ = Sx``,
         ``τ = ωt``, ``u = fũ`` and ``w = fw̃`` (the disturbance in the input unit, as a
@@ -654,9 +657,7 @@ def _l2_state_feedback(As: Sequence[FloatArray], B: FloatArray, D: FloatArray, C
     data = ([sc.S @ A @ Sinv / w for A in As], sc.S @ B * (f / w), sc.S @ D * (f / w),
             Cz @ Sinv / g, rho * f / g, sigma / w)
     try:
-        best = _solve_l2(*data, gamma2=None)
-        res = best if slack == 0.0 else _solve_l2(*data, gamma2=(1.0 + slack)**2
-                                                   * float(best["gamma2"]))
+        res = _solve_l2(*data, gamma2=(1.0 + slack)**2 * _least_gamma2(data))
     except InfeasibleDesignError as err:
         raise InfeasibleDesignError(
             f"design_state_feedback_l2: no linear K certifies decay rate sigma={sigma:g} with "
@@ -675,6 +676,52 @@ def _l2_state_feedback(As: Sequence[FloatArray], B: FloatArray, D: FloatArray, C
                                    res.status, gamma=gamma, rho=rho)
 
 
+#: Relative width of the bracket on ``γ²`` when the infimum is found by bisection.
+_L2_BISECTION_RTOL = 1e-3
+
+
+def _least_gamma2(data: tuple[Any, ...]) -> float:
+    """``γ̃²_inf`` of the scaled (SF-L2) problem: ``min γ²`` directly; when the solver cannot
+    finish it (the infimum sits where ``Q`` turns singular, e.g. ``B = D``), the upper end of
+    a geometric bisection on the feasibility of the problem with ``γ²`` fixed, to
+    :data:`_L2_BISECTION_RTOL`."""
+    # only γ² is used from these solves (the certificate returned is the interior one at
+    # (1 + slack)²γ²): their thin margins near the boundary are expected, not reported
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", InaccurateCertificateWarning)
+            return float(_solve_l2(*data, gamma2=None)["gamma2"])
+    except InfeasibleDesignError as err:
+        if err.status == "infeasible":      # a decision, not a failure to finish
+            raise
+
+    def feasible(g2: float) -> bool:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", InaccurateCertificateWarning)
+            try:
+                _solve_l2(*data, gamma2=g2)
+            except InfeasibleDesignError:
+                return False
+        return True
+
+    lo, hi = 0.0, 1.0
+    for _ in range(40):                      # bracket: hi feasible, lo not (or 0)
+        if feasible(hi):
+            break
+        lo, hi = hi, 4.0 * hi
+    else:
+        raise InfeasibleDesignError("no gamma up to 4^40 (scaled) is certified",
+                                    status="infeasible")
+    if lo == 0.0:
+        lo = hi / 4.0
+        while lo > 1e-12 * hi and feasible(lo):
+            hi, lo = lo, lo / 4.0
+    while hi > (1.0 + _L2_BISECTION_RTOL) * lo:
+        mid = float(np.sqrt(lo * hi))
+        lo, hi = (lo, mid) if feasible(mid) else (mid, hi)
+    return hi
+
+
 def _solve_l2(At: Sequence[FloatArray], Bt: FloatArray, Dt: FloatArray, Ct: FloatArray,
               rho_t: float, s_t: float, *, gamma2: float | None) -> Any:
     """The scaled (SF-L2) LMIs: ``min γ²`` (``gamma2=None``), or, with ``γ²`` fixed, the
@@ -691,9 +738,8 @@ def _solve_l2(At: Sequence[FloatArray], Bt: FloatArray, Dt: FloatArray, Ct: Floa
     Y = prob.variable("Y", (p, n))
     g2: Any = prob.variable("gamma2") if gamma2 is None else gamma2
     t = None
-    if gamma2 is None:
-        prob.positive("Q > 0", Q, margin=LMI_MARGIN)
-    else:
+    prob.positive("Q > 0", Q, margin=LMI_MARGIN)
+    if gamma2 is not None:     # t >= δ by the line above: a certificate, never an indefinite Q
         t = prob.variable("t")
         prob.positive("Q >= tI", Q, margin=t)
     for i, A in enumerate(At):
