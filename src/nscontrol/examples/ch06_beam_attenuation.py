@@ -550,7 +550,7 @@ def _tradeoff_figure(tr: Any, out: dict[str, Any], out_dir: Path,
                      figures: list[Path]) -> None:
     from ._figures import new_figure, save_figure
 
-    fig, ax = new_figure(figsize=(7.5, 4.4))
+    fig, ax = new_figure(figsize=(7.5, 4.8))
     ax.semilogy(tr.max_effort, tr.sup_response, "ko-", label="penalised (L2) designs, max|u|")
     ax.semilogy(tr.max_effort_rms, tr.sup_response, "o--", color="0.5", mfc="none",
                 label="penalised (L2) designs, RMS(u)")
@@ -568,7 +568,7 @@ def _tradeoff_figure(tr: Any, out: dict[str, Any], out_dir: Path,
                     label=f"{name}, RMS(u)")
     ax.set_xlabel("control force over the band: largest max|u| or largest RMS(u) [N]")
     ax.set_ylabel("largest closed-loop amplitude sup P_CL [m]")
-    ax.legend(fontsize="x-small", loc="center left", bbox_to_anchor=(0.02, 0.45))
+    ax.legend(fontsize="small", loc="upper right")
     save_figure(fig, out_dir, "ch06_tradeoff", figures)
 
 
