@@ -649,13 +649,13 @@ def _l2_state_feedback(As: Sequence[FloatArray], B: FloatArray, D: FloatArray, C
                        rho: float, sigma: float, slack: float, scale: Scaling | str | None
                        ) -> ConvergentStateFeedback:
     sc = _resolve_scaling(scale, As, B)
-    # z in units of ρf: the penalty block is the identity and γ̃ = γ/ρ, O(1) when the effort
-    # dominates (with the model's output unit the beam's LMIs fail in Clarabel for ρf > 5)
+    # z in units of g = ρf: the penalty ρ̃ = ρf/g is 1 and γ̃ = γ/ρ, O(1) when the effort
+    # dominates (with the model's output unit the beam's LMIs failed in Clarabel from ρf = 7.6)
     f, w = sc.input_unit, sc.omega
     g = rho * f
     Sinv = np.linalg.inv(sc.S)
     data = ([sc.S @ A @ Sinv / w for A in As], sc.S @ B * (f / w), sc.S @ D * (f / w),
-            Cz @ Sinv / g, rho * f / g, sigma / w)
+            Cz @ Sinv / g, 1.0, sigma / w)
     try:
         res = _solve_l2(*data, gamma2=(1.0 + slack)**2 * _least_gamma2(data))
     except InfeasibleDesignError as err:
