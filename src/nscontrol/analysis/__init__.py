@@ -47,6 +47,7 @@ _EXPORTS: dict[str, str] = {
     "VelocityGainThreshold": "attenuation", "min_velocity_gain": "attenuation",
     "response_amplitude": "attenuation", "local_maxima": "attenuation",
     "AttenuationReport": "attenuation", "attenuation_report": "attenuation",
+    "AttenuationTradeoff": "attenuation", "attenuation_tradeoff": "attenuation",
     # orbits.py
     "Forced": "orbits", "MapResult": "orbits", "Orbit": "orbits", "stroboscopic_map": "orbits",
     "find_orbit": "orbits", "Cycle": "orbits", "find_cycle": "orbits", "SectionReturn": "orbits",

@@ -21,7 +21,8 @@ if TYPE_CHECKING:
     from .periodic import FrequencyResponse
 
 __all__ = ["VelocityGainThreshold", "min_velocity_gain", "response_amplitude",
-           "local_maxima", "AttenuationReport", "attenuation_report"]
+           "local_maxima", "AttenuationReport", "attenuation_report", "AttenuationTradeoff",
+           "attenuation_tradeoff"]
 
 FloatArray = NDArray[np.float64]
 
@@ -187,6 +188,8 @@ class AttenuationReport:
         ``coexistence_rtol`` relative: coexisting steady states.
     closed_loop_maxima
         Frequencies (Hz) of the local maxima of ``P_CL``.
+    max_effort_rms
+        Largest RMS control effort ``RMS(u)`` over the band (NaN without effort data).
     """
 
     frequency: FloatArray
@@ -198,6 +201,7 @@ class AttenuationReport:
     max_effort: float
     coexistence: list[tuple[float, float]]
     closed_loop_maxima: FloatArray
+    max_effort_rms: float = float("nan")
 
 
 def _windows(mask: NDArray[np.bool_], f: FloatArray) -> list[tuple[float, float]]:
@@ -227,8 +231,8 @@ def attenuation_report(open_loop: Sequence[FrequencyResponse], closed_loop: Freq
         :func:`~nscontrol.analysis.periodic.frequency_sweep`); ``P_OL`` is their pointwise
         maximum, the worst steady state the history can select.
     closed_loop : FrequencyResponse
-        The closed loop on the same grid (its ``effort`` gives :attr:`AttenuationReport.
-        max_effort`).
+        The closed loop on the same grid (its ``effort`` and ``effort_rms`` give
+        :attr:`AttenuationReport.max_effort` and :attr:`AttenuationReport.max_effort_rms`).
     points : mapping of str to float or (float, float), optional
         Named frequencies (Hz) or windows ``(lo, hi)`` (Hz) where the ratio is reported: a
         window takes the open loop's largest local maximum inside it (its largest value if it
@@ -296,8 +300,136 @@ def attenuation_report(open_loop: Sequence[FrequencyResponse], closed_loop: Freq
         with np.errstate(invalid="ignore"):
             lo_, hi_ = np.nanmin(P_ol_all, axis=0), np.nanmax(P_ol_all, axis=0)
             coexist = (hi_ - lo_) > rtol * lo_
-    effort = closed_loop.effort
     return AttenuationReport(
         f, P_ol, P_cl, float(np.nanmax(P_ol) / np.nanmax(P_cl)), ratios, at,
-        float(np.nanmax(effort)) if np.any(np.isfinite(effort)) else float("nan"),
-        _windows(coexist, f), f[local_maxima(P_cl)])
+        _band_max(closed_loop.effort), _windows(coexist, f), f[local_maxima(P_cl)],
+        _band_max(closed_loop.effort_rms))
+
+
+def _band_max(values: FloatArray) -> float:
+    """Largest finite entry (NaN when there is none, e.g. no control law)."""
+    v = np.asarray(values, float)
+    return float(np.nanmax(v)) if np.any(np.isfinite(v)) else float("nan")
+
+
+# -- the trade-off of the L2 design ----------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class AttenuationTradeoff:
+    """Gain, certified L2 gain and closed-loop figures of the L2 state feedback of the beam,
+    one entry per control penalty ``ρ``.
+
+    Attributes
+    ----------
+    rho
+        The penalties (m/N), as given.
+    gain
+        ``‖K‖₂`` in the model's units (N per state unit).
+    scaled_gain
+        ``‖K̃‖₂`` in the scaled coordinates of the design (forces in units of ``k_mid``).
+    gamma
+        Certified L2 gain from the force to ``z = (y_s, ρu)`` (m/N).
+    sup_response
+        Band supremum of ``P_CL(f) = max_t|ȳ_s|`` on the grid (m).
+    max_effort, max_effort_rms
+        Band maxima of ``max_t|u|`` and ``RMS(u)`` (N).
+    frequency
+        The grid (Hz).
+    designs
+        The :class:`~nscontrol.design.beam_attenuation.AttenuationDesign` per ``ρ``.
+    responses
+        The closed-loop :class:`~nscontrol.analysis.periodic.FrequencyResponse` per ``ρ``.
+    """
+
+    rho: FloatArray
+    gain: FloatArray
+    scaled_gain: FloatArray
+    gamma: FloatArray
+    sup_response: FloatArray
+    max_effort: FloatArray
+    max_effort_rms: FloatArray
+    frequency: FloatArray
+    designs: tuple[Any, ...]
+    responses: tuple[Any, ...]
+
+
+def attenuation_tradeoff(plant: MechanicalPWL, rhos: Any, *, frequencies: Any,
+                         amplitude: Any = 1.0, decay: float = 0.1, slack: float = 0.1,
+                         omega_ref: float | None = None, n_samples: int = 256,
+                         executor: Any = "serial") -> AttenuationTradeoff:
+    """The attenuation/effort trade-off of the L2 state feedback over control penalties.
+
+    For each ``ρ``: the design ``design_attenuation(plant, structure="state", rho=ρ)``,
+    then the steady states of its closed loop on the grid ``frequencies`` by shooting
+    (:func:`~nscontrol.analysis.periodic.frequency_response`, exact PWA integration), and
+    their band figures.
+
+    Parameters
+    ----------
+    plant : MechanicalPWL
+        The beam.
+    rhos : array_like
+        Control penalties (m/N), each finite and ``> 0``.
+    frequencies : array_like
+        The grid (Hz); a coarse one suffices for band maxima of smooth curves.
+    amplitude : float or callable
+        The force amplitude, or ``ω -> a(ω)`` (e.g. :class:`~nscontrol.systems.beam.
+        Unbalance`).
+    decay, slack, omega_ref : float
+        As in :func:`~nscontrol.design.beam_attenuation.design_attenuation` (``decay`` in
+        units of ``ω_ref``).
+    n_samples : int
+        Uniform samples per period.
+    executor
+        As in :func:`nscontrol.sweep.run` (default ``"serial"``: each point costs a few ms).
+
+    Returns
+    -------
+    AttenuationTradeoff
+
+    Raises
+    ------
+    ModelError
+        A bad ``ρ`` or grid.
+    InfeasibleDesignError
+        A design failed.
+
+    Notes
+    -----
+    The closed loops are convergent (the design certifies the decay rate), so each
+    frequency has one steady state and shooting finds it. On a steady state the design's
+    dissipation inequality gives ``mean|y_s|² + ρ² mean|u|² <= γ² mean|F|²``.
+
+    Examples
+    --------
+    >>> from nscontrol.systems.beam import Unbalance, two_mode_beam
+    >>> tr = attenuation_tradeoff(two_mode_beam(), [1e-6, 1e-5], frequencies=[20.0, 40.0],
+    ...                           amplitude=Unbalance(1e-4))
+    >>> bool(tr.gain[0] > tr.gain[1] and tr.gamma[0] < tr.gamma[1])
+    True
+    """
+    from ..design.beam_attenuation import design_attenuation
+    from .periodic import frequency_response
+
+    rho = np.atleast_1d(np.asarray(rhos, float))
+    if rho.ndim != 1 or rho.size == 0:
+        raise ModelError(f"rhos: expected a non-empty 1-d array of penalties, got {rhos!r}")
+    f = np.atleast_1d(np.asarray(frequencies, float))
+    designs, responses = [], []
+    for r in rho:
+        des = design_attenuation(plant, structure="state", rho=float(r), decay=decay,
+                                 slack=slack, omega_ref=omega_ref)
+        designs.append(des)
+        responses.append(frequency_response(
+            des.closed_loop(), 2 * np.pi * f, amplitude=amplitude,
+            output=des.performance_output, control=des.control(), n_samples=n_samples,
+            executor=executor, progress=False))
+    scaled = [float(d.feedback.gain_bound) if d.feedback is not None else float("nan")
+              for d in designs]
+    return AttenuationTradeoff(
+        rho, np.array([np.linalg.norm(d.K, 2) for d in designs]), np.array(scaled),
+        np.array([d.gamma for d in designs]),
+        np.array([float(np.nanmax(response_amplitude(r))) for r in responses]),
+        np.array([_band_max(r.effort) for r in responses]),
+        np.array([_band_max(r.effort_rms) for r in responses]), f, tuple(designs),
+        tuple(responses))

@@ -635,6 +635,9 @@ class HarmonicResponse:
         ``max_t |x̄(t)|`` (refined peak; the quantity the ISC bound ``γ_ISC·a`` bounds).
     effort
         ``max_t |u(t)|`` of the control law given as ``control`` (``nan`` without one).
+    effort_rms
+        ``RMS_t |u(t)|`` over the steady-state period (the ``p`` periods of a brute-force
+        response of multiplicity ``p``; ``nan`` without a control law).
     """
 
     omega: float
@@ -648,6 +651,7 @@ class HarmonicResponse:
     x0: FloatArray
     state_peak: float = np.nan
     effort: float = np.nan
+    effort_rms: float = np.nan
 
 
 def _output_matrix(system: Any, output: Any) -> FloatArray:
@@ -677,12 +681,19 @@ def _effort(control: Any, x: FloatArray) -> FloatArray | None:
     return np.linalg.norm(u, axis=1)
 
 
+def _rms(values: FloatArray | None) -> float:
+    """RMS of uniform samples of whole periods (NaN for ``None``): the sampled mean of a
+    trigonometric polynomial of degree below ``N/2`` is its exact mean, so no refinement is
+    needed, unlike a peak."""
+    return np.nan if values is None else float(np.sqrt(np.mean(values**2)))
+
+
 def harmonic_response(orbit: PeriodicOrbit, *, amplitude: float, output: Any = None,
                       system: Any = None, n_harmonics: int = 5,
                       control: Any = None) -> HarmonicResponse:
     """Generalized-Bode figures of a shot orbit: refined ``γ_a``, RMS gain, harmonics, peak
     state and (with ``control``, a callable ``x -> u`` on time-major states) the effort
-    ``max|u|``.
+    ``max|u|`` and its RMS over the period.
 
     Parameters
     ----------
@@ -714,7 +725,7 @@ def harmonic_response(orbit: PeriodicOrbit, *, amplitude: float, output: Any = N
         harmonics=dft_harmonics(z[:, 0], n_harmonics) / a, max_floquet=orbit.max_multiplier,
         multiplicity=1, n_crossings=orbit.n_crossings, x0=orbit.x0,
         state_peak=refined_peak(np.linalg.norm(x, axis=1)),
-        effort=np.nan if u is None else refined_peak(u))
+        effort=np.nan if u is None else refined_peak(u), effort_rms=_rms(u))
 
 
 @dataclass(frozen=True)
@@ -759,6 +770,9 @@ class FrequencyResponse:
         ``max_t |x̄(t)|`` per frequency.
     effort
         Control effort ``max_t |u(t)|`` per frequency (NaN when no control law was given).
+    effort_rms
+        ``RMS_t |u(t)|`` over the steady-state period(s) per frequency (NaN when no control
+        law was given; empty for a response built without it).
     direction
         ``"independent"`` (shooting, every point on its own), ``"up"`` or ``"down"``.
     amplitude
@@ -789,6 +803,7 @@ class FrequencyResponse:
     errors: tuple[Any, ...] = ()
     branches: tuple[Any, ...] = ()
     amplitudes: FloatArray = field(default_factory=lambda: np.empty(0))
+    effort_rms: FloatArray = field(default_factory=lambda: np.empty(0))
 
     @classmethod
     def from_points(cls, omegas: ArrayLike, points: Sequence[HarmonicResponse | None],
@@ -807,7 +822,7 @@ class FrequencyResponse:
                    col("n_crossings", -1).astype(np.int64), col("state_peak", np.nan),
                    col("effort", np.nan), direction,
                    np.nan if callable(amplitude) else float(amplitude), tuple(errors),
-                   tuple(branches), a)
+                   tuple(branches), a, col("effort_rms", np.nan).astype(float))
 
 
 def _omega_grid(omegas: Any) -> FloatArray:
@@ -853,7 +868,8 @@ def frequency_response(system: SimulableSystem, omegas: ArrayLike, *,
         states: ``ConvergentStateFeedback.control``, ``PWAStateFeedback.control``, or
         ``EstimateFeedback(feedback, n)`` for an observer-based loop
         (:mod:`nscontrol.design.convergent_pwa`); gives :attr:`FrequencyResponse.effort`
-        ``= max_t|u|``. Must be picklable for process executors (those are).
+        ``= max_t|u|`` and :attr:`FrequencyResponse.effort_rms` ``= RMS_t|u|``. Must be
+        picklable for process executors (those are).
     executor
         As in :func:`nscontrol.sweep.run`. Default ``"auto"``: the first frequency runs
         here, timed, and the rest go to a local process pool only when the predicted serial
@@ -930,8 +946,9 @@ def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: Fl
                     n_harmonics: int, control: Any) -> HarmonicResponse:
     """Figures of a brute-force window on its *uniform* grid (event rows removed). For
     multiplicity ``p >= 1`` over the last ``p`` periods (peaks refined cyclically, harmonics
-    of ω at DFT bins ``p, 2p, ...``); for ``p = 0`` plain maxima over the whole window, RMS
-    over the window and harmonics over the last period."""
+    of ω at DFT bins ``p, 2p, ...``, RMS of ``z`` and ``u`` over the ``p`` periods); for
+    ``p = 0`` plain maxima over the whole window, RMS over the window and harmonics over the
+    last period."""
     p = int(bf.multiplicity)
     k = max(p, 1)
     _, x = bf.uniform_samples(k)
@@ -943,6 +960,7 @@ def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: Fl
     if p >= 1:
         gamma, peak = refined_peak(mag), refined_peak(np.linalg.norm(x, axis=1))
         effort = np.nan if u is None else refined_peak(u)
+        effort_rms = _rms(u)
         rms = float(np.sqrt(np.mean(mag**2)))
     else:  # not periodic: every recorded row, and the RMS of the whole window
         xa = bf.trajectory.x
@@ -951,6 +969,7 @@ def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: Fl
         ua = _effort(control, xa)
         effort = np.nan if ua is None else float(np.max(ua))
         _, xw = bf.uniform_samples()
+        effort_rms = _rms(_effort(control, xw))
         rms = float(np.sqrt(np.mean(np.linalg.norm(xw @ Cz.T, axis=1)**2)))
     t_end = bf.t0 + (bf.poincare.shape[0] - 1) * bf.period
     times = bf.trajectory.event_times()
@@ -958,7 +977,8 @@ def _brute_response(bf: BruteForceResult, omega: float, amplitude: float, Cz: Fl
     return HarmonicResponse(omega=float(omega), amplitude=amplitude, gamma=gamma / amplitude,
                             rms_gain=rms / (amplitude / np.sqrt(2.0)), harmonics=harmonics,
                             max_floquet=np.nan, multiplicity=p, n_crossings=crossings,
-                            x0=bf.poincare[-1], state_peak=peak, effort=effort)
+                            x0=bf.poincare[-1], state_peak=peak, effort=effort,
+                            effort_rms=effort_rms)
 
 
 #: Shooting tolerance of the sweeps' orbits (relative to ``max(1, |x|)``), as in

@@ -53,6 +53,7 @@ _EXPORTS: dict[str, str] = {
     "ConvergentStateFeedback": "convergent_pwa", "PWAStateFeedback": "convergent_pwa",
     "ConvergentObserver": "convergent_pwa", "EstimateFeedback": "convergent_pwa",
     "design_state_feedback": "convergent_pwa", "design_pwa_state_feedback": "convergent_pwa",
+    "design_state_feedback_l2": "convergent_pwa",
     "tune_pwa_state_feedback": "convergent_pwa", "design_observer": "convergent_pwa",
     "output_feedback_loop": "convergent_pwa",
     # beam_attenuation.py

@@ -4,7 +4,8 @@
 Three controller structures, one design object :class:`AttenuationDesign`:
 
 * ``"state"`` — ``u = Kx`` from the decay-rate LMI (SF-σ) in the beam's mechanical
-  coordinates (:func:`beam_scaling`);
+  coordinates (:func:`beam_scaling`), or, given a control penalty ``rho``, from the L2
+  design (SF-L2) for the performance output ``z = (y_s, ρu)``;
 * ``"output"`` — ``u = Kx̂`` with the piecewise-linear observer (OBS-σ) fed by the measured
   midpoint displacement: by separation the steady state is that of ``"state"``;
 * ``"pd"`` — collocated servo-stiffness and servo-damping ``u = -k_p y_s - k_d y_s'``, the
@@ -117,6 +118,12 @@ class AttenuationDesign:
     P: FloatArray | None
     decay: float
 
+    @property
+    def gamma(self) -> float:
+        """The certified L2 gain from the force ``F`` to ``z = (y_s, ρu)`` (m/N) of an L2
+        design (``rho`` given); NaN otherwise."""
+        return float("nan") if self.feedback is None else float(self.feedback.gamma)
+
     def modes(self) -> tuple[FloatArray, FloatArray]:
         """The plant loop's mode matrices ``A_i + BK`` (contact, free)."""
         A0, A1 = self.plant.to_pwa().A
@@ -182,7 +189,8 @@ def pd_gain(plant: MechanicalPWL, kp: float, kd: float) -> FloatArray:
 def design_attenuation(plant: MechanicalPWL, *, structure: str = "output",
                        decay: float = 0.1, observer_decay: float = 0.5,
                        omega_ref: float | None = None, kp: float = 0.0,
-                       kd: float | None = None) -> AttenuationDesign:
+                       kd: float | None = None, rho: float | None = None,
+                       slack: float = 0.1) -> AttenuationDesign:
     """Design a convergent attenuating controller for the beam.
 
     Parameters
@@ -201,6 +209,14 @@ def design_attenuation(plant: MechanicalPWL, *, structure: str = "output",
         As in :func:`beam_scaling`.
     kp, kd : float
         ``"pd"`` only: the gains (N/m, N s/m); ``kd`` is required.
+    rho : float, optional
+        ``"state"`` and ``"output"``: a control penalty (m/N) selects the L2 design
+        :func:`~nscontrol.design.convergent_pwa.design_state_feedback_l2` for the
+        performance output ``z = (y_s, ρu)`` (support displacement, penalised force) and the
+        unbalance force as disturbance, with decay rate ``decay``, instead of (SF-σ).
+    slack : float
+        L2 design only: ``γ = (1 + slack)·γ_inf`` (see
+        :func:`~nscontrol.design.convergent_pwa.design_state_feedback_l2`).
 
     Returns
     -------
@@ -209,7 +225,7 @@ def design_attenuation(plant: MechanicalPWL, *, structure: str = "output",
     Raises
     ------
     ModelError
-        Unknown ``structure``; ``"pd"`` without ``kd``.
+        Unknown ``structure``; ``"pd"`` without ``kd`` or with ``rho``; a bad ``rho``.
     InfeasibleDesignError
         No gain certifies the decay rate.
 
@@ -238,7 +254,7 @@ def design_attenuation(plant: MechanicalPWL, *, structure: str = "output",
     >>> np.round(sf.K / 1e3, 1)
     array([[-95.5, -41.1,  -0.9,  -0.2]])
     """
-    from .convergent_pwa import design_observer, design_state_feedback
+    from .convergent_pwa import design_observer, design_state_feedback, design_state_feedback_l2
 
     if structure not in STRUCTURES:
         raise ModelError(f"structure: expected one of {STRUCTURES}, got {structure!r}")
@@ -249,10 +265,17 @@ def design_attenuation(plant: MechanicalPWL, *, structure: str = "output",
             raise ModelError("kd: the 'pd' structure needs the servo-damping gain kd (N s/m); "
                              "nscontrol.analysis.min_velocity_gain(plant) gives the smallest "
                              "one with a common quadratic Lyapunov function")
+        if rho is not None:
+            raise ModelError("rho: the control penalty selects the L2 state-feedback design; "
+                             "the 'pd' structure has fixed gains kp, kd")
         return AttenuationDesign("pd", plant, pd_gain(plant, kp, kd), None, None, None,
                                  float("nan"))
     sigma = check_positive("decay", decay) * sc.omega
-    sf = design_state_feedback(pwa, sigma=sigma, B=plant.B, scale=sc)
+    if rho is None:
+        sf = design_state_feedback(pwa, sigma=sigma, B=plant.B, scale=sc)
+    else:
+        sf = design_state_feedback_l2(pwa, rho=rho, Cz=plant.H, D=plant.D, B=plant.B,
+                                      sigma=sigma, slack=slack, scale=sc)
     obs = None
     if structure == "output":
         obs = design_observer(pwa, sigma=check_positive("observer_decay", observer_decay)
