@@ -5,10 +5,10 @@ Scenarios:
 * the sweeps of the example (open loop and the reference closed loop, 5–70 Hz on a 0.25 Hz
   grid, up and down, 3 s settling transient per landing, 12 recorded periods, shooting and
   continuation in between): wall time serial and on 2 Dask workers (``LocalCluster``, one
-  thread each), parallel efficiency ``t_serial / (2 t_dask)``, medians of three paired
-  rounds; then the same with the servo-damping baseline as a third loop (all the example's
-  sweeps). Each loop's direction is one task (a sweep follows its attractor), so the
-  longest one, the open loop's sweep down, bounds what two workers can gain;
+  thread each, their stack profiler off), parallel efficiency ``t_serial / (2 t_dask)``,
+  medians of three paired rounds; then the same with the servo-damping baseline as a third
+  loop (all the example's sweeps). Each loop's direction is one task (a sweep follows its
+  attractor), so the longest one, the open loop's sweep down, bounds what two workers gain;
 * the open-loop sweep up against SciPy ``solve_ivp`` (DOP853, one terminal event on the
   support facet, restarted in the other mode after each crossing), brute force with the same
   protocol on a coarser grid: time per frequency of both and ``max |P_ours/P_scipy - 1|`` over
@@ -64,6 +64,7 @@ def _sweeps(quick: bool, baseline: bool) -> dict[str, Any]:
     round-to-round spread is large)."""
     import statistics
 
+    from dask import config as dask_config
     from dask.distributed import Client, LocalCluster
 
     task = ex.BeamSweep(step_hz=1.0 if quick else ex.STEP_HZ)
@@ -72,8 +73,10 @@ def _sweeps(quick: bool, baseline: bool) -> dict[str, Any]:
     serial, dask, same = [], [], 0.0
     for _ in range(1 if quick else 3):
         res, t_serial = _timed(lambda: ex.sweep_all(loops, task=task, executor="serial"))
-        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:
+        # the workers' stack sampler (every 10 ms) costs ~15 % on these Python-heavy tasks
+        with dask_config.set({"distributed.worker.profile.enabled": False}), \
+                LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                             dashboard_address=None) as cluster, Client(cluster) as client:
             ex.sweep_all(loops, task=ex.BeamSweep(step_hz=5.0), executor=client)  # warm-up
             res2, t_dask = _timed(lambda: ex.sweep_all(loops, task=task, executor=client))
         serial.append(t_serial)
