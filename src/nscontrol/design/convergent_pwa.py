@@ -376,15 +376,20 @@ def _modes(system: Any) -> tuple[FloatArray, ...]:
 
 
 def _input_matrix(system: Any, B: Any) -> FloatArray:
+    return _matrix_or_E(system, B, "B", "the control input matrix B (n, p)")
+
+
+def _matrix_or_E(system: Any, M: Any, name: str, what: str) -> FloatArray:
+    """``M`` checked as an ``(n, ·)`` matrix (a length-``n`` vector is one column), or the
+    model's input matrix ``E`` when ``M`` is ``None``."""
     n = system.n_states
-    if B is None:
-        B = getattr(system, "E", None)
-        if B is None:
-            raise ModelError("B: the model has no input matrix E; pass the control input "
-                             "matrix B (n, p)")
-        return np.asarray(B, float)
-    B = np.asarray(B, float)
-    return as_matrix("B", B.reshape(n, -1) if B.ndim == 1 and B.size == n else B, rows=n)
+    if M is None:
+        M = getattr(system, "E", None)
+        if M is None:
+            raise ModelError(f"{name}: the model has no input matrix E; pass {what}")
+        return np.asarray(M, float)
+    M = np.asarray(M, float)
+    return as_matrix(name, M.reshape(n, -1) if M.ndim == 1 and M.size == n else M, rows=n)
 
 
 def design_state_feedback(system: PiecewiseAffineSystem, *, sigma: float,
@@ -625,14 +630,7 @@ def _penalty(rho: Any) -> float:
 
 
 def _disturbance_matrix(system: Any, D: Any) -> FloatArray:
-    n = system.n_states
-    if D is None:
-        D = getattr(system, "E", None)
-        if D is None:
-            raise ModelError("D: the model has no input matrix E; pass the disturbance input "
-                             "matrix D (n, m)")
-    D = np.asarray(D, float)
-    return as_matrix("D", D.reshape(n, -1) if D.ndim == 1 and D.size == n else D, rows=n)
+    return _matrix_or_E(system, D, "D", "the disturbance input matrix D (n, m)")
 
 
 def _performance_output(system: Any, Cz: Any, n: int) -> FloatArray:
