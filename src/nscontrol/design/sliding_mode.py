@@ -93,6 +93,56 @@ def _plant_model(plant: Any, h: float) -> tuple[FloatArray, FloatArray, float]:
     return cPhi, cPhi - plant.c, cG
 
 
+class _SampledBlock:
+    """The block interface of a sampled law with internal state whose one step gives both
+    its output at ``t_k`` and its state at the next sample (:meth:`_advance`)."""
+
+    def _advance(self, xc: FloatArray, m: Measurement) -> tuple[FloatArray, FloatArray]:
+        raise NotImplementedError
+
+    def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        """The block's output at the sampling instant ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Sampling instant.
+        xc : ndarray
+            The internal state.
+        m : Measurement
+            The plant's measurement at ``t``.
+        """
+        return self._advance(xc, m)[0]
+
+    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        """The internal state at the next sample.
+
+        Parameters
+        ----------
+        t : float
+            Sampling instant.
+        xc : ndarray
+            The internal state.
+        m : Measurement
+            The plant's measurement at ``t``.
+        """
+        return self._advance(xc, m)[1]
+
+    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
+        """The internal state is unchanged by a plant jump.
+
+        Parameters
+        ----------
+        t : float
+            Time of the jump.
+        xc : ndarray
+            The internal state.
+        jump : Jump
+            Unused.
+        """
+        return xc
+
+
 @dataclass(frozen=True, eq=False)
 class FirstOrderSMC(StaticLaw):
     """First-order sliding-mode control with the discrete equivalent control, sampled.
@@ -172,7 +222,7 @@ class FirstOrderSMC(StaticLaw):
 
 
 @dataclass(frozen=True, eq=False)
-class SuperTwistingController:
+class SuperTwistingController(_SampledBlock):
     """The super-twisting controller, sampled; internal state ``ν``.
 
     Parameters
@@ -262,51 +312,15 @@ class SuperTwistingController:
         u, nu1 = kern.super_twisting_explicit(float(self.plant.c @ x), nu, self.k1, self.k2, h)
         return u, np.array([nu1])
 
-    def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        """``u_k`` (see the Notes).
-
-        Parameters
-        ----------
-        t : float
-            Sampling instant.
-        xc : ndarray
-            ``[ν_k]``.
-        m : Measurement
-            Reads the plant state ``m.x``.
-        """
-        return np.array([self._step(xc, np.asarray(m.x, dtype=float))[0]])
-
-    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        """The internal state at the next sample (``ν_{k+1}`` first).
-
-        Parameters
-        ----------
-        t : float
-            Sampling instant.
-        xc : ndarray
-            The internal state (``ν_k`` first).
-        m : Measurement
-            Reads the plant state ``m.x``.
-        """
-        return self._step(xc, np.asarray(m.x, dtype=float))[1]
-
-    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
-        """``ν`` is unchanged by a plant jump.
-
-        Parameters
-        ----------
-        t : float
-            Time of the jump.
-        xc : ndarray
-            ``[ν]``.
-        jump : Jump
-            Unused.
-        """
-        return xc
+    def _advance(self, xc: FloatArray, m: Measurement) -> tuple[FloatArray, FloatArray]:
+        """``([u_k], state at the next sample)`` from ``[ν_k, ...]`` and the plant state
+        ``m.x``."""
+        u, nxt = self._step(xc, np.asarray(m.x, dtype=float))
+        return np.array([u]), nxt
 
 
 @dataclass(frozen=True, eq=False)
-class LevantDifferentiator:
+class LevantDifferentiator(_SampledBlock):
     """Levant's robust exact differentiator of the measured ``y = f(t)``, sampled.
 
     ``z0' = -k1 |z0 - f|^{1/2} sign(z0 - f) + z1``, ``z1' = -k2 sign(z0 - f)``; its output is
@@ -368,47 +382,10 @@ class LevantDifferentiator:
         nxt = np.array([z[0] + h * (-k1 * kern.psi(e) + z[1]), z[1] - h * k2 * sg])
         return np.asarray(z, dtype=float).copy(), nxt
 
-    def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        """The estimate ``(f̂, f̂')`` at ``t_k`` from the measured ``m.y[0] = f_k``.
-
-        Parameters
-        ----------
-        t : float
-            Sampling instant.
-        xc : ndarray
-            ``(z0, z1)``.
-        m : Measurement
-            Reads ``m.y[0]``.
-        """
-        return self.step(xc, float(m.y[0]))[0]
-
-    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        """The state at the next sample.
-
-        Parameters
-        ----------
-        t : float
-            Sampling instant.
-        xc : ndarray
-            ``(z0, z1)``.
-        m : Measurement
-            Reads ``m.y[0]``.
-        """
-        return self.step(xc, float(m.y[0]))[1]
-
-    def reset(self, t: float, xc: FloatArray, jump: Any) -> FloatArray:
-        """Unchanged by a plant jump.
-
-        Parameters
-        ----------
-        t : float
-            Time of the jump.
-        xc : ndarray
-            ``(z0, z1)``.
-        jump : Jump
-            Unused.
-        """
-        return xc
+    def _advance(self, xc: FloatArray, m: Measurement) -> tuple[FloatArray, FloatArray]:
+        """``(estimate (f̂, f̂') at t_k, state at the next sample)`` from ``(z0, z1)`` and the
+        measured ``m.y[0] = f_k``."""
+        return self.step(xc, float(m.y[0]))
 
 
 def differentiate(diff: LevantDifferentiator, samples: ArrayLike) -> FloatArray:
