@@ -58,6 +58,12 @@ def inclined_block(mu: float, angle: float = 0.0, *, g: float = 9.81,
                             names=("x", "y"))
 
 
+def _ball(mu: float, radius: float, mass: float, g: float) -> tuple[float, ...]:
+    """The checked ``(μ, R, m, g)`` of a rolling body."""
+    return (check_positive("mu", mu, allow_zero=True), check_positive("radius", radius),
+            check_positive("mass", mass), check_positive("g", g, allow_zero=True))
+
+
 def rolling_disk(mu: float, *, radius: float = 0.1, mass: float = 1.0,
                  g: float = 9.81) -> LagrangianSystem:
     """A uniform disk on the ground: ``q = (x, y, θ)``, ``θ`` counter-clockwise.
@@ -82,9 +88,7 @@ def rolling_disk(mu: float, *, radius: float = 0.1, mass: float = 1.0,
     >>> rolling_disk(0.3).tangent_matrix.tolist()
     [[1.0, 0.0, 0.1]]
     """
-    mu = check_positive("mu", mu, allow_zero=True)
-    R, mass = check_positive("radius", radius), check_positive("mass", mass)
-    g = check_positive("g", g, allow_zero=True)
+    mu, R, mass, g = _ball(mu, radius, mass, g)
     return LagrangianSystem([mass, mass, 0.5 * mass * R * R],
                             constant_force=[0.0, -mass * g, 0.0], gap_matrix=[[0.0, 1.0, 0.0]],
                             gap_offset=[-R], friction=mu, tangent_matrix=[[1.0, 0.0, R]],
@@ -117,9 +121,7 @@ def rolling_sphere(mu: float, *, radius: float = 0.1, mass: float = 1.0,
     >>> rolling_sphere(0.3).friction_dim
     2
     """
-    mu = check_positive("mu", mu, allow_zero=True)
-    R, mass = check_positive("radius", radius), check_positive("mass", mass)
-    g = check_positive("g", g, allow_zero=True)
+    mu, R, mass, g = _ball(mu, radius, mass, g)
     inertia = 0.4 * mass * R * R
     T = [[1.0, 0.0, 0.0, 0.0, -R, 0.0], [0.0, 1.0, 0.0, R, 0.0, 0.0]]
     return LagrangianSystem([mass] * 3 + [inertia] * 3,
