@@ -90,7 +90,6 @@ class _Modes:
         self.g0s = np.ones((R, p))
         self.row_norms = np.ones((R, p))
         self.ready = np.zeros(R, dtype=np.bool_)
-        self.flows: list[Any] = [None] * R
         self.bern = np.zeros((K1, K1, K1))   # the search's Bernstein tables, from a context
 
     @classmethod
@@ -119,7 +118,7 @@ class _Modes:
         """Build region ``k``'s flow and guard data for the compiled loop."""
         from ..numerics.lti import LTIFlow
 
-        flow = self.flows[k] = LTIFlow.shared(self.aug[k])
+        flow = LTIFlow.shared(self.aug[k])
         ctx = flow.guard_context()
         G, g0 = self.guards[k]
         W, norms = ctx.guard_data(G)
