@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from . import errors
 from .errors import (
+    BudgetExceededError,
     DimensionError,
     InadmissibleStateError,
     InfeasibleDesignError,
@@ -41,8 +42,8 @@ _LAZY = {"solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp"),
          "closed_loop": ("nscontrol.simulate.closed_loop", "closed_loop")}
 
 __all__ = ["errors", "NscontrolError", "ModelError", "DimensionError", "InadmissibleStateError",
-           "InfeasibleDesignError", "SolverError", "ZenoError", "simulate", "Trajectory", *_LAZY,
-           *_SUBPACKAGES]
+           "InfeasibleDesignError", "SolverError", "BudgetExceededError", "ZenoError",
+           "simulate", "Trajectory", *_LAZY, *_SUBPACKAGES]
 
 
 def __getattr__(name: str) -> Any:

@@ -21,6 +21,7 @@ __all__ = [
     "InfeasibleDesignError",
     "SolverError",
     "NonFiniteStateError",
+    "BudgetExceededError",
     "ZenoError",
     "SlidingError",
     "NscontrolWarning",
@@ -86,6 +87,26 @@ class NonFiniteStateError(SolverError):
         super().__init__(message, status="non_finite", trajectory=trajectory)
         self.time = time
         self.state = state
+
+
+class BudgetExceededError(SolverError):
+    """An adaptive or iterative loop spent its budget (steps, iterations, events, a smallest
+    step relative to the time scale) before it finished: no loop of nscontrol runs unbounded.
+
+    ``budget`` names the option that set the limit (``"max_steps"``, ``"max_iter"``,
+    ``"min_step"``...), so the message and the attribute say which one to raise; ``limit`` is
+    its value and ``used`` what was spent. A simulation's part computed so far is in
+    ``trajectory``; any other loop's last iterate or partial result (a branch of a
+    continuation, a Newton iterate) is in ``partial``.
+    """
+
+    def __init__(self, message: str, *, budget: str, limit: Any = None, used: Any = None,
+                 trajectory: Any = None, partial: Any = None):
+        super().__init__(message, status="budget", trajectory=trajectory)
+        self.budget = budget
+        self.limit = limit
+        self.used = used
+        self.partial = partial
 
 
 class ZenoError(NscontrolError, RuntimeError):
