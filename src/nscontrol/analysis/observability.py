@@ -432,9 +432,8 @@ class ErrorContraction:
         float
         """
         t = as_float_array("times", times).ravel()
-        idx = np.searchsorted(self.times, t)
-        if t.size < 2 or np.any(idx >= self.times.size) or not np.allclose(
-                self.times[np.minimum(idx, self.times.size - 1)], t, rtol=0.0, atol=0.0):
+        idx = np.minimum(np.searchsorted(self.times, t), self.times.size - 1)
+        if t.size < 2 or not np.array_equal(self.times[idx], t):
             raise ModelError(f"times: expected at least two of the pre-impact instants of "
                              f"this propagation, got {t!r}")
         return -_least_squares_line(t, self.log_norms[idx])[0]
