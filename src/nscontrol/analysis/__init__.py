@@ -22,7 +22,9 @@ _EXPORTS: dict[str, str] = {
     "reconstructibility": "observability", "jury_second_order": "observability",
     "alpha_limit": "observability", "observer_flow_norms": "observability",
     "search_epsilon": "observability", "certified_rate": "observability",
-    "impact_decay_rate": "observability",
+    "impact_decay_rate": "observability", "impact_error_contraction": "observability",
+    "ErrorContraction": "observability", "ROUNDING_PER_STATE": "observability",
+    "MAX_RELATIVE_ROUNDING": "observability",
     # pwl_maps.py
     "coherent_orientation": "pwl_maps", "preimage_counts": "pwl_maps",
     "HomeomorphismReport": "pwl_maps", "homeomorphism_report": "pwl_maps",

@@ -7,7 +7,9 @@ analyses a model and a simulated run:
 * :func:`impact_observability` -- Theorem 1 for an
   :class:`~nscontrol.systems.impacting_bodies.ImpactingBodies` model;
 * :func:`reconstructibility` -- Theorem 2 for a given impact record;
-* :func:`impact_decay_rate` -- the decay rate of ``||x~||`` measured on a simulated run.
+* :func:`impact_decay_rate` -- the decay rate of ``||x~||`` measured on a simulated run;
+* :func:`impact_error_contraction` -- the error propagated alone along the run's impacts
+  (its contraction over each inter-impact interval, without the rounding floor).
 
 The conditions the observer design itself needs are defined in
 :mod:`nscontrol.design.impact_conditions` and re-exported here, so that the chapter's tests
@@ -32,6 +34,7 @@ from .._validation import (
     as_float_array,
     as_matrix,
     as_square,
+    as_vector,
     check_integer,
     check_positive,
     check_t_span,
@@ -46,7 +49,7 @@ from ..design.impact_conditions import (
     search_epsilon,
     theorem1_test,
 )
-from ..errors import ModelError
+from ..errors import DimensionError, ModelError
 from ..numerics.observability import RANK_RTOL, pbh_observability
 
 __all__ = [
@@ -54,6 +57,7 @@ __all__ = [
     "ReconstructibilityResult",
     "EpsilonCertificate",
     "DecayMeasurement",
+    "ErrorContraction",
     "RANK_RTOL",
     "theorem1_test",
     "impact_observability",
@@ -65,6 +69,9 @@ __all__ = [
     "search_epsilon",
     "certified_rate",
     "impact_decay_rate",
+    "impact_error_contraction",
+    "ROUNDING_PER_STATE",
+    "MAX_RELATIVE_ROUNDING",
 ]
 
 
@@ -208,7 +215,7 @@ class DecayMeasurement:
     intercept
         Its value at ``t = 0``: the fitted line is ``ln ||x~|| ~ intercept - rate t``.
     times, norms
-        The pre-impact instants and error norms used (above the floor).
+        The pre-impact instants and error norms used (above the rounding floor).
     initial_norm
         ``||x~(t0)||``.
     dwell_min, dwell_max
@@ -220,6 +227,11 @@ class DecayMeasurement:
     roundoff
         The roundoff level ``u ||E||_2 ||x(t_i-)||`` of each pre-impact norm (all impacts
         after ``skip``, the excluded ones too).
+    rate_error
+        Bound on ``|rate - exact|``, ``exact`` being the same fit through the exact error
+        norms at the same impacts, from the estimated rounding of each norm used
+        (:data:`ROUNDING_PER_STATE`); ``inf`` when a norm at the floor is used
+        (``through_floor``).
     """
 
     rate: float
@@ -232,20 +244,38 @@ class DecayMeasurement:
     n_points: int = 0
     n_floor: int = 0
     roundoff: FloatArray = field(default_factory=lambda: np.zeros(0))
+    rate_error: float = np.inf
 
 
-#: A pre-impact norm enters the decay fit only above this multiple of its roundoff level
-#: ``u ||E|| ||x(t_i-)||``. The propagation accumulates rounding over the steps between
-#: impacts: on chapter 2's runs the observed floor lies 1 to 25 times above ``u ||E|| ||x||``,
-#: so a norm 100 times above it carries a relative error <= 25 % in the worst case observed
-#: (<= 1 % on most runs), while the floor itself (<= 25 times the level) is always excluded.
-ROUNDOFF_MARGIN = 100.0
+#: Estimated rounding of a measured pre-impact norm ``||E x(t_i-)||`` per closed-loop state, in
+#: units of its level ``u ||E||_2 ||x(t_i-)||``: ``|measured - exact| <= kappa u ||E|| ||x||``
+#: with ``kappa = ROUNDING_PER_STATE * n``. The estimate: every flight between impacts adds
+#: the rounding of three products of length ``n`` -- the propagation ``V (e^{lambda t}
+#: V^-1 x)`` and ``E x`` -- ``3 n u ||E|| ||x||`` by the standard bound; what earlier flights
+#: added is carried along and contracted by the error dynamics, by a factor ``q`` per impact,
+#: a geometric sum ``3 n / (1 - q)``: ``10 n`` for ``q <= 0.7`` (an observer slower than that
+#: does not reach its floor within a run of tens of impacts, so the margin never decides
+#: there). ``tests/analysis/test_decay_fit.py`` checks it against the exactly propagated error.
+ROUNDING_PER_STATE = 10.0
+#: Largest estimated relative rounding ``kappa u ||E|| ||x(t_i-)|| / ||x~(t_i-)||`` of a norm
+#: the fit uses: ``ln ||x~||`` is then off by at most ``-ln(1 - 0.1) = 0.105``.
+MAX_RELATIVE_ROUNDING = 0.1
 
 
-def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-10,
+def _least_squares_line(t: FloatArray, log_n: FloatArray) -> tuple[float, float, FloatArray]:
+    """``(slope, intercept, w)`` of the least-squares line through ``(t_i, log_n_i)``; the
+    slope is ``sum_i w_i log_n_i``, so an error ``d_i`` in each ``log_n_i`` moves it by at
+    most ``sum_i |w_i| |d_i|``."""
+    dt = t - t.mean()
+    w = dt / float(np.sum(dt * dt))
+    slope = float(np.sum(w * log_n))
+    return slope, float(log_n.mean() - slope * t.mean()), w
+
+
+def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 0.0,
                       kind: str = "jump", skip: int = 0,
                       through_floor: bool = False,
-                      roundoff_margin: float = ROUNDOFF_MARGIN) -> DecayMeasurement:
+                      roundoff_margin: float | None = None) -> DecayMeasurement:
     """Fit the decay rate of ``||x~(t_i-)||`` at the impacts of a closed-loop run.
 
     Parameters
@@ -255,12 +285,14 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-1
     error_matrix : (k, n) array_like
         Maps the closed-loop state to the estimation error (``closed_loop.outputs["error"]``).
     floor : float
-        Norms below ``floor * ||x~(t0)||`` are left out (rounding level, not convergence).
-    roundoff_margin : float
-        Norms below ``roundoff_margin * u ||E||_2 ||x(t_i-)||`` are left out too: the error
-        ``x~ = E x`` is formed from states of size ``||x||``, so that is its rounding level,
-        which a large observer gain (a small ``eps``) lifts far above ``floor`` (default
-        :data:`ROUNDOFF_MARGIN`).
+        Norms below ``floor * ||x~(t0)||`` are left out too (default 0: only the rounding
+        floor below decides).
+    roundoff_margin : float, optional
+        Norms below ``roundoff_margin * u ||E||_2 ||x(t_i-)||`` are at the rounding floor:
+        the error ``x~ = E x`` is formed from states of size ``||x||``. Default
+        ``ROUNDING_PER_STATE * n / MAX_RELATIVE_ROUNDING`` (``n`` closed-loop states, i.e.
+        ``100 n``): every norm used is then within 10 % of the exact error by the rounding
+        estimate.
     kind : str
         Event kind marking impacts (``"jump"`` for linear hybrid systems).
     skip : int
@@ -285,26 +317,24 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-1
     Theorems 3 and 4 bound ``||x~(t)|| <= mu e^{-alpha (t - t0)} ||x~(t0)||``; the error is
     sampled just before the impacts (``t_i-``), where the observer's jumps have not yet acted,
     so the samples compare like with like from one impact cycle to the next. The fit stops at
-    the first sample under the floor (past it the "decay" is rounding). A rate fitted on two
-    or three points is only indicative; ``times.size`` says how many were used. Any norm
-    gives the same asymptotic rate.
+    the first sample at the rounding floor: past it the "decay" is rounding. Only the impacts
+    before the floor are seen, so a fast observer is measured over its first few impacts; the
+    rate over the whole run is :func:`impact_error_contraction`'s, which propagates the error
+    alone and has no floor. ``rate_error`` bounds the effect of rounding on the fitted slope;
+    it says nothing of how far a fit over a few impacts is from the rate over many.
+
+    The floor: the measured error is ``E x`` with ``x`` the closed-loop state, so its
+    rounding scales with ``u ||E|| ||x||`` (a small ``eps`` makes ``||E||`` large), not with
+    the error itself; :data:`ROUNDING_PER_STATE` states the factor. A fixed threshold relative
+    to ``||x~(t0)||`` cannot say where that floor is: on a chapter-2 run with ``k33 = 0.08``,
+    ``eps = 0.0125`` the error bottoms out near ``3e-10`` after one impact cycle, and a fit
+    through all eight norms above ``1e-10 ||x~(t0)||`` returns 0.34 where the exact
+    propagation of the error over the same impacts gives 12.9.
 
     References
     ----------
     Chapter 2 of SICONOS D5.3, Theorems 3 and 4; spec ch02 §7 ("fit of log ||x~|| over impact
     cycles").
-
-    The floor: the measured error is ``E x`` with ``x`` the closed-loop state, rounded at
-    ``u ||x||`` per component; once the true error is that small, the measured norm stays at
-    ``~u ||E|| ||x||`` (within a factor ~25 on chapter 2's runs, the rounding of the
-    propagation accumulating over the steps) while the true error keeps decaying. Fitting those
-    points flattens the line: on a chapter-2 run with ``k33 = 0.08``, ``eps = 0.0125`` the
-    error reaches its floor ``~3e-10`` (above the fixed ``floor``) after one impact cycle, and
-    a fit through all eight norms returns 0.34 where the exact propagation of the error over
-    the same impacts gives 12.9. The fit therefore stops at the first norm under
-    ``roundoff_margin`` times that level (there: one norm is left, a ``ModelError``; with
-    ``through_floor=True`` a lower bound, 1.9); ``n_points`` and ``n_floor`` report how many
-    norms were used and left out.
 
     Examples
     --------
@@ -319,12 +349,14 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-1
     >>> clock = LinearHybridSystem(A, [[0.0, 1.0, 0.0]], [0.0], J)
     >>> traj = simulate(clock, [1.0, 1.0, 1.0], (0.0, 10.5), progress=False)
     >>> fit = impact_decay_rate(traj, [[1.0, 0.0, 0.0]])
-    >>> round(fit.rate, 9), fit.times.size, round(fit.dwell_max, 9)
-    (0.5, 10, 1.0)
+    >>> round(fit.rate, 9), fit.times.size, round(fit.dwell_max, 9), fit.rate_error < 1e-11
+    (0.5, 10, 1.0, True)
     """
     E = as_matrix("error_matrix", error_matrix, cols=trajectory.n_states)
     floor = check_positive("floor", floor, allow_zero=True)
-    margin = check_positive("roundoff_margin", roundoff_margin, allow_zero=True)
+    kappa = ROUNDING_PER_STATE * E.shape[1]
+    margin = (kappa / MAX_RELATIVE_ROUNDING if roundoff_margin is None
+              else check_positive("roundoff_margin", roundoff_margin, allow_zero=True))
     skip = check_integer("skip", skip, minimum=0)
     events = trajectory.events_of(kind)[skip:]
     times = np.array([ev.time for ev in events])
@@ -343,12 +375,179 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 1e-1
         raise ModelError(f"trajectory: {end} pre-impact error norm(s) usable (above the "
                          f"floor {floor:g} x ||x~(t0)|| and {margin:g} x the roundoff level "
                          f"u ||E|| ||x||{extra}); need two to fit a rate -- "
-                         f"simulate longer, use a larger eps{hint}")
+                         f"simulate longer, use a larger eps{hint}, or measure the rate "
+                         f"with impact_error_contraction")
     t_fit, n_fit = times[:end], norms[:end]
-    slope, intercept = (float(c) for c in np.polyfit(t_fit, np.log(n_fit), 1))
+    slope, intercept, w = _least_squares_line(t_fit, np.log(n_fit))
+    rho = kappa * roundoff[:end] / n_fit       # estimated relative rounding of each norm
+    with np.errstate(divide="ignore"):   # inf where the rounding may be the whole norm
+        dlog = -np.log1p(-np.minimum(rho, 1.0))   # |ln measured - ln exact| <= dlog
+    rate_error = float(np.sum(np.abs(w) * dlog))
     dwell = np.diff(trajectory.event_times(kind))
     return DecayMeasurement(-slope, intercept, t_fit, n_fit, e0,
                             float(dwell.min()) if dwell.size else np.inf,
                             float(dwell.max()) if dwell.size else np.inf,
                             n_points=int(end), n_floor=int(norms.size - end),
-                            roundoff=roundoff)
+                            roundoff=roundoff, rate_error=rate_error)
+
+
+@dataclass(frozen=True)
+class ErrorContraction:
+    """The estimation error propagated alone along the impacts of a run.
+
+    Attributes
+    ----------
+    times
+        Pre-impact instants ``t_i`` (after ``skip``).
+    log_norms
+        ``ln ||x~(t_i-)||`` of the propagated error.
+    factors
+        Contraction over each inter-impact interval,
+        ``||x~(t_{i+1}-)|| / ||x~(t_i-)||`` (one fewer than ``times``).
+    rate
+        Mean contraction rate from the first to the last of ``times``:
+        ``-ln(prod factors) / (t_last - t_first)``.
+    initial_norm
+        ``||x~(t0)||``.
+    """
+
+    times: FloatArray
+    log_norms: FloatArray
+    factors: FloatArray
+    rate: float
+    initial_norm: float
+
+    def rate_over(self, times: ArrayLike) -> float:
+        """The least-squares rate of the propagated error at the given pre-impact instants
+        (a subset of :attr:`times`): the exact counterpart of a
+        :class:`DecayMeasurement` fitted at the same impacts.
+
+        Parameters
+        ----------
+        times : array_like
+            Instants of :attr:`times`, at least two.
+
+        Returns
+        -------
+        float
+        """
+        t = as_float_array("times", times).ravel()
+        idx = np.minimum(np.searchsorted(self.times, t), self.times.size - 1)
+        if t.size < 2 or not np.array_equal(self.times[idx], t):
+            raise ModelError(f"times: expected at least two of the pre-impact instants of "
+                             f"this propagation, got {t!r}")
+        return -_least_squares_line(t, self.log_norms[idx])[0]
+
+
+def impact_error_contraction(closed_loop: Any, trajectory: Any, error_state0: ArrayLike,
+                             error_matrix: ArrayLike, *, kind: str = "jump",
+                             skip: int = 0) -> ErrorContraction:
+    """Propagate the estimation error alone along the impacts of a closed-loop run.
+
+    The state difference ``dz`` between the run and the same run with a zero estimation error
+    (the observer started at the true state) has a zero plant part, so it moves no guard:
+    it follows the closed loop's flow ``e^{A (t_{i+1} - t_i)}`` and jump matrices at the
+    run's own impact times, and ``E dz = x~``. Propagated with ``scipy.linalg.expm`` and
+    rescaled after every interval, it carries rounding relative to ``||x~||`` instead of to
+    the closed-loop state: no floor, so the rate is seen over the whole run, however fast
+    the observer.
+
+    Parameters
+    ----------
+    closed_loop : LinearHybridSystem
+        The loop that was simulated (its ``A`` and ``jump_matrices``).
+    trajectory : Trajectory
+        The run: the impact times and which guard each one hit.
+    error_state0 : (n,) array_like
+        ``dz(t0)``: the run's initial state minus that of the same run with the observer at
+        the true state (for chapter 2,
+        :meth:`~nscontrol.design.impact_observer.ImpactObserverDesign.error_state`).
+    error_matrix : (k, n) array_like
+        Maps the closed-loop state to the estimation error.
+    kind : str
+        Event kind marking impacts.
+    skip : int
+        Impacts left out at the start of :attr:`ErrorContraction.times` (the propagation
+        still runs through them).
+
+    Returns
+    -------
+    ErrorContraction
+
+    Raises
+    ------
+    ModelError
+        The loop has no linear jumps, ``error_state0`` moves a guard (it is not such a
+        difference), the run has other events than ``kind``, or fewer than two impacts are
+        left after ``skip``.
+    DimensionError
+        ``error_state0`` or ``error_matrix`` do not match the loop's state.
+
+    Notes
+    -----
+    The rate is the product of the per-interval contractions, i.e. the mean rate between the
+    first and the last pre-impact instant; the interval before the first impact (where an
+    unmeasured body's error is not touched at all) is left out. A fit of the measured norms
+    (:func:`impact_decay_rate`) at the same impacts must agree with :meth:`rate_over` within
+    its ``rate_error``.
+
+    Examples
+    --------
+    The clock of :func:`impact_decay_rate`: the error ``e' = -0.5 e`` contracts by
+    ``e^{-0.5}`` over every one-second interval.
+
+    >>> import numpy as np
+    >>> from nscontrol.simulate import simulate
+    >>> from nscontrol.systems.hybrid import LinearHybridSystem
+    >>> A = [[-0.5, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]]
+    >>> J = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]
+    >>> clock = LinearHybridSystem(A, [[0.0, 1.0, 0.0]], [0.0], J)
+    >>> traj = simulate(clock, [1.0, 1.0, 1.0], (0.0, 10.5), progress=False)
+    >>> c = impact_error_contraction(clock, traj, [1.0, 0.0, 0.0], [[1.0, 0.0, 0.0]])
+    >>> round(c.rate, 12), c.factors.size, bool(np.allclose(c.factors, np.exp(-0.5)))
+    (0.5, 9, True)
+    """
+    from scipy.linalg import expm
+
+    A = np.asarray(closed_loop.A, dtype=float)
+    jumps = closed_loop.jump_matrices
+    if jumps is None:
+        raise ModelError("closed_loop: its jumps are not linear (no jump_matrices); the error "
+                         "can only be propagated through linear jumps")
+    n = A.shape[0]
+    if trajectory.n_states != n:
+        raise DimensionError(f"trajectory: {trajectory.n_states} states, the closed loop has "
+                             f"{n}; pass the run of this loop")
+    dz = as_vector("error_state0", error_state0, n)
+    E = as_matrix("error_matrix", error_matrix, cols=n)
+    skip = check_integer("skip", skip, minimum=0)
+    G = np.asarray(closed_loop.G, dtype=float)
+    # a difference of two runs with the same plant state moves no guard (up to the rounding
+    # of the two initial states, n u ||G|| ||z0||, with a factor 10)
+    z0 = np.asarray(trajectory.x[0], dtype=float)
+    tol = 10.0 * n * np.finfo(float).eps * np.linalg.norm(G, 2) * (
+        np.linalg.norm(z0) + np.linalg.norm(dz))
+    if np.any(np.abs(G @ dz) > tol):
+        raise ModelError(f"error_state0: moves the guards by {np.abs(G @ dz).max():.3g} "
+                         f"(> {tol:.3g}); pass the initial state of the run minus that of the "
+                         f"same run with the observer at the true state (zero plant part)")
+    others = {ev.kind for ev in trajectory.events} - {kind}
+    if others:
+        raise ModelError(f"trajectory: has events of kind(s) {sorted(others)} besides {kind!r}; "
+                         "only runs whose every event is an impact can be propagated")
+    events = trajectory.events_of(kind)
+    if len(events) - skip < 2:
+        raise ModelError(f"trajectory: {len(events)} impact(s) of kind {kind!r} and skip="
+                         f"{skip}; need two after the skipped ones to measure a contraction")
+    t_prev, log_scale, logs = float(trajectory.t[0]), 0.0, []
+    e0 = float(np.linalg.norm(E @ dz))
+    for ev in events:
+        dz = expm(A * (ev.time - t_prev)) @ dz
+        s = float(np.linalg.norm(dz))
+        log_scale, dz = log_scale + np.log(s), dz / s     # rescaled: it never underflows
+        logs.append(log_scale + np.log(np.linalg.norm(E @ dz)))
+        dz, t_prev = jumps[ev.index] @ dz, ev.time
+    times = np.array([ev.time for ev in events])[skip:]
+    log_norms = np.array(logs)[skip:]
+    rate = float((log_norms[0] - log_norms[-1]) / (times[-1] - times[0]))
+    return ErrorContraction(times, log_norms, np.exp(np.diff(log_norms)), rate, e0)

@@ -679,6 +679,29 @@ class ImpactObserverDesign:
         xa = self._observer_flow(realisation)[3] @ xh[:na2]
         return np.concatenate([xp, xa, xh[na2:]])
 
+    def error_state(self, x_plant0: ArrayLike, xhat0: ArrayLike, *,
+                    realisation: Literal["scaled", "original"] = "scaled") -> FloatArray:
+        """The estimation error as a closed-loop state: :meth:`initial_state` minus the same
+        with the observer at the true state.
+
+        Its plant part is zero, so it moves no guard: it follows the closed loop's flow and
+        jumps at the plant's impacts, and ``outputs["error"]`` maps it to ``x~``
+        (:func:`~nscontrol.analysis.observability.impact_error_contraction` propagates it).
+
+        Parameters
+        ----------
+        x_plant0, xhat0, realisation
+            As for :meth:`initial_state`.
+
+        Returns
+        -------
+        ndarray
+        """
+        xp = as_vector("x_plant0", x_plant0)
+        truth = xp[:self.n_observer]
+        return (self.initial_state(xp, xhat0, realisation=realisation)
+                - self.initial_state(xp, truth, realisation=realisation))
+
 
 def certificate_velocity_scale(plant: ImpactPlant, delta_max: float) -> float:
     """The velocity scale of the certificate's norms: the plant's ``frequency``, or
