@@ -32,7 +32,7 @@ from .._files import replaced_atomically
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import ModelError
 from .orbits import at_times, sample_on_grid
-from .periodic import period_multiplicity
+from .periodic import _multiplicity_rtol, period_multiplicity
 
 __all__ = ["BifurcationDiagram", "bifurcation_diagram", "parse_grid"]
 
@@ -235,7 +235,8 @@ def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
     progress
         Progress bar (per chunk), as :func:`nscontrol.sweep.run`.
     rtol
-        Tolerance of the period-multiplicity test (relative to the largest sample).
+        Tolerance of the period-multiplicity test (relative to the largest sample), in
+        ``(0, 1)``.
     parameter_name : str
         Name of the parameter (axis labels, saved files).
     state_names : tuple of str
@@ -268,7 +269,7 @@ def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
         raise ModelError(f"directions: expected a non-empty subset of ('up', 'down'), got "
                          f"{directions!r}")
     task = _ChunkTask(factory, None if x0 is None else np.asarray(x0, float), nt, ns,
-                      float(rtol), bool(warm_start))
+                      _multiplicity_rtol(rtol), bool(warm_start))
     chunks = _chunks(len(vals), cs, dirs, vals)
     res = sweep.run(task, chunks, executor=executor, progress=progress, desc="bifurcation")
     n = factory(float(vals[0])).n_states
