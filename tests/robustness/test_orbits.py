@@ -18,7 +18,13 @@ from nscontrol.analysis.bifurcation import bifurcation_diagram
 from nscontrol.analysis.continuation import Branch, continue_orbit
 from nscontrol.analysis.equilibria import continue_equilibrium
 from nscontrol.analysis.impact_oscillator import ImpactOscillator, OscillatorFamily
-from nscontrol.analysis.orbits import Autonomous, find_cycle, find_orbit, hyperplane_map
+from nscontrol.analysis.orbits import (
+    Autonomous,
+    Forced,
+    find_cycle,
+    find_orbit,
+    hyperplane_map,
+)
 from nscontrol.analysis.periodic import period_multiplicity, periodic_steady_state
 from nscontrol.cli import main
 from nscontrol.errors import BudgetExceededError, InadmissibleStateError, ModelError, SolverError
@@ -136,6 +142,12 @@ def test_wrong_object_types_are_named():
         continue_orbit(FAM(0.5), 0.5, [0.0, 0.0], p_range=(0.0, 1.0))
     with pytest.raises(ModelError, match=r"^system: expected a model with n_states"):
         find_cycle("hopf", [0.5, 0.0], np.pi, normal=[0.0, 1.0])
+    with pytest.raises(ModelError, match=r"^system: expected a model with n_states"):
+        Forced(BASE, None, 1.0)                  # the closed form, not a simulable model
+    with pytest.raises(ModelError, match=r"^x0: expected a real numeric array, got strings"):
+        continue_orbit(FAM, 0.5, [["0", "0"]], p_range=(0.0, 1.0))
+    with pytest.raises(ModelError, match=r"^x0: expected a real numeric array, got strings"):
+        find_orbit(FAM(0.5), [["0", "0"]])
 
 
 # -- vague: the message says what happened where --------------------------------------------

@@ -47,6 +47,7 @@ import numpy as np
 from .._validation import (
     FloatArray,
     as_finite_scalar,
+    as_float_array,
     as_vector,
     check_integer,
     check_positive,
@@ -91,6 +92,7 @@ class Forced:
     options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
+        _n_states(self.system)
         check_positive("period", self.period)
 
     @property
@@ -494,7 +496,7 @@ def _left_admissible_set(it: int, start: FloatArray, X: FloatArray,
 def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
     if isinstance(forced, Autonomous):
         return _cycle_node(forced, x0, k)
-    arr = np.asarray(x0, float)
+    arr = as_float_array("x0", x0)
     if arr.ndim == 2:
         if arr.shape != (k, n):
             raise DimensionError(f"x0: expected shape ({k}, {n}) for {k} nodes, got {arr.shape}")
@@ -969,7 +971,7 @@ def _cycle_node(problem: Autonomous, x0: Any, k: int) -> FloatArray:
     if k != 1:
         raise ModelError(f"n_periods: a cycle is shot from one node (n_periods = 1), got {k}")
     n = int(problem.system.n_states)
-    arr = np.asarray(x0, float).reshape(-1)
+    arr = as_float_array("x0", x0).reshape(-1)
     if arr.size == n:
         arr = np.append(arr, problem.period)
     return as_vector("x0", arr, n + 1)[None, :].copy()
