@@ -27,7 +27,13 @@ from nscontrol.analysis.orbits import (
 )
 from nscontrol.analysis.periodic import period_multiplicity, periodic_steady_state
 from nscontrol.cli import main
-from nscontrol.errors import BudgetExceededError, InadmissibleStateError, ModelError, SolverError
+from nscontrol.errors import (
+    BudgetExceededError,
+    DimensionError,
+    InadmissibleStateError,
+    ModelError,
+    SolverError,
+)
 from nscontrol.testing.cycle_problems import hopf_normal_form
 
 BASE = ImpactOscillator(omega=2.5, stop=0.1)
@@ -148,6 +154,22 @@ def test_wrong_object_types_are_named():
         continue_orbit(FAM, 0.5, [["0", "0"]], p_range=(0.0, 1.0))
     with pytest.raises(ModelError, match=r"^x0: expected a real numeric array, got strings"):
         find_orbit(FAM(0.5), [["0", "0"]])
+
+
+def test_switch_at_flip_and_bifurcation_diagram_name_wrong_objects():
+    from nscontrol.analysis.continuation import SpecialPoint, switch_at_flip
+
+    with pytest.raises(ModelError, match=r"^branch: expected the Branch"):
+        switch_at_flip(FAM, "branch", p_range=(1.0, 3.0))
+    b = continue_orbit(FAM, 2.0, _impacting(2.0), p_range=(1.5, 3.0), max_steps=1)
+    fold = SpecialPoint("fold", 2.0, 0, b.nodes[0], b.multipliers[0], 0.0)
+    with pytest.raises(ModelError, match=r"^point: expected a flip of the branch .* got a "
+                                         r"'fold' point"):
+        switch_at_flip(FAM, b, fold, p_range=(1.0, 3.0))
+    with pytest.raises(ModelError, match=r"^factory: expected a callable"):
+        bifurcation_diagram(FAM(0.5), [0.3], progress=False)
+    with pytest.raises(DimensionError, match=r"^x0: expected a vector of length 2"):
+        bifurcation_diagram(FAM, [0.3], x0=[0.0, 0.0, 0.0], progress=False)
 
 
 # -- vague: the message says what happened where --------------------------------------------

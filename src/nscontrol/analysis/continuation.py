@@ -630,8 +630,21 @@ def switch_at_flip(factory: Callable[[float], Forced], branch: Branch,
         The flip (default: the first one found on ``branch``).
     **options
         Passed to :func:`continue_orbit`.
+
+    Raises
+    ------
+    ModelError
+        ``branch`` not a :class:`Branch`, ``point`` not one of its flips, or no flip on it.
     """
+    if not isinstance(branch, Branch):
+        raise ModelError(f"branch: expected the Branch continue_orbit returned, got "
+                         f"{type(branch).__name__}")
     flips = branch.special("flip")
+    if point is not None and not (isinstance(point, SpecialPoint) and point.kind == "flip"):
+        what = f"a {point.kind!r} point" if isinstance(point, SpecialPoint) else \
+            type(point).__name__
+        raise ModelError(f"point: expected a flip of the branch (branch.special('flip')), got "
+                         f"{what}")
     if point is None:
         if not flips:
             raise ModelError("branch: no flip point located on this branch")
