@@ -194,6 +194,22 @@ def test_a_penetrating_trial_step_is_damped_not_fatal():
                        atol=SHOOTING)
 
 
+def test_a_penetrating_predictor_halves_the_continuation_step():
+    # near resonance (ω = 0.9) the non-impacting orbit's nodes move fast with F: a long
+    # first step predicts nodes beyond the stop. That is a failed correction (the step is
+    # halved), not the user's x0 being inadmissible; both step sizes end at the closed-form
+    # grazing (location tolerance as in tests/analysis/test_continuation.py)
+    osc = ImpactOscillator(omega=0.9, stop=0.1)
+    fam, fg = OscillatorFamily(osc, "forcing"), osc.grazing_forcing()
+    for step in (0.05, 0.3):
+        b = continue_orbit(fam, 0.5 * fg, [0.0, 0.0], p_range=(0.0, 4 * fg), step=step,
+                           step_max=1.0, max_steps=40)
+        (g,) = b.points
+        assert g.kind == "grazing" and g.parameter == pytest.approx(fg, rel=1e-9)
+    with pytest.raises(InadmissibleStateError, match=r"^x0: contact 0 is penetrated"):
+        continue_orbit(fam, 0.5 * fg, [0.2, 0.0], p_range=(0.0, 4 * fg))   # the user's x0
+
+
 @pytest.mark.parametrize("tol", [-1e-11, 0.0, np.nan, "1e-11"])
 def test_a_bad_tolerance_is_refused_upfront(tol):
     with pytest.raises(ModelError, match=r"^tol: expected a (finite number > 0|real number)"):

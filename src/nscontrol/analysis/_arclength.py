@@ -27,7 +27,7 @@ from .._validation import (
     check_names,
     check_positive,
 )
-from ..errors import BudgetExceededError, ModelError, SolverError
+from ..errors import BudgetExceededError, InadmissibleStateError, ModelError, SolverError
 
 #: Default budgets of a continuation: Newton iterations per correction, corrected trial
 #: points per location of a test function's zero.
@@ -149,19 +149,31 @@ class ArclengthProblem:
         return max(1.0, float(np.max(np.abs(y[:-1])))) if y.size > 1 else 1.0
 
     def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int | None = None,
-                G_p: FloatArray | None = None) -> tuple[FloatArray, Any]:
+                G_p: FloatArray | None = None, *, start: bool = False) -> tuple[FloatArray, Any]:
         """Newton on ``G = 0``, ``t·(y - y_pred) = 0`` from ``y_pred``; ``SolverError`` when it
         fails, :class:`BudgetExceededError` (``budget="corrector_max_iter"``, the last
         iterate in ``partial``) when ``max_iter`` (default :attr:`max_iter`) iterations did
         not converge. ``G_p`` is evaluated once per correction (a chord in the ``p`` column only:
         it is the costly column for shooting problems and changes little over a step); a
         given ``G_p`` is used instead (with ``t = (0, ..., 0, 1)``, ``p`` is pinned and the
-        column does not matter: pass zeros)."""
+        column does not matter: pass zeros).
+
+        An iterate the model refuses (:class:`InadmissibleStateError`: a predicted node that
+        penetrates a contact) is a failed correction, a ``SolverError`` naming the iterate,
+        so that the step is halved; only with ``start`` (``y_pred`` is the user's start) is
+        the refusal of iterate 0 passed on as it is."""
         max_iter = self.max_iter if max_iter is None else max_iter
         y = y_pred.copy()
         res = np.inf
         for it in range(max_iter + 1):
-            R, J, aux = self.residual(y, G_p)
+            try:
+                R, J, aux = self.residual(y, G_p)
+            except InadmissibleStateError as exc:
+                if start and it == 0:
+                    raise
+                cause = str(exc).removeprefix("x0: ")
+                raise SolverError(f"the corrector's iterate {it} at p = {y[-1]:.9g} left the "
+                                  f"admissible set: {cause}") from exc
             G_p = J[:, -1]
             res = float(np.max(np.abs(R))) if R.size else 0.0
             if res <= self.tol * self.scale(y):

@@ -456,7 +456,7 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
     if initial_tangent is None:
         t0 = np.zeros_like(y0)
         t0[-1] = float(opts.direction)
-        y, orbit = prob.correct(y0, t0)      # at fixed p: the row (0..0, 1) pins it
+        y, orbit = prob.correct(y0, t0, start=True)   # fixed p: the row (0..0, 1) pins it
         t = prob.tangent(y, t0)
     else:
         t = as_vector("initial_tangent", initial_tangent, y0.size)
@@ -465,7 +465,7 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
                              "got zeros")
         t = t / np.linalg.norm(t)
         y = y0
-        _, orbit = prob.correct(y0, t)
+        _, orbit = prob.correct(y0, t, start=True)
     pts = [Point(y, orbit, _tests(orbit))]
     special: list[SpecialPoint] = []
     try:
