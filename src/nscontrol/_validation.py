@@ -251,8 +251,77 @@ def as_finite_scalar(name: str, value: Any) -> float:
     return v
 
 
+def as_interval(name: str, value: Any, *, labels: tuple[str, str] = ("lo", "hi"),
+                example: str = "(0.0, 1.0)") -> tuple[float, float]:
+    """A pair ``(lo, hi)`` of finite real numbers with ``lo < hi`` (a range of a parameter,
+    a time span); ``labels`` name the two ends in the messages.
+
+    A string is not a pair (``"12"`` would otherwise unpack to ``1.0, 2.0``), and a reversed
+    pair is refused rather than sorted: ``(2, 1)`` is more likely a slip than a range.
+
+    Examples
+    --------
+    >>> as_interval("p_range", (0, 2))
+    (0.0, 2.0)
+    >>> as_interval("p_range", (2, 1))  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: p_range: expected finite lo < hi, got (2.0, 1.0); ...
+    """
+    lo_name, hi_name = labels
+    if isinstance(value, str | bytes):
+        raise ModelError(f"{name}: expected a pair of numbers ({lo_name}, {hi_name}), got the "
+                         f"string {value!r}; write e.g. {example}")
+    try:
+        items = list(value)
+    except TypeError:
+        raise DimensionError(f"{name}: expected a pair ({lo_name}, {hi_name}), got "
+                             f"{value!r}") from None
+    if len(items) != 2:
+        raise DimensionError(f"{name}: expected a pair ({lo_name}, {hi_name}), got "
+                             f"{len(items)} value(s): {_short(value)}")
+    lo, hi = (as_real_scalar(f"{name}[{i}]", v) for i, v in enumerate(items))
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        hint = f"; write ({hi:g}, {lo:g})" if np.isfinite(lo) and np.isfinite(hi) and hi < lo \
+            else ""
+        raise ModelError(f"{name}: expected finite {lo_name} < {hi_name}, got ({lo}, {hi})"
+                         f"{hint}")
+    return lo, hi
+
+
+def check_names(name: str, values: Any, valid: Sequence[str]) -> tuple[str, ...]:
+    """A collection of names, each one of ``valid``, as a tuple.
+
+    A single string is refused (``detect="flip"`` would otherwise be read letter by letter),
+    and so is a misspelt name: the message lists the valid ones.
+
+    Examples
+    --------
+    >>> check_names("detect", ["fold"], ("fold", "flip"))
+    ('fold',)
+    >>> check_names("detect", ["flp"], ("fold", "flip"))
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: detect: unknown name(s) 'flp'; valid names: 'fold', 'flip'
+    """
+    listed = ", ".join(repr(v) for v in valid)
+    if isinstance(values, str | bytes):
+        raise ModelError(f"{name}: expected a collection of names, got the string {values!r}; "
+                         f"write ({values!r},) (valid names: {listed})")
+    try:
+        items = tuple(values)
+    except TypeError:
+        raise ModelError(f"{name}: expected a collection of names, got "
+                         f"{type(values).__name__} {values!r} (valid names: {listed})") from None
+    unknown = [v for v in items if not isinstance(v, str) or v not in valid]
+    if unknown:
+        raise ModelError(f"{name}: unknown name(s) {', '.join(repr(v) for v in unknown)}; "
+                         f"valid names: {listed}")
+    return items
+
+
 def check_t_span(t_span: Any, name: str = "t_span") -> tuple[float, float]:
-    """A pair ``(t0, tf)`` of finite real times with ``tf > t0``.
+    """A pair ``(t0, tf)`` of finite real times with ``tf > t0`` (:func:`as_interval`).
 
     A string is not a pair of times (``"01"`` would otherwise unpack to ``0.0, 1.0``), and
     neither are string or complex entries.
@@ -266,17 +335,4 @@ def check_t_span(t_span: Any, name: str = "t_span") -> tuple[float, float]:
     ...
     nscontrol.errors.ModelError: t_span: expected a pair of numbers (t0, tf), got the string ...
     """
-    if isinstance(t_span, str | bytes):
-        raise ModelError(f"{name}: expected a pair of numbers (t0, tf), got the string "
-                         f"{t_span!r}; write e.g. (0.0, 1.0)")
-    try:
-        items = list(t_span)
-    except TypeError:
-        raise DimensionError(f"{name}: expected a pair (t0, tf), got {t_span!r}") from None
-    if len(items) != 2:
-        raise DimensionError(f"{name}: expected a pair (t0, tf), got {len(items)} value(s): "
-                             f"{_short(t_span)}")
-    t0, tf = (as_real_scalar(f"{name}[{i}]", t) for i, t in enumerate(items))
-    if not (np.isfinite(t0) and np.isfinite(tf)) or tf <= t0:
-        raise ModelError(f"{name}: expected finite t0 < tf, got ({t0}, {tf})")
-    return t0, tf
+    return as_interval(name, t_span, labels=("t0", "tf"))

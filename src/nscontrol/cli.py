@@ -135,6 +135,7 @@ def report(out: Path, only: tuple[str, ...]) -> None:
 def bifurcation(example: str, param: str, scheduler: str | None, out: Path) -> None:
     """Brute-force bifurcation diagram of EXAMPLE's parameter family (up and down sweeps)."""
     from .analysis.bifurcation import bifurcation_diagram, parse_grid
+    from .errors import ModelError
     from .examples import get_example
 
     try:
@@ -146,8 +147,19 @@ def bifurcation(example: str, param: str, scheduler: str | None, out: Path) -> N
     if family is None:
         raise click.UsageError(f"example {example!r} defines no parameter family "
                                f"(bifurcation_family)")
-    bd = bifurcation_diagram(family(name), values, executor=scheduler or "serial",
-                             progress=True, parameter_name=name)
+    try:                # an unknown parameter name: the family lists the valid ones
+        factory = family(name)
+    except ModelError as exc:
+        raise click.UsageError(f"--param: {name!r} is no parameter of example {example!r} "
+                               f"({exc})") from None
+    try:                # every option is checked before the sweep runs
+        bd = bifurcation_diagram(factory, values, executor=scheduler or "serial",
+                                 progress=True, parameter_name=name)
+    except ModelError as exc:
+        text = str(exc)
+        if text.startswith("executor:"):
+            text = "--scheduler:" + text[len("executor:"):]
+        raise click.UsageError(text) from None
     out.mkdir(parents=True, exist_ok=True)
     bd.save(out / "bifurcation.h5")
     import matplotlib

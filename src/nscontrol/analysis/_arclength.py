@@ -19,8 +19,72 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
-from ..errors import SolverError
+from .._validation import (
+    FloatArray,
+    as_finite_scalar,
+    as_interval,
+    check_integer,
+    check_names,
+    check_positive,
+)
+from ..errors import BudgetExceededError, InadmissibleStateError, ModelError, SolverError
+
+#: Default budgets of a continuation: Newton iterations per correction, corrected trial
+#: points per location of a test function's zero.
+CORRECTOR_MAX_ITER = 8
+LOCATE_MAX_ITER = 100
+
+
+@dataclass(frozen=True)
+class Options:
+    """The checked options of a continuation (:func:`check_options`)."""
+
+    p0: float
+    lo: float
+    hi: float
+    step: float
+    step_min: float
+    step_max: float
+    max_steps: int
+    direction: int
+    tol: float
+    locate_tol: float
+    corrector_max_iter: int
+    locate_max_iter: int
+    detect: tuple[str, ...]
+    stop_at: tuple[str, ...]
+
+
+def check_options(factory: Any, p0: Any, p_range: Any, *, step: Any, step_min: Any,
+                  step_max: Any, max_steps: Any, direction: Any, tol: Any, locate_tol: Any,
+                  corrector_max_iter: Any, locate_max_iter: Any, detect: Any, stop_at: Any,
+                  kinds: tuple[str, ...], stop_kinds: tuple[str, ...]) -> Options:
+    """Every option of a continuation checked before anything is computed (one place for
+    orbits and equilibria): ``p_range`` an increasing pair holding ``p0``, steps positive
+    with ``step_min <= step_max``, budgets whole numbers, ``detect`` among ``kinds`` and
+    ``stop_at`` among ``stop_kinds`` (a misspelt name would silently watch nothing)."""
+    if not callable(factory):
+        raise ModelError(f"factory: expected a callable p -> problem, got "
+                         f"{type(factory).__name__}")
+    p = as_finite_scalar("p0", p0)
+    lo, hi = as_interval("p_range", p_range)
+    if not lo <= p <= hi:
+        raise ModelError(f"p0: expected a value in p_range [{lo:g}, {hi:g}], got {p:g}; start "
+                         f"inside the range or widen it")
+    h, h_min, h_max = (check_positive(name, v) for name, v in
+                       (("step", step), ("step_min", step_min), ("step_max", step_max)))
+    if h_min > h_max:
+        raise ModelError(f"step_min: expected step_min <= step_max, got step_min = {h_min:g} > "
+                         f"step_max = {h_max:g}")
+    if isinstance(direction, bool) or direction not in (1, -1):
+        raise ModelError(f"direction: expected +1 or -1, got {direction!r}")
+    return Options(p, lo, hi, h, h_min, h_max, check_integer("max_steps", max_steps, minimum=0),
+                   int(direction), check_positive("tol", tol),
+                   check_positive("locate_tol", locate_tol),
+                   check_integer("corrector_max_iter", corrector_max_iter, minimum=1),
+                   check_integer("locate_max_iter", locate_max_iter, minimum=1),
+                   check_names("detect", detect, kinds), check_names("stop_at", stop_at,
+                                                                     stop_kinds))
 
 
 def parameter_derivative(G: Callable[[float], FloatArray], p: float) -> FloatArray:
@@ -68,6 +132,8 @@ class ArclengthProblem:
 
     tol: float
     iterations: int
+    #: Newton iterations per correction (the ``corrector_max_iter`` option).
+    max_iter: int = CORRECTOR_MAX_ITER
 
     def residual(self, y: FloatArray, G_p: FloatArray | None = None
                  ) -> tuple[FloatArray, FloatArray, Any]:
@@ -82,17 +148,32 @@ class ArclengthProblem:
         """``max(1, max|x|)``: the corrector tolerance is relative to it."""
         return max(1.0, float(np.max(np.abs(y[:-1])))) if y.size > 1 else 1.0
 
-    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int = 8,
-                G_p: FloatArray | None = None) -> tuple[FloatArray, Any]:
+    def correct(self, y_pred: FloatArray, t: FloatArray, max_iter: int | None = None,
+                G_p: FloatArray | None = None, *, start: bool = False) -> tuple[FloatArray, Any]:
         """Newton on ``G = 0``, ``t·(y - y_pred) = 0`` from ``y_pred``; ``SolverError`` when it
-        fails. ``G_p`` is evaluated once per correction (a chord in the ``p`` column only:
+        fails, :class:`BudgetExceededError` (``budget="corrector_max_iter"``, the last
+        iterate in ``partial``) when ``max_iter`` (default :attr:`max_iter`) iterations did
+        not converge. ``G_p`` is evaluated once per correction (a chord in the ``p`` column only:
         it is the costly column for shooting problems and changes little over a step); a
         given ``G_p`` is used instead (with ``t = (0, ..., 0, 1)``, ``p`` is pinned and the
-        column does not matter: pass zeros)."""
+        column does not matter: pass zeros).
+
+        An iterate the model refuses (:class:`InadmissibleStateError`: a predicted node that
+        penetrates a contact) is a failed correction, a ``SolverError`` naming the iterate,
+        so that the step is halved; only with ``start`` (``y_pred`` is the user's start) is
+        the refusal of iterate 0 passed on as it is."""
+        max_iter = self.max_iter if max_iter is None else max_iter
         y = y_pred.copy()
         res = np.inf
         for it in range(max_iter + 1):
-            R, J, aux = self.residual(y, G_p)
+            try:
+                R, J, aux = self.residual(y, G_p)
+            except InadmissibleStateError as exc:
+                if start and it == 0:
+                    raise
+                cause = str(exc).removeprefix("x0: ")
+                raise SolverError(f"the corrector's iterate {it} at p = {y[-1]:.9g} left the "
+                                  f"admissible set: {cause}") from exc
             G_p = J[:, -1]
             res = float(np.max(np.abs(R))) if R.size else 0.0
             if res <= self.tol * self.scale(y):
@@ -106,8 +187,11 @@ class ArclengthProblem:
             except np.linalg.LinAlgError as exc:
                 raise SolverError(f"singular extended Jacobian at p = {y[-1]:.9g}") from exc
             self.iterations += 1
-        raise SolverError(f"corrector did not converge in {max_iter} iterations at "
-                          f"p = {y[-1]:.9g} (residual {res:.3g})")
+        raise BudgetExceededError(
+            f"corrector_max_iter: the corrector did not converge in {max_iter} iterations at "
+            f"p = {y[-1]:.9g} (residual {res:.3g} > tol = {self.tol:g}); raise "
+            f"corrector_max_iter, or start closer to the branch", budget="corrector_max_iter",
+            limit=max_iter, used=max_iter, partial=y.copy())
 
     def tangent(self, y: FloatArray, t_prev: FloatArray) -> FloatArray:
         """Unit tangent at ``y`` oriented like ``t_prev`` (``t_prev·t = 1 > 0`` before
@@ -138,7 +222,7 @@ def unit_tangent(J: FloatArray, t_prev: FloatArray) -> FloatArray:
 def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: FloatArray,
            h: float, value: Callable[[Point], float], rtol: float,
            s_first: float | None = None, closest: bool = True,
-           whole_state: bool = False) -> Point | None:
+           whole_state: bool = False, max_iter: int = LOCATE_MAX_ITER) -> Point | None:
     """Zero of ``value`` along the arclength from ``a`` (``s`` in ``(0, 2h)``).
 
     Secant steps while no sign change is bracketed, Illinois regula falsi once one is: an end
@@ -173,11 +257,20 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
         on ``a``'s side, as for a grazing, whose far side belongs to another map).
     whole_state
         Measure the bracket in ``y = (state, p)`` instead of ``p`` alone.
+    max_iter
+        Corrected trial points at most (the ``locate_max_iter`` option).
 
     Returns
     -------
     Point or None
-        ``None`` when no zero is found within 100 trials or no bracket can be formed.
+        ``None`` when no bracket can be formed (the sign change was not confirmed by a
+        corrected point).
+
+    Raises
+    ------
+    BudgetExceededError
+        ``max_iter`` trials spent before the bracket was ``rtol`` wide
+        (``budget="locate_max_iter"``; the best end of the bracket in ``partial``).
     """
     f_a = value(a)
     good = [(0.0, f_a, a)]                        # (s, f, point), same sign as at a
@@ -195,7 +288,7 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
     def size(u: Point) -> float:
         return max(1.0, float(np.max(np.abs(u.y)) if whole_state else abs(u.y[-1])))
 
-    for _ in range(100):
+    for _ in range(max_iter):
         s = min(max(s, 0.0), s_bad)
         pt: Point | None
         try:
@@ -238,7 +331,12 @@ def locate(correct: Callable[[FloatArray, FloatArray], Point], a: Point, t: Floa
             s_next = 0.5 * (s0 + s1)
         s = s_next if s_next < s_bad else 0.5 * (good[-1][0] + s_bad)
     else:
-        return None
+        raise BudgetExceededError(
+            f"locate_max_iter: the zero was not located in {max_iter} corrected trial points "
+            f"(bracket {width:.3g} wide in {'(x, p)' if whole_state else 'p'} at p = "
+            f"{good[-1][2].y[-1]:.12g}, against locate_tol = {rtol:g} relative); raise "
+            f"locate_max_iter or locate_tol", budget="locate_max_iter", limit=max_iter,
+            used=max_iter, partial=good[-1][2])
     best = good[-1][2]
     if closest and other is not None and abs(other[1]) < abs(good[-1][1]):
         best = other[2]

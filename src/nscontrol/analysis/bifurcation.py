@@ -32,7 +32,7 @@ from .._files import replaced_atomically
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import ModelError
 from .orbits import at_times, sample_on_grid
-from .periodic import period_multiplicity
+from .periodic import _multiplicity_rtol, period_multiplicity
 
 __all__ = ["BifurcationDiagram", "bifurcation_diagram", "parse_grid"]
 
@@ -235,7 +235,8 @@ def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
     progress
         Progress bar (per chunk), as :func:`nscontrol.sweep.run`.
     rtol
-        Tolerance of the period-multiplicity test (relative to the largest sample).
+        Tolerance of the period-multiplicity test (relative to the largest sample), in
+        ``(0, 1)``.
     parameter_name : str
         Name of the parameter (axis labels, saved files).
     state_names : tuple of str
@@ -267,11 +268,15 @@ def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
     if not dirs or any(d not in ("up", "down") for d in dirs) or len(set(dirs)) != len(dirs):
         raise ModelError(f"directions: expected a non-empty subset of ('up', 'down'), got "
                          f"{directions!r}")
-    task = _ChunkTask(factory, None if x0 is None else np.asarray(x0, float), nt, ns,
-                      float(rtol), bool(warm_start))
+    if not callable(factory):
+        raise ModelError(f"factory: expected a callable p -> Forced (or p -> map), got "
+                         f"{type(factory).__name__}")
+    first = factory(float(vals[0]))     # its size checks x0 before anything runs
+    n = int(first.n_states)
+    task = _ChunkTask(factory, None if x0 is None else as_vector("x0", x0, n), nt, ns,
+                      _multiplicity_rtol(rtol), bool(warm_start))
     chunks = _chunks(len(vals), cs, dirs, vals)
     res = sweep.run(task, chunks, executor=executor, progress=progress, desc="bifurcation")
-    n = factory(float(vals[0])).n_states
     pts = np.full((len(dirs), len(vals), ns, n), np.nan)
     mult = np.full((len(dirs), len(vals)), -1, dtype=int)
     errors: list[tuple[str, int, str]] = []
@@ -286,7 +291,7 @@ def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
                 errors.append((chunk[0], i, msg))
             else:
                 pts[di, i], mult[di, i] = samples, m
-    names = tuple(state_names) or tuple(getattr(factory(float(vals[0])).system, "state_names",
+    names = tuple(state_names) or tuple(getattr(getattr(first, "system", None), "state_names",
                                                  ()) or ())
     errors.sort(key=lambda e: (dirs.index(e[0]), e[1]))
     return BifurcationDiagram(parameter_name, vals, dirs, pts, mult, tuple(errors), cs, names)

@@ -46,9 +46,19 @@ from typing import Any
 import numpy as np
 
 from .._files import replaced_atomically
-from .._validation import FloatArray, check_integer, check_positive
-from ..errors import ModelError, SolverError
-from ._arclength import ArclengthProblem, FactoryMemo, Point, locate, parameter_derivative
+from .._validation import FloatArray, as_vector, check_integer
+from ..errors import BudgetExceededError, ModelError, SolverError
+from ._arclength import (
+    CORRECTOR_MAX_ITER,
+    LOCATE_MAX_ITER,
+    ArclengthProblem,
+    FactoryMemo,
+    Options,
+    Point,
+    check_options,
+    locate,
+    parameter_derivative,
+)
 from .orbits import Forced, Orbit, _initial_nodes, _shooting_system, make_orbit
 
 __all__ = ["SpecialPoint", "Branch", "continue_orbit", "switch_at_flip"]
@@ -275,6 +285,12 @@ def _as_forced(hit: Any, p: float) -> Forced:
     return hit
 
 
+#: The test functions :func:`continue_orbit` watches (``detect``) and the kinds it can stop
+#: at (``stop_at``: a grazing is reported as ``"sliding"`` when a sliding segment appears).
+ORBIT_KINDS = ("fold", "flip", "neimark_sacker", "grazing")
+ORBIT_STOP_KINDS = (*ORBIT_KINDS, "sliding")
+
+
 @dataclass
 class _Problem(ArclengthProblem):
     """``G(y) = 0`` for ``y = (nodes, p)`` (multiple shooting); corrector and tangent are the
@@ -363,7 +379,9 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
                    direction: int = 1, tol: float = 1e-10, locate_tol: float = 1e-10,
                    detect: tuple[str, ...] = ("fold", "flip", "neimark_sacker", "grazing"),
                    stop_at: tuple[str, ...] = ("grazing", "sliding"), parameter_name: str = "p",
-                   initial_tangent: Any = None, state_names: tuple[str, ...] = ()) -> Branch:
+                   initial_tangent: Any = None, state_names: tuple[str, ...] = (),
+                   corrector_max_iter: int = CORRECTOR_MAX_ITER,
+                   locate_max_iter: int = LOCATE_MAX_ITER) -> Branch:
     """Continue the ``n_periods·T``-periodic orbit through ``x0`` at ``p0`` in ``p``.
 
     Parameters
@@ -371,15 +389,17 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
     factory
         ``p -> Forced``: the system at parameter ``p`` (picklable when used in a sweep).
     p0, x0
-        Start: parameter and a guess of the orbit (one state or the ``(k, n)`` nodes).
+        Start: parameter (inside ``p_range``) and a guess of the orbit (one state or the
+        ``(k, n)`` nodes).
     p_range
-        Stop when ``p`` leaves ``[lo, hi]``.
+        ``(lo, hi)`` with ``lo < hi``: stop when ``p`` leaves ``[lo, hi]``.
     n_periods
         ``k`` of the ``kT``-periodic orbit.
     step, step_min, step_max
-        Initial, smallest and largest arclength steps.
+        Initial, smallest and largest arclength steps (``step_min <= step_max``). A failed
+        correction halves the step; below ``step_min`` the continuation stops.
     max_steps
-        Largest number of continuation steps.
+        Largest number of continuation steps (then it stops, ``stop_reason`` naming it).
     direction
         ``+1``: start towards increasing ``p``; ``-1``: decreasing.
     tol
@@ -387,56 +407,96 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
     locate_tol
         Relative width of the parameter bracket at which a bifurcation counts as located.
     detect
-        Which test functions to watch.
+        Which test functions to watch: any of ``"fold"``, ``"flip"``, ``"neimark_sacker"``,
+        ``"grazing"``.
     stop_at
         Kinds after whose location the continuation stops (default: grazing and sliding
-        bifurcations, where the event sequence and hence the map change).
+        bifurcations, where the event sequence and hence the map change); any of those of
+        ``detect`` and ``"sliding"``.
     parameter_name, state_names
         Labels kept in the :class:`Branch`.
     initial_tangent
         Start along this direction in ``y = (nodes, p)`` instead of the computed tangent
         (branch switching); ``x0`` must then be on the branch already.
+    corrector_max_iter
+        Newton iterations per correction. Spent at the start: :class:`BudgetExceededError`;
+        on the way the step is halved (down to ``step_min``).
+    locate_max_iter
+        Corrected trial points per location of a bifurcation.
 
     Returns
     -------
     Branch
+        Its ``stop_reason`` says why it ended: ``p_range`` left, a kind of ``stop_at``
+        located, ``max_steps`` spent, or the step halved below ``step_min``.
 
     Raises
     ------
+    ModelError
+        Bad options (refused before anything is computed), a factory returning no
+        :class:`Forced`.
+    BudgetExceededError
+        ``corrector_max_iter`` spent on the starting orbit (its last iterate in
+        ``err.partial``), or ``locate_max_iter`` spent locating a bifurcation (the branch
+        computed so far in ``err.partial``).
     SolverError
         The starting orbit cannot be found.
     """
     k = check_integer("n_periods", n_periods, minimum=1)
-    for name, v in (("step", step), ("step_min", step_min), ("step_max", step_max)):
-        check_positive(name, v)
-    if direction not in (1, -1):
-        raise ModelError(f"direction: expected +1 or -1, got {direction!r}")
-    lo, hi = sorted(map(float, p_range))
-    forced0 = factory(float(p0))
-    prob = _Problem(factory, k, forced0.n_states, tol)
+    opts = check_options(factory, p0, p_range, step=step, step_min=step_min,
+                         step_max=step_max, max_steps=max_steps, direction=direction, tol=tol,
+                         locate_tol=locate_tol, corrector_max_iter=corrector_max_iter,
+                         locate_max_iter=locate_max_iter, detect=detect, stop_at=stop_at,
+                         kinds=ORBIT_KINDS, stop_kinds=ORBIT_STOP_KINDS)
+    forced0 = _as_forced(factory(opts.p0), opts.p0)
+    prob = _Problem(factory, k, forced0.n_states, opts.tol)
+    prob.max_iter = opts.corrector_max_iter
     X0 = _initial_nodes(forced0, x0, k, forced0.n_states)
-    y0 = np.append(X0.ravel(), float(p0))
+    y0 = np.append(X0.ravel(), opts.p0)
     if initial_tangent is None:
         t0 = np.zeros_like(y0)
-        t0[-1] = float(direction)
-        y, orbit = prob.correct(y0, t0)      # at fixed p: the row (0..0, 1) pins it
+        t0[-1] = float(opts.direction)
+        y, orbit = prob.correct(y0, t0, start=True)   # fixed p: the row (0..0, 1) pins it
         t = prob.tangent(y, t0)
     else:
-        t = np.asarray(initial_tangent, float)
+        t = as_vector("initial_tangent", initial_tangent, y0.size)
+        if not np.any(t):
+            raise ModelError("initial_tangent: expected a nonzero direction in (nodes, p), "
+                             "got zeros")
         t = t / np.linalg.norm(t)
         y = y0
-        _, orbit = prob.correct(y0, t)
+        _, orbit = prob.correct(y0, t, start=True)
     pts = [Point(y, orbit, _tests(orbit))]
     special: list[SpecialPoint] = []
-    h, n_steps, reason = float(step), 0, ""
+    try:
+        reason, n_steps = _march(prob, opts, pts, special, t)
+    except BudgetExceededError as exc:      # a location's budget: keep what was computed
+        so_far = _branch(pts, special, f"{exc.budget} spent: {exc}",
+                         len(pts) - 1 - len(special),
+                         prob.iterations, parameter_name, state_names, k, forced0)
+        raise BudgetExceededError(
+            f"{exc}; the branch computed so far ({len(so_far)} points, p up to "
+            f"{so_far.p[-1]:.9g}) is in err.partial", budget=exc.budget, limit=exc.limit,
+            used=exc.used, partial=so_far) from exc
+    return _branch(pts, special, reason, n_steps, prob.iterations, parameter_name, state_names,
+                   k, forced0)
+
+
+def _march(prob: _Problem, opts: Options, pts: list[Point], special: list[SpecialPoint],
+           t: FloatArray) -> tuple[str, int]:
+    """The continuation's steps from ``pts[-1]`` along ``t``, appending to ``pts`` and
+    ``special``; returns the stop reason and the steps taken."""
+    lo, hi, detect, stop_at = opts.lo, opts.hi, opts.detect, opts.stop_at
+    h, n_steps, reason = opts.step, 0, ""
     while not reason:
-        if n_steps >= max_steps:
-            reason = f"max_steps ({max_steps}) reached at p = {pts[-1].y[-1]:.9g}"
+        if n_steps >= opts.max_steps:
+            reason = (f"max_steps ({opts.max_steps}) reached at p = {pts[-1].y[-1]:.9g}; "
+                      f"raise max_steps to go on")
             break
         s_g = (_grazing_ahead(pts[-2], pts[-1], h)
                if "grazing" in detect and len(pts) >= 2 else None)
         if s_g is not None:
-            sp = _locate(prob, pts[-1], t, h, "grazing", locate_tol, s_first=s_g)
+            sp = _locate(prob, pts[-1], t, h, "grazing", opts, s_first=s_g)
             if sp is not None:
                 pts.append(sp)
                 special.append(_special("grazing", sp, len(pts) - 1, prob))
@@ -447,16 +507,17 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
             y_new, orb = prob.correct(pts[-1].y + h * t, t)
         except SolverError as exc:
             h /= 2
-            if h < step_min:
-                reason = f"corrector failed at p ≈ {pts[-1].y[-1]:.9g} with step {2 * h:.3g} " \
-                         f"< 2·step_min: {exc}"
+            if h < opts.step_min:
+                reason = (f"step_min: the corrector failed at p ≈ {pts[-1].y[-1]:.9g} with "
+                          f"every step down to {2 * h:.3g} < 2·step_min = "
+                          f"{2 * opts.step_min:.3g}: {exc}")
             continue
         n_steps += 1
         new = Point(y_new, orb, _tests(orb))
         found = _crossings(pts[-1], new, detect)
         stop_kind = None
         for kind in found:
-            sp = _locate(prob, pts[-1], t, h, kind, locate_tol)
+            sp = _locate(prob, pts[-1], t, h, kind, opts)
             if sp is None or not _genuine(kind, sp.sol):
                 continue
             if kind == "grazing":
@@ -474,12 +535,10 @@ def continue_orbit(factory: Callable[[float], Forced], p0: float, x0: Any, *,
         if not lo <= p_new <= hi:
             reason = f"left p_range [{lo:g}, {hi:g}] at p = {p_new:.9g}"
             break
-        t_new = prob.tangent(y_new, t)
-        t = t_new
+        t = prob.tangent(y_new, t)
         if orb.iterations <= 3:
-            h = min(1.5 * h, step_max)
-    return _branch(pts, special, reason, n_steps, prob.iterations, parameter_name, state_names,
-                   k, forced0)
+            h = min(1.5 * h, opts.step_max)
+    return reason, n_steps
 
 
 def _crossings(a: Point, b: Point, detect: tuple[str, ...]) -> list[str]:
@@ -509,13 +568,14 @@ def _value(kind: str, pt: Point, ref: Point) -> float:
     return mag if pt.sol.signature == ref.sol.signature else -mag
 
 
-def _locate(prob: _Problem, a: Point, t: FloatArray, h: float, kind: str, rtol: float,
+def _locate(prob: _Problem, a: Point, t: FloatArray, h: float, kind: str, opts: Options,
             s_first: float | None = None) -> Point | None:
     """Zero of ``test(kind)`` along the arclength from ``a`` (the shared
-    :func:`~nscontrol.analysis._arclength.locate`); for a grazing the point kept is on
-    ``a``'s side (past it the event sequence, hence the map, is another)."""
-    return locate(prob.point, a, t, h, lambda pt: _value(kind, pt, a), rtol,
-                  s_first=s_first, closest=kind != "grazing")
+    :func:`~nscontrol.analysis._arclength.locate`, within ``opts.locate_tol`` and
+    ``opts.locate_max_iter``); for a grazing the point kept is on ``a``'s side (past it the
+    event sequence, hence the map, is another)."""
+    return locate(prob.point, a, t, h, lambda pt: _value(kind, pt, a), opts.locate_tol,
+                  s_first=s_first, closest=kind != "grazing", max_iter=opts.locate_max_iter)
 
 
 def _grazing_ahead(prev: Point, cur: Point, h: float) -> float | None:
@@ -570,8 +630,21 @@ def switch_at_flip(factory: Callable[[float], Forced], branch: Branch,
         The flip (default: the first one found on ``branch``).
     **options
         Passed to :func:`continue_orbit`.
+
+    Raises
+    ------
+    ModelError
+        ``branch`` not a :class:`Branch`, ``point`` not one of its flips, or no flip on it.
     """
+    if not isinstance(branch, Branch):
+        raise ModelError(f"branch: expected the Branch continue_orbit returned, got "
+                         f"{type(branch).__name__}")
     flips = branch.special("flip")
+    if point is not None and not (isinstance(point, SpecialPoint) and point.kind == "flip"):
+        what = f"a {point.kind!r} point" if isinstance(point, SpecialPoint) else \
+            type(point).__name__
+        raise ModelError(f"point: expected a flip of the branch (branch.special('flip')), got "
+                         f"{what}")
     if point is None:
         if not flips:
             raise ModelError("branch: no flip point located on this branch")

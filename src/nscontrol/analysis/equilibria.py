@@ -41,14 +41,17 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, as_vector, check_integer, check_positive
-from ..errors import ModelError, SolverError
+from .._validation import FloatArray, as_vector
+from ..errors import BudgetExceededError, ModelError, SolverError
 from ..numerics.differences import central_difference_jacobian
 from ..systems.nonlinear import NonlinearSystem
 from ._arclength import (
+    CORRECTOR_MAX_ITER,
+    LOCATE_MAX_ITER,
     ArclengthProblem,
     FactoryMemo,
     Point,
+    check_options,
     locate,
     parameter_derivative,
     unit_tangent,
@@ -258,7 +261,9 @@ def continue_equilibrium(factory: Callable[[float], Any], p0: float, x0: Any, *,
                          direction: int = 1, tol: float = 1e-12, locate_tol: float = 1e-12,
                          detect: tuple[str, ...] = ("fold", "hopf", "boundary_equilibrium"),
                          stop_at: tuple[str, ...] = (), parameter_name: str = "p",
-                         state_names: tuple[str, ...] = ()) -> Branch:
+                         state_names: tuple[str, ...] = (),
+                         corrector_max_iter: int = CORRECTOR_MAX_ITER,
+                         locate_max_iter: int = LOCATE_MAX_ITER) -> Branch:
     """Continue the equilibrium near ``x0`` at ``p0`` in the parameter ``p``.
 
     Parameters
@@ -287,6 +292,12 @@ def continue_equilibrium(factory: Callable[[float], Any], p0: float, x0: Any, *,
         Kinds after whose location the continuation stops.
     parameter_name, state_names
         Labels kept in the :class:`~nscontrol.analysis.continuation.Branch`.
+    corrector_max_iter
+        Newton iterations per correction (spent at the start: :class:`BudgetExceededError`;
+        on the way the step is halved down to ``step_min``).
+    locate_max_iter
+        Corrected trial points per location of a bifurcation (spent:
+        :class:`BudgetExceededError` with the branch so far in ``err.partial``).
 
     Returns
     -------
@@ -298,7 +309,12 @@ def continue_equilibrium(factory: Callable[[float], Any], p0: float, x0: Any, *,
     Raises
     ------
     ModelError
-        A factory returning something else, or a PWA system with a time-varying input.
+        Bad options (``p0`` outside ``p_range``, ``step_min > step_max``, an unknown name in
+        ``detect`` or ``stop_at``...), a factory returning something else, or a PWA system
+        with a time-varying input.
+    BudgetExceededError
+        ``corrector_max_iter`` spent on the starting equilibrium, or ``locate_max_iter``
+        spent locating a bifurcation.
     SolverError
         The starting equilibrium cannot be found.
 
@@ -312,44 +328,58 @@ def continue_equilibrium(factory: Callable[[float], Any], p0: float, x0: Any, *,
     >>> bool(abs(fold.parameter) < 1e-12), bool(b.stable[0]), bool(b.stable[-1])
     (True, True, False)
     """
-    check_integer("max_steps", max_steps, minimum=0)
-    for name, v in (("step", step), ("step_min", step_min), ("step_max", step_max)):
-        check_positive(name, v)
-    if direction not in (1, -1):
-        raise ModelError(f"direction: expected +1 or -1, got {direction!r}")
-    unknown = set(detect) - {"fold", "hopf", "boundary_equilibrium"}
-    if unknown:
-        raise ModelError(f"detect: unknown kind(s) {sorted(unknown)}; expected 'fold', 'hopf' "
-                         f"or 'boundary_equilibrium'")
-    lo, hi = sorted(map(float, p_range))
+    kinds = ("fold", "hopf", "boundary_equilibrium")
+    opts = check_options(factory, p0, p_range, step=step, step_min=step_min,
+                         step_max=step_max, max_steps=max_steps, direction=direction, tol=tol,
+                         locate_tol=locate_tol, corrector_max_iter=corrector_max_iter,
+                         locate_max_iter=locate_max_iter, detect=detect, stop_at=stop_at,
+                         kinds=kinds, stop_kinds=kinds)
+    lo, hi, p0, direction = opts.lo, opts.hi, opts.p0, opts.direction
+    detect, max_steps, step_min, step_max = opts.detect, opts.max_steps, opts.step_min, \
+        opts.step_max
     first = _as_field(factory(float(p0)))
     n = first.n_states if _is_pwa(first) else first.value(np.atleast_1d(
         np.asarray(x0, float))).shape[0]
     x0v = as_vector("x0", x0, n)
-    prob = _EquilibriumProblem(factory, n, float(tol))
+    prob = _EquilibriumProblem(factory, n, opts.tol)
+    prob.max_iter = opts.corrector_max_iter
     _start(prob, float(p0), x0v)
     t0 = np.zeros(n + 1)
     t0[-1] = float(direction)
     start = prob.point(np.append(x0v, float(p0)), t0)   # the row (0..0, 1) pins p
     t = prob.tangent(start.y, t0)
-    pts, special = [start], []
+    pts: list[Point] = [start]
+    special: list[SpecialPoint] = []
     last = start            # the point stepped from (after a facet: re-evaluated across it)
-    h, n_steps, reason = float(step), 0, ""
+    h, n_steps, reason = opts.step, 0, ""
+    names = tuple(state_names) or tuple(getattr(first, "state_names", ()) or ())
     while not reason:
         if n_steps >= max_steps:
-            reason = f"max_steps ({max_steps}) reached at p = {last.y[-1]:.9g}"
+            reason = (f"max_steps ({max_steps}) reached at p = {last.y[-1]:.9g}; raise "
+                      f"max_steps to go on")
             break
         try:
             new = prob.point(last.y + h * t, t)
         except SolverError as exc:
             h /= 2
             if h < step_min:
-                reason = (f"corrector failed at p ≈ {last.y[-1]:.9g} with step {2 * h:.3g} "
-                          f"< 2·step_min: {exc}")
+                reason = (f"step_min: the corrector failed at p ≈ {last.y[-1]:.9g} with "
+                          f"every step down to {2 * h:.3g} < 2·step_min = "
+                          f"{2 * step_min:.3g}: {exc}")
             continue
         n_steps += 1
         crossed = False
-        for kind, sp in _located(prob, last, new, t, h, detect, locate_tol):
+        try:
+            located = _located(prob, last, new, t, h, detect, opts.locate_tol,
+                               opts.locate_max_iter)
+        except BudgetExceededError as exc:      # keep what was computed
+            so_far = _branch(pts, special, f"{exc.budget} spent: {exc}", n_steps,
+                             prob.iterations, parameter_name, names)
+            raise BudgetExceededError(
+                f"{exc}; the branch computed so far ({len(so_far)} points) is in "
+                f"err.partial", budget=exc.budget, limit=exc.limit, used=exc.used,
+                partial=so_far) from exc
+        for kind, sp in located:
             pts.append(sp)
             special.append(_special(kind, sp, len(pts) - 1))
             if kind in stop_at:
@@ -371,8 +401,7 @@ def continue_equilibrium(factory: Callable[[float], Any], p0: float, x0: Any, *,
         t = prob.tangent(new.y, t)
         if new.sol.iterations <= 3:
             h = min(1.5 * h, step_max)
-    return _branch(pts, special, reason, n_steps, prob.iterations, parameter_name,
-                   tuple(state_names) or tuple(getattr(first, "state_names", ()) or ()))
+    return _branch(pts, special, reason, n_steps, prob.iterations, parameter_name, names)
 
 
 def _test_value(kind: str) -> Callable[[Point], float]:
@@ -383,14 +412,15 @@ def _test_value(kind: str) -> Callable[[Point], float]:
 
 
 def _located(prob: _EquilibriumProblem, a: Point, b: Point, t: FloatArray, h: float,
-             detect: tuple[str, ...], rtol: float) -> list[tuple[str, Point]]:
+             detect: tuple[str, ...], rtol: float, max_iter: int) -> list[tuple[str, Point]]:
     """The zeros of the test functions that changed sign between ``a`` and ``b``, in branch
     order; nothing past a boundary equilibrium (the branch continues in another region)."""
     found = []
     for kind in detect:
         if a.tests[kind] * b.tests[kind] >= 0.0:
             continue
-        sp = locate(prob.point, a, t, h, _test_value(kind), rtol, whole_state=True)
+        sp = locate(prob.point, a, t, h, _test_value(kind), rtol, whole_state=True,
+                    max_iter=max_iter)
         if sp is None:
             continue
         if kind == "hopf" and not _genuine_hopf(sp.sol, 1e-6):

@@ -44,8 +44,21 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, as_vector, check_integer, check_positive
-from ..errors import DimensionError, ModelError, SolverError
+from .._validation import (
+    FloatArray,
+    as_finite_scalar,
+    as_float_array,
+    as_vector,
+    check_integer,
+    check_positive,
+)
+from ..errors import (
+    BudgetExceededError,
+    DimensionError,
+    InadmissibleStateError,
+    ModelError,
+    SolverError,
+)
 from .saltation import impact_jump_jacobian, saltation_matrix
 
 __all__ = ["Forced", "MapResult", "Orbit", "stroboscopic_map", "find_orbit", "Cycle",
@@ -79,6 +92,7 @@ class Forced:
     options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
+        _n_states(self.system)
         check_positive("period", self.period)
 
     @property
@@ -406,35 +420,83 @@ def find_orbit(forced: Forced, x0: Any, *, n_periods: int = 1, tol: float = 1e-1
     n_periods
         ``k``: look for an orbit of period ``kT``.
     tol
-        Stop when ``max_i |P(x_i) - x_{i+1}| <= tol·max(1, |x|)``.
+        Stop when ``max_i |P(x_i) - x_{i+1}| <= tol·max(1, |x|)`` (``> 0``).
     max_iter
-        Newton iterations (each a damped step: halved until the residual decreases).
+        Newton iterations at most (each a damped step: halved, at most
+        :data:`DAMPING_HALVINGS` times, until the residual decreases and the trial is
+        admissible).
 
     Raises
     ------
+    ModelError
+        ``forced`` not a :class:`Forced`, or a tolerance that is not a positive number.
+    BudgetExceededError
+        ``max_iter`` iterations spent (a :class:`SolverError`; message with the last
+        residual, the last Newton iterate's nodes in ``err.partial``).
+    InadmissibleStateError
+        A Newton iterate left the admissible set (a penetrated contact, a state outside the
+        partition) and no damped step stayed inside; the message names the iterate and the
+        start it came from.
     SolverError
-        No convergence within ``max_iter`` iterations (message with the last residual).
+        A singular shooting Jacobian, or an integrator's failure.
     """
+    if not isinstance(forced, Forced):
+        raise ModelError(f"forced: expected a Forced (system, periodic input, period), got "
+                         f"{type(forced).__name__}; wrap the model as Forced(system, u, period)")
     k = check_integer("n_periods", n_periods, minimum=1)
+    tol = check_positive("tol", tol)
+    max_iter = check_integer("max_iter", max_iter, minimum=0)
     n = forced.n_states
     X = _initial_nodes(forced, x0, k, n)
-    for it in range(int(max_iter) + 1):
-        R, J, maps = _shooting_system(forced, X)
+    start = X.copy()
+    for it in range(max_iter + 1):
+        R, J, maps = _iterate_system(forced, X, it, start)
         res = float(np.max(np.abs(R)))
         if res <= tol * max(1.0, float(np.max(np.abs(X)))):
             return make_orbit(forced, X, maps, it, res)
         if it == max_iter:
             break
-        X = _damped_step(forced, X, R, J, res)
-    raise SolverError(f"x0: shooting did not converge in {max_iter} Newton iterations "
-                      f"(residual {res:.3g}); start closer to the orbit (e.g. from a "
-                      f"brute-force run) or check that a {k}T-periodic orbit exists")
+        X = _damped_step(forced, X, R, J, res, it, start)
+    raise BudgetExceededError(
+        f"max_iter: shooting did not converge in {max_iter} Newton iterations (residual "
+        f"{res:.3g} > tol = {tol:g}); raise max_iter, start closer to the orbit (e.g. from a "
+        f"brute-force run) or check that a {k}T-periodic orbit exists; the last iterate's "
+        f"nodes are in err.partial", budget="max_iter", limit=max_iter, used=max_iter,
+        partial=X.copy())
+
+
+#: Halvings of a Newton step in :func:`find_orbit` before the smallest step is taken as it is.
+DAMPING_HALVINGS = 8
+
+
+def _iterate_system(forced: Forced, X: FloatArray, it: int, start: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, list[MapResult]]:
+    """:func:`_shooting_system` at Newton iterate ``it``; an inadmissible iterate (``it >
+    0``: the user's start was admissible) is reported as the iterate's, not as ``x0``'s."""
+    try:
+        return _shooting_system(forced, X)
+    except InadmissibleStateError as exc:
+        if it == 0:
+            raise
+        raise _left_admissible_set(it, start, X, exc) from exc
+
+
+def _left_admissible_set(it: int, start: FloatArray, X: FloatArray,
+                         exc: Exception) -> InadmissibleStateError:
+    first = np.array2string(start[0], precision=6)
+    here = np.array2string(X[0], precision=6)
+    cause = str(exc).removeprefix("x0: ")     # the iterate's state, not the user's x0
+    return InadmissibleStateError(
+        f"x0: Newton iterate {it} of the shooting from x0 = {first} left the admissible set "
+        f"(at {here}; even the step damped {DAMPING_HALVINGS} times): {cause}; start closer to "
+        f"the orbit (e.g. from the end of a brute-force run), or with n_periods nodes "
+        f"taken from a run, so that smaller Newton steps reach it")
 
 
 def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
     if isinstance(forced, Autonomous):
         return _cycle_node(forced, x0, k)
-    arr = np.asarray(x0, float)
+    arr = as_float_array("x0", x0)
     if arr.ndim == 2:
         if arr.shape != (k, n):
             raise DimensionError(f"x0: expected shape ({k}, {n}) for {k} nodes, got {arr.shape}")
@@ -446,22 +508,32 @@ def _initial_nodes(forced: Forced, x0: Any, k: int, n: int) -> FloatArray:
 
 
 def _damped_step(forced: Forced, X: FloatArray, R: FloatArray, J: FloatArray,
-                 res: float) -> FloatArray:
+                 res: float, it: int, start: FloatArray) -> FloatArray:
+    """The Newton step from iterate ``it``, halved until the residual decreases (a trial the
+    integrator refuses — a grazing, a penetrated contact — counts as no decrease); after
+    :data:`DAMPING_HALVINGS` halvings the smallest step is taken as it is, unless it left
+    the admissible set (:class:`InadmissibleStateError` naming iterate ``it + 1``)."""
     try:
         dx = np.linalg.solve(J, -R).reshape(X.shape)
     except np.linalg.LinAlgError as exc:
-        raise SolverError(f"x0: singular shooting Jacobian ({exc}); the orbit is at a fold "
-                          f"or a multiplier is 1") from exc
+        raise SolverError(f"x0: singular shooting Jacobian at Newton iterate {it} ({exc}); "
+                          f"the orbit is at a fold or a multiplier is 1") from exc
     lam = 1.0
-    for _ in range(8):
+    outside: InadmissibleStateError | None = None
+    for _ in range(DAMPING_HALVINGS):
         trial = X + lam * dx
         try:
             R2 = _shooting_system(forced, trial)[0]
             if float(np.max(np.abs(R2))) < res:
                 return trial
+            outside = None
+        except InadmissibleStateError as exc:
+            outside = exc
         except SolverError:
-            pass
+            outside = None
         lam /= 2
+    if outside is not None:
+        raise _left_admissible_set(it + 1, start, X + 2 * lam * dx, outside) from outside
     return X + lam * dx
 
 
@@ -709,6 +781,10 @@ def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: floa
     The default ``tol = 1e-9`` sits above the residual floor of event-located flows (switch
     instants found to ~1e-11 relative, times the field's jump).
 
+    An equilibrium solves the same equations for every ``T`` (it is no cycle) and is
+    refused: the point found must move, over its period, by more than the tolerance, and
+    cross the hyperplane (``normal·ẋ ≠ 0``).
+
     Parameters
     ----------
     system
@@ -718,44 +794,109 @@ def find_cycle(system: Any, x0: Any, period: float, *, normal: Any, offset: floa
     period : float
         Initial guess of its period.
     normal : array_like
-        Normal of the phase-condition hyperplane.
+        Normal of the phase-condition hyperplane (nonzero).
     offset : float, optional
         Its offset (default ``normal·x0`` of the guess).
     method : str or Integrator subclass, optional
         The integrator (default: the system's).
     tol : float
-        Newton's tolerance on the residual.
+        Newton's tolerance on the residual (``> 0``).
     max_iter : int
         Newton iterations at most.
 
     Raises
     ------
     ModelError
-        A method without the ``sensitivity`` capability.
+        A method without the ``sensitivity`` capability, a zero ``normal``, a bad tolerance.
+    BudgetExceededError
+        ``max_iter`` iterations spent (message with the residual; the last iterate
+        ``(x0, T)`` in ``err.partial``).
     SolverError
-        No convergence (message with the residual).
+        Newton ended on an equilibrium or on a point whose flow does not cross the
+        hyperplane, drove the period to ``<= 0``, or met a singular bordered Jacobian.
     """
-    n = int(system.n_states)
+    n = _n_states(system)
     x = as_vector("x0", x0, n).copy()
     T = check_positive("period", period)
-    nv = as_vector("normal", normal, n)
-    c = float(nv @ x) if offset is None else float(offset)
-    for it in range(int(max_iter) + 1):
+    nv = _section_normal(normal, n)
+    c = float(nv @ x) if offset is None else as_finite_scalar("offset", offset)
+    tol = check_positive("tol", tol)
+    max_iter = check_integer("max_iter", max_iter, minimum=0)
+    for it in range(max_iter + 1):
         r, J, M, f, tr = _cycle_equations(system, x, T, nv, c, method)
         res = float(np.max(np.abs(r)))
         if res <= tol * max(1.0, float(np.max(np.abs(x)))):
+            _check_crossing(x, T, f, nv, tol, it)
             mu, k = _trivial_index(M, f)
             sig = tuple((e.kind, int(e.index)) for e in tr.events)
             return Cycle(x, T, M, mu, k, sig, it, res)
         if it == max_iter:
             break
-        step = np.linalg.solve(J, -r)
+        try:
+            step = np.linalg.solve(J, -r)
+        except np.linalg.LinAlgError as exc:
+            raise SolverError(f"normal: singular bordered Jacobian at Newton iterate {it}: the "
+                              f"flow at x = {x} does not cross normal·x = {c:g} (normal·ẋ = "
+                              f"{float(nv @ f):.3g}), or the cycle has a second multiplier 1; "
+                              f"choose a normal along the flow at x0") from exc
         x, T = x + step[:n], T + float(step[n])
         if T <= 0:
             raise SolverError(f"period: Newton drove the period to {T:.3g} <= 0; start from a "
                               f"better period guess")
-    raise SolverError(f"x0: cycle shooting did not converge in {max_iter} iterations "
-                      f"(residual {res:.3g}); improve the guesses of x0 and period")
+    raise BudgetExceededError(
+        f"max_iter: cycle shooting did not converge in {max_iter} iterations (residual "
+        f"{res:.3g} > tol = {tol:g}); raise max_iter or improve the guesses of x0 and period; "
+        f"the last iterate (x0, T) is in err.partial", budget="max_iter", limit=max_iter,
+        used=max_iter, partial=np.append(x, T))
+
+
+def _n_states(system: Any) -> int:
+    """``system.n_states`` of a model (``ModelError`` for anything else)."""
+    n = getattr(system, "n_states", None)
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise ModelError(f"system: expected a model with n_states (a system simulate "
+                         f"integrates), got {type(system).__name__}")
+    return int(n)
+
+
+def _section_normal(normal: Any, n: int) -> FloatArray:
+    """The normal of a hyperplane ``normal·x = offset`` in ``R^n``: a finite nonzero vector
+    (a zero one defines no hyperplane and makes the phase condition vacuous).
+
+    Parameters
+    ----------
+    normal : array_like
+        The normal.
+    n : int
+        The state dimension.
+    """
+    nv = as_vector("normal", normal, n)
+    if not np.any(nv):
+        raise ModelError(f"normal: expected a nonzero normal of the hyperplane normal·x = "
+                         f"offset, got {nv.tolist()}; take e.g. the flow's direction at x0")
+    return nv
+
+
+def _check_crossing(x: FloatArray, T: float, f: FloatArray, normal: FloatArray, tol: float,
+                    it: int) -> None:
+    """Refuse an equilibrium (the flow moves less than the tolerance over the period: the
+    shooting residual cannot tell it from a cycle) and a point whose flow is tangent to the
+    section (``normal·ẋ = 0`` to rounding: no crossing to pin the phase)."""
+    scale = max(1.0, float(np.max(np.abs(x))))
+    travel = float(np.max(np.abs(f))) * T
+    if not travel > tol * scale:
+        raise SolverError(f"x0: Newton iterate {it} is an equilibrium, not a point of a cycle: "
+                          f"the flow there moves |ẋ|·T = {travel:.3g} over the period (<= tol "
+                          f"= {tol:g}); start from a point on the cycle (e.g. the end of a "
+                          f"long run) away from the equilibria")
+    # normal·ẋ against the rounding of the central difference ẋ (ε^{2/3} relative) times a
+    # factor 1e3 for the event location inside the difference's window
+    eps23 = float(np.finfo(float).eps) ** (2 / 3)
+    cross = abs(float(normal @ f))
+    if not cross > 1e3 * eps23 * float(np.linalg.norm(normal)) * float(np.linalg.norm(f)):
+        raise SolverError(f"normal: the flow at the point found, {x}, does not cross "
+                          f"normal·x = offset (normal·ẋ = {float(normal @ f):.3g}): no "
+                          f"phase condition; choose a normal along the flow there")
 
 
 def _cycle_equations(system: Any, x: FloatArray, T: float, normal: FloatArray, offset: float,
@@ -811,7 +952,7 @@ class Autonomous(Forced):
 
     def __init__(self, system: Any, period: float, *, normal: Any, offset: float = 0.0,
                  method: Any = None, options: tuple[tuple[str, Any], ...] = ()) -> None:
-        nv = as_vector("normal", normal, int(system.n_states))
+        nv = _section_normal(normal, _n_states(system))
         values = {"system": system, "u": None, "period": period, "method": method,
                   "options": tuple(options), "normal": nv, "offset": float(offset)}
         for key, value in values.items():
@@ -830,7 +971,7 @@ def _cycle_node(problem: Autonomous, x0: Any, k: int) -> FloatArray:
     if k != 1:
         raise ModelError(f"n_periods: a cycle is shot from one node (n_periods = 1), got {k}")
     n = int(problem.system.n_states)
-    arr = np.asarray(x0, float).reshape(-1)
+    arr = as_float_array("x0", x0).reshape(-1)
     if arr.size == n:
         arr = np.append(arr, problem.period)
     return as_vector("x0", arr, n + 1)[None, :].copy()
@@ -891,7 +1032,7 @@ class SectionReturn:
 
 def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: float,
                    method: Any = None, direction: int = 1,
-                   samples: int = 2000) -> SectionReturn:
+                   samples: int = 2000, max_iter: int = 60) -> SectionReturn:
     """Poincaré map of an autonomous system on the hyperplane ``normal·x = offset``.
 
     The first crossing in ``direction`` (``+1``: ``normal·x`` increasing) after ``t = 0`` is
@@ -906,7 +1047,7 @@ def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: f
     x0 : array_like
         The starting state.
     normal : array_like
-        Normal of the hyperplane.
+        Normal of the hyperplane (nonzero).
     offset : float
         Its offset.
     t_max : float
@@ -917,19 +1058,30 @@ def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: f
         Crossing direction counted as a return.
     samples : int
         Samples of ``(0, t_max)`` that bracket the crossing.
+    max_iter : int
+        Secant steps at most refining the crossing time.
 
     Raises
     ------
     SolverError
         No crossing within ``t_max``.
+    BudgetExceededError
+        ``max_iter`` secant steps spent before the crossing time settled to rounding (the
+        last estimate of the return time in ``err.partial``).
     """
     from ..simulate import simulate
 
-    n = int(system.n_states)
+    n = _n_states(system)
     x0 = as_vector("x0", x0, n)
-    nv = as_vector("normal", normal, n)
-    grid = np.linspace(0.0, float(t_max), int(samples) + 1)
-    tr = simulate(system, x0, (0.0, float(t_max)), method=method, t_eval=grid)
+    nv = _section_normal(normal, n)
+    offset = as_finite_scalar("offset", offset)
+    t_max = check_positive("t_max", t_max)
+    samples = check_integer("samples", samples, minimum=1)
+    max_iter = check_integer("max_iter", max_iter, minimum=1)
+    if isinstance(direction, bool) or direction not in (1, -1):
+        raise ModelError(f"direction: expected +1 or -1, got {direction!r}")
+    grid = np.linspace(0.0, t_max, samples + 1)
+    tr = simulate(system, x0, (0.0, t_max), method=method, t_eval=grid)
     X = at_times(tr, grid)
     g = direction * (X @ nv - offset)
     hits = np.flatnonzero((g[:-1] < 0) & (g[1:] >= 0))
@@ -947,12 +1099,19 @@ def hyperplane_map(system: Any, x0: Any, *, normal: Any, offset: float, t_max: f
 
     s0, s1 = 0.0, grid[i + 1] - ta
     g0, g1 = gap(s0)[0], gap(s1)[0]
-    for _ in range(60):
+    for _ in range(max_iter):
         s2 = s1 - g1 * (s1 - s0) / (g1 - g0) if g1 != g0 else 0.5 * (s0 + s1)
         g2 = gap(s2)[0]
         s0, g0, s1, g1 = s1, g1, s2, g2
         if abs(s1 - s0) <= 4 * np.finfo(float).eps * max(1.0, ta + s1):
             break
+    else:
+        raise BudgetExceededError(
+            f"max_iter: the crossing time did not settle in {max_iter} secant steps (last "
+            f"change {abs(s1 - s0):.3g} at t = {ta + s1:.12g}); raise max_iter, or check that "
+            f"the flow crosses the section transversally there; the last estimate of the "
+            f"return time is in err.partial", budget="max_iter", limit=max_iter,
+            used=max_iter, partial=float(ta + s1))
     tau = ta + s1
     run = _transition_run(system, x0, tau, method, t_eval=_velocity_samples(tau))
     M = np.asarray(run.stats["state_transition"], float)

@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_vector, check_positive
-from ..errors import DimensionError, ModelError, SolverError
+from .._validation import as_vector, check_in_interval, check_integer, check_positive
+from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
 
 if TYPE_CHECKING:   # imported where used at run time
     from ..systems.protocols import InputSignal, SimulableSystem
@@ -202,10 +202,14 @@ def periodic_steady_state(system: SimulableSystem, period: float, *, u: InputSig
     Raises
     ------
     ModelError
-        Non-positive period.
+        Non-positive period, tolerance or budget.
+    BudgetExceededError
+        No periodic solution found within the budgets (``budget="max_iter"``, or
+        ``"max_periods"`` when the fallback's iteration did not settle): not convergent, or
+        an unstable orbit out of Newton's reach; the message gives the last residual,
+        ``err.partial`` the last iterate.
     SolverError
-        No periodic solution found (not convergent, or an unstable orbit out of Newton's
-        reach); the message gives the last residual.
+        Newton failed otherwise (a singular Jacobian).
 
     Notes
     -----
@@ -232,32 +236,50 @@ def periodic_steady_state(system: SimulableSystem, period: float, *, u: InputSig
     (-2.19, False)
     """
     period = check_positive("period", period)
+    tol = check_positive("tol", tol)
+    max_iter = check_integer("max_iter", max_iter, minimum=0)
+    max_periods = check_integer("max_periods", max_periods, minimum=1)
+    n_samples = check_integer("n_samples", n_samples, minimum=2)
     _require_sensitivity(system, method)
     n = int(system.n_states)
     starts = [_linear_guess(system, u), np.zeros(n)] if x0 is None else \
         [as_vector("x0", x0, n)]
-    t_eval = np.linspace(0.0, period, int(n_samples))
-    iters = 0
+    t_eval = np.linspace(0.0, period, n_samples)
+    iters, periods, settled = 0, 0, True
     for m, start in enumerate(starts):  # cheap restarts before the slow fallback
         budget = max_iter if m == len(starts) - 1 else min(max_iter, 4)
-        x, traj, k, ok = _newton(system, start, period, method, u, t_eval, tol, budget,
-                                 options)
+        x, traj, k, failure = _newton(system, start, period, method, u, t_eval, tol, budget,
+                                      options)
         iters += k
-        if ok:
+        if failure is None:
             break
     how = "newton"
-    if not ok and fallback:
-        x, periods = _fixed_point(system, x if np.all(np.isfinite(x)) else np.zeros(n),
-                                  period, method, u, tol, max_periods, options)
-        x, traj, more, ok = _newton(system, x, period, method, u, t_eval, tol,
-                                    max(int(max_iter), 6), options)
+    if failure is not None and fallback:
+        x, periods, settled = _fixed_point(system, x if np.all(np.isfinite(x)) else np.zeros(n),
+                                           period, method, u, tol, max_periods, options)
+        x, traj, more, failure = _newton(system, x, period, method, u, t_eval, tol,
+                                         max(max_iter, 6), options)
         iters += more
         iters += periods
         how = "fixed_point+newton"
-    if not ok:
-        raise SolverError(f"periodic_steady_state: no T-periodic solution found for T="
-                          f"{period:g} after {iters} iterations; the system may not be "
-                          f"convergent — use brute_force_steady_state", status="max_iter")
+    if failure is not None:
+        spent = "max_periods" if not settled else "max_iter"
+        what = (f"the fixed-point iteration did not settle in max_periods = {max_periods} "
+                f"periods and Newton did not converge from where it ended" if not settled
+                else f"Newton did not converge within max_iter = {max_iter} iterations per "
+                f"start{' (and the fallback)' if fallback else ''}")
+        message = (f"{spent}: no T-periodic solution found for T={period:g} after {iters} "
+                   f"iterations: {what} (last: {failure}); raise {spent}, or the system may "
+                   f"not be convergent — use brute_force_steady_state; the last iterate is in "
+                   f"err.partial")
+        if isinstance(failure, BudgetExceededError) or not settled:
+            last = failure.partial[0] if isinstance(failure, BudgetExceededError) else x
+            raise BudgetExceededError(message, budget=spent,
+                                      limit=max_periods if not settled else max_iter,
+                                      used=periods if not settled else iters,
+                                      partial=np.asarray(last, float))
+        raise SolverError(message.replace(f"{spent}: ", "periodic_steady_state: ", 1),
+                          status="max_iter")
     Phi = np.asarray(traj.stats["state_transition"])
     mult = np.linalg.eigvals(Phi)
     mult = mult[np.argsort(-np.abs(mult), kind="stable")]
@@ -289,25 +311,27 @@ def _linear_guess(system: Any, u: Any) -> FloatArray:
 
 def _newton(system: Any, x: FloatArray, period: float, method: str, u: Any,
             t_eval: FloatArray, tol: float, max_iter: int, options: dict[str, Any]
-            ) -> tuple[FloatArray, Any, int, bool]:
+            ) -> tuple[FloatArray, Any, int, SolverError | None]:
     """Newton on ``F(x) = φ_T(x) - x`` by the orbit engine
     (:func:`~nscontrol.analysis.orbits.find_orbit`: damped Newton with the integrator's
-    state transition); the converged period is then sampled on ``t_eval``."""
+    state transition); the converged period is then sampled on ``t_eval``. On failure: the
+    start, ``None`` and the error (a :class:`BudgetExceededError` holds the last iterate)."""
     from .orbits import Forced, find_orbit
 
     forced = Forced(system, u, period, method, tuple(options.items()))
     try:
         orbit = find_orbit(forced, x, tol=tol, max_iter=max_iter)
-    except SolverError:
-        return x, None, int(max_iter), False
+    except SolverError as exc:
+        return x, None, int(max_iter), exc
     tr = _shoot(system, orbit.x0, period, method, u, t_eval, options)
-    return orbit.x0, tr, orbit.iterations, True
+    return orbit.x0, tr, orbit.iterations, None
 
 
 def _fixed_point(system: Any, x: FloatArray, period: float, method: str, u: Any, tol: float,
-                 max_periods: int, options: dict[str, Any]) -> tuple[FloatArray, int]:
+                 max_periods: int, options: dict[str, Any]) -> tuple[FloatArray, int, bool]:
     """Long integration: Poincaré samples ``x_{k+1} = φ_T(x_k)`` until they settle (to 1e-6
-    relative, enough for Newton to take over) or ``max_periods`` elapse."""
+    relative, enough for Newton to take over) or ``max_periods`` elapse; returns the last
+    sample, the periods run and whether they settled."""
     from ..simulate import simulate
 
     chunk = 50
@@ -322,8 +346,8 @@ def _fixed_point(system: Any, x: FloatArray, period: float, method: str, u: Any,
         x = tr.x[-1]
         done += chunk
         if np.linalg.norm(samples[-1] - samples[0]) <= max(tol, 1e-6) * _scale(x):
-            break
-    return x, done
+            return x, done, True
+    return x, done, False
 
 
 # -- uniqueness ------------------------------------------------------------------------------
@@ -454,6 +478,12 @@ class BruteForceResult:
         return tr.t[idx], tr.x[idx]
 
 
+def _multiplicity_rtol(rtol: Any) -> float:
+    """The relative tolerance of :func:`period_multiplicity`: in ``(0, 1)`` (``<= 0`` would
+    find no period in floating point, ``>= 1`` a period 1 everywhere)."""
+    return check_in_interval("rtol", rtol, 0.0, 1.0, open_interval=True)
+
+
 def period_multiplicity(poincare: Any, *, rtol: float = 1e-3, max_p: int = 6) -> int:
     """Smallest ``p <= max_p`` with ``max_k |x_{k+p} - x_k| <= rtol·max|x|`` over Poincaré
     samples ``x_k = x(t0 + kT)``; ``0`` when none (quasi-periodic, chaotic, or transient).
@@ -463,10 +493,12 @@ def period_multiplicity(poincare: Any, *, rtol: float = 1e-3, max_p: int = 6) ->
     poincare : (K, n) array_like
         The Poincaré samples ``x_k``, one per row.
     rtol : float
-        Tolerance relative to ``max|x|``.
+        Tolerance relative to ``max|x|``, in ``(0, 1)``.
     max_p : int
         Largest multiplicity tried.
     """
+    rtol = _multiplicity_rtol(rtol)
+    max_p = check_integer("max_p", max_p, minimum=1)
     X = np.asarray(poincare, float)
     scale = max(float(np.max(np.abs(X))), 1e-300)
     for p in range(1, max_p + 1):
@@ -544,6 +576,7 @@ def brute_force_steady_state(system: SimulableSystem, period: float, *, u: Input
     from ..simulate import simulate
 
     period = check_positive("period", period)
+    rtol = _multiplicity_rtol(rtol)
     if int(n_transient) < 0 or int(n_record) < 1:
         raise ModelError(f"n_transient, n_record: expected >= 0 and >= 1, got {n_transient}, "
                          f"{n_record}")
