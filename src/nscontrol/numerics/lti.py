@@ -93,6 +93,9 @@ TAYLOR_DEGREE = 18
 #: Bound ``e/(K+1)!`` of the Taylor remainder on one cell (``||Ab h|| = 1``), passed to the
 #: compiled search by every caller.
 TAYLOR_REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
+#: Condition of the cell path's propagation ``Φ^k y`` (binary powering: at most ``2·53``
+#: rounded products for any ``k < 2^53``), in the restart tolerance.
+CELL_KAPPA = 2.0 * 53
 
 
 # --------------------------------------------------------------------------- exosystem
@@ -455,6 +458,10 @@ class _GuardContext:
         self.phi = np.empty((n, n))
         if n:
             taylor_tables(np.ascontiguousarray(Ab * self.h), self.taylor, self.phi)
+        # the propagation's condition, for the round-off tolerance of a restart
+        # (_lti_kernels.restart_tolerance): cond(V) of the eigen-decomposition, or the at
+        # most 2·53 rounded products of binary powering on the cell path
+        self.kappa = float(np.linalg.cond(flow._V)) if flow.method == "eig" else CELL_KAPPA
         if flow.method == "eig":
             self.kind = KIND_EIG
             self.lam = np.ascontiguousarray(flow._lam, dtype=complex)

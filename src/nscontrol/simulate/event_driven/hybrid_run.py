@@ -11,7 +11,7 @@ from ..._progress import TimeProgress
 from ..._validation import FloatArray
 from ...numerics.lti import LTIFlow
 from ..trajectory import Trajectory
-from ._flight import _Flight, _Workspace
+from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
 from ._recording import _fail_zeno, _Samples, append_events
 from ._zeno import _Zeno
@@ -48,10 +48,12 @@ class HybridRun:
         finish = dict(method="event_driven", state_names=s.state_names)
         with TimeProgress(self.t0, self.tf, desc="event_driven",
                           enable=self.opts.progress) as bar:
+            restart = False  # the first flight starts from the user's x0
             while t < self.tf:
                 t, x, ev = self.flight.run(x, t, self.tf, self.zeno, False, self.opts,
                                            self.samples, self.ws, sample_pre=True,
-                                           on_events=self._jumped)
+                                           on_events=self._jumped, restart=restart)
+                restart = True
                 bar.update(t)
                 if ev is None:
                     break
@@ -75,4 +77,6 @@ class HybridRun:
                     listener(t, x.copy(), x_plus.copy(), idx, None)
                 x = x_plus
                 self.samples.add(t, x)
-        return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
+        return self.samples.finish(status=0, stats={"events": self.zeno.n_events,
+                                                    **projection_stats(self.ws.proj)},
+                                   **finish)
