@@ -201,9 +201,10 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
     times (whose rounding, ``eps·t``, would carry the state past its event); the time
     labels carry their rounding in ``clock = [t, lo]``
     (:func:`nscontrol.numerics._lti_kernels.clock_advance`), read when ``clock[0]`` is the
-    ``t`` passed and written at the return. Samples written: grid points ``t_grid0 + k dt`` strictly inside each flight, the
-    pre-event state when ``sample_pre``, the post-jump state of every settled event and the
-    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
+    ``t`` passed and written at the return. Samples written: grid points
+    ``t_grid0 + k dt`` strictly inside each flight, the pre-event state when
+    ``sample_pre``, the post-jump state of every settled event and the final state at
+    ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
     the start of the flight whose samples did not fit (the run is then the same as with a
     larger buffer), or, when even an empty buffer is too small for one flight, the last grid
     point written.

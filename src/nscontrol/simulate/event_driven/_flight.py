@@ -62,12 +62,13 @@ class _Flight:
             s_t, s_x = samples.free()
             user = not restart  # x is the caller's: a negative guard is its state's fault
             code, t, n_s, n_e = run_linear_jumps(
-                self.W, self.g0, self.row_norm, 1e-12, 1e-12, TAYLOR_REMAINDER, ctx.phi, ctx.bern,
-                ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h, ctx.kappa,
-                self.n_free, self.J, self.jump_ok, self.slots, zeno.hist, zeno.count, zeno.first, geometric,
-                opts.ratio_tol, opts.horizon, opts.rel, opts.min_interval,
-                opts.max_events - zeno.n_events, x, t, tf, opts.dt, opts.t0, sample_pre,
-                restart, ws.proj, ws.clock, s_t, s_x, ws.e_t, ws.e_i, ws.e_pre, ws.e_post, ws.hit, ws.graze)
+                self.W, self.g0, self.row_norm, 1e-12, 1e-12, TAYLOR_REMAINDER, ctx.phi,
+                ctx.bern, ctx.kind, ctx.lam, ctx.V, ctx.Vinv, ctx.taylor, ctx.d, ctx.h,
+                ctx.kappa, self.n_free, self.J, self.jump_ok, self.slots, zeno.hist,
+                zeno.count, zeno.first, geometric, opts.ratio_tol, opts.horizon, opts.rel,
+                opts.min_interval, opts.max_events - zeno.n_events, x, t, tf, opts.dt,
+                opts.t0, sample_pre, restart, ws.proj, ws.clock, s_t, s_x, ws.e_t, ws.e_i,
+                ws.e_pre, ws.e_post, ws.hit, ws.graze)
             zeno.n_events += n_e
             samples.wrote(n_s)
             if n_e:
