@@ -113,7 +113,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
         event adds its pre- and post-event samples.
     max_events : int
-        More events than this is reported as Zeno.
+        Event budget: more events than this raises
+        :class:`~nscontrol.errors.BudgetExceededError` (``budget="max_events"``) with the
+        computed part (a long run needs one event per impact).
     min_interval : float
         Two events of the same guard closer than this (without a geometric pattern) is Zeno.
     zeno_ratio_tol : float

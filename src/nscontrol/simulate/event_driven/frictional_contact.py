@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..._validation import FloatArray
-from ...errors import ModelError, ZenoError
+from ...errors import BudgetExceededError, ModelError, ZenoError
 from ...numerics.lti import LTIFlow, first_event
 from ..trajectory import Recorder, Trajectory
 from ._options import _Options
@@ -170,6 +170,9 @@ class FrictionalContactRun:
     def _fail(self, message: str, t: float, error: type[Exception] = ModelError) -> None:
         traj = self.rec.finish(status=-1, message=message, method="event_driven",
                                state_names=self.s.state_names)
+        if error is BudgetExceededError:
+            raise BudgetExceededError(message, budget="max_events", limit=self.opts.max_events,
+                                      used=self.n_events, trajectory=traj)
         if error is ZenoError:
             raise ZenoError(message, time=t, trajectory=traj)
         raise ModelError(message, trajectory=traj)
@@ -199,8 +202,9 @@ class FrictionalContactRun:
                 continue
             self.n_events += 1
             if self.n_events > self.opts.max_events:
-                self._fail(f"event_driven: more than {self.opts.max_events} stick-slip events "
-                           f"by t = {t:.12g}", t, ZenoError)
+                self._fail(f"max_events: the run spent its budget of {self.opts.max_events} "
+                           f"stick-slip events by t = {t:.12g}; raise max_events", t,
+                           BudgetExceededError)
             if 0 in ev.indices:
                 self._fail(f"event_driven: the normal force reaches zero at t = {t:.12g} (the "
                            f"body would leave the contact); {_USE_MJ}", t)

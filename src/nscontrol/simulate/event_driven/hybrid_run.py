@@ -13,7 +13,7 @@ from ...numerics.lti import LTIFlow
 from ..trajectory import Trajectory
 from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
-from ._recording import _fail_zeno, _Samples, append_events
+from ._recording import _fail_budget, _fail_zeno, _Samples, append_events
 from ._zeno import _Zeno
 
 
@@ -63,8 +63,10 @@ class HybridRun:
                     continue
                 idx = np.asarray(ev.indices, dtype=np.int64)
                 self.zeno.n_events += 1
-                if self.zeno.n_events > self.opts.max_events or any(
-                        self.zeno.too_close(int(i), t) for i in idx):
+                if self.zeno.n_events > self.opts.max_events:
+                    return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+                                        **finish)
+                if any(self.zeno.too_close(int(i), t) for i in idx):
                     return _fail_zeno(self.opts, self.samples, f"event_driven: accumulation of "
                                       f"events of guards {idx.tolist()} near t = {t:.12g}",
                                       t, **finish)

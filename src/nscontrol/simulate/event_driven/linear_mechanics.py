@@ -19,7 +19,7 @@ from .._event_kernels import bounce_impulses, contact_state, open_and_finite
 from ..trajectory import Trajectory
 from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
-from ._recording import _fail_zeno, _Samples, append_events
+from ._recording import _fail_budget, _fail_zeno, _Samples, append_events
 from ._zeno import _Zeno
 
 
@@ -266,8 +266,8 @@ class LinearMechanicsRun:
             return t, z
         self.zeno.n_events += 1
         if self.zeno.n_events > self.opts.max_events:
-            return self._fail(f"event_driven: more than {self.opts.max_events} events by "
-                              f"t = {t:.12g}", t)
+            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+                                **self.finish_kw)
         impacts = [j for j in hit if j >= 0]
         if impacts:
             return self._impact(t, z, impacts)
