@@ -49,26 +49,54 @@ def _horner(a, m, x):  # pragma: no cover - compiled
     return r
 
 
+#: Iteration budget of the root refinement :func:`_root`. It cannot be spent: the bracket
+#: at least halves every two iterations (an iterate that did not halve it is followed by
+#: the midpoint), and the refinement stops once the bracket is below
+#: ``4 eps max(|hi|, _ROOT_FLOOR)``; from a bracket within the cell ``[0, 1]`` that takes at
+#: most ``2 (log2(1 / (4 eps _ROOT_FLOOR)) + 1) = 2·(70 + 1) = 142`` iterations.
+ROOT_BUDGET = 160
+#: Below this ``|σ|`` the root's bracket is refined to an absolute ``4 eps _ROOT_FLOOR``
+#: (``8.5e-22`` of a cell), far below what moves the state (a cell moves it by at most its
+#: norm, ``‖Ab h‖ = 1``): a relative bracket of a root at ``σ = 1e-300`` would need more
+#: than 1000 bisections and say nothing more.
+_ROOT_FLOOR = 2.0 ** -20
+
+
 @njit(cache=True)
 def _root(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
     """Root of the monotone polynomial on [lo, hi] with P(lo) > 0 >= P(hi): safeguarded Newton
-    from the secant point (bisection whenever Newton leaves the bracket)."""
+    from the secant point (bisection whenever Newton leaves the bracket or did not halve it
+    over the last two iterations; see :data:`ROOT_BUDGET`)."""
+    return root_iterations(a, m, lo, hi, f_lo, f_hi)[0]
+
+
+@njit(cache=True)
+def root_iterations(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
+    """:func:`_root` and the number of iterations it took (at most :data:`ROOT_BUDGET`)."""
     x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo > f_hi else 0.5 * (lo + hi)
-    for _ in range(200):
+    width = hi - lo
+    for it in range(ROOT_BUDGET):
         fx, d = _horner2(a, m, x)
         if fx == 0.0:
-            return x
+            return x, it + 1
         if fx > 0.0:
             lo = x
         else:
             hi = x
+        # a Newton point that did not halve the bracket is followed by the midpoint, whose
+        # evaluation halves it: the bracket halves at least every two iterations
+        stalled = hi - lo > 0.5 * width
+        width = hi - lo
         x_new = x - fx / d if d != 0.0 else 0.5 * (lo + hi)
-        if not (lo < x_new < hi):
+        inside = lo < x_new < hi
+        if inside and abs(x_new - x) <= 2.0 * _EPS * abs(x):
+            return x_new, it + 1    # Newton converged
+        if stalled or not inside:
             x_new = 0.5 * (lo + hi)
-        if abs(x_new - x) <= 2.0 * _EPS * abs(x) or hi - lo <= 4.0 * _EPS * abs(hi):
-            return x_new
+        if hi - lo <= 4.0 * _EPS * max(abs(hi), _ROOT_FLOOR):
+            return x_new, it + 1    # the bracket is the root
         x = x_new
-    return x
+    return x, ROOT_BUDGET
 
 
 @njit(cache=True)

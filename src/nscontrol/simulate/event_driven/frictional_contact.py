@@ -197,14 +197,14 @@ class FrictionalContactRun:
             if ev is None:
                 break
             x = z[:2 * self.n]
-            if ev.grazing:
-                self.rec.event(t, "grazing", 0, x, x, mode, mode)
-                continue
-            self.n_events += 1
+            self.n_events += 1   # every event spends the budget, a touch too
             if self.n_events > self.opts.max_events:
                 self._fail(f"max_events: the run spent its budget of {self.opts.max_events} "
                            f"stick-slip events by t = {t:.12g}; raise max_events", t,
                            BudgetExceededError)
+            if ev.grazing:
+                self.rec.event(t, "grazing", 0, x, x, mode, mode)
+                continue
             if 0 in ev.indices:
                 self._fail(f"event_driven: the normal force reaches zero at t = {t:.12g} (the "
                            f"body would leave the contact); {_USE_MJ}", t)

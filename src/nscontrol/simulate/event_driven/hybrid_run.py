@@ -57,15 +57,15 @@ class HybridRun:
                 bar.update(t)
                 if ev is None:
                     break
+                self.zeno.n_events += 1   # every event spends the budget, a touch too
+                if self.zeno.n_events > self.opts.max_events:
+                    return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+                                        **finish)
                 if ev.grazing:
                     for i in ev.indices:
                         self.rec.event(t, "grazing", i, x, x)
                     continue
                 idx = np.asarray(ev.indices, dtype=np.int64)
-                self.zeno.n_events += 1
-                if self.zeno.n_events > self.opts.max_events:
-                    return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
-                                        **finish)
                 if any(self.zeno.too_close(int(i), t) for i in idx):
                     return _fail_zeno(self.opts, self.samples, f"event_driven: accumulation of "
                                       f"events of guards {idx.tolist()} near t = {t:.12g}",

@@ -259,15 +259,15 @@ class LinearMechanicsRun:
     def _event(self, t: float, z: FloatArray, hit: list[int], grazing: bool) -> Any:
         """An event handed back by the compiled loop (``hit``: guard ids). Returns
         ``(t, z)`` to go on from, or a failed trajectory."""
+        self.zeno.n_events += 1   # every event spends the budget, a touch too
+        if self.zeno.n_events > self.opts.max_events:
+            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+                                **self.finish_kw)
         if grazing:  # a gap or a contact force touching zero: nothing changes
             for j in hit:
                 self.rec.event(t, "grazing", j if j >= 0 else -1 - j,
                                z[:2 * self.n], z[:2 * self.n])
             return t, z
-        self.zeno.n_events += 1
-        if self.zeno.n_events > self.opts.max_events:
-            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
-                                **self.finish_kw)
         impacts = [j for j in hit if j >= 0]
         if impacts:
             return self._impact(t, z, impacts)
