@@ -191,7 +191,11 @@ class FrictionalContactRun:
             ev = first_event(flow, z, guards, np.zeros(len(guards)), self.tf - t)
             t_end = self.tf if ev is None else t + ev.t
             times = self._grid(t, t_end)
-            Z = flow.propagate(z, times - t)
+            offsets = times - t
+            # the piece ends at the event's own offset, not at (t + τ) - t, which rounds by
+            # eps·t and would leave the state past its guard in a long run
+            offsets[-1] = self.tf - t if ev is None else ev.t
+            Z = flow.propagate(z, offsets)
             self._record(times, Z, mode, L)
             t, z = t_end, Z[-1].copy()
             if ev is None:
