@@ -1,7 +1,8 @@
 """Long runs stay valid: 10⁵-period runs of an elastic ball, a forced piecewise-affine
-oscillator and the forced impact oscillator, past the times at which round-off used to stop
-them with InadmissibleStateError (4602 s, 8200 s and 32,802 s), and the one round-off
-projection every restart goes through."""
+oscillator and the forced impact oscillator, far past the times at which round-off used to
+stop them with InadmissibleStateError (4602 s, 8200 s and 32,802 s), and the one round-off
+projection every restart goes through. Each 10⁵-period run takes under 20 s (about 8, 14
+and 4 s), so all are in the default suite."""
 
 from __future__ import annotations
 
@@ -35,8 +36,8 @@ def _elastic_ball(n_periods: int):
     return ball, traj, tf, period
 
 
-@pytest.mark.parametrize("n_periods", [6_000, pytest.param(100_000, marks=pytest.mark.slow)])
-def test_elastic_ball_runs_past_the_old_failure_and_keeps_its_energy(n_periods):
+def test_elastic_ball_runs_past_the_old_failure_and_keeps_its_energy():
+    n_periods = 100_000                           # about 8 s
     ball, traj, tf, period = _elastic_ball(n_periods)
     assert tf > 4602.4                            # where round-off used to stop the run
     assert traj.status == 0 and traj.t[-1] == tf
@@ -68,8 +69,8 @@ def _one_sided(n_periods: int):
     return traj, n_periods * T
 
 
-@pytest.mark.parametrize("n_periods", [3_000, pytest.param(100_000, marks=pytest.mark.slow)])
-def test_forced_pwa_oscillator_stays_on_its_periodic_orbit(n_periods):
+def test_forced_pwa_oscillator_stays_on_its_periodic_orbit():
+    n_periods = 100_000                           # about 14 s
     ref, t_ref = _one_sided(600)                  # long settled: e^{-c t/2} = e^{-130}
     traj, tf = _one_sided(n_periods)
     assert tf > 8200.0                            # where round-off used to stop the run
@@ -88,8 +89,8 @@ def test_forced_pwa_oscillator_stays_on_its_periodic_orbit(n_periods):
 
 # -- impact oscillator ---------------------------------------------------------------------------
 
-@pytest.mark.parametrize("n_periods", [14_000, pytest.param(100_000, marks=pytest.mark.slow)])
-def test_impact_oscillator_stays_on_its_attractor(n_periods):
+def test_impact_oscillator_stays_on_its_attractor():
+    n_periods = 100_000                           # about 4 s
     from nscontrol.examples.impact_oscillator_bifurcation import oscillator
 
     osc = oscillator().with_(forcing=1.5)         # the stable period-1 one-impact orbit
