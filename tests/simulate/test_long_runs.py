@@ -170,3 +170,19 @@ def test_the_projection_moves_only_the_plant_entries_along_the_guard():
     y = np.array([-1e-6, 0.0, 1.0])
     assert project_restart(W, g0, 1.0, 1.0, 0.0, 2, y, a, proj) == 0
     assert proj[3] == pytest.approx(-1e-6) and 0 < proj[4] < 1e-6
+
+
+def test_the_python_entry_is_the_same_projection():
+    """``numerics.lti.project_restart`` (the frictional runner's restarts) calls the kernel:
+    within the tolerance the guard comes to zero on the free entries, beyond it refuses."""
+    from nscontrol.numerics import LTIFlow, project_restart
+
+    flow = LTIFlow(np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -G_ACC], [0.0, 0.0, 0.0]]))
+    G, g0 = np.array([[1.0, 0.0, 0.0]]), np.zeros(1)
+    proj = np.zeros(5)
+    x = np.array([-1e-15, 4.4, 1.0])
+    y = project_restart(flow, x, G, g0, 1e3, proj, n_free=2)
+    assert y[0] == 0.0 and y[1:].tolist() == [4.4, 1.0] and proj[0] == 1
+    assert x[0] == -1e-15                                # the argument is left alone
+    with pytest.raises(InadmissibleStateError, match="round-off tolerance"):
+        project_restart(flow, np.array([-1e-6, 4.4, 1.0]), G, g0, 1e3, proj, n_free=2)

@@ -22,8 +22,9 @@ import numpy as np
 
 from ..._validation import FloatArray
 from ...errors import BudgetExceededError, ModelError, ZenoError
-from ...numerics.lti import LTIFlow, first_event
+from ...numerics.lti import LTIFlow, first_event, project_restart
 from ..trajectory import Recorder, Trajectory
+from ._flight import projection_stats
 from ._options import _Options
 from .linear_mechanics import _LinearModel
 
@@ -186,8 +187,14 @@ class FrictionalContactRun:
             self._fail(f"x0: the normal force would be {float(L[0] @ z):.3g} <= 0 (the body "
                        f"leaves the contact); {_USE_MJ}", t)
         self._record(np.array([t]), z[None], mode, L)
+        proj = np.zeros(5)   # round-off projections at restarts (numerics.lti.project_restart)
+        restart = False      # the first piece starts from the user's x0
         while t < self.tf:
             flow, guards, L = self._mode(mode)
+            if restart:
+                z = project_restart(flow, z, guards, np.zeros(len(guards)), t, proj,
+                                    n_free=2 * self.n)
+            restart = True
             ev = first_event(flow, z, guards, np.zeros(len(guards)), self.tf - t)
             t_end = self.tf if ev is None else t + ev.t
             times = self._grid(t, t_end)
@@ -219,6 +226,6 @@ class FrictionalContactRun:
             mode = new
             self._record(np.array([t]), z[None], mode, self._mode(mode)[2])
         stats = {"events": self.n_events, "impacts": 0,
-                 "impulses": np.zeros((0, self.s.n_contacts))}
+                 "impulses": np.zeros((0, self.s.n_contacts)), **projection_stats(proj)}
         return self.rec.finish(status=0, stats=stats, method="event_driven",
                                state_names=self.s.state_names)
