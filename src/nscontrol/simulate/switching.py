@@ -44,7 +44,8 @@ max_events : int
     Event budget: more events than this raises :class:`~nscontrol.errors.BudgetExceededError`
     (``budget="max_events"``, 1e6) with the computed part.
 progress : bool, optional
-A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed) raises with the
+A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed,
+``BudgetExceededError``: ``max_events`` spent) raises with the
 partial trajectory in ``err.trajectory`` (``simulate(..., on_failure="return")`` returns it
 with ``status = -1``); errors in the model or its initial state are always raised.
 """
