@@ -287,7 +287,7 @@ def test_frequency_sweep_records_each_failing_frequency_with_its_own_index(plant
                              progress=False, max_events=80)
     for way in ("up", "down"):
         err = res[way].errors
-        assert err[0] is not None and err[0].index == 0 and err[0].type == "ZenoError"
+        assert err[0] is not None and err[0].index == 0 and err[0].type == "BudgetExceededError"
         assert "ω = 0.4" in err[0].message and f"({way} sweep)" in err[0].message
         assert err[1] is None and np.isfinite(res[way].gamma[1])
         assert np.isnan(res[way].gamma[0])

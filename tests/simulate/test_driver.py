@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 import nscontrol as nsc
-from nscontrol.errors import ModelError, NscontrolWarning, ZenoError, ZenoWarning
+from nscontrol.errors import (
+    BudgetExceededError,
+    ModelError,
+    NscontrolWarning,
+    ZenoError,
+    ZenoWarning,
+)
 from nscontrol.simulate import METHODS, Integrator, Trajectory, register_method
 from nscontrol.simulate.methods import EventDriven, ImplicitEuler, MoreauJean, Switching
 from nscontrol.simulate.trajectory import Recorder
@@ -153,18 +159,20 @@ def _zeno_run(ball, **kw):
 
 
 def test_one_failure_policy_for_every_method(ball):
-    with pytest.raises(ZenoError) as info:
+    with pytest.raises(BudgetExceededError) as info:   # the event budget spent
         _zeno_run(ball)
+    assert info.value.budget == "max_events" and info.value.limit == 10
     assert info.value.trajectory.status == -1
     returned = _zeno_run(ball, on_failure="return")
     assert returned.status == -1 and len(returned.events_of("impact")) == 10
     np.testing.assert_array_equal(returned.t, info.value.trajectory.t)
-    with pytest.warns(ZenoWarning):
+    with pytest.warns(NscontrolWarning, match="max_events"):
         warned = _zeno_run(ball, on_failure="warn")
     assert warned.status == -1
     with pytest.raises(ModelError, match=r"^on_failure: expected 'raise', 'return' or 'warn'"):
         _zeno_run(ball, on_failure="ignore")
-    assert issubclass(ZenoWarning, NscontrolWarning)
+    assert issubclass(ZenoWarning, NscontrolWarning) and issubclass(BudgetExceededError,
+                                                                      ZenoError) is False
 
 
 def test_a_model_error_is_raised_whatever_the_failure_policy(ball):

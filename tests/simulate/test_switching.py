@@ -184,12 +184,13 @@ def test_pwa_with_a_function_input_matches_the_exact_exosystem_path():
         <= 1e-8
 
 
-def test_event_budget_exceeded_raises_zeno_with_the_computed_part():
-    from nscontrol.errors import ZenoError
+def test_event_budget_exceeded_raises_budget_error_with_the_computed_part():
+    from nscontrol.errors import BudgetExceededError
 
     p = sp.bimodal_oscillator()
-    with pytest.raises(ZenoError, match="max_events") as info:
+    with pytest.raises(BudgetExceededError, match="^max_events") as info:
         simulate(p.system, p.x0, p.t_span, max_events=5)
+    assert (info.value.budget, info.value.limit, info.value.used) == ("max_events", 5, 6)
     part = info.value.trajectory
     assert part.status == -1 and len(part.events) == 6
     assert 0.0 < part.t[-1] <= part.events[-1].time

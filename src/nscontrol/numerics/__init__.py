@@ -25,6 +25,7 @@ _EXPORTS: dict[str, str] = {
     # lti.py
     "Exosystem": "lti", "augment": "lti", "LTIFlow": "lti", "discretize": "lti",
     "Discretization": "lti", "GuardEvent": "lti", "first_event": "lti",
+    "project_restart": "lti",
     # lmi.py
     "LMIProblem": "lmi", "LMIResult": "lmi", "BisectionResult": "lmi", "LyapunovCheck": "lmi",
     "LYAPUNOV_RECHECK_RTOL": "lmi", "bisect_max": "lmi", "lyapunov_certificate": "lmi",

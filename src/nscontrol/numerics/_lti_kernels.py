@@ -49,26 +49,54 @@ def _horner(a, m, x):  # pragma: no cover - compiled
     return r
 
 
+#: Iteration budget of the root refinement :func:`_root`. It cannot be spent: the bracket
+#: at least halves every two iterations (an iterate that did not halve it is followed by
+#: the midpoint), and the refinement stops once the bracket is below
+#: ``4 eps max(|hi|, _ROOT_FLOOR)``; from a bracket within the cell ``[0, 1]`` that takes at
+#: most ``2 (log2(1 / (4 eps _ROOT_FLOOR)) + 1) = 2·(70 + 1) = 142`` iterations.
+ROOT_BUDGET = 160
+#: Below this ``|σ|`` the root's bracket is refined to an absolute ``4 eps _ROOT_FLOOR``
+#: (``8.5e-22`` of a cell), far below what moves the state (a cell moves it by at most its
+#: norm, ``‖Ab h‖ = 1``): a relative bracket of a root at ``σ = 1e-300`` would need more
+#: than 1000 bisections and say nothing more.
+_ROOT_FLOOR = 2.0 ** -20
+
+
 @njit(cache=True)
 def _root(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
     """Root of the monotone polynomial on [lo, hi] with P(lo) > 0 >= P(hi): safeguarded Newton
-    from the secant point (bisection whenever Newton leaves the bracket)."""
+    from the secant point (bisection whenever Newton leaves the bracket or did not halve it
+    over the last two iterations; see :data:`ROOT_BUDGET`)."""
+    return root_iterations(a, m, lo, hi, f_lo, f_hi)[0]
+
+
+@njit(cache=True)
+def root_iterations(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
+    """:func:`_root` and the number of iterations it took (at most :data:`ROOT_BUDGET`)."""
     x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo > f_hi else 0.5 * (lo + hi)
-    for _ in range(200):
+    width = hi - lo
+    for it in range(ROOT_BUDGET):
         fx, d = _horner2(a, m, x)
         if fx == 0.0:
-            return x
+            return x, it + 1
         if fx > 0.0:
             lo = x
         else:
             hi = x
+        # a Newton point that did not halve the bracket is followed by the midpoint, whose
+        # evaluation halves it: the bracket halves at least every two iterations
+        stalled = hi - lo > 0.5 * width
+        width = hi - lo
         x_new = x - fx / d if d != 0.0 else 0.5 * (lo + hi)
-        if not (lo < x_new < hi):
+        inside = lo < x_new < hi
+        if inside and abs(x_new - x) <= 2.0 * _EPS * abs(x):
+            return x_new, it + 1    # Newton converged
+        if stalled or not inside:
             x_new = 0.5 * (lo + hi)
-        if abs(x_new - x) <= 2.0 * _EPS * abs(x) or hi - lo <= 4.0 * _EPS * abs(hi):
-            return x_new
+        if hi - lo <= 4.0 * _EPS * max(abs(hi), _ROOT_FLOOR):
+            return x_new, it + 1    # the bracket is the root
         x = x_new
-    return x
+    return x, ROOT_BUDGET
 
 
 @njit(cache=True)
@@ -364,6 +392,91 @@ def propagate(kind, lam, V, Vinv, phi, T, d, h, x, t, out):  # pragma: no cover 
             acc[r] += tmp[r]
     for j in range(n):
         out[j] = acc[j] * d[j]
+
+
+@njit(cache=True)
+def clock_advance(t, lo, dur):  # pragma: no cover - compiled
+    """The time label after a piece of duration ``dur`` from the clock ``t + lo``: returns
+    ``(t', lo')`` with ``t' + lo' = t + lo + dur`` exactly (Knuth's two-sum; ``lo`` carries
+    what ``t'`` cannot hold). An integrator that propagates its state by each event's own
+    offset ``τ`` keeps its time labels this way: a plain ``t + τ`` rounds by ``eps·t`` per
+    event, the same way at every period of a periodic motion, and the labels would drift
+    from the state's own time by ``N·eps·t`` after ``N`` events."""
+    s = t + dur
+    bp = s - t
+    lo = lo + ((t - (s - bp)) + (dur - bp))
+    t_new = s + lo
+    return t_new, lo - (t_new - s)
+
+
+@njit(cache=True)
+def restart_tolerance(W, i, kappa, ynorm, g0_i, a1, h, t):  # pragma: no cover - compiled
+    """Bound on the round-off error of guard ``i`` at a state the integrator computed itself
+    (after an event, at the restart of a chunk), with ``a1 = h ġ_i`` its first Taylor
+    coefficient on a cell of width ``h``::
+
+        tol = 4 (K + 1 + n) eps (κ (‖G_i D‖ ‖y‖ + |g0_i|) + |ġ_i| max(|t|, h)).
+
+    The first term is the state's rounding carried into the guard: the propagated state is
+    a sum of at most ``K + 1`` Taylor terms or ``n`` eigenmodes, each rounded to ``eps``
+    relative, amplified by the propagation's condition ``κ`` (``cond(V)`` on the
+    eigen-decomposition path; on the cell path the at most ``2·53`` products of binary
+    powering); the guard's dot product, the jump and the recentring add no more than the
+    stated factor 4. The second term is the state of a time known to ``eps·max(|t|, h)``:
+    an event time ``t0 + τ`` or a sample time ``t_k`` rounded, over which the guard moves at
+    ``|ġ_i|``."""
+    K1, _, n = W.shape
+    return 4.0 * (K1 + n) * _EPS * (kappa * (ynorm * abs_row(W, i) + abs(g0_i))
+                                   + abs(a1) / h * max(abs(t), h))
+
+
+@njit(cache=True, inline="always")
+def abs_row(W, i):  # pragma: no cover - compiled
+    """``‖G_i D‖``: the norm of guard ``i``'s row of ``W[0] = G D``."""
+    s = 0.0
+    for c in range(W.shape[2]):
+        s += W[0, i, c] * W[0, i, c]
+    return np.sqrt(s)
+
+
+@njit(cache=True)
+def project_restart(W, g0, kappa, h, t, n_free, y, a, proj):  # pragma: no cover - compiled
+    """Project a restart state onto the admissible set ``{g >= 0}`` of its guards: the one
+    shared step of every integrator that goes on from a state it computed itself (after an
+    event or a jump, at the restart of a chunk), never from a user's ``x0``.
+
+    ``y`` is the balanced state (``x = D y``), changed in place. A guard negative by at most
+    :func:`restart_tolerance` is the integrator's own round-off (the event time rounded,
+    the state propagated): ``y`` moves by the smallest step along the guard's row ``G_i D``
+    that brings it to zero, on the first ``n_free`` entries only (the others — the constant
+    and the input generator of an augmented state — are not the plant's and stay). Each
+    projection adds one to ``proj[0]`` and keeps the largest ``|g|`` in ``proj[1]`` and the
+    largest ``|g|/tol`` in ``proj[2]``.
+
+    Returns ``-1``, or the index of the first guard negative beyond its tolerance (or with
+    no free entry to move), with its value in ``proj[3]`` and the tolerance in ``proj[4]``.
+    """
+    K1, p, n = W.shape
+    for i in range(p):
+        guard_taylor_coefficients(W, g0, i, y, a)
+        if a[0] >= 0.0:
+            continue
+        ynorm = np.sqrt(np.sum(y * y))
+        tol = restart_tolerance(W, i, kappa, ynorm, g0[i], a[1], h, t)
+        w2 = 0.0
+        for c in range(n_free):
+            w2 += W[0, i, c] * W[0, i, c]
+        if -a[0] > tol or w2 == 0.0:
+            proj[3] = a[0]
+            proj[4] = tol
+            return i
+        step = a[0] / w2
+        for c in range(n_free):
+            y[c] -= step * W[0, i, c]
+        proj[0] += 1.0
+        proj[1] = max(proj[1], -a[0])
+        proj[2] = max(proj[2], -a[0] / tol)
+    return -1
 
 
 @njit(cache=True)

@@ -84,7 +84,7 @@ from .scaling import balance
 from .statespace import state_matrix
 
 __all__ = ["Exosystem", "augment", "LTIFlow", "discretize", "Discretization", "GuardEvent",
-           "first_event"]
+           "first_event", "project_restart"]
 
 #: Largest eigenvector condition number for which the eigendecomposition path is used.
 EIG_COND_LIMIT = 1e5
@@ -93,6 +93,9 @@ TAYLOR_DEGREE = 18
 #: Bound ``e/(K+1)!`` of the Taylor remainder on one cell (``||Ab h|| = 1``), passed to the
 #: compiled search by every caller.
 TAYLOR_REMAINDER = math.e / math.factorial(TAYLOR_DEGREE + 1)
+#: Condition of the cell path's propagation ``Φ^k y`` (binary powering: at most ``2·53``
+#: rounded products for any ``k < 2^53``), in the restart tolerance.
+CELL_KAPPA = 2.0 * 53
 
 
 # --------------------------------------------------------------------------- exosystem
@@ -455,6 +458,10 @@ class _GuardContext:
         self.phi = np.empty((n, n))
         if n:
             taylor_tables(np.ascontiguousarray(Ab * self.h), self.taylor, self.phi)
+        # the propagation's condition, for the round-off tolerance of a restart
+        # (_lti_kernels.restart_tolerance): cond(V) of the eigen-decomposition, or the at
+        # most 2·53 rounded products of binary powering on the cell path
+        self.kappa = float(np.linalg.cond(flow._V)) if flow.method == "eig" else CELL_KAPPA
         if flow.method == "eig":
             self.kind = KIND_EIG
             self.lam = np.ascontiguousarray(flow._lam, dtype=complex)
@@ -548,6 +555,55 @@ def first_event(flow_or_A: LTIFlow | Any, x0: Any, G: Any, g0: Any, t_max: float
     simultaneous_tol = check_positive("simultaneous_tol", simultaneous_tol, allow_zero=True)
     ctx = flow.guard_context()
     return _search(ctx, x0, G, g0, t_max, graze_tol, simultaneous_tol)
+
+
+def project_restart(flow: LTIFlow, x: FloatArray, G: FloatArray, g0: FloatArray, t: float,
+                    proj: FloatArray, *, n_free: int | None = None) -> FloatArray:
+    """A state the integrator computed itself, with its guards negative at round-off level
+    projected onto ``{G x + g0 >= 0}`` (the compiled loops call the same kernel,
+    :func:`nscontrol.numerics._lti_kernels.project_restart`; see its tolerance there).
+
+    Parameters
+    ----------
+    flow : LTIFlow
+        The flow the next search runs on (its balancing and condition set the tolerance).
+    x : (n,) ndarray
+        The restart state (not changed).
+    G, g0 : ndarray
+        The guards ``G x + g0 >= 0`` of the next search.
+    t : float
+        The restart's time label (its rounding enters the tolerance).
+    proj : (5,) ndarray
+        The run's projection record, updated: count, largest ``|g|`` projected, largest
+        ``|g|/tol``, and the value and tolerance of a violation beyond it.
+    n_free : int, optional
+        Only the first ``n_free`` entries may move (default all): the others are the
+        constant or input generator of an augmented state.
+
+    Returns
+    -------
+    ndarray
+        The projected state (``x`` itself when nothing was projected).
+
+    Raises
+    ------
+    InadmissibleStateError
+        A guard negative beyond the round-off tolerance: not the integrator's rounding.
+    """
+    from ._lti_kernels import project_restart as kernel
+
+    ctx = flow.guard_context()
+    W, _ = ctx.guard_data(G)
+    y = x / ctx.d
+    done = proj[0]
+    i = kernel(W, np.asarray(g0, dtype=float), ctx.kappa, ctx.h, float(t),
+               flow.n if n_free is None else n_free, y, np.empty(W.shape[0]), proj)
+    if i >= 0:
+        raise InadmissibleStateError(
+            f"guard {i} is negative at t = {t:.12g} (g = {proj[3]:.3g}), beyond the "
+            f"integrator's round-off tolerance {proj[4]:.3g} at a state it computed: the "
+            f"state left the admissible set; check the model's modes and guards")
+    return y * ctx.d if proj[0] > done else x
 
 
 def _search(ctx: _GuardContext, x0: FloatArray, G: FloatArray, g0: FloatArray, t_max: float,

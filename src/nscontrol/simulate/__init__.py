@@ -80,9 +80,10 @@ def simulate(system: SimulableSystem, x0: ArrayLike, t_span: tuple[float, float]
     InadmissibleStateError
         ``x0`` violates a constraint.
     ZenoError, SolverError
-        The run could not continue. Every exception raised during the run — these, a user
-        callback's own, ``KeyboardInterrupt`` — carries the part computed so far in
-        ``err.trajectory``.
+        The run could not continue (a spent budget, such as ``max_events``, is the
+        ``SolverError`` :class:`~nscontrol.errors.BudgetExceededError`). Every exception
+        raised during the run — these, a user callback's own, ``KeyboardInterrupt`` —
+        carries the part computed so far in ``err.trajectory``.
     """
     t0, tf = check_t_span(t_span)
     return driver.run(system, x0, (t0, tf), method, dict(options))

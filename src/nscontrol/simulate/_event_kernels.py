@@ -24,7 +24,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lti_kernels import EVENT, NEGATIVE, guard_taylor_coefficients, propagate, search
+from ..numerics._lti_kernels import (
+    EVENT,
+    NEGATIVE,
+    clock_advance,
+    guard_taylor_coefficients,
+    project_restart,
+    propagate,
+    search,
+)
 
 #: Return codes of :func:`run_linear_jumps`.
 DONE, HANDOFF, FULL, INADMISSIBLE = 0, 1, 2, 3
@@ -108,8 +116,8 @@ def _grid_count(t, t_next, t_grid0, dt, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")  # a named part of the loop, at no call cost
-def _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next, t_grid0, dt, k, s_t, s_x,
-                 n_s, xn):  # pragma: no cover - compiled
+def _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, lo, t_next, t_grid0, dt, k, s_t,
+                 s_x, n_s, xn):  # pragma: no cover - compiled
     """Write the exact states at the grid points ``t_grid0 + j dt`` (``j >= k``) strictly
     inside ``(t, t_next)`` from ``n_s`` on. Returns ``(n_s, full, t_full)``: ``full`` when the
     buffer ran out, after the grid point ``t_full`` (its state then copied into ``x``)."""
@@ -120,7 +128,7 @@ def _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next, t_grid0, dt, k,
             return n_s, False, 0.0
         if tg > t:
             full = n_s + 3 > cap_s
-            propagate(kind, lam, V, Vinv, phi, T, d, h, x, tg - t, xn)
+            propagate(kind, lam, V, Vinv, phi, T, d, h, x, (tg - t) - lo, xn)
             s_t[n_s] = tg
             s_x[n_s] = xn
             n_s += 1
@@ -174,18 +182,29 @@ def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, 
 
 @njit(cache=True)
 def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
-                     kind, lam, V, Vinv, T, d, h,
+                     kind, lam, V, Vinv, T, d, h, kappa, n_free,
                      J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
                      horizon, rel, min_interval, budget,
-                     x, t, tf, dt, t_grid0, sample_pre,
+                     x, t, tf, dt, t_grid0, sample_pre, restart, proj, clock,
                      s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze):  # pragma: no cover
     """Flow from ``(t, x)`` and settle the simple events until ``tf`` or a hand-off.
 
     Returns ``(code, t, n_samples, n_events)``; ``x`` is overwritten with the state at the
     returned ``t`` (pre-event state for ``HANDOFF``, with ``hit``/``graze`` describing the
-    event). Samples written: grid points ``t_grid0 + k dt`` strictly inside each flight, the
-    pre-event state when ``sample_pre``, the post-jump state of every settled event and the
-    final state at ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
+    event). Every flight from a state the integrator computed — after a settled jump, and
+    the first one too when ``restart`` (``x`` comes from an earlier call, not from the
+    user) — starts with the round-off projection
+    :func:`nscontrol.numerics._lti_kernels.project_restart` (counts in ``proj``);
+    ``INADMISSIBLE``: a guard negative at the start, beyond that tolerance (``proj[3:5]``)
+    or, for the user's state, beyond the search's. A flight's end state is propagated by
+    the event's own offset ``τ`` from the flight's start, never by a difference of absolute
+    times (whose rounding, ``eps·t``, would carry the state past its event); the time
+    labels carry their rounding in ``clock = [t, lo]``
+    (:func:`nscontrol.numerics._lti_kernels.clock_advance`), read when ``clock[0]`` is the
+    ``t`` passed and written at the return. Samples written: grid points
+    ``t_grid0 + k dt`` strictly inside each flight, the pre-event state when
+    ``sample_pre``, the post-jump state of every settled event and the final state at
+    ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
     the start of the flight whose samples did not fit (the run is then the same as with a
     larger buffer), or, when even an empty buffer is too small for one flight, the last grid
     point written.
@@ -199,49 +218,85 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
     a = np.empty(W.shape[0])
     cap_s = s_t.shape[0]
     cap_e = e_t.shape[0]
+    lo = clock[1] if clock[0] == t else 0.0
+    code, t, n_s, n_e, lo = _linear_jumps(
+        W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, kind, lam, V, Vinv, T, d,
+        h, kappa, n_free, J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
+        horizon, rel, min_interval, budget, x, t, lo, tf, dt, t_grid0, sample_pre, restart,
+        proj, s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze, n, p, n_s, n_e, xn, y, a, cap_s,
+        cap_e)
+    clock[0] = t
+    clock[1] = lo
+    return code, t, n_s, n_e
+
+
+@njit(cache=True)
+def _linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, kind, lam, V,
+                  Vinv, T, d, h, kappa, n_free, J, jump_ok, zeno_slot, hist, count, first,
+                  geometric, ratio_tol, horizon, rel, min_interval, budget, x, t, lo, tf, dt,
+                  t_grid0, sample_pre, restart, proj, s_t, s_x, e_t, e_i, e_pre, e_post, hit,
+                  graze, n, p, n_s, n_e, xn, y, a, cap_s, cap_e):  # pragma: no cover
+    """The loop of :func:`run_linear_jumps` on the clock ``t + lo``; returns
+    ``(code, t, n_samples, n_events, lo)``."""
     while t < tf:
         if n_s + 4 > cap_s or n_e + 1 > cap_e:
-            return FULL, t, n_s, n_e
+            return FULL, t, n_s, n_e, lo
         for j in range(n):
             y[j] = x[j] / d[j]
+        if p and restart:
+            done = proj[0]
+            if project_restart(W, g0, kappa, h, t, n_free, y, a, proj) >= 0:
+                return INADMISSIBLE, t, n_s, n_e, lo
+            if proj[0] > done:  # projected: the state is the balanced one moved
+                for j in range(n):
+                    x[j] = y[j] * d[j]
+        restart = True
         if p:
             code, tau, _ = search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
-                                  y, h, tf - t, kind, lam, V, Vinv, T, d, hit, graze)
+                                  y, h, (tf - t) - lo, kind, lam, V, Vinv, T, d, hit, graze)
         else:
             code, tau = 0, 0.0
         if code == NEGATIVE:
-            return INADMISSIBLE, t, n_s, n_e
-        t_next = tf if code != EVENT else t + tau
+            return INADMISSIBLE, t, n_s, n_e, lo
+        # the flight's duration: the event's offset τ itself (up to tf without an event)
+        if code == EVENT:
+            dur = tau
+            t_next, lo_next = clock_advance(t, lo, dur)
+            if t_next >= tf:
+                t_next, lo_next = tf, 0.0
+        else:
+            dur = (tf - t) - lo
+            t_next, lo_next = tf, 0.0
         # grid samples strictly inside (t, t_next)
         k = int(np.floor((t - t_grid0) / dt)) + 1
         if n_s and n_s + _grid_count(t, t_next, t_grid0, dt, k) + 3 > cap_s:
             # this flight's samples do not fit: hand the buffer back first and redo the flight
             # from the same state, so that emptying the buffer changes nothing
-            return FULL, t, n_s, n_e
-        n_s, full, t_full = _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, t_next,
+            return FULL, t, n_s, n_e, lo
+        n_s, full, t_full = _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, lo, t_next,
                                          t_grid0, dt, k, s_t, s_x, n_s, xn)
         if full:  # resume from the last grid point written: its exact state is in x
-            return FULL, t_full, n_s, n_e
-        if t_next > t:
-            propagate(kind, lam, V, Vinv, phi, T, d, h, x, t_next - t, xn)
+            return FULL, t_full, n_s, n_e, 0.0
+        if dur > 0.0:
+            propagate(kind, lam, V, Vinv, phi, T, d, h, x, dur, xn)
             x[:] = xn
-        t = t_next
+        t, lo = t_next, lo_next
         if code != EVENT:
             s_t[n_s] = t
             s_x[n_s] = x
             n_s += 1
-            return DONE, t, n_s, n_e
+            return DONE, t, n_s, n_e, lo
         if sample_pre:
             s_t[n_s] = t
             s_x[n_s] = x
             n_s += 1
         if budget <= n_e:
-            return HANDOFF, t, n_s, n_e
+            return HANDOFF, t, n_s, n_e, lo
         i = _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first,
                          geometric, ratio_tol, horizon, rel, min_interval, x, t, hit, graze,
                          xn, y, a)
         if i < 0:
-            return HANDOFF, t, n_s, n_e
+            return HANDOFF, t, n_s, n_e, lo
         zeno_push(hist, count, first, zeno_slot[i], t)
         e_t[n_e] = t
         e_i[n_e] = i
@@ -252,7 +307,7 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
         s_t[n_s] = t
         s_x[n_s] = x
         n_s += 1
-    return DONE, t, n_s, n_e
+    return DONE, t, n_s, n_e, lo
 
 
 @njit(cache=True)

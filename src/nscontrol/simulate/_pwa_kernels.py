@@ -20,7 +20,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lti_kernels import EVENT, NEGATIVE, matmul_into, propagate, search
+from ..numerics._lti_kernels import (
+    EVENT,
+    NEGATIVE,
+    clock_advance,
+    matmul_into,
+    project_restart,
+    propagate,
+    search,
+)
 
 #: Return codes of :func:`run_pieces`.
 DONE, HANDOFF, FULL, NEED_FLOW, INADMISSIBLE, STUCK = 0, 1, 2, 3, 4, 5
@@ -123,11 +131,11 @@ def _premultiply(F, Phi, tmp):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, row_norms,
-               bern, remainder, graze_tol, sim_tol, H, h, nf, aug,
+def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0s,
+               row_norms, bern, remainder, graze_tol, sim_tol, H, h, nf, aug,
                xi, t, tf, i, Phi, sens, t_eval, ptr, s_x,
-               e_t, e_row, e_from, e_to, e_x, e_S, e_ptr, budget, hit, graze, stuck
-               ):  # pragma: no cover - compiled
+               e_t, e_row, e_from, e_to, e_x, e_S, e_ptr, budget, hit, graze, stuck,
+               restart, proj, clock):  # pragma: no cover - compiled
     """Flow from ``(t, ξ)`` in region ``i`` and settle the plain crossings until ``tf`` or a
     hand-off.
 
@@ -140,13 +148,41 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
     * ``FULL``: the event buffer is full or the ``budget`` of events is spent, resume;
     * ``NEED_FLOW``: region ``i``'s flow is not prepared (``ready[i]`` false), prepare it and
       resume;
-    * ``INADMISSIBLE``: guard ``index`` of region ``i`` is negative at the start;
+    * ``INADMISSIBLE``: guard ``index`` of region ``i`` is negative at the start of a
+      piece: beyond the round-off tolerance of
+      :func:`nscontrol.numerics._lti_kernels.project_restart` (``proj[3:5]``) for a state
+      the run computed, or beyond the search's for the user's ``x0``;
     * ``STUCK``: more than :data:`MAX_STUCK` consecutive events without progress.
 
     Samples: the requested times ``t_eval[ptr:]`` up to each piece's end go to the same rows
     of ``s_x``; settled crossings to ``e_*`` with ``e_ptr`` the sample count at the event (the
     samples up to and including the event time precede it).
+
+    Every piece that starts from a state the run computed (after a crossing, and the first
+    one too when ``restart``) starts with that projection (counted in ``proj``); a piece
+    ends at the event's own offset ``τ`` from its start, never at a difference of absolute
+    times (whose rounding, ``eps·t``, would carry the state past its facet); the time
+    labels carry their rounding in ``clock = [t, lo]``
+    (:func:`nscontrol.numerics._lti_kernels.clock_advance`), read when ``clock[0]`` is the
+    ``t`` passed, written at every return.
     """
+    lo = clock[1] if clock[0] == t else 0.0
+    out = _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0s,
+                  row_norms, bern, remainder, graze_tol, sim_tol, H, h, nf, aug, xi, t, lo,
+                  tf, i, Phi, sens, t_eval, ptr, s_x, e_t, e_row, e_from, e_to, e_x, e_S,
+                  e_ptr, budget, hit, graze, stuck, restart, proj)
+    clock[0] = out[1]
+    clock[1] = out[8]
+    return out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7]
+
+
+@njit(cache=True)
+def _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0s, row_norms,
+            bern, remainder, graze_tol, sim_tol, H, h, nf, aug, xi, t, lo, tf, i, Phi, sens,
+            t_eval, ptr, s_x, e_t, e_row, e_from, e_to, e_x, e_S, e_ptr, budget, hit, graze,
+            stuck, restart, proj):  # pragma: no cover - compiled
+    """The loop of :func:`run_pieces` on the clock ``t + lo``; returns its tuple and
+    ``lo``."""
     m = xi.shape[0]
     n = Phi.shape[0]
     n_e = 0
@@ -154,6 +190,7 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
     n_samples = t_eval.shape[0]
     cap_e = e_t.shape[0]
     y = np.empty(m)
+    a = np.empty(Ws.shape[1])
     xn = np.empty(m)
     unit = np.zeros(m)
     col = np.empty(m)
@@ -163,37 +200,52 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
     fp = np.empty(n)
     while t < tf:
         if not ready[i]:
-            return NEED_FLOW, t, i, ptr, n_e, stuck, pieces, -1
+            return NEED_FLOW, t, i, ptr, n_e, stuck, pieces, -1, lo
         if n_e >= cap_e or n_e >= budget:
-            return FULL, t, i, ptr, n_e, stuck, pieces, -1
+            return FULL, t, i, ptr, n_e, stuck, pieces, -1, lo
         kind, lam, V, Vinv = kinds[i], lams[i], Vs[i], Vinvs[i]
         phi, T, d, hh = phis[i], taylors[i], ds[i], hs[i]
         for c in range(m):
             y[c] = xi[c] / d[c]
+        if restart:
+            done = proj[0]
+            index = project_restart(Ws[i], g0s[i], kappas[i], hh, t, n, y, a, proj)
+            if index >= 0:
+                return INADMISSIBLE, t, i, ptr, n_e, stuck, pieces, index, lo
+            if proj[0] > done:  # projected: the state is the balanced one moved
+                for c in range(m):
+                    xi[c] = y[c] * d[c]
+        restart = True
         code, tau, index = search(Ws[i], g0s[i], row_norms[i], graze_tol, sim_tol, remainder,
-                                  phi, bern, y, hh, tf - t, kind, lam, V, Vinv, T, d, hit,
+                                  phi, bern, y, hh, (tf - t) - lo, kind, lam, V, Vinv, T, d, hit,
                                   graze)
         if code == NEGATIVE:
-            return INADMISSIBLE, t, i, ptr, n_e, stuck, pieces, index
+            return INADMISSIBLE, t, i, ptr, n_e, stuck, pieces, index, lo
         event = code == EVENT
-        t_end = min(t + tau, tf) if event else tf
+        if event:   # the piece's duration is τ itself, never a difference of labels
+            piece = tau
+            t_end, lo_end = clock_advance(t, lo, piece)
+            if t_end >= tf:
+                t_end, lo_end = tf, 0.0
+        else:
+            piece = (tf - t) - lo
+            t_end, lo_end = tf, 0.0
         while ptr < n_samples and t_eval[ptr] <= t_end:   # samples in (t, t_end]
-            propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, t_eval[ptr] - t, xn)
+            propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, (t_eval[ptr] - t) - lo, xn)
             s_x[ptr, :] = xn[:n]
             ptr += 1
-        piece = t_end - t
         propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, piece, xn)
         if sens:
             _times_expm(kind, lam, V, Vinv, phi, T, d, hh, piece, n, Phi, unit, col, E, tmp)
         pieces += 1
-        if piece <= 0.0:
+        if t_end <= t:   # no progress in time
             stuck += 1
             if stuck > MAX_STUCK:
-                return STUCK, t_end, i, ptr, n_e, stuck, pieces, -1
+                return STUCK, t_end, i, ptr, n_e, stuck, pieces, -1, lo
         else:
             stuck = 0
         xi[:] = xn
-        t = t_end
+        t, lo = t_end, lo_end
         if not event or t >= tf:
             break
         row = -1
@@ -208,10 +260,10 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
                 if not graze[r]:
                     all_graze = False
         if not plain or all_graze or row < 0:
-            return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1
+            return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
         j = choose_region(H, h, nf, aug, xi, n, i)
         if j < 0:
-            return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1
+            return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
         if sens:
             _field(aug, i, xi, n, fm)
             _field(aug, j, xi, n, fp)
@@ -219,7 +271,7 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
             for c in range(n):
                 den += H[i, row, c] * fm[c]
             if den == 0.0:
-                return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1
+                return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
             for r in range(n):   # S = I + (F⁺ - F⁻) nᵀ / (nᵀF⁻)
                 for c in range(n):
                     e_S[n_e, r, c] = (fp[r] - fm[r]) * H[i, row, c] / den
@@ -233,4 +285,4 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, ready, Ws, g0s, ro
         e_ptr[n_e] = ptr
         n_e += 1
         i = j
-    return DONE, t, i, ptr, n_e, stuck, pieces, -1
+    return DONE, t, i, ptr, n_e, stuck, pieces, -1, lo

@@ -30,6 +30,7 @@ from scipy.linalg import expm
 
 from .._validation import FloatArray
 from ..errors import InadmissibleStateError, ModelError, SlidingError, SolverError, ZenoError
+from .event_driven._flight import projection_stats
 from .switching import saltation_matrix
 
 
@@ -86,6 +87,7 @@ class _Modes:
         self.taylors = np.zeros((R, K1, m, m))
         self.ds = np.ones((R, m))
         self.hs = np.ones(R)
+        self.kappas = np.ones(R)
         self.Ws = np.zeros((R, K1, p, m))
         self.g0s = np.ones((R, p))
         self.row_norms = np.ones((R, p))
@@ -127,6 +129,7 @@ class _Modes:
         if flow.method == "eig":
             self.lams[k], self.Vs[k], self.Vinvs[k] = ctx.lam, ctx.V, ctx.Vinv
         self.phis[k], self.taylors[k], self.ds[k], self.hs[k] = ctx.phi, ctx.taylor, ctx.d, ctx.h
+        self.kappas[k] = ctx.kappa
         self.Ws[k, :, :p], self.g0s[k, :p], self.row_norms[k, :p] = W, g0, norms
         self.bern = ctx.bern
         self.ready[k] = True
@@ -256,15 +259,21 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
     ptr = int(np.searchsorted(run.t_eval, t, side="right"))  # t0 itself: the forced sample
     run.rec.sample(t, x0, force=True)
     segments = 0
+    restart = False   # the first piece starts from the user's x0
+    proj = np.zeros(5)   # round-off projections (_lti_kernels.project_restart)
+    clock = np.array([np.nan, 0.0])   # the loop's time label and its carried rounding
     while t < run.tf:
         ptr0 = ptr
+        user = not restart
         code, t, i, ptr, n_e, run.stuck, pieces, index = K.run_pieces(
             modes.kinds, modes.lams, modes.Vs, modes.Vinvs, modes.phis, modes.taylors,
-            modes.ds, modes.hs, modes.ready, modes.Ws, modes.g0s, modes.row_norms, modes.bern,
-            TAYLOR_REMAINDER, 1e-12, 1e-12, modes.H, modes.h, modes.nf, modes.aug,
-            xi, float(t), float(run.tf), int(i), run.Phi, run.sensitivity, run.t_eval, ptr,
-            buf.s_x, buf.e_t, buf.e_row, buf.e_from, buf.e_to, buf.e_x, buf.e_S, buf.e_ptr,
-            run.max_events - run.n_events + 1, buf.hit, buf.graze, run.stuck)
+            modes.ds, modes.hs, modes.kappas, modes.ready, modes.Ws, modes.g0s,
+            modes.row_norms, modes.bern, TAYLOR_REMAINDER, 1e-12, 1e-12, modes.H, modes.h,
+            modes.nf, modes.aug, xi, float(t), float(run.tf), int(i), run.Phi,
+            run.sensitivity, run.t_eval, ptr, buf.s_x, buf.e_t, buf.e_row, buf.e_from,
+            buf.e_to, buf.e_x, buf.e_S, buf.e_ptr, run.max_events - run.n_events + 1,
+            buf.hit, buf.graze, run.stuck, restart, proj, clock)
+        restart = restart or code != K.NEED_FLOW or pieces > 0
         segments += pieces
         _replay(run, buf, ptr0, ptr, n_e)
         run.bar.update(t)
@@ -276,11 +285,7 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
             raise ZenoError(f"switching: {K.MAX_STUCK} consecutive events at t = {t:.12g} "
                             f"without progress (Zeno point or an undecidable mode)", time=t)
         elif code == K.INADMISSIBLE:
-            G, g0 = modes.guards[i]
-            raise InadmissibleStateError(
-                f"x0: guard {index} is negative at t = {t:.12g} (g = "
-                f"{float(G[index] @ xi + g0[index]):.3g} < 0); the search needs every guard "
-                f">= 0 at its start — check the state or the guard signs")
+            raise _inadmissible(modes, i, index, xi, t, proj, user)
         elif code == K.HANDOFF:
             hits = [int(r) for r in np.flatnonzero(buf.hit)]
             grazing = bool(buf.graze[hits].all())
@@ -289,7 +294,24 @@ def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
                 break
     if run.rec.last_time < run.tf and run.status == 0:
         run.rec.sample(run.tf, xi[:n], force=True)
-    return {"segments": segments, "final_mode": i, "propagation": "exact"}
+    return {"segments": segments, "final_mode": i, "propagation": "exact",
+            **projection_stats(proj)}
+
+
+def _inadmissible(modes: _Modes, i: int, index: int, xi: FloatArray, t: float,
+                  proj: FloatArray, user: bool) -> InadmissibleStateError:
+    """The error of a piece that starts with a facet of its region ``i`` violated."""
+    if not user and proj[4] > 0.0:
+        return InadmissibleStateError(
+            f"switching: facet slack {index} of region {i} is negative at t = {t:.12g} "
+            f"(g = {proj[3]:.3g}), beyond the integrator's round-off tolerance "
+            f"{proj[4]:.3g} at a state it computed; the trajectory left its region. Check "
+            f"that the partition's facets match between neighbouring regions")
+    G, g0 = modes.guards[i]
+    return InadmissibleStateError(
+        f"x0: guard {index} of region {i} is negative at t = {t:.12g} (g = "
+        f"{float(G[index] @ xi + g0[index]):.3g} < 0); start from a state inside its region "
+        f"(every facet slack >= 0)")
 
 
 def _settle(system: Any, modes: _Modes, run: Any, t: float, i: int, xi: FloatArray,

@@ -41,9 +41,11 @@ sensitivity : bool
 rtol, atol : float
     Tolerances of DOP853 where an ODE solver is used (1e-11, 1e-13; both > 0).
 max_events : int
-    Zeno guard: more events than this raises :class:`~nscontrol.errors.ZenoError` (1e6).
+    Event budget: more events than this raises :class:`~nscontrol.errors.BudgetExceededError`
+    (``budget="max_events"``, 1e6) with the computed part.
 progress : bool, optional
-A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed) raises with the
+A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed,
+``BudgetExceededError``: ``max_events`` spent) raises with the
 partial trajectory in ``err.trajectory`` (``simulate(..., on_failure="return")`` returns it
 with ``status = -1``); errors in the model or its initial state are always raised.
 """
@@ -57,7 +59,7 @@ from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_float_array, as_vector, check_integer, check_positive
-from ..errors import ModelError, NscontrolError, ZenoError
+from ..errors import BudgetExceededError, ModelError, NscontrolError, ZenoError
 from .trajectory import Recorder, Trajectory
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
@@ -179,9 +181,12 @@ class _Run:
             self.Phi = S @ self.Phi
         self.n_events += 1
         if self.n_events > self.max_events:
-            raise ZenoError(f"switching: more than max_events = {self.max_events} events by "
-                            f"t = {t:.6g}; an accumulation of switchings (Zeno) or chattering. "
-                            f"Raise max_events, or check for sliding", time=t)
+            raise BudgetExceededError(
+                f"max_events: the run spent its budget of {self.max_events} events by t = "
+                f"{t:.12g}; raise max_events for a long run (one event per switching), or "
+                f"look for an accumulation of switchings (Zeno), chattering or sliding. The "
+                f"computed part is in err.trajectory", budget="max_events",
+                limit=self.max_events, used=self.n_events)
 
     def zero_length(self, t: float) -> None:
         self.stuck += 1

@@ -36,8 +36,15 @@ contact is closed plastically at ``t_k`` and the run continues in persistent con
 event ``"accumulation"`` is recorded at ``t∞`` (our choice: the samples in ``[t_k, t∞]``
 follow the constrained flow, an error of the order of the remaining bounce heights). An
 accumulation that cannot be resolved that way (no geometric pattern, a contact force that
-would be negative, more than ``max_events`` events) raises :class:`ZenoError` with the
-trajectory computed so far (``simulate(..., on_failure="warn")`` warns and returns it).
+would be negative) raises :class:`ZenoError` with the trajectory computed so far
+(``simulate(..., on_failure="warn")`` warns and returns it); more than ``max_events`` events
+(every event counts, touches too) raise :class:`~nscontrol.errors.BudgetExceededError`
+(``budget="max_events"``), with it too.
+
+Long runs: a flight ends at its event's own offset ``τ`` (the time labels carry their
+rounding separately), and a restart whose guard is negative at round-off level is
+projected by the one shared kernel :func:`nscontrol.numerics.lti.project_restart`
+(``stats["projections"]``); see ``docs/lti.md``.
 
 Speed: the flow between events, the event search and every event of a single guard with a
 linear jump (a free contact bouncing with nothing else closed; a :class:`LinearHybridSystem`
@@ -113,7 +120,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
         event adds its pre- and post-event samples.
     max_events : int
-        More events than this is reported as Zeno.
+        Event budget: more events than this raises
+        :class:`~nscontrol.errors.BudgetExceededError` (``budget="max_events"``) with the
+        computed part (a long run needs one event per impact).
     min_interval : float
         Two events of the same guard closer than this (without a geometric pattern) is Zeno.
     zeno_ratio_tol : float
@@ -162,6 +171,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         closed (impacts, several contacts, the normal force reaching zero).
     InadmissibleStateError
         ``x0`` violates a constraint.
+    BudgetExceededError
+        More than ``max_events`` events (``err.budget == "max_events"``), with
+        ``err.trajectory``.
     ZenoError
         Unresolvable accumulation of events; ``err.trajectory`` holds the run so far (every
         error raised during the run carries it).

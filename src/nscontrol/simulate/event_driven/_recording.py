@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..._validation import FloatArray
-from ...errors import NscontrolError, ZenoError
+from ...errors import BudgetExceededError, NscontrolError, ZenoError
 from ..trajectory import Event, Recorder, Trajectory
 from ._options import _Options
 
@@ -155,6 +155,18 @@ def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: 
     raise ZenoError(message + "; pass on_failure='return' (or 'warn') to keep the partial "
                     "trajectory, or use method='moreau_jean' which passes through "
                     "accumulations", time=t, trajectory=traj)
+
+
+def _fail_budget(opts: _Options, rec: _Samples, t: float, used: int, **finish: Any
+                 ) -> Trajectory:
+    """The run spent its event budget ``max_events``: raise with the part computed."""
+    message = (f"max_events: the run spent its budget of {opts.max_events} events by t = "
+               f"{t:.12g} ({used} events); raise max_events for a long run (one event per "
+               f"impact or switching), or look for an accumulation of events (Zeno). The "
+               f"computed part is in err.trajectory (on_failure='return' returns it)")
+    traj = rec.finish(status=-1, message=message, **finish)
+    raise BudgetExceededError(message, budget="max_events", limit=opts.max_events,
+                              used=used, trajectory=traj)
 
 
 def _guarded(run: Any) -> Trajectory:

@@ -21,9 +21,10 @@ from typing import Any
 import numpy as np
 
 from ..._validation import FloatArray
-from ...errors import ModelError, ZenoError
-from ...numerics.lti import LTIFlow, first_event
+from ...errors import BudgetExceededError, ModelError, ZenoError
+from ...numerics.lti import LTIFlow, first_event, project_restart
 from ..trajectory import Recorder, Trajectory
+from ._flight import projection_stats
 from ._options import _Options
 from .linear_mechanics import _LinearModel
 
@@ -170,6 +171,9 @@ class FrictionalContactRun:
     def _fail(self, message: str, t: float, error: type[Exception] = ModelError) -> None:
         traj = self.rec.finish(status=-1, message=message, method="event_driven",
                                state_names=self.s.state_names)
+        if error is BudgetExceededError:
+            raise BudgetExceededError(message, budget="max_events", limit=self.opts.max_events,
+                                      used=self.n_events, trajectory=traj)
         if error is ZenoError:
             raise ZenoError(message, time=t, trajectory=traj)
         raise ModelError(message, trajectory=traj)
@@ -183,24 +187,35 @@ class FrictionalContactRun:
             self._fail(f"x0: the normal force would be {float(L[0] @ z):.3g} <= 0 (the body "
                        f"leaves the contact); {_USE_MJ}", t)
         self._record(np.array([t]), z[None], mode, L)
+        proj = np.zeros(5)   # round-off projections at restarts (numerics.lti.project_restart)
+        restart = False      # the first piece starts from the user's x0
         while t < self.tf:
             flow, guards, L = self._mode(mode)
+            if restart:
+                z = project_restart(flow, z, guards, np.zeros(len(guards)), t, proj,
+                                    n_free=2 * self.n)
+            restart = True
             ev = first_event(flow, z, guards, np.zeros(len(guards)), self.tf - t)
             t_end = self.tf if ev is None else t + ev.t
             times = self._grid(t, t_end)
-            Z = flow.propagate(z, times - t)
+            offsets = times - t
+            # the piece ends at the event's own offset, not at (t + τ) - t, which rounds by
+            # eps·t and would leave the state past its guard in a long run
+            offsets[-1] = self.tf - t if ev is None else ev.t
+            Z = flow.propagate(z, offsets)
             self._record(times, Z, mode, L)
             t, z = t_end, Z[-1].copy()
             if ev is None:
                 break
             x = z[:2 * self.n]
+            self.n_events += 1   # every event spends the budget, a touch too
+            if self.n_events > self.opts.max_events:
+                self._fail(f"max_events: the run spent its budget of {self.opts.max_events} "
+                           f"stick-slip events by t = {t:.12g}; raise max_events", t,
+                           BudgetExceededError)
             if ev.grazing:
                 self.rec.event(t, "grazing", 0, x, x, mode, mode)
                 continue
-            self.n_events += 1
-            if self.n_events > self.opts.max_events:
-                self._fail(f"event_driven: more than {self.opts.max_events} stick-slip events "
-                           f"by t = {t:.12g}", t, ZenoError)
             if 0 in ev.indices:
                 self._fail(f"event_driven: the normal force reaches zero at t = {t:.12g} (the "
                            f"body would leave the contact); {_USE_MJ}", t)
@@ -211,6 +226,6 @@ class FrictionalContactRun:
             mode = new
             self._record(np.array([t]), z[None], mode, self._mode(mode)[2])
         stats = {"events": self.n_events, "impacts": 0,
-                 "impulses": np.zeros((0, self.s.n_contacts))}
+                 "impulses": np.zeros((0, self.s.n_contacts)), **projection_stats(proj)}
         return self.rec.finish(status=0, stats=stats, method="event_driven",
                                state_names=self.s.state_names)

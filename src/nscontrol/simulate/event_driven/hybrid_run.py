@@ -11,9 +11,9 @@ from ..._progress import TimeProgress
 from ..._validation import FloatArray
 from ...numerics.lti import LTIFlow
 from ..trajectory import Trajectory
-from ._flight import _Flight, _Workspace
+from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
-from ._recording import _fail_zeno, _Samples, append_events
+from ._recording import _fail_budget, _fail_zeno, _Samples, append_events
 from ._zeno import _Zeno
 
 
@@ -48,21 +48,25 @@ class HybridRun:
         finish = dict(method="event_driven", state_names=s.state_names)
         with TimeProgress(self.t0, self.tf, desc="event_driven",
                           enable=self.opts.progress) as bar:
+            restart = False  # the first flight starts from the user's x0
             while t < self.tf:
                 t, x, ev = self.flight.run(x, t, self.tf, self.zeno, False, self.opts,
                                            self.samples, self.ws, sample_pre=True,
-                                           on_events=self._jumped)
+                                           on_events=self._jumped, restart=restart)
+                restart = True
                 bar.update(t)
                 if ev is None:
                     break
+                self.zeno.n_events += 1   # every event spends the budget, a touch too
+                if self.zeno.n_events > self.opts.max_events:
+                    return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+                                        **finish)
                 if ev.grazing:
                     for i in ev.indices:
                         self.rec.event(t, "grazing", i, x, x)
                     continue
                 idx = np.asarray(ev.indices, dtype=np.int64)
-                self.zeno.n_events += 1
-                if self.zeno.n_events > self.opts.max_events or any(
-                        self.zeno.too_close(int(i), t) for i in idx):
+                if any(self.zeno.too_close(int(i), t) for i in idx):
                     return _fail_zeno(self.opts, self.samples, f"event_driven: accumulation of "
                                       f"events of guards {idx.tolist()} near t = {t:.12g}",
                                       t, **finish)
@@ -75,4 +79,6 @@ class HybridRun:
                     listener(t, x.copy(), x_plus.copy(), idx, None)
                 x = x_plus
                 self.samples.add(t, x)
-        return self.samples.finish(status=0, stats={"events": self.zeno.n_events}, **finish)
+        return self.samples.finish(status=0, stats={"events": self.zeno.n_events,
+                                                    **projection_stats(self.ws.proj)},
+                                   **finish)

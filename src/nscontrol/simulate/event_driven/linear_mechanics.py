@@ -17,9 +17,9 @@ from ...numerics.lcp import solve_lcp
 from ...numerics.lti import LTIFlow
 from .._event_kernels import bounce_impulses, contact_state, open_and_finite
 from ..trajectory import Trajectory
-from ._flight import _Flight, _Workspace
+from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
-from ._recording import _fail_zeno, _Samples, append_events
+from ._recording import _fail_budget, _fail_zeno, _Samples, append_events
 from ._zeno import _Zeno
 
 
@@ -136,7 +136,7 @@ class LinearMechanicsRun:
         jump_ok = (guard_ids >= 0) & (not C)
         slots = np.where(guard_ids >= 0, guard_ids, 0)
         flight = _Flight(LTIFlow.shared(A), gmat, g0, self._bounce_maps(free, len(guard_ids)),
-                         jump_ok, slots)
+                         jump_ok, slots, n_free=2 * n)
         self.flows[C] = (flight, guard_ids)
         return self.flows[C]
 
@@ -229,11 +229,13 @@ class LinearMechanicsRun:
         t, z = self.t0, self.z
         self.samples.add(t, z)
         self._set_mode(t, z, self._persistent(z, self._resting(z, self._contacts(z)[0])))
+        restart = False  # the first flight starts from the user's x0
         with TimeProgress(self.t0, self.tf, desc="event_driven",
                           enable=self.opts.progress) as bar:
             while t < self.tf:
                 flight, ids = self._mode(frozenset(self.contact))
-                t, z, ev = self._fly(flight, ids, z, t, self.tf)
+                t, z, ev = self._fly(flight, ids, z, t, self.tf, restart)
+                restart = True
                 bar.update(t)
                 if ev is None:
                     break
@@ -243,28 +245,29 @@ class LinearMechanicsRun:
                 t, z = out
         stats = {"events": self.zeno.n_events, "impacts": self.n_impacts,
                  "impulses": (np.concatenate(self.impulses) if self.impulses
-                              else np.zeros((0, self.s.n_contacts)))}
+                              else np.zeros((0, self.s.n_contacts))),
+                 **projection_stats(self.ws.proj)}
         traj = self.samples.finish(status=0, stats=stats, **self.finish_kw)
         self.ws.give_back(self.model.workspaces)
         return traj
 
-    def _fly(self, flight: _Flight, ids: np.ndarray, z: FloatArray, t: float, t_end: float
-             ) -> tuple[float, FloatArray, Any]:
+    def _fly(self, flight: _Flight, ids: np.ndarray, z: FloatArray, t: float, t_end: float,
+             restart: bool = True) -> tuple[float, FloatArray, Any]:
         return flight.run(z, t, t_end, self.zeno, True, self.opts, self.samples, self.ws,
-                          sample_pre=True, on_events=self._bounced(ids))
+                          sample_pre=True, on_events=self._bounced(ids), restart=restart)
 
     def _event(self, t: float, z: FloatArray, hit: list[int], grazing: bool) -> Any:
         """An event handed back by the compiled loop (``hit``: guard ids). Returns
         ``(t, z)`` to go on from, or a failed trajectory."""
+        self.zeno.n_events += 1   # every event spends the budget, a touch too
+        if self.zeno.n_events > self.opts.max_events:
+            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+                                **self.finish_kw)
         if grazing:  # a gap or a contact force touching zero: nothing changes
             for j in hit:
                 self.rec.event(t, "grazing", j if j >= 0 else -1 - j,
                                z[:2 * self.n], z[:2 * self.n])
             return t, z
-        self.zeno.n_events += 1
-        if self.zeno.n_events > self.opts.max_events:
-            return self._fail(f"event_driven: more than {self.opts.max_events} events by "
-                              f"t = {t:.12g}", t)
         impacts = [j for j in hit if j >= 0]
         if impacts:
             return self._impact(t, z, impacts)

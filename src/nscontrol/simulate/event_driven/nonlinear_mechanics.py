@@ -19,7 +19,7 @@ from ...errors import ModelError, SolverError
 from ..trajectory import Trajectory
 from ._flight import _sample_times
 from ._options import _Options
-from ._recording import _fail_zeno, _Samples
+from ._recording import _fail_budget, _fail_zeno, _Samples
 from ._variational import Variational
 from ._zeno import _Zeno
 
@@ -155,7 +155,9 @@ class NonlinearMechanicsRun:
                               f"are closed at t = {t:.12g} with zero normal velocity and pushed "
                               "inwards (persistent contact), which is supported for linear "
                               "systems only", t, **finish)
-        if self.zeno.n_events > self.opts.max_events or any(
+        if self.zeno.n_events > self.opts.max_events:
+            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events, **finish)
+        if any(
                 self.zeno.too_close(j, t) or self.zeno.add(j, t) is not None for j in hitting):
             return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
                               f"{hitting} accumulate near t = {t:.12g}; persistent contact "
