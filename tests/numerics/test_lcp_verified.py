@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from nscontrol.errors import BudgetExceededError, ModelError, SolverError
+from nscontrol.errors import BudgetExceededError, DimensionError, ModelError, SolverError
 from nscontrol.numerics import _lcp_kernels as kernels
 from nscontrol.numerics.lcp import LCPResult, LCPSolver, residual, solve_lcp
 from nscontrol.testing.lcp_problems import (
@@ -243,3 +243,16 @@ def test_strict_must_be_a_bool(strict):
         solve_lcp(np.eye(2), np.ones(2), strict=strict)
     with pytest.raises(ModelError, match="^strict: expected True or False"):
         LCPSolver(np.eye(2), strict=strict)
+
+
+@pytest.mark.parametrize(("args", "error", "name"), [
+    ((np.eye(2), ["1", "0"], [0.0, 0.0]), ModelError, "z"),           # was parsed
+    ((np.eye(2), [1.0, 0.0], ["0", "0"]), ModelError, "q"),
+    ((np.eye(2), [1.0, 0.0, 0.0], [0.0, 0.0]), DimensionError, "z"),
+    ((np.eye(2), [1.0, 0.0], [0.0]), DimensionError, "q"),
+    (([["1", "0"], ["0", "1"]], [1.0, 0.0], [0.0, 0.0]), ModelError, "M"),
+    ((np.ones((2, 3)), [1.0, 0.0], [0.0, 0.0]), DimensionError, "M"),
+])
+def test_residual_checks_its_arguments(args, error, name):
+    with pytest.raises(error, match=f"^{name}: expected"):
+        residual(*args)

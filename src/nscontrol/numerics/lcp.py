@@ -145,10 +145,20 @@ def residual(M: Any, z: Any, q: Any) -> float:
         The point to measure.
     q : (n,) array_like
         The LCP vector.
+
+    Raises
+    ------
+    DimensionError, ModelError
+        As :func:`solve_lcp` for ``M`` and ``q``; ``z`` must be a real vector of length
+        ``n`` (it may hold ``inf``, e.g. the ``z`` of an ``"overflow"`` result).
     """
-    z = np.asarray(z, dtype=np.float64)
-    q = np.asarray(q, dtype=np.float64)
-    return _natural_residual(z, np.asarray(M @ z + q, dtype=np.float64).ravel(), q)
+    M = _as_lcp_matrix(M)
+    n = M.shape[0]
+    q = as_vector("q", q, size=n)
+    z = as_float_array("z", z, shape=(n,), finite=False)
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = np.asarray(M @ z + q, dtype=np.float64).ravel()
+    return _natural_residual(z, w, q)
 
 
 def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
@@ -638,7 +648,8 @@ class LCPSolver:
     @cached_property
     def _terms(self) -> int:
         """Terms in one entry of ``M z + q`` for sparse ``M``: a row's non-zeros plus one."""
-        return int(np.max(np.diff(self._M.indptr), initial=0)) + 1
+        csr: Any = self._M
+        return int(np.max(np.diff(csr.indptr), initial=0)) + 1
 
     def _run_lemke(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                    max_iter: int | None) -> _Outcome:
