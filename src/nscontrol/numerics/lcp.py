@@ -289,13 +289,16 @@ class _Outcome(NamedTuple):
     method: str
     tolerance: float
     limit: int          # the budget max_iter the run had (pivots, sweeps or iterations)
+    note: str = ""      # why the budget was shorter than max_iter, if it was
 
     def describe(self) -> str:
         """``"name: status (residual r, ...)"``: why it stopped, the budget if spent."""
         text = f"{self.method}: {self.status} (residual {self.residual:.3g}"
         if self.status == "max_iter":
             unit = _UNITS.get(self.method, "iterations")
-            text += f", budget max_iter = {self.limit} {unit} spent"
+            text += self.note or f", budget max_iter = {self.limit} {unit} spent"
+        elif self.status != "solved" and not math.isfinite(self.residual):
+            text += ", the iterate is not finite"
         elif self.status != "solved" and self.tolerance == -math.inf:
             text += ", not certifiable: M z + q cancels beyond half the float64 digits"
         elif self.status == "numerical_failure" and self.residual > self.tolerance:
@@ -688,8 +691,11 @@ class LCPSolver:
         total = self._limit("pgs", max_iter)
         probe = min(AUTO_PGS_PROBE_SWEEPS, total)
         first = self._run_pgs(q, z0, probe)
-        if first.status == "solved" or probe == total or not self._symmetric_psd:
-            return first._replace(limit=total) if probe == total else first
+        if first.status == "solved" or probe == total:
+            return first
+        if not self._symmetric_psd:
+            return first._replace(note=f", stopped after the probe of {probe} sweeps: M is not "
+                                       "positive semidefinite, where PGS need not converge")
         rest = self._run_pgs(q, np.array(first.z), total - probe)
         return rest._replace(iterations=probe + rest.iterations, limit=total)
 
