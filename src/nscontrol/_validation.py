@@ -204,6 +204,39 @@ def check_in_interval(name: str, value: Any, lo: float, hi: float, *,
     return v
 
 
+def check_bool(name: str, value: Any, *, allow_none: bool = False) -> Any:
+    """A boolean option: ``True``/``False`` (Python or numpy), and ``None`` with
+    ``allow_none`` (an option whose ``None`` means "decide for me", e.g. ``progress``).
+
+    Anything else is refused, strings first of all: ``"no"`` is truthy, so an ``if option:``
+    would silently read ``"no"`` as True. Integers are refused too (``0``/``1`` say nothing a
+    bool does not, and ``2`` would be a bug).
+
+    Returns
+    -------
+    bool or None
+
+    Examples
+    --------
+    >>> check_bool("projection", True), check_bool("progress", None, allow_none=True)
+    (True, None)
+    >>> check_bool("strict", "no")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: strict: expected True or False, got the string 'no' ...
+    """
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if value is None and allow_none:
+        return None
+    want = "True, False or None" if allow_none else "True or False"
+    if isinstance(value, str | bytes | np.str_ | np.bytes_):
+        got = f"the string {value!r} (any non-empty string is truthy)"
+    else:
+        got = f"{value!r} (a {type(value).__name__})"
+    raise ModelError(f"{name}: expected {want}, got {got}; pass a bool")
+
+
 def check_integer(name: str, value: Any, *, minimum: int | None = None,
                   error: type[Exception] = ModelError) -> int:
     """An integer (``int``, numpy integer, or a float with an integral value such as ``1e4``)

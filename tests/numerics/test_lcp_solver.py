@@ -225,7 +225,8 @@ def test_when_every_method_fails_the_message_lists_them_and_ray_is_kept():
 def test_fixed_method_does_not_fall_back():
     n = 12
     res = solve_lcp(murty_matrix(n), -np.ones(n), method="lemke")
-    assert res.status == "max_iter" and res.message == f"lemke: max_iter (residual {0.5:.3g})"
+    assert res.status == "max_iter" and res.message == (
+        f"lemke: max_iter (residual {0.5:.3g}, budget max_iter = {50 * (n + 1)} pivots spent)")
 
 
 # ----------------------------------------------------------------------------- overflow

@@ -12,12 +12,22 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._lcp_kernels import MAX_CANCELLATION, ROUNDOFF_FACTOR
+
 #: Contact states written by the kernels.
 OPEN, STICK, SLIP = 0, 1, 2
 #: Unit roundoff.
 _EPS = 2.220446049250313e-16
 #: Grid of the slip-angle bracketing (a root of the slip equation in each bracket at most).
 _ANGLE_GRID = 32
+#: Default budget of the local projected fixed point (:func:`_local_fixed_point`), the
+#: option ``max_local_iter`` of :func:`~nscontrol.numerics.friction_contact.
+#: solve_friction_contact`.
+MAX_LOCAL_ITER = 20_000
+#: Steps of the Illinois regula falsi on one slip-angle bracket: a structural bound, not a
+#: budget to tune (the bracket is at most 2 pi / 32 wide, and the iteration stops at its
+#: machine resolution, which bisection alone reaches in 53 halvings).
+_SLIP_ROOT_STEPS = 200
 
 
 @njit(cache=True)
@@ -96,6 +106,48 @@ def relative_error(q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
 
 
 @njit(cache=True)
+def certify(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
+            r: np.ndarray, u: np.ndarray, mu: np.ndarray, dim: int, tol: float
+            ) -> tuple[float, float, bool]:
+    """The acceptance test of every frictional-contact path: ``u = W r + q`` recomputed
+    from ``r``, then ``(error, tolerance, certified)`` with the relative natural-map
+    :func:`relative_error` and the tolerance ``tol`` plus the round-off bound of ``u``.
+
+    One entry of ``u`` from ``k`` terms (a row's non-zeros and ``q_i``) is off by at most
+    ``gamma_k (|W||r| + |q|)_i``; ``û`` adds ``μ |u_T|`` (at most ``1 + max μ`` times that),
+    and the 2-norm over ``n`` entries at most ``sqrt(n)`` times the largest. With the factor
+    :data:`~nscontrol.numerics._lcp_kernels.ROUNDOFF_FACTOR`: ``2 k eps (1 + max μ) sqrt(n)
+    max_i (|W||r| + |q|)_i / max(|q|, |r|, |u|)``. As for the LCP, the tolerance is ``-inf``
+    (nothing certified) when ``|W||r|`` exceeds the scale by
+    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`.
+    """
+    n = q.shape[0]
+    big = 0.0
+    terms = 1
+    for i in range(n):
+        s = q[i]
+        a = abs(q[i])
+        for p in range(indptr[i], indptr[i + 1]):
+            t = data[p] * r[indices[p]]
+            s += t
+            a += abs(t)
+        u[i] = s
+        if not (a <= big):     # also propagates NaN
+            big = a
+        terms = max(terms, indptr[i + 1] - indptr[i] + 1)
+    err = relative_error(q, r, u, mu, dim)
+    scale = float(max(np.linalg.norm(q), np.linalg.norm(r), np.linalg.norm(u)))
+    cancellation = big / scale if scale > 0.0 else 0.0   # scale 0: r = u = q = 0, exact
+    if not (cancellation <= MAX_CANCELLATION):     # also NaN and inf
+        return err, -np.inf, False
+    mu_max = 0.0
+    for i in range(mu.shape[0]):
+        mu_max = max(mu_max, mu[i])
+    tolerance = tol + ROUNDOFF_FACTOR * terms * _EPS * (1.0 + mu_max) * np.sqrt(n) * cancellation
+    return err, tolerance, bool(err <= tolerance)
+
+
+@njit(cache=True)
 def local_1d(w: float, qn: float, r: np.ndarray) -> int:
     """One frictionless contact: ``r = max(-q_N / w, 0)``."""
     r[0] = max(-qn / w, 0.0) if qn < 0.0 else 0.0
@@ -165,7 +217,7 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
     else:
         a, b, side = lo, hi, 0
         phi = lo
-        for _ in range(200):
+        for _ in range(_SLIP_ROOT_STEPS):
             phi = (a * fb - b * fa) / (fb - fa)
             if phi == a or phi == b or abs(b - a) <= 4.0 * _EPS * (1.0 + abs(phi)):
                 break
@@ -187,14 +239,18 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
 
 
 @njit(cache=True)
-def _local_fixed_point(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
+def _local_fixed_point(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray,
+                       max_iter: int) -> tuple[int, int]:
     """The projected fixed point ``r <- P_K(r - ρ û(r))``, ``ρ = 1 / trace W``, from the
-    current ``r``, until it stops moving: the fallback of :func:`local_3d`."""
+    current ``r``, until it stops moving or ``max_iter`` steps are spent (``r`` then holds
+    the last iterate): the fallback of :func:`local_3d`. Returns ``(state, steps)``."""
     rho = 1.0 / (W[0, 0] + W[1, 1] + W[2, 2])
     u = np.empty(3)
     x = np.empty(3)
     nxt = np.empty(3)
-    for _ in range(20000):
+    steps = 0
+    for _ in range(max_iter):
+        steps += 1
         for k in range(3):
             u[k] = W[k, 0] * r[0] + W[k, 1] * r[1] + W[k, 2] * r[2] + q[k]
         x[0] = r[0] - rho * (u[0] + mu * np.sqrt(u[1] ** 2 + u[2] ** 2))
@@ -206,16 +262,17 @@ def _local_fixed_point(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -
         if change <= 4.0 * _EPS * (abs(r[0]) + abs(r[1]) + abs(r[2])):
             break
     if r[0] == 0.0:
-        return OPEN
+        return OPEN, steps
     slip = np.sqrt(u[1] ** 2 + u[2] ** 2)
-    return SLIP if slip > 1e-12 * (abs(u[0]) + slip + abs(q[0])) else STICK
+    return (SLIP if slip > 1e-12 * (abs(u[0]) + slip + abs(q[0])) else STICK), steps
 
 
 @njit(cache=True)
-def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray
-              ) -> int:
+def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray,
+             max_local_iter: int = MAX_LOCAL_ITER) -> int:
     """Exact solution of one spatial contact: take-off, stick, or slip (angle root); writes
-    ``r`` (read as the fallback's start) and returns the state."""
+    ``r`` (read as the fallback's start) and returns the state. When no slip root is
+    bracketed, the projected fixed point runs for at most ``max_local_iter`` steps."""
     if q[0] >= 0.0:
         r[0], r[1], r[2] = 0.0, 0.0, 0.0
         return OPEN
@@ -245,7 +302,8 @@ def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.nd
             if found:
                 break
     if not found:   # no bracketed slip root (strong normal-tangent coupling, large μ)
-        return _local_fixed_point(W, q, mu, r)
+        state, _ = _local_fixed_point(W, q, mu, r, max_local_iter)
+        return state
     r[0] = best_rn
     r[1] = -mu * best_rn * np.cos(best_phi)
     r[2] = -mu * best_rn * np.sin(best_phi)
@@ -270,12 +328,15 @@ def diagonal_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, m
 @njit(cache=True)
 def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
                 mu: np.ndarray, dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray,
-                tol: float, max_sweeps: int) -> tuple[int, int, float]:
+                tol: float, max_sweeps: int, max_local_iter: int = MAX_LOCAL_ITER
+                ) -> tuple[int, int, float]:
     """Non-smooth Gauss–Seidel over contacts, exact local solves; stops when the relative
-    natural-map error (checked on the whole problem after every sweep) is ``<= tol``.
+    natural-map error (checked on the whole problem after every sweep) is ``<= tol``, or
+    after ``max_sweeps`` sweeps (the budget; ``max_local_iter`` is that of a spatial
+    contact's projected fixed point, :func:`local_3d`).
 
     Returns ``(code, sweeps, error)``: code 0 converged, 2 sweep limit, 3 a diagonal block
-    not positive definite.
+    not positive definite. :func:`certify` then decides whether ``r`` solves the problem.
     """
     m = mu.shape[0]
     blocks = diagonal_blocks(indptr, indices, data, m, dim)
@@ -309,7 +370,8 @@ def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np
             elif dim == 2:
                 states[i] = local_2d(blocks[i], qloc, mu[i], rloc)
             else:
-                states[i] = local_3d(blocks[i], inverses[i], qloc, mu[i], rloc)
+                states[i] = local_3d(blocks[i], inverses[i], qloc, mu[i], rloc,
+                                     max_local_iter)
             for k in range(dim):
                 r[b + k] = rloc[k]
         csr_matvec_add(indptr, indices, data, r, q, u)

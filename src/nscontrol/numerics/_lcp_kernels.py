@@ -17,6 +17,14 @@ code  meaning
 
 The kernels do not raise; :func:`nscontrol.numerics.solve_lcp` validates input, checks the
 residual of what a kernel returns and falls back to another method on failure.
+
+**One acceptance test.** :func:`certify` decides whether a point solves the LCP, from its
+natural residual against ``tol`` plus the round-off bound of evaluating ``M z + q``; every
+path of :mod:`nscontrol.numerics.lcp` and the fused ``*_verified`` kernels (which return
+``(status_code, iterations, residual, tolerance)``) reconcile their status with it by
+:func:`verified_status`: "solved" exactly when the residual passes. The bare kernels
+(``lemke_kernel``, ``pgs_kernel``, ``tridiagonal_lcp_kernel``) report what their iteration
+reached; a compiled caller verifies with :func:`verify_dense` or :func:`verify_tridiagonal`.
 """
 
 from __future__ import annotations
@@ -54,6 +62,59 @@ def natural_residual(z, w, q):
     return res / (1.0 + qmax)
 
 
+#: Factor on the a-priori bound of the round-off in one entry of ``w = M z + q`` computed in
+#: float64 from ``k`` terms (``k - 1`` products and ``q_i``): ``|fl(w_i) - w_i| <= gamma_k
+#: (|M| |z| + |q|)_i`` with ``gamma_k = k eps / (1 - k eps)``, for any summation order
+#: (Higham, *Accuracy and Stability of Numerical Algorithms*, 2002, §3.1). The factor 2
+#: covers ``1 / (1 - k eps)`` and the rounding of the solver's own last update of ``z``.
+ROUNDOFF_FACTOR = 2.0
+#: Largest cancellation ``max_i (|M| |z|)_i / (1 + max|q|)`` in ``w = M z + q`` at which a
+#: residual still certifies a solution: ``1 / sqrt(eps)`` (at least half of the digits of
+#: every ``w_i`` survive). At a solution ``z_a = -M_aa^{-1} q_a`` the cancellation is at most
+#: the condition number of ``M_aa`` (<= 1e7 in the tested families); a direct solve on a
+#: numerically singular block (a near-ray of a PSD LCP without solution) gives
+#: ``|z| ~ |q| / (eps |M|)``, a cancellation near ``1 / eps``, where the float residual of
+#: any point is round-off and certifies nothing.
+MAX_CANCELLATION = 1.0 / np.sqrt(_EPS)
+
+
+@njit(cache=True)
+def certify(z, w, q, mz_abs_max, terms, tol):
+    """The one acceptance test of every LCP path: ``(residual, tolerance, certified)``.
+
+    ``w`` must hold ``M z + q`` computed from ``z``, ``mz_abs_max`` the largest entry of
+    ``|M| |z|`` and ``terms`` the largest number of terms in one entry of ``w`` (non-zeros
+    of a row of ``M`` plus one). The tolerance is ``tol`` plus the round-off bound of
+    evaluating ``w`` (:data:`ROUNDOFF_FACTOR` ``terms eps (max|M||z| + max|q|) / (1 +
+    max|q|)``, relative as :func:`natural_residual`); ``-inf`` when the cancellation in
+    ``M z + q`` exceeds :data:`MAX_CANCELLATION` (nothing can be certified there).
+    ``certified`` is ``residual <= tolerance`` (False for NaN).
+    """
+    n = q.shape[0]
+    qmax = 0.0
+    for i in range(n):
+        qmax = max(qmax, abs(q[i]))
+    res = natural_residual(z, w, q)
+    scale = 1.0 + qmax
+    cancellation = mz_abs_max / scale     # divided first: no overflow near 1e308
+    if not (cancellation <= MAX_CANCELLATION):   # also NaN and inf
+        return res, -np.inf, False
+    tolerance = tol + ROUNDOFF_FACTOR * terms * _EPS * (cancellation + qmax / scale)
+    return res, tolerance, bool(res <= tolerance)
+
+
+@njit(cache=True)
+def verified_status(code, certified):
+    """A kernel's status reconciled with the residual test: solved exactly when certified
+    (also after an iteration limit or a ray, if the point passes); a kernel's "solved" that
+    does not pass becomes a numerical failure."""
+    if certified:
+        return SOLVED
+    if code == SOLVED:
+        return NUMERICAL_FAILURE
+    return code
+
+
 @njit(cache=True)
 def _row_dot(M, i, z, n):
     """``M[i, :] @ z`` with four independent accumulators: a single running sum is bound by
@@ -78,6 +139,46 @@ def _matvec_plus(M, z, q, w_out):
     n = q.shape[0]
     for i in range(n):
         w_out[i] = q[i] + _row_dot(M, i, z, n)
+
+
+@njit(cache=True)
+def _matvec_plus_abs(M, z, q, w_out):
+    """``w_out = M z + q`` and ``max_i (|M| |z|)_i`` (the cancellation of :func:`certify`)
+    in one pass over ``M``, with the four accumulators of :func:`_row_dot`."""
+    n = q.shape[0]
+    big = 0.0
+    m = n - n % 4
+    for i in range(n):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        s3 = 0.0
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        for j in range(0, m, 4):
+            p0 = M[i, j] * z[j]
+            p1 = M[i, j + 1] * z[j + 1]
+            p2 = M[i, j + 2] * z[j + 2]
+            p3 = M[i, j + 3] * z[j + 3]
+            s0 += p0
+            s1 += p1
+            s2 += p2
+            s3 += p3
+            a0 += abs(p0)
+            a1 += abs(p1)
+            a2 += abs(p2)
+            a3 += abs(p3)
+        for j in range(m, n):
+            p0 = M[i, j] * z[j]
+            s0 += p0
+            a0 += abs(p0)
+        w_out[i] = q[i] + ((s0 + s1) + (s2 + s3))
+        a = (a0 + a1) + (a2 + a3)
+        if not (a <= big):   # also propagates NaN
+            big = a
+    return big
 
 
 # --------------------------------------------------------------------------------- Lemke
@@ -658,39 +759,28 @@ def csr_tridiagonal_bands(indptr, indices, data, lower, diag, upper):
 
 
 @njit(cache=True)
-def _residual_and_floor(z, w, q, row_sum_max):
-    """Natural residual, and the round-off floor ``64 eps (||M|| ||z|| + ||q||) / (1 + ||q||)``
-    below which no evaluation of ``M z + q`` can certify anything."""
-    zmax = 0.0
-    qmax = 0.0
-    for i in range(q.shape[0]):
-        zmax = max(zmax, abs(z[i]))
-        qmax = max(qmax, abs(q[i]))
-    floor = 64.0 * _EPS * (row_sum_max * zmax + qmax) / (1.0 + qmax)
-    return natural_residual(z, w, q), floor
+def verify_dense(M, q, z, w_out, tol):
+    """``w_out = M z + q`` recomputed from ``z``, then :func:`certify`: returns
+    ``(residual, tolerance, certified)``."""
+    mz = _matvec_plus_abs(M, z, q, w_out)
+    return certify(z, w_out, q, mz, q.shape[0] + 1, tol)
 
 
 @njit(cache=True)
-def verify_dense(M, q, z, w_out):
-    """``w_out = M z + q``; returns ``(residual, round-off floor)``."""
+def verify_tridiagonal(lower, diag, upper, q, z, w_out, tol):
+    """:func:`verify_dense` for the tridiagonal ``M`` with bands ``(lower, diag, upper)``."""
     n = q.shape[0]
-    row_sum_max = 0.0
-    for i in range(n):
-        s = q[i]
-        a = 0.0
-        for j in range(n):
-            s += M[i, j] * z[j]
-            a += abs(M[i, j])
-        w_out[i] = s
-        row_sum_max = max(row_sum_max, a)
-    return _residual_and_floor(z, w_out, q, row_sum_max)
-
-
-@njit(cache=True)
-def verify_tridiagonal(lower, diag, upper, q, z, w_out):
-    """``w_out = M z + q`` for tridiagonal ``M``; returns ``(residual, round-off floor)``."""
     _tridiag_w(lower, diag, upper, q, z, w_out)
-    return _residual_and_floor(z, w_out, q, tridiagonal_inf_norm(lower, diag, upper))
+    mz = 0.0
+    for i in range(n):
+        a = abs(diag[i] * z[i])
+        if i > 0:
+            a += abs(lower[i - 1] * z[i - 1])
+        if i < n - 1:
+            a += abs(upper[i] * z[i + 1])
+        if not (a <= mz):
+            mz = a
+    return certify(z, w_out, q, mz, 4, tol)
 
 
 @njit(cache=True)
@@ -709,36 +799,35 @@ Q_NOT_FINITE = -1
 
 
 @njit(cache=True)
-def lemke_verified(M, q, z_out, w_out, max_iter, row_sum_max):
+def lemke_verified(M, q, z_out, w_out, max_iter, tol):
     """:func:`lemke_kernel` and its verification in one compiled call (a reusable solver's
     per-call path: one dispatch instead of three).
 
-    ``row_sum_max`` is ``||M||_inf``, computed once by the caller. Returns
-    ``(status_code, iterations, residual, round-off floor)`` with ``w_out = M z + q``
-    recomputed from ``z_out``; status :data:`Q_NOT_FINITE` when ``q`` is not finite.
+    Returns ``(status_code, iterations, residual, tolerance)`` with ``w_out = M z + q``
+    recomputed from ``z_out``, the status reconciled with :func:`certify` by
+    :func:`verified_status`; :data:`Q_NOT_FINITE` when ``q`` is not finite.
     """
     if not all_finite(q):
         return Q_NOT_FINITE, 0, np.nan, np.nan
     code, its = lemke_kernel(M, q, z_out, w_out, max_iter)
-    _matvec_plus(M, z_out, q, w_out)
-    res, floor = _residual_and_floor(z_out, w_out, q, row_sum_max)
-    return code, its, res, floor
+    res, tolerance, ok = verify_dense(M, q, z_out, w_out, tol)
+    return verified_status(code, ok), its, res, tolerance
 
 
 @njit(cache=True)
-def tridiagonal_verified(lower, diag, upper, q, z_inout, w_out, max_iter, warm):
+def tridiagonal_verified(lower, diag, upper, q, z_inout, w_out, max_iter, warm, tol):
     """:func:`tridiagonal_lcp_kernel` (``warm=False``: from the projected Thomas sweeps) or
     :func:`tridiagonal_howard` from ``z_inout`` (``warm=True``), then the verification of
     :func:`verify_tridiagonal`, in one compiled call. Returns ``(status_code, iterations,
-    residual, round-off floor)``; :data:`Q_NOT_FINITE` when ``q`` is not finite."""
+    residual, tolerance)`` as :func:`lemke_verified`."""
     if not all_finite(q):
         return Q_NOT_FINITE, 0, np.nan, np.nan
     if warm:
         code, its = tridiagonal_howard(lower, diag, upper, q, z_inout, w_out, max_iter)
     else:
         code, its = tridiagonal_lcp_kernel(lower, diag, upper, q, z_inout, w_out, max_iter)
-    res, floor = verify_tridiagonal(lower, diag, upper, q, z_inout, w_out)
-    return code, its, res, floor
+    res, tolerance, ok = verify_tridiagonal(lower, diag, upper, q, z_inout, w_out, tol)
+    return verified_status(code, ok), its, res, tolerance
 
 
 @njit(cache=True)
@@ -770,23 +859,19 @@ def tridiagonal_inf_norm(lower, diag, upper):
 
 @njit(cache=True)
 def dense_structure(M):
-    """One scan of a dense square matrix: ``(all entries finite, tridiagonal, ||M||_inf)``
-    (what :class:`~nscontrol.numerics.lcp.LCPSolver` needs of ``M`` before anything else)."""
+    """One scan of a dense square matrix: ``(all entries finite, tridiagonal)`` (what
+    :class:`~nscontrol.numerics.lcp.LCPSolver` needs of ``M`` before anything else)."""
     n = M.shape[0]
     finite = True
     tridiagonal = True
-    best = 0.0
     for i in range(n):
-        s = 0.0
         for j in range(n):
             v = M[i, j]
             if not np.isfinite(v):
                 finite = False
             elif v != 0.0 and (j > i + 1 or j < i - 1):
                 tridiagonal = False
-            s += abs(v)
-        best = max(best, s)
-    return finite, tridiagonal, best
+    return finite, tridiagonal
 
 
 # --------------------------------------------------------------------------------- PGS polish
@@ -836,7 +921,8 @@ def pgs_polish(M, q, z, w):
     PGS converges linearly, and its error in ``z`` is up to ``residual / lambda_min(M)``;
     once the active set ``{z_i > w_i}`` is right, one solve of ``M[a, a] z_a = -q_a`` gives
     the solution to round-off. ``w`` must hold ``M z + q``; both are overwritten when the
-    polished point has a smaller natural residual. Returns whether it did.
+    polished point has a smaller natural residual that :func:`certify` can trust (its
+    cancellation below :data:`MAX_CANCELLATION`). Returns whether it did.
     """
     n = q.shape[0]
     idx = np.empty(n, dtype=np.int64)
@@ -853,7 +939,14 @@ def pgs_polish(M, q, z, w):
         for r in range(k):
             p[idx[r]] = x[r]
     wp = np.empty(n)
-    _matvec_plus(M, p, q, wp)
+    mz = _matvec_plus_abs(M, p, q, wp)
+    qmax = 0.0
+    for i in range(n):
+        qmax = max(qmax, abs(q[i]))
+    if not (mz <= MAX_CANCELLATION * (1.0 + qmax)):
+        # a singular active block: the float residual of that point is round-off, and
+        # a comparison with it means nothing (see certify)
+        return False
     after = natural_residual(p, wp, q)
     if np.isfinite(after) and after < natural_residual(z, w, q):
         for i in range(n):
@@ -866,10 +959,9 @@ def pgs_polish(M, q, z, w):
 @njit(cache=True)
 def pgs_verified(M, q, z_inout, w_out, tol, max_iter, omega, cold_start):
     """:func:`pgs_kernel` (from zero with ``cold_start``, else from ``z_inout``), the
-    active-set polish of :func:`pgs_polish` (status solved when it improves the point) and
-    the verification of :func:`verify_dense`, in one compiled call. Returns
-    ``(status_code, sweeps, residual, round-off floor)``; :data:`Q_NOT_FINITE` when ``q`` is
-    not finite."""
+    active-set polish of :func:`pgs_polish` and the verification of :func:`verify_dense`,
+    in one compiled call. Returns ``(status_code, sweeps, residual, tolerance)`` as
+    :func:`lemke_verified`."""
     if not all_finite(q):
         return Q_NOT_FINITE, 0, np.nan, np.nan
     if cold_start:
@@ -877,7 +969,6 @@ def pgs_verified(M, q, z_inout, w_out, tol, max_iter, omega, cold_start):
     code, its = pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega)
     if code == SOLVED or code == MAX_ITER:
         _matvec_plus(M, z_inout, q, w_out)
-        if pgs_polish(M, q, z_inout, w_out):
-            code = SOLVED
-    res, floor = verify_dense(M, q, z_inout, w_out)
-    return code, its, res, floor
+        pgs_polish(M, q, z_inout, w_out)
+    res, tolerance, ok = verify_dense(M, q, z_inout, w_out, tol)
+    return verified_status(code, ok), its, res, tolerance

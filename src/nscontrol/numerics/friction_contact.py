@@ -22,19 +22,29 @@ Two methods:
   whole problem is computed after every sweep and must reach ``tol``.
 
 The reported ``residual`` is ``‖r - P_K(r - û)‖ / max(‖q‖, ‖r‖, ‖u‖)`` (the scaling Siconos
-uses, so that figures compare like with like).
+uses, so that figures compare like with like), recomputed from ``r`` on every path; the
+status is ``"solved"`` exactly when it is at most ``tolerance``: ``tol`` plus the round-off
+bound of evaluating ``W r + q`` (:func:`~nscontrol.numerics._friction_kernels.certify`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 from scipy import sparse
 
-from .._validation import FloatArray, as_vector, check_integer, check_positive
-from ..errors import DimensionError, ModelError, SolverError
+from .._validation import (
+    FloatArray,
+    as_float_array,
+    as_vector,
+    check_finite,
+    check_integer,
+    check_positive,
+)
+from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
 from . import _friction_kernels as kernels
 
 __all__ = ["FrictionContactResult", "solve_friction_contact", "friction_residual",
@@ -59,13 +69,20 @@ class FrictionContactResult:
     states : ndarray (m,) of int
         0 open, 1 stick, 2 slip (:data:`CONTACT_STATES`).
     residual : float
-        Relative natural-map error (module docstring).
+        Relative natural-map error (module docstring), recomputed from ``r``.
     iterations : int
         NSGS sweeps, or Lemke pivots (0 when not reported).
     method : str
         ``"lcp"`` or ``"nsgs"``.
     status : str
-        ``"solved"``, ``"max_iter"`` or the LCP's status.
+        ``"solved"`` exactly when ``residual <= tolerance``; otherwise ``"max_iter"`` (NSGS
+        spent ``max_sweeps``, or Lemke ``max_pivots``: :attr:`message` names the budget),
+        the LCP's status, or ``"numerical_failure"`` (a method's claim the residual refutes).
+    tolerance : float
+        ``tol`` plus the round-off bound of ``W r + q`` (``-inf`` where nothing can be
+        certified: ``|W||r|`` beyond ``1 / sqrt(eps)`` times the problem's scale).
+    message : str
+        Why the method stopped: the budget spent, or the LCP's message.
     """
 
     r: FloatArray
@@ -75,6 +92,8 @@ class FrictionContactResult:
     iterations: int
     method: str
     status: str
+    tolerance: float = field(default=math.nan)
+    message: str = field(default="")
 
     @property
     def success(self) -> bool:
@@ -103,6 +122,7 @@ def friction_residual(W: Any, q: Any, mu: Any, r: Any, dim: int) -> float:
     >>> bool(friction_residual(np.eye(3), [-1.0, 0.2, 0.0], 0.5, [1.0, -0.2, 0.0], 3) == 0.0)
     True
     """
+    dim = _check_dim(dim)
     Wc, qv, muv = _problem(W, q, mu, dim)
     rv = as_vector("r", r, qv.shape[0])
     u = np.asarray(Wc @ rv).ravel() + qv
@@ -126,8 +146,15 @@ def contact_states(r: Any, u: Any, dim: int, *, tol: float = 1e-9) -> np.ndarray
     >>> contact_states([1.0, -0.5, 0.0, 0.0], [0.0, 0.5, 1.0, 0.0], 2).tolist()
     [2, 0]
     """
-    r = np.asarray(r, float).reshape(-1, dim)
-    u = np.asarray(u, float).reshape(-1, dim)
+    dim = _check_dim(dim)
+    tol = check_positive("tol", tol)
+    rv = _per_contact("r", as_vector("r", r), dim)
+    return _states(rv, _per_contact("u", as_vector("u", u, rv.size), dim), tol)
+
+
+def _states(r: FloatArray, u: FloatArray, tol: float = 1e-9) -> np.ndarray:
+    """:func:`contact_states` of checked ``(m, dim)`` arrays."""
+    dim = r.shape[1]
     slip = np.linalg.norm(u[:, 1:], axis=1) if dim > 1 else np.zeros(r.shape[0])
     threshold = tol * max(1.0, float(np.max(np.abs(u), initial=0.0)))
     states = np.where(slip > threshold, kernels.SLIP, kernels.STICK)
@@ -137,7 +164,9 @@ def contact_states(r: Any, u: Any, dim: int, *, tol: float = 1e-9) -> np.ndarray
 def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
                            method: Literal["auto", "lcp", "nsgs"] = "auto",
                            tol: float = 1e-12, max_sweeps: int = 100_000,
-                           r0: Any = None) -> FrictionContactResult:
+                           r0: Any = None, max_pivots: int | None = None,
+                           max_local_iter: int = kernels.MAX_LOCAL_ITER
+                           ) -> FrictionContactResult:
     """Solve ``u = W r + q`` with Coulomb's law (De Saxcé's form) at every contact.
 
     Parameters
@@ -155,13 +184,21 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
         :data:`AUTO_LCP_MAX_CONTACTS` contacts and NSGS otherwise, then the other method
         when the first does not reach ``tol``.
     tol : float
-        Tolerance of the relative natural-map error.
+        Tolerance of the relative natural-map error (widened by the round-off bound of
+        ``W r + q``: :attr:`FrictionContactResult.tolerance`).
     max_sweeps : int
-        NSGS sweep limit.
+        NSGS's budget of sweeps.
     r0 : array_like (m dim,), optional
         NSGS starting impulses (a warm start); by default zeros, or for more than
         :data:`AUTO_LCP_MAX_CONTACTS` contacts the solution of the frictionless problem
         (normal impulses only, one LCP), which is exact when no tangential load acts.
+        Checked with every method (the planar LCP does not use it).
+    max_pivots : int, optional
+        Lemke's budget of pivots for ``"lcp"`` (default ``50 (4 m + 1)``).
+    max_local_iter : int
+        Budget of the projected fixed point a spatial contact falls back to when no slip
+        direction is bracketed; a local solve that spends it keeps its last iterate, and the
+        sweep's verified residual decides.
 
     Returns
     -------
@@ -170,11 +207,17 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     Raises
     ------
     ModelError
-        Negative ``μ``, an unknown method, ``"lcp"`` with ``dim != 2``.
+        ``μ`` negative or NaN, entries of ``W``, ``q``, ``μ`` or ``r0`` that are NaN,
+        infinite, complex or strings, an unknown method, ``"lcp"`` with ``dim != 2``, a
+        budget or ``tol`` that is not a positive number.
     DimensionError
-        Shapes that disagree.
+        ``W`` not square, shapes that disagree (``q``'s length not a multiple of ``dim``,
+        ``W``, ``μ`` or ``r0`` not matching it).
+    BudgetExceededError
+        No method reached ``tol`` and the last one spent its budget (``err.budget`` is
+        ``"max_sweeps"`` or ``"max_pivots"``, ``err.partial`` the last result).
     SolverError
-        No method reached ``tol`` (``err.result`` in the message's figures).
+        No method reached ``tol`` for another reason (``err.status``).
 
     Examples
     --------
@@ -187,13 +230,15 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     >>> slip.r.round(12).tolist(), slip.u.round(12).tolist(), slip.states.tolist()
     ([1.0, -0.5, -0.0], [0.0, 0.5, 0.0], [2])
     """
-    dim = check_integer("dim", dim, minimum=1)
-    if dim > 3:
-        raise ModelError(f"dim: expected 1, 2 or 3 unknowns per contact, got {dim}")
+    dim = _check_dim(dim)
     Wc, qv, muv = _problem(W, q, mu, dim)
     tol = check_positive("tol", tol)
     max_sweeps = check_integer("max_sweeps", max_sweeps, minimum=1)
-    if method not in ("auto", "lcp", "nsgs"):
+    max_local_iter = check_integer("max_local_iter", max_local_iter, minimum=1)
+    if max_pivots is not None:
+        max_pivots = check_integer("max_pivots", max_pivots, minimum=1)
+    r_start = None if r0 is None else as_vector("r0", r0, qv.shape[0])
+    if not isinstance(method, str) or method not in ("auto", "lcp", "nsgs"):
         raise ModelError(f"method: expected 'auto', 'lcp' or 'nsgs', got {method!r}")
     if method == "lcp" and dim != 2:
         raise ModelError(f"method: 'lcp' solves planar contacts (dim=2), got dim={dim}; use "
@@ -201,21 +246,30 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     m = muv.shape[0]
     if m == 0:
         return FrictionContactResult(np.zeros(0), np.zeros(0), np.zeros(0, np.int64), 0.0, 0,
-                                     "nsgs", "solved")
+                                     "nsgs", "solved", tol)
     order = [method] if method != "auto" else (
         ["lcp", "nsgs"] if dim == 2 and m <= AUTO_LCP_MAX_CONTACTS
         else ["nsgs", "lcp"] if dim == 2 and m <= 5 * AUTO_LCP_MAX_CONTACTS else ["nsgs"])
     attempts = []
     for name in order:
-        result = (_solve_lcp(Wc, qv, muv) if name == "lcp"
-                  else _solve_nsgs(Wc, qv, muv, dim, tol, max_sweeps, r0))
+        result = (_solve_lcp(Wc, qv, muv, tol, max_pivots) if name == "lcp"
+                  else _solve_nsgs(Wc, qv, muv, dim, tol, max_sweeps, r_start,
+                                   max_local_iter))
         if result.success:
             return result
-        attempts.append(f"{name}: {result.status}, residual {result.residual:.3g} after "
-                        f"{result.iterations} iterations")
-    raise SolverError("solve_friction_contact: no method reached tol = "
-                      f"{tol:.3g} ({'; '.join(attempts)}); raise max_sweeps or tol, or check "
-                      "that W's diagonal blocks are positive definite", status=result.status)
+        attempts.append(f"{name}: {result.status}, residual {result.residual:.3g} "
+                        f"(tolerance {result.tolerance:.3g}) after {result.iterations} "
+                        f"iterations" + (f": {result.message}" if result.message else ""))
+    text = (f"solve_friction_contact: no method reached tol = {tol:.3g} "
+            f"({'; '.join(attempts)})")
+    if result.status == "max_iter":
+        budget, limit = (("max_sweeps", max_sweeps) if result.method == "nsgs"
+                         else ("max_pivots", _pivot_limit(m, max_pivots)))
+        raise BudgetExceededError(
+            f"{budget}: {text}; raise {budget} or tol; the last result is in err.partial",
+            budget=budget, limit=limit, used=result.iterations, partial=result)
+    raise SolverError(f"{text}; raise tol, or check that W's diagonal blocks are positive "
+                      "definite", status=result.status)
 
 
 def planar_friction_lcp(W: Any, q: Any, mu: Any) -> tuple[FloatArray, FloatArray]:
@@ -254,42 +308,68 @@ def planar_friction_lcp(W: Any, q: Any, mu: Any) -> tuple[FloatArray, FloatArray
 
 
 # -- methods ---------------------------------------------------------------------------------
-def _solve_lcp(W: Any, q: FloatArray, mu: FloatArray) -> FrictionContactResult:
+def _pivot_limit(m: int, max_pivots: int | None) -> int:
+    """Lemke's budget on the planar LCP of ``m`` contacts (``4 m`` unknowns)."""
+    return max_pivots or 50 * (4 * m + 1)
+
+
+def _certified(W: Any, q: FloatArray, mu: FloatArray, dim: int, r: FloatArray, tol: float
+               ) -> tuple[FloatArray, float, float, bool]:
+    """``u = W r + q`` recomputed and :func:`kernels.certify`'s verdict."""
+    u = np.empty_like(q)
+    err, tolerance, ok = kernels.certify(W.indptr, W.indices, W.data, q, r, u, mu, dim, tol)
+    return u, float(err), float(tolerance), bool(ok)
+
+
+def _status(ok: bool, claimed: str) -> str:
+    """A method's status reconciled with the residual test: solved exactly when it passes;
+    a claim of "solved" it refutes is a numerical failure."""
+    if ok:
+        return "solved"
+    return "numerical_failure" if claimed == "solved" else claimed
+
+
+def _solve_lcp(W: Any, q: FloatArray, mu: FloatArray, tol: float, max_pivots: int | None
+               ) -> FrictionContactResult:
     from .lcp import solve_lcp
 
     m = mu.shape[0]
     M, qq = planar_friction_lcp(W, q, mu)
-    res = solve_lcp(M, qq, method="lemke")
+    res = solve_lcp(M, qq, method="lemke", max_iter=_pivot_limit(m, max_pivots))
     z = res.z
     r = np.empty(2 * m)
     r[0::2] = z[:m]
     r[1::2] = z[m:2 * m] - z[2 * m:3 * m]
-    u = np.asarray(W @ r).ravel() + q
-    err = float(kernels.relative_error(q, r, u, mu, 2))
-    # the LCP is solved and verified by solve_lcp (its own residual test): exact up to
-    # round-off, so tol does not apply to it
-    status = "solved" if res.success else res.status
-    return FrictionContactResult(r, u, contact_states(r, u, 2), err,
-                                 int(getattr(res, "iterations", 0) or 0), "lcp", status)
+    u, err, tolerance, ok = _certified(W, q, mu, 2, r, tol)
+    message = (f"budget max_pivots = {res.iterations} pivots spent"
+               if res.status == "max_iter" else "" if res.success else res.message)
+    return FrictionContactResult(r, u, _states(r.reshape(-1, 2), u.reshape(-1, 2)), err,
+                                 int(res.iterations),
+                                 "lcp", _status(ok, res.status), tolerance, message)
 
 
 def _solve_nsgs(W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
-                max_sweeps: int, r0: Any) -> FrictionContactResult:
+                max_sweeps: int, r0: FloatArray | None, max_local_iter: int
+                ) -> FrictionContactResult:
     if r0 is not None:
-        r = as_vector("r0", r0, q.shape[0]).copy()
+        r = r0.copy()
     elif mu.shape[0] > AUTO_LCP_MAX_CONTACTS:   # a cold start of a large (stacked) set
         r = frictionless_impulses(W, q, dim)
     else:
         r = np.zeros_like(q)
     u = np.empty_like(q)
     states = np.zeros(mu.shape[0], np.int64)
-    code, sweeps, err = kernels.nsgs_kernel(W.indptr, W.indices, W.data, q, mu, dim, r, u,
-                                            states, tol, max_sweeps)
+    code, sweeps, _ = kernels.nsgs_kernel(W.indptr, W.indices, W.data, q, mu, dim, r, u,
+                                          states, tol, max_sweeps, max_local_iter)
     if code == 3:
         raise ModelError("W: a diagonal entry of a contact's normal row is not positive; "
                          "every contact needs a normal direction some motion can change")
-    return FrictionContactResult(r, u, states, float(err), int(sweeps), "nsgs",
-                                 "solved" if code == 0 else "max_iter")
+    u, err, tolerance, ok = _certified(W, q, mu, dim, r, tol)
+    status = _status(ok, "solved" if code == 0 else "max_iter")
+    message = (f"budget max_sweeps = {max_sweeps} sweeps spent" if status == "max_iter"
+               else "")
+    return FrictionContactResult(r, u, states, err, int(sweeps), "nsgs", status, tolerance,
+                                 message)
 
 
 def frictionless_impulses(W: Any, q: Any, dim: int) -> FloatArray:
@@ -313,8 +393,9 @@ def frictionless_impulses(W: Any, q: Any, dim: int) -> FloatArray:
     """
     from .lcp import solve_lcp
 
-    W = sparse.csr_matrix(W, dtype=np.float64)
-    q = np.asarray(q, dtype=np.float64)
+    dim = _check_dim(dim)
+    q = _per_contact("q", as_vector("q", q), dim).ravel()
+    W = _delassus(W, q.shape[0])
     n_ = np.arange(0, q.shape[0], dim)
     r = np.zeros_like(q)
     if not np.any(q[n_] < 0.0):
@@ -326,22 +407,48 @@ def frictionless_impulses(W: Any, q: Any, dim: int) -> FloatArray:
     return r
 
 
-def _problem(W: Any, q: Any, mu: Any, dim: int) -> tuple[Any, FloatArray, FloatArray]:
-    """``W`` as sorted CSR float64, ``q`` and ``μ`` as vectors, shapes checked."""
-    qv = as_vector("q", q)
-    if qv.shape[0] % dim:
-        raise DimensionError(f"q: expected a length divisible by dim = {dim}, got "
-                             f"{qv.shape[0]}")
-    m = qv.shape[0] // dim
-    Wc = sparse.csr_matrix(W, dtype=np.float64)
-    if Wc.shape != (qv.shape[0], qv.shape[0]):
-        raise DimensionError(f"W: expected shape ({qv.shape[0]}, {qv.shape[0]}) to match q, "
-                             f"got {Wc.shape}")
+def _check_dim(dim: Any) -> int:
+    dim = check_integer("dim", dim, minimum=1)
+    if dim > 3:
+        raise ModelError(f"dim: expected 1, 2 or 3 unknowns per contact, got {dim}")
+    return dim
+
+
+def _per_contact(name: str, v: FloatArray, dim: int) -> FloatArray:
+    """``v`` as an ``(m, dim)`` array, its length checked to be a multiple of ``dim``."""
+    if v.shape[0] % dim:
+        raise DimensionError(f"{name}: expected a length divisible by dim = {dim}, got "
+                             f"{v.shape[0]}")
+    return v.reshape(-1, dim)
+
+
+def _delassus(W: Any, n: int) -> Any:
+    """``W`` as a finite real square ``(n, n)`` CSR float64 matrix, duplicates summed and
+    indices sorted (the layout of the kernels); strings, complex and NaN are refused."""
+    if sparse.issparse(W):
+        Wc = sparse.csr_matrix(W)
+        if Wc.dtype.kind not in "fiub":
+            raise ModelError(f"W: expected a real sparse matrix, got dtype {Wc.dtype}")
+        Wc = Wc.astype(np.float64)
+        check_finite("W", Wc.data)
+    else:
+        Wc = sparse.csr_matrix(as_float_array("W", W, ndim=2))
+    if Wc.shape != (n, n):
+        raise DimensionError(f"W: expected shape ({n}, {n}) to match q, got {Wc.shape}")
     Wc.sum_duplicates()
     Wc.sort_indices()
-    if not np.all(np.isfinite(Wc.data)):
-        raise ModelError("W: expected finite entries")
-    muv = np.full(m, float(mu)) if np.ndim(mu) == 0 else as_vector("mu", mu, m)
-    for i, mi in enumerate(muv):
-        check_positive(f"mu[{i}]", mi, allow_zero=True)
+    return Wc
+
+
+def _problem(W: Any, q: Any, mu: Any, dim: int) -> tuple[Any, FloatArray, FloatArray]:
+    """``W`` as sorted CSR float64, ``q`` and ``μ`` as vectors, shapes and values checked."""
+    qv = as_vector("q", q)
+    m = _per_contact("q", qv, dim).shape[0]
+    Wc = _delassus(W, qv.shape[0])
+    if np.ndim(mu) == 0:
+        muv = np.full(m, check_positive("mu", mu, allow_zero=True))
+    else:
+        muv = as_vector("mu", mu, m)
+        for i, mi in enumerate(muv):
+            check_positive(f"mu[{i}]", mi, allow_zero=True)
     return Wc, qv, np.ascontiguousarray(muv)

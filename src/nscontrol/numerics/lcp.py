@@ -37,7 +37,7 @@ import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,12 +46,13 @@ from .._validation import (
     as_float_array,
     as_square,
     as_vector,
+    check_bool,
     check_finite,
     check_in_interval,
     check_integer,
     check_positive,
 )
-from ..errors import DimensionError, ModelError, SolverError
+from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
 from . import _lcp_kernels as kernels
 
 __all__ = ["LCPResult", "LCPSolver", "solve_lcp", "residual"]
@@ -64,6 +65,8 @@ STATUSES = ("solved", "ray_termination", "max_iter", "numerical_failure", "overf
 AUTO_PGS_MIN_SIZE = 400
 #: ``auto`` does not fall back to dense Lemke or PGS above this size (memory n^2, time n^3).
 AUTO_LEMKE_MAX_SIZE = 3000
+#: PGS's default budget of sweeps (``max_iter``).
+PGS_SWEEPS = 10_000
 #: Sweeps of ``auto``'s PGS before it pays for a definiteness test (see ``_run_pgs_auto``).
 AUTO_PGS_PROBE_SWEEPS = 100
 #: Sweeps of PGS as a fallback of ``auto`` on a matrix it is not known to converge for
@@ -90,10 +93,13 @@ class LCPResult:
         On failure: the last iterate of the method that ran last; on ``"overflow"``: ``inf``
         where the solution exceeds the float64 range.
     status : {"solved", "ray_termination", "max_iter", "numerical_failure", "overflow"}
-        ``"solved"`` only when :attr:`residual` passed the acceptance test (see
-        :func:`solve_lcp`). ``"ray_termination"``: Lemke found no solution (for
-        copositive-plus ``M`` the LCP is infeasible). ``"overflow"``: the problem rescaled by
-        powers of two was solved, but its solution scaled back exceeds float64.
+        ``"solved"`` exactly when ``residual <= tolerance`` (on every path: the method's
+        own claim does not count). ``"ray_termination"``: Lemke found no solution (for
+        copositive-plus ``M`` the LCP is infeasible). ``"max_iter"``: the method spent its
+        budget ``max_iter`` (the message names it, with the limit). ``"numerical_failure"``:
+        a pivot or diagonal broke down, or the method claimed a solution whose residual
+        does not pass. ``"overflow"``: the problem rescaled by powers of two was solved, but
+        its solution scaled back exceeds float64.
     iterations : int
         Pivots (Lemke), sweeps (PGS) or active-set iterations (banded) of the last method.
     residual : float
@@ -102,8 +108,13 @@ class LCPResult:
     method : str
         The method that produced ``z`` (for ``"auto"``: the one finally used).
     message : str
-        Why it stopped, and which methods were tried (``"name: status (residual r)"``
+        Why it stopped, and which methods were tried (``"name: status (residual r, ...)"``
         joined by ``"; "``, in the order they ran).
+    tolerance : float
+        The acceptance threshold :attr:`residual` was tested against: ``tol`` plus the
+        round-off bound of evaluating ``M z + q`` (see :func:`solve_lcp`); ``-inf`` when
+        ``z`` is so large that ``M z + q`` cancels beyond half the float64 digits, where
+        no residual certifies anything (a near-ray of a nearly singular ``M``).
     """
 
     z: NDArray[np.float64]
@@ -113,6 +124,7 @@ class LCPResult:
     residual: float
     method: str
     message: str = field(default="")
+    tolerance: float = field(default=math.nan)
 
     @property
     def success(self) -> bool:
@@ -133,10 +145,20 @@ def residual(M: Any, z: Any, q: Any) -> float:
         The point to measure.
     q : (n,) array_like
         The LCP vector.
+
+    Raises
+    ------
+    DimensionError, ModelError
+        As :func:`solve_lcp` for ``M`` and ``q``; ``z`` must be a real vector of length
+        ``n`` (it may hold ``inf``, e.g. the ``z`` of an ``"overflow"`` result).
     """
-    z = np.asarray(z, dtype=np.float64)
-    q = np.asarray(q, dtype=np.float64)
-    return _natural_residual(z, np.asarray(M @ z + q, dtype=np.float64).ravel(), q)
+    M = _as_lcp_matrix(M)
+    n = M.shape[0]
+    q = as_vector("q", q, size=n)
+    z = as_float_array("z", z, shape=(n,), finite=False)
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = np.asarray(M @ z + q, dtype=np.float64).ravel()
+    return _natural_residual(z, w, q)
 
 
 def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
@@ -158,15 +180,23 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     method : {"auto", "lemke", "pgs", "banded"}
         See the module docstring; ``"auto"`` picks and verifies (Notes).
     tol : float
-        Acceptance threshold on :attr:`LCPResult.residual` (and PGS's stopping criterion).
-        A direct method's result is accepted when its residual is below ``tol`` or below the
-        round-off floor ``64 eps (||M||_inf ||z||_inf + ||q||_inf) / (1 + ||q||_inf)`` of
-        evaluating ``M z + q``.
+        The solver's tolerance on :attr:`LCPResult.residual` (and PGS's stopping
+        criterion). Every result, of every method, is accepted exactly when its residual,
+        recomputed from ``z``, is at most ``tol + 2 k eps (max|M||z| + max|q|) / (1 +
+        max|q|)``: ``tol`` plus twice the a-priori round-off bound of evaluating ``M z + q``
+        with ``k`` terms per entry (``n + 1`` dense, ``4`` tridiagonal, the non-zeros of a
+        row plus one sparse); never when ``max|M||z| > (1 + max|q|) / sqrt(eps)`` (Notes).
     max_iter : int, optional
-        Iteration limit of each method run. Defaults: Lemke ``50 (n + 1)`` pivots, PGS
-        ``10000`` sweeps (``1000`` as a fallback of ``auto``), banded ``n + 2`` iterations.
+        The budget of each method run (pivots, sweeps or iterations); spending it gives the
+        status ``"max_iter"`` with a message naming ``max_iter`` and the limit. Defaults:
+        Lemke ``50 (n + 1)`` pivots (also the cap that ends a cycling path), PGS ``10000``
+        sweeps (``1000`` as a fallback of ``auto``), banded ``n + 2`` iterations. ``auto``
+        runs each method at most once, so its chain is bounded by the sum of these.
     strict : bool
-        Raise :class:`~nscontrol.errors.SolverError` instead of returning a failed result.
+        Raise instead of returning a failed result: :class:`~nscontrol.errors.
+        BudgetExceededError` (``budget="max_iter"``, ``limit``, ``used``, the result in
+        ``partial``) when the budget was spent, :class:`~nscontrol.errors.SolverError`
+        otherwise.
     z0 : (n,) array_like, optional
         Starting point for ``"pgs"`` and ``"banded"`` (warm start); Lemke ignores it.
     omega : float
@@ -181,9 +211,11 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     DimensionError
         ``M`` not square, or ``q`` / ``z0`` of the wrong length.
     ModelError
-        NaN, infinite or complex entries, unknown ``method``, ``tol`` not a finite number
-        ``> 0``, ``omega`` outside (0, 2), ``max_iter`` not an integer ``>= 1`` (``2.7`` is
-        refused, not truncated).
+        NaN, infinite, complex or string entries, unknown ``method``, ``tol`` not a finite
+        number ``> 0``, ``omega`` outside (0, 2), ``max_iter`` not an integer ``>= 1``
+        (``2.7`` is refused, not truncated), ``strict`` not a bool (``"no"`` is truthy).
+    BudgetExceededError
+        With ``strict=True``, when the result's method spent its ``max_iter``.
     SolverError
         With ``strict=True``, when no method reached a verified solution (``err.status``).
 
@@ -200,6 +232,17 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     diagonal (``n <= 3000``, 1000 sweeps: exact in one sweep for a lower-triangular ``M``,
     where Lemke's path can be exponentially long), Howard's iteration with dense LU
     (``n <= 200``). :attr:`LCPResult.message` lists every method tried with its status.
+
+    *Verification.* The tolerance above is an error estimate: ``w`` computed in float64
+    differs from ``M z + q`` by at most ``gamma_k (|M||z| + |q|)`` entrywise (``gamma_k ~ k
+    eps``), so a residual below it is a solution up to the round-off of its own evaluation.
+    That bound grows with ``z``: where ``|M||z|`` exceeds ``(1 + max|q|) / sqrt(eps)``, half
+    the digits of ``w`` are lost to cancellation and nothing is certified (status
+    ``"numerical_failure"``, :attr:`LCPResult.tolerance` ``-inf``). A genuine solution has
+    ``|M||z|`` at most about ``cond(M_aa) max|q|``; a direct solve on a numerically
+    singular active block, such as PGS's polish on a positive semidefinite LCP without
+    solution, gives ``|z| ~ 1e15`` and a cancellation near ``1 / eps`` — before this test,
+    such a point was reported solved with a residual of 0.5.
 
     Lemke is guaranteed to find a solution for P-matrices (unique solution) and, for
     copositive-plus ``M``, ends in a ray only when the LCP is infeasible — but its path may
@@ -235,8 +278,35 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
 
 # ----------------------------------------------------------------------------- the solver
 
-# One method run: (z, w, status, iterations, residual, method name).
-_Outcome = tuple[NDArray[np.float64], NDArray[np.float64], str, int, float, str]
+class _Outcome(NamedTuple):
+    """One method run, verified (its status reconciled with :func:`kernels.certify`)."""
+
+    z: NDArray[np.float64]
+    w: NDArray[np.float64]
+    status: str
+    iterations: int
+    residual: float
+    method: str
+    tolerance: float
+    limit: int          # the budget max_iter the run had (pivots, sweeps or iterations)
+    note: str = ""      # why the budget was shorter than max_iter, if it was
+
+    def describe(self) -> str:
+        """``"name: status (residual r, ...)"``: why it stopped, the budget if spent."""
+        text = f"{self.method}: {self.status} (residual {self.residual:.3g}"
+        if self.status == "max_iter":
+            unit = _UNITS.get(self.method, "iterations")
+            text += self.note or f", budget max_iter = {self.limit} {unit} spent"
+        elif self.status != "solved" and not math.isfinite(self.residual):
+            text += ", the iterate is not finite"
+        elif self.status != "solved" and self.tolerance == -math.inf:
+            text += ", not certifiable: M z + q cancels beyond half the float64 digits"
+        elif self.status == "numerical_failure" and self.residual > self.tolerance:
+            text += f" above the tolerance {self.tolerance:.3g}"
+        return text + ")"
+
+
+_UNITS = {"lemke": "pivots", "pgs": "sweeps", "banded": "iterations"}
 
 
 class LCPSolver:
@@ -290,11 +360,12 @@ class LCPSolver:
             check_in_interval("omega", omega, 0.0, 2.0, open_interval=True))
         self.max_iter = None if max_iter is None else check_integer("max_iter", max_iter,
                                                                      minimum=1)
-        self.strict = bool(strict)
+        self.strict = strict if strict is False or strict is True else check_bool(
+            "strict", strict)
         if (type(M) is np.ndarray and M.dtype == np.float64 and M.ndim == 2
                 and M.flags.c_contiguous and M.flags.writeable and M.shape[0] == M.shape[1]):
-            # the common case in one compiled scan: finiteness, tridiagonality, ||M||_inf
-            finite, tridiagonal, self._row_sum_max = kernels.dense_structure(M)
+            # the common case in one compiled scan: finiteness, tridiagonality
+            finite, tridiagonal = kernels.dense_structure(M)
             if not finite:
                 check_finite("M", M)
             self._M = self._dense = M
@@ -302,7 +373,6 @@ class LCPSolver:
         else:
             self._M = _as_lcp_matrix(M)
             self._bands = _tridiagonal_bands(self._M)
-            self._row_sum_max = self._inf_norm()
         self.n: int = int(self._M.shape[0])
         self.first_method: str = self._first_method()
         self._fused = self._fused_first_call()
@@ -353,31 +423,38 @@ class LCPSolver:
                 and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == self.n):
             q = self._check_q(q)
         if z0 is None and self._fused is not None:
-            # the per-call path of a reusable solver, kept short: one compiled call
+            # the per-call path of a reusable solver, kept short: one compiled call, whose
+            # status is already reconciled with the residual test (kernels.certify)
             n = self.n
             z, w = np.empty(n), np.empty(n)
-            code, its, res, floor = self._fused(q, z, w)
-            # the acceptance test of _outcome, inlined
-            if code == 0 and (res <= self.tol or res <= floor) and floor < math.inf:
+            code, its, res, tolerance = self._fused(q, z, w)
+            if code == 0:
                 z.setflags(write=False)
                 w.setflags(write=False)
                 method = self.first_method
                 return LCPResult(z, w, "solved", its, res, method,
-                                 f"{method}: solved (residual {res:.3g})")
+                                 f"{method}: solved (residual {res:.3g})", tolerance)
             if code == kernels.Q_NOT_FINITE:
                 check_finite("q", q)
-            first = self._outcome(z, w, code, its, res, floor, self.first_method)
+            first = self._outcome(z, w, code, its, res, tolerance, self.first_method,
+                                  self._limit(self.first_method))
             z0v = None
         else:
             z0v = None if z0 is None else as_vector("z0", z0, size=self.n)
             first = _RUNNERS[self.first_method](self, q, z0v, self.max_iter)
-        if first[2] == "solved":
-            z, w, status, its, res, method = first
-            return LCPResult(z, w, status, its, res, method,
-                             f"{method}: solved (residual {res:.3g})")
-        result = self._run_fallbacks(q, z0v, first)
+        if first.status == "solved":
+            return LCPResult(first.z, first.w, "solved", first.iterations, first.residual,
+                             first.method, first.describe(), first.tolerance)
+        result, chosen = self._run_fallbacks(q, z0v, first)
         if result.status != "solved":
             result = self._retry_rescaled(q, z0v, result)
+        if self.strict and result.status == "max_iter":
+            raise BudgetExceededError(
+                f"max_iter: the LCP of size {self.n} was not solved within the budget "
+                f"max_iter = {chosen.limit} {_UNITS.get(chosen.method, 'iterations')} of "
+                f"{chosen.method} ({result.message}); raise max_iter, or try another method; "
+                "the last iterate is in err.partial", budget="max_iter", limit=chosen.limit,
+                used=chosen.iterations, partial=result)
         if self.strict and result.status != "solved":
             raise SolverError(f"no verified solution of the LCP of size {self.n} "
                               f"({result.message}); check that M is a P-matrix or "
@@ -386,43 +463,56 @@ class LCPSolver:
         return result
 
     def _fused_first_call(self) -> Callable[..., tuple[int, int, float, float]] | None:
-        """``f(q, z, w) -> (code, iterations, residual, floor)``: the first method's kernel
-        fused with its verification, when it has one (Lemke, PGS with its polish from zero,
+        """``f(q, z, w) -> (code, iterations, residual, tolerance)``: the first method's
+        kernel fused with its verification, when it has one (Lemke, PGS with its polish from zero,
         tridiagonal ``banded`` from its own start); None otherwise."""
-        max_iter = self.max_iter
+        tol = self.tol
+        limit = self._limit(self.first_method)
         if self.first_method == "lemke":
-            M, norm = self._dense, self._row_sum_max
+            M = self._dense
             lemke = kernels.lemke_verified
-            return lambda q, z, w: lemke(M, q, z, w, max_iter or 0, norm)
+            return lambda q, z, w: lemke(M, q, z, w, limit, tol)
         if self.first_method == "pgs":
-            M, tol, omega = self._dense, self.tol, self.omega
-            sweeps = int(max_iter or 10_000)
+            M, omega = self._dense, self.omega
             pgs = kernels.pgs_verified
-            return lambda q, z, w: pgs(M, q, z, w, tol, sweeps, omega, True)
+            return lambda q, z, w: pgs(M, q, z, w, tol, limit, omega, True)
         if self.first_method == "banded" and self._bands is not None:
             lower, diag, upper = self._bands
-            limit = int(max_iter or self.n + 2)
             howard = kernels.tridiagonal_verified
-            return lambda q, z, w: howard(lower, diag, upper, q, z, w, limit, False)
+            return lambda q, z, w: howard(lower, diag, upper, q, z, w, limit, False, tol)
         return None
 
+    def _limit(self, name: str, max_iter: int | None = None) -> int:
+        """The budget of one run of method ``name``: ``max_iter`` when given (else the
+        solver's), otherwise the method's default (see :func:`solve_lcp`)."""
+        limit = max_iter or self.max_iter
+        if limit:
+            return int(limit)
+        if name == "lemke":
+            return 50 * (self.n + 1)
+        if name == "banded":
+            return self.n + 2
+        if name == "pgs_fallback":
+            return AUTO_PGS_FALLBACK_SWEEPS
+        return PGS_SWEEPS
+
     def _run_fallbacks(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
-                       first: _Outcome) -> LCPResult:
+                       first: _Outcome) -> tuple[LCPResult, _Outcome]:
         """Run ``auto``'s fallbacks after a failed first method until one is verified;
         the message lists every method run, in order. When all fail, the result is Lemke's
         ray termination if there was one (for copositive-plus ``M`` a certificate that the
-        LCP is infeasible), else the last method's."""
+        LCP is infeasible), else the last method's. Returns it with the chosen run."""
         tried = [first]
         for name in self._fallbacks():
             tried.append(_RUNNERS[name](self, q, z0, self.max_iter))
-            if tried[-1][2] == "solved":
+            if tried[-1].status == "solved":
                 break
         chosen = tried[-1]
-        if chosen[2] != "solved":
-            chosen = next((o for o in tried if o[2] == "ray_termination"), chosen)
-        z, w, status, its, res, method = chosen
-        message = "; ".join(f"{o[5]}: {o[2]} (residual {o[4]:.3g})" for o in tried)
-        return LCPResult(z, w, status, its, res, method, message)
+        if chosen.status != "solved":
+            chosen = next((o for o in tried if o.status == "ray_termination"), chosen)
+        message = "; ".join(o.describe() for o in tried)
+        return LCPResult(chosen.z, chosen.w, chosen.status, chosen.iterations,
+                         chosen.residual, chosen.method, message, chosen.tolerance), chosen
 
     def _check_q(self, q: Any) -> NDArray[np.float64]:
         """``q`` as a writeable C-contiguous float64 vector of length n; finiteness is
@@ -440,16 +530,6 @@ class LCPSolver:
         return q
 
     # ------------------------------------------------------------------ analysis
-
-    def _inf_norm(self) -> float:
-        if self._bands is not None:
-            lower, diag, upper = self._bands
-            return float(kernels.tridiagonal_inf_norm(lower, diag, upper))
-        if isinstance(self._M, np.ndarray):
-            return float(kernels.inf_norm(self._M))
-        if self._M.shape[0] == 0:
-            return 0.0
-        return float(np.asarray(abs(self._M).sum(axis=1)).max())
 
     @property
     def _sparse(self) -> bool:
@@ -541,63 +621,65 @@ class LCPSolver:
 
     # ------------------------------------------------------------------ runners
 
-    def _finish(self, q: NDArray[np.float64], z: NDArray[np.float64], code: int,
-                iterations: int, method: str) -> _Outcome:
-        """Recompute ``w`` from ``z`` and accept "solved" only if the residual passes."""
-        w, res, floor = self._verify(z, q)
-        return self._outcome(z, w, code, iterations, res, floor, method)
-
     def _outcome(self, z: NDArray[np.float64], w: NDArray[np.float64], code: int,
-                 iterations: int, res: float, floor: float, method: str) -> _Outcome:
-        status = STATUSES[code]
-        # an infinite floor means z or w overflowed: nothing is certified then
-        if status == "solved" and not (res <= max(self.tol, floor) and floor < math.inf):
-            status = "numerical_failure"
+                 iterations: int, res: float, tolerance: float, method: str, limit: int
+                 ) -> _Outcome:
+        """A run's outcome from a status already reconciled with the residual test."""
         z.setflags(write=False)
         w.setflags(write=False)
-        return z, w, status, int(iterations), float(res), method
+        return _Outcome(z, w, STATUSES[code], int(iterations), float(res), method,
+                        float(tolerance), int(limit))
 
     def _verify(self, z: NDArray[np.float64], q: NDArray[np.float64]
-                ) -> tuple[NDArray[np.float64], float, float]:
-        """``w = M z + q`` recomputed, the residual and the round-off floor (see
-        :func:`solve_lcp`)."""
+                ) -> tuple[NDArray[np.float64], float, float, bool]:
+        """``w = M z + q`` recomputed from ``z``, and :func:`kernels.certify`'s residual,
+        tolerance and verdict."""
         w = np.empty_like(z)
-        if self.n == 0:
-            return w, 0.0, 0.0
         if self._bands is not None:
             lower, diag, upper = self._bands
-            res, floor = kernels.verify_tridiagonal(lower, diag, upper, q, z, w)
+            res, tolerance, ok = kernels.verify_tridiagonal(lower, diag, upper, q, z, w,
+                                                            self.tol)
         elif isinstance(self._M, np.ndarray):
-            res, floor = kernels.verify_dense(self._M, q, z, w)
+            res, tolerance, ok = kernels.verify_dense(self._M, q, z, w, self.tol)
         else:
-            w = np.asarray(self._M @ z + q, dtype=np.float64)
-            res, floor = kernels._residual_and_floor(z, w, q, self._row_sum_max)
-        return w, float(res), float(floor)
+            w = np.asarray(self._M @ z + q, dtype=np.float64).ravel()
+            with np.errstate(over="ignore", invalid="ignore"):
+                mz = float(np.max(abs(self._M) @ np.abs(z), initial=0.0))
+            res, tolerance, ok = kernels.certify(z, w, q, mz, self._terms, self.tol)
+        return w, float(res), float(tolerance), bool(ok)
+
+    @cached_property
+    def _terms(self) -> int:
+        """Terms in one entry of ``M z + q`` for sparse ``M``: a row's non-zeros plus one."""
+        csr: Any = self._M
+        return int(np.max(np.diff(csr.indptr), initial=0)) + 1
 
     def _run_lemke(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                    max_iter: int | None) -> _Outcome:
         n = self.n
         z, w = np.empty(n), np.empty(n)
-        code, its, res, floor = kernels.lemke_verified(self._dense, q, z, w,
-                                                       max_iter or 0, self._row_sum_max)
+        limit = self._limit("lemke", max_iter)
+        code, its, res, tolerance = kernels.lemke_verified(self._dense, q, z, w, limit,
+                                                           self.tol)
         if code == kernels.Q_NOT_FINITE:
             check_finite("q", q)
-        return self._outcome(z, w, code, its, res, floor, "lemke")
+        return self._outcome(z, w, code, its, res, tolerance, "lemke", limit)
 
     def _run_pgs(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                  max_iter: int | None) -> _Outcome:
         n = self.n
         z = np.zeros(n) if z0 is None else np.array(z0)   # the kernel clamps z0 to >= 0
         w = np.empty(n)
-        code, its, res, floor = kernels.pgs_verified(
-            self._dense, q, z, w, self.tol, int(max_iter or 10_000), self.omega, False)
+        limit = self._limit("pgs", max_iter)
+        code, its, res, tolerance = kernels.pgs_verified(
+            self._dense, q, z, w, self.tol, limit, self.omega, False)
         if code == kernels.Q_NOT_FINITE:
             check_finite("q", q)
-        return self._outcome(z, w, code, its, res, floor, "pgs")
+        return self._outcome(z, w, code, its, res, tolerance, "pgs", limit)
 
     def _run_pgs_fallback(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                           max_iter: int | None) -> _Outcome:
-        return self._run_pgs(q, z0, max_iter or AUTO_PGS_FALLBACK_SWEEPS)
+        return self._run_pgs(q, z0, self._limit("pgs_fallback", max_iter))
 
     def _run_pgs_auto(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                       max_iter: int | None) -> _Outcome:
@@ -606,30 +688,35 @@ class LCPSolver:
         it has not converged is ``M`` tested for positive semidefiniteness (a Cholesky
         factorisation), and PGS continues from the probe's iterate for PSD ``M`` only (where
         it converges). Otherwise the probe's failure hands over to the fallbacks."""
-        total = int(max_iter or 10_000)
+        total = self._limit("pgs", max_iter)
         probe = min(AUTO_PGS_PROBE_SWEEPS, total)
         first = self._run_pgs(q, z0, probe)
-        if first[2] == "solved" or probe == total or not self._symmetric_psd:
+        if first.status == "solved" or probe == total:
             return first
-        z, w, status, its, res, method = self._run_pgs(q, np.array(first[0]), total - probe)
-        return z, w, status, probe + its, res, method
+        if not self._symmetric_psd:
+            return first._replace(note=f", stopped after the probe of {probe} sweeps: M is not "
+                                       "positive semidefinite, where PGS need not converge")
+        rest = self._run_pgs(q, np.array(first.z), total - probe)
+        return rest._replace(iterations=probe + rest.iterations, limit=total)
 
     def _run_banded(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                     max_iter: int | None) -> _Outcome:
         n = self.n
-        limit = int(max_iter or n + 2)
+        limit = self._limit("banded", max_iter)
         z = np.zeros(n) if z0 is None else z0.copy()
         if self._bands is None:
             check_finite("q", q)
             code, its, z = self._howard(q, z, limit)
-            return self._finish(q, z, code, its, "banded")
+            w, res, tolerance, ok = self._verify(z, q)
+            return self._outcome(z, w, int(kernels.verified_status(code, ok)), its, res,
+                                 tolerance, "banded", limit)
         lower, diag, upper = self._bands
         w = np.empty(n)
-        code, its, res, floor = kernels.tridiagonal_verified(lower, diag, upper, q, z, w, limit,
-                                                             z0 is not None)
+        code, its, res, tolerance = kernels.tridiagonal_verified(
+            lower, diag, upper, q, z, w, limit, z0 is not None, self.tol)
         if code == kernels.Q_NOT_FINITE:
             check_finite("q", q)
-        return self._outcome(z, w, code, its, res, floor, "banded")
+        return self._outcome(z, w, code, its, res, tolerance, "banded", limit)
 
     @cached_property
     def _howard_matrix(self) -> Any:
@@ -704,13 +791,13 @@ class LCPSolver:
             return _with_message(failed, note)
         with np.errstate(over="ignore", invalid="ignore"):
             z = np.ldexp(r.z, b - a)
-            w, res, floor = self._verify(z, q)
+            w, res, tolerance, ok = self._verify(z, q)
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(w))):
             return self._overflow(z, w, r, (a, b), q_max, m_max, note)
-        status = "solved" if res <= max(self.tol, floor) else failed.status
         z.setflags(write=False)
         w.setflags(write=False)
-        return LCPResult(z, w, status, r.iterations, res, r.method, note)
+        return LCPResult(z, w, "solved" if ok else failed.status, r.iterations, res, r.method,
+                         note, tolerance)
 
     def _overflow(self, z: NDArray[np.float64], w: NDArray[np.float64], scaled: LCPResult,
                   exponents: tuple[int, int], q_max: float, m_max: float, note: str
@@ -731,7 +818,7 @@ class LCPSolver:
         z.setflags(write=False)
         w.setflags(write=False)
         return LCPResult(z, w, "overflow", scaled.iterations, math.inf, scaled.method,
-                         message)
+                         message, -math.inf)
 
 
 _RUNNERS = {"lemke": LCPSolver._run_lemke, "pgs": LCPSolver._run_pgs,
@@ -741,7 +828,7 @@ _RUNNERS = {"lemke": LCPSolver._run_lemke, "pgs": LCPSolver._run_pgs,
 
 def _with_message(result: LCPResult, message: str) -> LCPResult:
     return LCPResult(result.z, result.w, result.status, result.iterations, result.residual,
-                     result.method, message)
+                     result.method, message, result.tolerance)
 
 
 def _sparse_block_solver(M: Any, idx: NDArray[np.intp], rhs: NDArray[np.float64]

@@ -22,8 +22,8 @@ def lcp_steps(Phi, Gam, Gh, HPhi, HGam, Dh, M3, Qa3, q03, T3, s3, comp, nv, mg, 
     ``0 <= ζ ⟂ M ζ + Qa a_g + q0 >= 0`` of size ``nv[g]`` (zero-padded in ``M3[g]``,
     ``Qa3[g]``, ``q03[g]``), with ``a_g = a + D_h w`` restricted to the block (the multipliers
     of the blocks solved before it enter, the others are still zero) and ``w = T ζ + s``.
-    Every Lemke solution is accepted only if its natural residual is below ``tol`` (or the
-    round-off floor).
+    Every Lemke solution is accepted only if its natural residual passes the shared test
+    of :func:`~nscontrol.numerics._lcp_kernels.certify` (``tol`` plus the round-off bound).
 
     Returns ``(k, status, residual)``: the number of completed steps, the status of the first
     failed step (0 when all succeeded; ``NUMERICAL_FAILURE`` for a rejected residual) and
@@ -69,8 +69,8 @@ def lcp_steps(Phi, Gam, Gh, HPhi, HGam, Dh, M3, Qa3, q03, T3, s3, comp, nv, mg, 
                 status, _ = lemke_kernel(M, qlcp, zeta, wv, 50 * (v + 1))
                 if status != 0:
                     return k, status, np.inf
-                res, floor = verify_dense(M, qlcp, zeta, wv)
-                if not res <= max(tol, floor):
+                res, _, certified = verify_dense(M, qlcp, zeta, wv, tol)
+                if not certified:
                     return k, NUMERICAL_FAILURE, res
                 worst = max(worst, res)
             for li in range(kg):
