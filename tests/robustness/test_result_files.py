@@ -330,7 +330,7 @@ def test_failed_save_on_a_full_disk_leaves_the_process_and_the_file_whole(tmp_pa
     assert sorted(os.listdir(tmp_path)) == sorted(before)          # no temporary file
 
 
-CHILD_KILLED = """
+CHILD_KILLED_BEFORE_RENAME = """
     import os, signal, sys
     from pathlib import Path
     import numpy as np
@@ -343,12 +343,32 @@ CHILD_KILLED = """
     Trajectory(t=np.arange(3.0), x=np.zeros((3, 1))).save(Path(sys.argv[-1]) / "run.h5")
 """
 
+CHILD_KILLED_MID_WRITE = """
+    import resource, signal, sys
+    from pathlib import Path
+    import numpy as np
+    from nscontrol.simulate.trajectory import Trajectory
 
-def test_killed_save_leaves_an_orphan_the_next_save_removes(tmp_path):
+    big = Trajectory(t=np.arange(100_000.0), x=np.zeros((100_000, 3)))
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    # past the limit the kernel sends SIGXFSZ, whose default action (Python ignores it)
+    # ends the process at once: a save killed in the middle of writing a 3.2 MB file
+    signal.signal(signal.SIGXFSZ, signal.SIG_DFL)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (65536, 65536))
+    big.save(Path(sys.argv[-1]) / "run.h5")
+"""
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGXFSZ"), reason="needs POSIX signals")
+@pytest.mark.parametrize(("child", "sig"), [(CHILD_KILLED_BEFORE_RENAME, "SIGKILL"),
+                                            (CHILD_KILLED_MID_WRITE, "SIGXFSZ")])
+def test_killed_save_leaves_an_orphan_the_next_save_removes(tmp_path, child, sig):
     target = tmp_path / "run.h5"
     saved("trajectory", target)
-    res = run_child(CHILD_KILLED, tmp_path)
-    assert res.returncode == -signal.SIGKILL, (res.returncode, res.stderr[-2000:])
+    before = target.read_bytes()
+    res = run_child(child, tmp_path)
+    assert res.returncode == -getattr(signal, sig), (res.returncode, res.stderr[-2000:])
+    assert target.read_bytes() == before
     orphans = [n for n in os.listdir(tmp_path) if n != "run.h5"]
     assert len(orphans) == 1 and orphans[0].startswith(".run.h5.")
     assert orphans[0].endswith(".tmp"), orphans
