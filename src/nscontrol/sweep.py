@@ -575,7 +575,7 @@ def _end_overdue(pool: Any, call: _Guarded, budget: float, pending: set[int],
         if process is not None:
             process.kill()
         else:
-            os.kill(pid, signal.SIGTERM)
+            os.kill(pid, getattr(signal, "SIGKILL", signal.SIGTERM))
         ended += 1
     return ended
 
