@@ -4,7 +4,8 @@
 default, in a Dask cluster when given ``dask.distributed.Client(...).get_executor()``, a
 ``Client`` or a scheduler address such as ``"tcp://10.0.0.5:8786"`` (extra ``cluster``) — and
 returns a frozen :class:`SweepResult` holding the values **in grid order** and, per point, the
-error that point raised. One failing point never loses the others.
+error that point raised. One failing point never loses the others, and with ``point_timeout``
+(local process pools) one that never returns is stopped and recorded as failed.
 
 Picklability
 ------------
@@ -28,17 +29,19 @@ import os
 import pickle
 import re
 import shutil
+import signal
 import sys
 import tempfile
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
 
+from ._validation import check_positive
 from .errors import ModelError, NscontrolError
 
 __all__ = ["run", "SweepResult", "PointError", "SweepError", "AUTO_PARALLEL_SECONDS",
@@ -128,9 +131,10 @@ class _Guarded:
 
     Every exception but ``KeyboardInterrupt`` is the point's error, ``SystemExit`` included.
     In local worker processes (``marks`` set) the wrapper leaves a file named after the point
-    in ``marks`` while it runs, so that after a worker dies the points it was running are
-    known, and pickles the value itself (``ship``), so that a value that cannot travel back is
-    reported as such for its point.
+    in ``marks`` while it runs, holding the worker's pid and the start time, so that after a
+    worker dies the points it was running are known, and a point running longer than
+    ``point_timeout`` is found with the process to end; and it pickles the value itself
+    (``ship``), so that a value that cannot travel back is reported as such for its point.
     """
 
     fn: Callable[[Any], Any]
@@ -141,7 +145,8 @@ class _Guarded:
         index, point = indexed
         mark = None if self.marks is None else os.path.join(self.marks, str(index))
         if mark is not None:
-            open(mark, "w").close()
+            with open(mark, "w") as fh:
+                fh.write(f"{os.getpid()} {time.time()!r}")
         try:
             value = self.fn(point)
         except KeyboardInterrupt:
@@ -196,7 +201,8 @@ AUTO_PARALLEL_SECONDS = 0.15
 
 def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         executor: Executor | str | Any | None = None,
-        progress: bool | None = None, desc: str = "sweep") -> SweepResult:
+        progress: bool | None = None, desc: str = "sweep",
+        point_timeout: float | None = None) -> SweepResult:
     """Evaluate ``fn(point)`` for every point of ``grid``, in parallel.
 
     Parameters
@@ -221,6 +227,15 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         ``True`` always, ``False`` never.
     desc
         Label of the progress bar.
+    point_timeout
+        Wall-time budget of one point, in seconds (``None``: none). A point still running
+        after it is recorded as a :class:`PointError` of type ``BudgetExceededError`` naming
+        ``point_timeout``, and the worker process running it is ended; the other points run
+        on (those that were running beside it are re-run in a fresh pool). Enforced on local
+        process pools only (``None``, ``"auto"``, which then runs every point in the pool,
+        and a :class:`~concurrent.futures.ProcessPoolExecutor`, which the ended worker
+        leaves broken for later use): a point running in this process, a thread or a Dask
+        worker cannot be stopped, so those executors refuse the option.
 
     Returns
     -------
@@ -234,14 +249,17 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     and fails every point still queued on it; those points are re-run in a fresh pool. The
     points the dead workers were running are re-run alone, each in its own process: one that
     kills its process again is recorded as its own :class:`PointError` (``WorkerDied``), the
-    others keep their values. At most :data:`MAX_POOL_RESTARTS` fresh pools are started.
+    others keep their values. At most :data:`MAX_POOL_RESTARTS` fresh pools are started
+    after such deaths (the workers ended for ``point_timeout`` do not count: each of those
+    settles its point).
 
     Raises
     ------
     ModelError
         ``fn`` is not callable, ``grid`` is not an iterable of points, or ``executor`` is of
         an unsupported type or a string that is neither ``"serial"``, ``"auto"`` nor a
-        scheduler address (``tcp://host:port`` or ``host:port``).
+        scheduler address (``tcp://host:port`` or ``host:port``); ``point_timeout`` is not a
+        positive number, or is given with an executor that cannot stop a running point.
     KeyboardInterrupt
         Re-raised after the points that finished are kept: ``err.sweep_result`` holds the
         :class:`SweepResult` so far (unfinished points carry a ``KeyboardInterrupt`` error).
@@ -261,6 +279,7 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
                          f"{type(fn).__name__}")
     points = _points(grid)
     _check_executor(executor)
+    budget = _check_point_timeout(point_timeout, executor)
     if not points:
         return SweepResult((), (), ())
     call = _Guarded(fn)
@@ -270,11 +289,12 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     todo = list(enumerate(points))
     bar = _bar(len(points), progress, desc)
     try:
-        if isinstance(executor, str) and executor == "auto":
+        if isinstance(executor, str) and executor == "auto" and budget is None:
             _run_auto(call, todo, values, errors, bar, done)
-        else:
-            with _executor_for(executor, len(points)) as ex:
-                _dispatch(ex, call, todo, values, errors, bar, done)
+        else:                          # "auto" with a budget: every point in a local pool
+            auto = isinstance(executor, str) and executor == "auto"
+            with _executor_for(None if auto else executor, len(points)) as ex:
+                _dispatch(ex, call, todo, values, errors, bar, done, budget)
     except KeyboardInterrupt as exc:
         for i, finished in enumerate(done):
             if not finished:
@@ -295,6 +315,11 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
 #: Fresh local pools :func:`run` starts after worker processes died, before it records the
 #: points not yet run as errors.
 MAX_POOL_RESTARTS = 10
+
+#: Longest wait (seconds) between two looks for points over ``point_timeout``; the wait is
+#: also at most a quarter of the budget, so a point is ended within 1.25 budgets (plus the
+#: time to end its process).
+_POLL_SECONDS = 0.25
 
 _ADDRESS = re.compile(r"^(?:(?:tcp|tls|ucx|ws|wss)://)?"
                       r"(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9_.-]*[A-Za-z0-9])?)"
@@ -330,6 +355,26 @@ def _check_executor(executor: Any) -> None:
                      f"address (tcp://host:port or host:port){hint}")
 
 
+def _check_point_timeout(point_timeout: Any, executor: Any) -> float | None:
+    """The per-point budget in seconds (None: unlimited); refused where no running point can
+    be stopped (only ending its process stops a point: a thread or Dask task cannot be)."""
+    if point_timeout is None:
+        return None
+    budget = check_positive("point_timeout", point_timeout)
+    local = (executor is None or isinstance(executor, ProcessPoolExecutor)
+             or (isinstance(executor, str) and executor == "auto"))
+    if not local:
+        what = (repr(executor) if isinstance(executor, str)
+                else f"a {type(executor).__name__}")
+        raise ModelError(
+            f"point_timeout: a running point can be stopped only by ending its worker process, "
+            f"which nscontrol does on local process pools only (executor=None, 'auto' or a "
+            f"ProcessPoolExecutor), got executor={what}; run on a local pool, or bound the "
+            f"work inside fn (its own step or iteration budgets); on Dask, Future.cancel leaves "
+            f"a running task in its worker thread, only restarting the workers stops it")
+    return budget
+
+
 def _run_auto(call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
               errors: list[PointError | None], bar: Any, done: list[bool]) -> None:
     """``executor="auto"``: a timed pilot point here, then processes only if they pay."""
@@ -348,72 +393,71 @@ def _run_auto(call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
 
 def _dispatch(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]],
               values: list[Any], errors: list[PointError | None], bar: Any,
-              done: list[bool]) -> None:
-    """Local process pools get crash recovery; other executors run as they are."""
+              done: list[bool], budget: float | None = None) -> None:
+    """Local process pools get crash recovery and the per-point budget; other executors run
+    as they are."""
     if isinstance(ex, ProcessPoolExecutor):
-        _gather_recovering(ex, call, todo, values, errors, bar, done)
+        _gather_recovering(ex, call, todo, values, errors, bar, done, budget)
     else:
         _gather(ex, call, todo, values, errors, bar, done)
 
 
 def _gather_recovering(pool: ProcessPoolExecutor, call: _Guarded, todo: list[tuple[int, Any]],
                        values: list[Any], errors: list[PointError | None], bar: Any,
-                       done: list[bool]) -> None:
+                       done: list[bool], budget: float | None = None) -> None:
     """:func:`_gather` on a local pool, re-running the points a dead worker took with it.
 
     After a crash the points whose marks remain (they were running) are re-run alone, each
     in a fresh one-worker pool, so the culprit is identified; the points that never started
-    go to a fresh pool of the same size. Each round settles at least one point, and at most
-    :data:`MAX_POOL_RESTARTS` rounds run.
+    go to a fresh pool of the same size. When the pool broke because workers were ended for
+    the ``budget`` (their points settled), the culprits are known: every lost point goes to
+    the fresh pool. Each round settles at least one point; at most
+    :data:`MAX_POOL_RESTARTS` rounds follow a crash.
     """
     marks = tempfile.mkdtemp(prefix="nscontrol-sweep-")
     call = replace(call, marks=marks, ship=True)
     workers = getattr(pool, "_max_workers", None) or (os.cpu_count() or 1)
     context = getattr(pool, "_mp_context", None)
     try:
-        lost = _gather(pool, call, todo, values, errors, bar, done)
+        lost, ended = _gather(pool, call, todo, values, errors, bar, done, budget)
         restarts = 0
         while lost:
-            restarts += 1
             running = {int(n) for n in os.listdir(marks)}
             for n in os.listdir(marks):
                 os.unlink(os.path.join(marks, n))
-            # the points the dead workers held (the first few lost ones when no mark says)
-            suspects = [ip for ip in lost if ip[0] in running] or lost[:workers]
-            for i, p in suspects:
-                _run_alone(call, i, p, context, values, errors, bar, done)
-            lost = [ip for ip in lost if not done[ip[0]]]
-            if lost and restarts >= MAX_POOL_RESTARTS:
+            if not ended:
+                restarts += 1
+                # the points the dead workers held (the first few lost ones when no mark says)
+                suspects = [ip for ip in lost if ip[0] in running] or lost[:workers]
+                for i, p in suspects:
+                    _run_alone(call, i, p, context, values, errors, bar, done, budget)
+                lost = [ip for ip in lost if not done[ip[0]]]
+            if lost and not ended and restarts >= MAX_POOL_RESTARTS:
                 for i, _ in lost:
                     _settle(i, PointError(i, "BrokenProcessPool", (
-                        f"not run: worker processes died {restarts} times in this sweep; "
-                        "run these points with executor='serial' to see why")),
+                        f"not run: worker processes died {restarts} times in this sweep "
+                        f"(MAX_POOL_RESTARTS = {MAX_POOL_RESTARTS} fresh pools spent); run "
+                        "these points with executor='serial' to see why")),
                         values, errors, bar, done)
                 return
             if lost:
                 with _owned_pool(workers, context) as fresh:
-                    lost = _gather(fresh, call, lost, values, errors, bar, done)
+                    lost, ended = _gather(fresh, call, lost, values, errors, bar, done, budget)
     finally:
         shutil.rmtree(marks, ignore_errors=True)
 
 
 def _run_alone(call: _Guarded, i: int, p: Any, context: Any, values: list[Any],
-               errors: list[PointError | None], bar: Any, done: list[bool]) -> None:
+               errors: list[PointError | None], bar: Any, done: list[bool],
+               budget: float | None) -> None:
     """One point in a fresh one-worker pool: its value, its error, or its own crash."""
     with _owned_pool(1, context) as solo:
-        fut = solo.submit(call, (i, p))
-        try:
-            fut.result()
-        except BrokenProcessPool:
-            _settle(i, PointError(i, "WorkerDied", (
-                f"the worker process died while running point {i} (os._exit, a segfault, the "
-                "OOM killer...); re-run alone in a fresh process it died again; the other "
-                "points were re-run in a fresh pool")), values, errors, bar, done)
-            return
-        except Exception:
-            pass
-        _store(i, fut, values, errors, "")
-        _tick(i, bar, done)
+        lost, _ = _gather(solo, call, [(i, p)], values, errors, bar, done, budget)
+    if lost:
+        _settle(i, PointError(i, "WorkerDied", (
+            f"the worker process died while running point {i} (os._exit, a segfault, the "
+            "OOM killer...); re-run alone in a fresh process it died again; the other "
+            "points were re-run in a fresh pool")), values, errors, bar, done)
 
 
 def _settle(i: int, error: PointError, values: list[Any], errors: list[PointError | None],
@@ -442,16 +486,17 @@ def _owned_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
 
 
 def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
-            errors: list[PointError | None], bar: Any, done: list[bool]
-            ) -> list[tuple[int, Any]]:
+            errors: list[PointError | None], bar: Any, done: list[bool],
+            budget: float | None = None) -> tuple[list[tuple[int, Any]], int]:
     """Run the ``(index, point)`` pairs of ``todo`` on ``ex`` (in this process when None) and
     store values and errors by index. Returns the pairs lost to a broken local pool (not
-    stored: the caller re-runs them)."""
+    stored: the caller re-runs them) and how many workers were ended because their point
+    ran over ``budget`` seconds (local pools with marks only)."""
     if ex is None:
         for i, p in todo:
             _store(i, _resolved(call, (i, p)), values, errors, "")
             _tick(i, bar, done)
-        return []
+        return [], 0
     dask = type(ex).__module__.startswith("distributed")
     futures: dict[Future, int] = {}
     fn_problem = ""  # set once fn itself is known not to serialise: no more submits
@@ -472,19 +517,67 @@ def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], va
     diagnosis: str | None = None
     lost: list[tuple[int, Any]] = []
     points = dict(todo)
-    for f in as_completed(futures):
-        i = futures[f]
-        failure = f.exception()
-        if isinstance(failure, BrokenProcessPool):
-            lost.append((i, points[i]))
+    timed = budget is not None and call.marks is not None
+    poll = min(_POLL_SECONDS, budget / 4) if timed and budget is not None else None
+    ended = 0
+    pending = set(futures)
+    while pending:
+        finished, pending = wait(pending, timeout=poll, return_when=FIRST_COMPLETED)
+        for f in finished:
+            i = futures[f]
+            if done[i]:          # its worker was ended for the budget: settled already
+                continue
+            failure = f.exception()
+            if isinstance(failure, BrokenProcessPool):
+                lost.append((i, points[i]))
+                continue
+            if isinstance(failure, KeyboardInterrupt):
+                raise failure
+            if diagnosis is None and failure is not None:
+                diagnosis = _pickling_problem(call, dask=dask) or _transit_problem(i,
+                                                                                  points[i])
+            _store(i, f, values, errors, diagnosis or "")
+            _tick(i, bar, done)
+        if timed and pending and budget is not None:
+            ended += _end_overdue(ex, call, budget, {futures[f] for f in pending}, values,
+                                  errors, bar, done)
+    return sorted(lost, key=lambda ip: ip[0]), ended
+
+
+def _end_overdue(pool: Any, call: _Guarded, budget: float, pending: set[int],
+                 values: list[Any], errors: list[PointError | None], bar: Any,
+                 done: list[bool]) -> int:
+    """Settle every point of ``pending`` running longer than ``budget`` as a
+    ``BudgetExceededError`` and end its worker process (the only way to stop it). Returns
+    how many were ended."""
+    assert call.marks is not None
+    processes = getattr(pool, "_processes", None) or {}
+    now, ended = time.time(), 0
+    for name in os.listdir(call.marks):
+        mark = os.path.join(call.marks, name)
+        try:
+            with open(mark) as fh:
+                pid_text, start_text = fh.read().split()
+            i, pid, elapsed = int(name), int(pid_text), now - float(start_text)
+        except (OSError, ValueError):  # being written or removed right now: next look
             continue
-        if isinstance(failure, KeyboardInterrupt):
-            raise failure
-        if diagnosis is None and failure is not None:
-            diagnosis = _pickling_problem(call, dask=dask) or _transit_problem(i, points[i])
-        _store(i, f, values, errors, diagnosis or "")
-        _tick(i, bar, done)
-    return sorted(lost, key=lambda ip: ip[0])
+        if i not in pending or done[i] or elapsed <= budget:
+            continue
+        process = processes.get(pid)
+        if processes and process is None:  # not a worker of this pool: a stale mark
+            continue
+        _settle(i, PointError(i, "BudgetExceededError", (
+            f"point {i} ran longer than point_timeout={budget:g} s (stopped after "
+            f"{elapsed:.3g} s by ending its worker process); raise point_timeout, or run the "
+            f"point alone (executor='serial') to see why it is slow")), values, errors, bar,
+            done)
+        os.unlink(mark)
+        if process is not None:
+            process.kill()
+        else:
+            os.kill(pid, getattr(signal, "SIGKILL", signal.SIGTERM))
+        ended += 1
+    return ended
 
 
 def _transit_problem(index: int, point: Any) -> str:

@@ -131,6 +131,7 @@ def test_restarts_are_bounded(monkeypatch):
             assert res.values[i] == i * i
         elif res.errors[i].type != "WorkerDied":
             assert "executor='serial'" in res.errors[i].message
+            assert "MAX_POOL_RESTARTS = 1 fresh pools spent" in res.errors[i].message
     assert all(res.errors[i] is not None for i in (2, 5, 8))
 
 
@@ -237,3 +238,89 @@ def test_unpicklable_point_is_named():
 def test_math_sqrt_values_exact_through_processes():
     res = sweep.run(math.sqrt, [2.0, 3.0], progress=False)
     assert res.values == (math.sqrt(2.0), math.sqrt(3.0))
+
+
+# ----------------------------------------------------------------------------- time budget
+
+#: Seconds: a healthy point here takes microseconds, a hanging one forever; 2 s keeps a
+#: healthy point clear of the budget even on a machine descheduling workers under load.
+BUDGET = 2.0
+
+
+def _hang_at_3(p):
+    if p == 3:
+        import time
+
+        time.sleep(3600)
+    return p * p
+
+
+def _hang_at_3_and_8(p):
+    return _hang_at_3(3 if p == 8 else p) if p in (3, 8) else p * p
+
+
+def _hang_at_3_exit_at_8(p):
+    if p == 8:
+        os._exit(5)
+    return _hang_at_3(p)
+
+
+def assert_over_budget(res, bad: set[int]) -> None:
+    for i in bad:
+        e = res.errors[i]
+        assert e.type == "BudgetExceededError", e
+        assert f"point {i} ran longer than point_timeout={BUDGET:g} s" in e.message
+        assert "raise point_timeout" in e.message
+
+
+@pytest.mark.parametrize("executor", [None, "auto", "pool"])
+def test_point_over_its_time_budget_is_recorded_and_stopped(executor):
+    import time
+
+    start = time.perf_counter()
+    if executor == "pool":
+        with ProcessPoolExecutor(max_workers=2) as pool:
+            res = sweep.run(_hang_at_3, range(N), executor=pool, point_timeout=BUDGET,
+                            progress=False)
+    else:
+        res = sweep.run(_hang_at_3, range(N), executor=executor, point_timeout=BUDGET,
+                        progress=False)
+    elapsed = time.perf_counter() - start
+    assert_healthy_points_kept(res, {3})
+    assert_over_budget(res, {3})
+    # stopped within 1.25 budgets (the look every budget/4), plus pools started and ended:
+    # nowhere near the hour the point would sleep
+    assert elapsed < 1.25 * BUDGET + 60.0
+
+
+def test_ended_workers_do_not_spend_the_restart_budget(monkeypatch):
+    """Two points over budget with no restart allowed: their workers are ended, each
+    settling its point, and every other point still gets its value."""
+    monkeypatch.setattr(sweep_mod, "MAX_POOL_RESTARTS", 0)
+    res = sweep.run(_hang_at_3_and_8, range(N), point_timeout=BUDGET, progress=False)
+    assert_healthy_points_kept(res, {3, 8})
+    assert_over_budget(res, {3, 8})
+
+
+def test_time_budget_and_a_dead_worker_in_one_sweep():
+    res = sweep.run(_hang_at_3_exit_at_8, range(N), point_timeout=BUDGET, progress=False)
+    assert_healthy_points_kept(res, {3, 8})
+    assert_over_budget(res, {3})
+    assert res.errors[8].type == "WorkerDied"
+
+
+@pytest.mark.parametrize("executor", ["serial", "threads", "tcp://scheduler:8786"])
+def test_time_budget_refused_where_a_point_cannot_be_stopped(executor):
+    with ThreadPoolExecutor(2) as threads:
+        with pytest.raises(ModelError) as info:
+            sweep.run(_identity, [1, 2], point_timeout=1.0, progress=False,
+                      executor=threads if executor == "threads" else executor)
+    msg = str(info.value)
+    assert msg.startswith("point_timeout:") and "local process pools" in msg
+    assert "Dask" in msg
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, float("nan"), float("inf"), "1", True])
+def test_time_budget_must_be_a_positive_number(bad):
+    with pytest.raises(ModelError, match="^point_timeout: expected"):
+        sweep.run(_identity, [1], point_timeout=bad, progress=False)

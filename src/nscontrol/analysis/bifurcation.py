@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import replaced_atomically
+from .._files import Reader, load_hdf5, put, save_hdf5
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import ModelError
 from .orbits import at_times, sample_on_grid
@@ -110,40 +110,85 @@ class BifurcationDiagram:
         return pd.DataFrame(data)
 
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write to HDF5 (format ``nscontrol.BifurcationDiagram/1``), atomically."""
-        import h5py
+        """Write to HDF5 (format ``nscontrol.BifurcationDiagram/1``), with a Fletcher-32
+        checksum on every non-empty dataset, atomically (the mechanism of every result type,
+        :mod:`nscontrol._files`).
 
-        path = Path(path)
-        with replaced_atomically(path) as tmp, h5py.File(tmp, "w") as f:
-            f.attrs.update(format="nscontrol.BifurcationDiagram/1",
-                           parameter_name=self.parameter_name, chunk_size=self.chunk_size)
-            f.attrs["directions"] = np.array(self.directions, dtype="S")
-            f.attrs["state_names"] = np.array(self.state_names, dtype="S")
-            f.create_dataset("values", data=self.values)
-            f.create_dataset("points", data=self.points, compression="gzip")
-            f.create_dataset("multiplicity", data=self.multiplicity)
-            f.create_dataset("error_direction",
-                             data=np.array([e[0] for e in self.errors], dtype="S"))
-            f.create_dataset("error_index", data=np.array([e[1] for e in self.errors], int))
-            f.create_dataset("error_message",
-                             data=np.array([e[2].encode() for e in self.errors], dtype="S"))
-        return path
+        Parameters
+        ----------
+        path : str or path-like
+            The file to write; its folder must exist.
+
+        Returns
+        -------
+        Path
+            ``path``.
+
+        Raises
+        ------
+        FileNotFoundError, IsADirectoryError
+            The folder of ``path`` does not exist, or ``path`` is a folder.
+        OSError
+            The disk is full (or a quota, a file size limit): the previous file is unchanged
+            and no temporary file remains.
+        """
+        return save_hdf5(path, self._write)
+
+    def _write(self, f: Any) -> None:
+        """The body of :meth:`save`, into the open (empty) ``f``."""
+        f.attrs.update(format=_FORMAT, parameter_name=self.parameter_name,
+                       chunk_size=self.chunk_size)
+        f.attrs["directions"] = np.array(self.directions, dtype="S")
+        f.attrs["state_names"] = np.array(self.state_names, dtype="S")
+        put(f, "values", self.values)
+        put(f, "points", self.points, compression="gzip")
+        put(f, "multiplicity", self.multiplicity)
+        put(f, "error_direction", np.array([e[0] for e in self.errors], dtype="S"))
+        put(f, "error_index", np.array([e[1] for e in self.errors], int))
+        put(f, "error_message", np.array([e[2].encode() for e in self.errors], dtype="S"))
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> BifurcationDiagram:
-        """Read a file written by :meth:`save`."""
-        import h5py
+        """Read a file written by :meth:`save`.
 
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != "nscontrol.BifurcationDiagram/1":
-                raise ModelError(f"path: {path} is not an nscontrol.BifurcationDiagram/1 file")
-            errors = tuple((d.decode(), int(i), m.decode()) for d, i, m in
-                           zip(f["error_direction"][()], f["error_index"][()],
-                               f["error_message"][()], strict=True))
-            return cls(str(f.attrs["parameter_name"]), f["values"][()],
-                       tuple(s.decode() for s in f.attrs["directions"]), f["points"][()],
-                       f["multiplicity"][()], errors, int(f.attrs["chunk_size"]),
-                       tuple(s.decode() for s in f.attrs["state_names"]))
+        Parameters
+        ----------
+        path : str or path-like
+            The file.
+
+        Returns
+        -------
+        BifurcationDiagram
+            The diagram saved there.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ModelError
+            ``path`` is not a bifurcation diagram file: not HDF5 (a text file), empty,
+            truncated, of another format, missing a dataset or attribute, or a dataset fails
+            its checksum (flipped bytes). The message says which, and names the member.
+        """
+        return load_hdf5(path, cls._read, formats=(_FORMAT,), what="bifurcation diagram",
+                         writer="BifurcationDiagram.save")
+
+    @classmethod
+    def _read(cls, r: Reader, fmt: str) -> BifurcationDiagram:
+        """The body of :meth:`load`; every member goes through ``r`` (errors named)."""
+        direction, index = r.data("error_direction"), r.data("error_index")
+        message = r.data("error_message")
+        r.where = "the error table (error_direction, error_index, error_message)"
+        errors = tuple((d.decode(), int(i), m.decode())
+                       for d, i, m in zip(direction, index, message, strict=True))
+        values, points, multiplicity = r.data("values"), r.data("points"), r.data("multiplicity")
+        directions = tuple(s.decode() for s in r.attr("directions"))
+        names = tuple(s.decode() for s in r.attr("state_names"))
+        return cls(str(r.attr("parameter_name")), values, directions, points, multiplicity,
+                   errors, int(r.attr("chunk_size")), names)
+
+
+_FORMAT = "nscontrol.BifurcationDiagram/1"
 
 
 @dataclass(frozen=True)

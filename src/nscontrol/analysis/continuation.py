@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import replaced_atomically
+from .._files import Reader, load_hdf5, put, save_hdf5
 from .._validation import FloatArray, as_vector, check_integer
 from ..errors import BudgetExceededError, ModelError, SolverError
 from ._arclength import (
@@ -231,49 +231,101 @@ class Branch:
     # -- HDF5 ------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write to HDF5 (format ``nscontrol.Branch/2``: ``/1`` and the ``solution``
-        attribute) atomically: a temporary file in the
-        same directory, renamed over ``path`` only once complete."""
-        import h5py
+        attribute), with a Fletcher-32 checksum on every non-empty dataset, atomically: a
+        temporary file in the same folder, renamed over ``path`` only once complete (the
+        mechanism of every result type, :mod:`nscontrol._files`).
 
-        path = Path(path)
-        with replaced_atomically(path) as tmp, h5py.File(tmp, "w") as f:
-            f.attrs.update(format="nscontrol.Branch/2", solution=self.solution,
-                           parameter_name=self.parameter_name,
-                           stop_reason=self.stop_reason, n_steps=self.n_steps,
-                           corrector_iterations=self.corrector_iterations)
-            f.attrs["state_names"] = np.array(self.state_names, dtype="S")
-            for key in ("p", "nodes", "period", "multipliers", "stable", "n_impacts"):
-                f.create_dataset(key, data=getattr(self, key))
-            g = f.create_group("points")
-            for i, pt in enumerate(self.points):
-                s = g.create_group(str(i))
-                s.attrs.update(kind=pt.kind, parameter=pt.parameter, index=pt.index,
-                               uncertainty=pt.uncertainty)
-                s.create_dataset("nodes", data=pt.nodes)
-                s.create_dataset("multipliers", data=pt.multipliers)
-        return path
+        Parameters
+        ----------
+        path : str or path-like
+            The file to write; its folder must exist.
+
+        Returns
+        -------
+        Path
+            ``path``.
+
+        Raises
+        ------
+        FileNotFoundError, IsADirectoryError
+            The folder of ``path`` does not exist, or ``path`` is a folder.
+        OSError
+            The disk is full (or a quota, a file size limit): the previous file is unchanged
+            and no temporary file remains.
+        """
+        return save_hdf5(path, self._write)
+
+    def _write(self, f: Any) -> None:
+        """The body of :meth:`save`, into the open (empty) ``f``."""
+        f.attrs.update(format=_FORMAT, solution=self.solution,
+                       parameter_name=self.parameter_name, stop_reason=self.stop_reason,
+                       n_steps=self.n_steps, corrector_iterations=self.corrector_iterations)
+        f.attrs["state_names"] = np.array(self.state_names, dtype="S")
+        for key in ("p", "nodes", "period", "multipliers", "stable", "n_impacts"):
+            put(f, key, getattr(self, key))
+        g = f.create_group("points")
+        g.attrs["count"] = len(self.points)     # a lost point group is then noticed
+        for i, pt in enumerate(self.points):
+            s = g.create_group(str(i))
+            s.attrs.update(kind=pt.kind, parameter=pt.parameter, index=pt.index,
+                           uncertainty=pt.uncertainty)
+            put(s, "nodes", pt.nodes)
+            put(s, "multipliers", pt.multipliers)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Branch:
-        """Read a file written by :meth:`save` (formats ``/1``, periodic only, and ``/2``)."""
-        import h5py
+        """Read a file written by :meth:`save` (formats ``/1``, periodic only, and ``/2``).
 
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("format") not in ("nscontrol.Branch/1", "nscontrol.Branch/2"):
-                raise ModelError(f"path: {path} is not an nscontrol.Branch/1 or /2 file "
-                                 f"(format {f.attrs.get('format')!r})")
-            g = f["points"]
-            points = tuple(
-                SpecialPoint(str(g[k].attrs["kind"]), float(g[k].attrs["parameter"]),
-                             int(g[k].attrs["index"]), g[k]["nodes"][()],
-                             g[k]["multipliers"][()], float(g[k].attrs["uncertainty"]))
-                for k in sorted(g, key=int))
-            return cls(str(f.attrs["parameter_name"]), f["p"][()], f["nodes"][()],
-                       f["period"][()], f["multipliers"][()], f["stable"][()].astype(bool),
-                       f["n_impacts"][()], points, str(f.attrs["stop_reason"]),
-                       int(f.attrs["n_steps"]), int(f.attrs["corrector_iterations"]),
-                       tuple(s.decode() for s in f.attrs["state_names"]),
-                       str(f.attrs.get("solution", "periodic")))
+        Parameters
+        ----------
+        path : str or path-like
+            The file.
+
+        Returns
+        -------
+        Branch
+            The branch saved there.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ModelError
+            ``path`` is not a branch file: not HDF5 (a text file), empty, truncated, of
+            another format, missing a group, dataset or attribute, or a dataset fails its
+            checksum (flipped bytes). The message says which, and names the member.
+        """
+        return load_hdf5(path, cls._read, formats=(_FORMAT, _FORMAT_V1), what="branch",
+                         writer="Branch.save")
+
+    @classmethod
+    def _read(cls, r: Reader, fmt: str) -> Branch:
+        """The body of :meth:`load`; every member goes through ``r`` (errors named)."""
+        points = []
+        names = sorted(r.group("points"), key=int)
+        # absent in files of earlier versions
+        count = int(r.attr("count", of="points", default=len(names)))
+        if names != [str(i) for i in range(count)]:
+            raise KeyError(f"the file should hold {count} special point group(s) named 0, "
+                           f"1, ..., it holds {names}")
+        for k in names:
+            at = f"points/{k}"
+            points.append(SpecialPoint(
+                str(r.attr("kind", of=at)), float(r.attr("parameter", of=at)),
+                int(r.attr("index", of=at)), r.data(f"{at}/nodes"),
+                r.data(f"{at}/multipliers"), float(r.attr("uncertainty", of=at))))
+        p, nodes, period = r.data("p"), r.data("nodes"), r.data("period")
+        multipliers, stable = r.data("multipliers"), r.data("stable").astype(bool)
+        n_impacts = r.data("n_impacts")
+        state_names = tuple(s.decode() for s in r.attr("state_names"))
+        return cls(str(r.attr("parameter_name")), p, nodes, period, multipliers, stable,
+                   n_impacts, tuple(points), str(r.attr("stop_reason")),
+                   int(r.attr("n_steps")), int(r.attr("corrector_iterations")), state_names,
+                   str(r.attr("solution", default="periodic")))
+
+
+_FORMAT = "nscontrol.Branch/2"
+_FORMAT_V1 = "nscontrol.Branch/1"     # periodic orbits only: no "solution" attribute
 
 
 # -- the continuation problem ------------------------------------------------------------------

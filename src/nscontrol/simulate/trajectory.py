@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._files import replaced_atomically
+from .._files import Reader, load_hdf5, put, save_hdf5
 from .._validation import as_float_array, as_real_scalar, check_integer
 from ..errors import DimensionError, ModelError
 from ._run_context import register_recorder
@@ -225,7 +225,7 @@ class Trajectory:
     def save(self, path: str | Path) -> None:
         """Write the trajectory to an HDF5 file (lossless: :meth:`load` returns an equal one).
 
-        Layout (format ``nscontrol.Trajectory/2``): datasets ``t``, ``x``, group ``signals``
+        Layout (format ``nscontrol.Trajectory/3``): datasets ``t``, ``x``, group ``signals``
         (one dataset each), group ``events`` (columns), group ``stats``: a numeric array stat
         is a dataset of its own (any size: HDF5 attributes stop at 64 KB), every other stat
         (``None``, bool, int, float, str, list, tuple, dict, complex, numpy scalars, arrays
@@ -235,60 +235,61 @@ class Trajectory:
         Every non-empty dataset carries a Fletcher-32 checksum, so :meth:`load` detects flipped
         bytes instead of returning wrong numbers. The file is written atomically: into a
         temporary file in the same folder, renamed over ``path`` (``os.replace``) only once
-        complete, so a failed save leaves an existing file untouched.
+        complete, so a failed save leaves an existing file untouched (see
+        :mod:`nscontrol._files`, shared by every result type).
+
+        Parameters
+        ----------
+        path : str or Path
+            The file to write; its folder must exist.
 
         Raises
         ------
         ModelError
             A stat of a type that has no lossless encoding (the message names its key), or a
             signal name HDF5 would read as a path (containing ``/``, empty or ``"."``).
+        FileNotFoundError, IsADirectoryError
+            The folder of ``path`` does not exist, or ``path`` is a folder.
+        OSError
+            The disk is full (or a quota, a file size limit): the previous file is unchanged,
+            no temporary file remains, and the process goes on unharmed.
         """
         for name in self.signals:
             _check_signal_name(name)
-        path = Path(path)
-        if not path.parent.is_dir():
-            raise FileNotFoundError(f"path: folder {str(path.parent)!r} does not exist; create "
-                                    "it first (e.g. Path(...).mkdir(parents=True))")
-        if path.is_dir():
-            raise IsADirectoryError(f"path: {str(path)!r} is a folder; pass a file name")
-        with replaced_atomically(path) as tmp:
-            self._write(tmp)
+        save_hdf5(path, self._write)
 
-    def _write(self, path: Path) -> None:
-        """The body of :meth:`save`: the whole file, written to a fresh ``path``."""
-        import h5py
-
-        with h5py.File(path, "x") as f:
-            f.attrs["format"] = _FORMAT
-            f.attrs["status"] = self.status
-            f.attrs["message"] = self.message
-            f.attrs["method"] = self.method
-            f.attrs["state_names"] = list(self.state_names)
-            _put(f, "t", self.t)
-            _put(f, "x", self.x)
-            sig = f.create_group("signals")
-            for name, value in self.signals.items():
-                _put(sig, name, np.asarray(value))
-            ev = f.create_group("events")
-            n = self.n_states
-            _put(ev, "time", np.array([e.time for e in self.events], float))
-            _put(ev, "kind", np.array([e.kind.encode() for e in self.events], dtype="S"))
-            for key in ("index", "mode_from", "mode_to"):
-                _put(ev, key, np.array([getattr(e, key) for e in self.events], dtype=np.int64))
-            for key in ("pre", "post"):
-                data = [np.asarray(getattr(e, key), float) for e in self.events]
-                width = max((d.size for d in data), default=n)
-                arr = np.full((len(data), width), np.nan)
-                sizes = np.array([d.size for d in data], dtype=np.int64)
-                for i, d in enumerate(data):
-                    arr[i, : d.size] = d
-                _put(ev, key, arr)
-                _put(ev, key + "_size", sizes)
-            st = f.create_group("stats")
-            for key, value in self.stats.items():
-                if not isinstance(key, str):
-                    raise ModelError(f"stats: expected string keys, got {key!r}")
-                _save_stat(st, key, value)
+    def _write(self, f: Any) -> None:
+        """The body of :meth:`save`: the whole file, written into the open (empty) ``f``."""
+        f.attrs["format"] = _FORMAT
+        f.attrs["status"] = self.status
+        f.attrs["message"] = self.message
+        f.attrs["method"] = self.method
+        f.attrs["state_names"] = list(self.state_names)
+        put(f, "t", self.t)
+        put(f, "x", self.x)
+        sig = f.create_group("signals")
+        for name, value in self.signals.items():
+            put(sig, name, np.asarray(value))
+        ev = f.create_group("events")
+        n = self.n_states
+        put(ev, "time", np.array([e.time for e in self.events], float))
+        put(ev, "kind", np.array([e.kind.encode() for e in self.events], dtype="S"))
+        for key in ("index", "mode_from", "mode_to"):
+            put(ev, key, np.array([getattr(e, key) for e in self.events], dtype=np.int64))
+        for key in ("pre", "post"):
+            data = [np.asarray(getattr(e, key), float) for e in self.events]
+            width = max((d.size for d in data), default=n)
+            arr = np.full((len(data), width), np.nan)
+            sizes = np.array([d.size for d in data], dtype=np.int64)
+            for i, d in enumerate(data):
+                arr[i, : d.size] = d
+            put(ev, key, arr)
+            put(ev, key + "_size", sizes)
+        st = f.create_group("stats")
+        for key, value in self.stats.items():
+            if not isinstance(key, str):
+                raise ModelError(f"stats: expected string keys, got {key!r}")
+            _save_stat(st, key, value)
 
     @classmethod
     def load(cls, path: str | Path) -> Trajectory:
@@ -303,26 +304,11 @@ class Trajectory:
             truncated, missing a group or dataset, or a dataset fails its checksum (flipped
             bytes). The message says which, and names the dataset.
         """
-        import h5py
-
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"path: no trajectory file at {str(path)!r}")
-        try:
-            f = h5py.File(path, "r")
-        except OSError as exc:
-            raise ModelError(f"path: {str(path)!r} {_unreadable_reason(path)} (h5py: {exc}); "
-                             "load a file written by Trajectory.save") from None
-        with f:
-            reader = _Reader(f, path)
-            fmt = f.attrs.get("format")
-            if fmt not in (_FORMAT, _FORMAT_V2, _FORMAT_V1):
-                raise ModelError(f"path: expected an nscontrol trajectory file (format "
-                                 f"{_FORMAT!r}), got {str(path)!r} with format {fmt!r}")
-            return reader.run(lambda: cls._read(reader, fmt))
+        return load_hdf5(path, cls._read, formats=(_FORMAT, _FORMAT_V2, _FORMAT_V1),
+                         what="trajectory", writer="Trajectory.save")
 
     @classmethod
-    def _read(cls, r: _Reader, fmt: str) -> Trajectory:
+    def _read(cls, r: Reader, fmt: str) -> Trajectory:
         """The body of :meth:`load`; every dataset goes through ``r`` (errors named)."""
         pre, post = r.data("events/pre"), r.data("events/post")
         pre_n, post_n = r.data("events/pre_size"), r.data("events/post_size")
@@ -339,14 +325,12 @@ class Trajectory:
         else:
             stats = _load_stats(r)
         signals = {k: r.data(f"signals/{k}") for k in r.group("signals")}
-        attrs = r.file.attrs
-        r.where = "the attributes (status, message, method, state_names)"
-        return cls(
-            t=r.data("t"), x=r.data("x"), signals=signals, events=events, stats=stats,
-            status=int(attrs["status"]), message=str(attrs["message"]),
-            method=str(attrs["method"]),
-            state_names=tuple(str(s) for s in attrs["state_names"]),
-        )
+        t, x = r.data("t"), r.data("x")
+        status, message = int(r.attr("status")), str(r.attr("message"))
+        method, names = str(r.attr("method")), tuple(str(s) for s in r.attr("state_names"))
+        r.where = "the file"
+        return cls(t=t, x=x, signals=signals, events=events, stats=stats, status=status,
+                   message=message, method=method, state_names=names)
 
     def to_pandas(self) -> Any:
         """Samples as a pandas DataFrame indexed by ``t`` (states, then flattened signals).
@@ -454,13 +438,6 @@ _FORMAT = "nscontrol.Trajectory/3"
 _FORMAT_V2 = "nscontrol.Trajectory/2"      # stats as variable-length JSON strings
 _FORMAT_V1 = "nscontrol.Trajectory/1"      # stats as attributes
 
-#: Target size of a checksummed chunk (bytes).
-_CHUNK_BYTES = 1 << 20
-
-#: First bytes of every HDF5 file (its superblock signature).
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-
-
 def _check_times(t: FloatArray) -> None:
     """Refuse sample times that are not finite or that decrease (equal ones are allowed: an
     event time appears twice, for the pre- and the post-event sample)."""
@@ -484,69 +461,6 @@ def _check_signal_name(name: Any) -> None:
                          "rename the signal, e.g. with '_' instead of '/'")
 
 
-def _put(group: Any, name: str, data: np.ndarray) -> Any:
-    """A dataset with a Fletcher-32 checksum (which needs chunked storage, so an empty or
-    scalar array, with nothing to corrupt, is stored plainly)."""
-    data = np.asarray(data)
-    if data.ndim == 0 or data.size == 0:
-        return group.create_dataset(name, data=data)
-    # chunks of whole rows, ~1 MiB (h5py's automatic ones are tens of KB: more chunk
-    # lookups). Checking the sums costs: 200000 x 6 states load in ~0.022 s, ~0.006 s unchecked
-    row_bytes = max(1, data.itemsize * int(np.prod(data.shape[1:])))
-    rows = int(min(data.shape[0], max(1, _CHUNK_BYTES // row_bytes)))
-    return group.create_dataset(name, data=data, fletcher32=True,
-                                chunks=(rows,) + data.shape[1:])
-
-
-def _unreadable_reason(path: Path) -> str:
-    """Why h5py could not open ``path``: empty, not HDF5, or truncated/damaged HDF5."""
-    with open(path, "rb") as fh:
-        head = fh.read(len(_HDF5_SIGNATURE))
-    if not head:
-        return "is empty (0 bytes): the save did not complete"
-    if head != _HDF5_SIGNATURE:
-        return "is not an HDF5 file (a text or other file)"
-    return "is a truncated or damaged HDF5 file"
-
-
-class _Reader:
-    """Reads datasets of an open trajectory file, turning h5py's errors into ``ModelError``
-    that name the dataset and say what is wrong."""
-
-    def __init__(self, file: Any, path: Path) -> None:
-        self.file, self.path, self.where = file, path, "the file"
-
-    def group(self, name: str) -> Any:
-        self.where = f"group {name!r}"
-        return self.file[name]
-
-    def data(self, name: str) -> np.ndarray:
-        self.where = f"dataset {name!r}"
-        return self.file[name][()]
-
-    def run(self, body: Any) -> Any:
-        where = lambda: f"path: {self.where} of {str(self.path)!r}"   # noqa: E731
-        try:
-            return body()
-        except KeyError as exc:
-            raise ModelError(f"{where()} is missing ({exc.args[0] if exc.args else exc}): the "
-                             "file is incomplete or not written by Trajectory.save") from None
-        except OSError as exc:
-            text = str(exc)
-            if "filter" in text or "checksum" in text.lower():
-                raise ModelError(f"{where()} fails its Fletcher-32 checksum: the file is "
-                                 "corrupted (flipped bytes); restore it from a copy or "
-                                 "re-run the simulation") from None
-            raise ModelError(f"{where()} cannot be read ({text}): the file is truncated or "
-                             "damaged; restore it from a copy or re-run") from None
-        except (ValueError, TypeError, IndexError, UnicodeDecodeError) as exc:
-            if isinstance(exc, ModelError | DimensionError):
-                raise ModelError(f"path: {str(self.path)!r} holds an invalid trajectory: "
-                                 f"{exc}") from None
-            raise ModelError(f"{where()} is malformed ({type(exc).__name__}: {exc}): the file "
-                             "was not written by Trajectory.save or is damaged") from None
-
-
 def _save_stat(group: Any, key: str, value: Any) -> None:
     """One stat into the ``stats`` group: numeric arrays as datasets, the rest as tagged JSON.
 
@@ -555,7 +469,7 @@ def _save_stat(group: Any, key: str, value: Any) -> None:
     """
     name = str(len(group))
     if isinstance(value, np.ndarray) and value.dtype.kind in "biufc":
-        ds = _put(group, name, value)
+        ds = put(group, name, value)
         ds.attrs["encoding"] = "array"
     else:
         try:
@@ -565,24 +479,24 @@ def _save_stat(group: Any, key: str, value: Any) -> None:
                              f"deeply (or refers to itself)") from None
         # UTF-8 bytes in a fixed-size array: a checksum covers them (a variable-length
         # string's checksum would cover only its heap reference)
-        ds = _put(group, name, np.frombuffer(text.encode(), dtype=np.uint8))
+        ds = put(group, name, np.frombuffer(text.encode(), dtype=np.uint8))
         ds.attrs["encoding"] = "json-utf8"
     ds.attrs["key"] = key
 
 
-def _load_stats(r: _Reader) -> dict[str, Any]:
+def _load_stats(r: Reader) -> dict[str, Any]:
     group = r.group("stats")
     out: dict[str, Any] = {}
     for name in sorted(group, key=int):
         raw: Any = r.data(f"stats/{name}")
-        encoding = group[name].attrs["encoding"]
+        encoding = r.attr("encoding", of=f"stats/{name}")
         if encoding == "array":
             value = raw
         elif encoding == "json-utf8":
             value = _from_json(json.loads(raw.tobytes().decode()))
         else:                    # format 2: a variable-length string
             value = _from_json(json.loads(raw.decode() if isinstance(raw, bytes) else raw))
-        out[str(group[name].attrs["key"])] = value
+        out[str(r.attr("key", of=f"stats/{name}"))] = value
     return out
 
 
