@@ -10,6 +10,7 @@ numerical tolerance is involved.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -348,6 +349,7 @@ def _pwl():
     return _mod("nscontrol.examples.ch09_pwl_linearization").ex9_4_pwl_gain()
 
 
+@functools.cache
 def _impact_design():
     from nscontrol.design.impact_observer import design_impact_observer
     from nscontrol.systems.impacting_bodies import ImpactingBodies
@@ -364,6 +366,13 @@ def _ball():
 
 def _oscillator():
     return _mod("nscontrol.examples.ch11_convergent_pwa").one_sided_oscillator(0.1)
+
+
+def _one_state(p):
+    """A stand-in for a diagram's factory: only its state size is read before the check."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(n_states=1)
 
 
 _OBSERVER = ([[0, 1], [-3, -4]], [[0], [1]], [[2, 1]], [[2, 1]])
@@ -403,7 +412,7 @@ BOOLEAN_OPTIONS = {
                                                                  executor="serial",
                                                                  progress=f), "progress"),
     "bifurcation_diagram warm_start": (lambda f: _mod("nscontrol.analysis.bifurcation")
-                                       .bifurcation_diagram(lambda p: None, [1.0, 2.0],
+                                       .bifurcation_diagram(_one_state, [1.0, 2.0],
                                                             warm_start=f), "warm_start"),
     "frequency_response progress": (lambda f: _mod("nscontrol.analysis.periodic")
                                     .frequency_response(_oscillator(), [1.0], progress=f),
