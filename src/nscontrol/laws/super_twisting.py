@@ -8,6 +8,7 @@ state ``nu_{k+1} = nu_k - h k2 sigma_{k+1}`` from the implicit step leaves
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,6 +55,9 @@ def super_twisting_resolvent(x: Any, a: Any, b: Any) -> Any:
     DimensionError
         Shapes that do not broadcast together.
     """
+    if type(x) is float and type(a) is float and type(b) is float and math.isfinite(x) \
+            and 0.0 <= a < math.inf and 0.0 <= b < math.inf:   # valid scalars: no array checks
+        return _resolvent(np.asarray(x), a, b)              # (implicit Euler, every step)
     x = as_float_array("x", x)
     weights = []
     for name, w in (("a", a), ("b", b)):
