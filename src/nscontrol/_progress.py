@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+from ._validation import check_bool
+
 
 class TimeProgress:
     """A progress bar over simulated time ``[t0, tf]``, shown on stderr after ``delay`` seconds.
@@ -17,7 +19,7 @@ class TimeProgress:
                  enable: bool | None = None, delay: float = 2.0) -> None:
         self.t0, self.tf = float(t0), float(tf)
         self._bar: Any = None
-        if enable is False:
+        if check_bool("progress", enable, allow_none=True) is False:
             return
         from tqdm.auto import tqdm
 
@@ -58,7 +60,7 @@ def progress_iter(iterable: Any, *, total: int | None = None, desc: str = "",
     count and the elapsed time but no ETA: an estimate from the fast items would freeze at
     "2 s left" during a slow one. ``label(item)`` names the item in progress.
     """
-    if enable is False:
+    if check_bool("progress", enable, allow_none=True) is False:
         return iterable
     from tqdm.auto import tqdm
 

@@ -183,24 +183,37 @@ def as_real_scalar(name: str, value: Any) -> float:
         raise ModelError(f"{name}: expected a real number, got {value!r}") from None
 
 
-def check_positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
-    """A finite scalar that is > 0 (or >= 0 with ``allow_zero``)."""
+def check_positive(name: str, value: Any, *, allow_zero: bool = False,
+                   hint: str = "") -> float:
+    """A finite scalar that is > 0 (or >= 0 with ``allow_zero``); ``hint`` (what the value
+    means or what to pass) ends the message of a refusal."""
     v = as_real_scalar(name, value)
     if not np.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
-        raise ModelError(f"{name}: expected a finite number {bound}, got {value!r}")
+        raise ModelError(f"{name}: expected a finite number {bound}, got {value!r}"
+                         + (f"; {hint}" if hint else ""))
     return v
 
 
 def check_in_interval(name: str, value: Any, lo: float, hi: float, *,
-                      open_interval: bool = False) -> float:
+                      open_interval: bool = False, hint: str = "") -> float:
     """A finite scalar in the closed interval ``[lo, hi]`` (the open one with
-    ``open_interval=True``)."""
+    ``open_interval=True``); ``hint`` ends the message of a refusal.
+
+    Examples
+    --------
+    >>> check_in_interval("margin", 0.7, 0.0, 0.5, hint="D must lie in [m, 1 - m]")
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: margin: expected a value in [0.0, 0.5], got 0.7; D must ...
+    """
     v = as_real_scalar(name, value)
     inside = lo < v < hi if open_interval else lo <= v <= hi
     if not (np.isfinite(v) and inside):
         span = f"({lo}, {hi})" if open_interval else f"[{lo}, {hi}]"
-        raise ModelError(f"{name}: expected a value in {span}, got {value!r}")
+        raise ModelError(f"{name}: expected a value in {span}, got {value!r}"
+                         + (f"; {hint}" if hint else ""))
     return v
 
 
@@ -235,6 +248,32 @@ def check_bool(name: str, value: Any, *, allow_none: bool = False) -> Any:
     else:
         got = f"{value!r} (a {type(value).__name__})"
     raise ModelError(f"{name}: expected {want}, got {got}; pass a bool")
+
+
+def check_type(name: str, value: Any, expected: type | tuple[type, ...], *,
+               hint: str = "") -> Any:
+    """``value`` itself when it is an instance of ``expected``; otherwise a
+    :class:`ModelError` naming the argument, the expected and the received type (and
+    ``hint``: where to get the right object), instead of an ``AttributeError`` deep inside.
+
+    Examples
+    --------
+    >>> check_type("system", 1.0, str, hint="build it with str()")
+    Traceback (most recent call last):
+    ...
+    nscontrol.errors.ModelError: system: expected a str, got a float (1.0); build it with str()
+    """
+    if isinstance(value, expected):
+        return value
+    kinds = expected if isinstance(expected, tuple) else (expected,)
+    names = " or ".join(k.__name__ for k in kinds)
+    got = type(value).__name__
+
+    def article(word: str) -> str:
+        return "an" if word[:1] in "AEIOUaeiou" else "a"
+
+    raise ModelError(f"{name}: expected {article(names)} {names}, got {article(got)} {got} "
+                     f"({_short(value)})" + (f"; {hint}" if hint else ""))
 
 
 def check_integer(name: str, value: Any, *, minimum: int | None = None,

@@ -41,7 +41,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
 
-from ._validation import check_positive
+from ._validation import check_bool, check_positive
 from .errors import ModelError, NscontrolError
 
 __all__ = ["run", "SweepResult", "PointError", "SweepError", "AUTO_PARALLEL_SECONDS",
@@ -287,7 +287,7 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     errors: list[PointError | None] = [None] * len(points)
     done = [False] * len(points)
     todo = list(enumerate(points))
-    bar = _bar(len(points), progress, desc)
+    bar = _bar(len(points), check_bool("progress", progress, allow_none=True), desc)
     try:
         if isinstance(executor, str) and executor == "auto" and budget is None:
             _run_auto(call, todo, values, errors, bar, done)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .._files import Reader, load_hdf5, put, save_hdf5
-from .._validation import FloatArray, as_vector, check_integer
+from .._validation import FloatArray, as_vector, check_bool, check_integer
 from ..errors import ModelError
 from .orbits import at_times, sample_on_grid
 from .periodic import _multiplicity_rtol, period_multiplicity
@@ -319,7 +319,7 @@ def bifurcation_diagram(factory: Callable[[float], Any], values: Any, *,
     first = factory(float(vals[0]))     # its size checks x0 before anything runs
     n = int(first.n_states)
     task = _ChunkTask(factory, None if x0 is None else as_vector("x0", x0, n), nt, ns,
-                      _multiplicity_rtol(rtol), bool(warm_start))
+                      _multiplicity_rtol(rtol), check_bool("warm_start", warm_start))
     chunks = _chunks(len(vals), cs, dirs, vals)
     res = sweep.run(task, chunks, executor=executor, progress=progress, desc="bifurcation")
     pts = np.full((len(dirs), len(vals), ns, n), np.nan)

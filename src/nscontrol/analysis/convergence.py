@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_finite_scalar, as_matrix, as_square, check_positive
+from .._validation import as_finite_scalar, as_matrix, as_square, check_bool, check_positive
 from ..errors import (
     DimensionError,
     InaccurateCertificateWarning,
@@ -176,7 +176,7 @@ def quadratic_convergence(system: PiecewiseAffineSystem | Sequence[ArrayLike], *
     from ..numerics.lmi import LYAPUNOV_RECHECK_RTOL, recheck_lyapunov
     from ..numerics.scaling import Scaling
 
-    sc = Scaling.balanced(As) if normalise else Scaling.identity(n)
+    sc = Scaling.balanced(As) if check_bool("normalise", normalise) else Scaling.identity(n)
     try:
         P_s, margin, status = _max_margin_cqlf([sc.matrix(A) for A in As], decay / sc.omega,
                                                p_max)
@@ -600,6 +600,7 @@ def peak_to_peak_bound(As: Sequence[ArrayLike], D: ArrayLike, Cz: ArrayLike, *,
     (0.897, 0.4)
     """
     As_, D, Cz = _io_matrices(As, D, Cz)
+    refine = check_bool("refine", refine)
     if alphas is None:
         rho = min(float(np.min(np.abs(np.linalg.eigvals(A)))) for A in As_)
         if rho == 0.0:

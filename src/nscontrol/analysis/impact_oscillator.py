@@ -72,7 +72,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from .._validation import FloatArray, check_in_interval, check_positive
+from .._validation import FloatArray, check_bool, check_in_interval, check_positive
 from ..errors import ModelError
 
 __all__ = ["ImpactOscillator", "OneImpactOrbit", "OscillatorFamily"]
@@ -172,7 +172,8 @@ class ImpactOscillator:
         """
         from ..systems.lagrangian import LagrangianSystem
 
-        drive = _Drive(self.forcing, self.omega) if drive_as_force else None
+        drive = _Drive(self.forcing, self.omega) \
+            if check_bool("drive_as_force", drive_as_force) else None
         return LagrangianSystem(np.array([[self.mass]]), stiffness=np.array([[self.stiffness]]),
                                 damping=np.array([[self.damping]]),
                                 gap_matrix=np.array([[-1.0]]), gap_offset=np.array([self.stop]),

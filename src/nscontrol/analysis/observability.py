@@ -35,6 +35,7 @@ from .._validation import (
     as_matrix,
     as_square,
     as_vector,
+    check_bool,
     check_integer,
     check_positive,
     check_t_span,
@@ -367,7 +368,7 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 0.0,
     keep = (norms > floor * e0) & (norms > margin * roundoff)
     below = np.flatnonzero(~keep)
     end = int(below[0]) if below.size else norms.size   # past the floor: rounding, not decay
-    if through_floor and below.size:
+    if check_bool("through_floor", through_floor) and below.size:
         end += 1
     if end < 2:
         extra = ", plus the first under it" if through_floor else ""

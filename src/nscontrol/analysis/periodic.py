@@ -30,7 +30,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_vector, check_in_interval, check_integer, check_positive
+from .._validation import (
+    as_vector,
+    check_bool,
+    check_in_interval,
+    check_integer,
+    check_positive,
+)
 from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
 
 if TYPE_CHECKING:   # imported where used at run time
@@ -240,6 +246,7 @@ def periodic_steady_state(system: SimulableSystem, period: float, *, u: InputSig
     max_iter = check_integer("max_iter", max_iter, minimum=0)
     max_periods = check_integer("max_periods", max_periods, minimum=1)
     n_samples = check_integer("n_samples", n_samples, minimum=2)
+    fallback = check_bool("fallback", fallback)
     _require_sensitivity(system, method)
     n = int(system.n_states)
     starts = [_linear_guess(system, u), np.zeros(n)] if x0 is None else \
@@ -967,6 +974,7 @@ def frequency_response(system: SimulableSystem, omegas: ArrayLike, *,
     w = _omega_grid(omegas)
     _output_matrix(system, output)  # bad shapes fail here, not once per point
     _check_control(control)
+    progress = check_bool("progress", progress, allow_none=True)
     task = _ShootPoint(system, _amplitude_spec(amplitude), output,
                        int(n_samples), int(n_harmonics), method, dict(options), control)
     res = sweep.run(task, list(w), executor=executor, progress=progress, desc="FRF")
@@ -1403,18 +1411,34 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *,
     import os
 
     from .. import sweep
+    from ..simulate.driver import check_run
 
     w = np.sort(_omega_grid(omegas))
+    if isinstance(directions, str):
+        raise ModelError(f"directions: expected a sequence of 'up' and/or 'down', got the "
+                         f"string {directions!r}; write e.g. ({directions!r},)")
     for d in directions:
         if d not in ("up", "down"):
             raise ModelError(f"directions: expected 'up' and/or 'down', got {d!r}")
     _output_matrix(system, output)
     _check_control(control)
+    # every frequency would fail alike on these (NaN points with an ok status): refuse now
+    progress = check_bool("progress", progress, allow_none=True)
+    n_transient = check_integer("n_transient", n_transient, minimum=0)
+    n_record = check_integer("n_record", n_record, minimum=1)
+    n_harmonics = check_integer("n_harmonics", n_harmonics, minimum=1)
+    least = max(3, 2 * n_harmonics + 1)   # Nyquist: the K-th harmonic needs > 2K samples
+    if check_integer("samples_per_period", samples_per_period, minimum=1) < least:
+        raise ModelError(f"samples_per_period: expected an integer >= {least} (more than "
+                         f"2·n_harmonics = {2 * n_harmonics} samples per period resolve "
+                         f"harmonic {n_harmonics}), got {samples_per_period!r}; raise it or "
+                         f"lower n_harmonics")
     options.setdefault("progress", False)  # one bar for the sweep, not one per simulation
+    check_run(system, method, {**options, "u": None, "t_eval": None})
     if transient_time is not None:
         transient_time = check_positive("transient_time", transient_time)
     task = _SweepBranch(system, _amplitude_spec(amplitude), output,
-                        int(n_transient), int(n_record), int(n_harmonics),
+                        n_transient, n_record, n_harmonics,
                         int(samples_per_period), method, dict(options), control,
                         transient_time)
     order = np.arange(w.size)

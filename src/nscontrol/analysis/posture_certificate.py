@@ -27,8 +27,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_matrix, as_square, as_vector
+from .._validation import FloatArray, as_matrix, as_square, as_vector, check_type
 from ..errors import ModelError
+from ..systems.foot_body import ActuatedContactModel
 
 __all__ = ["PostureCertificate", "posture_certificate", "gain_threshold",
            "KineticAngleReport", "kinetic_angle_condition", "ConstrainedMinimum",
@@ -135,6 +136,7 @@ def posture_certificate(model: Any, q_star: ArrayLike, active: Any, Kp: ArrayLik
     >>> c.failed, round(c.margin, 3)      # k_p = 120 below k̄ = 156.176
     ('sosc', -36.176)
     """
+    check_type("model", model, ActuatedContactModel)
     S = model.actuation
     n, p = model.n_dof, S.shape[0]
     q = as_vector("q_star", q_star, n)
@@ -246,6 +248,7 @@ def gain_threshold(model: Any, q_star: ArrayLike, active: Any, lam_star: ArrayLi
     >>> round(k, 3)                        # m_b g L cos θ*
     156.176
     """
+    check_type("model", model, ActuatedContactModel)
     n = model.n_dof
     q = as_vector("q_star", q_star, n)
     idx = [int(i) for i in np.atleast_1d(active)]

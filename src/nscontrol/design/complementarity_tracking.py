@@ -34,8 +34,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .._validation import FloatArray, check_integer, check_positive
-from ..errors import ModelError
+from .._validation import (
+    FloatArray,
+    as_finite_scalar,
+    check_in_interval,
+    check_integer,
+    check_positive,
+    check_type,
+)
+from ..errors import DimensionError, ModelError
 from ..systems.feedback import StaticLaw
 
 __all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
@@ -199,6 +206,17 @@ class CircleTask:
     period: float = 10.0
     y_threshold: float = 0.01
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", as_finite_scalar("centre", self.centre))
+        object.__setattr__(self, "radius", check_positive(
+            "radius", self.radius, hint="the circle's radius in metres"))
+        object.__setattr__(self, "period", check_positive(
+            "period", self.period, hint="the time of one turn in seconds"))
+        object.__setattr__(self, "y_threshold", check_in_interval(
+            "y_threshold", self.y_threshold, 0.0, self.radius,
+            hint="τ0 is where the descending y_d falls to this height, between the ground "
+                 "and the top of the circle"))
+
     def nominal(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(q_d, q̇_d, q̈_d)``; on the lower half the circle's own (below-ground) path.
 
@@ -251,6 +269,16 @@ class HalfSineTask:
     amplitude: float = 0.1
     omega: float = 2 * math.pi / 8
     threshold: float = 0.01
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "amplitude", check_positive(
+            "amplitude", self.amplitude, hint="the half-wave's height in metres"))
+        object.__setattr__(self, "omega", check_positive(
+            "omega", self.omega, hint="the task's angular frequency in rad/s"))
+        object.__setattr__(self, "threshold", check_in_interval(
+            "threshold", self.threshold, 0.0, self.amplitude,
+            hint="τ0 is where the descending q_d falls to this height, between the ground "
+                 "and the amplitude"))
 
     @property
     def period(self) -> float:
@@ -452,6 +480,38 @@ class _Cycle:
     u_star: float = math.nan
 
 
+def _check_model_and_task(model: Any, task: Any) -> None:
+    """A task-space model and a cyclic task of the same dimension, the task in the arm's
+    reach: refused here rather than by an ``AttributeError`` or a run that cannot track."""
+    from ..systems.two_link import TwoLinkArm
+
+    for name, kind, obj, needs, example in (
+            ("model", "TaskSpaceModel", model,
+             ("n_dof", "task_state", "task_dynamics", "task_model"),
+             "TwoLinkArm() or OneDofMass() of nscontrol.systems.two_link"),
+            ("task", "CyclicTask", task, ("nominal", "tau0", "t_detach"),
+             "CircleTask() or HalfSineTask()")):
+        missing = [a for a in needs if not hasattr(obj, a)]
+        if missing:
+            raise ModelError(f"{name}: expected a {kind} (with {', '.join(needs)}), got a "
+                             f"{type(obj).__name__} without {', '.join(missing)}; pass e.g. "
+                             f"{example}")
+    n = check_integer("model.n_dof", model.n_dof, minimum=1)
+    q_d = np.atleast_1d(task.nominal(0.0)[0])
+    if q_d.shape != (n,):
+        raise DimensionError(f"task: its nominal q_d has {q_d.size} coordinate(s), the model "
+                             f"{n}; a CircleTask goes with a TwoLinkArm, a HalfSineTask with "
+                             f"a OneDofMass")
+    if isinstance(model, TwoLinkArm) and isinstance(task, CircleTask):
+        l1, l2 = model.params.l1, model.params.l2
+        near, far = abs(task.centre) - task.radius, abs(task.centre) + task.radius
+        if near < abs(l1 - l2) or far > l1 + l2:   # the circle's distances from the base
+            raise ModelError(f"task: the circle of centre x = {task.centre:g} m and radius "
+                             f"{task.radius:g} m spans distances [{near:.6g}, {far:.6g}] m "
+                             f"from the arm's base, outside its reach [{abs(l1 - l2):.6g}, "
+                             f"{l1 + l2:.6g}] m; move the centre or shrink the radius")
+
+
 class SwitchingTrackingController(StaticLaw):
     """The switching passivity-based tracking controller (module docstring) as a
     continuous-time :class:`~nscontrol.systems.Controller` for :func:`nscontrol.closed_loop`.
@@ -524,6 +584,10 @@ class SwitchingTrackingController(StaticLaw):
         if switching not in ("designed", "impact-triggered"):
             raise ModelError(f"switching: expected 'designed' or 'impact-triggered', got "
                              f"{switching!r}")
+        _check_model_and_task(model, task)
+        check_type("gains", gains, PBCGains)
+        check_type("transition", transition, TransitionDesign)
+        check_type("contact", contact, ContactPhaseDesign)
         self.model, self.task, self.gains = model, task, gains
         self.transition, self.contact = transition, contact
         self.model_scale = check_positive("model_scale", model_scale)

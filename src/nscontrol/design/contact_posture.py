@@ -39,9 +39,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_square, as_vector, check_positive, check_symmetric
+from .._validation import (
+    FloatArray,
+    as_square,
+    as_vector,
+    check_bool,
+    check_positive,
+    check_symmetric,
+    check_type,
+)
 from ..errors import DimensionError, InfeasibleDesignError, ModelError, NscontrolWarning
 from ..systems.feedback import StaticLaw
+from ..systems.foot_body import ActuatedContactModel
 
 __all__ = ["StaticPostureDesign", "ContactRegulator", "static_contact_forces",
            "design_contact_regulator"]
@@ -121,7 +130,9 @@ def static_contact_forces(model: Any, q_star: ArrayLike, active: Any, *,
         (``status`` ``"unbalanced"`` or ``"negative_contact_force"``); the message gives the
         centre of pressure and the support on flat ground.
     ModelError
-        A contact of ``active`` is open at ``q*`` or one outside it is closed.
+        A contact of ``active`` is open at ``q*`` or one outside it is closed; ``model`` not
+        an :class:`~nscontrol.systems.foot_body.ActuatedContactModel`; a non-bool
+        ``require_positive``.
     DimensionError
         Wrong lengths, an index out of range.
 
@@ -132,6 +143,8 @@ def static_contact_forces(model: Any, q_star: ArrayLike, active: Any, *,
     >>> np.round(d.lam_star, 4).tolist(), np.round(d.tau_star, 4).tolist()
     ([77.4074, 128.6026], [15.6699])
     """
+    check_type("model", model, ActuatedContactModel)
+    require_positive = check_bool("require_positive", require_positive)
     q_star = as_vector("q_star", q_star, model.n_dof)
     idx = _active_indices(active, model.n_contacts)
     lam_min = check_positive("lam_min", lam_min)
@@ -292,6 +305,9 @@ class ContactRegulator(StaticLaw):
     period: float | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
+        check_type("model", self.model, ActuatedContactModel)
+        check_type("design", self.design, StaticPostureDesign,
+                   hint="compute it with static_contact_forces(model, q_star, active)")
         p = self.model.actuation.shape[0]
         Kp = as_square("Kp", np.atleast_2d(self.Kp), p)
         Kd = as_square("Kd", np.atleast_2d(self.Kd), p)

@@ -27,7 +27,17 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_real_scalar, as_vector, check_integer, check_positive
+from .._validation import (
+    FloatArray,
+    as_finite_scalar,
+    as_real_scalar,
+    as_vector,
+    check_bool,
+    check_in_interval,
+    check_integer,
+    check_positive,
+    check_type,
+)
 from ..errors import InaccurateCertificateWarning, InfeasibleDesignError, ModelError, SolverError
 from ..systems.buck import BuckConverter
 from . import _zad_kernels as K
@@ -652,7 +662,8 @@ def design_zad(system: BuckConverter, *, T: float, x_ref: float, margin: float =
         Shift the surface's reference by the measured mean error (one Newton step), which
         removes PL-ZAD's ``O(T²)`` offset.
     duty_margin : float
-        ``D0`` must lie in ``[duty_margin, 1 - duty_margin]``.
+        ``D0`` must lie in ``[duty_margin, 1 - duty_margin]`` (so ``0 <= duty_margin <=
+        0.5``).
 
     Returns
     -------
@@ -663,6 +674,9 @@ def design_zad(system: BuckConverter, *, T: float, x_ref: float, margin: float =
     InfeasibleDesignError
         The reference needs a duty outside ``(0, 1)`` (``x_ref >= u_on`` or ``<= u_off``),
         or the designed orbit is not stable.
+    ModelError
+        ``system`` not a :class:`BuckConverter`; ``duty_margin`` outside ``[0, 0.5]``; a
+        non-numeric or non-finite number, a non-bool ``compensate_offset``.
 
     Examples
     --------
@@ -670,8 +684,15 @@ def design_zad(system: BuckConverter, *, T: float, x_ref: float, margin: float =
     >>> des.status, round(des.controller.ks / des.ks_critical, 6)
     ('certified', 1.2)
     """
+    check_type("system", system, BuckConverter,
+               hint="build it with BuckConverter(...) or BuckConverter.normalized(...)")
     T = check_positive("T", T)
+    x_ref = as_finite_scalar("x_ref", x_ref)
     margin = check_positive("margin", margin, allow_zero=True)
+    compensate_offset = check_bool("compensate_offset", compensate_offset)
+    duty_margin = check_in_interval(
+        "duty_margin", duty_margin, 0.0, 0.5,
+        hint="D0 must lie in [duty_margin, 1 - duty_margin], which is empty above 0.5")
     D0 = leading_duty(system, x_ref)
     if not duty_margin <= D0 <= 1.0 - duty_margin:
         raise InfeasibleDesignError(

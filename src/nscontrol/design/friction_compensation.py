@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, check_positive
+from .._validation import FloatArray, check_bool, check_positive
 from ..errors import ModelError, NscontrolWarning
 from ..systems.feedback import StaticLaw
 
@@ -114,6 +114,7 @@ class PDLaw:
     def __post_init__(self) -> None:
         for name in ("kp", "kd", "J"):
             object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        object.__setattr__(self, "feedforward", check_bool("feedforward", self.feedforward))
         if not callable(self.reference):
             raise ModelError(f"reference: expected a callable t -> (r, r', r''), got "
                              f"{type(self.reference).__name__}")

@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_real_scalar, as_square, as_vector, check_positive
+from .._validation import as_real_scalar, as_square, as_vector, check_bool, check_positive
 from ..errors import (
     DimensionError,
     InaccurateCertificateWarning,
@@ -578,7 +578,7 @@ class ImpactObserverDesign:
         from ..simulate.closed_loop import closed_loop
 
         plant_sys = self.plant.bodies.hybrid(u)
-        if not impacts:   # a guard that never reaches zero: body b out of reach
+        if not check_bool("impacts", impacts):   # a guard never reaching zero: b out of reach
             plant_sys = replace(plant_sys, G=np.zeros_like(plant_sys.G),
                                 g0=np.ones_like(plant_sys.g0))
         pl = self.plant

@@ -30,11 +30,13 @@ from .._validation import (
     FloatArray,
     as_real_scalar,
     as_vector,
+    check_bool,
     check_in_interval,
     check_integer,
     check_positive,
+    check_type,
 )
-from ..errors import InfeasibleDesignError, ModelError, SolverError
+from ..errors import DimensionError, InfeasibleDesignError, ModelError, SolverError
 from ..systems.nonlinear import NonlinearSystem
 from ..systems.wedge import (
     Wedge,
@@ -518,6 +520,25 @@ def _first_crossing(system: Any, x0: FloatArray, normal: FloatArray, offset: flo
     return float(hits[0].time), np.asarray(hits[0].post, float)
 
 
+def _check_plant_and_cycle(plant: Any, cycle: Any, section: Any) -> None:
+    """A planar :class:`NonlinearSystem`, a cycle object (``x0``, ``period``, ``nontrivial``:
+    a ``Cycle`` of the analysis layer, which this layer does not import) and a
+    :class:`Section` or ``None``: refused here, not by an ``AttributeError`` mid-design."""
+    check_type("plant", plant, NonlinearSystem,
+               hint="the corner design needs the planar vector field x' = f(x)")
+    if int(plant.n_states) != 2:
+        raise DimensionError(f"plant: expected a planar system (2 states), got "
+                             f"{plant.n_states} states")
+    missing = [a for a in ("x0", "period", "nontrivial") if not hasattr(cycle, a)]
+    if missing:
+        raise ModelError(f"cycle: expected a Cycle (x0, period, nontrivial), got a "
+                         f"{type(cycle).__name__} without {', '.join(missing)}; find it "
+                         f"with nscontrol.analysis.orbits.find_cycle(plant, ...)")
+    if section is not None:
+        check_type("section", section, Section, hint="build it with Section(normal, offset, "
+                                                     "direction) or pass None")
+
+
 def corner_site(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike,
                 anchor: ArrayLike | None = None, axis: ArrayLike | None = None,
                 section: Section | None = None, upstream: float = 0.25,
@@ -555,12 +576,14 @@ def corner_site(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike,
     Raises
     ------
     ModelError
-        ``b`` or ``axis`` parallel to the flow at the anchor.
+        ``b`` or ``axis`` parallel to the flow at the anchor; ``plant`` not a planar
+        :class:`NonlinearSystem`, ``cycle`` not a cycle, ``section`` not a :class:`Section`.
     SolverError
         The cycle does not cross a requested line.
     """
     from ..simulate import simulate
 
+    _check_plant_and_cycle(plant, cycle, section)
     T = check_positive("period", cycle.period)
     lam = float(np.real(cycle.nontrivial[0]))
     bb = _vec("b", b)
@@ -748,7 +771,8 @@ def design_corner_controller(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike
         the crossing interval, or no controlled cycle on the crossing branch.
     ModelError
         Invalid arguments (``half_angle`` outside ``(0, π/2)``, ``b`` parallel to the flow at
-        the anchor, ``target_offset`` zero).
+        the anchor, ``target_offset`` zero, ``plant``, ``cycle`` or ``section`` of the wrong
+        type, a non-bool ``allow_sliding``).
 
     Examples
     --------
@@ -764,6 +788,8 @@ def design_corner_controller(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike
     >>> d.regime, d.predicted_multiplier
     ('sliding', 0.0)
     """
+    _check_plant_and_cycle(plant, cycle, section)
+    allow_sliding = check_bool("allow_sliding", allow_sliding)
     lam_d = as_real_scalar("target_multiplier", target_multiplier)
     z_d = as_real_scalar("target_offset", target_offset)
     if not np.isfinite(lam_d) or not np.isfinite(z_d):

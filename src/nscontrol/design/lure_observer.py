@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_matrix, check_in_interval, check_positive
+from .._validation import as_matrix, check_bool, check_in_interval, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError
 
 if TYPE_CHECKING:   # imported where used at run time
@@ -731,7 +731,7 @@ def lure_observer_lmi(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
     mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P,
                                                 solver)
     alpha_v = check_positive("alpha", alpha, allow_zero=True)
-    if precheck:
+    if check_bool("precheck", precheck):
         _raise_structural(mat, variant)
     lmi = _ObserverLMI(mat, variant, kappa_v, eps_v, eps_P_v, solver)
     cert, gains, status = lmi.solve(alpha_v)
@@ -807,7 +807,7 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
     mat, kappa_v, eps_v, eps_P_v = _prepare(A, G, H, C, D, variant, kappa, eps, eps_P,
                                                 solver)
     tol = check_positive("tol", tol)
-    if precheck:
+    if check_bool("precheck", precheck):
         _raise_structural(mat, variant)
     lmi = _ObserverLMI(mat, variant, kappa_v, eps_v, eps_P_v, solver)
     alpha_max, cert, gains = _bisect(lmi, tol)

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_matrix, as_vector, check_positive
+from .._validation import FloatArray, as_matrix, as_vector, check_bool, check_positive
 from ..errors import DimensionError, InfeasibleDesignError, ModelError, SlidingError
 from ..systems.conewise import ConewiseLinearSystem
 
@@ -220,7 +220,7 @@ class PWLLinearization:
 
         plant = self.system if plant is None else plant
         self._check_plant(plant)
-        if check:
+        if check_bool("check", check):
             self._check_crossings()
         exo = input_generator(v, plant.n_inputs)
         n, q, m = plant.n_states, exo.S.shape[0], plant.n_inputs
@@ -368,7 +368,8 @@ def pwl_feedback_linearize(system: ConewiseLinearSystem, feedback_class: str = "
         raise ModelError(f"system: expected a ConewiseLinearSystem, got "
                          f"{type(system).__name__}")
     tol = check_positive("tol", tol)
-    ar = _Exact() if exact else _Float(tol)
+    force = check_bool("force", force)
+    ar = _Exact() if check_bool("exact", exact) else _Float(tol)
     if system.n_inputs > 1:
         return _multi_input(system, feedback_class, ar)
     return _single_input(system, feedback_class, ar, force)

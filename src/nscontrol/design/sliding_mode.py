@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_vector, check_integer, check_positive
+from .._validation import FloatArray, as_vector, check_bool, check_integer, check_positive
 from ..errors import DimensionError, ModelError
 from ..numerics.lti import discretize
 from ..simulate.trajectory import Trajectory
@@ -289,6 +289,8 @@ class SuperTwistingController(_SampledBlock):
             object.__setattr__(self, name, check_positive(name, getattr(self, name)))
         object.__setattr__(self, "discretization", _check_discretization(self.discretization))
         object.__setattr__(self, "nu0", float(as_vector("nu0", [self.nu0], 1)[0]))
+        object.__setattr__(self, "estimate_disturbance",
+                           check_bool("estimate_disturbance", self.estimate_disturbance))
         model = _plant_model(self.plant, self.period)
         if model[2] <= 0.0:
             raise ModelError(f"plant: expected c Γ > 0 (u pushing s up; got {model[2]:.3g}); "

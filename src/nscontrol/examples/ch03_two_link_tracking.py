@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import check_bool
 from ..errors import ModelError
 from . import Check, Example, ExampleResult, check, verdict_from
 
@@ -110,7 +111,8 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
         plant = _ground_moved(plant, ground_offset)
     # compiled only on request: the chapter's runs (and the robustness sweeps that compare
     # runs bit for bit with moved-ground ones, which have no compiled model) stay Python
-    if compiled and controller.compiled() is not None and ground_offset == 0.0:
+    if check_bool("compiled", compiled) and controller.compiled() is not None \
+            and ground_offset == 0.0:
         # the controller's compiled form in the compiled Moreau–Jean loop; its log and
         # cycles are read back from the block state the run recorded
         from ..simulate.closed_loop import closed_loop

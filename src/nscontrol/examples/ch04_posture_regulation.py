@@ -16,6 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from .._validation import check_bool
 from . import Check, Example, ExampleResult, check, verdict_from
 
 __all__ = ["EXAMPLES", "foot_body_setup", "wall_mass_setup", "initial_state",
@@ -231,7 +232,7 @@ def run_foot(theta_dot: float, *, h: float = 1e-3, T: float = 8.0, kp: float = K
     model, reg, plant = foot_body_setup(kp, kd, theta_star, m_b_design)
     q_star = reg.design.q_star
     x0 = initial_state(model, q_star, theta_dot)
-    system = closed_loop(plant, reg) if as_block else reg.folded(plant)
+    system = closed_loop(plant, reg) if check_bool("as_block", as_block) else reg.folded(plant)
     tr = simulate(system, x0, (0.0, T), method="moreau_jean", h=h, progress=False,
                       activation=ACTIVATION)
     n = model.n_dof

@@ -8,13 +8,14 @@ state ``nu_{k+1} = nu_k - h k2 sigma_{k+1}`` from the implicit step leaves
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
-from ..errors import ModelError
+from .._validation import FloatArray, as_float_array
+from ..errors import DimensionError, ModelError
 from .base import SetValuedLaw, broadcast_parameter, check_dim
 
 __all__ = ["SuperTwistingLaw", "super_twisting_resolvent"]
@@ -45,8 +46,38 @@ def super_twisting_resolvent(x: Any, a: Any, b: Any) -> Any:
     1.0
     >>> float(super_twisting_resolvent(-0.5, 1.0, 1.0))  # inside the sign graph
     -0.0
+
+    Raises
+    ------
+    ModelError
+        Non-finite or non-numeric ``x``, ``a`` or ``b``, or a negative weight (the map is
+        then not monotone and the formula's ``z`` solves nothing).
+    DimensionError
+        Shapes that do not broadcast together.
     """
-    x = np.asarray(x, dtype=float)
+    if type(x) is float and type(a) is float and type(b) is float and math.isfinite(x) \
+            and 0.0 <= a < math.inf and 0.0 <= b < math.inf:   # valid scalars: no array checks
+        return _resolvent(np.asarray(x), a, b)              # (implicit Euler, every step)
+    x = as_float_array("x", x)
+    weights = []
+    for name, w in (("a", a), ("b", b)):
+        w = as_float_array(name, w)
+        if np.any(w < 0.0):
+            raise ModelError(f"{name}: expected weights >= 0 (gamma times a gain of the "
+                             f"monotone law), got {w.tolist()}; the feedback's sign belongs in "
+                             f"the linear part")
+        weights.append(w)
+    try:
+        np.broadcast_shapes(x.shape, weights[0].shape, weights[1].shape)
+    except ValueError:
+        raise DimensionError(f"x, a, b: shapes {x.shape}, {weights[0].shape}, "
+                             f"{weights[1].shape} do not broadcast together; give scalars or "
+                             f"arrays of x's shape") from None
+    return _resolvent(x, weights[0], weights[1])
+
+
+def _resolvent(x: FloatArray, a: Any, b: Any) -> Any:
+    """:func:`super_twisting_resolvent` on checked arrays (the law's own, validated, path)."""
     c = np.maximum(np.abs(x) - b, 0.0)
     r = 2.0 * c / (a + np.sqrt(a * a + 4.0 * c) + (c == 0.0))   # c = 0: r = 0, no 0/0
     out = np.sign(x) * r * r
@@ -107,7 +138,7 @@ class SuperTwistingLaw(SetValuedLaw):
         object.__setattr__(self, "dim", int(k1.shape[0]))
 
     def _resolvent(self, x: FloatArray, gamma: FloatArray) -> FloatArray:
-        return np.asarray(super_twisting_resolvent(x, gamma * self.k1, gamma * self.k2))
+        return np.asarray(_resolvent(x, gamma * self.k1, gamma * self.k2))
 
     def _curve(self, z: FloatArray) -> FloatArray:
         return self.k1 * np.sqrt(np.abs(z)) * np.sign(z) + self.k2 * np.sign(z)

@@ -360,8 +360,7 @@ class LCPSolver:
             check_in_interval("omega", omega, 0.0, 2.0, open_interval=True))
         self.max_iter = None if max_iter is None else check_integer("max_iter", max_iter,
                                                                      minimum=1)
-        self.strict = strict if strict is False or strict is True else check_bool(
-            "strict", strict)
+        self.strict = check_bool("strict", strict)
         if (type(M) is np.ndarray and M.dtype == np.float64 and M.ndim == 2
                 and M.flags.c_contiguous and M.flags.writeable and M.shape[0] == M.shape[1]):
             # the common case in one compiled scan: finiteness, tridiagonality

@@ -42,7 +42,14 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .._validation import FloatArray, as_finite_scalar, as_real_scalar, as_square, check_positive
+from .._validation import (
+    FloatArray,
+    as_finite_scalar,
+    as_real_scalar,
+    as_square,
+    check_bool,
+    check_positive,
+)
 from ..errors import InaccurateCertificateWarning, InfeasibleDesignError, ModelError
 from .scaling import Scaling
 
@@ -547,7 +554,7 @@ def lyapunov_certificate(A: Any, *, decay: float = 0.0, margin: float = 1e-6,
     A = as_square("A", A)
     decay = as_finite_scalar("decay", decay)
     n = A.shape[0]
-    sc = Scaling.balanced([A]) if scale else Scaling.identity(n)
+    sc = Scaling.balanced([A]) if check_bool("scale", scale) else Scaling.identity(n)
     As, alpha = sc.matrix(A), decay / sc.omega
     prob = LMIProblem(f"Lyapunov certificate (decay {decay:.6g})")
     P = prob.symmetric("P", n)

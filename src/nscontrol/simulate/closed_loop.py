@@ -48,7 +48,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_matrix, as_vector
+from .._validation import (
+    FloatArray,
+    as_float_array,
+    as_matrix,
+    as_vector,
+    check_bool,
+    check_positive,
+)
 from ..errors import DimensionError, ModelError
 from ..systems.feedback import (
     Controller,
@@ -131,8 +138,13 @@ def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
     if observer is not None and isinstance(observer, StateFeedback | LinearController):
         raise ModelError("observer: a StateFeedback/LinearController outputs an input, not an "
                          "estimate; pass it as controller=")
-    if not isinstance(compiled, bool):
-        raise ModelError(f"compiled: expected True or False, got {compiled!r}")
+    for name, block in (("controller", controller), ("observer", observer)):
+        period = getattr(block, "period", None)
+        if block is not None and period is not None:   # a sampled block's own period
+            check_positive(f"{name}.period", period,
+                           hint="a block's period is None (continuous-time) or its sampling "
+                                "period T > 0")
+    compiled = check_bool("compiled", compiled)
     return ClosedLoop(plant, controller, observer, exosystem, input_matrix, output_matrix,
                       compiled)
 
@@ -744,9 +756,10 @@ class _BlockRunner:
                 impulse: Any) -> None:
         jump = Jump(t, np.asarray(x_minus), np.asarray(x_plus), np.asarray(indices), impulse)
         if self.obs is not None:
-            self.xo = np.asarray(self.obs.reset(t, self.xo, jump), float)
+            self.xo = _finite("observer", self.obs.reset(t, self.xo, jump), self.xo.size, t)
         if self.ctrl is not None:
-            self.xc = np.asarray(self.ctrl.reset(t, self.xc, jump), float)
+            self.xc = _finite("controller", self.ctrl.reset(t, self.xc, jump), self.xc.size,
+                              t)
 
     def finish(self, traj: Trajectory) -> Trajectory:
         """The blocks' states and outputs as signals, held over each step (ZOH)."""
@@ -873,10 +886,17 @@ def _all_finite(a: FloatArray) -> bool:
 
 
 def _finite(role: str, value: Any, size: int | None, t: float) -> FloatArray:
-    out = np.asarray(value, dtype=float).reshape(-1)
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiu":   # the usual case, fast
+        out = value.astype(float, copy=False).reshape(-1)
+    else:        # numpy would parse a string '1.0': refuse anything that is not numeric
+        try:
+            out = as_float_array(role, value, finite=False).reshape(-1)
+        except ModelError as err:
+            raise ModelError(f"{err} (returned by the block at t = {t:.6g}); its output and "
+                             f"update must return numeric arrays") from None
     if size is not None and out.size != size:
-        raise DimensionError(f"{role}: update returned {out.size} values, its state has "
-                             f"{size} (at t = {t:.6g})")
+        raise DimensionError(f"{role}: update or reset returned {out.size} values, its state "
+                             f"has {size} (at t = {t:.6g})")
     if not _all_finite(out):
         raise ModelError(f"{role}: returned a non-finite value at t = {t:.6g}: {out!r}")
     return out

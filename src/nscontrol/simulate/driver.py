@@ -29,7 +29,9 @@ What the driver owns for every method:
 * the failure policy ``on_failure`` (``"raise"``, ``"return"`` or ``"warn"``);
 * ``listeners`` (called during the run by methods with the ``"listeners"`` capability, from
   the event table after the run otherwise);
-* ``progress`` (the bar on stderr), ``sensitivity`` (refused by methods without it);
+* ``progress`` (the bar on stderr: ``True``, ``False`` or ``None``), ``sensitivity``
+  (``True``/``False``, refused by methods without it) — a string such as ``"no"`` is refused
+  (:func:`check_run` makes the same checks ahead of a sweep);
 * composite systems (a :func:`nscontrol.closed_loop`): lowered to what the method
   integrates, and their named signals added to the result.
 """
@@ -44,12 +46,13 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from .._validation import check_bool
 from ..errors import ModelError, NscontrolError, NscontrolWarning, SolverError, ZenoError
 from ._run_context import RunContext, current_run, run_context
 from .trajectory import Trajectory
 
 __all__ = ["Integrator", "METHODS", "CAPABILITIES", "COMMON_OPTIONS", "Lowered",
-           "CompositeSystem", "integrator_for", "register_method", "current_run"]
+           "CompositeSystem", "integrator_for", "register_method", "current_run", "check_run"]
 
 #: What an integrator may declare it can do.
 CAPABILITIES: Mapping[str, str] = {
@@ -244,8 +247,7 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
             merged["listeners"] = [*lowered.options["listeners"], *options["listeners"]]
         system, x0, options = lowered.system, lowered.x0, merged
     if not cls.supports(system):
-        raise ModelError(f"{cls.name}: integrates {cls.systems()}, got "
-                         f"{type(system).__name__}")
+        raise ModelError(_unsupported(cls, system))
     common, own = _split_options(cls, options)
     if "time_stepping" in cls.capabilities and own.get("h") is not None:
         own["h"] = _check_step(own["h"], t_span)
@@ -254,6 +256,47 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
     if lowered is not None:
         traj = lowered.finish(traj)
     return traj
+
+
+def check_run(system: Any, method: Any, options: Mapping[str, Any]) -> type[Integrator]:
+    """What :func:`nscontrol.simulate` checks before it runs, for a caller that will run many
+    simulations (a sweep) and must refuse a bad call once, up front: the method, that it
+    integrates ``system`` (a closed loop is checked when it is lowered, at run time), the
+    option names and the common options' values.
+
+    Parameters
+    ----------
+    system
+        The model.
+    method : str or Integrator subclass or None
+        As in :func:`nscontrol.simulate`.
+    options : mapping
+        The options the caller will pass to :func:`nscontrol.simulate`.
+
+    Returns
+    -------
+    type[Integrator]
+        The integrator that will run.
+
+    Raises
+    ------
+    ModelError
+        Unknown method or option, a method that does not integrate ``system``, a bad common
+        option (``on_failure``, ``listeners``, ``progress``, ``sensitivity`` ...).
+    """
+    cls = integrator_for(system, method)
+    if not callable(getattr(type(system), "lower", None)) and not cls.supports(system):
+        raise ModelError(_unsupported(cls, system))
+    _split_options(cls, dict(options))
+    return cls
+
+
+def _unsupported(cls: type[Integrator], system: Any) -> str:
+    """The message for a method that does not integrate ``system``, naming those that do."""
+    able = [name for name in METHODS if METHODS[name].supports(system)]
+    todo = (f"use method={able[0]!r}" + (f" (or one of {able[1:]})" if able[1:] else "")
+            if able else "no built-in method integrates it")
+    return f"{cls.name}: integrates {cls.systems()}, got {type(system).__name__}; {todo}"
 
 
 def _split_options(cls: type[Integrator], options: dict[str, Any]
@@ -267,6 +310,10 @@ def _split_options(cls: type[Integrator], options: dict[str, Any]
                          f"{sorted(accepted)}")
     common = {k: v for k, v in options.items() if k in COMMON_OPTIONS}
     own = {k: v for k, v in options.items() if k not in COMMON_OPTIONS}
+    if "progress" in common:      # one check for every method (a str would be truthy)
+        common["progress"] = check_bool("progress", common["progress"], allow_none=True)
+    if "sensitivity" in common:
+        common["sensitivity"] = check_bool("sensitivity", common["sensitivity"])
     on_failure = common.get("on_failure", "raise")
     if on_failure not in ("raise", "return", "warn"):
         raise ModelError(f"on_failure: expected 'raise', 'return' or 'warn', got "
@@ -337,6 +384,10 @@ def _check_t_eval(t_eval: Any) -> np.ndarray:
 def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
                  t_span: tuple[float, float], common: dict[str, Any],
                  own: dict[str, Any]) -> Trajectory:
+    if "progress" in common:      # one check for every method (a str would be truthy)
+        common["progress"] = check_bool("progress", common["progress"], allow_none=True)
+    if "sensitivity" in common:
+        common["sensitivity"] = check_bool("sensitivity", common["sensitivity"])
     on_failure = common.get("on_failure", "raise")
     try:
         traj = cls().integrate(system, x0, t_span, **own)

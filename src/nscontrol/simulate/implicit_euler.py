@@ -96,7 +96,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_vector, check_in_interval, check_positive
+from .._validation import FloatArray, as_vector, check_bool, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
 
@@ -685,7 +685,7 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     controller = _check_controller(system, options)
     blocks = options.get("compiled_blocks") if controller is not None else None
     system = _with_input(system, options.get("u"))
-    sensitivity = _check_sensitivity(options.get("sensitivity", False))
+    sensitivity = check_bool("sensitivity", options.get("sensitivity", False))
     if sensitivity and controller is not None:
         raise ModelError("sensitivity: not available with a controller= (the Jacobian of the "
                          "discrete map would miss the feedback's derivative)")
@@ -787,12 +787,6 @@ def _check_controller(system: Any, options: dict[str, Any]) -> Any:
         raise ModelError("controller, u: give one of them (the controller's output is the "
                          "input u)")
     return controller
-
-
-def _check_sensitivity(value: Any) -> bool:
-    if not isinstance(value, bool | np.bool_):
-        raise ModelError(f"sensitivity: expected True or False, got {value!r}")
-    return bool(value)
 
 
 def _warn_degenerate(jac: Any) -> None:

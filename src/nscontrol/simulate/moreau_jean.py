@@ -63,7 +63,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, check_in_interval, check_positive
+from .._validation import FloatArray, check_bool, check_in_interval, check_positive
 from ..errors import DimensionError, ModelError, SolverError
 from .trajectory import Recorder, Trajectory
 
@@ -293,6 +293,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
     if activation is None:
         activation = 1e-12 * (1.0 + float(np.max(np.abs(x0[: system.n_dof]), initial=0.0)))
     activation = check_positive("activation", activation, allow_zero=True)
+    projection = check_bool("projection", projection)
+    progress = check_bool("progress", progress, allow_none=True)
     t0, tf = (float(t) for t in t_span)
     if system.friction_dim or projection:   # Coulomb friction, or the position projection
         from ._frictional_moreau_jean import integrate_frictional
@@ -303,7 +305,7 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
         return integrate_frictional(system, x0, t0, tf, h=h, theta=theta, gamma=gamma, u=u,
                                     record_every=record_every, signals=signals,
                                     progress=progress, activation=activation,
-                                    projection=bool(projection), contact_tol=contact_tol)
+                                    projection=projection, contact_tol=contact_tol)
     # whole steps of h, then one shorter step so that the run ends exactly at tf
     n_full = int(np.floor((tf - t0) / h + 1e-9))
     h_last = (tf - t0) - n_full * h

@@ -58,7 +58,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_float_array, as_vector, check_integer, check_positive
+from .._validation import (
+    FloatArray,
+    as_float_array,
+    as_vector,
+    check_bool,
+    check_integer,
+    check_positive,
+)
 from ..errors import BudgetExceededError, ModelError, NscontrolError, ZenoError
 from .trajectory import Recorder, Trajectory
 
@@ -140,10 +147,7 @@ class _Run:
                              f"{t_eval.shape}" + ("" if t_eval.ndim != 1 else " (not sorted)"))
         self.t_eval = t_eval[(t_eval >= self.t0) & (t_eval <= self.tf)]
         self._ptr = 0
-        sens = options.get("sensitivity", False)
-        if not isinstance(sens, bool | np.bool_):
-            raise ModelError(f"sensitivity: expected True or False, got {sens!r}")
-        self.sensitivity = bool(sens)
+        self.sensitivity = check_bool("sensitivity", options.get("sensitivity", False))
         self.rtol = check_positive("rtol", options.get("rtol", 1e-11))
         self.atol = check_positive("atol", options.get("atol", 1e-13))
         self.max_events = check_integer("max_events", options.get("max_events", 1_000_000),

@@ -176,8 +176,16 @@ class Trajectory:
         )
 
     def at(self, t: float | FloatArray) -> FloatArray:
-        """States linearly interpolated at time(s) ``t`` (right-continuous at events)."""
+        """States linearly interpolated at time(s) ``t`` (right-continuous at events).
+
+        Raises
+        ------
+        ModelError
+            A time outside the recorded span ``[t[0], t[-1]]`` (beyond round-off): the run
+            says nothing about it, and the end state would be a wrong answer.
+        """
         tq = np.atleast_1d(as_float_array("t", t))
+        self._check_in_span("t", tq)
         out = self._interpolate(self.x, *self._weights(tq))
         return out[0] if np.ndim(t) == 0 else out
 
@@ -199,16 +207,24 @@ class Trajectory:
         if len(self.t) < 2:
             raise ModelError("t_eval: the run recorded fewer than 2 samples; nothing to "
                              "interpolate")
-        scale = 1e-12 * max(1.0, float(np.max(np.abs(self.t))))   # roundoff of the end times
-        if tq.min() < self.t[0] - scale or tq.max() > self.t[-1] + scale:
-            raise ModelError(f"t_eval: times must lie in the simulated span [{self.t[0]:.6g}, "
-                             f"{self.t[-1]:.6g}], got [{tq.min():.6g}, {tq.max():.6g}]")
+        self._check_in_span("t_eval", tq)
         weights = self._weights(tq)
         signals = {k: self._interpolate(np.asarray(v, dtype=np.float64), *weights)
                    for k, v in self.signals.items()}
         stats = {**self.stats, "t_eval": "interpolated"}
         return replace(self, t=tq.copy(), x=self._interpolate(self.x, *weights),
                        signals=signals, stats=stats)
+
+    def _check_in_span(self, name: str, tq: FloatArray) -> None:
+        """Refuse query times outside ``[t[0], t[-1]]`` beyond the round-off of the end
+        times (a few ulps of the largest ``|t|``: 1e-12 relative leaves a factor ~4500)."""
+        if not tq.size or not self.t.size:
+            return
+        scale = 1e-12 * max(1.0, float(np.max(np.abs(self.t))))
+        if tq.min() < self.t[0] - scale or tq.max() > self.t[-1] + scale:
+            raise ModelError(f"{name}: times must lie in the simulated span [{self.t[0]:.6g}, "
+                             f"{self.t[-1]:.6g}], got [{tq.min():.6g}, {tq.max():.6g}]; "
+                             f"simulate over a longer span, or query inside it")
 
     def _weights(self, tq: FloatArray) -> tuple[np.ndarray, FloatArray]:
         idx = np.clip(np.searchsorted(self.t, tq, side="right") - 1, 0, len(self.t) - 2)

@@ -26,6 +26,7 @@ from .._validation import (
     as_matrix,
     as_square,
     as_vector,
+    check_bool,
     check_positive,
     check_positive_definite,
     check_symmetric,
@@ -195,7 +196,7 @@ class MechanicalPWL:
         N = self.n_dof
         Minv = np.linalg.inv(self.M)
         A = np.block([[np.zeros((N, N)), np.eye(N)], [-Minv @ self.K, -Minv @ self.Cd]])
-        if contact:
+        if check_bool("contact", contact):
             A = A - self.support.k * np.outer(self._lift(self.support.h), self.H)
         return A
 

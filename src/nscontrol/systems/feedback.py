@@ -39,7 +39,15 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_matrix, as_vector, check_positive
+from .._validation import (
+    FloatArray,
+    as_float_array,
+    as_matrix,
+    as_square,
+    as_vector,
+    check_bool,
+    check_positive,
+)
 from ..errors import DimensionError, ModelError
 
 __all__ = ["Measurement", "Jump", "Controller", "Observer", "StaticLaw", "StateFeedback",
@@ -205,8 +213,13 @@ class CompiledBlock:
                                  f"numba.njit({sig_name}) (from "
                                  f"nscontrol.systems.feedback), the signature declared, got "
                                  f"{getattr(self, name)!r}")
-        params = np.ascontiguousarray(np.asarray(self.params, dtype=np.float64).reshape(-1))
-        object.__setattr__(self, "params", params)
+        # strings are not parsed and NaN is refused; +-inf may stand for "no bound"
+        params = as_float_array("params", self.params, finite=False).reshape(-1)
+        if np.isnan(params).any():
+            raise ModelError(f"params: expected numbers (+-inf allowed for a missing bound), "
+                             f"got NaN at index {np.flatnonzero(np.isnan(params)).tolist()}; "
+                             f"the kernels would compute NaN outputs from it")
+        object.__setattr__(self, "params", np.ascontiguousarray(params))
 
 
 def _has_signature(fn: Any, sig: Any) -> bool:
@@ -441,6 +454,8 @@ class PiecewiseStateFeedback(StaticLaw):
                                  f"{len(ks)}")
         object.__setattr__(self, "K", Ks)
         object.__setattr__(self, "k", ks)
+        object.__setattr__(self, "discontinuous", check_bool("discontinuous",
+                                                             self.discontinuous))
         if self.on not in ("state", "estimate"):
             raise ModelError(f"on: expected 'state' or 'estimate', got {self.on!r}")
 
@@ -478,7 +493,7 @@ class LinearController(_Block):
     n_states: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
-        A = as_matrix("A", self.A)
+        A = as_square("A", self.A)
         r = A.shape[0]
         B = as_matrix("B", self.B, rows=r)
         C = as_matrix("C", self.C, cols=r)

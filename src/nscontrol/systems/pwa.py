@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_matrix, as_square, as_vector
+from .._validation import FloatArray, as_matrix, as_square, as_vector, check_bool
 from ..errors import DimensionError, ModelError
 from ..numerics.statespace import is_state_space, state_space_matrices
 from .lure import as_input_function
@@ -139,6 +139,7 @@ class PiecewiseAffineSystem:
     def __post_init__(self) -> None:
         if len(self.A) == 0:
             raise DimensionError("A: expected one matrix per region, got none")
+        object.__setattr__(self, "continuous", check_bool("continuous", self.continuous))
         self._take_state_space_modes()
         As = tuple(as_square(f"A[{i}]", a) for i, a in enumerate(self.A))
         n = As[0].shape[0]

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_positive
+from .._validation import check_bool, check_positive
 from ..errors import ModelError
 
 __all__ = ["LCPProblem", "canonical_lcps", "two_by_two_interior", "two_by_two_mixed",
@@ -127,6 +127,7 @@ def stack_delassus(n_masses: int, *, mass: float = 1.0, g: float = 9.81, h: floa
     mass = check_positive("mass", mass)
     g = check_positive("g", g)
     h = check_positive("h", h)
+    sparse = check_bool("sparse", sparse)
     diag = np.full(n, 2.0 / mass)
     diag[0] = 1.0 / mass
     off = np.full(n - 1, -1.0 / mass)

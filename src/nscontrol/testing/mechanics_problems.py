@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, check_positive
+from .._validation import FloatArray, check_bool, check_positive
 from ..systems.lagrangian import LagrangianSystem
 
 __all__ = ["BouncingBall", "RestingStack", "NewtonsCradle", "impact_oscillator",
@@ -267,9 +267,12 @@ class ImpactingPendulum:
         def jacobian(t: float, q: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
             return np.array([[-np.cos(q[0])]]), np.zeros((1, 1))
 
-        mass: Any = (lambda q: np.ones((1, 1))) if self.callable_mass else np.ones((1, 1))
+        mass: Any = (lambda q: np.ones((1, 1))) if check_bool("callable_mass", self.callable_mass) \
+            else np.ones((1, 1))
         return LagrangianSystem(mass, damping=[[self.damping]], force=force,
-                                force_jacobian=jacobian if self.force_jacobian else None,
+                                force_jacobian=(jacobian if check_bool("force_jacobian",
+                                                                       self.force_jacobian)
+                                                else None),
                                 gap_matrix=[[-1.0]], gap_offset=[self.wall],
                                 restitution=self.restitution, names=("theta",))
 

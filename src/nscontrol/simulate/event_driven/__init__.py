@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..._validation import check_bool
 from ...errors import ModelError, NscontrolError
 from ...systems.hybrid import LinearHybridSystem
 from ...systems.impacting_bodies import ImpactingBodies
@@ -205,8 +206,7 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
         listeners=listeners, rtol=rtol, atol=atol, record_every=record_every,
         signals=signals, progress=progress)
-    if not isinstance(sensitivity, bool | np.bool_):
-        raise ModelError(f"sensitivity: expected True or False, got {sensitivity!r}")
+    sensitivity = check_bool("sensitivity", sensitivity)
     if sensitivity and not isinstance(system, LagrangianSystem):
         raise ModelError(f"sensitivity: event_driven computes the state transition of a "
                          f"LagrangianSystem, got {type(system).__name__}; for an "

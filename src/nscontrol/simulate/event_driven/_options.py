@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._validation import FloatArray, as_matrix, check_integer, check_positive
+from ..._validation import FloatArray, as_matrix, check_bool, check_integer, check_positive
 from ...errors import DimensionError, ModelError
 from ...numerics.lti import Exosystem
 
@@ -112,7 +112,7 @@ class _Options:
                    rel=check_positive("zeno_rel", zeno_rel),
                    listeners=tuple(listeners), rtol=check_positive("rtol", rtol),
                    atol=check_positive("atol", atol), every=record_every, signals=signals,
-                   progress=progress)
+                   progress=check_bool("progress", progress, allow_none=True))
 
 
 #: Checked options by ``(t0, tf, (type, value) of each option)``.
