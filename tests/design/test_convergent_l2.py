@@ -14,6 +14,8 @@ from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
 from nscontrol.numerics.lti import Exosystem
 from nscontrol.systems.beam import Unbalance, two_mode_beam
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 RHO = 1e-6          # m/N
 N = 4000            # uniform samples per period
 

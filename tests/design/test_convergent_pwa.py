@@ -11,6 +11,8 @@ from nscontrol.examples.ch11_convergent_pwa import beam_surrogate, one_sided_osc
 from nscontrol.numerics.scaling import Scaling
 from nscontrol.systems.pwa import PiecewiseAffineSystem
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 
 @pytest.fixture(scope="module")
 def plant():

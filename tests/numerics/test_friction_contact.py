@@ -7,6 +7,8 @@ import pytest
 from nscontrol.errors import DimensionError, ModelError
 from nscontrol.numerics import friction_residual, planar_friction_lcp, solve_friction_contact
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 EPS = np.finfo(float).eps
 
 
