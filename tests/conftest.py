@@ -8,6 +8,16 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    # the modules whose verdict rests on rounding (LMI certificates, orbits and their Floquet
+    # multipliers, continuation, integrator accuracy, the LCP and LTI numerics) carry
+    # ``pytestmark = pytest.mark.sensitive``; ``make test-sensitive`` reruns them under an
+    # older BLAS kernel and with numba's optimiser off (tests/README.md)
+    config.addinivalue_line(
+        "markers", "sensitive: numerically sensitive module, rerun by make test-sensitive under "
+        "OPENBLAS_CORETYPE=Sandybridge and NUMBA_OPT=0")
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261122)

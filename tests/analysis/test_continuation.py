@@ -9,6 +9,8 @@ from nscontrol.analysis.continuation import Branch, continue_orbit, switch_at_fl
 from nscontrol.analysis.impact_oscillator import ImpactOscillator, OscillatorFamily
 from nscontrol.analysis.orbits import Forced, find_orbit
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 BASE = ImpactOscillator(omega=2.5, stop=0.1)
 FAM = OscillatorFamily(BASE, "forcing")
 FG = BASE.grazing_forcing()

@@ -13,6 +13,8 @@ from nscontrol.errors import DimensionError, ModelError, SolverError
 from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
 from nscontrol.numerics.lti import Exosystem
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 W_RES, W_SUB = 1.420, 2.9
 
 
@@ -85,11 +87,16 @@ def test_check7_open_loop_not_convergent(plant):
 def test_check8_homogeneity_and_gap(plant, sf, loop):
     gammas = [pr.harmonic_response(_orbit(loop, W_SUB, a), amplitude=a, system=loop).gamma
               for a in (0.1, 1.0, 10.0)]
-    assert gammas[0] == pytest.approx(0.18919, abs=1e-5)
+    # the spec's figures depend on K, the minimiser of the gain bound: an LMI solver stopped at
+    # its gap tolerance 1e-8 fixes a minimiser only to about √1e-8 = 1e-4 relative (a smooth
+    # optimum is flat), which moves γ by |∂γ/∂K|·1e-4|K| <= 0.062·1e-4·2.3 = 1.4e-5 and the
+    # linear gain by 0.033·1e-4·2.3 = 7.6e-6 (|∂/∂K| by central differences of these very
+    # functions); plus the figures' rounding, 5e-6 and 5e-7
+    assert gammas[0] == pytest.approx(0.18919, abs=2e-5)
     np.testing.assert_allclose(gammas, gammas[1], rtol=1e-6)
     gap_loop = sf.closed_loop(one_sided_oscillator(0.1, gap=0.5))
     lin = _linear_gain(plant.A[1] + plant.E @ sf.K, plant.E, plant.C, W_SUB)
-    assert lin == pytest.approx(0.125325, abs=1e-6)
+    assert lin == pytest.approx(0.125325, abs=1e-5)
     for a in (0.01, 1.0):
         g = pr.harmonic_response(_orbit(gap_loop, W_SUB, a), amplitude=a, system=gap_loop).gamma
         assert g == pytest.approx(lin, rel=1e-5)
@@ -118,6 +125,8 @@ def test_check10_bounds_hold(plant, sf, loop):
     assert frf.gamma.max() <= p2p.bound and frf.rms_gain.max() <= l2
     # P6: with the (SF-σ) certificate every Floquet multiplier obeys |μ| <= e^{-σT}
     assert np.all(frf.max_floquet <= np.exp(-0.3 * 2 * np.pi / omegas) * (1 + 1e-9))
+    # the spec's 4-digit figures: their rounding 5e-5 plus the effect of K's determinacy
+    # (~1e-5, see check 8) sit 10x inside 5e-4; the grid of ω is the same on every machine
     assert frf.gamma.max() == pytest.approx(0.4155, abs=5e-4)
     assert frf.rms_gain.max() == pytest.approx(0.3287, abs=5e-4)
     eps = 2 * 0.3 * np.linalg.eigvalsh(sf.P)[0]
@@ -235,7 +244,7 @@ def test_frequency_response_in_worker_processes_matches_serial(loop):
     with ProcessPoolExecutor(2) as pool:
         parallel = pr.frequency_response(loop, omegas, executor=pool, progress=False)
     np.testing.assert_allclose(parallel.gamma, serial.gamma, rtol=1e-12)
-    assert parallel.gamma[1] == pytest.approx(0.18919, abs=1e-5)
+    assert parallel.gamma[1] == pytest.approx(0.18919, abs=2e-5)   # as in check 8
 
 
 def test_frequency_response_of_a_system_with_an_exosystem_input_in_processes(plant, sf):

@@ -10,6 +10,8 @@ from nscontrol.errors import SolverError
 from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
 from nscontrol.numerics.lti import Exosystem
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 EPS = np.finfo(float).eps
 
 

@@ -14,6 +14,8 @@ from nscontrol.examples.ch11_convergent_pwa import one_sided_oscillator
 from nscontrol.numerics.lti import Exosystem
 from nscontrol.systems.beam import Unbalance, two_mode_beam
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 RHO = 1e-6          # m/N
 N = 4000            # uniform samples per period
 
@@ -72,22 +74,44 @@ def test_tradeoff_is_monotone_over_two_decades(beam):
     assert np.all(np.diff(tr.gain) < 0) and np.all(np.diff(tr.scaled_gain) < 0)
     assert np.all(np.diff(tr.max_effort) < 0) and np.all(np.diff(tr.max_effort_rms) < 0)
     assert np.all(np.diff(tr.gamma) > 0) and np.all(np.diff(tr.sup_response) > 0)
-    # γ = (1 + slack) γ_inf and γ_inf = ρ (the effort u -> -w of an unbounded gain): the
-    # solver's relative accuracy (~1e-8 on γ²) times 100
-    np.testing.assert_allclose(tr.gamma / tr.rho, 1.1, rtol=1e-4)
+    # γ = (1 + slack)·γ_inf with slack = 0.1, and γ_inf = ρ (the effort u -> -w of an unbounded
+    # gain) to the 1e-4 the design states for ρ in 1e-8..1e-4 m/N (docs/ch06.md). Which way
+    # γ_inf is found depends on whether Clarabel finishes the direct min γ² on this machine's
+    # rounding (here it does at ρ = 1e-7, 1e-6 and not at 1e-5): directly, to its gap
+    # tolerance 1e-8 on γ² (far inside the 1e-4); or by the bisection, which returns the upper
+    # end of a bracket 1e-3 wide on γ² (_L2_BISECTION_RTOL), so up to √(1 + 1e-3) above.
+    ratio = tr.gamma / (1.1 * tr.rho)
+    assert np.all(ratio >= 1 - 1e-4) and np.all(ratio <= (1 + 1e-4) * np.sqrt(1 + 1e-3))
     assert np.all(tr.max_effort_rms <= tr.max_effort)
     for des in tr.designs:   # every closed loop is certified convergent
         assert des.decay > 0 and des.P is not None
 
 
-def test_least_gamma_by_bisection_when_the_solver_cannot_finish(beam):
-    """At ρ = 1e-3 m/N the direct min γ² fails in the solvers (the infimum lies where Q turns
-    singular); the bisection on feasibility brackets γ_inf² to 1e-3."""
+def test_least_gamma_by_bisection_when_the_solver_cannot_finish(beam, monkeypatch):
+    """When the direct min γ² does not finish (the infimum lies where Q turns singular; on
+    which ρ that happens depends on the machine's rounding, so it is forced here), the
+    bisection on feasibility brackets γ_inf² to 1e-3 and γ = 1.1·γ_inf from its upper end."""
+    from nscontrol.design import convergent_pwa
+    from nscontrol.errors import InfeasibleDesignError
+
+    solve = convergent_pwa._solve_l2
+    fixed: list = []
+
+    def direct_fails(*args, gamma2):
+        if gamma2 is None:
+            raise InfeasibleDesignError("direct min gamma2 made to fail by the test",
+                                        status="solver_error")
+        fixed.append(gamma2)
+        return solve(*args, gamma2=gamma2)
+
+    monkeypatch.setattr(convergent_pwa, "_solve_l2", direct_fails)
     des = design_attenuation(beam, structure="state", rho=1e-3)
-    # γ_inf = ρ (measured for 1e-8..1e-4 m/N: the effort u -> -F of an unbounded gain, and no
-    # smaller); the bisection returns the upper end of a bracket 1e-3 wide on γ², so γ/ρ lies
-    # in [1.1, 1.1·√1.001]
-    assert 1.1 * (1 - 1e-6) <= des.gamma / 1e-3 <= 1.1 * np.sqrt(1 + 1e-3) * (1 + 1e-6)
+    assert len(fixed) > 3        # the bisection ran (its solves, then the final one)
+    # γ_inf = ρ to the 1e-4 the design states (docs/ch06.md: the effort u -> -F of an unbounded
+    # gain, and no smaller); the bisection returns the upper end of a bracket 1e-3 wide on γ²,
+    # so γ/(1.1ρ) lies in [1, √1.001] widened by that 1e-4
+    ratio = des.gamma / (1.1 * 1e-3)
+    assert 1 - 1e-4 <= ratio <= (1 + 1e-4) * np.sqrt(1 + 1e-3)
     assert np.isfinite(des.K).all() and des.feedback.gain_bound < 100
 
 

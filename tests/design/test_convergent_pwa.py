@@ -11,6 +11,8 @@ from nscontrol.examples.ch11_convergent_pwa import beam_surrogate, one_sided_osc
 from nscontrol.numerics.scaling import Scaling
 from nscontrol.systems.pwa import PiecewiseAffineSystem
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 
 @pytest.fixture(scope="module")
 def plant():
@@ -25,7 +27,9 @@ def _certificate_ok(As, P, sigma):
 
 def test_state_feedback_example_a(plant):
     sf = d.design_state_feedback(plant, sigma=0.3)
-    np.testing.assert_allclose(sf.K, [[-1.481, -1.742]], atol=2e-3)  # spec §4.1
+    # spec §4.1 quotes 3 decimals (±5e-4); K minimises the gain bound, which the solver's gap
+    # tolerance 1e-8 fixes only to about √1e-8 = 1e-4 relative (a flat optimum): 2.3e-4 here
+    np.testing.assert_allclose(sf.K, [[-1.481, -1.742]], atol=2e-3)
     assert sf.gain_bound == pytest.approx(3.90, abs=0.01)
     assert np.linalg.norm(sf.K, 2) <= sf.gain_bound * (1 + 1e-6)  # check 12
     loop = sf.closed_loop(plant)
@@ -64,7 +68,9 @@ def test_pwa_feedback_with_gap_offsets():
 
 def test_observer_example_a(plant):
     obs = d.design_observer(plant, sigma=1.0)
-    np.testing.assert_allclose(obs.L.ravel(), [3.110, 3.402], atol=3e-3)  # spec §4.1
+    # spec §4.1 (3 decimals, ±5e-4) and the minimiser's √(gap tolerance) = 1e-4 relative of
+    # |L| = 4.6: 5e-4 + 4.6e-4 < 3e-3
+    np.testing.assert_allclose(obs.L.ravel(), [3.110, 3.402], atol=3e-3)
     assert obs.kappa == pytest.approx(9.73, abs=0.02)
     assert np.linalg.norm(obs.L, 2) <= obs.gain_bound * (1 + 1e-6)
     assert _certificate_ok([A - obs.L @ obs.C for A in plant.A], obs.P, 1.0)
@@ -162,7 +168,11 @@ def test_auto_scaling_solves_the_beam_observer(k):
 def test_tune_pwa_feedback_minimises_the_largest_region_gain(plant):
     pf = d.tune_pwa_state_feedback(plant, sigma=0.3, nu_bounds=(0.0, 5.0), n_grid=6)
     best = max(pf.region_gains)
-    assert best == pytest.approx(1.7055, abs=2e-3) and pf.nu[0] == pytest.approx(1.906, abs=0.02)
+    # ν is found by Brent to xatol = 1e-3 of the 5-wide interval (5e-3); the largest region
+    # gain has a kink at its minimum, with slopes up to (2.29 - 1.706)/(2.5 - 1.906) ≈ 1 (the
+    # designs at ν = 1.906 and 2.5 of check 15), so it is known to 1·5e-3 (plus the spec's
+    # rounding 5e-5), ν to 4 xatol
+    assert best == pytest.approx(1.7055, abs=6e-3) and pf.nu[0] == pytest.approx(1.906, abs=0.02)
     for nu in (0.0, 1.0, 1.5, 2.5, 5.0):  # nearby and far values are worse
         other = d.design_pwa_state_feedback(plant, nu=nu, sigma=0.3)
         assert max(other.region_gains) >= best - 1e-6

@@ -14,6 +14,8 @@ from nscontrol.design.lure_observer import (
 from nscontrol.errors import DimensionError, InfeasibleDesignError, ModelError
 from nscontrol.examples import ch08_lure_observer as ex
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 
 def _postconditions(design):
     cert = design.certificate

@@ -15,6 +15,8 @@ from nscontrol.numerics import (
     solve_friction_contact,
 )
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 EPS = np.finfo(float).eps
 
 

@@ -9,6 +9,8 @@ from nscontrol.errors import DimensionError, ModelError, SolverError
 from nscontrol.numerics.lcp import LCPResult, LCPSolver, solve_lcp
 from nscontrol.testing.lcp_problems import no_solution, random_p_matrix
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 EPS = np.finfo(np.float64).eps
 
 

@@ -16,6 +16,8 @@ from nscontrol.numerics.lti import (
     first_event,
 )
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 # two masses, springs and dampers, forced on the first mass
 A_PLANT = np.array([[0.0, 0.0, 1.0, 0.0],
                     [0.0, 0.0, 0.0, 1.0],

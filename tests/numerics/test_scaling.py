@@ -9,6 +9,8 @@ from nscontrol.errors import DimensionError, ModelError
 from nscontrol.numerics.lmi import LYAPUNOV_RECHECK_RTOL, recheck_lyapunov
 from nscontrol.numerics.scaling import Scaling, balance, balanced_unit_norm
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 U = np.finfo(float).eps  # unit roundoff (x2)
 
 

@@ -30,6 +30,8 @@ from nscontrol.testing.setvalued_problems import (
     relay_scalar,
 )
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 EPS = np.finfo(float).eps
 H = {"moreau_jean": 1e-3, "implicit_euler": 2e-3}
 
