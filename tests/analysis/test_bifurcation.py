@@ -38,8 +38,13 @@ def test_regimes_match_the_closed_forms():
         assert m_up[i] == 1
         assert np.allclose(up[i], BASE.with_(forcing=vals[i]).non_impacting_state(0),
                            atol=1e-9)
-    # between grazing and flip the period-1 orbit is unstable: the period-2 attractor
-    assert m_down[2] == 2
+    # between grazing and flip the period-1 orbit is unstable: the period-2 attractor.
+    # Coming up from the linear orbit it converges at about 10^-3.6 per 50 periods (the
+    # distance to its 2000-period sample is 4e-9 after 100 periods, < 1e-12 after 150), so
+    # 200 periods leave ~1e-15. Coming *down* from F = 2.0 the start lies in a transient
+    # whose length round-off decides (multiplicity 2 or 0 for n_transient from 200 to 350
+    # with the same code, only the rounding of the flights changed): no test on it.
+    assert m_up[2] == 2
     # above the flip, coming down: the closed-form impacting orbit; |μ| = 0.71 over 200
     # periods leaves 0.71^200 ~ 1e-30
     for i in (3, 4):
