@@ -7,6 +7,9 @@ from typing import Any
 
 from ._validation import check_bool
 
+#: Seconds before an iterable's bar appears (shorter runs show none).
+ITER_DELAY = 2.0
+
 
 class TimeProgress:
     """A progress bar over simulated time ``[t0, tf]``, shown on stderr after ``delay`` seconds.
@@ -64,7 +67,7 @@ def progress_iter(iterable: Any, *, total: int | None = None, desc: str = "",
         return iterable
     from tqdm.auto import tqdm
 
-    bar = tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=2.0, leave=False,
+    bar = tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=ITER_DELAY, leave=False,
                bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}")
     if label is None:
         return bar
