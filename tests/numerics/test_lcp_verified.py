@@ -18,6 +18,8 @@ from nscontrol.testing.lcp_problems import (
     random_psd_matrix,
 )
 
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
 EPS = np.finfo(float).eps
 TOL = 1e-12
 PROPERTY = settings(max_examples=30, deadline=None,
