@@ -1,6 +1,7 @@
 """Filippov systems for :mod:`nscontrol.simulate.switching`.
 
-Each piece is integrated by DOP853 (``rtol``/``atol`` options) with one terminal event per
+Each piece is integrated by DOP853 (``rtol``/``atol`` options; steps counted on the run's
+``max_steps`` budget, none below ``min_rel_step`` of the span) with one terminal event per
 surface, armed in the direction that leaves the current side (so a piece that starts on a
 surface never re-triggers it). At a hit of surface ``j`` with ``σ± = ∇h_jᵀF±``:
 
@@ -19,12 +20,24 @@ of ``h_j = 0`` accumulate in finite time at a point where ``h_j = σ_j = 0``. At
 previous crossing within ``1e-9 (1 + |t|)``), and the weight below lies in ``[0, 1]``, the motion
 continues on ``h_j = σ̂_j = 0`` (event ``"two_sliding_start"``) with the field
 ``F₂ = F⁻ + α (F⁺ - F⁻)``, ``α = -(∂_t σ̂ + ∇σ̂ᵀF⁻) / ∇σ̂ᵀ(F⁺ - F⁻)`` (the equivalent control
-that keeps ``σ̂`` at zero; ``σ̂`` is ``∇h_jᵀ(F⁺ + F⁻)/2`` evaluated at the point projected onto
-the surface, so a non-smooth term that vanishes on the surface, such as ``|s|^{1/2}``, does not
-enter its central differences). The entry state is projected onto ``h_j = 0``, then onto
-``σ̂ = 0`` along ``F⁺ - F⁻`` (the only direction the switching moves the state in); the samples
-onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0
-or 1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
+that keeps ``σ̂`` at zero; ``σ̂ = ∇h_jᵀ(F⁺ + F⁻)/2``). Every field of this piece is the side's
+field **restricted to the surface** (:meth:`_Fields.on_surface`): the mean of its values at
+the two points ``±d`` along the normal, ``d = 1e-6 (1 + |x|)``. A smooth field is met to
+``O(d²)``; a continuous term odd in ``h_j``, such as the super-twisting's ``|s|^{1/2} sign s``,
+cancels. Evaluated on the surface itself, that term turns a rounding-level ``h_j`` of 1e-17
+into a 1e-8 jump of the field, the central differences of ``σ̂`` into jumps of ``α`` of 1e-3,
+and DOP853's steps into an endless shrinking (the hang of issue 29); restricted, the piece's
+field is Lipschitz, ``α``'s five-point differences (step ``1e-3 (1 + |x|)``) carry a relative
+error of about 1e-10, and the steps are those of a smooth problem. Hypothesis: the field's
+non-smooth dependence on ``h_j`` near the surface is odd (an even term such as ``|h_j|^{1/2}``
+would be met only to ``O(√d)``). The entry state is projected onto ``h_j = 0``, then onto
+``σ̂ = 0`` along ``F⁺ - F⁻`` (the only direction the switching moves the state in); the
+samples onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0 or
+1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
+
+A piece that starts within rounding of a surface (at a crossing, at a tangential exit) arms
+that surface's event just beyond its start (:func:`_surface_level`): armed from zero it could
+fire at once, again and again, or miss a return to the surface within its first step.
 
 A tangential touch without a sign change of ``h_k`` is caught by a non-terminal event on
 ``σ_k = ∇h_kᵀF`` of the current field, armed in the direction of an extremum of ``h_k`` towards
@@ -50,7 +63,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray
-from ..errors import ModelError, SolverError
+from ..errors import ModelError
 from ..numerics.differences import central_difference_jacobian
 from .switching import saltation_matrix
 
@@ -60,15 +73,22 @@ _GRAZE_FACTOR = 100.0
 #: is proportional to |σ|, so this bounds the error of the reaching time by about 1e-7 times
 #: the field's time scale.
 _TWO_SLIDING_SIGMA = 1e-7
-#: Central-difference step (relative) for the derivatives of σ̂: about eps^(1/3), balancing
-#: the O(δ²) truncation against the O(eps/δ) rounding.
-_FD_STEP = 6e-6
+#: Five-point central-difference step (relative to 1 + |x|) for the derivatives of σ̂: about
+#: eps^(1/5) = 7e-4, balancing the O(ε⁴) truncation against the O(eps/ε) rounding.
+_FD_STEP = 1e-3
+#: Normal distance (relative to 1 + |x|) of the two points whose mean is a field restricted to
+#: a surface: a smooth field is met to O(d²) = 1e-12 relative; an odd |h|^{1/2} term cancels up
+#: to its rounding k eps |x| / (2 √d), about 1e-13 k.
+_NORMAL_OFFSET = 1e-6
 
 
 class _Fields:
     def __init__(self, system: Any) -> None:
         self.s = system
         self.J = system.n_surfaces
+        self._terms_key: tuple[Any, ...] | None = None
+        self._terms: tuple[float, float, FloatArray, FloatArray] = (0.0, 0.0, np.zeros(0),
+                                                                    np.zeros(0))
 
     def side(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int, side: int
              ) -> FloatArray:
@@ -86,26 +106,60 @@ class _Fields:
         sm, sp, fm, fp, _ = self.sigmas(t, x, signs, j)
         return (sp * fm - sm * fp) / (sp - sm)
 
+    def on_surface(self, t: float, y: FloatArray, signs: tuple[int, ...], j: int, side: int
+                   ) -> FloatArray:
+        """The field of side ``side`` restricted to ``h_j = 0`` near ``y``: the mean of its
+        values at the two points at distance ``±d`` along the unit normal from ``y``'s
+        first-order projection, ``d = _NORMAL_OFFSET (1 + |y|)``.
+
+        A field smooth across the surface is met to ``O(d²)``; a continuous term odd in
+        ``h_j`` such as ``k |h_j|^{1/2} sign h_j`` (the super-twisting's) cancels, leaving
+        ``k e / (2 √(d |∇h_j|))`` for a rounding ``e`` of ``h_j`` at the two points, so the
+        result is Lipschitz in ``y`` where the field itself is not (its slope in ``h_j`` is
+        unbounded at ``h_j = 0``, which no rounding-level evaluation on the surface avoids).
+        """
+        g = self.s.gradient(j, y)
+        gn = float(np.linalg.norm(g))
+        if gn == 0.0:
+            return self.side(t, y, signs, j, side)
+        base = y - float(self.s.surfaces[j](y)) / (gn * gn) * g
+        off = (_NORMAL_OFFSET * (1.0 + float(np.linalg.norm(y))) / gn) * g
+        return 0.5 * (self.side(t, base + off, signs, j, side)
+                      + self.side(t, base - off, signs, j, side))
+
     def sigma_hat(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> float:
-        """``∇h_jᵀ(F⁺ + F⁻)/2`` at ``x`` projected onto ``h_j = 0``."""
-        sm, sp, _, _, _ = self.sigmas(t, _on_surface(self.s, j, x), signs, j)
-        return 0.5 * (sm + sp)
+        """``∇h_jᵀ(F⁺ + F⁻)/2`` of the fields restricted to ``h_j = 0``
+        (:meth:`on_surface`), at ``x`` projected onto the surface."""
+        y = _project(self.s, j, x)
+        fm = self.on_surface(t, y, signs, j, -1)
+        fp = self.on_surface(t, y, signs, j, 1)
+        return 0.5 * float(self.s.gradient(j, y) @ (fm + fp))
 
     def two_sliding_terms(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
                           ) -> tuple[float, float, FloatArray, FloatArray]:
-        """``(a0, a1, F⁻, F⁺)``: ``dσ̂/dt = a0 + α a1`` along ``F⁻ + α (F⁺ - F⁻)``, all at
-        ``x`` projected onto ``h_j = 0`` (a term like ``|h|^{1/2}`` would otherwise turn the
-        integrator's O(1e-14) departures from the surface into O(1e-7) jumps of the field)."""
-        x = _on_surface(self.s, j, x)
-        fm, fp = self.side(t, x, signs, j, -1), self.side(t, x, signs, j, 1)
-        scale = 1.0 + float(np.linalg.norm(x)) + abs(t)
+        """``(a0, a1, F⁻, F⁺)``: ``dσ̂/dt = a0 + α a1`` along ``F⁻ + α (F⁺ - F⁻)``, the
+        fields restricted to ``h_j = 0`` at ``x`` projected onto the surface. The derivatives
+        of ``σ̂`` are five-point central differences (truncation ``O(ε⁴)`` and rounding
+        ``O(eps/ε)`` balance near ``ε = 1e-3``) of a function smooth along the surface, so
+        ``α`` is smooth too and an adaptive step never shrinks on its noise."""
+        key = (t, x.tobytes(), signs, j)
+        if key == self._terms_key:   # the step's last stage, then its events, ask again
+            return self._terms
+        y = _project(self.s, j, x)
+        fm = self.on_surface(t, y, signs, j, -1)
+        fp = self.on_surface(t, y, signs, j, 1)
+        scale = 1.0 + float(np.linalg.norm(y))
 
         def along(dt: float, v: FloatArray) -> float:
             eps = _FD_STEP * scale / max(1.0, float(np.linalg.norm(v)), abs(dt))
-            return (self.sigma_hat(t + eps * dt, x + eps * v, signs, j)
-                    - self.sigma_hat(t - eps * dt, x - eps * v, signs, j)) / (2.0 * eps)
 
-        return along(1.0, fm), along(0.0, fp - fm), fm, fp
+            def at(k: float) -> float:
+                return self.sigma_hat(t + k * eps * dt, y + k * eps * v, signs, j)
+            return (8.0 * (at(1.0) - at(-1.0)) - (at(2.0) - at(-2.0))) / (12.0 * eps)
+
+        self._terms_key = key
+        self._terms = (along(1.0, fm), along(0.0, fp - fm), fm, fp)
+        return self._terms
 
     def two_sliding_weight(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
                            ) -> float:
@@ -206,8 +260,6 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
 
 def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
                  ) -> dict[str, Any]:
-    from scipy.integrate import solve_ivp
-
     fields = _Fields(system)
     n = system.n_states
     t, x = run.t0, x0.copy()
@@ -225,17 +277,16 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     last_cross: dict[int, float] = {}
     while t < run.tf:
         if second >= 0:
-            f, (events, kinds) = _two_sliding_piece(system, fields, signs, second)
+            f, (events, kinds) = _two_sliding_piece(system, fields, signs, second, x)
         else:
             f = fields.rhs(signs, sliding)
-            events, kinds = _events(system, fields, signs, sliding)
+            events, kinds = _events(system, fields, signs, sliding, x)
         if run.sensitivity:
             rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
                 np.concatenate([x, np.eye(n).ravel()])
         else:
             rhs, y0 = f, x
-        sol = solve_ivp(rhs, (t, run.tf), y0, method="DOP853", rtol=run.rtol, atol=run.atol,
-                        events=events, dense_output=True)
+        sol = run.dop853(rhs, t, y0, events)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
         if ts.size and sol.sol is not None:
@@ -244,10 +295,7 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
                 X = np.array([_project(system, max(sliding, second), xs) for xs in X])
             run.rec.extend(ts, X)
         if sol.status < 0:
-            raise SolverError(f"switching: DOP853 failed at t = {t_end:.6g} "
-                              f"({sol.message}); the field may be singular or blow up there. "
-                              f"The trajectory up to that time is in err.trajectory",
-                              status="dop853")
+            raise run.piece_failure(sol, t_end, "the field may be singular or blow up there")
         _record_grazings(system, run, sol, kinds, signs, sliding, t_end, last_graze)
         if run.sensitivity:
             run.Phi = sol.y[n:, -1].reshape(n, n) @ run.Phi
@@ -348,12 +396,12 @@ def _leave_two_sliding(fields: _Fields, run: Any, t: float, x: FloatArray,
     return out
 
 
-def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: int
-                       ) -> tuple[Any, tuple[list[Any], list[tuple[str, int]]]]:
+def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: int,
+                       x0: FloatArray) -> tuple[Any, tuple[list[Any], list[tuple[str, int]]]]:
     """Field and events of a piece in second-order sliding on surface ``j``: the other
     surfaces' events as in first order, and the exits ``α = 0`` (falling) and ``α = 1``
     (rising), both terminal."""
-    events, kinds = _events(system, fields, signs, -1)
+    events, kinds = _events(system, fields, signs, -1, x0)
     keep = [i for i, (_, k) in enumerate(kinds) if k != j]
     events, kinds = [events[i] for i in keep], [kinds[i] for i in keep]
     n = system.n_states
@@ -368,29 +416,6 @@ def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: 
         events.append(exit_event(bound))
         kinds.append(("exit2", bound))
     return (lambda t, x: fields.two_sliding(t, x, signs, j)), (events, kinds)
-
-
-def _on_surface(system: Any, j: int, x: FloatArray) -> FloatArray:
-    """``x`` projected onto ``h_j = 0``, then nudged (Newton steps on one coordinate, down to
-    one ulp) until ``h_j`` is exactly zero in floating point when such a nudge exists: a term
-    like ``|h|^{1/2}`` of the field turns a rounding-level ``h`` of 1e-16 into a 1e-8 jump,
-    which central differences and the integrator's error control would amplify."""
-    y = _project(system, j, x)
-    g = system.gradient(j, y)
-    hv = float(system.surfaces[j](y))
-    for i in np.argsort(-np.abs(g))[:2]:
-        for _ in range(4):
-            if hv == 0.0 or g[i] == 0.0:
-                return y
-            cand = y.copy()
-            step = cand[i] - hv / g[i]
-            cand[i] = step if step != cand[i] else np.nextafter(
-                cand[i], -np.inf if hv * g[i] > 0 else np.inf)
-            hc = float(system.surfaces[j](cand))
-            if not abs(hc) < abs(hv):
-                break
-            y, hv = cand, hc
-    return y
 
 
 def _project(system: Any, j: int, x: FloatArray) -> FloatArray:
@@ -441,19 +466,36 @@ def _record_grazings(system: Any, run: Any, sol: Any, kinds: list[tuple[str, int
         run.rec.sample(tr, xr, force=True)
 
 
-def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
-            ) -> tuple[list[Any], list[tuple[str, int]]]:
-    """Events of a piece: each surface armed in the direction leaving the current side
-    (terminal), the extrema of each surface function towards it (``σ_k = 0``, non-terminal:
-    grazing candidates), and while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0``
-    (rising, terminal)."""
+def _surface_level(system: Any, k: int, side: int, x0: FloatArray) -> float:
+    """The level of ``h_k`` whose crossing ends a piece that starts at ``x0`` on side ``side``:
+    zero, unless ``x0`` lies within rounding of the surface or on its other side (as the
+    state located at a crossing or at a tangential exit does), where it is
+    ``h_k(x0) - side η``, ``η = 8 eps (|h_k(x0)| + |∇h_k| |x0|)``: just beyond the start
+    towards the side being left. Armed from zero, the event would fire at the piece's very
+    start or miss a return to the surface within the first step (``h_k`` starting on the far
+    side of it by a rounding and coming back); the level moves the located crossing by
+    ``η / |∇h_kᵀF|`` in time."""
+    h0 = float(system.surfaces[k](x0))
+    eta = 8.0 * np.finfo(float).eps * (abs(h0) + float(np.linalg.norm(system.gradient(k, x0)))
+                                       * float(np.linalg.norm(x0)))
+    return 0.0 if side * h0 > eta else h0 - side * eta
+
+
+def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int,
+            x0: FloatArray) -> tuple[list[Any], list[tuple[str, int]]]:
+    """Events of a piece from ``x0``: each surface armed in the direction leaving the current
+    side (terminal, at the level of :func:`_surface_level`), the extrema of each surface
+    function towards it (``σ_k = 0``, non-terminal: grazing candidates), and while sliding
+    the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0`` (rising, terminal)."""
     n = system.n_states
     events: list[Any] = []
     kinds: list[tuple[str, int]] = []
 
     def surface(k: int) -> Any:
+        level = _surface_level(system, k, signs[k], x0)
+
         def ev(t: float, y: FloatArray) -> float:
-            return float(system.surfaces[k](y[:n]))
+            return float(system.surfaces[k](y[:n])) - level
         ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]  # solve_ivp reads these
         return ev
 
