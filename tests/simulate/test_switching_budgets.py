@@ -4,6 +4,8 @@ the Filippov, nonlinear and PWA-with-a-function-input paths, periods on the PWM 
 ``BudgetExceededError`` naming it, with every sample computed before it in
 ``err.trajectory``."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -75,10 +77,10 @@ def test_pwm_budget_stops_at_the_period_it_cannot_pay():
     with pytest.raises(BudgetExceededError) as info:
         simulate(system, x0, span, max_steps=8, n_samples=101)
     part = info.value.trajectory
-    # periods 0..7 were paid for: their switch instants k T + o_j (k < 8) are all there and
-    # nothing at or after t_8 = 2.0 was computed
-    assert part.t[-1] <= 8 * 0.25 and len(part.events_of("switch")) == 2 * 8 - 1
-    assert part.events[-1].time < 2.0
+    # periods 0..7 were paid for: their two switch instants k T + d/2, k T + T - d/2 each
+    # (centred pulse) are all there, and nothing after t_8 = 2.0 was computed
+    assert part.t[-1] == 8 * 0.25 and len(part.events_of("switch")) == 2 * 8
+    assert part.events[-1].time == 7 * 0.25 + 0.25 - 0.15 / 2
 
 
 def test_min_rel_step_stops_a_blow_up_before_the_steps_reach_rounding():
@@ -89,15 +91,23 @@ def test_min_rel_step_stops_a_blow_up_before_the_steps_reach_rounding():
         simulate(f, [1.0], (0.0, 2.0))
     err = info.value
     assert err.budget == "min_rel_step" and err.limit == 1e-12 and err.used > 0
+    stop = _stop_time(err)
+    assert 1.0 - 1e-6 < stop < 1.0
     part = err.trajectory
-    assert part.status == -1 and 1.0 - 1e-6 < part.t[-1] < 1.0
-    # every sample before is the closed form 1/(1 - t), to the integrator's tolerance
+    # every requested sample before the stop is there (t_eval spacing 2e-3: the last is
+    # 0.998) and is the closed form 1/(1 - t), to the integrator's tolerance
+    assert part.status == -1 and part.t[-1] == pytest.approx(0.998, abs=1e-12)
     early = part.t < 0.9
     np.testing.assert_allclose(part.x[early, 0], 1.0 / (1.0 - part.t[early]), rtol=1e-9)
-    # a looser floor lets the same run go further before the same budget stops it
-    with pytest.raises(BudgetExceededError) as loose:
+    # a coarser floor stops the same run earlier, by the same budget
+    with pytest.raises(BudgetExceededError) as coarse:
         simulate(f, [1.0], (0.0, 2.0), min_rel_step=1e-6)
-    assert loose.value.trajectory.t[-1] < part.t[-1]
+    assert coarse.value.budget == "min_rel_step" and _stop_time(coarse.value) < stop
+
+
+def _stop_time(err):
+    """The time a budget error's message says the run stopped at."""
+    return float(re.search(r"at t = ([0-9.e+-]+)", str(err)).group(1))
 
 
 @pytest.mark.parametrize("name, value, message", [
