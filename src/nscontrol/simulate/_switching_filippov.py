@@ -35,9 +35,10 @@ would be met only to ``O(√d)``). The entry state is projected onto ``h_j = 0``
 samples onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0 or
 1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
 
-A piece that starts within rounding of a surface (at a crossing, at a tangential exit) arms
-that surface's event just beyond its start (:func:`_surface_level`): armed from zero it could
-fire at once, again and again, or miss a return to the surface within its first step.
+A piece that starts within rounding of a surface (at a crossing, at a tangential exit) starts
+strictly on its side of it, moved by a few roundings (:func:`_onto_sides`): from the far side
+its event could miss a return to the surface within the first step, from the surface itself
+fire at once, again and again.
 
 A tangential touch without a sign change of ``h_k`` is caught by a non-terminal event on
 ``σ_k = ∇h_kᵀF`` of the current field, armed in the direction of an extremum of ``h_k`` towards
@@ -277,10 +278,11 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     last_cross: dict[int, float] = {}
     while t < run.tf:
         if second >= 0:
-            f, (events, kinds) = _two_sliding_piece(system, fields, signs, second, x)
+            f, (events, kinds) = _two_sliding_piece(system, fields, signs, second)
         else:
             f = fields.rhs(signs, sliding)
-            events, kinds = _events(system, fields, signs, sliding, x)
+            events, kinds = _events(system, fields, signs, sliding)
+        x = _onto_sides(system, signs, max(sliding, second), x)
         if run.sensitivity:
             rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
                 np.concatenate([x, np.eye(n).ravel()])
@@ -396,12 +398,12 @@ def _leave_two_sliding(fields: _Fields, run: Any, t: float, x: FloatArray,
     return out
 
 
-def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: int,
-                       x0: FloatArray) -> tuple[Any, tuple[list[Any], list[tuple[str, int]]]]:
+def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: int
+                       ) -> tuple[Any, tuple[list[Any], list[tuple[str, int]]]]:
     """Field and events of a piece in second-order sliding on surface ``j``: the other
     surfaces' events as in first order, and the exits ``α = 0`` (falling) and ``α = 1``
     (rising), both terminal."""
-    events, kinds = _events(system, fields, signs, -1, x0)
+    events, kinds = _events(system, fields, signs, -1)
     keep = [i for i, (_, k) in enumerate(kinds) if k != j]
     events, kinds = [events[i] for i in keep], [kinds[i] for i in keep]
     n = system.n_states
@@ -466,36 +468,47 @@ def _record_grazings(system: Any, run: Any, sol: Any, kinds: list[tuple[str, int
         run.rec.sample(tr, xr, force=True)
 
 
-def _surface_level(system: Any, k: int, side: int, x0: FloatArray) -> float:
-    """The level of ``h_k`` whose crossing ends a piece that starts at ``x0`` on side ``side``:
-    zero, unless ``x0`` lies within rounding of the surface or on its other side (as the
-    state located at a crossing or at a tangential exit does), where it is
-    ``h_k(x0) - side η``, ``η = 8 eps (|h_k(x0)| + |∇h_k| |x0|)``: just beyond the start
-    towards the side being left. Armed from zero, the event would fire at the piece's very
-    start or miss a return to the surface within the first step (``h_k`` starting on the far
-    side of it by a rounding and coming back); the level moves the located crossing by
-    ``η / |∇h_kᵀF|`` in time."""
-    h0 = float(system.surfaces[k](x0))
-    eta = 8.0 * np.finfo(float).eps * (abs(h0) + float(np.linalg.norm(system.gradient(k, x0)))
-                                       * float(np.linalg.norm(x0)))
-    return 0.0 if side * h0 > eta else h0 - side * eta
+def _onto_sides(system: Any, signs: tuple[int, ...], skip: int, x: FloatArray) -> FloatArray:
+    """``x`` moved, by a few roundings of ``h_k`` along ``∇h_k``, strictly onto the side
+    ``signs[k]`` of every surface ``k != skip`` it lies within rounding of (as the state located
+    at a crossing or a tangential exit does). Left on the far side of the surface by a rounding,
+    a piece's event would miss a return to the surface within its first step (``h_k`` starting
+    beyond the level and coming back before the step's end); left at ``h_k = 0`` exactly, it
+    would fire at the piece's very start, again and again. A state farther than 1000 roundings
+    from the surface is left alone."""
+    y = x
+    for k, side in enumerate(signs):
+        if k == skip:
+            continue
+        h = float(system.surfaces[k](y))
+        g = system.gradient(k, y)
+        gg = float(g @ g)
+        ulp = np.finfo(float).eps * (abs(h) + float(np.sqrt(gg) * np.linalg.norm(y)))
+        if side * h > 0.0 or gg == 0.0 or abs(h) > 1000.0 * ulp:
+            continue
+        step = ulp
+        for _ in range(8):
+            cand = y + (side * step - h) / gg * g
+            if side * float(system.surfaces[k](cand)) > 0.0:
+                y = cand
+                break
+            step *= 2.0
+    return y
 
 
-def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int,
-            x0: FloatArray) -> tuple[list[Any], list[tuple[str, int]]]:
-    """Events of a piece from ``x0``: each surface armed in the direction leaving the current
-    side (terminal, at the level of :func:`_surface_level`), the extrema of each surface
-    function towards it (``σ_k = 0``, non-terminal: grazing candidates), and while sliding
-    the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0`` (rising, terminal)."""
+def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
+            ) -> tuple[list[Any], list[tuple[str, int]]]:
+    """Events of a piece: each surface armed in the direction leaving the current side
+    (terminal; the piece starts strictly on that side, :func:`_onto_sides`), the extrema of
+    each surface function towards it (``σ_k = 0``, non-terminal: grazing candidates), and
+    while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0`` (rising, terminal)."""
     n = system.n_states
     events: list[Any] = []
     kinds: list[tuple[str, int]] = []
 
     def surface(k: int) -> Any:
-        level = _surface_level(system, k, signs[k], x0)
-
         def ev(t: float, y: FloatArray) -> float:
-            return float(system.surfaces[k](y[:n])) - level
+            return float(system.surfaces[k](y[:n]))
         ev.terminal, ev.direction = True, -float(signs[k])  # type: ignore[attr-defined]  # solve_ivp reads these
         return ev
 
