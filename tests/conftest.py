@@ -40,3 +40,14 @@ def clarabel_fails(monkeypatch) -> list:
 
     monkeypatch.setattr(cp.Problem, "solve", clarabel_breaks)
     return attempts
+
+
+#: Per-test limit of the tests marked slow (the others have pyproject's ``timeout = 300``).
+SLOW_TIMEOUT = 1800
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Give the tests marked ``slow`` the longer limit, unless they set their own."""
+    for item in items:
+        if item.get_closest_marker("slow") and not item.get_closest_marker("timeout"):
+            item.add_marker(pytest.mark.timeout(SLOW_TIMEOUT))

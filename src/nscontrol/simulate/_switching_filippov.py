@@ -1,6 +1,7 @@
 """Filippov systems for :mod:`nscontrol.simulate.switching`.
 
-Each piece is integrated by DOP853 (``rtol``/``atol`` options) with one terminal event per
+Each piece is integrated by DOP853 (``rtol``/``atol`` options; steps counted on the run's
+``max_steps`` budget, none below ``min_rel_step`` of the span) with one terminal event per
 surface, armed in the direction that leaves the current side (so a piece that starts on a
 surface never re-triggers it). At a hit of surface ``j`` with ``σ± = ∇h_jᵀF±``:
 
@@ -19,12 +20,25 @@ of ``h_j = 0`` accumulate in finite time at a point where ``h_j = σ_j = 0``. At
 previous crossing within ``1e-9 (1 + |t|)``), and the weight below lies in ``[0, 1]``, the motion
 continues on ``h_j = σ̂_j = 0`` (event ``"two_sliding_start"``) with the field
 ``F₂ = F⁻ + α (F⁺ - F⁻)``, ``α = -(∂_t σ̂ + ∇σ̂ᵀF⁻) / ∇σ̂ᵀ(F⁺ - F⁻)`` (the equivalent control
-that keeps ``σ̂`` at zero; ``σ̂`` is ``∇h_jᵀ(F⁺ + F⁻)/2`` evaluated at the point projected onto
-the surface, so a non-smooth term that vanishes on the surface, such as ``|s|^{1/2}``, does not
-enter its central differences). The entry state is projected onto ``h_j = 0``, then onto
-``σ̂ = 0`` along ``F⁺ - F⁻`` (the only direction the switching moves the state in); the samples
-onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0
-or 1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
+that keeps ``σ̂`` at zero; ``σ̂ = ∇h_jᵀ(F⁺ + F⁻)/2``). Every field of this piece is the side's
+field **restricted to the surface** (:meth:`_Fields.on_surface`): the mean of its values at
+the two points ``±d`` along the normal, ``d = 1e-6 (1 + |x|)``. A smooth field is met to
+``O(d²)``; a continuous term odd in ``h_j``, such as the super-twisting's ``|s|^{1/2} sign s``,
+cancels. Evaluated on the surface itself, that term turns a rounding-level ``h_j`` of 1e-17
+into a 1e-8 jump of the field, the central differences of ``σ̂`` into jumps of ``α`` of 1e-3,
+and DOP853's steps into an endless shrinking (the hang of issue 29); restricted, the piece's
+field is Lipschitz, ``α``'s five-point differences (step ``1e-3 (1 + |x|)``) carry a relative
+error of about 1e-10, and the steps are those of a smooth problem. Hypothesis: the field's
+non-smooth dependence on ``h_j`` near the surface is odd (an even term such as ``|h_j|^{1/2}``
+would be met only to ``O(√d)``). The entry state is projected onto ``h_j = 0``, then onto
+``σ̂ = 0`` along ``F⁺ - F⁻`` (the only direction the switching moves the state in); the
+samples onto ``h_j = 0``. The motion leaves (``"two_sliding_exit"``) when ``α`` reaches 0 or
+1, to the side towards which ``σ̂`` then moves. Not available with ``sensitivity=True``.
+
+A piece that starts within rounding of a surface (at a crossing, at a tangential exit) starts
+strictly on its side of it, moved by a few roundings (:func:`_onto_sides`): from the far side
+its event could miss a return to the surface within the first step, from the surface itself
+fire at once, again and again.
 
 A tangential touch without a sign change of ``h_k`` is caught by a non-terminal event on
 ``σ_k = ∇h_kᵀF`` of the current field, armed in the direction of an extremum of ``h_k`` towards
@@ -50,7 +64,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray
-from ..errors import ModelError, SolverError
+from ..errors import ModelError
 from ..numerics.differences import central_difference_jacobian
 from .switching import saltation_matrix
 
@@ -60,15 +74,22 @@ _GRAZE_FACTOR = 100.0
 #: is proportional to |σ|, so this bounds the error of the reaching time by about 1e-7 times
 #: the field's time scale.
 _TWO_SLIDING_SIGMA = 1e-7
-#: Central-difference step (relative) for the derivatives of σ̂: about eps^(1/3), balancing
-#: the O(δ²) truncation against the O(eps/δ) rounding.
-_FD_STEP = 6e-6
+#: Five-point central-difference step (relative to 1 + |x|) for the derivatives of σ̂: about
+#: eps^(1/5) = 7e-4, balancing the O(ε⁴) truncation against the O(eps/ε) rounding.
+_FD_STEP = 1e-3
+#: Normal distance (relative to 1 + |x|) of the two points whose mean is a field restricted to
+#: a surface: a smooth field is met to O(d²) = 1e-12 relative; an odd |h|^{1/2} term cancels up
+#: to its rounding k eps |x| / (2 √d), about 1e-13 k.
+_NORMAL_OFFSET = 1e-6
 
 
 class _Fields:
     def __init__(self, system: Any) -> None:
         self.s = system
         self.J = system.n_surfaces
+        self._terms_key: tuple[Any, ...] | None = None
+        self._terms: tuple[float, float, FloatArray, FloatArray] = (0.0, 0.0, np.zeros(0),
+                                                                    np.zeros(0))
 
     def side(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int, side: int
              ) -> FloatArray:
@@ -86,26 +107,60 @@ class _Fields:
         sm, sp, fm, fp, _ = self.sigmas(t, x, signs, j)
         return (sp * fm - sm * fp) / (sp - sm)
 
+    def on_surface(self, t: float, y: FloatArray, signs: tuple[int, ...], j: int, side: int
+                   ) -> FloatArray:
+        """The field of side ``side`` restricted to ``h_j = 0`` near ``y``: the mean of its
+        values at the two points at distance ``±d`` along the unit normal from ``y``'s
+        first-order projection, ``d = _NORMAL_OFFSET (1 + |y|)``.
+
+        A field smooth across the surface is met to ``O(d²)``; a continuous term odd in
+        ``h_j`` such as ``k |h_j|^{1/2} sign h_j`` (the super-twisting's) cancels, leaving
+        ``k e / (2 √(d |∇h_j|))`` for a rounding ``e`` of ``h_j`` at the two points, so the
+        result is Lipschitz in ``y`` where the field itself is not (its slope in ``h_j`` is
+        unbounded at ``h_j = 0``, which no rounding-level evaluation on the surface avoids).
+        """
+        g = self.s.gradient(j, y)
+        gn = float(np.linalg.norm(g))
+        if gn == 0.0:
+            return self.side(t, y, signs, j, side)
+        base = y - float(self.s.surfaces[j](y)) / (gn * gn) * g
+        off = (_NORMAL_OFFSET * (1.0 + float(np.linalg.norm(y))) / gn) * g
+        return 0.5 * (self.side(t, base + off, signs, j, side)
+                      + self.side(t, base - off, signs, j, side))
+
     def sigma_hat(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> float:
-        """``∇h_jᵀ(F⁺ + F⁻)/2`` at ``x`` projected onto ``h_j = 0``."""
-        sm, sp, _, _, _ = self.sigmas(t, _on_surface(self.s, j, x), signs, j)
-        return 0.5 * (sm + sp)
+        """``∇h_jᵀ(F⁺ + F⁻)/2`` of the fields restricted to ``h_j = 0``
+        (:meth:`on_surface`), at ``x`` projected onto the surface."""
+        y = _project(self.s, j, x)
+        fm = self.on_surface(t, y, signs, j, -1)
+        fp = self.on_surface(t, y, signs, j, 1)
+        return 0.5 * float(self.s.gradient(j, y) @ (fm + fp))
 
     def two_sliding_terms(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
                           ) -> tuple[float, float, FloatArray, FloatArray]:
-        """``(a0, a1, F⁻, F⁺)``: ``dσ̂/dt = a0 + α a1`` along ``F⁻ + α (F⁺ - F⁻)``, all at
-        ``x`` projected onto ``h_j = 0`` (a term like ``|h|^{1/2}`` would otherwise turn the
-        integrator's O(1e-14) departures from the surface into O(1e-7) jumps of the field)."""
-        x = _on_surface(self.s, j, x)
-        fm, fp = self.side(t, x, signs, j, -1), self.side(t, x, signs, j, 1)
-        scale = 1.0 + float(np.linalg.norm(x)) + abs(t)
+        """``(a0, a1, F⁻, F⁺)``: ``dσ̂/dt = a0 + α a1`` along ``F⁻ + α (F⁺ - F⁻)``, the
+        fields restricted to ``h_j = 0`` at ``x`` projected onto the surface. The derivatives
+        of ``σ̂`` are five-point central differences (truncation ``O(ε⁴)`` and rounding
+        ``O(eps/ε)`` balance near ``ε = 1e-3``) of a function smooth along the surface, so
+        ``α`` is smooth too and an adaptive step never shrinks on its noise."""
+        key = (t, x.tobytes(), signs, j)
+        if key == self._terms_key:   # the step's last stage, then its events, ask again
+            return self._terms
+        y = _project(self.s, j, x)
+        fm = self.on_surface(t, y, signs, j, -1)
+        fp = self.on_surface(t, y, signs, j, 1)
+        scale = 1.0 + float(np.linalg.norm(y))
 
         def along(dt: float, v: FloatArray) -> float:
             eps = _FD_STEP * scale / max(1.0, float(np.linalg.norm(v)), abs(dt))
-            return (self.sigma_hat(t + eps * dt, x + eps * v, signs, j)
-                    - self.sigma_hat(t - eps * dt, x - eps * v, signs, j)) / (2.0 * eps)
 
-        return along(1.0, fm), along(0.0, fp - fm), fm, fp
+            def at(k: float) -> float:
+                return self.sigma_hat(t + k * eps * dt, y + k * eps * v, signs, j)
+            return (8.0 * (at(1.0) - at(-1.0)) - (at(2.0) - at(-2.0))) / (12.0 * eps)
+
+        self._terms_key = key
+        self._terms = (along(1.0, fm), along(0.0, fp - fm), fm, fp)
+        return self._terms
 
     def two_sliding_weight(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int
                            ) -> float:
@@ -206,8 +261,6 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
 
 def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
                  ) -> dict[str, Any]:
-    from scipy.integrate import solve_ivp
-
     fields = _Fields(system)
     n = system.n_states
     t, x = run.t0, x0.copy()
@@ -229,13 +282,13 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         else:
             f = fields.rhs(signs, sliding)
             events, kinds = _events(system, fields, signs, sliding)
+        x = _onto_sides(system, signs, max(sliding, second), x)
         if run.sensitivity:
             rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
                 np.concatenate([x, np.eye(n).ravel()])
         else:
             rhs, y0 = f, x
-        sol = solve_ivp(rhs, (t, run.tf), y0, method="DOP853", rtol=run.rtol, atol=run.atol,
-                        events=events, dense_output=True)
+        sol = run.dop853(rhs, t, y0, events)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
         if ts.size and sol.sol is not None:
@@ -244,10 +297,7 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
                 X = np.array([_project(system, max(sliding, second), xs) for xs in X])
             run.rec.extend(ts, X)
         if sol.status < 0:
-            raise SolverError(f"switching: DOP853 failed at t = {t_end:.6g} "
-                              f"({sol.message}); the field may be singular or blow up there. "
-                              f"The trajectory up to that time is in err.trajectory",
-                              status="dop853")
+            raise run.piece_failure(sol, t_end, "the field may be singular or blow up there")
         _record_grazings(system, run, sol, kinds, signs, sliding, t_end, last_graze)
         if run.sensitivity:
             run.Phi = sol.y[n:, -1].reshape(n, n) @ run.Phi
@@ -370,29 +420,6 @@ def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: 
     return (lambda t, x: fields.two_sliding(t, x, signs, j)), (events, kinds)
 
 
-def _on_surface(system: Any, j: int, x: FloatArray) -> FloatArray:
-    """``x`` projected onto ``h_j = 0``, then nudged (Newton steps on one coordinate, down to
-    one ulp) until ``h_j`` is exactly zero in floating point when such a nudge exists: a term
-    like ``|h|^{1/2}`` of the field turns a rounding-level ``h`` of 1e-16 into a 1e-8 jump,
-    which central differences and the integrator's error control would amplify."""
-    y = _project(system, j, x)
-    g = system.gradient(j, y)
-    hv = float(system.surfaces[j](y))
-    for i in np.argsort(-np.abs(g))[:2]:
-        for _ in range(4):
-            if hv == 0.0 or g[i] == 0.0:
-                return y
-            cand = y.copy()
-            step = cand[i] - hv / g[i]
-            cand[i] = step if step != cand[i] else np.nextafter(
-                cand[i], -np.inf if hv * g[i] > 0 else np.inf)
-            hc = float(system.surfaces[j](cand))
-            if not abs(hc) < abs(hv):
-                break
-            y, hv = cand, hc
-    return y
-
-
 def _project(system: Any, j: int, x: FloatArray) -> FloatArray:
     """``x`` moved back onto ``h_j = 0`` by Newton steps along ``∇h_j`` (at most 4)."""
     best = x
@@ -441,12 +468,40 @@ def _record_grazings(system: Any, run: Any, sol: Any, kinds: list[tuple[str, int
         run.rec.sample(tr, xr, force=True)
 
 
+def _onto_sides(system: Any, signs: tuple[int, ...], skip: int, x: FloatArray) -> FloatArray:
+    """``x`` moved, by a few roundings of ``h_k`` along ``∇h_k``, strictly onto the side
+    ``signs[k]`` of every surface ``k != skip`` it lies within rounding of (as the state located
+    at a crossing or a tangential exit does). Left on the far side of the surface by a rounding,
+    a piece's event would miss a return to the surface within its first step (``h_k`` starting
+    beyond the level and coming back before the step's end); left at ``h_k = 0`` exactly, it
+    would fire at the piece's very start, again and again. A state farther than 1000 roundings
+    from the surface is left alone."""
+    y = x
+    for k, side in enumerate(signs):
+        if k == skip:
+            continue
+        h = float(system.surfaces[k](y))
+        g = system.gradient(k, y)
+        gg = float(g @ g)
+        ulp = np.finfo(float).eps * (abs(h) + float(np.sqrt(gg) * np.linalg.norm(y)))
+        if side * h > 0.0 or gg == 0.0 or abs(h) > 1000.0 * ulp:
+            continue
+        step = ulp
+        for _ in range(8):
+            cand = y + (side * step - h) / gg * g
+            if side * float(system.surfaces[k](cand)) > 0.0:
+                y = cand
+                break
+            step *= 2.0
+    return y
+
+
 def _events(system: Any, fields: _Fields, signs: tuple[int, ...], sliding: int
             ) -> tuple[list[Any], list[tuple[str, int]]]:
     """Events of a piece: each surface armed in the direction leaving the current side
-    (terminal), the extrema of each surface function towards it (``σ_k = 0``, non-terminal:
-    grazing candidates), and while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0``
-    (rising, terminal)."""
+    (terminal; the piece starts strictly on that side, :func:`_onto_sides`), the extrema of
+    each surface function towards it (``σ_k = 0``, non-terminal: grazing candidates), and
+    while sliding the exits ``σ⁻ = 0`` (falling) and ``σ⁺ = 0`` (rising, terminal)."""
     n = system.n_states
     events: list[Any] = []
     kinds: list[tuple[str, int]] = []

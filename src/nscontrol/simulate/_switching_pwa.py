@@ -29,7 +29,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .._validation import FloatArray
-from ..errors import InadmissibleStateError, ModelError, SlidingError, SolverError, ZenoError
+from ..errors import InadmissibleStateError, ModelError, SlidingError, ZenoError
 from .event_driven._flight import projection_stats
 from .switching import saltation_matrix
 
@@ -355,8 +355,6 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     """Pieces by DOP853 for inputs given as arbitrary functions of time: one terminal event
     per facet (leaving the region) and per domain facet, and one non-terminal event per facet
     on the slack's derivative (grazing candidates: a minimum of the slack at zero)."""
-    from scipy.integrate import solve_ivp
-
     u = options.get("u", system.u)
     from ..systems.lure import as_input_function
 
@@ -397,17 +395,14 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
             for r in range(system.domain[0].shape[0]):
                 events.append(_facet_event(system.domain[0][r], float(system.domain[1][r])))
                 kinds.append(("domain", r))
-        sol = solve_ivp(lambda tt, xx, i=i: field(i, tt, xx), (t, run.tf), x, method="DOP853",
-                        rtol=run.rtol, atol=run.atol, events=events, dense_output=True)
+        sol = run.dop853(lambda tt, xx, i=i: field(i, tt, xx), t, x, events)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
         if ts.size and sol.sol is not None:
             run.rec.extend(ts, sol.sol(ts).T)
         if sol.status < 0:
-            raise SolverError(f"switching: DOP853 failed at t = {t_end:.6g} ({sol.message}) in "
-                              f"region {i}; check the input function for NaN or infinite "
-                              f"values. The trajectory up to that time is in err.trajectory",
-                              status="dop853")
+            raise run.piece_failure(sol, t_end, f"in region {i}; check the input function for "
+                                                f"NaN or infinite values")
         for k, (kind, r) in enumerate(kinds):   # grazing: slack minimum at zero
             if kind != "graze":
                 continue

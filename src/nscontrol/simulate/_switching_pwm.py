@@ -73,6 +73,7 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
             raise ModelError(f"period: T = {T:g} is below the floating-point resolution of the "
                              f"time near t_k = {t_k:.17g}: the run cannot advance; shift t_span "
                              f"towards 0 or use a longer period")
+        run.step(t_k)                         # one period: one step of the budget
         d = ctrl.duty_at(t_k, xi[:n])
         duties.append(d)
         offs = ctrl.offsets(d)

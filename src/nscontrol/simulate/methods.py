@@ -107,7 +107,7 @@ class Switching(_ModuleIntegrator):
     module = "nscontrol.simulate.switching"
     capabilities = frozenset({"events", "exact_flow", "sensitivity", "t_eval"})
     options: ClassVar[frozenset[str]] = frozenset(
-        {"u", "n_samples", "rtol", "atol", "max_events"})
+        {"u", "n_samples", "rtol", "atol", "max_events", "max_steps", "min_rel_step"})
     pass_through: ClassVar[frozenset[str]] = frozenset({"progress"})
 
     @classmethod

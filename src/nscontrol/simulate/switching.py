@@ -42,16 +42,30 @@ rtol, atol : float
     Tolerances of DOP853 where an ODE solver is used (1e-11, 1e-13; both > 0).
 max_events : int
     Event budget: more events than this raises :class:`~nscontrol.errors.BudgetExceededError`
-    (``budget="max_events"``, 1e6) with the computed part.
+    (``budget="max_events"``, 1e6) with the computed part. Every DOP853 piece ends at an
+    event, so this also bounds the number of pieces.
+max_steps : int
+    Step budget (1e6): the accepted DOP853 steps of the whole run (Filippov, nonlinear, PWA
+    with an input function) plus the periods of a PWM run; spending it raises
+    :class:`~nscontrol.errors.BudgetExceededError` (``budget="max_steps"``).
+min_rel_step : float
+    Smallest DOP853 step as a fraction of the span ``tf - t0`` (1e-12, in ``(0, 1)``; the last
+    step, cut at ``tf``, is exempt): a field that blows up or loses its smoothness makes the
+    steps shrink, and a step below this raises ``BudgetExceededError``
+    (``budget="min_rel_step"``) instead of creeping on. The tests' smallest step is 3e-8 of
+    the span.
 progress : bool, optional
-A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed,
-``BudgetExceededError``: ``max_events`` spent) raises with the
-partial trajectory in ``err.trajectory`` (``simulate(..., on_failure="return")`` returns it
+A failure during the run (``ZenoError``, ``SolverError``: DOP853 failed, and its subclass
+``BudgetExceededError``: a budget spent — ``max_events``, ``max_steps``, ``min_rel_step``)
+raises with the partial trajectory, every sample computed before it, in ``err.trajectory``
+(``simulate(..., on_failure="return")`` returns it
 with ``status = -1``); errors in the model or its initial state are always raised.
+``stats["steps"]`` counts the steps spent on ``max_steps``.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -63,10 +77,11 @@ from .._validation import (
     as_float_array,
     as_vector,
     check_bool,
+    check_in_interval,
     check_integer,
     check_positive,
 )
-from ..errors import BudgetExceededError, ModelError, NscontrolError, ZenoError
+from ..errors import BudgetExceededError, ModelError, NscontrolError, SolverError, ZenoError
 from .trajectory import Recorder, Trajectory
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
@@ -123,10 +138,11 @@ def saltation_matrix(f_minus: Any, f_plus: Any, normal: Any) -> FloatArray:
 
 
 class _Run:
-    """State shared by the integrators: recorder, events, sensitivity, Zeno guard."""
+    """State shared by the integrators: recorder, events, sensitivity, Zeno guard, the step
+    budget."""
 
     def __init__(self, system: Any, x0: FloatArray, t_span: tuple[float, float],
-                 options: dict[str, Any]) -> None:
+                 options: dict[str, Any], max_steps: int, min_rel_step: float) -> None:
         unknown = set(options) - _OPTIONS
         if unknown:
             hint = ("; a PWM controller is part of the model: build "
@@ -152,6 +168,12 @@ class _Run:
         self.atol = check_positive("atol", options.get("atol", 1e-13))
         self.max_events = check_integer("max_events", options.get("max_events", 1_000_000),
                                         minimum=0)
+        self.max_steps = check_integer("max_steps", max_steps, minimum=1)
+        self.min_rel_step = check_in_interval("min_rel_step", min_rel_step, 0.0, 1.0,
+                                              open_interval=True)
+        self.min_step = self.min_rel_step * (self.tf - self.t0)
+        self.steps = 0
+        self.spent: str | None = None      # the budget a DOP853 piece stopped on
         self.status, self.message = 0, None
         self.rec = Recorder(self.n, offered=())   # states and events only, no signals
         self.Phi = np.eye(self.n)
@@ -192,6 +214,49 @@ class _Run:
                 f"computed part is in err.trajectory", budget="max_events",
                 limit=self.max_events, used=self.n_events)
 
+    def step(self, t: float) -> None:
+        """Count one step of a loop that is not DOP853's (a PWM period) on ``max_steps``."""
+        if self.steps >= self.max_steps:
+            raise self.spent_error("max_steps", t)
+        self.steps += 1
+
+    def dop853(self, rhs: Any, t: float, y0: FloatArray, events: list[Any]) -> Any:
+        """``solve_ivp`` by DOP853 from ``t`` to ``tf`` (``rtol``, ``atol``, dense output),
+        its accepted steps counted on ``max_steps`` and none shorter than ``min_rel_step``
+        times the span (but the last one, cut at ``tf``): spending either stops the piece as a
+        failed one (``status = -1``, ``self.spent`` names the budget), with every step before
+        in the solution."""
+        from scipy.integrate import solve_ivp
+
+        self.spent = None
+        return solve_ivp(rhs, (t, self.tf), y0, method=_budgeted_dop853(), run=self,
+                         rtol=self.rtol, atol=self.atol, events=events, dense_output=True)
+
+    def piece_failure(self, sol: Any, t_end: float, hint: str) -> SolverError:
+        """The error of a DOP853 piece that failed at ``t_end``: the budget it spent, or the
+        solver's own failure (``hint`` says what to check)."""
+        if self.spent is not None:
+            return self.spent_error(self.spent, t_end)
+        return SolverError(f"switching: DOP853 failed at t = {t_end:.6g} ({sol.message}); "
+                           f"{hint}. The trajectory up to that time is in err.trajectory",
+                           status="dop853")
+
+    def spent_error(self, budget: str, t: float) -> BudgetExceededError:
+        span = f"[{self.t0:.6g}, {self.tf:.6g}]"
+        if budget == "max_steps":
+            return BudgetExceededError(
+                f"max_steps: the run spent its {self.max_steps} steps (DOP853 steps, or PWM "
+                f"periods) by t = {t:.12g} of {span}; raise max_steps for a long run, or check "
+                f"the model for a field that chatters or whose step keeps shrinking. The "
+                f"trajectory up to that time is in err.trajectory", budget="max_steps",
+                limit=self.max_steps, used=self.steps)
+        return BudgetExceededError(
+            f"min_rel_step: DOP853 needed a step below min_rel_step = {self.min_rel_step:g} "
+            f"times the span {span} (min step {self.min_step:.3g}) at t = {t:.12g}: the field "
+            f"may blow up or lose smoothness there; check the model near that time, or lower "
+            f"min_rel_step. The trajectory up to that time is in err.trajectory",
+            budget="min_rel_step", limit=self.min_rel_step, used=self.steps)
+
     def zero_length(self, t: float) -> None:
         self.stuck += 1
         if self.stuck > 50:
@@ -201,8 +266,8 @@ class _Run:
     def finish(self, status: int = 0, message: str | None = None,
                extra: dict[str, Any] | None = None) -> Trajectory:
         self.bar.close()
-        stats: dict[str, Any] = {"events": self.n_events, **{f"n_{k}": v
-                                                            for k, v in self.counts.items()}}
+        stats: dict[str, Any] = {"events": self.n_events, "steps": self.steps,
+                                 **{f"n_{k}": v for k, v in self.counts.items()}}
         stats.update(extra or {})
         if self.sensitivity:
             stats["state_transition"] = self.Phi.copy()
@@ -212,8 +277,38 @@ class _Run:
                                state_names=getattr(self.system, "state_names", ()))
 
 
+@functools.cache
+def _budgeted_dop853() -> type:
+    """scipy's DOP853 counting its accepted steps on a run's budget (built on first use:
+    ``import nscontrol`` does not load scipy.integrate)."""
+    from scipy.integrate import DOP853
+
+    class BudgetedDOP853(DOP853):
+        def __init__(self, fun: Any, t0: float, y0: FloatArray, t_bound: float, *, run: _Run,
+                     **options: Any) -> None:
+            self.run = run
+            super().__init__(fun, t0, y0, t_bound, **options)
+
+        def _step_impl(self) -> tuple[bool, str | None]:
+            run = self.run
+            if run.steps >= run.max_steps:
+                run.spent = "max_steps"
+                return False, "max_steps spent"
+            t = self.t
+            ok, message = super()._step_impl()
+            if ok:
+                run.steps += 1
+                if abs(self.t - t) < run.min_step and self.t != self.t_bound:
+                    run.spent = "min_rel_step"   # solve_ivp keeps the steps before this one
+                    return False, "step below min_rel_step"
+            return ok, message
+
+    return BudgetedDOP853
+
+
 def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSystem
-              | NonlinearSystem, x0: ArrayLike, t_span: tuple[float, float],
+              | NonlinearSystem, x0: ArrayLike, t_span: tuple[float, float], *,
+              max_steps: int = 1_000_000, min_rel_step: float = 1e-12,
               **options: Any) -> Trajectory:
     """Integrate a PWA, Filippov or PWM-switched system with every switching located (or a
     smooth nonlinear system, which has none).
@@ -223,6 +318,14 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
     system : PiecewiseAffineSystem or FilippovSystem or SwitchedAffineSystem or NonlinearSystem
     x0 : array_like, shape (n,)
     t_span : (float, float)
+    max_steps : int
+        Budget of accepted DOP853 steps over the run plus PWM periods (``>= 1``; default
+        1e6, about a minute for a small model): spending it raises
+        :class:`~nscontrol.errors.BudgetExceededError` naming ``max_steps``.
+    min_rel_step : float
+        Smallest DOP853 step as a fraction of ``tf - t0`` (in ``(0, 1)``; default 1e-12); a
+        step below it (but the last one, cut at ``tf``) raises ``BudgetExceededError`` naming
+        ``min_rel_step``.
     **options
         See the module docstring.
 
@@ -243,6 +346,9 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
         ``x0`` outside a PWA system's domain or in no region.
     ZenoError
         Accumulation of events; ``err.trajectory`` holds the computed part.
+    BudgetExceededError
+        ``max_steps`` spent, or a step below ``min_rel_step`` (``err.budget`` names which);
+        ``err.trajectory`` holds every sample computed before.
     SolverError
         DOP853 failed (e.g. a field that blows up); ``err.trajectory`` holds the computed part.
 
@@ -271,7 +377,7 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
                          f"SwitchedAffineSystem or NonlinearSystem, got "
                          f"{type(system).__name__}; Lur'e systems use method='implicit_euler'")
     x0 = as_vector("x0", x0, system.n_states)
-    run = _Run(system, x0, t_span, options)
+    run = _Run(system, x0, t_span, options, max_steps, min_rel_step)
     try:
         extra = runner(system, x0, run, options)
     except NscontrolError as exc:
