@@ -362,7 +362,10 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
             active = runner.active_set(q_pre, v_pre) if "active" in reads and not inline \
                 else None
-            done, code, q_out, v_out, p_out = runner(state, fext, times.size)
+            with rec.chunk(lambda pr: _record_chunk(
+                    rec, system, times[:pr.done] + step, *pr.written(), state, q_pre, v_pre,
+                    listeners, step)) as state["progress"]:
+                done, code, q_out, v_out, p_out = runner(state, fext, times.size)
             if done and active is not None:  # one step per chunk with a controller
                 state["active_prev"] = active
             if code and runner.path == "tridiagonal":
@@ -647,6 +650,9 @@ class _PythonRunner:
         q_out = np.empty((chunk, s.n_dof))
         v_out = np.empty((chunk, s.n_dof))
         p_out = np.zeros((chunk, s.n_contacts))
+        progress = state.get("progress")
+        if progress is not None:   # the rows a failed step leaves behind are kept
+            progress.rows = (q_out, v_out, p_out)
         inline = state.get("inline")
         for k in range(chunk):
             # step starts are t0 + k h (also for the shortened last step, whose runner has
@@ -667,6 +673,8 @@ class _PythonRunner:
                 return k, code, q_out, v_out, p_out
             q, v = q_new, v_new
             q_out[k], v_out[k] = q, v
+            if progress is not None:
+                progress.done = k + 1
         state["q"], state["v"] = q, v
         if inline is not None:
             state["active_prev"] = self.active_prev
