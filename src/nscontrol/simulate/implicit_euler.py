@@ -89,8 +89,8 @@ its one-step problem has no verified solution: Lemke's status, or a natural resi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -734,8 +734,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         while done < n_steps:
             k1 = min(n_steps, done + _CHUNK)
             times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
-            with rec.chunk(lambda pr: _record_block(rec, system, times[1:1 + pr.done],
-                                                    *pr.written(), last=True)
+            with rec.chunk(lambda pr, t=times: _record_block(rec, system, t[1:1 + pr.done],
+                                                             *pr.written(), last=True)
                            ) as stepper.progress:
                 X, Z, W = _run_chunk(stepper, rec, system, x, times, blocks, controller, jac,
                                      stats, done)

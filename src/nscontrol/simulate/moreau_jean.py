@@ -362,9 +362,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
             active = runner.active_set(q_pre, v_pre) if "active" in reads and not inline \
                 else None
-            with rec.chunk(lambda pr: _record_chunk(
-                    rec, system, times[:pr.done] + step, *pr.written(), state, q_pre, v_pre,
-                    listeners, step)) as state["progress"]:
+            with rec.chunk(lambda pr, t=times, h_k=step, q=q_pre, v=v_pre: _record_chunk(
+                    rec, system, t[:pr.done] + h_k, *pr.written(), state, q, v, listeners,
+                    h_k)) as state["progress"]:
                 done, code, q_out, v_out, p_out = runner(state, fext, times.size)
             if done and active is not None:  # one step per chunk with a controller
                 state["active_prev"] = active
