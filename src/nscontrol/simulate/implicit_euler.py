@@ -91,6 +91,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -734,8 +735,7 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         while done < n_steps:
             k1 = min(n_steps, done + _CHUNK)
             times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
-            with rec.chunk(lambda pr, t=times: _record_block(rec, system, t[1:1 + pr.done],
-                                                             *pr.written(), last=True)
+            with rec.chunk(partial(_record_finished, rec=rec, system=system, times=times)
                            ) as stepper.progress:
                 X, Z, W = _run_chunk(stepper, rec, system, x, times, blocks, controller, jac,
                                      stats, done)
@@ -811,6 +811,13 @@ def _warn_degenerate(jac: Any) -> None:
                   f"discrete map is not differentiable; stats['state_transition'] uses the "
                   f"constraint-active one-sided derivative there", NscontrolWarning,
                   stacklevel=3)
+
+
+def _record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
+                     times: FloatArray) -> None:
+    """Record the steps a failed chunk finished (see :meth:`Recorder.chunk`)."""
+    X, Z, W = progress.written()
+    _record_block(rec, system, times[1:1 + progress.done], X, Z, W, last=True)
 
 
 def _record_block(rec: Recorder, system: Any, t: FloatArray, X: FloatArray, Z: FloatArray,

@@ -57,6 +57,7 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -65,7 +66,7 @@ from numpy.typing import ArrayLike
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_bool, check_in_interval, check_positive
 from ..errors import DimensionError, ModelError, SolverError
-from .trajectory import Recorder, Trajectory
+from .trajectory import ChunkProgress, Recorder, Trajectory
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.impacting_bodies import ImpactingBodies
@@ -362,9 +363,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
             active = runner.active_set(q_pre, v_pre) if "active" in reads and not inline \
                 else None
-            with rec.chunk(lambda pr, t=times, h_k=step, q=q_pre, v=v_pre: _record_chunk(
-                    rec, system, t[:pr.done] + h_k, *pr.written(), state, q, v, listeners,
-                    h_k)) as state["progress"]:
+            with rec.chunk(partial(_record_finished, rec=rec, system=system, times=times,
+                                   state=state, q_pre=q_pre, v_pre=v_pre,
+                                   listeners=listeners, h=step)) as state["progress"]:
                 done, code, q_out, v_out, p_out = runner(state, fext, times.size)
             if done and active is not None:  # one step per chunk with a controller
                 state["active_prev"] = active
@@ -793,6 +794,16 @@ def _sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> No
     n = system.n_dof
     sig = _signals(system, x0[None, :n], x0[None, n:], np.zeros((1, system.n_contacts)), rec)
     rec.extend(np.array([t0]), x0[None, :], **sig)
+
+
+def _record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
+                     times: FloatArray, state: dict[str, Any], q_pre: FloatArray,
+                     v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                     h: float) -> None:
+    """Record the steps a failed chunk finished (see :meth:`Recorder.chunk`)."""
+    q, v, p = progress.written()
+    _record_chunk(rec, system, times[:progress.done] + h, q, v, p, state, q_pre, v_pre,
+                  listeners, h)
 
 
 def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
