@@ -93,6 +93,10 @@ CASES = {
     "moreau_jean force KeyboardInterrupt": (
         lambda: _oscillator(KeyboardInterrupt), [1.0, 0.0], {"method": "moreau_jean"},
         KeyboardInterrupt),
+    "moreau_jean u raises": (   # a linear plant: the compiled tridiagonal runner
+        lambda: LagrangianSystem([[1.0]], stiffness=[[1.0]], gap_matrix=[[1.0]],
+                                 gap_offset=[10.0], actuation=[[1.0]]),
+        [1.0, 0.0], {"method": "moreau_jean", "u": _input(_raise)}, SensorFault),
     "implicit_euler u raises": (
         lambda: _lure(Relay(0.2), _input(_raise)), [1.0, 0.0], {"method": "implicit_euler"},
         SensorFault),

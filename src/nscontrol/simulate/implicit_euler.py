@@ -100,7 +100,7 @@ from numpy.typing import ArrayLike
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_vector, check_bool, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
-from .trajectory import ChunkProgress, Recorder, Trajectory
+from .trajectory import ChunkProgress, Recorder, Trajectory, evaluable_prefix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.lure import LureSystem
@@ -1037,16 +1037,9 @@ class _Stepper:
     def _run_until_input_fails(self, x: FloatArray, times: FloatArray) -> None:
         """The steps of a chunk whose input cannot be evaluated over it whole (``u``
         raised): those before the first time it fails at (found by bisection on prefixes of
-        ``times``) are run into :attr:`progress`, kept when the caller's error goes on."""
-        ok, bad = 1, times.size        # prefixes times[:ok] evaluate; times[:bad] do not
-        while bad - ok > 1:
-            mid = (ok + bad) // 2
-            try:
-                self._inputs(times[:mid])
-            except Exception:  # noqa: BLE001 - the caller re-raises the original error
-                bad = mid
-            else:
-                ok = mid
+        ``times``) are run into :attr:`progress`, kept when the caller's error goes on
+        (``times[:k]`` gives the inputs of the ``k - 1`` steps it spans)."""
+        ok = evaluable_prefix(lambda k: self._inputs(times[:k]), times.size)
         if ok >= 2:
             self.progress.rows = self.run(x, times[:ok])
             self.progress.done = ok - 1

@@ -58,7 +58,7 @@ import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -66,7 +66,7 @@ from numpy.typing import ArrayLike
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_bool, check_in_interval, check_positive
 from ..errors import DimensionError, ModelError, SolverError
-from .trajectory import ChunkProgress, Recorder, Trajectory
+from .trajectory import ChunkProgress, Recorder, Trajectory, evaluable_prefix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.impacting_bodies import ImpactingBodies
@@ -353,13 +353,12 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
                 chunk = 1 if per_step else max(1, min(n_full - k, 20_000, _CHUNK_FLOATS // max(
                     1, 2 * system.n_dof + system.n_contacts)))
                 times, step = t0 + h * np.arange(k, k + chunk), h
-            try:
-                fext = _external_force(setup, u, None if inline else controller, times,
-                                       state)
-            except ModelError as err:
-                err.trajectory = rec.finish(status=-1, message=str(err), method="moreau_jean",
-                                            state_names=system.state_names)
-                raise
+            fext, failed = _chunk_force(setup, u, None if inline else controller, times,
+                                        state)
+            if failed is not None:          # run the steps before u's first failing time
+                if fext.shape[0] == 0:
+                    _end_at_input_failure(failed, rec, system)
+                times = times[:fext.shape[0]]
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
             active = runner.active_set(q_pre, v_pre) if "active" in reads and not inline \
                 else None
@@ -383,6 +382,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
                 state["last"] = (times[done - 1] + step, q_out[done - 1], v_out[done - 1],
                                  p_out[done - 1])
             bar.update(t0 + h * state["k"])
+            if failed is not None and done == times.size:   # the steps before it all ran
+                _end_at_input_failure(failed, rec, system)
             if code == _MODEL_ERROR:
                 message = state["model_error"]
                 raise ModelError(message, trajectory=rec.finish(
@@ -450,6 +451,29 @@ def _external_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
                              f"from controller(t, q, v), got {c!r} at t = {times[0]:.6g}")
         total[0] += c
     return total @ S.T
+
+
+def _chunk_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
+                 state: dict[str, Any]) -> tuple[FloatArray, Exception | None]:
+    """:func:`_external_force` over a chunk, or, when it raises, over the chunk's longest
+    prefix that evaluates (empty when none does), with the error to raise once those steps
+    are recorded."""
+    try:
+        return _external_force(setup, u, controller, times, state), None
+    except Exception as err:  # noqa: BLE001 - handed back to the caller, who re-raises it
+        k = evaluable_prefix(
+            lambda j: _external_force(setup, u, controller, times[:j], state), times.size)
+        return (_external_force(setup, u, controller, times[:k], state) if k
+                else np.zeros((0, setup.system.n_dof))), err
+
+
+def _end_at_input_failure(failed: Exception, rec: Recorder, system: Any) -> NoReturn:
+    """Raise the error of an input that failed, once the steps before it are recorded (a
+    library error carries them; the driver attaches them to any other)."""
+    if isinstance(failed, ModelError):
+        failed.trajectory = rec.finish(status=-1, message=str(failed), method="moreau_jean",
+                                       state_names=system.state_names)
+    raise failed
 
 
 def _inline_controller(controller: Any, setup: _Setup, state: dict[str, Any]

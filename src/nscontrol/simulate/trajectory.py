@@ -591,6 +591,23 @@ class ChunkProgress:
         return tuple(r[:self.done] for r in self.rows)
 
 
+def evaluable_prefix(evaluate: Callable[[int], object], n: int) -> int:
+    """The longest ``k < n`` for which ``evaluate(k)`` returns, found by bisection, given that
+    ``evaluate(n)`` raised: how many leading times of a chunk a vectorised input ``u(t)``
+    can be sampled at (a pure function of time), so that the steps before the first failing
+    time are still run and recorded (see :meth:`Recorder.chunk`)."""
+    ok, bad = 0, n          # evaluate(ok) returns (or ok == 0), evaluate(bad) raises
+    while bad - ok > 1:
+        mid = (ok + bad) // 2
+        try:
+            evaluate(mid)
+        except Exception:  # noqa: BLE001 - the caller re-raises the original error
+            bad = mid
+        else:
+            ok = mid
+    return ok
+
+
 class Recorder:
     """Growing buffers an integrator writes samples and events into.
 
