@@ -8,6 +8,8 @@ failing time), and the error must be the one raised.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -15,7 +17,7 @@ import nscontrol as nsc
 from nscontrol.errors import ModelError
 from nscontrol.laws.monotone_function import MonotoneFunction
 from nscontrol.laws.relay import Relay
-from nscontrol.systems.lagrangian import LagrangianSystem
+from nscontrol.systems.lagrangian import LagrangianSystem, affine_compiled_model
 from nscontrol.systems.lure import LureSystem
 
 EPS = np.finfo(float).eps
@@ -85,6 +87,13 @@ def _curved():
     return MonotoneFunction(lambda z: z + z ** 3, dim=1)
 
 
+def _compiled_linear_plant():
+    """A spring-mass above a far floor run by Moreau–Jean's compiled-model loop."""
+    plant = LagrangianSystem([[1.0]], stiffness=[[1.0]], gap_matrix=[[1.0]],
+                             gap_offset=[10.0], actuation=[[1.0]])
+    return replace(plant, compiled=affine_compiled_model(plant))
+
+
 # (system, x0, simulate options, expected error)
 CASES = {
     "moreau_jean force raises": (
@@ -97,6 +106,9 @@ CASES = {
         lambda: LagrangianSystem([[1.0]], stiffness=[[1.0]], gap_matrix=[[1.0]],
                                  gap_offset=[10.0], actuation=[[1.0]]),
         [1.0, 0.0], {"method": "moreau_jean", "u": _input(_raise)}, SensorFault),
+    "moreau_jean compiled model, u raises": (
+        lambda: _compiled_linear_plant(), [1.0, 0.0],
+        {"method": "moreau_jean", "u": _input(_raise)}, SensorFault),
     "implicit_euler u raises": (
         lambda: _lure(Relay(0.2), _input(_raise)), [1.0, 0.0], {"method": "implicit_euler"},
         SensorFault),
@@ -117,6 +129,8 @@ def test_a_failed_run_keeps_every_sample_before_the_failure(case):
     assert type(info.value) is error           # the error raised, not a wrapper
     partial = info.value.trajectory
     assert partial.status == -1
+    if "compiled" in case:
+        assert reference_path(make, x0, options) == "compiled_model"
     # the failing callable is read at a step's start (a closed loop's block) or end (an
     # input, an implicit force): the run ends at the last step whose end is before the
     # failing time, or at it; within one step of it in either case (rounding of k h: 1e-12)
@@ -128,3 +142,9 @@ def test_a_failed_run_keeps_every_sample_before_the_failure(case):
     tol = 10 * 500 * 10 * EPS
     np.testing.assert_allclose(partial.t, reference.t, rtol=0, atol=tol)
     np.testing.assert_allclose(partial.x, reference.x, rtol=0, atol=tol)
+
+
+def reference_path(make, x0, options):
+    """The Moreau–Jean path a run of ``make()`` takes (on a span the input never fails on)."""
+    return nsc.simulate(make(), x0, (0.0, 0.1), h=H, **options).stats["path"]
+
