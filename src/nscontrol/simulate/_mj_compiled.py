@@ -28,7 +28,13 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
     from numba.core.errors import NumbaExperimentalFeatureWarning
 
     from . import _mj_compiled_kernels as kern
-    from .moreau_jean import _LCP_STATUS, _external_force, _record_chunk, _signals
+    from .moreau_jean import (
+        _LCP_STATUS,
+        _chunk_force,
+        _end_at_input_failure,
+        _record_chunk,
+        _signals,
+    )
 
     n, m = system.n_dof, system.n_contacts
     t0, tf = t_span
@@ -65,12 +71,12 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
                 times, step = np.array([t0 + h * k]), h_last
             else:
                 times, step = t0 + h * np.arange(k, min(n_full, k + _CHUNK)), h
-            try:
-                fext = np.ascontiguousarray(_external_force(setup, u, None, times, state))
-            except ModelError as err:
-                err.trajectory = rec.finish(status=-1, message=str(err), method="moreau_jean",
-                                            state_names=system.state_names)
-                raise
+            fext, failed = _chunk_force(setup, u, None, times, state)
+            if failed is not None:          # run the steps before u's first failing time
+                if fext.shape[0] == 0:
+                    _end_at_input_failure(failed, rec, system)
+                times = times[:fext.shape[0]]
+            fext = np.ascontiguousarray(fext)
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
             size = times.size
             q_out, v_out, p_out = np.empty((size, n)), np.empty((size, n)), np.zeros((size, m))
@@ -95,6 +101,8 @@ def integrate_compiled(system: Any, setup: Any, x0: Any, t_span: tuple[float, fl
                                  p_out[done - 1])
             state["k"] = k + done
             bar.update(t0 + h * state["k"])
+            if failed is not None and done == times.size:   # the steps before it all ran
+                _end_at_input_failure(failed, rec, system)
             if code == 0:
                 continue
             t_fail = float(times[done])

@@ -89,7 +89,9 @@ its one-step problem has no verified solution: Lemke's status, or a natural resi
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -98,7 +100,7 @@ from numpy.typing import ArrayLike
 from .._progress import TimeProgress
 from .._validation import FloatArray, as_vector, check_bool, check_in_interval, check_positive
 from ..errors import InadmissibleStateError, ModelError, SolverError
-from .trajectory import Recorder, Trajectory
+from .trajectory import ChunkProgress, Recorder, Trajectory, evaluable_prefix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.lure import LureSystem
@@ -733,21 +735,10 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         while done < n_steps:
             k1 = min(n_steps, done + _CHUNK)
             times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
-            try:
-                if blocks is not None:
-                    X, Z, W = stepper.run_with_blocks(x, times, blocks)
-                else:
-                    X, Z, W = stepper.run(x, times) if controller is None else \
-                        stepper.run_with_controller(x, times, controller)
-            except SolverError as exc:
-                X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
-                _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
-                if jac is not None:   # the transition up to the last verified step
-                    jac.extend(times[1:1 + X.shape[0]], Z, W, stepper.worst)
-                traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
-                                  stats=stats(done + X.shape[0]),
-                                  state_names=system.state_names)
-                raise SolverError(str(exc), status=exc.status, trajectory=traj) from None
+            with rec.chunk(partial(_record_finished, rec=rec, system=system, times=times)
+                           ) as stepper.progress:
+                X, Z, W = _run_chunk(stepper, rec, system, x, times, blocks, controller, jac,
+                                     stats, done)
             _record_block(rec, system, times[1:], X, Z, W, last=k1 == n_steps)
             if jac is not None:
                 jac.extend(times[1:], Z, W, stepper.worst)
@@ -758,6 +749,27 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         _warn_degenerate(jac)
     return rec.finish(status=0, message=None, method="implicit_euler", stats=stats(n_steps),
                       state_names=system.state_names)
+
+
+def _run_chunk(stepper: Any, rec: Recorder, system: Any, x: FloatArray, times: FloatArray,
+               blocks: Any, controller: Any, jac: Any, stats: Callable[[int], dict[str, Any]],
+               done: int) -> tuple[FloatArray, ...]:
+    """The steps over ``times`` by the path chosen for the run (a solver failure ends the run
+    with its verified steps recorded)."""
+    try:
+        if blocks is not None:
+            return stepper.run_with_blocks(x, times, blocks)
+        return stepper.run(x, times) if controller is None else \
+            stepper.run_with_controller(x, times, controller)
+    except SolverError as exc:
+        X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
+        _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
+        if jac is not None:   # the transition up to the last verified step
+            jac.extend(times[1:1 + X.shape[0]], Z, W, stepper.worst)
+        traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
+                          stats=stats(done + X.shape[0]),
+                          state_names=system.state_names)
+        raise SolverError(str(exc), status=exc.status, trajectory=traj) from None
 
 
 def _with_input(system: Any, u: Any) -> Any:
@@ -801,6 +813,13 @@ def _warn_degenerate(jac: Any) -> None:
                   stacklevel=3)
 
 
+def _record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
+                     times: FloatArray) -> None:
+    """Record the steps a failed chunk finished (see :meth:`Recorder.chunk`)."""
+    X, Z, W = progress.written()
+    _record_block(rec, system, times[1:1 + progress.done], X, Z, W, last=True)
+
+
 def _record_block(rec: Recorder, system: Any, t: FloatArray, X: FloatArray, Z: FloatArray,
                   W: FloatArray, *, last: bool) -> None:
     if X.shape[0] == 0:
@@ -839,6 +858,7 @@ class _Stepper:
     def __init__(self, system: Any, mats: StepMatrices, plan: _Plan) -> None:
         self.system, self.m, self.plan = system, mats, plan
         self.worst = 0.0   # largest accepted per-step residual (LCP / Python paths)
+        self.progress = ChunkProgress()   # the chunk in progress (see Recorder.chunk)
         u = system.u
         self.exo = None
         if system.has_input and all(hasattr(u, a) for a in ("S", "Cu", "w0", "w")):
@@ -875,6 +895,7 @@ class _Stepper:
         k, q = times.size - 1, self.system.n_inputs
         n, mm = self.system.n_states, self.system.n_multipliers
         X, Z, W = np.empty((k, n)), np.empty((k, mm)), np.empty((k, mm))
+        self.progress.rows = (X, Z, W)
         fast = self._compiled_step()
         ubar, gnext = np.zeros((1, q)), np.zeros((1, mm))
         for j in range(k):
@@ -888,6 +909,7 @@ class _Stepper:
                     gnext[0] = self.system.shift_at(times[j + 1:j + 2])[0]
                 fast(x, ubar, gnext, X[j:j + 1], Z[j:j + 1], W[j:j + 1])
                 x = X[j]
+                self.progress.done = j + 1
                 continue
             try:
                 Xj, Zj, Wj = self.run(x, times[j:j + 2], ubar=u[None, :])
@@ -896,6 +918,7 @@ class _Stepper:
                 raise
             x = X[j] = Xj[0]
             Z[j], W[j] = Zj[0], Wj[0]
+            self.progress.rows, self.progress.done = (X, Z, W), j + 1
         return X, Z, W
 
     def run_with_blocks(self, x: FloatArray, times: FloatArray,
@@ -948,7 +971,11 @@ class _Stepper:
     def run(self, x: FloatArray, times: FloatArray,
             ubar: FloatArray | None = None) -> tuple[FloatArray, ...]:
         if ubar is None:
-            ubar, gnext = self._inputs(times)
+            try:
+                ubar, gnext = self._inputs(times)
+            except Exception:
+                self._run_until_input_fails(x, times)
+                raise
         else:
             gnext = self.system.shift_at(times[1:]) if self.system.has_shift else \
                 np.zeros((times.size - 1, self.system.n_multipliers))
@@ -1004,7 +1031,18 @@ class _Stepper:
                 raise
             x = q + m.Gh @ w
             X[j], Z[j], W[j] = x, z, w
+            self.progress.rows, self.progress.done = (X, Z, W), j + 1
         return X, Z, W
+
+    def _run_until_input_fails(self, x: FloatArray, times: FloatArray) -> None:
+        """The steps of a chunk whose input cannot be evaluated over it whole (``u``
+        raised): those before the first time it fails at (found by bisection on prefixes of
+        ``times``) are run into :attr:`progress`, kept when the caller's error goes on
+        (``times[:k]`` gives the inputs of the ``k - 1`` steps it spans)."""
+        ok = evaluable_prefix(lambda k: self._inputs(times[:k]), times.size)
+        if ok >= 2:
+            self.progress.rows = self.run(x, times[:ok])
+            self.progress.done = ok - 1
 
 
 _RESIDUAL_FAILURE = 3  # NUMERICAL_FAILURE of the LCP kernels: residual check failed

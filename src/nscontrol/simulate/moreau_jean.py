@@ -57,7 +57,8 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from functools import partial
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -65,7 +66,7 @@ from numpy.typing import ArrayLike
 from .._progress import TimeProgress
 from .._validation import FloatArray, check_bool, check_in_interval, check_positive
 from ..errors import DimensionError, ModelError, SolverError
-from .trajectory import Recorder, Trajectory
+from .trajectory import ChunkProgress, Recorder, Trajectory, evaluable_prefix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.impacting_bodies import ImpactingBodies
@@ -352,17 +353,19 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
                 chunk = 1 if per_step else max(1, min(n_full - k, 20_000, _CHUNK_FLOATS // max(
                     1, 2 * system.n_dof + system.n_contacts)))
                 times, step = t0 + h * np.arange(k, k + chunk), h
-            try:
-                fext = _external_force(setup, u, None if inline else controller, times,
-                                       state)
-            except ModelError as err:
-                err.trajectory = rec.finish(status=-1, message=str(err), method="moreau_jean",
-                                            state_names=system.state_names)
-                raise
+            fext, failed = _chunk_force(setup, u, None if inline else controller, times,
+                                        state)
+            if failed is not None:          # run the steps before u's first failing time
+                if fext.shape[0] == 0:
+                    _end_at_input_failure(failed, rec, system)
+                times = times[:fext.shape[0]]
             q_pre, v_pre = state["q"].copy(), state["v"].copy()
             active = runner.active_set(q_pre, v_pre) if "active" in reads and not inline \
                 else None
-            done, code, q_out, v_out, p_out = runner(state, fext, times.size)
+            with rec.chunk(partial(_record_finished, rec=rec, system=system, times=times,
+                                   state=state, q_pre=q_pre, v_pre=v_pre,
+                                   listeners=listeners, h=step)) as state["progress"]:
+                done, code, q_out, v_out, p_out = runner(state, fext, times.size)
             if done and active is not None:  # one step per chunk with a controller
                 state["active_prev"] = active
             if code and runner.path == "tridiagonal":
@@ -379,6 +382,8 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
                 state["last"] = (times[done - 1] + step, q_out[done - 1], v_out[done - 1],
                                  p_out[done - 1])
             bar.update(t0 + h * state["k"])
+            if failed is not None and done == times.size:   # the steps before it all ran
+                _end_at_input_failure(failed, rec, system)
             if code == _MODEL_ERROR:
                 message = state["model_error"]
                 raise ModelError(message, trajectory=rec.finish(
@@ -446,6 +451,29 @@ def _external_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
                              f"from controller(t, q, v), got {c!r} at t = {times[0]:.6g}")
         total[0] += c
     return total @ S.T
+
+
+def _chunk_force(setup: _Setup, u: Any, controller: Any, times: FloatArray,
+                 state: dict[str, Any]) -> tuple[FloatArray, Exception | None]:
+    """:func:`_external_force` over a chunk, or, when it raises, over the chunk's longest
+    prefix that evaluates (empty when none does), with the error to raise once those steps
+    are recorded."""
+    try:
+        return _external_force(setup, u, controller, times, state), None
+    except Exception as err:  # noqa: BLE001 - handed back to the caller, who re-raises it
+        k = evaluable_prefix(
+            lambda j: _external_force(setup, u, controller, times[:j], state), times.size)
+        return (_external_force(setup, u, controller, times[:k], state) if k
+                else np.zeros((0, setup.system.n_dof))), err
+
+
+def _end_at_input_failure(failed: Exception, rec: Recorder, system: Any) -> NoReturn:
+    """Raise the error of an input that failed, once the steps before it are recorded (a
+    library error carries them; the driver attaches them to any other)."""
+    if isinstance(failed, ModelError):
+        failed.trajectory = rec.finish(status=-1, message=str(failed), method="moreau_jean",
+                                       state_names=system.state_names)
+    raise failed
 
 
 def _inline_controller(controller: Any, setup: _Setup, state: dict[str, Any]
@@ -647,6 +675,9 @@ class _PythonRunner:
         q_out = np.empty((chunk, s.n_dof))
         v_out = np.empty((chunk, s.n_dof))
         p_out = np.zeros((chunk, s.n_contacts))
+        progress = state.get("progress")
+        if progress is not None:   # the rows a failed step leaves behind are kept
+            progress.rows = (q_out, v_out, p_out)
         inline = state.get("inline")
         for k in range(chunk):
             # step starts are t0 + k h (also for the shortened last step, whose runner has
@@ -667,6 +698,8 @@ class _PythonRunner:
                 return k, code, q_out, v_out, p_out
             q, v = q_new, v_new
             q_out[k], v_out[k] = q, v
+            if progress is not None:
+                progress.done = k + 1
         state["q"], state["v"] = q, v
         if inline is not None:
             state["active_prev"] = self.active_prev
@@ -785,6 +818,16 @@ def _sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> No
     n = system.n_dof
     sig = _signals(system, x0[None, :n], x0[None, n:], np.zeros((1, system.n_contacts)), rec)
     rec.extend(np.array([t0]), x0[None, :], **sig)
+
+
+def _record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
+                     times: FloatArray, state: dict[str, Any], q_pre: FloatArray,
+                     v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                     h: float) -> None:
+    """Record the steps a failed chunk finished (see :meth:`Recorder.chunk`)."""
+    q, v, p = progress.written()
+    _record_chunk(rec, system, times[:progress.done] + h, q, v, p, state, q_pre, v_pre,
+                  listeners, h)
 
 
 def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,

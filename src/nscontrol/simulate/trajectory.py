@@ -12,7 +12,8 @@ step or selected signals only) and call :meth:`Recorder.finish` to obtain the fr
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -577,6 +578,36 @@ def _hashable(key: Any) -> Any:
 
 
 
+@dataclass
+class ChunkProgress:
+    """The rows of a chunk in progress (see :meth:`Recorder.chunk`): the stepping loop's
+    buffers and how many of their leading rows hold finished steps."""
+
+    done: int = 0
+    rows: tuple[np.ndarray, ...] = ()
+
+    def written(self) -> tuple[np.ndarray, ...]:
+        """The finished rows of each buffer."""
+        return tuple(r[:self.done] for r in self.rows)
+
+
+def evaluable_prefix(evaluate: Callable[[int], object], n: int) -> int:
+    """The longest ``k < n`` for which ``evaluate(k)`` returns, found by bisection, given that
+    ``evaluate(n)`` raised: how many leading times of a chunk a vectorised input ``u(t)``
+    can be sampled at (a pure function of time), so that the steps before the first failing
+    time are still run and recorded (see :meth:`Recorder.chunk`)."""
+    ok, bad = 0, n          # evaluate(ok) returns (or ok == 0), evaluate(bad) raises
+    while bad - ok > 1:
+        mid = (ok + bad) // 2
+        try:
+            evaluate(mid)
+        except Exception:  # noqa: BLE001 - the caller re-raises the original error
+            bad = mid
+        else:
+            ok = mid
+    return ok
+
+
 class Recorder:
     """Growing buffers an integrator writes samples and events into.
 
@@ -635,6 +666,25 @@ class Recorder:
         """The samples and events recorded so far as a :class:`Trajectory` (the recorder goes
         on; used for the partial trajectory of a run that fails)."""
         return self._freeze(status, message, method, {}, ())
+
+    @contextmanager
+    def chunk(self, record: Callable[[ChunkProgress], None]) -> Iterator[ChunkProgress]:
+        """A chunk of steps computed into the stepping loop's own buffers and recorded at its
+        end: the one place where a failed run keeps the chunk's samples.
+
+        The block receives a :class:`ChunkProgress`; the stepping loop puts its buffers in
+        ``rows`` and counts the rows written in ``done``. Any exception escaping the block
+        (a user callback's own error, ``KeyboardInterrupt``, a library error) without a
+        trajectory of its own first has ``record(progress)`` record the ``done`` rows, so
+        that the driver's partial trajectory holds every sample computed before the failure.
+        """
+        progress = ChunkProgress()
+        try:
+            yield progress
+        except BaseException as err:
+            if progress.done and getattr(err, "trajectory", None) is None:
+                record(progress)
+            raise
 
     @staticmethod
     def capacity_for(n_samples: int, every: Any = 1) -> int:
