@@ -700,7 +700,6 @@ class _BlockRunner:
                 setattr(self, "xo" if name == "observer" else "xc",
                         as_vector(f"{name}.x0", x_init, block.n_states))
         from . import _block_kernels as bk    # numba loads with the first closed loop
-
         # the sampled blocks' schedules, laid out as the compiled loops' ``sched`` (its
         # ``t_prev`` slot unused here): one rule, ``take_sample``, for both paths
         self.sched = np.full(bk.SCHED_SIZE, np.nan)
