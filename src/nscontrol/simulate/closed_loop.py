@@ -699,7 +699,7 @@ class _BlockRunner:
             if block is not None and x_init is not None:
                 setattr(self, "xo" if name == "observer" else "xc",
                         as_vector(f"{name}.x0", x_init, block.n_states))
-        from . import _block_kernels as bk    # numba loads with the first closed loop
+        from . import _block_kernels as bk  # numba loads with the first closed loop
         # the sampled blocks' schedules, laid out as the compiled loops' ``sched`` (its
         # ``t_prev`` slot unused here): one rule, ``take_sample``, for both paths
         self.sched = np.full(bk.SCHED_SIZE, np.nan)
