@@ -6,14 +6,20 @@ by the integrators' compiled loops.
 
 * a continuous block (``period <= 0``) first advances its state by explicit Euler over the
   previous step, ``xb += h update(t - h, xb, m_prev)``, then outputs ``output(t, xb, m)``;
-* a sampled block (period ``T``) at its instants (the first step start at or after each,
-  within ``1e-9 T``) outputs ``output(t, xb, m)``, moves to ``update(t, xb, m)``, and holds
-  the output until its next instant;
+* a sampled block (period ``T``) at its instants ``t_first + k T`` (``t_first``: the first
+  step start it sees; the first step start at or after each instant, to the rounding of
+  the step times, see :func:`take_sample`) outputs ``output(t, xb, m)``, moves to
+  ``update(t, xb, m)``, and holds the output until its next instant;
 * the observer runs first; the controller reads its estimate.
 
-The scheduling state lives in ``sched = [t_prev, due_observer, due_controller]`` (NaN:
-none yet), so a run can be cut into chunks. A non-zero return is a status (``STATUS_*``):
-the integrator raises the error the Python path would raise.
+The instants are counted, never accumulated: ``t_first + k T`` is formed afresh from the
+integer count ``k``, so its error stays a few ulps however long the run (adding ``T`` at
+each tick drifts by one rounding per tick and, with a slack that is a fixed fraction of
+``T``, skipped a sample after ~2·10⁴ ticks of a 1e-4 s loop). The scheduling state lives in
+``sched = [t_prev, t_first_observer, k_observer, t_first_controller, k_controller]`` (NaN:
+none yet), so a run cut into chunks takes the same samples. The Python block runner calls
+the same :func:`take_sample`. A non-zero return is a status (``STATUS_*``): the integrator
+raises the error the Python path would raise.
 """
 
 from __future__ import annotations
@@ -28,7 +34,16 @@ STATUS_CONTROLLER_SIZE = 3
 STATUS_CONTROLLER_NONFINITE = 4
 STATUS_OBSERVER_OUTPUT_SIZE = 5  # the estimate has the wrong length
 STATUS_CONTROLLER_OUTPUT_SIZE = 6  # u has the wrong length
-_SAMPLE_SLACK = 1e-9
+# The step starts are ``t0 + j h`` and the instants ``t_first + k T``, each formed from an
+# integer count: one rounding of the product, one of the sum, and the relative rounding
+# (u = eps/2) of h and T themselves times ``j h`` / ``k T`` (each <= |t| + |t_first|). Their
+# difference, where the exact values coincide, is at most ~12 u max(|t|, |t_first|); the
+# slack is 32 u = 16 eps of that scale (a factor ~2.5 over the bound), independent of the
+# run's length, and far below one step (16 eps |t| < h while |t| / h < 2.8e14).
+_SAMPLE_SLACK_EPS = 16.0 * np.finfo(np.float64).eps
+SCHED_SIZE = 5                  # [t_prev, t_first_obs, k_obs, t_first_ctrl, k_ctrl]
+SLOT_OBSERVER = 1
+SLOT_CONTROLLER = 3
 
 
 @njit(cache=True)
@@ -40,10 +55,36 @@ def _finite(a):
 
 
 @njit(cache=True)
+def take_sample(sched, slot, t, period):
+    """Whether a sampled block of period ``period`` samples at the step start ``t``.
+
+    ``sched[slot]`` is the block's first instant ``t_first`` (NaN: none yet, then ``t``
+    becomes it and is sampled), ``sched[slot + 1]`` the count ``k`` of instants already
+    served. The step start serves the instant ``t_first + k period`` when ``t`` is at or
+    after it up to the rounding of the step times (``_SAMPLE_SLACK_EPS``); it also serves
+    every later instant it is at or after (a step longer than the period), and ``k``
+    moves past them. Updates ``sched`` in place.
+    """
+    t_first = sched[slot]
+    if np.isnan(t_first):
+        sched[slot] = t
+        sched[slot + 1] = 1.0
+        return True
+    k = sched[slot + 1]
+    slack = _SAMPLE_SLACK_EPS * max(abs(t), abs(t_first))
+    if t < t_first + k * period - slack:
+        return False
+    k += 1.0
+    while t >= t_first + k * period - slack:
+        k += 1.0
+    sched[slot + 1] = k
+    return True
+
+
+@njit(cache=True)
 def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
              prev_y, prev_x, prev_xhat, prev_lam, bad_size, bad_value, bad_out):
     """One block at the step start ``t``; writes its (held) output into ``held``."""
-    due = sched[slot]
     if period <= 0.0:                      # continuous: explicit Euler over the last step
         if h > 0.0:
             d = fns[1](t - h, xb, prev_y, prev_x, prev_xhat, prev_lam, params)
@@ -62,7 +103,7 @@ def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
             return bad_value
         held[:] = out
         return STATUS_OK
-    if np.isnan(due) or t >= due - _SAMPLE_SLACK * period:
+    if take_sample(sched, slot, t, period):
         out = fns[0](t, xb, y, x, xhat, lam, params)
         if out.size != held.size:
             return bad_out
@@ -75,7 +116,6 @@ def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
             return bad_value
         xb[:] = new
         held[:] = out
-        sched[slot] = (t if np.isnan(due) else due) + period
     return STATUS_OK
 
 
@@ -92,14 +132,14 @@ def step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat
     sched[0] = t
     none = xhat[:0]
     if has_obs:
-        status = _advance(obs_fns, obs_params, obs_period, xo, xhat, sched, 1, t, h,
-                          y, x, none, lam, prev_y, prev_x, none, prev_lam,
+        status = _advance(obs_fns, obs_params, obs_period, xo, xhat, sched, SLOT_OBSERVER,
+                          t, h, y, x, none, lam, prev_y, prev_x, none, prev_lam,
                           STATUS_OBSERVER_SIZE, STATUS_OBSERVER_NONFINITE,
                           STATUS_OBSERVER_OUTPUT_SIZE)
         if status != STATUS_OK:
             return status
     if has_ctrl:
-        status = _advance(ctrl_fns, ctrl_params, ctrl_period, xc, u, sched, 2, t,
+        status = _advance(ctrl_fns, ctrl_params, ctrl_period, xc, u, sched, SLOT_CONTROLLER, t,
                           h, y, x, xhat, lam, prev_y, prev_x, prev_xhat, prev_lam,
                           STATUS_CONTROLLER_SIZE, STATUS_CONTROLLER_NONFINITE,
                           STATUS_CONTROLLER_OUTPUT_SIZE)

@@ -699,7 +699,12 @@ class _BlockRunner:
             if block is not None and x_init is not None:
                 setattr(self, "xo" if name == "observer" else "xc",
                         as_vector(f"{name}.x0", x_init, block.n_states))
-        self.next_sample = {"observer": None, "controller": None}
+        from . import _block_kernels as bk  # numba loads with the first closed loop
+        # the sampled blocks' schedules, laid out as the compiled loops' ``sched`` (its
+        # ``t_prev`` slot unused here): one rule, ``take_sample``, for both paths
+        self.sched = np.full(bk.SCHED_SIZE, np.nan)
+        self.slot = {"observer": bk.SLOT_OBSERVER, "controller": bk.SLOT_CONTROLLER}
+        self.take_sample = bk.take_sample
         # a continuous block's last Measurement, a sampled block's held output ("<role>_out")
         self.held: dict[str, Any] = {}
         self.t_prev: float | None = None
@@ -744,12 +749,10 @@ class _BlockRunner:
                                       xb.size, t)
             self.held[role] = m
             return xb, _finite(role, block.output(t, xb, m), None, t)
-        due = self.next_sample[role]
-        if due is None or t >= due - 1e-9 * period:
+        if self.take_sample(self.sched, self.slot[role], float(t), float(period)):
             out = _finite(role, block.output(t, xb, m), None, t)
             xb = _finite(role, block.update(t, xb, m), xb.size, t)
             self.held[role + "_out"] = out
-            self.next_sample[role] = (t if due is None else due) + period
         return xb, self.held[role + "_out"]
 
     def on_jump(self, t: float, x_minus: FloatArray, x_plus: FloatArray, indices: Any,
@@ -815,7 +818,9 @@ class _CompiledBlocks:
         c = parts(runner.ctrl, ctrl, runner.xc, int(runner.n_inputs))
         self.obs_parts, self.ctrl_parts = o, c
         self.prev = (np.zeros(p), np.zeros(n), np.zeros(o[7].size), np.zeros(n_lam))
-        self.sched = np.full(3, np.nan)
+        from . import _block_kernels as bk
+
+        self.sched = np.full(bk.SCHED_SIZE, np.nan)
         if not c[0]:
             self.ctrl_parts = c[:7] + (np.zeros(int(runner.n_inputs)),)
 
