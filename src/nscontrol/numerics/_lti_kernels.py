@@ -410,6 +410,20 @@ def clock_advance(t, lo, dur):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def flight_end(event, tau, t, lo, tf):  # pragma: no cover - compiled
+    """The duration of a flight (or piece) from the clock ``t + lo`` and the clock at its
+    end, ``(dur, t', lo')``: with an event, its own offset ``τ`` (never a difference of
+    labels, which rounds by ``eps·t``), the labels moved by :func:`clock_advance` and clipped
+    at ``tf``; without one, up to ``tf``."""
+    if event:
+        t_end, lo_end = clock_advance(t, lo, tau)
+        if t_end >= tf:
+            return tau, tf, 0.0
+        return tau, t_end, lo_end
+    return (tf - t) - lo, tf, 0.0
+
+
+@njit(cache=True)
 def restart_tolerance(W, i, kappa, ynorm, g0_i, a1, h, t):  # pragma: no cover - compiled
     """Bound on the round-off error of guard ``i`` at a state the integrator computed itself
     (after an event, at the restart of a chunk), with ``a1 = h ġ_i`` its first Taylor

@@ -27,7 +27,7 @@ from numba import njit
 from ..numerics._lti_kernels import (
     EVENT,
     NEGATIVE,
-    clock_advance,
+    flight_end,
     guard_taylor_coefficients,
     project_restart,
     propagate,
@@ -258,15 +258,7 @@ def _linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, kin
             code, tau = 0, 0.0
         if code == NEGATIVE:
             return INADMISSIBLE, t, n_s, n_e, lo
-        # the flight's duration: the event's offset τ itself (up to tf without an event)
-        if code == EVENT:
-            dur = tau
-            t_next, lo_next = clock_advance(t, lo, dur)
-            if t_next >= tf:
-                t_next, lo_next = tf, 0.0
-        else:
-            dur = (tf - t) - lo
-            t_next, lo_next = tf, 0.0
+        dur, t_next, lo_next = flight_end(code == EVENT, tau, t, lo, tf)
         # grid samples strictly inside (t, t_next)
         k = int(np.floor((t - t_grid0) / dt)) + 1
         if n_s and n_s + _grid_count(t, t_next, t_grid0, dt, k) + 3 > cap_s:

@@ -23,7 +23,7 @@ from numba import njit
 from ..numerics._lti_kernels import (
     EVENT,
     NEGATIVE,
-    clock_advance,
+    flight_end,
     matmul_into,
     project_restart,
     propagate,
@@ -222,14 +222,7 @@ def _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0
         if code == NEGATIVE:
             return INADMISSIBLE, t, i, ptr, n_e, stuck, pieces, index, lo
         event = code == EVENT
-        if event:   # the piece's duration is τ itself, never a difference of labels
-            piece = tau
-            t_end, lo_end = clock_advance(t, lo, piece)
-            if t_end >= tf:
-                t_end, lo_end = tf, 0.0
-        else:
-            piece = (tf - t) - lo
-            t_end, lo_end = tf, 0.0
+        piece, t_end, lo_end = flight_end(event, tau, t, lo, tf)
         while ptr < n_samples and t_eval[ptr] <= t_end:   # samples in (t, t_end]
             propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, (t_eval[ptr] - t) - lo, xn)
             s_x[ptr, :] = xn[:n]
