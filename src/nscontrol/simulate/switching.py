@@ -207,12 +207,7 @@ class _Run:
             self.Phi = S @ self.Phi
         self.n_events += 1
         if self.n_events > self.max_events:
-            raise BudgetExceededError(
-                f"max_events: the run spent its budget of {self.max_events} events by t = "
-                f"{t:.12g}; raise max_events for a long run (one event per switching), or "
-                f"look for an accumulation of switchings (Zeno), chattering or sliding. The "
-                f"computed part is in err.trajectory", budget="max_events",
-                limit=self.max_events, used=self.n_events)
+            raise self.spent_error("max_events", t)
 
     def step(self, t: float) -> None:
         """Count one step of a loop that is not DOP853's (a PWM period) on ``max_steps``."""
@@ -242,7 +237,16 @@ class _Run:
                            status="dop853")
 
     def spent_error(self, budget: str, t: float) -> BudgetExceededError:
+        """The error of a spent budget (``max_events``, ``max_steps`` or ``min_rel_step``)
+        at ``t``: the option named first, what to do, the computed part kept."""
         span = f"[{self.t0:.6g}, {self.tf:.6g}]"
+        if budget == "max_events":
+            return BudgetExceededError(
+                f"max_events: the run spent its budget of {self.max_events} events by t = "
+                f"{t:.12g} of {span}; raise max_events for a long run (one event per "
+                f"switching), or look for an accumulation of switchings (Zeno), chattering or "
+                f"sliding. The computed part is in err.trajectory", budget="max_events",
+                limit=self.max_events, used=self.n_events)
         if budget == "max_steps":
             return BudgetExceededError(
                 f"max_steps: the run spent its {self.max_steps} steps (DOP853 steps, or PWM "
