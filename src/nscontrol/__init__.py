@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from . import errors
+from . import _kernel_cache, errors
 from .errors import (
     BudgetExceededError,
     DimensionError,
@@ -29,6 +29,10 @@ from .errors import (
     ZenoError,
 )
 from .simulate import Trajectory, simulate  # noqa: E402  (the verb shadows its subpackage)
+
+# numba stamps a cached kernel with its own file only: drop the caches of kernels whose
+# imported kernels changed since (an edit, an upgrade) before any kernel module loads
+_kernel_cache.refresh()
 
 if TYPE_CHECKING:   # the lazy names below, typed for type checkers (imported on first use)
     from .numerics.lcp import solve_lcp as solve_lcp

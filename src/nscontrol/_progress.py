@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+from ._kernel_cache import KERNEL_GLOBS
 from ._validation import check_bool
 
 #: Seconds before an iterable's bar appears (shorter runs show none).
@@ -81,8 +82,6 @@ def _labelled(bar: Any, desc: str, label: Any) -> Any:
         yield item
 
 
-#: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder.
-KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py")
 
 _announced = False
 
