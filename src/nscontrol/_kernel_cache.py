@@ -24,7 +24,7 @@ import re
 from collections.abc import Iterable
 from pathlib import Path
 
-__all__ = ["KERNEL_GLOBS", "kernel_modules", "dependency_digests", "refresh"]
+__all__ = ["KERNEL_GLOBS", "kernel_modules", "reached_kernels", "dependency_digests", "refresh"]
 
 #: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder.
 KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py")
@@ -62,15 +62,14 @@ def _imported_kernels(module: Path, source: str, known: set[Path]) -> set[Path]:
     return found
 
 
-def dependency_digests(modules: Iterable[Path]) -> dict[Path, str]:
-    """For each kernel module, a digest of the sources of every kernel module it reaches
-    through imports (itself excluded: numba stamps its own file)."""
-    paths = list(modules)     # under one resolved root, so equal files are equal paths
-    sources = {p: p.read_bytes() for p in paths}
+def reached_kernels(modules: Iterable[Path]) -> dict[Path, set[Path]]:
+    """For each kernel module, the kernel modules it reaches through its imports, directly
+    or through others (itself excluded). ``modules`` are paths under one resolved root."""
+    paths = list(modules)
     known = set(paths)
-    direct = {p: _imported_kernels(p, sources[p].decode("utf-8", "replace"), known)
+    direct = {p: _imported_kernels(p, p.read_text(encoding="utf-8", errors="replace"), known)
               for p in paths}
-    digests = {}
+    reached = {}
     for p in paths:
         seen: set[Path] = set()
         todo = list(direct[p])
@@ -79,6 +78,17 @@ def dependency_digests(modules: Iterable[Path]) -> dict[Path, str]:
             if q not in seen and q != p:
                 seen.add(q)
                 todo.extend(direct[q])
+        reached[p] = seen
+    return reached
+
+
+def dependency_digests(modules: Iterable[Path]) -> dict[Path, str]:
+    """For each kernel module, a digest of the sources of every kernel module it reaches
+    (:func:`reached_kernels`; itself excluded: numba stamps its own file)."""
+    reached = reached_kernels(modules)
+    sources = {p: p.read_bytes() for p in reached}
+    digests = {}
+    for p, seen in reached.items():
         h = hashlib.sha256()
         for q in sorted(seen):
             h.update(str(q.name).encode() + b"\0" + sources[q] + b"\0")
