@@ -47,7 +47,7 @@ from . import _friction_compensation_kernels as _k
 
 __all__ = ["SetPoint", "Sinusoid", "PDLaw", "compensation_model", "FrictionCompensatingPD",
            "ReducedOrderVelocityObserver", "OneLinkGains", "one_link_gains",
-           "FrictionLoopRun", "simulate_friction_loop"]
+           "FrictionLoopRun", "friction_loop", "simulate_friction_loop"]
 
 
 # -- references --------------------------------------------------------------------------
@@ -493,6 +493,94 @@ class FrictionLoopRun:
         """Boolean mask of the ticks with ``t >= start``."""
         return self.t >= start - 1e-9 * max(1.0, abs(start))
 
+    @classmethod
+    def from_trajectory(cls, traj: Any, robot: Any, pd: PDLaw, observer: Any,
+                        omega_hat0: float) -> FrictionLoopRun:
+        """The tick-wise view of a run of :func:`friction_loop` (``simulate`` by implicit
+        Euler with the control period as step).
+
+        Parameters
+        ----------
+        traj
+            The :class:`~nscontrol.simulate.trajectory.Trajectory`.
+        robot
+            The :class:`~nscontrol.systems.one_link.OneLinkRobot`.
+        pd
+            The controller's PD law (its reference).
+        observer
+            The loop's :class:`ReducedOrderVelocityObserver`, or ``None``.
+        omega_hat0
+            The estimate at the first tick.
+        """
+        t, x = traj.t, traj.x
+        friction = robot.friction_torque(x[:, 1], traj.signal("w")[:, 0])
+        if observer is None:
+            omega_hat = x[:, 1].copy()
+        else:   # the estimate of each tick from its carried state and angle sample
+            omega_hat = observer.estimates_at(traj.signal("xo"), x[:, 0])
+            omega_hat[0] = omega_hat0
+        u = traj.signal("u")[:, 0]
+        u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
+        if pd.compiled_parameters() is not None:    # the compiled blocks' reference
+            ref = _k.references(np.ascontiguousarray(t), pd._record[0])
+        else:
+            ref = np.array([pd.reference_at(tk)[0] for tk in t])
+        return cls(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(), omega_hat=omega_hat, u=u,
+                   friction=friction, reference=ref, trajectory=traj)
+
+
+def friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float, h: float,
+                  theta0: float = 0.0, omega_hat0: float = 0.0, value_at_zero: float = 0.0,
+                  smooth_eps: float | None = None, compiled: bool = True) -> Any:
+    """The digital friction-compensating loop as a closed loop for :func:`nscontrol.simulate`.
+
+    The plant is ``robot.lure_system()``; the controller a :class:`FrictionCompensatingPD`
+    with the compensation ``compensation_model(robot.friction, kappa)`` and period ``h``; the
+    observer (if ``l`` is given) a :class:`ReducedOrderVelocityObserver` whose estimate at the
+    first tick is ``omega_hat0``. Run it with
+    ``nscontrol.simulate(loop, [theta0, omega0], (0, T), method="implicit_euler", h=h)``.
+
+    Parameters
+    ----------
+    robot
+        The :class:`~nscontrol.systems.one_link.OneLinkRobot`.
+    pd
+        The PD (+ feedforward) law and its reference.
+    l
+        Observer gain, or ``None`` to feed back the measured velocity (no observer).
+    kappa
+        Compensation factor ``>= 0`` (0: none, 1: exact).
+    h
+        Control period (and the plant step to run it with); ``h sigma_tan < J`` is required.
+    theta0, omega_hat0
+        Initial angle (the observer's start) and velocity estimate.
+    value_at_zero, smooth_eps
+        Passed to :class:`FrictionCompensatingPD`.
+    compiled
+        Run the blocks' compiled forms when they have one (default; ``False``: their Python
+        methods, the same functions called one tick at a time). The run's
+        ``stats["controller"]`` says which ran.
+
+    Returns
+    -------
+    ClosedLoop
+
+    Raises
+    ------
+    ModelError
+        ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
+    """
+    from ..simulate.closed_loop import closed_loop
+
+    h = robot.check_step(h)
+    comp = compensation_model(robot.friction, kappa)
+    ctrl = FrictionCompensatingPD(pd, comp, h, value_at_zero=value_at_zero,
+                                  smooth_eps=smooth_eps)
+    obs = None
+    if l is not None:
+        obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
+    return closed_loop(robot.lure_system(), ctrl, obs, compiled=compiled)
+
 
 def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float,
                            h: float, T: float, theta0: float = 0.0, omega0: float = 0.0,
@@ -500,6 +588,11 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
                            smooth_eps: float | None = None,
                            compiled: bool = True) -> FrictionLoopRun:
     """Run the digital friction-compensating loop (control period ``h``) by implicit Euler.
+
+    A convenience over ``nscontrol.simulate(friction_loop(...), [theta0, omega0], (0, T),
+    method="implicit_euler", h=h)``: it builds the loop (:func:`friction_loop`) and reads the
+    trajectory tick by tick (:meth:`FrictionLoopRun.from_trajectory`: the estimate each tick
+    computed, the torque that acted after it, the friction torque and the reference).
 
     Parameters
     ----------
@@ -533,34 +626,11 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
         ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
     """
     from ..simulate import simulate
-    from ..simulate.closed_loop import closed_loop
 
-    h = robot.check_step(h)
-    T = check_positive("T", T)
-    comp = compensation_model(robot.friction, kappa)
-    ctrl = FrictionCompensatingPD(pd, comp, h, value_at_zero=value_at_zero,
-                                  smooth_eps=smooth_eps)
-    obs = None
-    if l is not None:
-        obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
-    plant = robot.lure_system()
-    loop = closed_loop(plant, ctrl, obs, compiled=compiled)
-    traj = simulate(loop, [theta0, omega0], (0.0, T), method="implicit_euler", h=h,
-                    progress=False)
-    t, x = traj.t, traj.x
-    w = traj.signal("w")[:, 0]
-    friction = robot.friction_torque(x[:, 1], w)
-    if obs is None:
-        omega_hat = x[:, 1].copy()
-    else:   # the estimate of each tick from its carried state and angle sample
-        omega_hat = obs.estimates_at(traj.signal("xo"), x[:, 0])
-        omega_hat[0] = omega_hat0
-    u = traj.signal("u")[:, 0]
-    u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
-    if pd.compiled_parameters() is not None:    # the compiled blocks' reference, on the grid
-        ref = _k.references(np.ascontiguousarray(t), pd._record[0])
-    else:
-        ref = np.array([pd.reference_at(tk)[0] for tk in t])
-    return FrictionLoopRun(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(),
-                           omega_hat=omega_hat, u=u, friction=friction, reference=ref,
-                           trajectory=traj)
+    loop = friction_loop(robot, pd, l=l, kappa=kappa, h=h, theta0=theta0,
+                         omega_hat0=omega_hat0, value_at_zero=value_at_zero,
+                         smooth_eps=smooth_eps, compiled=compiled)
+    traj = simulate(loop, [theta0, omega0], (0.0, check_positive("T", T)),
+                    method="implicit_euler", h=h, progress=False)
+    return FrictionLoopRun.from_trajectory(traj, robot, loop.controller.pd, loop.observer,
+                                           omega_hat0)
