@@ -242,19 +242,19 @@ def test_measured_velocity_never_compensates_static_friction_at_rest():
 def test_block_parameters_are_named_records():
     """The compiled blocks' flat parameters are the named records of the kernels module,
     read back field by field (no hand-counted offsets)."""
-    from nscontrol.design._friction_compensation_kernels import CONTROLLER, OBSERVER
+    from nscontrol.design._friction_compensation_kernels import PARAMETERS
 
     pd = PDLaw(KP, KD, J, Sinusoid(0.5, 3.0), feedforward=False)
     ctrl = FrictionCompensatingPD(pd, compensation_model(F, 1.3), H, value_at_zero=0.1,
                                   smooth_eps=1e-3)
-    c = ctrl.compiled().params.view(CONTROLLER)[0]
+    c = ctrl.compiled().params.view(PARAMETERS)[0]
     assert (c["kind"], c["a"], c["w"], c["kp"], c["kd"], c["J"], c["feedforward"]) == (
         1.0, 0.5, 3.0, KP, KD, J, 0.0)
     assert (c["has_compensation"], c["T_s"], c["T_c"], c["b"]) == (
         1.0, 1.3 * T_S, 1.3 * 0.2, 1.3 * 0.02)
     assert (c["value_at_zero"], c["has_eps"], c["eps"]) == (0.1, 1.0, 1e-3)
-    o = ReducedOrderVelocityObserver(L, pd, H).compiled().params.view(OBSERVER)[0]
-    assert (o["T"], o["l"], o["kp"]) == (H, L, KP)
+    o = ReducedOrderVelocityObserver(L, pd, H).compiled().params.view(PARAMETERS)[0]
+    assert (o["T"], o["l"], o["kp"], o["has_compensation"]) == (H, L, KP, 0.0)
 
 
 def test_python_methods_follow_the_closed_forms():

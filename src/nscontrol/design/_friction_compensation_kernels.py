@@ -6,11 +6,10 @@ reference values of their Python reference callable), and the compiled blocks
 (``BLOCK_SIGNATURE``) call them with the reference computed by :func:`reference`. So the two
 paths run the same machine code.
 
-Parameters are named records (numpy structured dtypes of ``float64`` fields,
-:func:`nscontrol._validation.named_record`): :data:`PD` for the PD law, :data:`CONTROLLER`
-and :data:`OBSERVER` for the blocks (the PD fields first). The compiled loops pass a block's
-record as its flat ``float64`` view; the block kernels read it back by name
-(``p.view(CONTROLLER)[0]``).
+Parameters are one named record, :data:`PARAMETERS` (a numpy structured dtype of
+``float64`` fields, built by :func:`nscontrol._validation.named_record`), passed as its flat
+``float64`` view (the compiled loops' signature, and a cheap argument from Python); each
+function reads it back by name (``p.view(PARAMETERS)[0].kp``).
 """
 
 from __future__ import annotations
@@ -23,17 +22,16 @@ from numba import njit
 from ..systems._feedback_kernels import BLOCK_SIGNATURE
 
 _F = np.float64
-#: The PD law: reference ``kind`` (0 set-point ``a``, 1 ``a sin(w t)``), gains, inertia and
-#: whether the feedforward ``J r''`` is on (1.0) or off (0.0).
-PD = np.dtype([("kind", _F), ("a", _F), ("w", _F), ("kp", _F), ("kd", _F), ("J", _F),
-               ("feedforward", _F)])
-#: The controller: the PD fields, then the friction model ``T_hat`` (``has_compensation``
-#: 0.0 for none; ``T_s, T_c, omega_s, delta, b``), ``T_hat(0)`` and the optional smoothing.
-CONTROLLER = np.dtype(PD.descr + [("has_compensation", _F), ("T_s", _F), ("T_c", _F),
-                                  ("omega_s", _F), ("delta", _F), ("b", _F),
-                                  ("value_at_zero", _F), ("has_eps", _F), ("eps", _F)])
-#: The observer: the PD fields, then the sampling period ``T`` and the gain ``l``.
-OBSERVER = np.dtype(PD.descr + [("T", _F), ("l", _F)])
+#: The parameters of chapter 7's blocks, one record for the PD law, the controller and the
+#: observer (a block leaves the fields it does not read at 0): the reference ``kind`` (0
+#: set-point ``a``, 1 ``a sin(w t)``), the PD gains, the inertia and the feedforward switch
+#: (1.0 on); the friction model ``T_hat`` (``has_compensation`` 0.0 for none; ``T_s, T_c,
+#: omega_s, delta, b``), ``T_hat(0)`` and the optional smoothing of the sign; the observer's
+#: sampling period ``T`` and gain ``l``.
+PARAMETERS = np.dtype([
+    ("kind", _F), ("a", _F), ("w", _F), ("kp", _F), ("kd", _F), ("J", _F), ("feedforward", _F),
+    ("has_compensation", _F), ("T_s", _F), ("T_c", _F), ("omega_s", _F), ("delta", _F),
+    ("b", _F), ("value_at_zero", _F), ("has_eps", _F), ("eps", _F), ("T", _F), ("l", _F)])
 
 
 @njit(cache=True)
@@ -44,23 +42,26 @@ def sinusoid(t, a, w):
 
 
 @njit(cache=True)
-def reference(t, c):
-    """``(r, r', r'')`` of the record's reference (a set-point or a sinusoid)."""
+def reference(t, p):
+    """``(r, r', r'')`` of the reference (a set-point or a sinusoid)."""
+    c = p.view(PARAMETERS)[0]
     if c.kind == 0.0:
         return c.a, 0.0, 0.0
     return sinusoid(t, c.a, c.w)
 
 
 @njit(cache=True)
-def pd_torque(r, dr, ddr, theta, omega_hat, c):
+def pd_torque(r, dr, ddr, theta, omega_hat, p):
     """``u_pd = J r'' - k_p (theta - r) - k_d (omega_hat - r')`` (feedforward optional)."""
+    c = p.view(PARAMETERS)[0]
     ff = c.J * ddr if c.feedforward != 0.0 else 0.0
     return ff - c.kp * (theta - r) - c.kd * (omega_hat - dr)
 
 
 @njit(cache=True)
-def friction_estimate(v, c):
+def friction_estimate(v, p):
     """``T_hat(v) = sign(v) f_hat(|v|)`` (``value_at_zero`` at 0, or the smoothed sign)."""
+    c = p.view(PARAMETERS)[0]
     if c.has_compensation == 0.0:
         return 0.0
     s = abs(v)
@@ -73,48 +74,49 @@ def friction_estimate(v, c):
 
 
 @njit(cache=True)
-def control(r, dr, ddr, theta, v, c):
+def control(r, dr, ddr, theta, v, p):
     """The controller's torque ``u = u_pd + T_hat(v)`` (``v`` the velocity it reads)."""
-    return pd_torque(r, dr, ddr, theta, v, c) + friction_estimate(v, c)
+    return pd_torque(r, dr, ddr, theta, v, p) + friction_estimate(v, p)
 
 
 @njit(cache=True)
-def observer_xi(xi, u_pd, theta, c):
+def observer_xi(xi, u_pd, theta, p):
     """Backward Euler on ``xi' = -l xi - l^2 theta + u_pd / J`` over one period ``T``, from
     the carried ``xi`` and ``u_pd`` with the new angle sample ``theta``."""
+    c = p.view(PARAMETERS)[0]
     T, l = c.T, c.l
     return (xi + T * (-l * l * theta + u_pd / c.J)) / (1.0 + T * l)
 
 
 @njit(cache=True)
-def observer_estimate(xi, u_pd, theta, c):
+def observer_estimate(xi, u_pd, theta, p):
     """``omega_hat = xi_new + l theta`` at a tick (carried ``xi``, ``u_pd``; sample ``theta``)."""
-    return observer_xi(xi, u_pd, theta, c) + c.l * theta
+    return observer_xi(xi, u_pd, theta, p) + p.view(PARAMETERS)[0].l * theta
 
 
 @njit(cache=True)
-def observer_step(r, dr, ddr, xi, u_pd, theta, c):
+def observer_step(r, dr, ddr, xi, u_pd, theta, p):
     """The state ``(xi_new, u_pd_new, omega_hat)`` carried into the next tick."""
-    xi_new = observer_xi(xi, u_pd, theta, c)
-    omega_hat = xi_new + c.l * theta
-    return xi_new, pd_torque(r, dr, ddr, theta, omega_hat, c), omega_hat
+    xi_new = observer_xi(xi, u_pd, theta, p)
+    omega_hat = xi_new + p.view(PARAMETERS)[0].l * theta
+    return xi_new, pd_torque(r, dr, ddr, theta, omega_hat, p), omega_hat
 
 
 @njit(cache=True)
-def observer_estimates(xo, theta, c):
+def observer_estimates(xo, theta, p):
     """:func:`observer_estimate` at many ticks (rows of ``xo``, entries of ``theta``)."""
     out = np.empty(theta.size)
     for k in range(theta.size):
-        out[k] = observer_estimate(xo[k, 0], xo[k, 1], theta[k], c)
+        out[k] = observer_estimate(xo[k, 0], xo[k, 1], theta[k], p)
     return out
 
 
 @njit(cache=True)
-def references(t, c):
-    """``r`` of the record's reference on the times ``t``."""
+def references(t, p):
+    """``r`` of the reference on the times ``t``."""
     out = np.empty(t.size)
     for k in range(t.size):
-        out[k] = reference(t[k], c)[0]
+        out[k] = reference(t[k], p)[0]
     return out
 
 
@@ -122,11 +124,10 @@ def references(t, c):
 @njit(BLOCK_SIGNATURE, cache=True)
 def controller_output(t, xb, y, x, xhat, lam, p):
     """``[u_pd + T_hat(omega_hat)]``; ``omega_hat`` the estimate, else the measured velocity."""
-    c = p.view(CONTROLLER)[0]
-    r, dr, ddr = reference(t, c)
+    r, dr, ddr = reference(t, p)
     v = xhat[0] if xhat.size > 0 else x[1]
     out = np.empty(1)
-    out[0] = control(r, dr, ddr, y[0], v, c)
+    out[0] = control(r, dr, ddr, y[0], v, p)
     return out
 
 
@@ -134,15 +135,14 @@ def controller_output(t, xb, y, x, xhat, lam, p):
 def observer_output(t, xb, y, x, xhat, lam, p):
     """``[omega_hat]`` at a tick."""
     out = np.empty(1)
-    out[0] = observer_estimate(xb[0], xb[1], y[0], p.view(OBSERVER)[0])
+    out[0] = observer_estimate(xb[0], xb[1], y[0], p)
     return out
 
 
 @njit(BLOCK_SIGNATURE, cache=True)
 def observer_update(t, xb, y, x, xhat, lam, p):
     """``[xi, u_pd, omega_hat]`` carried into the next tick."""
-    c = p.view(OBSERVER)[0]
-    r, dr, ddr = reference(t, c)
+    r, dr, ddr = reference(t, p)
     out = np.empty(3)
-    out[0], out[1], out[2] = observer_step(r, dr, ddr, xb[0], xb[1], y[0], c)
+    out[0], out[1], out[2] = observer_step(r, dr, ddr, xb[0], xb[1], y[0], p)
     return out

@@ -117,7 +117,7 @@ class PDLaw:
         if not callable(self.reference):
             raise ModelError(f"reference: expected a callable t -> (r, r', r''), got "
                              f"{type(self.reference).__name__}")
-        object.__setattr__(self, "_record", named_record(_k.PD, **self.fields()))
+        object.__setattr__(self, "_record", _parameters(self))
 
     def reference_at(self, t: float) -> tuple[float, float, float]:
         """``(r, r', r'')`` at ``t`` from the reference callable."""
@@ -127,7 +127,7 @@ class PDLaw:
     def torque(self, t: float, theta: float, omega_hat: float) -> float:
         """``u_pd`` at ``t`` for the angle ``theta`` and velocity estimate ``omega_hat``."""
         return _k.pd_torque(*self.reference_at(t), float(theta), float(omega_hat),
-                            self._record[0])
+                            self._record)
 
     def compiled_parameters(self) -> dict[str, float] | None:
         """The law's fields of the compiled blocks' parameter records (``kind, a, w`` of the
@@ -137,9 +137,9 @@ class PDLaw:
         return self.fields() if type(self.reference) in (SetPoint, Sinusoid) else None
 
     def fields(self) -> dict[str, float]:
-        """The fields of :data:`~nscontrol.design._friction_compensation_kernels.PD`; an
-        arbitrary reference (no compiled form) gets ``kind = a = w = 0``, unused: the Python
-        methods pass its values."""
+        """The law's fields of the blocks' parameter record (``PARAMETERS`` of the kernels
+        module); an arbitrary reference (no compiled form) gets ``kind = a = w = 0``, unused:
+        the Python methods pass its values."""
         ref = self.reference
         kind, a, w = 0.0, 0.0, 0.0
         if type(ref) is SetPoint:
@@ -148,6 +148,13 @@ class PDLaw:
             kind, a, w = 1.0, float(ref.amplitude), float(ref.frequency)
         return {"kind": kind, "a": a, "w": w, "kp": self.kp, "kd": self.kd, "J": self.J,
                 "feedforward": 1.0 if self.feedforward else 0.0}
+
+
+def _parameters(pd: PDLaw, **fields: float) -> FloatArray:
+    """The blocks' parameter record (``PARAMETERS``, flat ``float64`` view): the PD law's
+    fields, then ``fields``; the fields a block does not read stay 0."""
+    values = dict.fromkeys(_k.PARAMETERS.names, 0.0) | pd.fields() | fields
+    return named_record(_k.PARAMETERS, **values).view(np.float64)
 
 
 def compensation_model(friction: Any, kappa: float) -> Any:
@@ -231,9 +238,8 @@ class FrictionCompensatingPD(StaticLaw):
                                                                   self.smooth_eps))
         curve = (0.0,) * 5 if self.compensation is None else _curve(self.compensation)
         eps = self.smooth_eps
-        rec = named_record(
-            _k.CONTROLLER, **self.pd.fields(),
-            has_compensation=0.0 if self.compensation is None else 1.0,
+        rec = _parameters(
+            self.pd, has_compensation=0.0 if self.compensation is None else 1.0,
             **dict(zip(("T_s", "T_c", "omega_s", "delta", "b"), curve, strict=True)),
             value_at_zero=float(self.value_at_zero), has_eps=0.0 if eps is None else 1.0,
             eps=0.0 if eps is None else float(eps))
@@ -241,7 +247,7 @@ class FrictionCompensatingPD(StaticLaw):
 
     def friction_estimate(self, omega_hat: float) -> float:
         """``T_hat(omega_hat)``: ``sign(v) f_hat(|v|)``, ``value_at_zero`` at 0."""
-        return _k.friction_estimate(float(omega_hat), self._record[0])
+        return _k.friction_estimate(float(omega_hat), self._record)
 
     def compiled(self) -> Any:
         """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`), or
@@ -251,8 +257,7 @@ class FrictionCompensatingPD(StaticLaw):
 
         if self.pd.compiled_parameters() is None:
             return None
-        return CompiledBlock(_k.controller_output, static_update,
-                             self._record.view(np.float64))
+        return CompiledBlock(_k.controller_output, static_update, self._record)
 
     def velocity(self, m: Any) -> float:
         """The velocity the controller uses: the estimate, else the measured one."""
@@ -261,7 +266,7 @@ class FrictionCompensatingPD(StaticLaw):
     def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
         """``[u]`` at the tick ``t``."""
         return np.array([_k.control(*self.pd.reference_at(t), float(m.y[0]), self.velocity(m),
-                                    self._record[0])])
+                                    self._record)])
 
 
 @dataclass(frozen=True, eq=False)
@@ -304,8 +309,7 @@ class ReducedOrderVelocityObserver:
                              f"e' = -l e is unstable for l <= 0), got l = {self.l!r}") from None
         object.__setattr__(self, "l", l_val)
         object.__setattr__(self, "period", check_positive("period", self.period))
-        object.__setattr__(self, "_record", named_record(_k.OBSERVER, **self.pd.fields(),
-                                                         T=self.period, l=self.l))
+        object.__setattr__(self, "_record", _parameters(self.pd, T=self.period, l=self.l))
 
     @property
     def estimates(self) -> FloatArray:
@@ -323,7 +327,7 @@ class ReducedOrderVelocityObserver:
     def estimate(self, xo: FloatArray, theta: float) -> float:
         """``omega_hat`` at a tick with angle sample ``theta`` and carried state ``xo``."""
         return _k.observer_estimate(float(xo[0]), float(xo[1]), float(theta),
-                                    self._record[0])
+                                    self._record)
 
     def estimates_at(self, xo: FloatArray, theta: FloatArray) -> FloatArray:
         """:meth:`estimate` for many ticks at once (rows of ``xo``, entries of ``theta``),
@@ -338,7 +342,7 @@ class ReducedOrderVelocityObserver:
         """
         xo = np.ascontiguousarray(xo, dtype=float).reshape(-1, 3)
         theta = np.ascontiguousarray(theta, dtype=float).reshape(-1)
-        return _k.observer_estimates(xo, theta, self._record[0])
+        return _k.observer_estimates(xo, theta, self._record)
 
     def output(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
         """``[omega_hat]`` at the tick ``t``."""
@@ -347,7 +351,7 @@ class ReducedOrderVelocityObserver:
     def update(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
         """The state carried into the next tick."""
         return np.array(_k.observer_step(*self.pd.reference_at(t), float(xo[0]), float(xo[1]),
-                                         float(m.y[0]), self._record[0]))
+                                         float(m.y[0]), self._record))
 
     def reset(self, t: float, xo: FloatArray, jump: Any) -> FloatArray:
         """The plant does not jump."""
@@ -360,8 +364,7 @@ class ReducedOrderVelocityObserver:
 
         if self.pd.compiled_parameters() is None:
             return None
-        return CompiledBlock(_k.observer_output, _k.observer_update,
-                             self._record.view(np.float64))
+        return CompiledBlock(_k.observer_output, _k.observer_update, self._record)
 
 
 # -- gain design -------------------------------------------------------------------------
@@ -522,7 +525,7 @@ class FrictionLoopRun:
         u = traj.signal("u")[:, 0]
         u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
         if pd.compiled_parameters() is not None:    # the compiled blocks' reference
-            ref = _k.references(np.ascontiguousarray(t), pd._record[0])
+            ref = _k.references(np.ascontiguousarray(t), pd._record)
         else:
             ref = np.array([pd.reference_at(tk)[0] for tk in t])
         return cls(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(), omega_hat=omega_hat, u=u,
