@@ -153,7 +153,7 @@ class PDLaw:
 def _parameters(pd: PDLaw, **fields: float) -> FloatArray:
     """The blocks' parameter record (``PARAMETERS``, flat ``float64`` view): the PD law's
     fields, then ``fields``; the fields a block does not read stay 0."""
-    values = dict.fromkeys(_k.PARAMETERS.names, 0.0) | pd.fields() | fields
+    values = dict.fromkeys(_k.PARAMETERS.names or (), 0.0) | pd.fields() | fields
     return named_record(_k.PARAMETERS, **values).view(np.float64)
 
 
