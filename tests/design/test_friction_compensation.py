@@ -274,3 +274,16 @@ def test_python_methods_follow_the_closed_forms():
     xi = (0.3 + H * (-L * L * th + 0.1 / J)) / (1.0 + H * L)
     assert obs.estimate(np.array([0.3, 0.1, 0.0]), th) == pytest.approx(
         xi + L * th, rel=8 * np.finfo(float).eps)
+
+
+def test_the_default_path_is_compiled_and_an_arbitrary_reference_falls_back_to_python():
+    """Compiled by default; a reference with no compiled form runs the Python methods (the
+    same functions, so the same numbers bit for bit), and ``stats`` says which path ran."""
+    fast = simulate_friction_loop(ROBOT, PDLaw(KP, KD, J, SetPoint(1.0)), l=L, kappa=1.0,
+                                  h=H, T=300 * H, omega0=0.5)
+    slow = simulate_friction_loop(ROBOT, PDLaw(KP, KD, J, lambda t: (1.0, 0.0, 0.0)), l=L,
+                                  kappa=1.0, h=H, T=300 * H, omega0=0.5)
+    assert fast.trajectory.stats["controller"] == "compiled"
+    assert slow.trajectory.stats["controller"] == "python"
+    for name in ("theta", "omega", "omega_hat", "u", "friction", "reference"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
