@@ -6,9 +6,11 @@ Scenarios:
   compensation): our steps/s with the blocks' compiled forms (the default) against the same
   loop with their Python methods (``closed_loop(..., compiled=False)``), in the same run (no
   Siconos counterpart of the set-valued Stribeck law);
-* the same loop on Coulomb friction (T_s = T_c = 0.2, no viscous term), T = 2 s, against
-  Siconos (relay Lur'e system by EulerMoreauOSI + Relay, the same controller and observer
-  written again in its script, the torque held in the system's ``b``): steps/s of both and
+* the same loop on Coulomb friction (T_s = T_c = 0.2, no viscous term), T = 2 s, on the
+  default path (``simulate_friction_loop``, i.e. ``nscontrol.simulate`` of ``friction_loop``:
+  the compiled blocks; ``accuracy.path`` says which ran) against Siconos (relay Lur'e
+  system by EulerMoreauOSI + Relay, the same controller and observer written again in its
+  script, the torque held in the system's ``b``): steps/s of both and
   ``max |theta_ours - theta_siconos|`` (our compiled blocks, and the Python ones);
 * the kappa diagram (kappa in [0, 1.5], set-point runs at h = 1e-3, T = 10): wall time
   serial, on 2 local worker processes and on 2 Dask workers (a ``LocalCluster``, when
@@ -68,7 +70,8 @@ def _reference_run(quick: bool) -> dict[str, Any]:
             "reference": "python blocks (closed_loop(..., compiled=False))",
             "reference_steps_per_s": python, "ratio": ours / python,
             "note": "no Siconos counterpart of the set-valued Stribeck law",
-            "accuracy": {"final_error": float(abs(run.error[-1]))}}
+            "accuracy": {"final_error": float(abs(run.error[-1])),
+                         "path": run.trajectory.stats["controller"]}}
 
 
 def _coulomb_run(quick: bool) -> dict[str, Any]:
@@ -82,7 +85,8 @@ def _coulomb_run(quick: bool) -> dict[str, Any]:
                     f"h = {h:g}, T = {T:g}",
         "size": steps, "ours_steps_per_s": ours, "reference": None,
         "reference_steps_per_s": None, "ratio": None,
-        "accuracy": {"python_blocks_steps_per_s": python}}
+        "accuracy": {"python_blocks_steps_per_s": python,
+                     "path": run.trajectory.stats["controller"]}}
     ok, why = siconos_available()
     if not ok:
         record["note"] = why

@@ -408,3 +408,31 @@ def check_t_span(t_span: Any, name: str = "t_span") -> tuple[float, float]:
     nscontrol.errors.ModelError: t_span: expected a pair of numbers (t0, tf), got the string ...
     """
     return as_interval(name, t_span, labels=("t0", "tf"))
+
+
+def named_record(dtype: np.dtype, **values: Any) -> np.ndarray:
+    """A one-element structured array of ``dtype`` (all fields ``float64``) with every field
+    set by name: the parameter record of a compiled kernel.
+
+    Its ``.view(np.float64)`` is the flat array the compiled loops pass (their signatures
+    take ``float64[::1]``); a kernel reads it back by name with ``p.view(dtype)[0]``.
+
+    Raises
+    ------
+    ModelError
+        A field of ``dtype`` not given, or a name that is not a field.
+
+    Examples
+    --------
+    >>> dt = np.dtype([("kp", np.float64), ("kd", np.float64)])
+    >>> rec = named_record(dt, kd=0.3, kp=2.0)
+    >>> float(rec[0]["kp"]), rec.view(np.float64).tolist()
+    (2.0, [2.0, 0.3])
+    """
+    names = tuple(dtype.names or ())
+    if set(values) != set(names):
+        raise ModelError(f"values: expected the fields {list(names)}, got {sorted(values)}")
+    out = np.zeros(1, dtype)
+    for key, value in values.items():
+        out[key] = float(value)
+    return out

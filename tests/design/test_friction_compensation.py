@@ -237,3 +237,53 @@ def test_measured_velocity_never_compensates_static_friction_at_rest():
     assert np.all(run.omega[m] == 0.0)
     assert abs(KP * run.error[-1]) <= T_S
     assert abs(run.error[-1]) > 1e-3          # stuck short of the set-point
+
+
+def test_block_parameters_are_named_records():
+    """The compiled blocks' flat parameters are the named records of the kernels module,
+    read back field by field (no hand-counted offsets)."""
+    from nscontrol.design._friction_compensation_kernels import PARAMETERS
+
+    pd = PDLaw(KP, KD, J, Sinusoid(0.5, 3.0), feedforward=False)
+    ctrl = FrictionCompensatingPD(pd, compensation_model(F, 1.3), H, value_at_zero=0.1,
+                                  smooth_eps=1e-3)
+    c = ctrl.compiled().params.view(PARAMETERS)[0]
+    assert (c["kind"], c["a"], c["w"], c["kp"], c["kd"], c["J"], c["feedforward"]) == (
+        1.0, 0.5, 3.0, KP, KD, J, 0.0)
+    assert (c["has_compensation"], c["T_s"], c["T_c"], c["b"]) == (
+        1.0, 1.3 * T_S, 1.3 * 0.2, 1.3 * 0.02)
+    assert (c["value_at_zero"], c["has_eps"], c["eps"]) == (0.1, 1.0, 1e-3)
+    o = ReducedOrderVelocityObserver(L, pd, H).compiled().params.view(PARAMETERS)[0]
+    assert (o["T"], o["l"], o["kp"], o["has_compensation"]) == (H, L, KP, 0.0)
+
+
+def test_python_methods_follow_the_closed_forms():
+    """The methods (now calling the compiled functions) against the formulas written here:
+    a few roundings of O(1) numbers, so 8 ulps relative."""
+    pd = PDLaw(KP, KD, J, Sinusoid(0.5, 3.0))
+    t, th, wh = 0.7, 0.2, -0.4
+    r, dr, ddr = 0.5 * math.sin(2.1), 1.5 * math.cos(2.1), -4.5 * math.sin(2.1)
+    assert pd.reference(t) == pytest.approx((r, dr, ddr), rel=8 * np.finfo(float).eps)
+    assert pd.torque(t, th, wh) == pytest.approx(
+        J * ddr - KP * (th - r) - KD * (wh - dr), rel=8 * np.finfo(float).eps)
+    ctrl = FrictionCompensatingPD(pd, F, H, value_at_zero=0.05)
+    mag = 0.2 + 0.2 * math.exp(-(0.4 / 0.05) ** 2) + 0.02 * 0.4
+    assert ctrl.friction_estimate(wh) == pytest.approx(-mag, rel=8 * np.finfo(float).eps)
+    assert ctrl.friction_estimate(0.0) == 0.05
+    obs = ReducedOrderVelocityObserver(L, pd, H)
+    xi = (0.3 + H * (-L * L * th + 0.1 / J)) / (1.0 + H * L)
+    assert obs.estimate(np.array([0.3, 0.1, 0.0]), th) == pytest.approx(
+        xi + L * th, rel=8 * np.finfo(float).eps)
+
+
+def test_the_default_path_is_compiled_and_an_arbitrary_reference_falls_back_to_python():
+    """Compiled by default; a reference with no compiled form runs the Python methods (the
+    same functions, so the same numbers bit for bit), and ``stats`` says which path ran."""
+    fast = simulate_friction_loop(ROBOT, PDLaw(KP, KD, J, SetPoint(1.0)), l=L, kappa=1.0,
+                                  h=H, T=300 * H, omega0=0.5)
+    slow = simulate_friction_loop(ROBOT, PDLaw(KP, KD, J, lambda t: (1.0, 0.0, 0.0)), l=L,
+                                  kappa=1.0, h=H, T=300 * H, omega0=0.5)
+    assert fast.trajectory.stats["controller"] == "compiled"
+    assert slow.trajectory.stats["controller"] == "python"
+    for name in ("theta", "omega", "omega_hat", "u", "friction", "reference"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)

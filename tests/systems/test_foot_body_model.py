@@ -87,3 +87,18 @@ def test_wall_mass_and_bad_actuation():
                              wall.gaps, wall.gap_jacobian, wall.gap_hessians,
                              actuation=[[1.0, 0.0], [2.0, 0.0]], symmetry=None,
                              names=("a", "b"), contact_names=("c",))
+
+
+def test_parameters_are_a_named_record_and_a_short_q_is_refused(model):
+    """The compiled model's parameters read back by name; the callables (compiled kernels,
+    which do not bounds-check) refuse a configuration of the wrong size."""
+    from nscontrol.errors import DimensionError
+    from nscontrol.systems._foot_body_kernels import FOOT_BODY
+
+    p = model.compiled_model().params.view(FOOT_BODY)[0]
+    assert (p["m"], p["m_b"], p["L"], p["a"], p["b"], p["d"]) == (21.0, 20.0, 0.8, 0.08, 0.17,
+                                                                  0.05)
+    with pytest.raises(DimensionError, match=r"^q: expected 4 coordinates"):
+        model.mass(np.zeros(3))
+    with pytest.raises(DimensionError, match=r"^v: expected 4 coordinates"):
+        model.coriolis_force(np.zeros(4), np.zeros(5))

@@ -44,6 +44,7 @@ _EXPORTS: dict[str, str] = {
     "one_link_gains": "friction_compensation",
     "FrictionLoopRun": "friction_compensation",
     "simulate_friction_loop": "friction_compensation",
+    "friction_loop": "friction_compensation",
     # pwl_linearization.py
     "FEEDBACK_CLASSES": "pwl_linearization", "PWLLinearization": "pwl_linearization",
     "LinearizationResult": "pwl_linearization", "pwl_feedback_linearize": "pwl_linearization",

@@ -34,20 +34,20 @@ The reconstruction (observer structure, parameterisation of ``kappa``, gain-desi
 
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, check_bool, check_positive
+from .._validation import FloatArray, check_bool, check_positive, named_record
 from ..errors import ModelError, NscontrolWarning
 from ..systems.feedback import StaticLaw
+from . import _friction_compensation_kernels as _k
 
 __all__ = ["SetPoint", "Sinusoid", "PDLaw", "compensation_model", "FrictionCompensatingPD",
            "ReducedOrderVelocityObserver", "OneLinkGains", "one_link_gains",
-           "FrictionLoopRun", "simulate_friction_loop"]
+           "FrictionLoopRun", "friction_loop", "simulate_friction_loop"]
 
 
 # -- references --------------------------------------------------------------------------
@@ -83,9 +83,7 @@ class Sinusoid:
     frequency: float = 1.0
 
     def __call__(self, t: float) -> tuple[float, float, float]:
-        a, w = self.amplitude, self.frequency
-        s, c = math.sin(w * t), math.cos(w * t)
-        return a * s, a * w * c, -a * w * w * s
+        return _k.sinusoid(float(t), float(self.amplitude), float(self.frequency))
 
 
 # -- the PD part and the compensation ------------------------------------------------------
@@ -110,6 +108,7 @@ class PDLaw:
     J: float
     reference: Any = field(default_factory=SetPoint)
     feedforward: bool = True
+    _record: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("kp", "kd", "J"):
@@ -118,25 +117,44 @@ class PDLaw:
         if not callable(self.reference):
             raise ModelError(f"reference: expected a callable t -> (r, r', r''), got "
                              f"{type(self.reference).__name__}")
+        object.__setattr__(self, "_record", _parameters(self))
+
+    def reference_at(self, t: float) -> tuple[float, float, float]:
+        """``(r, r', r'')`` at ``t`` from the reference callable."""
+        r, dr, ddr = self.reference(t)
+        return float(r), float(dr), float(ddr)
 
     def torque(self, t: float, theta: float, omega_hat: float) -> float:
         """``u_pd`` at ``t`` for the angle ``theta`` and velocity estimate ``omega_hat``."""
-        r, dr, ddr = self.reference(t)
-        ff = self.J * ddr if self.feedforward else 0.0
-        return ff - self.kp * (theta - r) - self.kd * (omega_hat - dr)
+        return _k.pd_torque(*self.reference_at(t), float(theta), float(omega_hat),
+                            self._record)
 
-    def compiled_parameters(self) -> FloatArray | None:
-        """The law as the compiled blocks read it (``[kind, a, w, kp, kd, J, feedforward]``),
-        or ``None`` when the reference is not a :class:`SetPoint` or :class:`Sinusoid` (an
-        arbitrary callable has no compiled form)."""
+    def compiled_parameters(self) -> dict[str, float] | None:
+        """The law's fields of the compiled blocks' parameter records (``kind, a, w`` of the
+        reference, ``kp, kd, J, feedforward``), or ``None`` when the reference is not a
+        :class:`SetPoint` or :class:`Sinusoid` (an arbitrary callable has no compiled
+        form)."""
+        return self.fields() if type(self.reference) in (SetPoint, Sinusoid) else None
+
+    def fields(self) -> dict[str, float]:
+        """The law's fields of the blocks' parameter record (``PARAMETERS`` of the kernels
+        module); an arbitrary reference (no compiled form) gets ``kind = a = w = 0``, unused:
+        the Python methods pass its values."""
         ref = self.reference
+        kind, a, w = 0.0, 0.0, 0.0
         if type(ref) is SetPoint:
-            head = [0.0, float(ref.value), 0.0]
+            a = float(ref.value)
         elif type(ref) is Sinusoid:
-            head = [1.0, float(ref.amplitude), float(ref.frequency)]
-        else:
-            return None
-        return np.array(head + [self.kp, self.kd, self.J, 1.0 if self.feedforward else 0.0])
+            kind, a, w = 1.0, float(ref.amplitude), float(ref.frequency)
+        return {"kind": kind, "a": a, "w": w, "kp": self.kp, "kd": self.kd, "J": self.J,
+                "feedforward": 1.0 if self.feedforward else 0.0}
+
+
+def _parameters(pd: PDLaw, **fields: float) -> FloatArray:
+    """The blocks' parameter record (``PARAMETERS``, flat ``float64`` view): the PD law's
+    fields, then ``fields``; the fields a block does not read stay 0."""
+    values = dict.fromkeys(_k.PARAMETERS.names or (), 0.0) | pd.fields() | fields
+    return named_record(_k.PARAMETERS, **values).view(np.float64)
 
 
 def compensation_model(friction: Any, kappa: float) -> Any:
@@ -211,45 +229,35 @@ class FrictionCompensatingPD(StaticLaw):
     smooth_eps: float | None = None
     n_states: int = field(default=0, init=False)
     n_outputs: int = field(default=1, init=False)
-    _params: Any = field(default=None, init=False, repr=False)
+    _record: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "period", check_positive("period", self.period))
         if self.smooth_eps is not None:
             object.__setattr__(self, "smooth_eps", check_positive("smooth_eps",
                                                                   self.smooth_eps))
-        curve = None if self.compensation is None else _curve(self.compensation)
-        object.__setattr__(self, "_params", curve)
+        curve = (0.0,) * 5 if self.compensation is None else _curve(self.compensation)
+        eps = self.smooth_eps
+        rec = _parameters(
+            self.pd, has_compensation=0.0 if self.compensation is None else 1.0,
+            **dict(zip(("T_s", "T_c", "omega_s", "delta", "b"), curve, strict=True)),
+            value_at_zero=float(self.value_at_zero), has_eps=0.0 if eps is None else 1.0,
+            eps=0.0 if eps is None else float(eps))
+        object.__setattr__(self, "_record", rec)
 
     def friction_estimate(self, omega_hat: float) -> float:
         """``T_hat(omega_hat)``: ``sign(v) f_hat(|v|)``, ``value_at_zero`` at 0."""
-        if self._params is None:
-            return 0.0
-        ts, tc, ws, dl, b = self._params
-        s = abs(omega_hat)
-        mag = tc + (ts - tc) * math.exp(-(s / ws) ** dl) + b * s
-        if self.smooth_eps is not None:
-            return max(-1.0, min(1.0, omega_hat / self.smooth_eps)) * mag
-        if omega_hat == 0.0:
-            return float(self.value_at_zero)
-        return math.copysign(mag, omega_hat)
+        return _k.friction_estimate(float(omega_hat), self._record)
 
     def compiled(self) -> Any:
         """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`), or
         ``None`` when the reference has none (see :meth:`PDLaw.compiled_parameters`)."""
-        from ..systems.feedback import CompiledBlock
-        from ._friction_compensation_kernels import controller_output
-
-        head = self.pd.compiled_parameters()
-        if head is None:
-            return None
-        curve = (0.0,) * 5 if self._params is None else self._params
-        eps = self.smooth_eps
-        tail = [0.0 if self._params is None else 1.0, *curve, float(self.value_at_zero),
-                0.0 if eps is None else 1.0, 0.0 if eps is None else float(eps)]
         from ..systems._feedback_kernels import static_update
+        from ..systems.feedback import CompiledBlock
 
-        return CompiledBlock(controller_output, static_update, np.concatenate([head, tail]))
+        if self.pd.compiled_parameters() is None:
+            return None
+        return CompiledBlock(_k.controller_output, static_update, self._record)
 
     def velocity(self, m: Any) -> float:
         """The velocity the controller uses: the estimate, else the measured one."""
@@ -257,8 +265,8 @@ class FrictionCompensatingPD(StaticLaw):
 
     def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
         """``[u]`` at the tick ``t``."""
-        v = self.velocity(m)
-        return np.array([self.pd.torque(t, float(m.y[0]), v) + self.friction_estimate(v)])
+        return np.array([_k.control(*self.pd.reference_at(t), float(m.y[0]), self.velocity(m),
+                                    self._record)])
 
 
 @dataclass(frozen=True, eq=False)
@@ -291,6 +299,7 @@ class ReducedOrderVelocityObserver:
     n_states: int = field(default=3, init=False)
     n_outputs: int = field(default=1, init=False)
     E: FloatArray = field(default_factory=lambda: np.array([[0.0, 0.0, 1.0]]), init=False)
+    _record: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         try:
@@ -300,6 +309,7 @@ class ReducedOrderVelocityObserver:
                              f"e' = -l e is unstable for l <= 0), got l = {self.l!r}") from None
         object.__setattr__(self, "l", l_val)
         object.__setattr__(self, "period", check_positive("period", self.period))
+        object.__setattr__(self, "_record", _parameters(self.pd, T=self.period, l=self.l))
 
     @property
     def estimates(self) -> FloatArray:
@@ -314,17 +324,14 @@ class ReducedOrderVelocityObserver:
         xi_prev = xi0 * (1.0 + T * l) + T * l * l * theta0
         return replace(self, x0=np.array([xi_prev, 0.0, float(omega_hat0)]))
 
-    def _xi(self, xo: FloatArray, theta: float) -> float:
-        T, l, J = self.period, self.l, self.pd.J
-        return (float(xo[0]) + T * (-l * l * theta + float(xo[1]) / J)) / (1.0 + T * l)
-
     def estimate(self, xo: FloatArray, theta: float) -> float:
         """``omega_hat`` at a tick with angle sample ``theta`` and carried state ``xo``."""
-        return self._xi(xo, theta) + self.l * theta
+        return _k.observer_estimate(float(xo[0]), float(xo[1]), float(theta),
+                                    self._record)
 
     def estimates_at(self, xo: FloatArray, theta: FloatArray) -> FloatArray:
         """:meth:`estimate` for many ticks at once (rows of ``xo``, entries of ``theta``),
-        with the same operations element by element.
+        by the same compiled function.
 
         Parameters
         ----------
@@ -333,11 +340,9 @@ class ReducedOrderVelocityObserver:
         theta : ndarray, shape (k,)
             Angle samples.
         """
-        T, l, J = self.period, self.l, self.pd.J
-        xo = np.asarray(xo, dtype=float)
-        theta = np.asarray(theta, dtype=float)
-        xi = (xo[:, 0] + T * (-l * l * theta + xo[:, 1] / J)) / (1.0 + T * l)
-        return xi + l * theta
+        xo = np.ascontiguousarray(xo, dtype=float).reshape(-1, 3)
+        theta = np.ascontiguousarray(theta, dtype=float).reshape(-1)
+        return _k.observer_estimates(xo, theta, self._record)
 
     def output(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
         """``[omega_hat]`` at the tick ``t``."""
@@ -345,10 +350,8 @@ class ReducedOrderVelocityObserver:
 
     def update(self, t: float, xo: FloatArray, m: Any) -> FloatArray:
         """The state carried into the next tick."""
-        theta = float(m.y[0])
-        xi = self._xi(xo, theta)
-        omega_hat = xi + self.l * theta
-        return np.array([xi, self.pd.torque(t, theta, omega_hat), omega_hat])
+        return np.array(_k.observer_step(*self.pd.reference_at(t), float(xo[0]), float(xo[1]),
+                                         float(m.y[0]), self._record))
 
     def reset(self, t: float, xo: FloatArray, jump: Any) -> FloatArray:
         """The plant does not jump."""
@@ -358,13 +361,10 @@ class ReducedOrderVelocityObserver:
         """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`), or
         ``None`` when the PD law's reference has none."""
         from ..systems.feedback import CompiledBlock
-        from ._friction_compensation_kernels import observer_output, observer_update
 
-        head = self.pd.compiled_parameters()
-        if head is None:
+        if self.pd.compiled_parameters() is None:
             return None
-        return CompiledBlock(observer_output, observer_update,
-                             np.concatenate([head, [self.period, self.l]]))
+        return CompiledBlock(_k.observer_output, _k.observer_update, self._record)
 
 
 # -- gain design -------------------------------------------------------------------------
@@ -496,6 +496,94 @@ class FrictionLoopRun:
         """Boolean mask of the ticks with ``t >= start``."""
         return self.t >= start - 1e-9 * max(1.0, abs(start))
 
+    @classmethod
+    def from_trajectory(cls, traj: Any, robot: Any, pd: PDLaw, observer: Any,
+                        omega_hat0: float) -> FrictionLoopRun:
+        """The tick-wise view of a run of :func:`friction_loop` (``simulate`` by implicit
+        Euler with the control period as step).
+
+        Parameters
+        ----------
+        traj
+            The :class:`~nscontrol.simulate.trajectory.Trajectory`.
+        robot
+            The :class:`~nscontrol.systems.one_link.OneLinkRobot`.
+        pd
+            The controller's PD law (its reference).
+        observer
+            The loop's :class:`ReducedOrderVelocityObserver`, or ``None``.
+        omega_hat0
+            The estimate at the first tick.
+        """
+        t, x = traj.t, traj.x
+        friction = robot.friction_torque(x[:, 1], traj.signal("w")[:, 0])
+        if observer is None:
+            omega_hat = x[:, 1].copy()
+        else:   # the estimate of each tick from its carried state and angle sample
+            omega_hat = observer.estimates_at(traj.signal("xo"), x[:, 0])
+            omega_hat[0] = omega_hat0
+        u = traj.signal("u")[:, 0]
+        u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
+        if pd.compiled_parameters() is not None:    # the compiled blocks' reference
+            ref = _k.references(np.ascontiguousarray(t), pd._record)
+        else:
+            ref = np.array([pd.reference_at(tk)[0] for tk in t])
+        return cls(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(), omega_hat=omega_hat, u=u,
+                   friction=friction, reference=ref, trajectory=traj)
+
+
+def friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float, h: float,
+                  theta0: float = 0.0, omega_hat0: float = 0.0, value_at_zero: float = 0.0,
+                  smooth_eps: float | None = None, compiled: bool = True) -> Any:
+    """The digital friction-compensating loop as a closed loop for :func:`nscontrol.simulate`.
+
+    The plant is ``robot.lure_system()``; the controller a :class:`FrictionCompensatingPD`
+    with the compensation ``compensation_model(robot.friction, kappa)`` and period ``h``; the
+    observer (if ``l`` is given) a :class:`ReducedOrderVelocityObserver` whose estimate at the
+    first tick is ``omega_hat0``. Run it with
+    ``nscontrol.simulate(loop, [theta0, omega0], (0, T), method="implicit_euler", h=h)``.
+
+    Parameters
+    ----------
+    robot
+        The :class:`~nscontrol.systems.one_link.OneLinkRobot`.
+    pd
+        The PD (+ feedforward) law and its reference.
+    l
+        Observer gain, or ``None`` to feed back the measured velocity (no observer).
+    kappa
+        Compensation factor ``>= 0`` (0: none, 1: exact).
+    h
+        Control period (and the plant step to run it with); ``h sigma_tan < J`` is required.
+    theta0, omega_hat0
+        Initial angle (the observer's start) and velocity estimate.
+    value_at_zero, smooth_eps
+        Passed to :class:`FrictionCompensatingPD`.
+    compiled
+        Run the blocks' compiled forms when they have one (default; ``False``: their Python
+        methods, the same functions called one tick at a time). The run's
+        ``stats["controller"]`` says which ran.
+
+    Returns
+    -------
+    ClosedLoop
+
+    Raises
+    ------
+    ModelError
+        ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
+    """
+    from ..simulate.closed_loop import closed_loop
+
+    h = robot.check_step(h)
+    comp = compensation_model(robot.friction, kappa)
+    ctrl = FrictionCompensatingPD(pd, comp, h, value_at_zero=value_at_zero,
+                                  smooth_eps=smooth_eps)
+    obs = None
+    if l is not None:
+        obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
+    return closed_loop(robot.lure_system(), ctrl, obs, compiled=compiled)
+
 
 def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float,
                            h: float, T: float, theta0: float = 0.0, omega0: float = 0.0,
@@ -503,6 +591,11 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
                            smooth_eps: float | None = None,
                            compiled: bool = True) -> FrictionLoopRun:
     """Run the digital friction-compensating loop (control period ``h``) by implicit Euler.
+
+    A convenience over ``nscontrol.simulate(friction_loop(...), [theta0, omega0], (0, T),
+    method="implicit_euler", h=h)``: it builds the loop (:func:`friction_loop`) and reads the
+    trajectory tick by tick (:meth:`FrictionLoopRun.from_trajectory`: the estimate each tick
+    computed, the torque that acted after it, the friction torque and the reference).
 
     Parameters
     ----------
@@ -536,36 +629,11 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
         ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
     """
     from ..simulate import simulate
-    from ..simulate.closed_loop import closed_loop
 
-    h = robot.check_step(h)
-    T = check_positive("T", T)
-    comp = compensation_model(robot.friction, kappa)
-    ctrl = FrictionCompensatingPD(pd, comp, h, value_at_zero=value_at_zero,
-                                  smooth_eps=smooth_eps)
-    obs = None
-    if l is not None:
-        obs = ReducedOrderVelocityObserver(l, pd, h).starting_at(theta0, omega_hat0)
-    plant = robot.lure_system()
-    loop = closed_loop(plant, ctrl, obs, compiled=compiled)
-    traj = simulate(loop, [theta0, omega0], (0.0, T), method="implicit_euler", h=h,
-                    progress=False)
-    t, x = traj.t, traj.x
-    w = traj.signal("w")[:, 0]
-    friction = robot.friction_torque(x[:, 1], w)
-    if obs is None:
-        omega_hat = x[:, 1].copy()
-    else:   # the estimate of each tick from its carried state and angle sample
-        omega_hat = obs.estimates_at(traj.signal("xo"), x[:, 0])
-        omega_hat[0] = omega_hat0
-    u = traj.signal("u")[:, 0]
-    u = np.concatenate([u[1:], u[-1:]])   # the signal shows what acted over the step before
-    if type(pd.reference) is SetPoint:
-        ref = np.full(t.size, float(pd.reference.value))
-    elif type(pd.reference) is Sinusoid:    # the same formula on the whole time grid
-        ref = pd.reference.amplitude * np.sin(pd.reference.frequency * t)
-    else:
-        ref = np.array([pd.reference(tk)[0] for tk in t])
-    return FrictionLoopRun(t=t, theta=x[:, 0].copy(), omega=x[:, 1].copy(),
-                           omega_hat=omega_hat, u=u, friction=friction, reference=ref,
-                           trajectory=traj)
+    loop = friction_loop(robot, pd, l=l, kappa=kappa, h=h, theta0=theta0,
+                         omega_hat0=omega_hat0, value_at_zero=value_at_zero,
+                         smooth_eps=smooth_eps, compiled=compiled)
+    traj = simulate(loop, [theta0, omega0], (0.0, check_positive("T", T)),
+                    method="implicit_euler", h=h, progress=False)
+    return FrictionLoopRun.from_trajectory(traj, robot, loop.controller.pd, loop.observer,
+                                           omega_hat0)

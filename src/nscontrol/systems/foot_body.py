@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, as_matrix, check_positive
+from .._validation import FloatArray, as_matrix, check_positive, named_record
 from ..errors import DimensionError, ModelError
 
 __all__ = ["ActuatedContactModel", "FootBodyParameters", "foot_body_model", "foot_body_points",
@@ -138,10 +138,8 @@ class ActuatedContactModel:
         from . import _foot_body_kernels as fk
         from .lagrangian import CompiledModel
 
-        p = self.parameters
         return CompiledModel(fk.mass, fk.force, fk.force_jacobian, fk.gaps, fk.gap_jacobian,
-                             np.array([p.total_mass, p.m_b, p.L, p.I_f, p.a, p.b, p.d, p.g,
-                                       p.I_b]), potential=fk.potential)
+                             self.parameters.record(), potential=fk.potential)
 
 
 @dataclass(frozen=True)
@@ -181,6 +179,25 @@ class FootBodyParameters:
         """``m = m_f + m_b``."""
         return self.m_f + self.m_b
 
+    def record(self) -> FloatArray:
+        """The parameters as the model's kernels read them: the named record
+        ``FOOT_BODY`` of :mod:`nscontrol.systems._foot_body_kernels`, as its flat
+        ``float64`` view."""
+        from ._foot_body_kernels import FOOT_BODY
+
+        return named_record(FOOT_BODY, m=self.total_mass, m_b=self.m_b, L=self.L, I_f=self.I_f,
+                            a=self.a, b=self.b, d=self.d, g=self.g,
+                            I_b=self.I_b).view(np.float64)
+
+
+def _configuration(q: Any, name: str = "q") -> FloatArray:
+    """``q`` as the kernels take it (contiguous ``float64``, 4 entries)."""
+    arr = np.ascontiguousarray(q, dtype=np.float64)
+    if arr.shape != (4,):
+        raise DimensionError(f"{name}: expected 4 coordinates (x, y, phi, theta), got shape "
+                             f"{arr.shape}")
+    return arr
+
 
 def foot_body_model(**parameters: Any) -> ActuatedContactModel:
     """The planar foot + ankle-actuated body on frictionless flat ground (Example A of ch04).
@@ -203,55 +220,26 @@ def foot_body_model(**parameters: Any) -> ActuatedContactModel:
     >>> model.gaps(q).round(15).tolist()                # both contacts closed, foot flat
     [0.0, 0.0]
     """
+    from . import _foot_body_kernels as fk
+
     p = FootBodyParameters(**parameters)
-    m, mb, L = p.total_mass, p.m_b, p.L
+    rec = p.record()
 
-    def mass(q: FloatArray) -> FloatArray:
-        c, s = mb * L * np.cos(q[3]), mb * L * np.sin(q[3])
-        return np.array([[m, 0.0, 0.0, -c], [0.0, m, 0.0, -s], [0.0, 0.0, p.I_f, 0.0],
-                         [-c, -s, 0.0, mb * L * L + p.I_b]])
+    def at(kernel: Any) -> Callable[[Any], Any]:
+        """``q -> kernel(q, rec)``."""
+        return lambda q: kernel(_configuration(q), rec)
 
-    def coriolis_force(q: FloatArray, v: FloatArray) -> FloatArray:
-        w2 = v[3] * v[3]
-        return np.array([mb * L * np.sin(q[3]) * w2, -mb * L * np.cos(q[3]) * w2, 0.0, 0.0])
+    def at_state(kernel: Any) -> Callable[[Any, Any], Any]:
+        """``(q, v) -> kernel(q, v, rec)``."""
+        return lambda q, v: kernel(_configuration(q), _configuration(v, "v"), rec)
 
-    def coriolis_jacobians(q: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
-        s, c, w = np.sin(q[3]), np.cos(q[3]), v[3]
-        Jq, Jv = np.zeros((4, 4)), np.zeros((4, 4))
-        Jq[0, 3], Jq[1, 3] = mb * L * c * w * w, mb * L * s * w * w
-        Jv[0, 3], Jv[1, 3] = 2 * mb * L * s * w, -2 * mb * L * c * w
-        return Jq, Jv
-
-    def potential(q: FloatArray) -> float:
-        return float(m * p.g * q[1] + mb * p.g * L * np.cos(q[3]))
-
-    def potential_gradient(q: FloatArray) -> FloatArray:
-        return np.array([0.0, m * p.g, 0.0, -mb * p.g * L * np.sin(q[3])])
-
-    def potential_hessian(q: FloatArray) -> FloatArray:
-        H = np.zeros((4, 4))
-        H[3, 3] = -mb * p.g * L * np.cos(q[3])
-        return H
-
-    def gaps(q: FloatArray) -> FloatArray:
-        s, c = np.sin(q[2]), np.cos(q[2])
-        return np.array([q[1] - p.a * s - p.d * c, q[1] + p.b * s - p.d * c])
-
-    def gap_jacobian(q: FloatArray) -> FloatArray:
-        s, c = np.sin(q[2]), np.cos(q[2])
-        return np.array([[0.0, 1.0, -p.a * c + p.d * s, 0.0],
-                         [0.0, 1.0, p.b * c + p.d * s, 0.0]])
-
-    def gap_hessians(q: FloatArray) -> FloatArray:
-        s, c = np.sin(q[2]), np.cos(q[2])
-        H = np.zeros((2, 4, 4))
-        H[0, 2, 2] = p.a * s + p.d * c
-        H[1, 2, 2] = -p.b * s + p.d * c
-        return H
-
-    def support_abscissae(q: FloatArray) -> FloatArray:
-        s, c = np.sin(q[2]), np.cos(q[2])
-        return np.array([q[0] - p.a * c + p.d * s, q[0] + p.b * c + p.d * s])
+    mass, potential = at(fk.mass), at(fk.potential)
+    coriolis_force, coriolis_jacobians = at_state(fk.coriolis_force), \
+        at_state(fk.coriolis_jacobians)
+    potential_gradient, potential_hessian = at(fk.potential_gradient), \
+        at(fk.potential_hessian)
+    gaps, gap_jacobian, gap_hessians = at(fk.gaps), at(fk.gap_jacobian), at(fk.gap_hessians)
+    support_abscissae = at(fk.support_abscissae)
 
     return ActuatedContactModel(
         4, mass, coriolis_force, coriolis_jacobians, potential, potential_gradient,
