@@ -312,7 +312,7 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
         a2.semilogy(run.t, np.maximum(np.abs(run.error), 1e-14), label=names[kappa])
     a1.set_ylabel("link angle theta [rad]")
     a1.set_title("Set-point 1 rad from rest: no, under-, exact and over-compensation")
-    a1.legend(fontsize=7)
+    a1.legend(fontsize=8)
     a2.set_ylabel("|theta - theta_r| [rad]")
     a2.set_xlabel("time t [s]")
     save_figure(fig, out_dir, "ch07_set_point", figures)
@@ -334,7 +334,7 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
     ax.set_xlabel("position error x1 = theta - theta_r [rad]")
     ax.set_ylabel("velocity estimate omega_hat [rad/s]")
     ax.set_title("Equilibrium set (Proposition B) against simulated final states")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8)
     save_figure(fig, out_dir, "ch07_equilibrium_set", figures)
 
     fig, ax = new_figure(figsize=(6, 5))
@@ -359,7 +359,7 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
     ax.set_xlabel("time t [s]")
     ax.set_ylabel("|omega - omega_hat| [rad/s]")
     ax.set_title("Observer error against |e0| exp(-(l - sigma_tan/J) t) + 4 h T_s/J")
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=8, ncol=2)
     save_figure(fig, out_dir, "ch07_observer_error", figures)
 
     fig, (a1, a2) = new_figure(2, 1, figsize=(7, 6), sharex=True)
