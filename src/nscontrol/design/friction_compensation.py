@@ -536,7 +536,7 @@ def simulate_friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: flo
         ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
     """
     from ..simulate import simulate
-    from ..simulate.closed_loop import closed_loop
+    from ..systems.closed_loop import closed_loop
 
     h = robot.check_step(h)
     T = check_positive("T", T)
