@@ -69,10 +69,9 @@ compiled flights with the arrays a run writes into (``_flight``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._validation import check_bool
