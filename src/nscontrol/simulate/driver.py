@@ -264,7 +264,8 @@ def _unsupported(cls: type[Integrator], system: Any) -> str:
     """The message for a method that does not integrate ``system``, naming those that do."""
     able = [name for name in METHODS if lowers(system, METHODS[name])]
     todo = (f"use method={able[0]!r}" + (f" (or one of {able[1:]})" if able[1:] else "")
-            if able else "no built-in method integrates it")
+            if able else "no built-in method integrates it, and no registered lowering turns "
+            "it into a system one does (see nscontrol.simulate.register_lowering)")
     return f"{cls.name}: integrates {cls.systems()}, got {type(system).__name__}; {todo}"
 
 
