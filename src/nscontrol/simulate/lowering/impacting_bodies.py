@@ -55,7 +55,7 @@ class LagrangianForm(Lowering):
         perm = system.lagrangian_permutation()
         back = np.argsort(perm)
         opts = dict(options)
-        listeners = opts.get("listeners")
+        listeners = opts.get("listeners", ())
         if _callables(listeners):   # others are refused by the driver as given
             opts["listeners"] = reorder_listeners(listeners, back)
         if opts.get("controller") is not None:
@@ -71,8 +71,13 @@ class LagrangianForm(Lowering):
 
 
 def _callables(listeners: Any) -> bool:
-    return (listeners is not None and not callable(listeners) and
-            not isinstance(listeners, str | bytes) and all(callable(fn) for fn in listeners))
+    """Whether ``listeners`` is a sequence of callables (what the driver accepts)."""
+    if callable(listeners) or isinstance(listeners, str | bytes):
+        return False
+    try:
+        return all(callable(fn) for fn in listeners)
+    except TypeError:   # not iterable
+        return False
 
 
 def permuted_gain(controller: Any, perm: np.ndarray) -> Any:
