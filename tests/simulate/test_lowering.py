@@ -136,3 +136,13 @@ def test_what_no_lowering_runs_is_refused_and_the_registry_checks_its_entries():
     names = [lowering.name for lowering in lowerings()]
     assert names[:4] == ["stack linear blocks", "fold state feedback", "run Python blocks",
                          "Lagrangian form of impacting bodies"]
+
+
+def test_sensitivity_of_impacting_bodies_is_refused_with_what_to_do():
+    bodies = _bodies()
+    x0 = np.array([0.0, 0.1, 0.3, 0.0, 1.0, -0.5])
+    with pytest.raises(ModelError, match=r"^sensitivity: event_driven computes the state "
+                                         r"transition of a LagrangianSystem.*\.lagrangian\(\)"):
+        nsc.simulate(bodies, x0, (0.0, 1.0), sensitivity=True)
+    with pytest.raises(ModelError, match=r"^sensitivity: method 'moreau_jean' does not "):
+        nsc.simulate(bodies, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, sensitivity=True)

@@ -45,8 +45,8 @@ class LagrangianForm(Lowering):
 
     def apply(self, system: Any, method: Any, x0: Any, options: Mapping[str, Any]
               ) -> Lowered:
-        if options.get("sensitivity") is not None and check_bool("sensitivity",
-                                                                 options["sensitivity"]):
+        if "sensitivity" in method.capabilities and options.get("sensitivity") is not None \
+                and check_bool("sensitivity", options["sensitivity"]):   # in [q; v] order
             raise ModelError(f"sensitivity: {method.name} computes the state transition of a "
                              f"LagrangianSystem, got ImpactingBodies; for an ImpactingBodies "
                              f"pass its .lagrangian() form")
