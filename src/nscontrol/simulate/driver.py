@@ -172,9 +172,6 @@ def _check_class(cls: Any) -> type[Integrator]:
     return cls
 
 
-# -- composite systems (closed loops): see nscontrol.simulate.lowering ----------------------
-
-
 # -- the driver ---------------------------------------------------------------------------------
 def integrator_for(system: Any, method: Any = None) -> type[Integrator]:
     """The integrator class ``simulate`` would use for ``system`` and ``method``.

@@ -62,7 +62,9 @@ from .feedback import (
 )
 from .protocols import Exogenous, SimulableSystem
 
-__all__ = ["closed_loop", "ClosedLoop"]
+# the function is public as nscontrol.closed_loop (and nscontrol.simulate.closed_loop): the
+# package nscontrol.systems cannot export it, its name is this module's
+__all__ = ["ClosedLoop"]
 
 
 def closed_loop(plant: SimulableSystem, controller: Controller | None = None,
