@@ -36,14 +36,14 @@ _kernel_cache.refresh()
 
 if TYPE_CHECKING:   # the lazy names below, typed for type checkers (imported on first use)
     from .numerics.lcp import solve_lcp as solve_lcp
-    from .simulate.closed_loop import closed_loop as closed_loop
+    from .systems.closed_loop import closed_loop as closed_loop
 
 __version__ = "0.1.0"
 
 _SUBPACKAGES = ("laws", "numerics", "systems", "design", "analysis", "testing",
                 "examples", "sweep")
 _LAZY = {"solve_lcp": ("nscontrol.numerics.lcp", "solve_lcp"),
-         "closed_loop": ("nscontrol.simulate.closed_loop", "closed_loop")}
+         "closed_loop": ("nscontrol.systems.closed_loop", "closed_loop")}
 
 __all__ = ["errors", "NscontrolError", "ModelError", "DimensionError", "InadmissibleStateError",
            "InfeasibleDesignError", "SolverError", "BudgetExceededError", "ZenoError",

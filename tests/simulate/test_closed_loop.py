@@ -8,6 +8,7 @@ import pytest
 
 import nscontrol as nsc
 from nscontrol.errors import DimensionError, ModelError
+from nscontrol.simulate.lowering import stacked_model
 from nscontrol.systems.feedback import (
     Controller,
     LinearController,
@@ -30,7 +31,7 @@ def test_state_feedback_on_a_linear_mechanical_plant_stays_exact_and_compiled():
     plant = _mass_on_wall(restitution=0.5)
     K = np.array([[-4.0, -1.0]])
     loop = nsc.closed_loop(plant, StateFeedback(K, k=[5.0]))
-    assert isinstance(loop.stacked, LagrangianSystem) and loop.stacked.is_linear
+    assert isinstance(stacked_model(loop), LagrangianSystem) and stacked_model(loop).is_linear
     folded = nsc.simulate(loop, [0.2, 0.0], (0.0, 10.0))
     # the same law through the integrator's own gain path (u = -K' x, with the offset as a
     # constant force): both are exact flows, so they agree to roundoff x number of samples
@@ -75,7 +76,7 @@ def test_a_user_sampled_controller_on_moreau_jean_matches_the_exact_discrete_loo
     ctrl = SampledPD(kp=4.0, kd=2.0, ref=1.0, period=T)
     assert isinstance(ctrl, Controller)
     loop = nsc.closed_loop(plant, ctrl)
-    assert loop.stacked is None and loop.default_method == "moreau_jean"
+    assert stacked_model(loop) is None and loop.default_method == "moreau_jean"
     tr = nsc.simulate(loop, [0.0, 0.0], (0.0, 2.0), h=h, theta=0.5)
     Phi = np.array([[1.0, T], [0.0, 1.0]])
     Gam = np.array([T * T / 2, T])
@@ -130,7 +131,7 @@ def test_a_linear_controller_and_observer_stack_into_one_lure_system():
                        C=[[1.0, 0.0]], u=lambda t: np.ones((np.size(t), 1)))
     integral = LinearController([[0.0]], [[-1.0]], [[1.0]], [[0.0]])   # u = -∫ y
     loop = nsc.closed_loop(plant, integral)
-    assert isinstance(loop.stacked, LureSystem) and loop.stacked.n_states == 3
+    assert isinstance(stacked_model(loop), LureSystem) and stacked_model(loop).n_states == 3
     tr = nsc.simulate(loop, np.zeros(3), (0.0, 60.0), h=1e-2)
     assert abs(tr.x[-1, 0]) < 1e-3        # integral action: y -> 0 (decay rate >= 0.2)
     np.testing.assert_allclose(tr.signal("u")[:, 0], tr.x[:, 2], atol=0)
@@ -149,7 +150,7 @@ def test_composition_refuses_what_no_integrator_runs():
 
     # Python blocks around a Lur'e plant run by implicit Euler only
     lure_loop = nsc.closed_loop(relay_feedback().system, SampledPD(1, 1, 0, 0.1))
-    assert lure_loop.stacked is None and lure_loop.default_method == "implicit_euler"
+    assert stacked_model(lure_loop) is None and lure_loop.default_method == "implicit_euler"
     with pytest.raises(ModelError, match=r"^moreau_jean: this loop's blocks run as Python code "
                                          r"stepped with a LureSystem"):
         nsc.simulate(lure_loop, np.zeros(lure_loop.n_states), (0.0, 1.0),
@@ -193,7 +194,7 @@ def test_a_pwa_plant_with_its_observer_is_one_pwa_system_on_the_product_of_regio
     plant = one_sided_oscillator(0.1)
     obs = design_observer(plant, sigma=1.0)
     loop = nsc.closed_loop(plant, observer=PiecewiseObserver(obs.L, obs.C))
-    assert loop.stacked.n_regions == 4 and loop.stacked.n_states == 4
+    assert stacked_model(loop).n_regions == 4 and stacked_model(loop).n_states == 4
     tr = nsc.simulate(loop, [0.5, 0.0, -0.5, 0.3], (0.0, 10.0))
     err = np.linalg.norm(tr.signal("error"), axis=1)
     np.testing.assert_allclose(tr.signal("error"), tr.x[:, :2] - tr.x[:, 2:], atol=0)

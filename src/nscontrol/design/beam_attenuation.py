@@ -142,7 +142,8 @@ class AttenuationDesign:
         """The closed loop as one PWA system: ``x`` (``"state"``, ``"pd"``: ``2N`` states,
         2 regions) or ``(x, x̂)`` (``"output"``: ``4N`` states, 4 regions); the excitation
         ``F`` is its input and the support displacement its first output."""
-        from ..simulate.closed_loop import closed_loop
+        from ..simulate.lowering import stacked_model
+        from ..systems.closed_loop import closed_loop
         from ..systems.feedback import PiecewiseStateFeedback
         from .convergent_pwa import output_feedback_loop
 
@@ -150,8 +151,9 @@ class AttenuationDesign:
         if self.observer is not None:
             return output_feedback_loop(pwa, self.observer, self.feedback)
         zero = np.zeros(1)
-        return closed_loop(pwa, PiecewiseStateFeedback((self.K, self.K), (zero, zero)),
-                           input_matrix=self.plant.B).stacked
+        return stacked_model(closed_loop(pwa, PiecewiseStateFeedback((self.K, self.K),
+                                                                     (zero, zero)),
+                                         input_matrix=self.plant.B))
 
     def control(self) -> Any:
         """The control law on the closed loop's time-major state (picklable): the effort

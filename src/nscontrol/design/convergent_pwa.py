@@ -273,10 +273,12 @@ class EstimateFeedback:
 
 def _with_feedback(system: PiecewiseAffineSystem, B: FloatArray, Ks: Sequence[FloatArray],
                    ks: Sequence[FloatArray]) -> PiecewiseAffineSystem:
-    from ..simulate.closed_loop import closed_loop
+    from ..simulate.lowering import stacked_model
+    from ..systems.closed_loop import closed_loop
     from ..systems.feedback import PiecewiseStateFeedback
 
-    return closed_loop(system, PiecewiseStateFeedback(Ks, ks), input_matrix=B).stacked
+    return stacked_model(closed_loop(system, PiecewiseStateFeedback(Ks, ks),
+                                     input_matrix=B))
 
 
 def output_feedback_loop(system: PiecewiseAffineSystem, observer: ConvergentObserver,
@@ -338,14 +340,16 @@ def output_feedback_loop(system: PiecewiseAffineSystem, observer: ConvergentObse
     >>> bool(np.allclose(x0[:2], ref, atol=1e-9) and np.allclose(x0[2:], x0[:2], atol=1e-9))
     True
     """
-    from ..simulate.closed_loop import closed_loop
+    from ..simulate.lowering import stacked_model
+    from ..systems.closed_loop import closed_loop
     from ..systems.feedback import PiecewiseObserver, PiecewiseStateFeedback
 
     controller = None
     if feedback is not None:
         controller = PiecewiseStateFeedback(*feedback.gains(len(system.A)), on="estimate")
-    return closed_loop(system, controller, PiecewiseObserver(observer.L, observer.C),
-                       input_matrix=None if feedback is None else feedback.B).stacked
+    return stacked_model(closed_loop(system, controller,
+                                     PiecewiseObserver(observer.L, observer.C),
+                                     input_matrix=None if feedback is None else feedback.B))
 
 
 # -- designs ---------------------------------------------------------------------------------

@@ -573,7 +573,7 @@ def friction_loop(robot: Any, pd: PDLaw, *, l: float | None, kappa: float, h: fl
     ModelError
         ``h sigma_tan >= J`` (with the bound), ``kappa < 0``, ``l <= 0``.
     """
-    from ..simulate.closed_loop import closed_loop
+    from ..systems.closed_loop import closed_loop
 
     h = robot.check_step(h)
     comp = compensation_model(robot.friction, kappa)

@@ -575,7 +575,8 @@ class ImpactObserverDesign:
         """
         from dataclasses import replace
 
-        from ..simulate.closed_loop import closed_loop
+        from ..simulate.lowering import stacked_model
+        from ..systems.closed_loop import closed_loop
 
         plant_sys = self.plant.bodies.hybrid(u)
         if not check_bool("impacts", impacts):   # a guard never reaching zero: b out of reach
@@ -586,7 +587,7 @@ class ImpactObserverDesign:
         y[0, :2 * pl.n_a] = pl.C_a
         loop = closed_loop(plant_sys, observer=self.observer(plant_sys.n_states, realisation),
                            output_matrix=y)
-        return loop.stacked
+        return stacked_model(loop)
 
     def observer(self, n_plant: int | None = None,
                  realisation: Literal["scaled", "original"] = "scaled") -> Any:

@@ -1035,9 +1035,10 @@ def _check_same_plant(design: LureObserverDesign, mat: _Matrices) -> None:
 
 
 def _closed_loop(design: LureObserverDesign, plant: LureSystem) -> LureSystem:
-    from ..simulate.closed_loop import closed_loop
+    from ..simulate.lowering import stacked_model
+    from ..systems.closed_loop import closed_loop
 
-    return closed_loop(plant, observer=design.observer(plant)).stacked
+    return stacked_model(closed_loop(plant, observer=design.observer(plant)))
 
 
 def _observer_block(design: LureObserverDesign, plant: LureSystem) -> LinearObserver:

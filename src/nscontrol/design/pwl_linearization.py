@@ -214,7 +214,7 @@ class PWLLinearization:
         SlidingError
             ``check=True`` and a facet with ``γ_i γ_j < 0`` (the message names it).
         """
-        from ..simulate.closed_loop import closed_loop
+        from ..systems.closed_loop import closed_loop
         from ..systems.feedback import PiecewiseStateFeedback
         from ..systems.pwa import PiecewiseAffineSystem
 

@@ -5,7 +5,9 @@ The integrators form a family (:class:`~nscontrol.simulate.driver.Integrator` su
 each integrates and can do) behind one driver (:mod:`nscontrol.simulate.driver`) that owns
 what is common to all: option checks, sampling (``t_eval``, ``record_every``, ``signals``),
 the failure policy (``on_failure``), ``listeners``, the progress bar, composite systems
-(closed loops) and the partial trajectory of a run that fails, whatever the exception.
+(closed loops, lowered by the registered lowerings of :mod:`nscontrol.simulate.lowering`;
+``register_lowering`` adds one) and the partial trajectory of a run that fails, whatever the
+exception.
 """
 
 from __future__ import annotations
@@ -18,10 +20,11 @@ from .._validation import check_t_span
 from ..systems.protocols import SimulableSystem
 from . import driver
 from .driver import METHODS, Integrator, register_method
+from .lowering import Lowered, Lowering, register_lowering
 from .trajectory import STATUS_MESSAGES, Event, Recorder, Trajectory
 
 __all__ = ["simulate", "Trajectory", "Event", "Recorder", "METHODS", "STATUS_MESSAGES",
-           "Integrator", "register_method"]
+           "Integrator", "register_method", "Lowering", "Lowered", "register_lowering"]
 
 #: The built-in method names (``register_method`` adds more, so ``simulate`` takes any str).
 Method = Literal["event_driven", "moreau_jean", "implicit_euler", "switching"]

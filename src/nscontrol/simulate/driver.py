@@ -32,8 +32,9 @@ What the driver owns for every method:
 * ``progress`` (the bar on stderr: ``True``, ``False`` or ``None``), ``sensitivity``
   (``True``/``False``, refused by methods without it) — a string such as ``"no"`` is refused
   (:func:`check_run` makes the same checks ahead of a sweep);
-* composite systems (a :func:`nscontrol.closed_loop`): lowered to what the method
-  integrates, and their named signals added to the result.
+* composite systems (a :func:`nscontrol.closed_loop`, impacting bodies): lowered to what the
+  method integrates by the registered lowerings (:mod:`nscontrol.simulate.lowering`), and
+  the result (a partial one too) mapped back, their named signals added.
 """
 
 from __future__ import annotations
@@ -41,18 +42,19 @@ from __future__ import annotations
 import importlib
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, replace
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from dataclasses import replace
+from typing import Any, ClassVar
 
 import numpy as np
 
 from .._validation import check_bool
 from ..errors import ModelError, NscontrolError, NscontrolWarning, SolverError, ZenoError
 from ._run_context import RunContext, current_run, run_context
+from .lowering.base import Lowered, invert_all, lower, lowers
 from .trajectory import Trajectory
 
 __all__ = ["Integrator", "METHODS", "CAPABILITIES", "COMMON_OPTIONS", "Lowered",
-           "CompositeSystem", "integrator_for", "register_method", "current_run", "check_run"]
+           "integrator_for", "register_method", "current_run", "check_run"]
 
 #: What an integrator may declare it can do.
 CAPABILITIES: Mapping[str, str] = {
@@ -170,38 +172,6 @@ def _check_class(cls: Any) -> type[Integrator]:
     return cls
 
 
-# -- composite systems (closed loops) ---------------------------------------------------------
-@dataclass(frozen=True)
-class Lowered:
-    """What a composite system becomes for one method.
-
-    Attributes
-    ----------
-    system
-        The system the method integrates.
-    x0
-        The initial state of ``system``.
-    options
-        Method options the composite needs (e.g. a ``controller=``), merged with the user's.
-    finish
-        Maps the method's trajectory to the composite's (state names, named signals).
-    """
-
-    system: Any
-    x0: Any
-    options: Mapping[str, Any] = field(default_factory=dict)
-    finish: Callable[[Trajectory], Trajectory] = lambda traj: traj
-
-
-@runtime_checkable
-class CompositeSystem(Protocol):
-    """A system that is assembled from parts (a closed loop) and lowered per method."""
-
-    def lower(self, method: type[Integrator], x0: Any) -> Lowered:
-        """The system ``method`` integrates, with its initial state and extra options."""
-        ...
-
-
 # -- the driver ---------------------------------------------------------------------------------
 def integrator_for(system: Any, method: Any = None) -> type[Integrator]:
     """The integrator class ``simulate`` would use for ``system`` and ``method``.
@@ -235,27 +205,23 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
         options: dict[str, Any]) -> Trajectory:
     """The body of :func:`nscontrol.simulate` (validated ``t_span``)."""
     cls = integrator_for(system, method)
-    lowered = None
-    if callable(getattr(type(system), "lower", None)):   # a CompositeSystem (cheap test)
-        lowered = system.lower(cls, x0)
-        clash = sorted(set(lowered.options) & set(options) - {"listeners"})
-        if clash:
-            raise ModelError(f"{clash[0]}: set by the closed loop's parts; do not pass it to "
-                             "simulate as well")
-        merged = {**options, **lowered.options}
-        if "listeners" in options and "listeners" in lowered.options:  # the loop's first
-            merged["listeners"] = [*lowered.options["listeners"], *options["listeners"]]
-        system, x0, options = lowered.system, lowered.x0, merged
-    if not cls.supports(system):
-        raise ModelError(_unsupported(cls, system))
+    applied: list[Any] = []
+    if not cls.supports(system):   # a closed loop, impacting bodies: lowered for the method
+        if not lowers(system, cls):
+            raise ModelError(_unsupported(cls, system))
+        system, x0, options, applied = lower(system, cls, x0, options)
     common, own = _split_options(cls, options)
     if "time_stepping" in cls.capabilities and own.get("h") is not None:
         own["h"] = _check_step(own["h"], t_span)
-    with run_context(RunContext(cls.name)) as ctx:
-        traj = _run_guarded(cls, ctx, system, x0, t_span, common, own)
-    if lowered is not None:
-        traj = lowered.finish(traj)
-    return traj
+    try:
+        with run_context(RunContext(cls.name)) as ctx:
+            traj = _run_guarded(cls, ctx, system, x0, t_span, common, own)
+    except BaseException as err:   # the partial run in the terms of the system given too
+        partial = getattr(err, "trajectory", None)
+        if applied and isinstance(partial, Trajectory):
+            err.trajectory = invert_all(partial, applied)  # type: ignore[attr-defined]
+        raise
+    return invert_all(traj, applied) if applied else traj
 
 
 def check_run(system: Any, method: Any, options: Mapping[str, Any]) -> type[Integrator]:
@@ -285,7 +251,7 @@ def check_run(system: Any, method: Any, options: Mapping[str, Any]) -> type[Inte
         option (``on_failure``, ``listeners``, ``progress``, ``sensitivity`` ...).
     """
     cls = integrator_for(system, method)
-    if not callable(getattr(type(system), "lower", None)) and not cls.supports(system):
+    if not lowers(system, cls):
         raise ModelError(_unsupported(cls, system))
     _split_options(cls, dict(options))
     return cls
@@ -293,9 +259,10 @@ def check_run(system: Any, method: Any, options: Mapping[str, Any]) -> type[Inte
 
 def _unsupported(cls: type[Integrator], system: Any) -> str:
     """The message for a method that does not integrate ``system``, naming those that do."""
-    able = [name for name in METHODS if METHODS[name].supports(system)]
+    able = [name for name in METHODS if lowers(system, METHODS[name])]
     todo = (f"use method={able[0]!r}" + (f" (or one of {able[1:]})" if able[1:] else "")
-            if able else "no built-in method integrates it")
+            if able else "no built-in method integrates it, and no registered lowering turns "
+            "it into a system one does (see nscontrol.simulate.register_lowering)")
     return f"{cls.name}: integrates {cls.systems()}, got {type(system).__name__}; {todo}"
 
 

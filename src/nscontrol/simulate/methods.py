@@ -42,12 +42,11 @@ class EventDriven(_ModuleIntegrator):
          "zeno_horizon", "zeno_rel", "rtol", "atol"})
 
     @classmethod
-    def supports(cls, system: Any) -> bool:
+    def supports(cls, system: Any) -> bool:   # ImpactingBodies: lowering.impacting_bodies
         from ..systems.hybrid import LinearHybridSystem
-        from ..systems.impacting_bodies import ImpactingBodies
         from ..systems.lagrangian import LagrangianSystem
 
-        return isinstance(system, LinearHybridSystem | LagrangianSystem | ImpactingBodies)
+        return isinstance(system, LinearHybridSystem | LagrangianSystem)
 
     @classmethod
     def systems(cls) -> str:
@@ -66,11 +65,10 @@ class MoreauJean(_ModuleIntegrator):
          "projection", "contact_tol", "compiled_blocks"})
 
     @classmethod
-    def supports(cls, system: Any) -> bool:
-        from ..systems.impacting_bodies import ImpactingBodies
+    def supports(cls, system: Any) -> bool:   # ImpactingBodies: lowering.impacting_bodies
         from ..systems.lagrangian import LagrangianSystem
 
-        return isinstance(system, LagrangianSystem | ImpactingBodies)
+        return isinstance(system, LagrangianSystem)
 
     @classmethod
     def systems(cls) -> str:

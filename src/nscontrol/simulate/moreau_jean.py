@@ -69,7 +69,6 @@ from ..errors import DimensionError, ModelError, SolverError
 from .trajectory import ChunkProgress, Recorder, Trajectory, evaluable_prefix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
-    from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
     from ..systems.protocols import InputSignal
     from .callbacks import Listener, StepController
@@ -101,7 +100,7 @@ class _Setup:
     mass_at: str = "start"
 
 
-def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
+def integrate(system: LagrangianSystem, x0: ArrayLike,
               t_span: tuple[float, float], *, h: float | None = None,
               theta: float = 0.5, gamma: float = 0.5, u: InputSignal = None,
               controller: StepController | None = None,
@@ -246,35 +245,14 @@ def integrate(system: LagrangianSystem | ImpactingBodies, x0: ArrayLike,
     >>> seen[0], seen[-1][1], round(seen[-1][0], 12)
     ((0.0, []), [0], 0.8)
     """
-    from ..systems.impacting_bodies import ImpactingBodies
     from ..systems.lagrangian import LagrangianSystem
 
     if h is None:
         raise ModelError("h: Moreau-Jean time-stepping needs a step, e.g. h=1e-3 (impacts are "
                          "captured to O(h), penetration <= h |u-|)")
-    if isinstance(system, ImpactingBodies):
-        from ..errors import NscontrolError
-        from .event_driven import partial_in_caller_order, reorder_listeners, reorder_states
-
-        perm = system.lagrangian_permutation()
-        back = np.argsort(perm)
-        partial_in_caller_order(back, system.state_names)
-        try:
-            traj = integrate(system.lagrangian(), system.check_state(x0)[perm], t_span, h=h,
-                             theta=theta, gamma=gamma, u=u, controller=controller,
-                             listeners=reorder_listeners(listeners, back),
-                             record_every=record_every, signals=signals, progress=progress,
-                             activation=activation, forces=forces,
-                             mass_at=mass_at, projection=projection,
-                             contact_tol=contact_tol)
-        except NscontrolError as err:  # the partial run in the chapter's state order too
-            if isinstance(err.trajectory, Trajectory):
-                err.trajectory = reorder_states(err.trajectory, back, system.state_names)
-            raise
-        return reorder_states(traj, back, system.state_names)
     if not isinstance(system, LagrangianSystem):
-        raise ModelError(f"moreau_jean: integrates LagrangianSystem and ImpactingBodies, got "
-                         f"{type(system).__name__}")
+        raise ModelError(f"moreau_jean: integrates LagrangianSystem (and ImpactingBodies "
+                         f"through nscontrol.simulate), got {type(system).__name__}")
     h = check_positive("h", h)
     theta = check_in_interval("theta", theta, 0.5, 1.0)
     gamma = check_in_interval("gamma", gamma, 0.0, 1.0)

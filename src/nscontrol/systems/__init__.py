@@ -45,6 +45,8 @@ _EXPORTS: dict[str, str] = {
     "ImpactingBodies": "impacting_bodies", "stiffness_from_springs": "impacting_bodies",
     # hybrid.py
     "LinearHybridSystem": "hybrid",
+    # closed_loop.py (its function closed_loop is nscontrol.closed_loop: the module's name)
+    "ClosedLoop": "closed_loop",
     # feedback.py
     "Measurement": "feedback", "Jump": "feedback", "Controller": "feedback",
     "StaticLaw": "feedback",

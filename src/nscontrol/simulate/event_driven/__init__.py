@@ -11,7 +11,8 @@ Integrates
   acceleration is again linear in the state) and are left when their contact force, also
   linear in the state, reaches zero;
 * :class:`~nscontrol.systems.ImpactingBodies` through its Lagrangian form (state order
-  ``[x_a; x_b]`` kept);
+  ``[x_a; x_b]`` kept), which :func:`nscontrol.simulate` hands over
+  (:mod:`nscontrol.simulate.lowering.impacting_bodies`);
 * a linear :class:`~nscontrol.systems.LagrangianSystem` resting on one planar frictional
   contact (Coulomb friction, the contact closed throughout) — exact: the modes stick,
   slip forward and slip backward are linear flows, switched where the slip velocity or the
@@ -68,31 +69,29 @@ compiled flights with the arrays a run writes into (``_flight``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._validation import check_bool
-from ...errors import ModelError, NscontrolError
+from ...errors import ModelError
 from ...systems.hybrid import LinearHybridSystem
-from ...systems.impacting_bodies import ImpactingBodies
 from ...systems.lagrangian import LagrangianSystem
 from ...systems.protocols import InputSignal
 from ..callbacks import Listener
 from ..trajectory import Trajectory
-from ._options import _check_gain, _check_input, _linear_controller, _Options, _permuted_gain
-from ._recording import _guarded, partial_in_caller_order, reorder_listeners, reorder_states
+from ._options import _check_gain, _check_input, _linear_controller, _Options
+from ._recording import _guarded, reorder_listeners, reorder_states
 from .frictional_contact import FrictionalContactRun, check_frictional_system
 from .hybrid_run import HybridRun
 from .linear_mechanics import LinearMechanicsRun, checked_state
 from .nonlinear_mechanics import NonlinearMechanicsRun
 
-__all__ = ["integrate", "reorder_listeners", "reorder_states", "partial_in_caller_order"]
+__all__ = ["integrate", "reorder_listeners", "reorder_states"]
 
 
-def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x0: ArrayLike,
+def integrate(system: LagrangianSystem | LinearHybridSystem, x0: ArrayLike,
               t_span: tuple[float, float], *, u: InputSignal = None,
               controller: Any = None, dt: float | None = None, max_events: int = 100_000,
               min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
@@ -217,15 +216,6 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
                 raise ModelError(f"{name}: a LinearHybridSystem carries its input generator "
                                  "and controller in its state; stack them into A instead")
         return _guarded(HybridRun(system, system.check_state(x0), t0, tf, opts))
-    if isinstance(system, ImpactingBodies):
-        return _integrate_impacting_bodies(system, x0, t_span, u=u, controller=controller,
-                                           dt=dt, max_events=max_events,
-                                           min_interval=min_interval,
-                                           zeno_ratio_tol=zeno_ratio_tol,
-                                           zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
-                                           listeners=listeners, rtol=rtol,
-                                           atol=atol, record_every=record_every,
-                                           signals=signals, progress=progress)
     if isinstance(system, LagrangianSystem):
         if system.friction_dim:   # one planar contact held closed: stick/slip exactly
             if sensitivity:
@@ -238,28 +228,9 @@ def integrate(system: LagrangianSystem | ImpactingBodies | LinearHybridSystem, x
         return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
                                        _check_input(system, u), controller, opts,
                                        bool(sensitivity)))
-    raise ModelError(f"event_driven: integrates LinearHybridSystem, LagrangianSystem and "
-                     f"ImpactingBodies, got {type(system).__name__}")
-
-
-def _integrate_impacting_bodies(system: Any, x0: Any, t_span: tuple[float, float], *,
-                                controller: Any, listeners: Sequence[Callable[..., None]],
-                                **options: Any) -> Trajectory:
-    """Integrate the Lagrangian form; results (and the partial run of an error) in the
-    chapter's ``[x_a; x_b]`` order."""
-    x0 = system.check_state(x0)
-    perm = system.lagrangian_permutation()
-    back = np.argsort(perm)
-    partial_in_caller_order(back, system.state_names)
-    try:
-        traj = integrate(system.lagrangian(), x0[perm], t_span,
-                         controller=_permuted_gain(controller, perm),
-                         listeners=reorder_listeners(listeners, back), **options)
-    except NscontrolError as err:
-        if isinstance(err.trajectory, Trajectory):
-            err.trajectory = reorder_states(err.trajectory, back, system.state_names)
-        raise
-    return reorder_states(traj, back, system.state_names)
+    raise ModelError(f"event_driven: integrates LinearHybridSystem and LagrangianSystem (and "
+                     f"ImpactingBodies through nscontrol.simulate), got "
+                     f"{type(system).__name__}")
 
 
 def _mechanics_run(system: Any, x0: Any, t0: float, tf: float, u: Any, controller: Any,

@@ -40,19 +40,6 @@ def _linear_controller(system: Any, K: Any) -> Callable[..., FloatArray]:
     return lambda t, q, v: -K @ np.concatenate([q, v])
 
 
-def _permuted_gain(controller: Any, perm: np.ndarray) -> Any:
-    """A gain on ``[x_a; x_b]`` as a gain on the Lagrangian ``[q; v]`` (callables pass)."""
-    if controller is None or callable(controller):
-        return controller
-    K = np.atleast_2d(np.asarray(controller, dtype=float))
-    if K.shape[-1] != perm.size:
-        raise DimensionError(f"controller: expected {perm.size} columns (the state), got "
-                             f"shape {K.shape}")
-    out = np.empty_like(K)
-    out[:, np.arange(perm.size)] = K[:, perm]
-    return out
-
-
 @dataclass(frozen=True, slots=True)
 class _Options:
     """The options of one run, checked (names as the runners use them; the user's names in

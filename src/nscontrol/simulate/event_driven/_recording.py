@@ -138,17 +138,6 @@ def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) ->
     return replace(traj, x=traj.x[:, order], events=events, state_names=tuple(names))
 
 
-def partial_in_caller_order(back: np.ndarray, names: Sequence[str]) -> None:
-    """A run that fails on any exception hands over its partial trajectory in the caller's
-    state order (``[x_a; x_b]`` of :class:`~nscontrol.systems.ImpactingBodies`), as a
-    finished run does (:func:`reorder_states`)."""
-    from .._run_context import current_run
-
-    ctx = current_run()
-    if ctx is not None:
-        ctx.partial_transform = lambda traj: reorder_states(traj, back, names)
-
-
 def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
                ) -> Trajectory:
     traj = rec.finish(status=-1, message=message, **finish)

@@ -1,0 +1,41 @@
+"""Lowerings: how :func:`nscontrol.simulate` runs a system its method does not integrate as
+given (a closed loop, impacting bodies), and how a user adds one.
+
+Each lowering has ``accepts(system, method)``, ``apply(system, method, x0, options)`` →
+:class:`Lowered` and ``invert(traj, lowered)`` (:mod:`.base`). The built-in ones, tried in
+this order, one module each:
+
+=============================================  ===============================================
+lowering (module)                              what it does
+=============================================  ===============================================
+``stack linear blocks`` (:mod:`.stack`)        a loop of linear blocks around a linear plant
+                                               as ONE model of the plant's family
+``fold state feedback`` (:mod:`.fold`)         static state feedback folded into a linear
+                                               Lagrangian plant's forces
+``run Python blocks`` (:mod:`.python_blocks`)  blocks stepped as code beside Moreau–Jean or
+                                               implicit Euler (a ``controller=``)
+``Lagrangian form of impacting bodies``        :class:`ImpactingBodies` in the ``[q; v]``
+(:mod:`.impacting_bodies`)                     order of their Lagrangian form, and back
+=============================================  ===============================================
+
+Lowerings chain: a loop of Python blocks around impacting bodies is first the bodies with a
+``controller=``, then their Lagrangian form. A method whose ``supports(system)`` is true for
+the system as given (a method that integrates closed loops natively) sees it unlowered.
+"""
+
+from __future__ import annotations
+
+from .base import (
+    Lowered,
+    Lowering,
+    invert_all,
+    lower,
+    lowerings,
+    lowers,
+    merge_options,
+    register_lowering,
+)
+from .stack import stacked_model
+
+__all__ = ["Lowering", "Lowered", "register_lowering", "lowerings", "lower", "lowers",
+           "invert_all", "merge_options", "stacked_model"]

@@ -1,0 +1,76 @@
+"""Static state feedback on a linear Lagrangian plant, folded into the plant's linear forces.
+
+``u = K [q; v] + k`` entering through ``S`` is a linear force: stiffness ``- S K_q``, damping
+``- S K_v``, constant force ``+ S k``. The folded plant keeps the exact event-driven flow and
+Moreau–Jean's compiled loop; the signal ``u`` is added back by :meth:`FoldStateFeedback.invert`.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Mapping
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...systems.closed_loop import ClosedLoop
+from .base import Lowered, Lowering
+from .stack import Maps, add_loop_signals
+
+if TYPE_CHECKING:
+    from ..trajectory import Trajectory
+
+__all__ = ["FoldStateFeedback", "folded_plant"]
+
+#: One fold per loop (a loop is immutable).
+_FOLDS: weakref.WeakKeyDictionary[ClosedLoop, tuple[Any, Maps]] = weakref.WeakKeyDictionary()
+
+
+class FoldStateFeedback(Lowering):
+    """A ``"folded"`` closed loop as the Lagrangian plant with the feedback inside."""
+
+    name = "fold state feedback"
+
+    def accepts(self, system: Any, method: Any) -> bool:
+        return isinstance(system, ClosedLoop) and system.composition == "folded"
+
+    def apply(self, system: Any, method: Any, x0: Any, options: Mapping[str, Any]
+              ) -> Lowered:
+        model, maps = folded_plant(system)
+        return Lowered(model, x0, options, (system, maps))
+
+    def invert(self, traj: Trajectory, lowered: Lowered) -> Trajectory:
+        loop, maps = lowered.data
+        return add_loop_signals(traj, maps, loop.plant)
+
+
+def folded_plant(loop: ClosedLoop) -> tuple[Any, Maps]:
+    """The plant with the loop's state feedback folded into its forces, and the map of ``u``.
+
+    Parameters
+    ----------
+    loop : ClosedLoop
+        A loop of composition ``"folded"`` (its gain's shape checked at construction).
+
+    Returns
+    -------
+    LagrangianSystem, dict
+    """
+    if loop not in _FOLDS:
+        _FOLDS[loop] = _fold(loop)
+    return _FOLDS[loop]
+
+
+def _fold(loop: ClosedLoop) -> tuple[Any, Maps]:
+    plant, ctrl = loop.plant, loop.controller
+    n = plant.n_dof
+    S = loop.force_input_matrix()
+    Kq, Kv = ctrl.K[:, :n], ctrl.K[:, n:]
+    zero = np.zeros((n, n))
+    K = (plant.stiffness if plant.stiffness is not None else zero) - S @ Kq
+    D = (plant.damping if plant.damping is not None else zero) - S @ Kv
+    f0 = (plant.constant_force if plant.constant_force is not None else np.zeros(n)) \
+        + S @ ctrl.k
+    return (replace(plant, stiffness=K, damping=D, constant_force=f0),
+            {"u": (ctrl.K, ctrl.k)})

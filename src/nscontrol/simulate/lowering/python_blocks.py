@@ -1,0 +1,87 @@
+"""Blocks written in Python, stepped beside the plant's integrator.
+
+A :class:`~nscontrol.systems.closed_loop.ClosedLoop` of composition ``"blocks"`` runs its
+controller and observer as code at the start of every step (zero-order hold over the step):
+
+* around a :class:`LagrangianSystem` or :class:`ImpactingBodies`: Moreau–Jean on the plant,
+  the blocks fed the contact multipliers ``λ̂`` and reset at impacts (a listener);
+* around a :class:`LureSystem`: implicit Euler on the plant, its set-valued law solved every
+  step (chapter 7's digital friction compensation).
+
+Blocks that all offer a compiled form run inside the integrator's compiled loop
+(``compiled_blocks=``). :meth:`PythonBlocks.invert` adds the blocks' signals (``u``, ``xo``,
+``xc``, ``xhat``) to the trajectory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from ...errors import ModelError
+from ...systems.closed_loop import ClosedLoop
+from .._block_runner import BlockRunner, CompiledBlocks
+from .base import Lowered, Lowering, merge_options
+
+if TYPE_CHECKING:
+    from ..trajectory import Trajectory
+
+__all__ = ["PythonBlocks"]
+
+
+class PythonBlocks(Lowering):
+    """A ``"blocks"`` closed loop as its plant with the blocks as a ``controller=``."""
+
+    name = "run Python blocks"
+
+    def accepts(self, system: Any, method: Any) -> bool:
+        return isinstance(system, ClosedLoop) and system.composition == "blocks"
+
+    def apply(self, system: Any, method: Any, x0: Any, options: Mapping[str, Any]
+              ) -> Lowered:
+        from ...systems.lure import LureSystem
+
+        lure = isinstance(system.plant, LureSystem)
+        runner, own = (_lure_options if lure else _mechanical_options)(system, method)
+        return Lowered(system.plant, x0, merge_options(options, own), runner)
+
+    def invert(self, traj: Trajectory, lowered: Lowered) -> Trajectory:
+        return lowered.data.finish(traj)
+
+
+def _mechanical_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str, Any]]:
+    """Moreau–Jean with ``controller=(t, q, v, *, lam_hat, active)`` and a listener that
+    resets the blocks at impacts."""
+    from ...systems.impacting_bodies import ImpactingBodies
+
+    if method.name != "moreau_jean":
+        raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
+                         f"the plant; use method='moreau_jean' (or give the blocks as "
+                         f"matrices: StateFeedback, LinearController, LinearObserver)")
+    runner = BlockRunner(loop)
+    options: dict[str, Any] = {"controller": runner.step, "listeners": [runner.on_jump]}
+    if loop.exosystem is not None:
+        options["u"] = loop.exosystem
+    # the compiled blocks read the plant's state order, which the Lagrangian form of
+    # impacting bodies permutes: those run their blocks in Python
+    compiled = None if isinstance(loop.plant, ImpactingBodies) else CompiledBlocks.of(runner)
+    if compiled is not None:       # used when the plant has a compiled model too
+        options["compiled_blocks"] = compiled
+    return runner, options
+
+
+def _lure_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str, Any]]:
+    """Implicit Euler with ``controller=(t, x) -> u`` (zero-order hold)."""
+    if method.name != "implicit_euler":
+        raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
+                         f"a LureSystem plant; use method='implicit_euler'")
+    if loop.exosystem is not None:
+        raise ModelError("exosystem: a Lur'e plant with Python blocks takes its reference "
+                         "through the blocks themselves (the plant's input is the controller's "
+                         "output)")
+    runner = BlockRunner(loop)
+    options: dict[str, Any] = {"controller": runner.step_state}
+    compiled = CompiledBlocks.of(runner)
+    if compiled is not None:
+        options["compiled_blocks"] = compiled
+    return runner, options
