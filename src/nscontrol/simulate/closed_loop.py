@@ -178,9 +178,12 @@ class ClosedLoop:
     @property
     def default_method(self) -> str:
         from ..systems.lure import LureSystem
+        from ..systems.sliding_mode import SlidingModePlant
 
         if self._stacked is not None:
             return str(self._stacked.default_method)
+        if isinstance(self.plant, SlidingModePlant):
+            return "sampled_zoh"
         return "implicit_euler" if isinstance(self.plant, LureSystem) else "moreau_jean"
 
     @property
@@ -253,6 +256,7 @@ def _stack(loop: ClosedLoop) -> Any:
     from ..systems.lagrangian import LagrangianSystem
     from ..systems.lure import LureSystem
     from ..systems.pwa import PiecewiseAffineSystem
+    from ..systems.sliding_mode import SlidingModePlant
 
     plant, ctrl, obs = loop.plant, loop.controller, loop.observer
     linear_blocks = (_is_linear_block(ctrl, "controller") and
@@ -268,10 +272,11 @@ def _stack(loop: ClosedLoop) -> Any:
             isinstance(ctrl, StateFeedback) and ctrl.on == "state" and \
             ctrl.period is None and plant.is_linear:
         return _fold_state_feedback(plant, ctrl, loop.input_matrix)
-    if isinstance(plant, LagrangianSystem | ImpactingBodies):
-        return None                                     # Python blocks beside the plant
+    if isinstance(plant, LagrangianSystem | ImpactingBodies | SlidingModePlant):
+        return None             # Python blocks beside the plant (or the loop itself: sampled_zoh)
     raise ModelError(f"plant: closed_loop composes LagrangianSystem, ImpactingBodies, "
-                     f"LinearHybridSystem, LureSystem and PiecewiseAffineSystem plants, got "
+                     f"LinearHybridSystem, LureSystem, PiecewiseAffineSystem and "
+                     f"SlidingModePlant plants, got "
                      f"{type(plant).__name__}")
 
 
@@ -626,9 +631,13 @@ def _signals_of_stack(loop: ClosedLoop) -> Callable[[Trajectory], Trajectory]:
 # -- Python blocks beside a mechanical plant (Moreau–Jean) -----------------------------------
 def _lower_python_blocks(loop: ClosedLoop, method: type[Integrator], x0: Any) -> Lowered:
     from ..systems.lure import LureSystem
+    from ..systems.sliding_mode import SlidingModePlant
 
     if isinstance(loop.plant, LureSystem):
         return _lower_python_blocks_lure(loop, method, x0)
+    if isinstance(loop.plant, SlidingModePlant):
+        raise ModelError(f"{method.name}: a {type(loop.plant).__name__} plant runs with its "
+                         f"sampled controller by method='sampled_zoh'")
     if method.name != "moreau_jean":
         raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
                          f"the plant; use method='moreau_jean' (or give the blocks as "

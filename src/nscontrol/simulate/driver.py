@@ -140,6 +140,7 @@ METHODS = _Registry({
     "moreau_jean": "nscontrol.simulate.methods:MoreauJean",
     "implicit_euler": "nscontrol.simulate.methods:ImplicitEuler",
     "switching": "nscontrol.simulate.methods:Switching",
+    "sampled_zoh": "nscontrol.simulate.methods:SampledZOH",
 })
 
 
@@ -236,7 +237,8 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
     """The body of :func:`nscontrol.simulate` (validated ``t_span``)."""
     cls = integrator_for(system, method)
     lowered = None
-    if callable(getattr(type(system), "lower", None)):   # a CompositeSystem (cheap test)
+    # a CompositeSystem (cheap test), lowered unless the method integrates it as it is
+    if callable(getattr(type(system), "lower", None)) and not cls.supports(system):
         lowered = system.lower(cls, x0)
         clash = sorted(set(lowered.options) & set(options) - {"listeners"})
         if clash:
