@@ -33,7 +33,9 @@ What the driver owns for every method:
   (``True``/``False``, refused by methods without it) — a string such as ``"no"`` is refused
   (:func:`check_run` makes the same checks ahead of a sweep);
 * composite systems (a :func:`nscontrol.closed_loop`): lowered to what the method
-  integrates, and their named signals added to the result.
+  integrates, and their named signals added to the result — unless the method's
+  :meth:`Integrator.supports` accepts the composite itself (``sampled_zoh``), which then
+  integrates it as it is.
 """
 
 from __future__ import annotations

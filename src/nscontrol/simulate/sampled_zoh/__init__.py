@@ -194,7 +194,7 @@ class _Run:
         """Ticks ``k0 .. k1 - 1``."""
         from numba.core.errors import NumbaExperimentalFeatureWarning
 
-        from . import _zoh_kernels as zk
+        from .. import _sampled_zoh_kernels as zk
 
         if self.blocks is None:
             self._python_chunk(k0, k1)
@@ -209,7 +209,7 @@ class _Run:
             b.raise_status(int(status), self.t0 + int(self.count[0]) * self.T)
 
     def _python_chunk(self, k0: int, k1: int) -> None:
-        from . import _zoh_kernels as zk
+        from .. import _sampled_zoh_kernels as zk
 
         runner, m = self.runner, self.runner.n_inputs
         for k in range(k0, k1):
@@ -225,7 +225,7 @@ class _Run:
 
     def keep_last(self) -> None:
         """The sample at the last tick: the input held before, the controller's state."""
-        from . import _zoh_kernels as zk
+        from .. import _sampled_zoh_kernels as zk
 
         if self.blocks is not None:
             xc, u = self.blocks.ctrl_parts[6], self.blocks.ctrl_parts[7]

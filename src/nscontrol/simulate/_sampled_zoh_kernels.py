@@ -1,4 +1,5 @@
-"""Compiled ticks of the sampled-data loop (method ``"sampled_zoh"``).
+"""Compiled ticks of the sampled-data loop (method ``"sampled_zoh"``,
+:mod:`nscontrol.simulate.sampled_zoh`).
 
 :func:`tick` is the one step both paths take after the blocks have run at ``t_n``: keep the
 sample (one in ``every``), propagate ``X_{n+1} = Φ X_n + Γ u_n`` (the exact zero-order-hold
@@ -17,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .._block_kernels import step_blocks
+from ._block_kernels import step_blocks
 
 
 @njit(cache=True)
