@@ -67,7 +67,8 @@ def _implicit_euler(ctx: dict[str, Any]) -> None:
 
 def run_sampled(plant: Any, controller: Any, x0: Any, t_span: tuple[float, float]) -> Any:
     """The sampled loop by ``method="sampled_zoh"`` (the plant exact between samples)."""
-    from .. import closed_loop, simulate
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
 
     return simulate(closed_loop(plant, controller), x0, t_span, method="sampled_zoh",
                     progress=False)

@@ -202,9 +202,9 @@ class _Run:
         b = self.blocks
         with warnings.catch_warnings():   # numba flags its first-class functions experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-            status = zk.run_chunk(k0, k1, self.t0, self.T, self.every, self.Phi, self.Gam,
-                                  self.X, self.Xn, b.Cy, np.zeros(0), *b.kernel_state(),
-                                  *self.out, self.count)
+            status = zk.run_chunk(  # type: ignore[call-arg]  # numba's stub
+                k0, k1, self.t0, self.T, self.every, self.Phi, self.Gam, self.X, self.Xn,
+                b.Cy, np.zeros(0), *b.kernel_state(), *self.out, self.count)
         if status:
             b.raise_status(int(status), self.t0 + int(self.count[0]) * self.T)
 
