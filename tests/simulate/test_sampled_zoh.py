@@ -236,5 +236,9 @@ def test_refusals_name_the_part():
     with pytest.raises(ModelError, match="^moreau_jean: a SlidingModePlant plant runs with "
                                          "its sampled controller by method='sampled_zoh'"):
         nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3)
+    with pytest.raises(ModelError, match=r"^signals: expected a sequence of signal names"):
+        nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), signals="u")
+    with pytest.raises(ModelError, match=r"^signals: unknown name\(s\) \['xc'\]"):
+        nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), signals=["xc"])   # FirstOrderSMC: no state
     with pytest.raises(ModelError, match=r"^sampled_zoh: unknown option\(s\) \['h'\]"):
         nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method="sampled_zoh", h=1e-3)

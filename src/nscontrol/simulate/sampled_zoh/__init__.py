@@ -43,7 +43,7 @@ from ..._progress import TimeProgress
 from ..._validation import FloatArray, as_vector, check_bool, check_integer
 from ...errors import DimensionError, ModelError
 from .._block_runner import BlockRunner, CompiledBlocks
-from ..trajectory import Recorder, Trajectory
+from ..trajectory import Recorder, Trajectory, _signal_names
 
 __all__ = ["integrate", "SampledZOHOptions", "CHUNK", "SIGNALS"]
 
@@ -78,9 +78,9 @@ class SampledZOHOptions:
     def checked(cls, record_every: Any = 1, signals: Any = None,
                 progress: Any = None) -> SampledZOHOptions:
         """The options from the user's values; :class:`~nscontrol.errors.ModelError` for a
-        bad one (``signals`` are checked by the recorder, against :data:`SIGNALS`)."""
+        bad one (a signal name outside :data:`SIGNALS`, a bare string for ``signals``)."""
         return cls(check_integer("record_every", record_every, minimum=1),
-                   None if signals is None else tuple(signals),
+                   None if signals is None else tuple(sorted(_signal_names(signals, SIGNALS))),
                    check_bool("progress", progress, allow_none=True))
 
 
