@@ -17,7 +17,13 @@ from nscontrol.errors import (
     ZenoWarning,
 )
 from nscontrol.simulate import METHODS, Integrator, Trajectory, register_method
-from nscontrol.simulate.methods import EventDriven, ImplicitEuler, MoreauJean, Switching
+from nscontrol.simulate.methods import (
+    EventDriven,
+    ImplicitEuler,
+    MoreauJean,
+    SampledZOH,
+    Switching,
+)
 from nscontrol.simulate.trajectory import Recorder
 from nscontrol.systems.lagrangian import LagrangianSystem
 
@@ -32,12 +38,12 @@ def ball():
 def test_methods_map_names_to_classes_and_a_class_is_a_method(ball):
     assert {k: METHODS[k] for k in METHODS} == {
         "event_driven": EventDriven, "moreau_jean": MoreauJean,
-        "implicit_euler": ImplicitEuler, "switching": Switching}
+        "implicit_euler": ImplicitEuler, "switching": Switching, "sampled_zoh": SampledZOH}
     by_name = nsc.simulate(ball, [1.0, 0.0], (0.0, 3.0), method="moreau_jean", h=1e-3)
     by_class = nsc.simulate(ball, [1.0, 0.0], (0.0, 3.0), method=MoreauJean, h=1e-3)
     # the same code runs both ways: bitwise equal
     np.testing.assert_array_equal(by_name.x, by_class.x)
-    for cls in (EventDriven, MoreauJean, ImplicitEuler, Switching):
+    for cls in (EventDriven, MoreauJean, ImplicitEuler, Switching, SampledZOH):
         assert cls.capabilities, cls
 
 
@@ -104,16 +110,53 @@ def test_a_user_integrator_plugs_in_by_class_and_by_registered_name():
 
 @pytest.mark.parametrize("method, system_kind", [
     ("event_driven", "ball"), ("moreau_jean", "ball"), ("implicit_euler", "lure"),
-    ("switching", "pwa")])
+    ("switching", "pwa"), ("sampled_zoh", "smc")])
 def test_every_method_refuses_an_unknown_option_with_one_message(method, system_kind, ball):
+    from nscontrol.design import FirstOrderSMC
+    from nscontrol.systems import SlidingModePlant
     from nscontrol.testing.setvalued_problems import bimodal_oscillator, relay_feedback
 
+    smc = SlidingModePlant.double_integrator()
     system, x0 = {"ball": (ball, [1.0, 0.0]),
                   "lure": (relay_feedback().system, [1.0, 0.0]),
-                  "pwa": (bimodal_oscillator().system, bimodal_oscillator().x0)}[system_kind]
+                  "pwa": (bimodal_oscillator().system, bimodal_oscillator().x0),
+                  "smc": (nsc.closed_loop(smc, FirstOrderSMC(smc, 1.0, 1e-2)), [1.0, 0.0]),
+                  }[system_kind]
     with pytest.raises(ModelError, match=rf"^{method}: unknown option\(s\) \['stepsize'\]; "
                                          r"accepted: \[.*'on_failure'.*'t_eval'"):
         nsc.simulate(system, x0, (0.0, 1.0), method=method, stepsize=1e-3)
+
+
+class WholeLoop(Integrator):
+    """A user's integrator that runs a closed loop as it is (no lowering)."""
+
+    name = "user_whole_loop"
+    seen: list = []
+
+    @classmethod
+    def supports(cls, system):
+        from nscontrol.simulate.closed_loop import ClosedLoop
+
+        return isinstance(system, ClosedLoop)
+
+    def integrate(self, system, x0, t_span, *, record_every=1, signals=None, progress=None):
+        self.seen.append(system)
+        rec = Recorder(len(x0))
+        rec.sample(t_span[0], np.asarray(x0, float))
+        rec.sample(t_span[1], np.asarray(x0, float), force=True)
+        return rec.finish(method=self.name)
+
+
+def test_a_method_that_integrates_a_closed_loop_gets_it_unlowered(ball):
+    from nscontrol.systems.feedback import StateFeedback
+
+    # the feedback folds into the ball's forces when lowered (a LagrangianSystem for the
+    # mechanics methods); a method that says it integrates the loop receives the loop
+    loop = nsc.closed_loop(ball, StateFeedback([[-1.0, -1.0]]))
+    tr = nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method=WholeLoop)
+    assert WholeLoop.seen == [loop] and tr.method == "user_whole_loop"
+    lowered = nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-2)
+    assert "u" in lowered.signals          # the lowering's own signals: it was lowered
 
 
 def test_a_user_callback_error_keeps_the_run_so_far(ball):

@@ -15,6 +15,7 @@ Tolerances by what the method declares:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -103,7 +104,30 @@ def _mechanics_cases() -> list[Case]:
             Case("resting-stack", stack.system(), stack.x0, (0.0, 0.5), check=_check_stack)]
 
 
-CASES = _set_valued_cases() + _mechanics_cases()
+def _check_smc(traj, method, h):
+    # implicit first-order sliding mode on x'' = u, s = x + x' (alpha = 1): the known answer
+    # s_k = s_0 - k alpha cG until |s_k| <= alpha cG, then s = 0 exactly (to rounding)
+    cG = 1e-3 + 1e-3 ** 2 / 2          # c Γ of the double integrator at T = 1e-3
+    s = traj.signal("s")
+    k = np.arange(s.size)
+    k_reach = math.ceil(1.0 / cG)
+    assert traj.stats["steps"] == 2000
+    # each tick rounds c x and Φ x (a few eps of |x| <= 1): the error grows at most linearly
+    assert np.all(np.abs(s[:k_reach] - (1.0 - k[:k_reach] * cG)) <= 4 * EPS * (k[:k_reach] + 1))
+    assert np.all(np.abs(s[k_reach:]) <= 4 * EPS)
+
+
+def _sampled_cases() -> list[Case]:
+    from nscontrol.design import FirstOrderSMC
+    from nscontrol.systems import SlidingModePlant
+
+    plant = SlidingModePlant.double_integrator()
+    return [Case("sampled-first-order-smc",
+                 nsc.closed_loop(plant, FirstOrderSMC(plant, 1.0, 1e-3)), [1.0, 0.0],
+                 (0.0, 2.0), check=_check_smc)]
+
+
+CASES = _set_valued_cases() + _mechanics_cases() + _sampled_cases()
 PAIRS = [(case, name) for case in CASES for name in METHODS
          if METHODS[name].supports(case.system)]
 

@@ -1,8 +1,15 @@
-"""Compiled one-step laws of the sampled sliding-mode blocks and the sampled-data loop.
+"""Compiled one-step laws of the sampled sliding-mode blocks and their compiled forms.
 
-The blocks of :mod:`nscontrol.design.sliding_mode` call the step functions below (one source
-of truth); :func:`run_loop` runs the whole loop of a linear plant with a zero-order hold
-(exact propagation matrices computed in Python) for the fast path of ``run_sampled``.
+The scalar laws (:func:`first_order_switching`, :func:`super_twisting_implicit`,
+:func:`super_twisting_explicit`, :func:`st_resolvent`) are the one source of the blocks of
+:mod:`nscontrol.design.sliding_mode`: their compiled forms (``output``/``update`` of the
+:class:`~nscontrol.systems.feedback.CompiledBlock` signature, below) call them, and the
+blocks' Python ``output``/``update`` call those compiled forms. The loop that runs a block on
+its plant is ``simulate(..., method="sampled_zoh")``.
+
+The parameter arrays (``params`` of the compiled forms) are laid out by the ``FO_*`` and
+``ST_*`` indices below; the plant's rows ``c`` and ``c Φ`` (or ``c (Φ - I)``) follow the
+scalars, ``n`` entries each.
 """
 
 from __future__ import annotations
@@ -12,8 +19,13 @@ import math
 import numpy as np
 from numba import njit
 
-#: Block kinds of :func:`run_loop`.
-FIRST_ORDER, SUPER_TWISTING = 0, 1
+from ..systems._feedback_kernels import BLOCK_SIGNATURE
+
+#: ``FirstOrderSMC`` parameters: ``[n, implicit, alpha, cG, c (n), c (Φ - I) (n)]``.
+FO_N, FO_IMPLICIT, FO_ALPHA, FO_CG, FO_ROWS = 0, 1, 2, 3, 4
+#: ``SuperTwistingController`` parameters:
+#: ``[n, implicit, estimate, k1, k2, h, cG, c (n), c Φ (n)]``.
+ST_N, ST_IMPLICIT, ST_ESTIMATE, ST_K1, ST_K2, ST_H, ST_CG, ST_ROWS = 0, 1, 2, 3, 4, 5, 6, 7
 
 
 @njit(cache=True)
@@ -74,51 +86,66 @@ def super_twisting_explicit(s: float, nu: float, k1: float, k2: float,
     return -k1 * psi(s) + nu, nu - h * k2 * sg
 
 
-@njit(cache=True)
-def run_loop(kind: int, implicit: bool, Phi: np.ndarray, Gam: np.ndarray, X0: np.ndarray,
-             n: int, c: np.ndarray, cPhi: np.ndarray, cPhiI: np.ndarray, cG: float,
-             alpha: float, k1: float, k2: float, h: float, nu0: float, steps: int,
-             estimate: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The sampled loop ``X_{k+1} = Φ X_k + Γ u_k`` (``X = [x; w]``, plant state first).
+@njit(BLOCK_SIGNATURE, cache=True)
+def first_order_output(t, xb, y, x, xhat, lam, params):
+    """``u_k = u_eq,k + u_s,k`` of ``FirstOrderSMC`` from the plant state ``x``:
+    ``u_eq = -(cΓ)^{-1} c (Φ - I) x``, ``u_s`` by :func:`first_order_switching`."""
+    n = int(params[FO_N])
+    cG = params[FO_CG]
+    s = 0.0
+    for i in range(n):
+        s += params[FO_ROWS + i] * x[i]
+    drift = 0.0
+    for i in range(n):
+        drift += params[FO_ROWS + n + i] * x[i]
+    out = np.empty(1)
+    out[0] = -drift / cG + first_order_switching(s, cG, params[FO_ALPHA],
+                                                 params[FO_IMPLICIT] != 0.0)
+    return out
 
-    With ``estimate`` the implicit super-twisting law adds the one-step disturbance estimate
-    ``d̂_k = d̂_{k-1} + (s_k - s̃_k) / cΓ`` (``s̃_k`` its own prediction of ``s_k``) to its
-    prediction. Returns the states ``(steps + 1, N)``, the inputs ``u_k`` and the integral states
-    ``ν_k`` (``steps + 1`` entries; the last input repeats the one before).
+
+@njit(cache=True)
+def super_twisting_step(xb, x, params):
+    """``(u_k, state at the next sample)`` of ``SuperTwistingController``.
+
+    Explicit: ``xb = [ν]``. Implicit: ``xb = [ν, s̃, d̂, started]``; with the estimate, the
+    one-step disturbance estimate ``d̂_k = d̂_{k-1} + (s_k - s̃_k) / cΓ`` (``s̃_k`` the law's own
+    prediction of ``s_k``, from the second sample on) enters the prediction
+    ``p = c Φ x_k + cΓ (ν_k + d̂_k)``.
     """
-    N = X0.shape[0]
-    X = np.empty((steps + 1, N))
-    U = np.zeros(steps + 1)
-    NU = np.zeros(steps + 1)
-    X[0] = X0
-    nu = nu0
-    s_pred, dhat = 0.0, 0.0
-    for k in range(steps):
-        x = X[k]
-        s = 0.0
+    n = int(params[ST_N])
+    cG, k1, k2, h = params[ST_CG], params[ST_K1], params[ST_K2], params[ST_H]
+    s = 0.0
+    for i in range(n):
+        s += params[ST_ROWS + i] * x[i]
+    nu = xb[0]
+    if params[ST_IMPLICIT] != 0.0:
+        s_pred, dhat = xb[1], xb[2]
+        if params[ST_ESTIMATE] != 0.0 and xb[3] > 0.0:
+            dhat += (s - s_pred) / cG
+        p = cG * (nu + dhat)
         for i in range(n):
-            s += c[i] * x[i]
-        NU[k] = nu
-        if kind == FIRST_ORDER:
-            drift = 0.0
-            for i in range(n):
-                drift += cPhiI[i] * x[i]
-            u = -drift / cG + first_order_switching(s, cG, alpha, implicit)
-        elif implicit:
-            if estimate and k > 0:
-                dhat += (s - s_pred) / cG
-            p = cG * (nu + dhat)
-            for i in range(n):
-                p += cPhi[i] * x[i]
-            u, nu, s_pred = super_twisting_implicit(p, nu, cG, k1, k2, h)
-        else:
-            u, nu = super_twisting_explicit(s, nu, k1, k2, h)
-        U[k] = u
-        for i in range(N):
-            acc = Gam[i] * u
-            for j in range(N):
-                acc += Phi[i, j] * x[j]
-            X[k + 1, i] = acc
-    U[steps] = U[steps - 1] if steps > 0 else 0.0
-    NU[steps] = nu
-    return X, U, NU
+            p += params[ST_ROWS + n + i] * x[i]
+        u, nu1, s1 = super_twisting_implicit(p, nu, cG, k1, k2, h)
+        nxt = np.empty(4)
+        nxt[0], nxt[1], nxt[2], nxt[3] = nu1, s1, dhat, 1.0
+        return u, nxt
+    u, nu1 = super_twisting_explicit(s, nu, k1, k2, h)
+    nxt = np.empty(1)
+    nxt[0] = nu1
+    return u, nxt
+
+
+@njit(BLOCK_SIGNATURE, cache=True)
+def super_twisting_output(t, xb, y, x, xhat, lam, params):
+    """The output ``[u_k]`` of ``SuperTwistingController`` (:func:`super_twisting_step`)."""
+    out = np.empty(1)
+    out[0] = super_twisting_step(xb, x, params)[0]
+    return out
+
+
+@njit(BLOCK_SIGNATURE, cache=True)
+def super_twisting_update(t, xb, y, x, xhat, lam, params):
+    """The state of ``SuperTwistingController`` at the next sample
+    (:func:`super_twisting_step`)."""
+    return super_twisting_step(xb, x, params)[1]

@@ -17,10 +17,13 @@ Three sampled blocks (the :class:`~nscontrol.systems.feedback.Controller` protoc
 * :class:`LevantDifferentiator` — the same two-term law driven by ``z0 - f``, explicit or
   implicit (the same scalar inclusion with ``h k1``, ``h² k2``).
 
-:func:`run_sampled` runs a block on a plant with exact zero-order-hold propagation of the
-plant and of its disturbance generator (compiled). The gain rule for a disturbance whose
-derivative is bounded by ``L`` is :func:`super_twisting_gains`. The derivations are in
-``docs/sliding_mode.md``.
+``nscontrol.simulate(nscontrol.closed_loop(plant, controller), x0, t_span,
+method="sampled_zoh")`` runs a block on a plant with exact zero-order-hold propagation of the
+plant and of its disturbance generator, the block in its compiled form
+(:meth:`FirstOrderSMC.compiled`, :meth:`SuperTwistingController.compiled`: the blocks'
+Python methods call the same compiled functions); :func:`run_sampled` is that call. The gain
+rule for a disturbance whose derivative is bounded by ``L`` is :func:`super_twisting_gains`.
+The derivations are in ``docs/sliding_mode.md``.
 """
 
 from __future__ import annotations
@@ -31,11 +34,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_vector, check_bool, check_integer, check_positive
-from ..errors import DimensionError, ModelError
+from .._validation import FloatArray, as_vector, check_bool, check_positive
+from ..errors import ModelError
 from ..numerics.lti import discretize
 from ..simulate.trajectory import Trajectory
-from ..systems.feedback import Measurement, StaticLaw
+from ..systems.feedback import CompiledBlock, Jump, Measurement, StaticLaw
 from ..systems.sliding_mode import SlidingModePlant
 from . import _sliding_mode_kernels as kern
 
@@ -93,6 +96,72 @@ def _plant_model(plant: Any, h: float) -> tuple[FloatArray, FloatArray, float]:
     return cPhi, cPhi - plant.c, cG
 
 
+_EMPTY = np.zeros(0)
+
+
+def _vec(a: Any) -> FloatArray:
+    """A measurement's field as the compiled forms take it (empty for ``None``)."""
+    return _EMPTY if a is None else np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
+
+
+class _CompiledLaw:
+    """A block whose law is its compiled form: ``output``/``update`` call the compiled
+    functions (one source for the Python path and the compiled loops)."""
+
+    _form: CompiledBlock
+
+    def compiled(self) -> CompiledBlock:
+        """The compiled form (:class:`~nscontrol.systems.feedback.CompiledBlock`) that the
+        integrators' compiled loops call, and that :meth:`output` and :meth:`update` call."""
+        return self._form
+
+    def _call(self, fn: Any, t: float, xc: Any, m: Measurement) -> FloatArray:
+        return np.asarray(fn(float(t), _vec(xc), _vec(m.y), _vec(m.x), _vec(m.xhat),
+                             _vec(m.lam), self._form.params))
+
+    def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        """The block's output ``[u_k]`` at the sampling instant ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Sampling instant.
+        xc : ndarray
+            The internal state.
+        m : Measurement
+            Reads the plant state ``m.x``.
+        """
+        return self._call(self._form.output, t, xc, m)
+
+    def update(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
+        """The internal state at the next sample.
+
+        Parameters
+        ----------
+        t : float
+            Sampling instant.
+        xc : ndarray
+            The internal state.
+        m : Measurement
+            Reads the plant state ``m.x``.
+        """
+        return self._call(self._form.update, t, xc, m)
+
+    def reset(self, t: float, xc: FloatArray, jump: Jump) -> FloatArray:
+        """The internal state is unchanged by a plant jump.
+
+        Parameters
+        ----------
+        t : float
+            Time of the jump.
+        xc : ndarray
+            The internal state.
+        jump : Jump
+            Unused.
+        """
+        return xc
+
+
 class _SampledBlock:
     """The block interface of a sampled law with internal state whose one step gives both
     its output at ``t_k`` and its state at the next sample (:meth:`_advance`)."""
@@ -144,7 +213,7 @@ class _SampledBlock:
 
 
 @dataclass(frozen=True, eq=False)
-class FirstOrderSMC(StaticLaw):
+class FirstOrderSMC(_CompiledLaw, StaticLaw):
     """First-order sliding-mode control with the discrete equivalent control, sampled.
 
     Parameters
@@ -167,9 +236,11 @@ class FirstOrderSMC(StaticLaw):
 
     Examples
     --------
+    >>> import nscontrol as nsc
     >>> p = SlidingModePlant.double_integrator()
     >>> ctrl = FirstOrderSMC(p, alpha=1.0, period=1e-3)
-    >>> tr = run_sampled(p, ctrl, [1.0, 0.0], (0.0, 2.0))
+    >>> tr = nsc.simulate(nsc.closed_loop(p, ctrl), [1.0, 0.0], (0.0, 2.0),
+    ...                   method="sampled_zoh")
     >>> bool(np.max(np.abs(tr.signal("s")[-500:])) < 1e-12)
     True
     """
@@ -180,12 +251,22 @@ class FirstOrderSMC(StaticLaw):
     discretization: str = "implicit"
     n_outputs: int = field(default=1, init=False)
     _model: tuple[FloatArray, FloatArray, float] = field(init=False, repr=False)
+    _form: CompiledBlock = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        from ..systems._feedback_kernels import static_update
+
         object.__setattr__(self, "alpha", check_positive("alpha", self.alpha))
         object.__setattr__(self, "period", check_positive("period", self.period))
         object.__setattr__(self, "discretization", _check_discretization(self.discretization))
-        object.__setattr__(self, "_model", _plant_model(self.plant, self.period))
+        model = _plant_model(self.plant, self.period)
+        object.__setattr__(self, "_model", model)
+        n = self.plant.n_states
+        head = [float(n), float(self.discretization == "implicit"), self.alpha, model[2]]
+        assert len(head) == kern.FO_ROWS
+        object.__setattr__(self, "_form", CompiledBlock(
+            kern.first_order_output, static_update,
+            np.concatenate([head, self.plant.c, model[1]])))
 
     @property
     def cG(self) -> float:
@@ -202,27 +283,9 @@ class FirstOrderSMC(StaticLaw):
         """
         return -float(self._model[1] @ np.asarray(x, dtype=float)) / self.cG
 
-    def output(self, t: float, xc: FloatArray, m: Measurement) -> FloatArray:
-        """``u_k = u_eq,k + u_s,k`` from the plant state ``m.x``.
-
-        Parameters
-        ----------
-        t : float
-            Sampling instant.
-        xc : ndarray
-            The (empty) internal state.
-        m : Measurement
-            Reads the plant state ``m.x``.
-        """
-        x = np.asarray(m.x, dtype=float)
-        s = float(self.plant.c @ x)
-        us = kern.first_order_switching(s, self.cG, self.alpha,
-                                        self.discretization == "implicit")
-        return np.array([self.equivalent_control(x) + us])
-
 
 @dataclass(frozen=True, eq=False)
-class SuperTwistingController(_SampledBlock):
+class SuperTwistingController(_CompiledLaw):
     """The super-twisting controller, sampled; internal state ``ν``.
 
     Parameters
@@ -255,9 +318,11 @@ class SuperTwistingController(_SampledBlock):
 
     Examples
     --------
+    >>> import nscontrol as nsc
     >>> p = SlidingModePlant.double_integrator()
     >>> st = SuperTwistingController(p, *super_twisting_gains(1.5), period=1e-2)
-    >>> tr = run_sampled(p, st, [0.5, 0.0], (0.0, 6.0))
+    >>> tr = nsc.simulate(nsc.closed_loop(p, st), [0.5, 0.0], (0.0, 6.0),
+    ...                   method="sampled_zoh")
     >>> bool(np.max(np.abs(tr.signal("s")[-100:])) < 1e-14)
     True
     """
@@ -271,6 +336,7 @@ class SuperTwistingController(_SampledBlock):
     estimate_disturbance: bool = True
     n_outputs: int = field(default=1, init=False)
     _model: tuple[FloatArray, FloatArray, float] = field(init=False, repr=False)
+    _form: CompiledBlock = field(init=False, repr=False)
 
     @property
     def n_states(self) -> int:
@@ -296,29 +362,17 @@ class SuperTwistingController(_SampledBlock):
             raise ModelError(f"plant: expected c Γ > 0 (u pushing s up; got {model[2]:.3g}); "
                              f"use -c as the sliding variable")
         object.__setattr__(self, "_model", model)
+        head = [float(self.plant.n_states), float(self.discretization == "implicit"),
+                float(self.estimate_disturbance), self.k1, self.k2, self.period, model[2]]
+        assert len(head) == kern.ST_ROWS
+        object.__setattr__(self, "_form", CompiledBlock(
+            kern.super_twisting_output, kern.super_twisting_update,
+            np.concatenate([head, self.plant.c, model[0]])))
 
     @property
     def cG(self) -> float:
         """``c Γ``: the gain of ``u_k`` in ``s_{k+1}``."""
         return self._model[2]
-
-    def _step(self, xc: FloatArray, x: FloatArray) -> tuple[float, FloatArray]:
-        nu, h = float(xc[0]), self.period
-        if self.discretization == "implicit":
-            s_pred, dhat, started = float(xc[1]), float(xc[2]), xc[3] > 0.0
-            if self.estimate_disturbance and started:
-                dhat += (float(self.plant.c @ x) - s_pred) / self.cG
-            p = float(self._model[0] @ x) + self.cG * (nu + dhat)
-            u, nu1, s1 = kern.super_twisting_implicit(p, nu, self.cG, self.k1, self.k2, h)
-            return u, np.array([nu1, s1, dhat, 1.0])
-        u, nu1 = kern.super_twisting_explicit(float(self.plant.c @ x), nu, self.k1, self.k2, h)
-        return u, np.array([nu1])
-
-    def _advance(self, xc: FloatArray, m: Measurement) -> tuple[FloatArray, FloatArray]:
-        """``([u_k], state at the next sample)`` from ``[ν_k, ...]`` and the plant state
-        ``m.x``."""
-        u, nxt = self._step(xc, np.asarray(m.x, dtype=float))
-        return np.array([u]), nxt
 
 
 @dataclass(frozen=True, eq=False)
@@ -421,66 +475,39 @@ def run_sampled(plant: SlidingModePlant, controller: FirstOrderSMC | SuperTwisti
                 x0: ArrayLike, t_span: tuple[float, float]) -> Trajectory:
     """The sampled loop of ``plant`` and ``controller``, propagated exactly between samples.
 
-    The plant and its disturbance generator ``[x; w]`` form one linear system stepped by its
+    The same as ``nscontrol.simulate(nscontrol.closed_loop(plant, controller), x0, t_span,
+    method="sampled_zoh")``, which it calls (see :mod:`nscontrol.simulate.sampled_zoh`): the
+    plant and its disturbance generator ``[x; w]`` form one linear system stepped by its
     exact zero-order-hold matrices over each sampling period (no integration error); the
-    controller's law runs compiled (the same step functions as its ``output``/``update``).
+    controller runs in its compiled form (the functions its ``output``/``update`` call).
 
     Parameters
     ----------
     plant : SlidingModePlant
         The plant, with its disturbance.
     controller : FirstOrderSMC or SuperTwistingController
-        A sampled block built on a plant with the same ``A``, ``B``, ``c``.
+        A sampled block (any sampled :class:`~nscontrol.systems.feedback.Controller` runs).
     x0 : array_like
         Plant initial state.
     t_span : (float, float)
-        ``(t0, tf)``; ``tf - t0`` should be a multiple of the period (the last sample at or
-        before ``tf``).
+        ``(t0, tf)``; the samples are ``t0 + k T`` up to the last one at or before ``tf``
+        (``T`` the controller's period).
 
     Returns
     -------
     Trajectory
         The samples ``x_k``, with signals ``"s"`` (``s_k``), ``"u"`` (the input held over
-        ``[t_k, t_{k+1})``) and ``"nu"`` (super-twisting's ``ν_k``).
+        ``[t_k, t_{k+1})``) and ``"xc"`` (the controller's state at ``t_k``: super-twisting's
+        ``ν_k`` is its first column).
 
     Raises
     ------
     ModelError
-        A block other than the two, or one built on another plant.
+        A controller that is not a sampled block.
+    DimensionError
+        ``x0`` of the wrong length, or a span shorter than one period.
     """
-    if not isinstance(controller, (FirstOrderSMC, SuperTwistingController)):
-        raise ModelError(f"controller: expected FirstOrderSMC or SuperTwistingController, got "
-                         f"{type(controller).__name__}")
-    for name in ("A", "B", "c"):
-        if not np.array_equal(getattr(controller.plant, name), getattr(plant, name)):
-            raise ModelError(f"controller: built on a plant with another {name}; build it on "
-                             f"this plant")
-    n = plant.n_states
-    x = as_vector("x0", x0, n)
-    t0, tf = (float(v) for v in t_span)
-    if not (np.isfinite(t0) and np.isfinite(tf) and tf > t0):
-        raise ModelError(f"t_span: expected finite t0 < tf, got {t_span!r}")
-    h = controller.period
-    steps = check_integer("t_span", int(np.floor((tf - t0) / h * (1.0 + 1e-12))), minimum=1,
-                          error=DimensionError)
-    A_aug, B_aug, w0 = plant.augmented()
-    Phi, Gam = discretize(A_aug, B_aug, h)
-    w_t0 = plant.disturbance.w(t0) if plant.disturbance is not None else w0
-    X0 = np.concatenate([x, w_t0])
-    cPhi, cPhiI, cG = controller._model
-    first = isinstance(controller, FirstOrderSMC)
-    X, U, NU = kern.run_loop(
-        kern.FIRST_ORDER if first else kern.SUPER_TWISTING,
-        controller.discretization == "implicit", Phi, np.ascontiguousarray(Gam[:, 0]), X0, n,
-        plant.c, cPhi, cPhiI, cG, getattr(controller, "alpha", 0.0),
-        getattr(controller, "k1", 0.0), getattr(controller, "k2", 0.0), h,
-        getattr(controller, "nu0", 0.0), steps,
-        bool(getattr(controller, "estimate_disturbance", False)))
-    t: FloatArray = t0 + h * np.arange(steps + 1, dtype=np.float64)
-    signals: dict[str, np.ndarray] = {"s": X[:, :n] @ plant.c, "u": U[:, None]}
-    if not first:
-        signals["nu"] = NU[:, None]
-    return Trajectory(t=t, x=X[:, :n].copy(), signals=signals,
-                      stats={"steps": steps, "period": h,
-                             "discretization": controller.discretization},
-                      method="sampled_zoh", state_names=plant.state_names)
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
+
+    return simulate(closed_loop(plant, controller), x0, t_span, method="sampled_zoh")

@@ -65,9 +65,18 @@ def _implicit_euler(ctx: dict[str, Any]) -> None:
     ctx["ie_s_after"] = float(np.max(np.abs(tr.x[k:, 0] + tr.x[k:, 1])))
 
 
+def run_sampled(plant: Any, controller: Any, x0: Any, t_span: tuple[float, float]) -> Any:
+    """The sampled loop by ``method="sampled_zoh"`` (the plant exact between samples)."""
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
+
+    return simulate(closed_loop(plant, controller), x0, t_span, method="sampled_zoh",
+                    progress=False)
+
+
 def _sampled(ctx: dict[str, Any]) -> None:
     from ..analysis import chattering_amplitude, fitted_order, reaching_time
-    from ..design import FirstOrderSMC, SuperTwistingController, run_sampled
+    from ..design import FirstOrderSMC, SuperTwistingController
 
     p, free, k1, k2 = ctx["plant"], ctx["free"], ctx["k1"], ctx["k2"]
     runs: dict[str, list[Any]] = {"st_explicit": [], "st_implicit": [], "st_plain": [],
@@ -184,8 +193,9 @@ def _figures(ctx: dict[str, Any], out_dir: Path | None, figures: list[Path]) -> 
             keep = tr.t <= T_FINAL
             a1.semilogy(tr.t[keep], np.maximum(np.abs(tr.signal("s")[keep]), 1e-18), style,
                         color=color, lw=0.9, label=f"{label}, h = {h:g} s")
-            # the sign multiplier the law used: sigma_k = -(nu_{k+1} - nu_k) / (h k2)
-            nu = tr.signal("nu")[:, 0]
+            # the sign multiplier the law used: sigma_k = -(nu_{k+1} - nu_k) / (h k2), nu
+            # the controller's first state
+            nu = tr.signal("xc")[:, 0]
             sigma = -np.diff(nu) / (h * ctx["k2"])
             win = (tr.t[:-1] >= 3.0) & (tr.t[:-1] <= 3.1)
             a2.plot(tr.t[:-1][win], sigma[win], style, color=color, lw=0.9,

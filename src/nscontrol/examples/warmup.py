@@ -107,14 +107,18 @@ def _frictional_contacts() -> None:
 
 def _sliding_mode() -> None:
     """The sampled sliding-mode loop (first order and super-twisting, both discretizations)."""
-    from ..design.sliding_mode import FirstOrderSMC, SuperTwistingController, run_sampled
+    from ..design.sliding_mode import FirstOrderSMC, SuperTwistingController
+    from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
     from ..systems.sliding_mode import SlidingModePlant
 
     plant = SlidingModePlant.double_integrator()
     for disc in ("implicit", "explicit"):
-        run_sampled(plant, FirstOrderSMC(plant, 1.0, 1e-2, disc), [1.0, 0.0], (0.0, 0.1))
-        run_sampled(plant, SuperTwistingController(plant, 1.8, 1.65, 1e-2, disc), [1.0, 0.0],
-                    (0.0, 0.1))
+        for ctrl in (FirstOrderSMC(plant, 1.0, 1e-2, disc),
+                     SuperTwistingController(plant, 1.8, 1.65, 1e-2, disc)):
+            for compiled in (True, False):      # the compiled loop, and the blocks' methods
+                simulate(closed_loop(plant, ctrl, compiled=compiled), [1.0, 0.0], (0.0, 0.1),
+                         method="sampled_zoh", progress=False)
 
 
 def _compiled_blocks() -> None:
@@ -188,7 +192,9 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "ZAD-controlled buck converter": ("design._zad_kernels",),
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
                             "simulate._frictional_mj_kernels"),
-    "sampled sliding-mode control": ("design._sliding_mode_kernels",),
+    "sampled sliding-mode control": ("design._sliding_mode_kernels",
+                                     "simulate._sampled_zoh_kernels", "simulate._block_kernels",
+                                     "systems._feedback_kernels"),
     "compiled controllers, observers and models": (
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
         "systems._two_link_kernels", "design._friction_compensation_kernels",

@@ -27,7 +27,7 @@ __all__ = ["simulate", "Trajectory", "Event", "Recorder", "METHODS", "STATUS_MES
            "Integrator", "register_method", "Lowering", "Lowered", "register_lowering"]
 
 #: The built-in method names (``register_method`` adds more, so ``simulate`` takes any str).
-Method = Literal["event_driven", "moreau_jean", "implicit_euler", "switching"]
+Method = Literal["event_driven", "moreau_jean", "implicit_euler", "switching", "sampled_zoh"]
 
 
 def simulate(system: SimulableSystem, x0: ArrayLike, t_span: tuple[float, float], *,
@@ -46,8 +46,8 @@ def simulate(system: SimulableSystem, x0: ArrayLike, t_span: tuple[float, float]
         Start and end times, ``t0 < tf``.
     method : str or Integrator subclass, optional
         The integrator: ``"event_driven"``, ``"moreau_jean"``, ``"implicit_euler"``,
-        ``"switching"``, or a class (your own :class:`Integrator` subclass too). Default: the
-        system's ``default_method``.
+        ``"switching"``, ``"sampled_zoh"``, or a class (your own :class:`Integrator`
+        subclass too). Default: the system's ``default_method``.
     **options
         The method's own options (``h``, ``theta``, ``rtol``, ``u`` ...: see
         :mod:`nscontrol.simulate.methods`) and the common ones every method takes:

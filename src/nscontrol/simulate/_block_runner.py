@@ -38,6 +38,7 @@ class BlockRunner:
 
     def __init__(self, loop: Any) -> None:
         from ..systems.impacting_bodies import ImpactingBodies
+        from ..systems.sliding_mode import SlidingModePlant
 
         self.loop = loop
         p = loop.plant
@@ -48,6 +49,8 @@ class BlockRunner:
         if hasattr(p, "law"):          # a LureSystem: u enters through its B
             self.Cy = output_matrix(loop, p.C, self.n)
             self.n_inputs = int(p.n_inputs)
+        elif isinstance(p, SlidingModePlant):    # sampled_zoh: u enters through its B
+            self.n_inputs = int(p.B.shape[1])
         else:
             mech = p.lagrangian() if isinstance(p, ImpactingBodies) else p
             self.n_inputs = mech.n_dof if mech.actuation is None else mech.actuation.shape[1]

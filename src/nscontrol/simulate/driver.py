@@ -34,7 +34,9 @@ What the driver owns for every method:
   (:func:`check_run` makes the same checks ahead of a sweep);
 * composite systems (a :func:`nscontrol.closed_loop`, impacting bodies): lowered to what the
   method integrates by the registered lowerings (:mod:`nscontrol.simulate.lowering`), and
-  the result (a partial one too) mapped back, their named signals added.
+  the result (a partial one too) mapped back, their named signals added — unless the method's
+  :meth:`Integrator.supports` accepts the composite itself (``sampled_zoh``), which then
+  integrates it as it is.
 """
 
 from __future__ import annotations
@@ -142,6 +144,7 @@ METHODS = _Registry({
     "moreau_jean": "nscontrol.simulate.methods:MoreauJean",
     "implicit_euler": "nscontrol.simulate.methods:ImplicitEuler",
     "switching": "nscontrol.simulate.methods:Switching",
+    "sampled_zoh": "nscontrol.simulate.methods:SampledZOH",
 })
 
 

@@ -16,6 +16,8 @@ method             systems                                     capabilities
                                                                sensitivity (discrete map)
 ``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
                    SwitchedAffineSystem, NonlinearSystem       sensitivity, t_eval
+``sampled_zoh``    a closed loop of a SlidingModePlant and a   exact flow
+                   sampled controller (the loop itself)
 =================  ==========================================  ============================
 """
 
@@ -25,7 +27,7 @@ from typing import Any, ClassVar
 
 from .driver import _ModuleIntegrator
 
-__all__ = ["EventDriven", "MoreauJean", "ImplicitEuler", "Switching"]
+__all__ = ["EventDriven", "MoreauJean", "ImplicitEuler", "Switching", "SampledZOH"]
 
 
 class EventDriven(_ModuleIntegrator):
@@ -121,3 +123,27 @@ class Switching(_ModuleIntegrator):
     def systems(cls) -> str:
         return ("PiecewiseAffineSystem, FilippovSystem, SwitchedAffineSystem and "
                 "NonlinearSystem (for Lur'e systems use method='implicit_euler')")
+
+
+class SampledZOH(_ModuleIntegrator):
+    """A plant and a sampled controller, the plant stepped exactly over each period with the
+    controller's output held (:mod:`nscontrol.simulate.sampled_zoh`)."""
+
+    name = "sampled_zoh"
+    module = "nscontrol.simulate.sampled_zoh"
+    capabilities = frozenset({"exact_flow"})
+    options: ClassVar[frozenset[str]] = frozenset()
+
+    @classmethod
+    def supports(cls, system: Any) -> bool:
+        """A closed loop around a ``SlidingModePlant``: integrated as it is (its blocks are
+        checked when it runs)."""
+        from ..systems.sliding_mode import SlidingModePlant
+        from .closed_loop import ClosedLoop
+
+        return isinstance(system, ClosedLoop) and isinstance(system.plant, SlidingModePlant)
+
+    @classmethod
+    def systems(cls) -> str:
+        return ("closed_loop(plant, controller) of a SlidingModePlant and a sampled "
+                "controller")

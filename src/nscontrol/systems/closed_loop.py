@@ -205,7 +205,10 @@ class ClosedLoop:
     @property
     def default_method(self) -> str:
         from .lure import LureSystem
+        from .sliding_mode import SlidingModePlant
 
+        if isinstance(self.plant, SlidingModePlant):    # the loop is integrated as it is
+            return "sampled_zoh"
         if self._composition == "blocks":
             return "implicit_euler" if isinstance(self.plant, LureSystem) else "moreau_jean"
         return str(self._plant_model.default_method)   # the stacked model's family
@@ -326,6 +329,7 @@ def _composition(loop: ClosedLoop) -> str:
     from .lagrangian import LagrangianSystem
     from .lure import LureSystem
     from .pwa import PiecewiseAffineSystem
+    from .sliding_mode import SlidingModePlant
 
     plant, ctrl, obs = loop.plant, loop.controller, loop.observer
     linear_blocks = (_is_linear_block(ctrl, "controller") and
@@ -347,8 +351,9 @@ def _composition(loop: ClosedLoop) -> str:
             isinstance(ctrl, StateFeedback) and ctrl.on == "state" and \
             ctrl.period is None and plant.is_linear:
         return "folded"
-    if isinstance(plant, LagrangianSystem | ImpactingBodies):
-        return "blocks"                                     # Python blocks beside the plant
+    if isinstance(plant, LagrangianSystem | ImpactingBodies | SlidingModePlant):
+        return "blocks"         # Python blocks beside the plant (or the loop itself: sampled_zoh)
     raise ModelError(f"plant: closed_loop composes LagrangianSystem, ImpactingBodies, "
-                     f"LinearHybridSystem, LureSystem and PiecewiseAffineSystem plants, got "
+                     f"LinearHybridSystem, LureSystem, PiecewiseAffineSystem and "
+                     f"SlidingModePlant plants, got "
                      f"{type(plant).__name__}")

@@ -121,6 +121,12 @@ class SlidingModePlant:
 
     # -- evaluation -------------------------------------------------------------------------
     @property
+    def default_method(self) -> str:
+        """``"sampled_zoh"``: the plant runs with a sampled controller,
+        ``simulate(closed_loop(plant, controller), ...)``, stepped exactly between samples."""
+        return "sampled_zoh"
+
+    @property
     def n_states(self) -> int:
         """Dimension ``n`` of the plant state."""
         return int(self.A.shape[0])

@@ -53,7 +53,11 @@ def _mechanical_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dic
     """Moreau–Jean with ``controller=(t, q, v, *, lam_hat, active)`` and a listener that
     resets the blocks at impacts."""
     from ...systems.impacting_bodies import ImpactingBodies
+    from ...systems.sliding_mode import SlidingModePlant
 
+    if isinstance(loop.plant, SlidingModePlant):
+        raise ModelError(f"{method.name}: a {type(loop.plant).__name__} plant runs with its "
+                         f"sampled controller by method='sampled_zoh'")
     if method.name != "moreau_jean":
         raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
                          f"the plant; use method='moreau_jean' (or give the blocks as "
