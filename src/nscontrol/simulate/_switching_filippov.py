@@ -66,7 +66,7 @@ import numpy as np
 from .._validation import FloatArray
 from ..errors import ModelError
 from ..numerics.differences import central_difference_jacobian
-from .switching import saltation_matrix
+from ._switching_run import saltation_matrix
 
 _GRAZE_FACTOR = 100.0
 #: Onset of second-order sliding at a crossing: |σ| below this times |∇h| |F|. In the
@@ -209,11 +209,11 @@ class _NoSurfaces:
         return np.zeros(0)
 
 
-def run_smooth(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+def run_smooth(system: Any, x0: FloatArray, run: Any
                ) -> dict[str, Any]:
     """Integrate a smooth :class:`~nscontrol.systems.nonlinear.NonlinearSystem` (input from
-    ``options["u"]`` or the system's) by the Filippov path with no surface."""
-    extra = run_filippov(_NoSurfaces(system, options.get("u")), x0, run, options)
+    the ``u`` option or the system's) by the Filippov path with no surface."""
+    extra = run_filippov(_NoSurfaces(system, run.opts.u), x0, run)
     del extra["final_mode"]      # a single mode: nothing to report
     return extra
 
@@ -259,7 +259,7 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
     return tuple(signs), sliding
 
 
-def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+def run_filippov(system: Any, x0: FloatArray, run: Any
                  ) -> dict[str, Any]:
     fields = _Fields(system)
     n = system.n_states

@@ -31,12 +31,13 @@ from scipy.linalg import expm
 from .._validation import FloatArray
 from ..errors import InadmissibleStateError, ModelError, SlidingError, ZenoError
 from .event_driven._flight import projection_stats
-from .switching import saltation_matrix
+from ._switching_run import saltation_matrix
 
 
-def _exosystem(system: Any, options: dict[str, Any]) -> Any:
-    """The input as an Exosystem, ``None`` for no input, or ``"function"`` otherwise."""
-    u = options.get("u", system.u)
+def _exosystem(system: Any, u: Any) -> Any:
+    """The input (``u``, or the system's when ``None``) as an Exosystem, ``None`` for no input,
+    or ``"function"`` otherwise."""
+    u = system.u if u is None else u
     if u is None or system.E is None:
         return None
     if all(hasattr(u, a) for a in ("S", "Cu", "w0")):
@@ -235,11 +236,11 @@ def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int) -> None:
         run.rec.extend(te[ptr0:ptr], buf.s_x[ptr0:ptr])
 
 
-def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
+def run_pwa(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
     _check_x0(system, x0)
-    exo = _exosystem(system, options)
+    exo = _exosystem(system, run.opts.u)
     if exo == "function":
-        return _run_pwa_ode(system, x0, run, options)
+        return _run_pwa_ode(system, x0, run)
     from ..numerics.lti import TAYLOR_REMAINDER
     from . import _pwa_kernels as K
 
@@ -350,12 +351,12 @@ def _settle(system: Any, modes: _Modes, run: Any, t: float, i: int, xi: FloatArr
     return False, j
 
 
-def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
                  ) -> dict[str, Any]:
     """Pieces by DOP853 for inputs given as arbitrary functions of time: one terminal event
     per facet (leaving the region) and per domain facet, and one non-terminal event per facet
     on the slack's derivative (grazing candidates: a minimum of the slack at zero)."""
-    u = options.get("u", system.u)
+    u = system.u if run.opts.u is None else run.opts.u
     from ..systems.lure import as_input_function
 
     ufn = as_input_function("u", u, system.E.shape[1])

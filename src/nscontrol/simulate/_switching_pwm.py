@@ -43,7 +43,7 @@ from ..numerics.saltation import time_shift_term
 _OFFSET_RATES = {"centered": (0.0, 0.5, -0.5), "leading": (0.0, 1.0), "trailing": (0.0, -1.0)}
 
 
-def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
+def run_pwm(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
     ctrl = system.controller
     if ctrl is None:
         raise ModelError("system.controller: a SwitchedAffineSystem needs its PWMController to "
