@@ -30,8 +30,8 @@ from scipy.linalg import expm
 
 from .._validation import FloatArray
 from ..errors import InadmissibleStateError, ModelError, SlidingError, ZenoError
-from .event_driven._flight import projection_stats
 from ._switching_run import saltation_matrix
+from .event_driven._flight import projection_stats
 
 
 def _exosystem(system: Any, u: Any) -> Any:

@@ -262,8 +262,8 @@ def _budgeted_dop853() -> type:
     from scipy.integrate import DOP853
 
     class BudgetedDOP853(DOP853):
-        def __init__(self, fun: Any, t0: float, y0: FloatArray, t_bound: float, *, run: SwitchingRun,
-                     **options: Any) -> None:
+        def __init__(self, fun: Any, t0: float, y0: FloatArray, t_bound: float, *,
+                     run: SwitchingRun, **options: Any) -> None:
             self.run = run
             super().__init__(fun, t0, y0, t_bound, **options)
 
