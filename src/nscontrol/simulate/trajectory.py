@@ -12,6 +12,7 @@ step or selected signals only) and call :meth:`Recorder.finish` to obtain the fr
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -121,6 +122,16 @@ class Trajectory:
                                      f"expected {t.shape[0]} (one per sample)")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "x", x)
+
+    @classmethod
+    def _from_record(cls, **values: Any) -> Trajectory:
+        """A trajectory from a :class:`Recorder`'s buffers, which satisfy the checks of
+        ``__post_init__`` by construction (float64 arrays, time-major, one row per sample,
+        finite times in order): every field given, nothing converted or checked."""
+        traj = object.__new__(cls)
+        for name in cls.__dataclass_fields__:
+            object.__setattr__(traj, name, values[name])
+        return traj
 
     # -- views --------------------------------------------------------------------------
     @property
@@ -816,13 +827,21 @@ class Recorder:
             order = np.argsort(t, kind="stable")
             t, x = t[order], x[order]
             signals = {k: v[order] for k, v in signals.items()}
-        return Trajectory(
+        if not math.isfinite(float(t.sum())):   # a NaN or infinite time (the sum of finite
+            _check_times(t)                     # times overflowing passes the full check)
+        # the buffers are float64, time-major, one row per sample and now in time order:
+        # what Trajectory.__post_init__ checks holds by construction, so it is skipped
+        return Trajectory._from_record(
             t=t, x=x, signals=signals,
-            events=tuple(sorted(self.events, key=lambda e: e.time)),
+            events=tuple(sorted(self.events, key=_event_time)) if self.events else (),
             stats=dict(stats or {}), status=status,
             message=STATUS_MESSAGES[status] if message is None else message,
             method=method, state_names=tuple(state_names),
         )
+
+
+def _event_time(event: Event) -> float:
+    return event.time
 
 
 def _signal_names(signals: Iterable[str], offered: tuple[str, ...] | None) -> set[str]:
