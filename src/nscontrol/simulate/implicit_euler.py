@@ -119,8 +119,8 @@ from .trajectory import (
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.lure import LureSystem
 
-__all__ = ["integrate", "ImplicitEulerOptions", "StepMatrices", "step_matrices", "componentwise_spec",
-           "lcp_step_data"]
+__all__ = ["integrate", "ImplicitEulerOptions", "StepMatrices", "step_matrices",
+           "componentwise_spec", "lcp_step_data"]
 
 _CHUNK = 1 << 16
 _SIGNALS = ("z", "w", "y")
