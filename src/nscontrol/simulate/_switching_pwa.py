@@ -367,14 +367,7 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
         return system.A[i] @ x + system.b[i] + system.E @ ufn(t)[0]
 
     def mode_at(x: FloatArray, t: float, exclude: int = -1) -> int:
-        for j in range(system.n_regions):
-            if j == exclude or not system.contains(j, x, 1e-9):
-                continue
-            H, hh = system.regions[j]
-            act = np.abs(hh - H @ x) <= 1e-9 * (1 + np.abs(hh) + np.abs(H) @ np.abs(x))
-            if not np.any(act) or np.all(H[act] @ field(j, t, x) <= 0.0):
-                return j
-        return -1
+        return _inward_region(system, field, x, t, exclude)
 
     t, x = run.t0, x0.copy()
     i = mode_at(x, t)
@@ -385,17 +378,7 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
     last_graze: dict[int, float] = {}
     while t < run.tf:
         H, h = system.regions[i]
-        events: list[Any] = []
-        kinds: list[tuple[str, int]] = []
-        for r in range(H.shape[0]):
-            events.append(_facet_event(H[r], float(h[r])))
-            kinds.append(("facet", r))
-            events.append(_slack_extremum(H[r], lambda tt, xx, i=i: field(i, tt, xx)))
-            kinds.append(("graze", r))
-        if system.domain is not None:
-            for r in range(system.domain[0].shape[0]):
-                events.append(_facet_event(system.domain[0][r], float(system.domain[1][r])))
-                kinds.append(("domain", r))
+        events, kinds = _region_events(system, i, field)
         sol = run.dop853(lambda tt, xx, i=i: field(i, tt, xx), t, x, events)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
@@ -404,21 +387,7 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
         if sol.status < 0:
             raise run.piece_failure(sol, t_end, f"in region {i}; check the input function for "
                                                 f"NaN or infinite values")
-        for k, (kind, r) in enumerate(kinds):   # grazing: slack minimum at zero
-            if kind != "graze":
-                continue
-            for tr in sol.t_events[k]:
-                tr = float(tr)
-                if tr >= t_end and sol.status == 1:
-                    continue
-                xr = sol.sol(tr)
-                tol = 100.0 * (run.atol + run.rtol * float(np.max(np.abs(xr)))) * \
-                    float(np.linalg.norm(H[r]))
-                if abs(float(h[r] - H[r] @ xr)) <= tol and \
-                        abs(tr - last_graze.get(r, -np.inf)) > 1e-9 * (1.0 + abs(tr)):
-                    last_graze[r] = tr
-                    run.event(tr, "grazing", r, xr, xr, i, i)
-                    run.rec.sample(tr, xr, force=True)
+        _record_ode_grazings(run, sol, kinds, system.regions[i], i, t_end, last_graze)
         if run.sensitivity:
             run.Phi = expm(system.A[i] * (t_end - t)) @ run.Phi
         segments += 1
@@ -452,6 +421,60 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
     if run.rec.last_time < run.tf and run.status == 0:
         run.rec.sample(run.tf, x, force=True)
     return {"segments": segments, "final_mode": i, "propagation": "dop853"}
+
+
+def _inward_region(system: Any, field: Any, x: FloatArray, t: float, exclude: int) -> int:
+    """A region (not ``exclude``) holding ``x`` whose field ``field(j, t, x)`` does not point
+    out through a facet ``x`` lies on; -1 when none."""
+    for j in range(system.n_regions):
+        if j == exclude or not system.contains(j, x, 1e-9):
+            continue
+        H, hh = system.regions[j]
+        act = np.abs(hh - H @ x) <= 1e-9 * (1 + np.abs(hh) + np.abs(H) @ np.abs(x))
+        if not np.any(act) or np.all(H[act] @ field(j, t, x) <= 0.0):
+            return j
+    return -1
+
+
+def _region_events(system: Any, i: int, field: Any) -> tuple[list[Any], list[tuple[str, int]]]:
+    """The DOP853 events of a piece in region ``i``: per facet a terminal one (leaving) and a
+    grazing candidate (the slack's minimum), and per domain facet a terminal one."""
+    H, h = system.regions[i]
+    events: list[Any] = []
+    kinds: list[tuple[str, int]] = []
+    for r in range(H.shape[0]):
+        events.append(_facet_event(H[r], float(h[r])))
+        kinds.append(("facet", r))
+        events.append(_slack_extremum(H[r], lambda tt, xx, i=i: field(i, tt, xx)))
+        kinds.append(("graze", r))
+    if system.domain is not None:
+        for r in range(system.domain[0].shape[0]):
+            events.append(_facet_event(system.domain[0][r], float(system.domain[1][r])))
+            kinds.append(("domain", r))
+    return events, kinds
+
+
+def _record_ode_grazings(run: Any, sol: Any, kinds: list[tuple[str, int]],
+                         region: tuple[FloatArray, FloatArray], i: int, t_end: float,
+                         last_graze: dict[int, float]) -> None:
+    """Record the grazings of a DOP853 piece in region ``i``: a slack minimum at zero (to
+    100 times the solver's tolerance), once per touch."""
+    H, h = region
+    for k, (kind, r) in enumerate(kinds):
+        if kind != "graze":
+            continue
+        for tr in sol.t_events[k]:
+            tr = float(tr)
+            if tr >= t_end and sol.status == 1:
+                continue
+            xr = sol.sol(tr)
+            tol = 100.0 * (run.atol + run.rtol * float(np.max(np.abs(xr)))) * \
+                float(np.linalg.norm(H[r]))
+            if abs(float(h[r] - H[r] @ xr)) <= tol and \
+                    abs(tr - last_graze.get(r, -np.inf)) > 1e-9 * (1.0 + abs(tr)):
+                last_graze[r] = tr
+                run.event(tr, "grazing", r, xr, xr, i, i)
+                run.rec.sample(tr, xr, force=True)
 
 
 def _facet_event(row: FloatArray, offset: float) -> Any:

@@ -76,6 +76,13 @@ class SwitchingOptions:
 _NAMES = frozenset(f.name for f in SwitchingOptions.__dataclass_fields__.values())
 
 
+@functools.lru_cache(maxsize=16)
+def _regular_samples(t0: float, tf: float, n: int) -> FloatArray:
+    """``np.linspace(t0, tf, n)`` kept for the runs over one span (a sweep): copying it is
+    cheaper than building it (callers copy, the compiled loop takes writable arrays)."""
+    return np.linspace(t0, tf, n)
+
+
 def _check_t_eval(t_eval: Any) -> FloatArray | None:
     if t_eval is None:
         return None
@@ -139,8 +146,9 @@ class SwitchingRun:
         self.t0, self.tf = t_span
         t_eval = opts.t_eval
         if t_eval is None:
-            t_eval = np.linspace(self.t0, self.tf, opts.n_samples)
-        self.t_eval = t_eval[(t_eval >= self.t0) & (t_eval <= self.tf)]
+            self.t_eval = _regular_samples(self.t0, self.tf, opts.n_samples).copy()
+        else:
+            self.t_eval = t_eval[(t_eval >= self.t0) & (t_eval <= self.tf)]
         self._ptr = 0
         self.sensitivity, self.rtol, self.atol = opts.sensitivity, opts.rtol, opts.atol
         self.max_events, self.max_steps = opts.max_events, opts.max_steps

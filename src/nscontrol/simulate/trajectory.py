@@ -821,7 +821,7 @@ class Recorder:
         n = self._n
         t, x = self._t[:n].copy(), self._x[:n].copy()
         signals = {k: v[:n].copy() for k, v in self._sig.items()}
-        if n > 1 and np.any(np.diff(t) < 0.0):
+        if n > 1 and (t[1:] < t[:-1]).any():
             # a forced sample at a root found after its piece was sampled (the switching
             # method's grazings): put it in time order; stable, so pre/post pairs keep theirs
             order = np.argsort(t, kind="stable")
