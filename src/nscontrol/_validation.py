@@ -132,7 +132,7 @@ def as_square(name: str, value: Any, size: int | None = None) -> FloatArray:
 
 def check_finite(name: str, arr: np.ndarray) -> None:
     """Raise :class:`ModelError` when ``arr`` holds NaN or infinite entries."""
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise ModelError(f"{name}: expected finite entries, got {bad} NaN or infinite "
                          f"value(s)")

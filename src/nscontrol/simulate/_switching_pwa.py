@@ -23,6 +23,7 @@ domain row, ``mode_to = -1``) and ``status = 1``.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -98,7 +99,23 @@ class _Modes:
     @classmethod
     def of(cls, system: Any, exo: Any) -> _Modes:
         """The modes of ``system`` under the exosystem ``exo`` (``None``: no input), shared
-        by the runs of an equal model and input (the most recent 32 are kept)."""
+        by the runs of an equal model and input (the most recent 32 are kept). The same
+        model object with the same input object finds its modes without hashing them."""
+        per_system = _MODES_OF.get(system)
+        if per_system is None:
+            per_system = _MODES_OF[system] = {}
+        known = per_system.get(id(exo))
+        if known is not None and known[0] is exo:   # the entry holds exo: its id is unique
+            return known[1]
+        modes = cls._shared(system, exo)
+        if len(per_system) >= 8:
+            per_system.pop(next(iter(per_system)))
+        per_system[id(exo)] = (exo, modes)
+        return modes
+
+    @classmethod
+    def _shared(cls, system: Any, exo: Any) -> _Modes:
+        """The modes of an equal model and input, found by their matrices' bytes."""
         n = system.n_states
         if exo is None:
             S, Bu = np.zeros((0, 0)), np.zeros((n, 0))
@@ -160,6 +177,9 @@ class _Modes:
 
 
 _MODES: dict[Any, _Modes] = {}
+#: Per model object (a PiecewiseAffineSystem is frozen), per input object: its modes.
+_MODES_OF: weakref.WeakKeyDictionary[Any, dict[int, tuple[Any, _Modes]]] = \
+    weakref.WeakKeyDictionary()
 
 
 def _check_x0(system: Any, x0: FloatArray) -> None:

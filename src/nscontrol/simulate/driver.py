@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import sys
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -109,7 +110,8 @@ class _ModuleIntegrator(Integrator):
 
     def integrate(self, system: Any, x0: Any, t_span: tuple[float, float],
                   **options: Any) -> Trajectory:
-        return importlib.import_module(self.module).integrate(system, x0, t_span, **options)
+        module = sys.modules.get(self.module) or importlib.import_module(self.module)
+        return module.integrate(system, x0, t_span, **options)
 
 
 # -- the registry: names -> classes, resolved lazily (import nscontrol stays fast) ----------
