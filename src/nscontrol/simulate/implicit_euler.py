@@ -517,12 +517,14 @@ def _initial_multiplier(system: Any, x0: FloatArray, t0: float) -> tuple[FloatAr
     InadmissibleStateError
         ``D = 0`` and ``H x0 + g(t0)`` lies outside the domain of the law.
     """
-    a = system.H @ x0 + system.shift_at(t0)[0]
+    a = system.H @ x0
+    if system.has_shift:
+        a += system.shift_at(t0)[0]
     m = a.shape[0]
-    if not np.any(system.D):
+    if not system.D.any():
         bad = [f"z[{sl.start}:{sl.stop}] = {np.array2string(a[sl], precision=6)} outside the "
                f"domain of {part!r}" for sl, part in _law_parts(system.law)
-               if not part.in_domain(a[sl], 1e-12 * (1.0 + float(np.max(np.abs(a[sl])))))]
+               if not part.in_domain(a[sl], 1e-12 * (1.0 + float(np.abs(a[sl]).max())))]
         if bad:
             raise InadmissibleStateError(
                 f"x0: the initial state violates the law's constraint: z0 = H x0 + g(t0) must "
