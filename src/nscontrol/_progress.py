@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 from typing import Any
 
 from ._kernel_cache import KERNEL_GLOBS
@@ -16,27 +17,38 @@ class TimeProgress:
     """A progress bar over simulated time ``[t0, tf]``, shown on stderr after ``delay`` seconds.
 
     ``enable=None`` shows it only when stderr is a terminal or the run is long; ``False`` never.
-    Updates are cheap: call :meth:`update` as often as convenient.
+    Updates are cheap: call :meth:`update` as often as convenient. The bar itself (tqdm) is
+    built at the first update after ``delay`` seconds of wall time, so a short run (most
+    calls of a sweep) pays one clock reading per update and never imports or starts tqdm.
     """
 
     def __init__(self, t0: float, tf: float, *, desc: str = "simulate",
                  enable: bool | None = None, delay: float = 2.0) -> None:
         self.t0, self.tf = float(t0), float(tf)
         self._bar: Any = None
-        if check_bool("progress", enable, allow_none=True) is False:
-            return
+        self._desc = desc
+        self._last = 0
+        # wall time after which the bar appears; None: never
+        self._due: float | None = None
+        if check_bool("progress", enable, allow_none=True) is not False:
+            self._start = time.perf_counter()
+            self._due = self._start + delay
+
+    def _open(self) -> None:
         from tqdm.auto import tqdm
 
         # the simulated time goes into the description: tqdm prefixes a postfix with ", "
-        self._desc = desc
-        self._bar = tqdm(total=1000, desc=desc, file=sys.stderr, delay=delay, leave=False,
+        self._bar = tqdm(total=1000, desc=self._desc, file=sys.stderr, leave=False,
                          bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
-        self._last = 0
+        self._bar.start_t = self._start   # the elapsed time counts from the run's start
+        self._due = None
 
     def update(self, t: float) -> None:
         """Advance the bar to simulated time ``t`` (cheap; redraws at most 1000 times)."""
         if self._bar is None:
-            return
+            if self._due is None or time.perf_counter() < self._due:
+                return
+            self._open()
         k = int(1000 * (t - self.t0) / (self.tf - self.t0))
         if k > self._last:
             self._bar.set_description_str(f"{self._desc} t={t:.4g}", refresh=False)
@@ -45,6 +57,7 @@ class TimeProgress:
 
     def close(self) -> None:
         """Remove the bar (idempotent)."""
+        self._due = None
         if self._bar is not None:
             self._bar.close()
             self._bar = None

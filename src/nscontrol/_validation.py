@@ -6,6 +6,7 @@ so that a bad input is reported where the user wrote it, not deep inside a solve
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -131,7 +132,7 @@ def as_square(name: str, value: Any, size: int | None = None) -> FloatArray:
 
 def check_finite(name: str, arr: np.ndarray) -> None:
     """Raise :class:`ModelError` when ``arr`` holds NaN or infinite entries."""
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise ModelError(f"{name}: expected finite entries, got {bad} NaN or infinite "
                          f"value(s)")
@@ -161,6 +162,8 @@ def as_real_scalar(name: str, value: Any) -> float:
 
     Not checked for finiteness; :func:`check_positive` and :func:`check_in_interval` do that.
     """
+    if type(value) is float or type(value) is int:   # the common case, checked first (fast)
+        return float(value)
     if isinstance(value, np.ndarray):
         if value.size != 1:        # a one-element array is accepted as its element
             raise ModelError(f"{name}: expected a real number, got an array of shape "
@@ -188,7 +191,7 @@ def check_positive(name: str, value: Any, *, allow_zero: bool = False,
     """A finite scalar that is > 0 (or >= 0 with ``allow_zero``); ``hint`` (what the value
     means or what to pass) ends the message of a refusal."""
     v = as_real_scalar(name, value)
-    if not np.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
+    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
         raise ModelError(f"{name}: expected a finite number {bound}, got {value!r}"
                          + (f"; {hint}" if hint else ""))
@@ -352,8 +355,8 @@ def as_interval(name: str, value: Any, *, labels: tuple[str, str] = ("lo", "hi")
     if len(items) != 2:
         raise DimensionError(f"{name}: expected a pair ({lo_name}, {hi_name}), got "
                              f"{len(items)} value(s): {_short(value)}")
-    lo, hi = (as_real_scalar(f"{name}[{i}]", v) for i, v in enumerate(items))
-    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+    lo, hi = as_real_scalar(f"{name}[0]", items[0]), as_real_scalar(f"{name}[1]", items[1])
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
         hint = f"; write ({hi:g}, {lo:g})" if np.isfinite(lo) and np.isfinite(hi) and hi < lo \
             else ""
         raise ModelError(f"{name}: expected finite {lo_name} < {hi_name}, got ({lo}, {hi})"

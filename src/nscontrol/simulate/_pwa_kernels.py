@@ -177,6 +177,56 @@ def run_pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws,
 
 
 @njit(cache=True)
+def _crossed_facet(hit, graze, n_facets):  # pragma: no cover - compiled
+    """The first region facet hit, or -1 when the loop hands the event to Python: a domain
+    facet was hit (Python decides whether the run ends), or every hit facet is grazed."""
+    row = -1
+    plain = True
+    all_graze = True
+    for r in range(hit.shape[0]):
+        if hit[r]:
+            if r >= n_facets:
+                plain = False
+            elif row < 0:
+                row = r
+            if not graze[r]:
+                all_graze = False
+    return -1 if (not plain or all_graze) else row
+
+
+@njit(cache=True)
+def _crossing_saltation(aug, normal, i, j, xi, n, fm, fp, S, Phi,
+                        tmp):  # pragma: no cover - compiled
+    """``S = I + (F⁺ - F⁻) nᵀ / (nᵀF⁻)`` of the crossing from region ``i`` to ``j`` at ``xi``
+    into ``S``, and ``Φ ← S Φ``; False (nothing written) when ``nᵀF⁻ = 0``."""
+    _field(aug, i, xi, n, fm)
+    _field(aug, j, xi, n, fp)
+    den = 0.0
+    for c in range(n):
+        den += normal[c] * fm[c]
+    if den == 0.0:
+        return False
+    for r in range(n):
+        for c in range(n):
+            S[r, c] = (fp[r] - fm[r]) * normal[c] / den
+        S[r, r] += 1.0
+    _premultiply(S, Phi, tmp)
+    return True
+
+
+@njit(cache=True)
+def _sample_flight(kind, lam, V, Vinv, phi, T, d, hh, xi, t, lo, t_end, t_eval, ptr, s_x, xn,
+                   n):  # pragma: no cover - compiled
+    """The requested samples in ``(t, t_end]`` of the flight from ``xi`` at ``t + lo`` into
+    ``s_x``; returns the next sample's index (``xn`` is scratch)."""
+    while ptr < t_eval.shape[0] and t_eval[ptr] <= t_end:
+        propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, (t_eval[ptr] - t) - lo, xn)
+        s_x[ptr, :] = xn[:n]
+        ptr += 1
+    return ptr
+
+
+@njit(cache=True)
 def _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0s, row_norms,
             bern, remainder, graze_tol, sim_tol, H, h, nf, aug, xi, t, lo, tf, i, Phi, sens,
             t_eval, ptr, s_x, e_t, e_row, e_from, e_to, e_x, e_S, e_ptr, budget, hit, graze,
@@ -187,7 +237,6 @@ def _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0
     n = Phi.shape[0]
     n_e = 0
     pieces = 0
-    n_samples = t_eval.shape[0]
     cap_e = e_t.shape[0]
     y = np.empty(m)
     a = np.empty(Ws.shape[1])
@@ -223,10 +272,8 @@ def _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0
             return INADMISSIBLE, t, i, ptr, n_e, stuck, pieces, index, lo
         event = code == EVENT
         piece, t_end, lo_end = flight_end(event, tau, t, lo, tf)
-        while ptr < n_samples and t_eval[ptr] <= t_end:   # samples in (t, t_end]
-            propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, (t_eval[ptr] - t) - lo, xn)
-            s_x[ptr, :] = xn[:n]
-            ptr += 1
+        ptr = _sample_flight(kind, lam, V, Vinv, phi, T, d, hh, xi, t, lo, t_end, t_eval, ptr,
+                             s_x, xn, n)
         propagate(kind, lam, V, Vinv, phi, T, d, hh, xi, piece, xn)
         if sens:
             _times_expm(kind, lam, V, Vinv, phi, T, d, hh, piece, n, Phi, unit, col, E, tmp)
@@ -241,35 +288,15 @@ def _pieces(kinds, lams, Vs, Vinvs, phis, taylors, ds, hs, kappas, ready, Ws, g0
         t, lo = t_end, lo_end
         if not event or t >= tf:
             break
-        row = -1
-        plain = True
-        all_graze = True
-        for r in range(hit.shape[0]):
-            if hit[r]:
-                if r >= nf[i]:
-                    plain = False   # a domain facet: Python decides whether the run ends
-                elif row < 0:
-                    row = r
-                if not graze[r]:
-                    all_graze = False
-        if not plain or all_graze or row < 0:
+        row = _crossed_facet(hit, graze, nf[i])
+        if row < 0:
             return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
         j = choose_region(H, h, nf, aug, xi, n, i)
         if j < 0:
             return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
-        if sens:
-            _field(aug, i, xi, n, fm)
-            _field(aug, j, xi, n, fp)
-            den = 0.0
-            for c in range(n):
-                den += H[i, row, c] * fm[c]
-            if den == 0.0:
-                return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
-            for r in range(n):   # S = I + (F⁺ - F⁻) nᵀ / (nᵀF⁻)
-                for c in range(n):
-                    e_S[n_e, r, c] = (fp[r] - fm[r]) * H[i, row, c] / den
-                e_S[n_e, r, r] += 1.0
-            _premultiply(e_S[n_e], Phi, tmp)
+        if sens and not _crossing_saltation(aug, H[i, row], i, j, xi, n, fm, fp, e_S[n_e],
+                                            Phi, tmp):
+            return HANDOFF, t, i, ptr, n_e, stuck, pieces, -1, lo
         e_t[n_e] = t
         e_row[n_e] = row
         e_from[n_e] = i

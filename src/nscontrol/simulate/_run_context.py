@@ -11,12 +11,20 @@ import contextvars
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from .trajectory import Recorder, Trajectory
+from typing import Any, Protocol
 
 __all__ = ["RunContext", "current_run", "run_context", "register_recorder"]
+
+
+class PartialRecord(Protocol):
+    """What the run needs of a recorder (:class:`~nscontrol.simulate.trajectory.Recorder`):
+    its sample count and a snapshot of it as a trajectory. A protocol, so that this module
+    does not import the recorder's (which registers with it)."""
+
+    def __len__(self) -> int: ...
+
+    def snapshot(self, *, status: int = -1, message: str | None = None,
+                 method: str = "") -> Any: ...
 
 
 @dataclass
@@ -35,15 +43,16 @@ class RunContext:
     """
 
     method: str
-    recorders: list[Recorder] = field(default_factory=list)
-    partial_transform: Callable[[Trajectory], Trajectory] | None = None
+    recorders: list[PartialRecord] = field(default_factory=list)
+    partial_transform: Callable[[Any], Any] | None = None
 
     def has_samples(self) -> bool:
         """Whether the run's record holds at least one sample."""
         return bool(self.recorders) and len(self.recorders[0]) > 0
 
-    def partial(self, message: str) -> Trajectory | None:
-        """The trajectory recorded so far, with ``status = -1`` and ``message``."""
+    def partial(self, message: str) -> Any:
+        """The trajectory recorded so far (a :class:`~nscontrol.simulate.trajectory.Trajectory`,
+        ``None`` before any recorder), with ``status = -1`` and ``message``."""
         if not self.recorders:
             return None
         traj = self.recorders[0].snapshot(status=-1, message=message, method=self.method)
@@ -69,7 +78,7 @@ def run_context(ctx: RunContext) -> Iterator[RunContext]:
         _CURRENT.reset(token)
 
 
-def register_recorder(rec: Any) -> None:
+def register_recorder(rec: PartialRecord) -> None:
     """Called by every recorder at construction."""
     ctx = _CURRENT.get()
     if ctx is not None:

@@ -66,7 +66,7 @@ import numpy as np
 from .._validation import FloatArray
 from ..errors import ModelError
 from ..numerics.differences import central_difference_jacobian
-from .switching import saltation_matrix
+from ._switching_run import saltation_matrix
 
 _GRAZE_FACTOR = 100.0
 #: Onset of second-order sliding at a crossing: |σ| below this times |∇h| |F|. In the
@@ -209,11 +209,11 @@ class _NoSurfaces:
         return np.zeros(0)
 
 
-def run_smooth(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+def run_smooth(system: Any, x0: FloatArray, run: Any
                ) -> dict[str, Any]:
     """Integrate a smooth :class:`~nscontrol.systems.nonlinear.NonlinearSystem` (input from
-    ``options["u"]`` or the system's) by the Filippov path with no surface."""
-    extra = run_filippov(_NoSurfaces(system, options.get("u")), x0, run, options)
+    the ``u`` option or the system's) by the Filippov path with no surface."""
+    extra = run_filippov(_NoSurfaces(system, run.opts.u), x0, run)
     del extra["final_mode"]      # a single mode: nothing to report
     return extra
 
@@ -259,7 +259,7 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
     return tuple(signs), sliding
 
 
-def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+def run_filippov(system: Any, x0: FloatArray, run: Any
                  ) -> dict[str, Any]:
     fields = _Fields(system)
     n = system.n_states
@@ -277,37 +277,9 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     last_graze: dict[int, float] = {}
     last_cross: dict[int, float] = {}
     while t < run.tf:
-        if second >= 0:
-            f, (events, kinds) = _two_sliding_piece(system, fields, signs, second)
-        else:
-            f = fields.rhs(signs, sliding)
-            events, kinds = _events(system, fields, signs, sliding)
-        x = _onto_sides(system, signs, max(sliding, second), x)
-        if run.sensitivity:
-            rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
-                np.concatenate([x, np.eye(n).ravel()])
-        else:
-            rhs, y0 = f, x
-        sol = run.dop853(rhs, t, y0, events)
-        t_end = float(sol.t[-1])
-        ts = run.samples(t, t_end, last=sol.status == 0)
-        if ts.size and sol.sol is not None:
-            X = sol.sol(ts)[:n].T
-            if max(sliding, second) >= 0:
-                X = np.array([_project(system, max(sliding, second), xs) for xs in X])
-            run.rec.extend(ts, X)
-        if sol.status < 0:
-            raise run.piece_failure(sol, t_end, "the field may be singular or blow up there")
-        _record_grazings(system, run, sol, kinds, signs, sliding, t_end, last_graze)
-        if run.sensitivity:
-            run.Phi = sol.y[n:, -1].reshape(n, n) @ run.Phi
-        run.stuck = 0 if t_end > t else run.stuck
-        if t_end <= t:
-            run.zero_length(t_end)
+        sol, kinds, t, x = _piece(system, fields, run, t, x, signs, sliding, second,
+                                  last_graze)
         pieces += 1
-        t, x = t_end, sol.y[:n, -1].copy()
-        if max(sliding, second) >= 0:
-            x = _project(system, max(sliding, second), x)
         run.bar.update(t)
         if sol.status != 1:
             break
@@ -343,6 +315,46 @@ def run_filippov(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     final = _two_sliding_code(signs, second) if second >= 0 else _mode_code(signs, sliding)
     return {"pieces": pieces, "final_mode": final,
             "propagation": "dop853"}
+
+
+def _piece(system: Any, fields: _Fields, run: Any, t: float, x: FloatArray,
+           signs: tuple[int, ...], sliding: int, second: int, last_graze: dict[int, float]
+           ) -> tuple[Any, list[Any], float, FloatArray]:
+    """One DOP853 piece of the current mode from ``(t, x)`` to its first event (or ``tf``):
+    its samples and grazings recorded, the sensitivity advanced. Returns the solution, the
+    kinds of its events, and the end time and state (projected onto a sliding surface)."""
+    n = system.n_states
+    if second >= 0:
+        f, (events, kinds) = _two_sliding_piece(system, fields, signs, second)
+    else:
+        f = fields.rhs(signs, sliding)
+        events, kinds = _events(system, fields, signs, sliding)
+    x = _onto_sides(system, signs, max(sliding, second), x)
+    if run.sensitivity:
+        rhs, y0 = _with_variational(f, fields.jac(signs, sliding), n), \
+            np.concatenate([x, np.eye(n).ravel()])
+    else:
+        rhs, y0 = f, x
+    sol = run.dop853(rhs, t, y0, events)
+    t_end = float(sol.t[-1])
+    ts = run.samples(t, t_end, last=sol.status == 0)
+    if ts.size and sol.sol is not None:
+        X = sol.sol(ts)[:n].T
+        if max(sliding, second) >= 0:
+            X = np.array([_project(system, max(sliding, second), xs) for xs in X])
+        run.rec.extend(ts, X)
+    if sol.status < 0:
+        raise run.piece_failure(sol, t_end, "the field may be singular or blow up there")
+    _record_grazings(system, run, sol, kinds, signs, sliding, t_end, last_graze)
+    if run.sensitivity:
+        run.Phi = sol.y[n:, -1].reshape(n, n) @ run.Phi
+    run.stuck = 0 if t_end > t else run.stuck
+    if t_end <= t:
+        run.zero_length(t_end)
+    x = sol.y[:n, -1].copy()
+    if max(sliding, second) >= 0:
+        x = _project(system, max(sliding, second), x)
+    return sol, kinds, t_end, x
 
 
 def _two_sliding_code(signs: tuple[int, ...], j: int) -> int:

@@ -23,6 +23,7 @@ domain row, ``mode_to = -1``) and ``status = 1``.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -30,13 +31,14 @@ from scipy.linalg import expm
 
 from .._validation import FloatArray
 from ..errors import InadmissibleStateError, ModelError, SlidingError, ZenoError
+from ._switching_run import saltation_matrix
 from .event_driven._flight import projection_stats
-from .switching import saltation_matrix
 
 
-def _exosystem(system: Any, options: dict[str, Any]) -> Any:
-    """The input as an Exosystem, ``None`` for no input, or ``"function"`` otherwise."""
-    u = options.get("u", system.u)
+def _exosystem(system: Any, u: Any) -> Any:
+    """The input (``u``, or the system's when ``None``) as an Exosystem, ``None`` for no input,
+    or ``"function"`` otherwise."""
+    u = system.u if u is None else u
     if u is None or system.E is None:
         return None
     if all(hasattr(u, a) for a in ("S", "Cu", "w0")):
@@ -97,7 +99,23 @@ class _Modes:
     @classmethod
     def of(cls, system: Any, exo: Any) -> _Modes:
         """The modes of ``system`` under the exosystem ``exo`` (``None``: no input), shared
-        by the runs of an equal model and input (the most recent 32 are kept)."""
+        by the runs of an equal model and input (the most recent 32 are kept). The same
+        model object with the same input object finds its modes without hashing them."""
+        per_system = _MODES_OF.get(system)
+        if per_system is None:
+            per_system = _MODES_OF[system] = {}
+        known = per_system.get(id(exo))
+        if known is not None and known[0] is exo:   # the entry holds exo: its id is unique
+            return known[1]
+        modes = cls._shared(system, exo)
+        if len(per_system) >= 8:
+            per_system.pop(next(iter(per_system)))
+        per_system[id(exo)] = (exo, modes)
+        return modes
+
+    @classmethod
+    def _shared(cls, system: Any, exo: Any) -> _Modes:
+        """The modes of an equal model and input, found by their matrices' bytes."""
         n = system.n_states
         if exo is None:
             S, Bu = np.zeros((0, 0)), np.zeros((n, 0))
@@ -159,6 +177,9 @@ class _Modes:
 
 
 _MODES: dict[Any, _Modes] = {}
+#: Per model object (a PiecewiseAffineSystem is frozen), per input object: its modes.
+_MODES_OF: weakref.WeakKeyDictionary[Any, dict[int, tuple[Any, _Modes]]] = \
+    weakref.WeakKeyDictionary()
 
 
 def _check_x0(system: Any, x0: FloatArray) -> None:
@@ -235,11 +256,11 @@ def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int) -> None:
         run.rec.extend(te[ptr0:ptr], buf.s_x[ptr0:ptr])
 
 
-def run_pwa(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
+def run_pwa(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
     _check_x0(system, x0)
-    exo = _exosystem(system, options)
+    exo = _exosystem(system, run.opts.u)
     if exo == "function":
-        return _run_pwa_ode(system, x0, run, options)
+        return _run_pwa_ode(system, x0, run)
     from ..numerics.lti import TAYLOR_REMAINDER
     from . import _pwa_kernels as K
 
@@ -350,12 +371,12 @@ def _settle(system: Any, modes: _Modes, run: Any, t: float, i: int, xi: FloatArr
     return False, j
 
 
-def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
+def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
                  ) -> dict[str, Any]:
     """Pieces by DOP853 for inputs given as arbitrary functions of time: one terminal event
     per facet (leaving the region) and per domain facet, and one non-terminal event per facet
     on the slack's derivative (grazing candidates: a minimum of the slack at zero)."""
-    u = options.get("u", system.u)
+    u = system.u if run.opts.u is None else run.opts.u
     from ..systems.lure import as_input_function
 
     ufn = as_input_function("u", u, system.E.shape[1])
@@ -366,14 +387,7 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         return system.A[i] @ x + system.b[i] + system.E @ ufn(t)[0]
 
     def mode_at(x: FloatArray, t: float, exclude: int = -1) -> int:
-        for j in range(system.n_regions):
-            if j == exclude or not system.contains(j, x, 1e-9):
-                continue
-            H, hh = system.regions[j]
-            act = np.abs(hh - H @ x) <= 1e-9 * (1 + np.abs(hh) + np.abs(H) @ np.abs(x))
-            if not np.any(act) or np.all(H[act] @ field(j, t, x) <= 0.0):
-                return j
-        return -1
+        return _inward_region(system, field, x, t, exclude)
 
     t, x = run.t0, x0.copy()
     i = mode_at(x, t)
@@ -384,17 +398,7 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     last_graze: dict[int, float] = {}
     while t < run.tf:
         H, h = system.regions[i]
-        events: list[Any] = []
-        kinds: list[tuple[str, int]] = []
-        for r in range(H.shape[0]):
-            events.append(_facet_event(H[r], float(h[r])))
-            kinds.append(("facet", r))
-            events.append(_slack_extremum(H[r], lambda tt, xx, i=i: field(i, tt, xx)))
-            kinds.append(("graze", r))
-        if system.domain is not None:
-            for r in range(system.domain[0].shape[0]):
-                events.append(_facet_event(system.domain[0][r], float(system.domain[1][r])))
-                kinds.append(("domain", r))
+        events, kinds = _region_events(system, i, field)
         sol = run.dop853(lambda tt, xx, i=i: field(i, tt, xx), t, x, events)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
@@ -403,21 +407,7 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
         if sol.status < 0:
             raise run.piece_failure(sol, t_end, f"in region {i}; check the input function for "
                                                 f"NaN or infinite values")
-        for k, (kind, r) in enumerate(kinds):   # grazing: slack minimum at zero
-            if kind != "graze":
-                continue
-            for tr in sol.t_events[k]:
-                tr = float(tr)
-                if tr >= t_end and sol.status == 1:
-                    continue
-                xr = sol.sol(tr)
-                tol = 100.0 * (run.atol + run.rtol * float(np.max(np.abs(xr)))) * \
-                    float(np.linalg.norm(H[r]))
-                if abs(float(h[r] - H[r] @ xr)) <= tol and \
-                        abs(tr - last_graze.get(r, -np.inf)) > 1e-9 * (1.0 + abs(tr)):
-                    last_graze[r] = tr
-                    run.event(tr, "grazing", r, xr, xr, i, i)
-                    run.rec.sample(tr, xr, force=True)
+        _record_ode_grazings(run, sol, kinds, system.regions[i], i, t_end, last_graze)
         if run.sensitivity:
             run.Phi = expm(system.A[i] * (t_end - t)) @ run.Phi
         segments += 1
@@ -451,6 +441,60 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]
     if run.rec.last_time < run.tf and run.status == 0:
         run.rec.sample(run.tf, x, force=True)
     return {"segments": segments, "final_mode": i, "propagation": "dop853"}
+
+
+def _inward_region(system: Any, field: Any, x: FloatArray, t: float, exclude: int) -> int:
+    """A region (not ``exclude``) holding ``x`` whose field ``field(j, t, x)`` does not point
+    out through a facet ``x`` lies on; -1 when none."""
+    for j in range(system.n_regions):
+        if j == exclude or not system.contains(j, x, 1e-9):
+            continue
+        H, hh = system.regions[j]
+        act = np.abs(hh - H @ x) <= 1e-9 * (1 + np.abs(hh) + np.abs(H) @ np.abs(x))
+        if not np.any(act) or np.all(H[act] @ field(j, t, x) <= 0.0):
+            return j
+    return -1
+
+
+def _region_events(system: Any, i: int, field: Any) -> tuple[list[Any], list[tuple[str, int]]]:
+    """The DOP853 events of a piece in region ``i``: per facet a terminal one (leaving) and a
+    grazing candidate (the slack's minimum), and per domain facet a terminal one."""
+    H, h = system.regions[i]
+    events: list[Any] = []
+    kinds: list[tuple[str, int]] = []
+    for r in range(H.shape[0]):
+        events.append(_facet_event(H[r], float(h[r])))
+        kinds.append(("facet", r))
+        events.append(_slack_extremum(H[r], lambda tt, xx, i=i: field(i, tt, xx)))
+        kinds.append(("graze", r))
+    if system.domain is not None:
+        for r in range(system.domain[0].shape[0]):
+            events.append(_facet_event(system.domain[0][r], float(system.domain[1][r])))
+            kinds.append(("domain", r))
+    return events, kinds
+
+
+def _record_ode_grazings(run: Any, sol: Any, kinds: list[tuple[str, int]],
+                         region: tuple[FloatArray, FloatArray], i: int, t_end: float,
+                         last_graze: dict[int, float]) -> None:
+    """Record the grazings of a DOP853 piece in region ``i``: a slack minimum at zero (to
+    100 times the solver's tolerance), once per touch."""
+    H, h = region
+    for k, (kind, r) in enumerate(kinds):
+        if kind != "graze":
+            continue
+        for tr in sol.t_events[k]:
+            tr = float(tr)
+            if tr >= t_end and sol.status == 1:
+                continue
+            xr = sol.sol(tr)
+            tol = 100.0 * (run.atol + run.rtol * float(np.max(np.abs(xr)))) * \
+                float(np.linalg.norm(H[r]))
+            if abs(float(h[r] - H[r] @ xr)) <= tol and \
+                    abs(tr - last_graze.get(r, -np.inf)) > 1e-9 * (1.0 + abs(tr)):
+                last_graze[r] = tr
+                run.event(tr, "grazing", r, xr, xr, i, i)
+                run.rec.sample(tr, xr, force=True)
 
 
 def _facet_event(row: FloatArray, offset: float) -> Any:

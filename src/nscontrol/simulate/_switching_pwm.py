@@ -43,7 +43,7 @@ from ..numerics.saltation import time_shift_term
 _OFFSET_RATES = {"centered": (0.0, 0.5, -0.5), "leading": (0.0, 1.0), "trailing": (0.0, -1.0)}
 
 
-def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> dict[str, Any]:
+def run_pwm(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
     ctrl = system.controller
     if ctrl is None:
         raise ModelError("system.controller: a SwitchedAffineSystem needs its PWMController to "
@@ -69,10 +69,7 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
     while k < n_periods:
         t_k = t0 + k * T                      # exact instants, not accumulated
         t_next = t0 + (k + 1) * T
-        if not t_next > t_k:
-            raise ModelError(f"period: T = {T:g} is below the floating-point resolution of the "
-                             f"time near t_k = {t_k:.17g}: the run cannot advance; shift t_span "
-                             f"towards 0 or use a longer period")
+        _check_advance(T, t_k, t_next)
         run.step(t_k)                         # one period: one step of the budget
         d = ctrl.duty_at(t_k, xi[:n])
         duties.append(d)
@@ -113,8 +110,23 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
         run.bar.update(t)
     if run.rec.last_time < tf:
         run.rec.sample(tf, xi[:n], force=True)
-    out = {"periods": k, "duty": np.array(duties), "final_mode": mode_prev}
-    if run.sensitivity:
+    return _pwm_stats(k, duties, mode_prev, degenerate if run.sensitivity else None)
+
+
+def _check_advance(T: float, t_k: float, t_next: float) -> None:
+    if not t_next > t_k:
+        raise ModelError(f"period: T = {T:g} is below the floating-point resolution of the "
+                         f"time near t_k = {t_k:.17g}: the run cannot advance; shift t_span "
+                         f"towards 0 or use a longer period")
+
+
+def _pwm_stats(periods: int, duties: list[float], final_mode: int,
+               degenerate: int | None) -> dict[str, Any]:
+    """The run's statistics; ``degenerate`` (with sensitivity): the periods whose duty sat on
+    a corner of the clipped duty law (warned about)."""
+    out: dict[str, Any] = {"periods": periods, "duty": np.array(duties),
+                           "final_mode": final_mode}
+    if degenerate is not None:
         out["degenerate_periods"] = degenerate
         if degenerate:
             import warnings
@@ -124,7 +136,7 @@ def run_pwm(system: Any, x0: FloatArray, run: Any, options: dict[str, Any]) -> d
             warnings.warn(f"switching: the duty sat exactly on 0 or the period in {degenerate} "
                           f"period(s), a corner of the clipped duty law where the map is not "
                           f"differentiable; stats['state_transition'] uses the saturated side",
-                          NscontrolWarning, stacklevel=4)
+                          NscontrolWarning, stacklevel=5)
     return out
 
 

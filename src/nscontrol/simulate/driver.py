@@ -42,6 +42,8 @@ What the driver owns for every method:
 from __future__ import annotations
 
 import importlib
+import math
+import sys
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import replace
@@ -112,7 +114,8 @@ class _ModuleIntegrator(Integrator):
 
     def integrate(self, system: Any, x0: Any, t_span: tuple[float, float],
                   **options: Any) -> Trajectory:
-        return importlib.import_module(self.module).integrate(system, x0, t_span, **options)
+        module = sys.modules.get(self.module) or importlib.import_module(self.module)
+        return module.integrate(system, x0, t_span, **options)
 
 
 # -- the registry: names -> classes, resolved lazily (import nscontrol stays fast) ----------
@@ -354,10 +357,6 @@ def _check_t_eval(t_eval: Any) -> np.ndarray:
 def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
                  t_span: tuple[float, float], common: dict[str, Any],
                  own: dict[str, Any]) -> Trajectory:
-    if "progress" in common:      # one check for every method (a str would be truthy)
-        common["progress"] = check_bool("progress", common["progress"], allow_none=True)
-    if "sensitivity" in common:
-        common["sensitivity"] = check_bool("sensitivity", common["sensitivity"])
     on_failure = common.get("on_failure", "raise")
     try:
         traj = cls().integrate(system, x0, t_span, **own)
@@ -415,7 +414,7 @@ def _stop_at_non_finite(traj: Trajectory, on_failure: str, system: Any = None) -
     first non-finite sample and raise (or return it with ``status = -1``)."""
     from ..errors import NonFiniteStateError
 
-    if np.isfinite(np.sum(traj.x)):   # one pass; a finite sum means every entry is finite
+    if math.isfinite(traj.x.sum()):   # one pass; a finite sum means every entry is finite
         return traj
     finite = np.isfinite(traj.x).all(axis=1)
     if finite.all():                  # the sum overflowed, the entries did not

@@ -89,7 +89,8 @@ its one-step problem has no verified solution: Lemke's status, or a natural resi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import weakref
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING, Any
@@ -98,18 +99,30 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, as_vector, check_bool, check_in_interval, check_positive
+from .._validation import (
+    FloatArray,
+    as_vector,
+    check_bool,
+    check_in_interval,
+    check_integer,
+    check_positive,
+)
 from ..errors import InadmissibleStateError, ModelError, SolverError
-from .trajectory import ChunkProgress, Recorder, Trajectory, evaluable_prefix
+from .trajectory import (
+    ChunkProgress,
+    Recorder,
+    Trajectory,
+    _signal_names,
+    evaluable_prefix,
+)
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ..systems.lure import LureSystem
 
-__all__ = ["integrate", "StepMatrices", "step_matrices", "componentwise_spec", "lcp_step_data"]
+__all__ = ["integrate", "ImplicitEulerOptions", "StepMatrices", "step_matrices",
+           "componentwise_spec", "lcp_step_data"]
 
 _CHUNK = 1 << 16
-_OPTIONS = {"h", "theta", "u", "record_every", "signals", "progress", "sensitivity",
-            "controller", "compiled_blocks"}
 _SIGNALS = ("z", "w", "y")
 #: Couplings of ``D_h`` below this fraction of ``max|D_h|`` are structural zeros.
 _STRUCTURAL_ZERO = 1e-14
@@ -504,12 +517,14 @@ def _initial_multiplier(system: Any, x0: FloatArray, t0: float) -> tuple[FloatAr
     InadmissibleStateError
         ``D = 0`` and ``H x0 + g(t0)`` lies outside the domain of the law.
     """
-    a = system.H @ x0 + system.shift_at(t0)[0]
+    a = system.H @ x0
+    if system.has_shift:
+        a += system.shift_at(t0)[0]
     m = a.shape[0]
-    if not np.any(system.D):
+    if not system.D.any():
         bad = [f"z[{sl.start}:{sl.stop}] = {np.array2string(a[sl], precision=6)} outside the "
                f"domain of {part!r}" for sl, part in _law_parts(system.law)
-               if not part.in_domain(a[sl], 1e-12 * (1.0 + float(np.max(np.abs(a[sl])))))]
+               if not part.in_domain(a[sl], 1e-12 * (1.0 + float(np.abs(a[sl]).max())))]
         if bad:
             raise InadmissibleStateError(
                 f"x0: the initial state violates the law's constraint: z0 = H x0 + g(t0) must "
@@ -617,14 +632,78 @@ def _is_diagonal(M: FloatArray) -> bool:
     return bool(np.max(np.abs(off), initial=0.0) <= 1e-14 * max(1.0, np.max(np.abs(M))))
 
 
+# -- the options ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ImplicitEulerOptions:
+    """The options of ``method="implicit_euler"``, validated once (their meaning: the module
+    docstring). Build it with :meth:`parse` from the keyword options of ``simulate``."""
+
+    h: float
+    theta: float = 1.0
+    u: Any = None
+    record_every: int = 1
+    signals: frozenset[str] | None = None
+    progress: bool | None = None
+    sensitivity: bool = False
+    controller: Callable[[float, FloatArray], Any] | None = None
+    compiled_blocks: Any = None     # used only with a controller (see the module docstring)
+
+    @classmethod
+    def parse(cls, options: Mapping[str, Any]) -> ImplicitEulerOptions:
+        """The checked options: unknown names and bad values raise ``ModelError``.
+
+        Parameters
+        ----------
+        options : mapping
+            The method's options as given to :func:`nscontrol.simulate` (``h`` required).
+
+        Returns
+        -------
+        ImplicitEulerOptions
+            The validated record.
+        """
+        unknown = set(options) - _OPTIONS
+        if unknown:
+            raise ModelError(f"implicit_euler: unknown option(s) {sorted(unknown)}; "
+                             f"accepted: {sorted(_OPTIONS)}")
+        if "h" not in options:
+            raise ModelError("h: implicit_euler needs a step, e.g. simulate(sys, x0, t_span, "
+                             "method='implicit_euler', h=1e-3)")
+        get = options.get
+        controller = _check_controller(get("controller"), get("u"))
+        sensitivity = check_bool("sensitivity", get("sensitivity", False))
+        if sensitivity and controller is not None:
+            raise ModelError("sensitivity: not available with a controller= (the Jacobian of "
+                             "the discrete map would miss the feedback's derivative)")
+        signals = get("signals")
+        return cls(h=check_positive("h", options["h"]),
+                   theta=check_in_interval("theta", get("theta", 1.0), 0.5, 1.0),
+                   u=get("u"), record_every=check_integer("record_every",
+                                                          get("record_every", 1), minimum=1),
+                   signals=None if signals is None else frozenset(
+                       _signal_names(signals, _SIGNALS)),
+                   progress=check_bool("progress", get("progress"), allow_none=True),
+                   sensitivity=sensitivity, controller=controller,
+                   compiled_blocks=get("compiled_blocks") if controller is not None else None)
+
+
+_OPTIONS = frozenset(ImplicitEulerOptions.__dataclass_fields__)
+
+
+def _check_controller(controller: Any, u: Any) -> Any:
+    """The ``controller`` option (``None`` when absent): a callable, not given with ``u``."""
+    if controller is None:
+        return None
+    if not callable(controller):
+        raise ModelError(f"controller: expected a callable (t, x) -> u, got "
+                         f"{type(controller).__name__}")
+    if u is not None:
+        raise ModelError("controller, u: give one of them (the controller's output is the "
+                         "input u)")
+    return controller
+
+
 # -- the integrator -----------------------------------------------------------------------
-def _check_options(options: dict[str, Any]) -> None:
-    unknown = set(options) - _OPTIONS
-    if unknown:
-        raise ModelError(f"implicit_euler: unknown option(s) {sorted(unknown)}; accepted: "
-                         f"{sorted(_OPTIONS)}")
-
-
 def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
               **options: Any) -> Trajectory:
     """Integrate a :class:`~nscontrol.systems.lure.LureSystem` by the θ-method.
@@ -639,7 +718,8 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
         Start and end times.
     **options
         ``h`` (required), ``theta`` (default 1), ``u``, ``sensitivity``, ``record_every``,
-        ``signals``, ``progress`` -- see the module docstring.
+        ``signals``, ``progress``, ``controller``, ``compiled_blocks`` -- see the module
+        docstring; checked once into an :class:`ImplicitEulerOptions`.
 
     Returns
     -------
@@ -675,101 +755,28 @@ def integrate(system: LureSystem, x0: ArrayLike, t_span: tuple[float, float],
     >>> tr.stats["solver"], bool(np.all(tr.signal("z") * tr.signal("w") == 0.0))
     ('closed_form', True)
     """
+    opts = ImplicitEulerOptions.parse(options)
+    _check_system(system, opts)
+    t0, tf = t_span
+    n_steps = max(1, math.ceil((tf - t0) / opts.h - 1e-9))
+    h = (tf - t0) / n_steps
+    setup = _Setup.of(system, h, opts.theta)   # before the input: it does not depend on it
+    system = _with_input(system, opts.u)
+    run = _Run(system, setup, opts, n_steps)
+    x0 = as_vector("x0", x0, system.n_states)
+    return run.steps(x0, t0)
+
+
+def _check_system(system: Any, opts: ImplicitEulerOptions) -> None:
+    """A Lur'e system, with an input matrix when the options feed it an input."""
     from ..systems.lure import LureSystem
 
-    _check_options(options)
     if not isinstance(system, LureSystem):
         raise ModelError(f"implicit_euler: expected a LureSystem, got {type(system).__name__}; "
                          f"for PWA/Filippov/switched systems use method='switching'")
-    if "h" not in options:
-        raise ModelError("h: implicit_euler needs a step, e.g. simulate(sys, x0, t_span, "
-                         "method='implicit_euler', h=1e-3)")
-    controller = _check_controller(system, options)
-    blocks = options.get("compiled_blocks") if controller is not None else None
-    system = _with_input(system, options.get("u"))
-    sensitivity = check_bool("sensitivity", options.get("sensitivity", False))
-    if sensitivity and controller is not None:
-        raise ModelError("sensitivity: not available with a controller= (the Jacobian of the "
-                         "discrete map would miss the feedback's derivative)")
-    h_req = check_positive("h", options["h"])
-    theta = check_in_interval("theta", options.get("theta", 1.0), 0.5, 1.0)
-    n = system.n_states
-    t0, tf = t_span
-    n_steps = max(1, math.ceil((tf - t0) / h_req - 1e-9))
-    every = options.get("record_every", 1)
-    rec = Recorder(n, every=every, signals=options.get("signals"), offered=_SIGNALS,
-                   capacity=Recorder.capacity_for(n_steps + 2, every))
-    x0 = as_vector("x0", x0, n)
-    h = (tf - t0) / n_steps
-    mats = StepMatrices(system, h, theta)
-    plan = _plan(system, mats.Dh, h)
-    z0, w0 = _initial_multiplier(system, x0, t0)
-    rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
-    stepper = _Stepper(system, mats, plan)
-    if blocks is not None and plan.solver != "closed_form":
-        blocks = None        # the LCP and Python solvers step one at a time in Python
-    jac = None
-    if sensitivity:
-        from ._lure_sensitivity import StepJacobians
-
-        jac = StepJacobians(system, mats, plan.D, _law_parts(system.law))
-    x = x0
-    done = 0
-
-    def stats(steps: int) -> dict[str, Any]:
-        out = {"steps": int(steps), "h": float(h), "theta": float(theta),
-               "solver": plan.solver, "structure": plan.structure,
-               "blocks": max(1, len(plan.blocks)),
-               "input": "controller" if controller is not None else stepper.input_mode}
-        if controller is not None:
-            out["controller"] = "compiled" if blocks is not None else "python"
-        if plan.solver != "closed_form":
-            out["max_residual"] = stepper.worst
-        if jac is not None:
-            out["state_transition"] = jac.transition.copy()
-            out["degenerate_steps"] = jac.degenerate_steps
-            out["first_degenerate_time"] = jac.first_degenerate_time
-        return out
-
-    with TimeProgress(t0, tf, desc="implicit_euler", enable=options.get("progress")) as bar:
-        while done < n_steps:
-            k1 = min(n_steps, done + _CHUNK)
-            times = np.asarray(t0 + h * np.arange(done, k1 + 1), dtype=float)
-            with rec.chunk(partial(_record_finished, rec=rec, system=system, times=times)
-                           ) as stepper.progress:
-                X, Z, W = _run_chunk(stepper, rec, system, x, times, blocks, controller, jac,
-                                     stats, done)
-            _record_block(rec, system, times[1:], X, Z, W, last=k1 == n_steps)
-            if jac is not None:
-                jac.extend(times[1:], Z, W, stepper.worst)
-            x = X[-1]
-            done = k1
-            bar.update(times[-1])
-    if jac is not None and jac.degenerate_steps:
-        _warn_degenerate(jac)
-    return rec.finish(status=0, message=None, method="implicit_euler", stats=stats(n_steps),
-                      state_names=system.state_names)
-
-
-def _run_chunk(stepper: Any, rec: Recorder, system: Any, x: FloatArray, times: FloatArray,
-               blocks: Any, controller: Any, jac: Any, stats: Callable[[int], dict[str, Any]],
-               done: int) -> tuple[FloatArray, ...]:
-    """The steps over ``times`` by the path chosen for the run (a solver failure ends the run
-    with its verified steps recorded)."""
-    try:
-        if blocks is not None:
-            return stepper.run_with_blocks(x, times, blocks)
-        return stepper.run(x, times) if controller is None else \
-            stepper.run_with_controller(x, times, controller)
-    except SolverError as exc:
-        X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
-        _record_block(rec, system, times[1:1 + X.shape[0]], X, Z, W, last=True)
-        if jac is not None:   # the transition up to the last verified step
-            jac.extend(times[1:1 + X.shape[0]], Z, W, stepper.worst)
-        traj = rec.finish(status=-1, message=str(exc), method="implicit_euler",
-                          stats=stats(done + X.shape[0]),
-                          state_names=system.state_names)
-        raise SolverError(str(exc), status=exc.status, trajectory=traj) from None
+    if opts.controller is not None and system.B is None:
+        raise ModelError("controller: this LureSystem has no input matrix B, so it takes no "
+                         "input; build it with B= to close a loop around it")
 
 
 def _with_input(system: Any, u: Any) -> Any:
@@ -784,21 +791,126 @@ def _with_input(system: Any, u: Any) -> Any:
     return replace(system, u=u)
 
 
-def _check_controller(system: Any, options: dict[str, Any]) -> Any:
-    """The ``controller`` option, checked against the system (``None`` when absent)."""
-    controller = options.get("controller")
-    if controller is None:
-        return None
-    if not callable(controller):
-        raise ModelError(f"controller: expected a callable (t, x) -> u, got "
-                         f"{type(controller).__name__}")
-    if system.B is None:
-        raise ModelError("controller: this LureSystem has no input matrix B, so it takes no "
-                         "input; build it with B= to close a loop around it")
-    if options.get("u") is not None:
-        raise ModelError("controller, u: give one of them (the controller's output is the "
-                         "input u)")
-    return controller
+@dataclass(frozen=True, eq=False)
+class _Setup:
+    """What a run computes once from the model and the step, before its first step: the step
+    matrices, the solver plan and the compiled closed form's law data. Shared by the runs of
+    one system and step (a sweep, a period map): :meth:`of` keeps it beside the system."""
+
+    mats: StepMatrices
+    plan: _Plan
+    spec: tuple[np.ndarray, FloatArray, FloatArray] | None
+    curve: FloatArray | None
+    ucol: np.ndarray | None
+
+    @classmethod
+    def of(cls, system: Any, h: float, theta: float) -> _Setup:
+        per_system = _SETUPS.get(system)
+        if per_system is None:
+            per_system = _SETUPS[system] = {}
+        setup = per_system.get((h, theta))
+        if setup is None:
+            if len(per_system) >= 8:     # a study of many steps: keep the latest few
+                per_system.pop(next(iter(per_system)))
+            setup = per_system[(h, theta)] = cls.build(system, h, theta)
+        return setup
+
+    @classmethod
+    def build(cls, system: Any, h: float, theta: float) -> _Setup:
+        mats = StepMatrices(system, h, theta)
+        plan = _plan(system, mats.Dh, h)
+        if plan.solver != "closed_form":
+            return cls(mats, plan, None, None, None)
+        spec = componentwise_spec(system.law)
+        if spec is None:   # _plan chooses the closed form only for such laws
+            raise ModelError("law: the closed-form step needs a componentwise law")
+        return cls(mats, plan, spec, curve_parameters(system.law), _single_state_rows(system))
+
+
+#: The setups of the systems in use (a LureSystem is frozen: its matrices do not change).
+_SETUPS: weakref.WeakKeyDictionary[Any, dict[tuple[float, float], _Setup]] = \
+    weakref.WeakKeyDictionary()
+
+
+class _Run:
+    """One run: the recorder, the stepper, the optional sensitivity, the chunked loop."""
+
+    def __init__(self, system: Any, setup: _Setup, opts: ImplicitEulerOptions,
+                 n_steps: int) -> None:
+        self.system, self.opts, self.n_steps = system, opts, n_steps
+        self.plan = setup.plan
+        self.h = setup.mats.h
+        self.rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
+                            offered=_SIGNALS,
+                            capacity=Recorder.capacity_for(n_steps + 2, opts.record_every))
+        self.stepper = _Stepper(system, setup)
+        self.controller = opts.controller
+        # the LCP and Python solvers step one at a time in Python: no compiled blocks there
+        self.blocks = opts.compiled_blocks if self.plan.solver == "closed_form" else None
+        self.jac = None
+        if opts.sensitivity:
+            from ._lure_sensitivity import StepJacobians
+
+            self.jac = StepJacobians(system, setup.mats, self.plan.D, _law_parts(system.law))
+
+    def steps(self, x0: FloatArray, t0: float) -> Trajectory:
+        """Record the initial state, run every step in chunks, freeze the record."""
+        system, rec, n_steps = self.system, self.rec, self.n_steps
+        z0, w0 = _initial_multiplier(system, x0, t0)
+        rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
+        x, done = x0, 0
+        tf = t0 + self.h * n_steps
+        with TimeProgress(t0, tf, desc="implicit_euler", enable=self.opts.progress) as bar:
+            while done < n_steps:
+                k1 = min(n_steps, done + _CHUNK)
+                times = np.asarray(t0 + self.h * np.arange(done, k1 + 1), dtype=float)
+                with rec.chunk(partial(_record_finished, rec=rec, system=system, times=times)
+                               ) as self.stepper.progress:
+                    X, Z, W = self.chunk(x, times, done)
+                _record_block(rec, system, times[1:], X, Z, W, last=k1 == n_steps)
+                if self.jac is not None:
+                    self.jac.extend(times[1:], Z, W, self.stepper.worst)
+                x, done = X[-1], k1
+                bar.update(times[-1])
+        if self.jac is not None and self.jac.degenerate_steps:
+            _warn_degenerate(self.jac)
+        return rec.finish(status=0, message=None, method="implicit_euler",
+                          stats=self.stats(n_steps), state_names=system.state_names)
+
+    def chunk(self, x: FloatArray, times: FloatArray, done: int) -> tuple[FloatArray, ...]:
+        """The steps over ``times`` by the path chosen for the run (a solver failure ends
+        the run with its verified steps recorded)."""
+        stepper, blocks, controller = self.stepper, self.blocks, self.controller
+        try:
+            if blocks is not None:
+                return stepper.run_with_blocks(x, times, blocks)
+            return stepper.run(x, times) if controller is None else \
+                stepper.run_with_controller(x, times, controller)
+        except SolverError as exc:
+            X, Z, W = exc.partial  # type: ignore[attr-defined]  # partial run, added at raise
+            _record_block(self.rec, self.system, times[1:1 + X.shape[0]], X, Z, W, last=True)
+            if self.jac is not None:   # the transition up to the last verified step
+                self.jac.extend(times[1:1 + X.shape[0]], Z, W, stepper.worst)
+            traj = self.rec.finish(status=-1, message=str(exc), method="implicit_euler",
+                                   stats=self.stats(done + X.shape[0]),
+                                   state_names=self.system.state_names)
+            raise SolverError(str(exc), status=exc.status, trajectory=traj) from None
+
+    def stats(self, steps: int) -> dict[str, Any]:
+        plan, controller, jac = self.plan, self.controller, self.jac
+        out = {"steps": int(steps), "h": float(self.h), "theta": float(self.opts.theta),
+               "solver": plan.solver, "structure": plan.structure,
+               "blocks": max(1, len(plan.blocks)),
+               "input": "controller" if controller is not None else self.stepper.input_mode}
+        if controller is not None:
+            out["controller"] = "compiled" if self.blocks is not None else "python"
+        if plan.solver != "closed_form":
+            out["max_residual"] = self.stepper.worst
+        if jac is not None:
+            out["state_transition"] = jac.transition.copy()
+            out["degenerate_steps"] = jac.degenerate_steps
+            out["first_degenerate_time"] = jac.first_degenerate_time
+        return out
 
 
 def _warn_degenerate(jac: Any) -> None:
@@ -855,8 +967,9 @@ def _exosystem_mean(exo: Any, h: float) -> FloatArray:
 class _Stepper:
     """Runs blocks of steps with the solver chosen once for the whole run."""
 
-    def __init__(self, system: Any, mats: StepMatrices, plan: _Plan) -> None:
-        self.system, self.m, self.plan = system, mats, plan
+    def __init__(self, system: Any, setup: _Setup) -> None:
+        mats = setup.mats
+        self.system, self.m, self.plan = system, mats, setup.plan
         self.worst = 0.0   # largest accepted per-step residual (LCP / Python paths)
         self.progress = ChunkProgress()   # the chunk in progress (see Recorder.chunk)
         u = system.u
@@ -866,14 +979,8 @@ class _Stepper:
             self.mean = _exosystem_mean(u, mats.h).T @ np.atleast_2d(np.asarray(u.Cu, float)).T
         self.input_mode = ("exact_mean" if self.exo is not None else
                            "samples" if system.has_input else "none")
-        if plan.solver == "closed_form":
-            spec = componentwise_spec(system.law)
-            if spec is None:   # _plan chooses the closed form only for such laws
-                raise ModelError("law: the closed-form step needs a componentwise law")
-            kind, p1, p2 = spec
-            self.spec = (kind, p1, p2)
-            self.curve = curve_parameters(system.law)
-            self.ucol = _single_state_rows(system)
+        if setup.spec is not None:   # the closed form's law data
+            self.spec, self.curve, self.ucol = setup.spec, setup.curve, setup.ucol
 
     def _inputs(self, times: FloatArray) -> tuple[FloatArray, FloatArray]:
         sys_, th = self.system, self.m.theta

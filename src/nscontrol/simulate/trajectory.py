@@ -12,6 +12,7 @@ step or selected signals only) and call :meth:`Recorder.finish` to obtain the fr
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -121,6 +122,16 @@ class Trajectory:
                                      f"expected {t.shape[0]} (one per sample)")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "x", x)
+
+    @classmethod
+    def _from_record(cls, **values: Any) -> Trajectory:
+        """A trajectory from a :class:`Recorder`'s buffers, which satisfy the checks of
+        ``__post_init__`` by construction (float64 arrays, time-major, one row per sample,
+        finite times in order): every field given, nothing converted or checked."""
+        traj = object.__new__(cls)
+        for name in cls.__dataclass_fields__:
+            object.__setattr__(traj, name, values[name])
+        return traj
 
     # -- views --------------------------------------------------------------------------
     @property
@@ -810,19 +821,27 @@ class Recorder:
         n = self._n
         t, x = self._t[:n].copy(), self._x[:n].copy()
         signals = {k: v[:n].copy() for k, v in self._sig.items()}
-        if n > 1 and np.any(np.diff(t) < 0.0):
+        if n > 1 and (t[1:] < t[:-1]).any():
             # a forced sample at a root found after its piece was sampled (the switching
             # method's grazings): put it in time order; stable, so pre/post pairs keep theirs
             order = np.argsort(t, kind="stable")
             t, x = t[order], x[order]
             signals = {k: v[order] for k, v in signals.items()}
-        return Trajectory(
+        if not math.isfinite(float(t.sum())):   # a NaN or infinite time (the sum of finite
+            _check_times(t)                     # times overflowing passes the full check)
+        # the buffers are float64, time-major, one row per sample and now in time order:
+        # what Trajectory.__post_init__ checks holds by construction, so it is skipped
+        return Trajectory._from_record(
             t=t, x=x, signals=signals,
-            events=tuple(sorted(self.events, key=lambda e: e.time)),
+            events=tuple(sorted(self.events, key=_event_time)) if self.events else (),
             stats=dict(stats or {}), status=status,
             message=STATUS_MESSAGES[status] if message is None else message,
             method=method, state_names=tuple(state_names),
         )
+
+
+def _event_time(event: Event) -> float:
+    return event.time
 
 
 def _signal_names(signals: Iterable[str], offered: tuple[str, ...] | None) -> set[str]:

@@ -59,6 +59,57 @@ Event kinds: ``"impact"``, ``"grazing"``, ``"accumulation"``, ``"contact_start"`
 ``"contact_end"`` (mechanics), ``"stick"``, ``"slip"``, ``"slip_reversal"`` (friction),
 ``"jump"`` and ``"grazing"`` (linear hybrid systems).
 
+Options
+-------
+u : Exosystem, optional
+    Input of a Lagrangian system or of :class:`ImpactingBodies` (through its actuation),
+    ``u(t) = Cu w(t)`` with ``w(0) = w0`` (absolute time, as in every integrator); its
+    state is propagated exactly with the plant.
+controller : (m, 2 n) array_like or callable ``(t, q, v) -> u``, optional
+    State feedback added to ``u`` through the actuation. A matrix ``K`` means
+    ``u = -K [q; v]``: linear, so the closed loop stays exact. A callable makes the flow
+    nonlinear: the run uses DOP853 with event location (no persistent contact there).
+dt : float, optional
+    Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
+    event adds its pre- and post-event samples.
+max_events : int
+    Event budget: more events than this raises
+    :class:`~nscontrol.errors.BudgetExceededError` (``budget="max_events"``) with the
+    computed part (a long run needs one event per impact).
+min_interval : float
+    Two events of the same guard closer than this (without a geometric pattern) is Zeno.
+zeno_ratio_tol : float
+    Tolerance on successive interval ratios to call the shrinking geometric.
+zeno_horizon : float, optional
+    Accumulate once the predicted remaining time is below this many seconds. Default:
+    relative, see ``zeno_rel``.
+zeno_rel : float
+    Without ``zeno_horizon``, accumulate once the predicted remaining time is below
+    ``zeno_rel`` times the duration of the bouncing sequence (from its first impact to
+    the accumulation point): the same bounces are resolved whatever ``t_span``.
+listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
+    Called after every jump / impact with the event's states, the indices of the guards
+    or contacts involved and the contact impulses (``None`` for hybrid jumps). The same
+    signature as :mod:`~nscontrol.simulate.moreau_jean`'s.
+rtol, atol : float
+    Tolerances of DOP853 (nonlinear systems only).
+record_every : int
+    Keep every ``record_every``-th sample (events, and the final state, are always kept).
+signals : sequence of str, optional
+    Signals to record (default all: the system's outputs for a hybrid system, ``gap`` and
+    ``energy`` for mechanics); an empty sequence records states only.
+progress : bool, optional
+    Progress bar (default: shown after 2 s).
+sensitivity : bool
+    Also compute the state transition ``∂x(tf)/∂x0`` (:class:`LagrangianSystem` only):
+    the variational equation is integrated with the state by DOP853 (a linear system
+    too: the exact runner has no variational equation, and persistent contact is then
+    refused as Zeno) and each impact multiplies it by the saltation matrix of Newton's
+    law with ``M(q)`` and ``g(q)``; see :mod:`._variational`.
+
+References: Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer
+2008, ch. 8 (event-driven schemes); D5.3 chapter 2, section 5.
+
 The package: :func:`integrate` here chooses the runner — :mod:`.hybrid_run`,
 :mod:`.linear_mechanics`, :mod:`.frictional_contact` or :mod:`.nonlinear_mechanics` —
 which share the options
@@ -108,51 +159,9 @@ def integrate(system: LagrangianSystem | LinearHybridSystem, x0: ArrayLike,
     x0 : array_like
         Admissible initial state (``[q; v]``, ``[x_a; x_b]`` or the hybrid state).
     t_span : (float, float)
-    u : Exosystem, optional
-        Input of a Lagrangian system or of :class:`ImpactingBodies` (through its actuation),
-        ``u(t) = Cu w(t)`` with ``w(0) = w0`` (absolute time, as in every integrator); its
-        state is propagated exactly with the plant.
-    controller : (m, 2 n) array_like or callable ``(t, q, v) -> u``, optional
-        State feedback added to ``u`` through the actuation. A matrix ``K`` means
-        ``u = -K [q; v]``: linear, so the closed loop stays exact. A callable makes the flow
-        nonlinear: the run uses DOP853 with event location (no persistent contact there).
-    dt : float, optional
-        Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
-        event adds its pre- and post-event samples.
-    max_events : int
-        Event budget: more events than this raises
-        :class:`~nscontrol.errors.BudgetExceededError` (``budget="max_events"``) with the
-        computed part (a long run needs one event per impact).
-    min_interval : float
-        Two events of the same guard closer than this (without a geometric pattern) is Zeno.
-    zeno_ratio_tol : float
-        Tolerance on successive interval ratios to call the shrinking geometric.
-    zeno_horizon : float, optional
-        Accumulate once the predicted remaining time is below this many seconds. Default:
-        relative, see ``zeno_rel``.
-    zeno_rel : float
-        Without ``zeno_horizon``, accumulate once the predicted remaining time is below
-        ``zeno_rel`` times the duration of the bouncing sequence (from its first impact to
-        the accumulation point): the same bounces are resolved whatever ``t_span``.
-    listeners : sequence of callables ``(t, x_minus, x_plus, contacts, impulse)``
-        Called after every jump / impact with the event's states, the indices of the guards
-        or contacts involved and the contact impulses (``None`` for hybrid jumps). The same
-        signature as :mod:`~nscontrol.simulate.moreau_jean`'s.
-    rtol, atol : float
-        Tolerances of DOP853 (nonlinear systems only).
-    record_every : int
-        Keep every ``record_every``-th sample (events, and the final state, are always kept).
-    signals : sequence of str, optional
-        Signals to record (default all: the system's outputs for a hybrid system, ``gap`` and
-        ``energy`` for mechanics); an empty sequence records states only.
-    progress : bool, optional
-        Progress bar (default: shown after 2 s).
-    sensitivity : bool
-        Also compute the state transition ``∂x(tf)/∂x0`` (:class:`LagrangianSystem` only):
-        the variational equation is integrated with the state by DOP853 (a linear system
-        too: the exact runner has no variational equation, and persistent contact is then
-        refused as Zeno) and each impact multiplies it by the saltation matrix of Newton's
-        law with ``M(q)`` and ``g(q)``; see :mod:`._variational`.
+    u, controller, dt, max_events, min_interval, zeno_ratio_tol, zeno_horizon, zeno_rel, \
+listeners, rtol, atol, record_every, signals, progress, sensitivity
+        The options: see "Options" in the module docstring.
 
     Returns
     -------
@@ -178,18 +187,6 @@ def integrate(system: LagrangianSystem | LinearHybridSystem, x0: ArrayLike,
         Unresolvable accumulation of events; ``err.trajectory`` holds the run so far (every
         error raised during the run carries it).
 
-    Notes
-    -----
-    Exact for flows that are linear between events: the state is propagated by the matrix
-    exponential and events are the first zeros of the guards on the exact solution
-    (:func:`nscontrol.numerics.lti.first_event`); impacts apply Newton's law on all closed
-    contacts at once. Accumulations are resolved as described in the module docstring.
-
-    References
-    ----------
-    Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer 2008,
-    ch. 8 (event-driven schemes); D5.3 chapter 2, section 5.
-
     Examples
     --------
     >>> import nscontrol as nsc
@@ -205,32 +202,49 @@ def integrate(system: LagrangianSystem | LinearHybridSystem, x0: ArrayLike,
         zeno_ratio_tol=zeno_ratio_tol, zeno_horizon=zeno_horizon, zeno_rel=zeno_rel,
         listeners=listeners, rtol=rtol, atol=atol, record_every=record_every,
         signals=signals, progress=progress)
-    sensitivity = check_bool("sensitivity", sensitivity)
-    if sensitivity and not isinstance(system, LagrangianSystem):
-        raise ModelError(f"sensitivity: event_driven computes the state transition of a "
-                         f"LagrangianSystem, got {type(system).__name__}; for an "
-                         f"ImpactingBodies pass its .lagrangian() form")
+    sensitivity = _check_sensitivity(system, sensitivity)
     if isinstance(system, LinearHybridSystem):
-        for name, value in (("u", u), ("controller", controller)):
-            if value is not None:
-                raise ModelError(f"{name}: a LinearHybridSystem carries its input generator "
-                                 "and controller in its state; stack them into A instead")
-        return _guarded(HybridRun(system, system.check_state(x0), t0, tf, opts))
+        return _run_hybrid(system, x0, t0, tf, u, controller, opts)
     if isinstance(system, LagrangianSystem):
-        if system.friction_dim:   # one planar contact held closed: stick/slip exactly
-            if sensitivity:
-                raise ModelError("sensitivity: not available with Coulomb friction; simulate "
-                                 "with method='moreau_jean' and a step h")
-            check_frictional_system(system, controller, opts.listeners)
-            gain = None if controller is None else _check_gain(system, controller)
-            return _guarded(FrictionalContactRun(system, checked_state(system, x0), t0, tf,
-                                                 _check_input(system, u), opts, gain))
-        return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
-                                       _check_input(system, u), controller, opts,
-                                       bool(sensitivity)))
+        return _run_lagrangian(system, x0, t0, tf, u, controller, opts, sensitivity)
     raise ModelError(f"event_driven: integrates LinearHybridSystem and LagrangianSystem (and "
                      f"ImpactingBodies through nscontrol.simulate), got "
                      f"{type(system).__name__}")
+
+
+def _check_sensitivity(system: Any, sensitivity: Any) -> bool:
+    """The ``sensitivity`` option: a bool, true only for a :class:`LagrangianSystem`."""
+    sensitivity = check_bool("sensitivity", sensitivity)
+    if sensitivity and not isinstance(system, LagrangianSystem):
+        raise ModelError(f"sensitivity: event_driven computes the state transition of a "
+                         f"LagrangianSystem, got {type(system).__name__}")
+    return bool(sensitivity)
+
+
+def _run_hybrid(system: LinearHybridSystem, x0: ArrayLike, t0: float, tf: float, u: Any,
+                controller: Any, opts: _Options) -> Trajectory:
+    """A linear hybrid system: its input and controller are in its state, never options."""
+    for name, value in (("u", u), ("controller", controller)):
+        if value is not None:
+            raise ModelError(f"{name}: a LinearHybridSystem carries its input generator "
+                             "and controller in its state; stack them into A instead")
+    return _guarded(HybridRun(system, system.check_state(x0), t0, tf, opts))
+
+
+def _run_lagrangian(system: LagrangianSystem, x0: ArrayLike, t0: float, tf: float, u: Any,
+                    controller: Any, opts: _Options, sensitivity: bool) -> Trajectory:
+    """A Lagrangian system: on one frictional contact held closed (stick/slip exactly), or
+    by :func:`_mechanics_run`."""
+    if system.friction_dim:   # one planar contact held closed: stick/slip exactly
+        if sensitivity:
+            raise ModelError("sensitivity: not available with Coulomb friction; simulate "
+                             "with method='moreau_jean' and a step h")
+        check_frictional_system(system, controller, opts.listeners)
+        gain = None if controller is None else _check_gain(system, controller)
+        return _guarded(FrictionalContactRun(system, checked_state(system, x0), t0, tf,
+                                             _check_input(system, u), opts, gain))
+    return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
+                                   _check_input(system, u), controller, opts, sensitivity))
 
 
 def _mechanics_run(system: Any, x0: Any, t0: float, tf: float, u: Any, controller: Any,
