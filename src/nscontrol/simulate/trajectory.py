@@ -700,10 +700,13 @@ class Recorder:
     @staticmethod
     def capacity_for(n_samples: int, every: Any = 1) -> int:
         """An initial ``capacity`` for about ``n_samples`` offered samples kept one in
-        ``every`` (so a run of known length never regrows its buffers), bounded by 2**20 rows
-        (past that the buffers double as needed)."""
+        ``every`` (so a run of known length never regrows its buffers), bounded by 2**16 rows
+        (past that the buffers double as needed: a few copies in a long run). The bound keeps
+        the first allocation small: a signal's buffer is filled with NaN, which touches every
+        page, and a fresh page costs a fault (a million-row buffer took 0.25 s on a loaded
+        machine, most of the time from a Ctrl-C to the partial trajectory of a long run)."""
         k = every if isinstance(every, int) and every >= 1 else 1
-        return int(min(max(n_samples, 0) // k + 4, 2**20))
+        return int(min(max(n_samples, 0) // k + 4, 2**16))
 
     def wants(self, name: str) -> bool:
         """Whether signal ``name`` is to be recorded (integrators may skip computing it)."""
