@@ -104,6 +104,31 @@ def test_discretize_matches_exact_response_to_held_input():
     np.testing.assert_allclose(Ad @ x0 + Bd[:, 0] * u0, exact, atol=1e-14)
 
 
+def test_discretize_reuses_its_exponential_and_hands_out_copies(monkeypatch):
+    """The exponential of a model discretised before is reused (one ``expm`` for two calls),
+    the values are the same bits, and a caller that edits its result leaves the next
+    caller's intact; another step or matrix is a new exponential."""
+    import scipy.linalg
+
+    from nscontrol.numerics import lti
+
+    calls = []
+    expm = scipy.linalg.expm
+    monkeypatch.setattr(scipy.linalg, "expm", lambda M: (calls.append(1), expm(M))[1])
+    A, B = np.array([[0.0, 1.0], [-4.0, -0.3]]), np.array([[0.0], [1.0]])
+    h = 0.0123456789           # a step no other test uses: not cached before
+    first = lti.discretize(A, B, h)
+    first.Ad[0, 0] = 99.0
+    second = lti.discretize(A.copy(), B.copy(), h)
+    assert len(calls) == 1
+    assert second.Ad[0, 0] != 99.0
+    fresh = scipy.linalg.expm(np.block([[A, B], [np.zeros((1, 3))]]) * h)
+    np.testing.assert_array_equal(second.Ad, fresh[:2, :2])
+    lti.discretize(A, B, 2 * h)
+    lti.discretize(2 * A, B, h)
+    assert len(calls) == 4      # two new keys (the reference above was the third call)
+
+
 # ----------------------------------------------------------------------------- guards
 def test_plain_crossing_to_machine_precision():
     ev = first_event(HARMONIC, [1.0, 0.0], [[1.0, 0.0]], [0.0], 10.0)
