@@ -9,9 +9,9 @@ the public helpers of the design module (``virtual_dive``, ``liftoff_blend``,
 scalar kernels below.
 
 Parameters are the record :data:`PARAMS`: the compiled block's flat ``params`` array is its
-bytes, read by name (``p.view(PARAMS)[0].gamma1``). The phase logic keeps its quantities in
+bytes, read by name (``record(p, PARAMS).gamma1``). The phase logic keeps its quantities in
 the block state, whose head is the record :data:`STATE` (read and written by name through
-``xb[:N_STATE].view(STATE)[0]``); ``output`` advances them **in place** (the compiled loop
+``record(xb, STATE)``); ``output`` advances them **in place** (the compiled loop
 passes the loop's own state array), while ``update`` returns a zero derivative so that the
 loop's explicit Euler step leaves ``xb`` exactly as ``output`` left it. The loop logs ``xb``
 at every step start: the phase, cycle, per-cycle quantities and the logged ``V``, ``V1``,
@@ -27,9 +27,14 @@ import math
 import numpy as np
 from numba import njit
 
+from ..numerics._record_kernels import record
 from ..systems._feedback_kernels import BLOCK_SIGNATURE
 from ..systems._two_link_kernels import ARM, one_dof_task_model
 from ..systems._two_link_kernels import task_model as arm_task_model
+
+# The helpers on the per-step path are inlined into their callers (``inline="always"``): a
+# call between compiled functions that passes arrays costs their reference counting, which
+# is most of a small helper's time.
 
 _F = np.float64
 #: The controller's parameters by name (``SwitchingTrackingController.compiled`` fills it).
@@ -38,8 +43,9 @@ PARAMS = np.dtype([
     # the task: circle (centre, radius) or half sine (amplitude, omega); both have these two
     ("centre", _F), ("radius", _F), ("amplitude", _F), ("omega", _F), ("threshold", _F),
     ("period", _F),
-    # the model: the arm's record, or the mass and gravity of the 1-DOF mass
-    ("arm", ARM), ("mass", _F), ("gravity", _F),
+    # the model: the arm's fields (those of ARM, flat: a nested record costs a copy in
+    # numba), or the mass and gravity of the 1-DOF mass
+    *((f"arm_{name}", _F) for name in ARM.names or ()), ("mass", _F), ("gravity", _F),
     ("gamma1", _F), ("gamma2", _F), ("Kf", _F),
     # transition design
     ("delta", _F), ("Delta", _F), ("depth_law", _F), ("alpha", _F), ("phi", _F),
@@ -60,7 +66,7 @@ STATE = np.dtype([
     ("seen", _F)])
 N_STATE = STATE.itemsize // 8
 #: The fields of the per-cycle record (``_Cycle`` of the design module).
-CYCLE_FIELDS = STATE.names[5:16]
+CYCLE_FIELDS: tuple[str, ...] = (STATE.names or ())[5:16]
 TASK_CIRCLE, TASK_HALF_SINE = 0.0, 1.0
 MODEL_TWO_LINK, MODEL_ONE_DOF = 0.0, 1.0
 DESIGNED, IMPACT_TRIGGERED = 0.0, 1.0
@@ -86,7 +92,7 @@ def initial_state(delay: int) -> np.ndarray:
 
 
 # -- tasks --------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def circle_nominal(t, xc, r, P, qd, dqd, ddqd):
     """The circle ``y = r sin(2πt/P)``, ``x = xc + r cos(2πt/P)`` and its derivatives."""
     w = 2 * math.pi / P
@@ -96,7 +102,7 @@ def circle_nominal(t, xc, r, P, qd, dqd, ddqd):
     ddqd[0], ddqd[1] = -r * w * w * s, -r * w * w * c
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def half_sine_nominal(t, A, w, qd, dqd, ddqd):
     """``A sin(ωt)`` and its derivatives."""
     qd[0] = A * math.sin(w * t)
@@ -104,19 +110,19 @@ def half_sine_nominal(t, A, w, qd, dqd, ddqd):
     ddqd[0] = -A * w * w * math.sin(w * t)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def circle_tau0(k, r, P, y_thr):
     """Where the descending ``y_d`` of cycle ``k`` falls to ``y_thr``."""
     return k * P + P / 2 - P * math.asin(y_thr / r) / (2 * math.pi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def half_sine_tau0(k, A, w, thr, P):
     """Where the descending ``A sin(ωt)`` of cycle ``k`` falls to ``thr``."""
     return k * P + (math.pi - math.asin(thr / A)) / w
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nominal(t, r, qd, dqd, ddqd):
     """The task's ``(q_d, q̇_d, q̈_d)`` at ``t`` into the three arrays."""
     if r.task == TASK_CIRCLE:
@@ -125,7 +131,7 @@ def _nominal(t, r, qd, dqd, ddqd):
         half_sine_nominal(t, r.amplitude, r.omega, qd, dqd, ddqd)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _tau0(k, r):
     """Start of the transition design of cycle ``k``."""
     if r.task == TASK_CIRCLE:
@@ -133,17 +139,18 @@ def _tau0(k, r):
     return half_sine_tau0(k, r.amplitude, r.omega, r.threshold, r.period)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _task_model(x, r, q, dq, Mq, Cq, gq, J):
     """Task coordinates, velocities and ``(M_q, C_q, g_q, J)`` of the plant in ``x``."""
     if r.model == MODEL_ONE_DOF:
         one_dof_task_model(x, r.mass, r.gravity, q, dq, Mq, Cq, gq, J)
     else:
-        arm_task_model(x, r.arm, q, dq, Mq, Cq, gq, J)
+        arm_task_model(x, r.arm_l1, r.arm_l2, r.arm_m1, r.arm_m2, r.arm_I1, r.arm_I2, r.arm_g,
+                       q, dq, Mq, Cq, gq, J)
 
 
 # -- the law's pieces ---------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lyapunov(Mq, q, dq, qd, dqd, g1, g2):
     """``(V, V1)`` with ``V1 = ½ sᵀ M s``, ``V = V1 + γ1 γ2 |q̃|²``."""
     n = q.size
@@ -159,7 +166,7 @@ def lyapunov(Mq, q, dq, qd, dqd, g1, g2):
     return V1 + g1 * g2 * ee, V1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def slotine_li(Mq, Cq, gq, q, dq, qd, dqd, ddqd, g1, g2, scale, has_star, q_star, tau):
     """``τ = scale (M q̈_r + C q̇_r + g) - γ1 s̄`` into ``tau``; ``s̄ = q̇ + γ2 (q - q_star) -
     q̇_d`` when ``has_star``, else ``s``."""
@@ -194,7 +201,7 @@ def dive(t, tau0, q10, depth, delta, Delta):
             (-6 * a + 12 * a * th) / Delta ** 2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def liftoff_blend(theta):
     """``σ(θ) = 10θ³ - 15θ⁴ + 6θ⁵`` and its two derivatives (``θ`` clipped to [0, 1])."""
     if theta >= 1.0:
@@ -258,7 +265,7 @@ def warp(t, tau0, delta, r, qd, dqd, ddqd):
         ddqd[i] = a * dpsi**2 + v * ddpsi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _reference_free(t, s, r, qd, dqd, ddqd):
     """Free motion: the nominal task; after a designed take-off, ``y = σ y_nom`` (leaves
     the surface with zero velocity)."""
@@ -322,7 +329,7 @@ def reference(t, s, r, q, qd, dqd, ddqd, q_star):
 
 
 # -- phase logic --------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _detected(xb, s, r, lam_raw):
     """The impulse over ``h`` the phase logic sees, ``detection_delay`` steps old (0 before
     that many steps); returns ``(λ, step start it was seen at)``."""
@@ -416,7 +423,7 @@ def _advance_triggered(t, s, r, q, dq, Mq, lam, t_seen):
 
 
 # -- one step -----------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def control(t, xb, x, x_true, noisy, lam_raw, force_noise, p):
     """Joint torques at the step start ``t`` for the measured state ``x``; advances the
     phase logic in ``xb`` (in place) and writes this step's log row into it.
@@ -426,8 +433,8 @@ def control(t, xb, x, x_true, noisy, lam_raw, force_noise, p):
     step's draw), saturated at ``lam_sat``. With ``noisy``, ``x`` is a noisy measurement of
     ``x_true``: the log and ``V(τ0)`` are those of the true state.
     """
-    r = p.view(PARAMS)[0]
-    s = xb[:N_STATE].view(STATE)[0]
+    r = record(p, PARAMS)
+    s = record(xb, STATE)
     n = int(r.n)
     # one workspace for the step's vectors and matrices (views: no allocation each)
     w = np.empty(8 * n + 3 * n * n)
@@ -467,8 +474,8 @@ def control(t, xb, x, x_true, noisy, lam_raw, force_noise, p):
 @njit(cache=True)
 def lyapunov_at(t, xb, x, p):
     """``(V, V1)`` at ``(t, x)`` with the reference of the phase in ``xb`` (unchanged)."""
-    r = p.view(PARAMS)[0]
-    s = xb[:N_STATE].view(STATE)[0]
+    r = record(p, PARAMS)
+    s = record(xb, STATE)
     n = int(r.n)
     q, dq, gq = np.empty(n), np.empty(n), np.empty(n)
     qd, dqd, ddqd, qs = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -481,8 +488,8 @@ def lyapunov_at(t, xb, x, p):
 @njit(cache=True)
 def reference_at(t, xb, x, p):
     """``(q_d, q̇_d, q̈_d)`` of the phase in ``xb`` at ``(t, x)`` (``xb`` unchanged)."""
-    r = p.view(PARAMS)[0]
-    s = xb[:N_STATE].view(STATE)[0]
+    r = record(p, PARAMS)
+    s = record(xb, STATE)
     n = int(r.n)
     q, dq, gq = np.empty(n), np.empty(n), np.empty(n)
     qd, dqd, ddqd, qs = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -495,14 +502,17 @@ def reference_at(t, xb, x, p):
 @njit(cache=True)
 def task_rows(x, p):
     """``[q, q']`` in task coordinates for every row of plant states ``x``."""
-    r = p.view(PARAMS)[0]
+    r = record(p, PARAMS)
     n = int(r.n)
     out = np.empty((x.shape[0], 2 * n))
-    q, dq, gq = np.empty(n), np.empty(n), np.empty(n)
+    q, dq, gq, xk = np.empty(n), np.empty(n), np.empty(n), np.empty(2 * n)
     Mq, Cq, J = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     for k in range(x.shape[0]):
-        _task_model(x[k], r, q, dq, Mq, Cq, gq, J)
-        out[k, :n], out[k, n:] = q, dq
+        for j in range(2 * n):          # element by element: no view made per row
+            xk[j] = x[k, j]
+        _task_model(xk, r, q, dq, Mq, Cq, gq, J)
+        for j in range(n):
+            out[k, j], out[k, n + j] = q[j], dq[j]
     return out
 
 

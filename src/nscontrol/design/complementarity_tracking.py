@@ -370,7 +370,8 @@ def slotine_li_force(Mq: FloatArray, Cq: FloatArray, gq: FloatArray, q: FloatArr
     tau = np.empty(args[3].size)
     has_star = q_star is not None
     qs = np.ascontiguousarray(q_star if has_star else args[3], dtype=float)
-    kern.slotine_li(*args, float(gains.gamma1), float(gains.gamma2), 1.0, has_star, qs, tau)
+    kern.slotine_li(*args, float(gains.gamma1), float(gains.gamma2), 1.0,  # type: ignore[call-arg]  # numba's stub
+                    has_star, qs, tau)
     return tau
 
 
@@ -599,6 +600,7 @@ class SwitchingTrackingController(StaticLaw):
                              "q2 (its trigger and force reference); the model has one "
                              "coordinate: use switching='designed' or a TwoLinkArm")
         self._params = self._kernel_params()
+        self._block: Any = None
         self.reset_run()
 
     # -- Controller protocol (update and reset from StaticLaw: ``output`` advances the
@@ -634,7 +636,7 @@ class SwitchingTrackingController(StaticLaw):
         m : Measurement
             Unused.
         """
-        return np.zeros_like(xc)
+        return np.zeros(np.shape(xc)[0])
 
     def compiled_reason(self) -> str | None:
         """Why this setting has no compiled form (``None``: it has one)."""
@@ -654,9 +656,12 @@ class SwitchingTrackingController(StaticLaw):
         """
         if self.compiled_reason() is not None:
             return None
-        from ..systems.feedback import CompiledBlock
+        if self._block is None:         # built once: its checks cost milliseconds
+            from ..systems.feedback import CompiledBlock
 
-        return CompiledBlock(kern.tracking_output, kern.tracking_update, self._params)
+            self._block = CompiledBlock(kern.tracking_output, kern.tracking_update,
+                                        self._params)
+        return self._block
 
     def _kernel_params(self) -> FloatArray:
         """The parameters as the kernels' record ``PARAMS`` (flat, in its order)."""
@@ -679,7 +684,8 @@ class SwitchingTrackingController(StaticLaw):
             r["model"], r["mass"], r["gravity"] = kern.MODEL_ONE_DOF, model.m, model.g
         else:
             r["model"] = kern.MODEL_TWO_LINK
-            r["arm"] = model.params.array.view(r["arm"].dtype)[0]
+            for name in ("l1", "l2", "m1", "m2", "I1", "I2", "g"):
+                r[f"arm_{name}"] = getattr(model.params, name)
         r["switching"] = kern.DESIGNED if self.switching == "designed" \
             else kern.IMPACT_TRIGGERED
         g, tr, c = self.gains, self.transition, self.contact
@@ -743,9 +749,9 @@ class SwitchingTrackingController(StaticLaw):
         self._xs: list[FloatArray] = []
         self._loaded: tuple[FloatArray, FloatArray] | None = None   # load_run's
         self._cycles: tuple[int, list[_Cycle]] | None = None
-        self._rng = np.random.default_rng(self.noise_seed)
-        # the force sensor's own stream: adding force noise leaves the position noise alone
-        self._force_rng = np.random.default_rng((self.noise_seed, 1))
+        # the noise generators, made at the first draw (a generator costs about a millisecond)
+        self._rng: np.random.Generator | None = None
+        self._force_rng: np.random.Generator | None = None
 
     def _field(self, name: str) -> float:
         return float(self._xb[:kern.N_STATE].view(kern.STATE)[name][0])
@@ -801,10 +807,15 @@ class SwitchingTrackingController(StaticLaw):
         x_true = np.array(x, dtype=float)            # a copy: logged
         x_meas = x_true
         if self.position_noise > 0.0:   # no draw at σ = 0: the noiseless run is unchanged
+            if self._rng is None:
+                self._rng = np.random.default_rng(self.noise_seed)
             x_meas = x_true.copy()
             x_meas[:n] += self._rng.normal(0.0, self.position_noise, n)
         noise = 0.0
         if self.force_noise > 0.0:      # no draw at σ = 0: the exact-sensor run is unchanged
+            if self._force_rng is None:
+                # the sensor's own stream: adding force noise leaves the position noise alone
+                self._force_rng = np.random.default_rng((self.noise_seed, 1))
             noise = float(self._force_rng.normal(0.0, self.force_noise))
         u = kern.control(float(t), self._xb, x_meas, x_true, x_meas is not x_true,
                          float(lam_raw), noise, self._params)

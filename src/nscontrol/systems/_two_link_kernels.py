@@ -4,7 +4,8 @@ task-space model (:meth:`~nscontrol.systems.two_link.TwoLinkArm.task_dynamics` c
 :func:`task_model_of`; the tracking controller's kernel calls :func:`task_model`).
 
 The parameters are the record :data:`ARM` (``l1, l2, m1, m2, I1, I2, g``); a compiled model's
-flat ``params`` array is that record's bytes, read by name through ``params.view(ARM)[0]``.
+flat ``params`` array is that record's bytes, read by name through ``record(params, ARM)``
+(:mod:`nscontrol.numerics._record_kernels`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..numerics._record_kernels import record
 from ._lagrangian_kernels import (
     FORCE_JACOBIAN_SIGNATURE,
     FORCE_SIGNATURE,
@@ -32,7 +34,7 @@ ARM = np.dtype([("l1", _F), ("l2", _F), ("m1", _F), ("m2", _F), ("I1", _F), ("I2
 @njit(MASS_SIGNATURE, cache=True)
 def mass(q, p):
     """``M(θ)``."""
-    a = p.view(ARM)[0]
+    a = record(p, ARM)
     l1, l2, m1, m2, I1, I2 = a.l1, a.l2, a.m1, a.m2, a.I1, a.I2
     c2 = math.cos(q[1])
     m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
@@ -45,7 +47,7 @@ def mass(q, p):
 @njit(FORCE_SIGNATURE, cache=True)
 def force(t, q, v, p):
     """``-C(θ, θ')θ' - G(θ)``."""
-    a = p.view(ARM)[0]
+    a = record(p, ARM)
     l1, l2, m1, m2, g = a.l1, a.l2, a.m1, a.m2, a.g
     h = m2 * l1 * l2 / 2 * math.sin(q[1])
     c00, c01, c10 = -h * v[1], -h * (v[0] + v[1]), h * v[0]
@@ -61,7 +63,7 @@ def force(t, q, v, p):
 @njit(FORCE_JACOBIAN_SIGNATURE, cache=True)
 def force_jacobian(t, q, v, p):
     """``[∂f/∂θ; ∂f/∂θ']``."""
-    a = p.view(ARM)[0]
+    a = record(p, ARM)
     l1, l2, m1, m2, g = a.l1, a.l2, a.m1, a.m2, a.g
     c = m2 * l1 * l2 / 2
     s2, c2 = c * math.sin(q[1]), c * math.cos(q[1])
@@ -79,7 +81,7 @@ def force_jacobian(t, q, v, p):
 @njit(GAP_SIGNATURE, cache=True)
 def gaps(q, p):
     """End-effector height ``l1 sin θ1 + l2 sin(θ1 + θ2)``."""
-    a = p.view(ARM)[0]
+    a = record(p, ARM)
     out = np.empty(1)
     out[0] = a.l1 * math.sin(q[0]) + a.l2 * math.sin(q[0] + q[1])
     return out
@@ -88,7 +90,7 @@ def gaps(q, p):
 @njit(GAP_JACOBIAN_SIGNATURE, cache=True)
 def gap_jacobian(q, p):
     """``∂g/∂θ``."""
-    a = p.view(ARM)[0]
+    a = record(p, ARM)
     c12 = a.l2 * math.cos(q[0] + q[1])
     G = np.empty((1, 2))
     G[0, 0], G[0, 1] = a.l1 * math.cos(q[0]) + c12, c12
@@ -98,18 +100,18 @@ def gap_jacobian(q, p):
 @njit(POTENTIAL_SIGNATURE, cache=True)
 def potential(q, p):
     """Gravity's potential."""
-    a = p.view(ARM)[0]
+    a = record(p, ARM)
     l1, l2, m1, m2, g = a.l1, a.l2, a.m1, a.m2, a.g
     return g * (m1 * l1 / 2 * math.sin(q[0])
                 + m2 * (l1 * math.sin(q[0]) + l2 / 2 * math.sin(q[0] + q[1])))
 
 
-@njit(cache=True)
-def task_model(x, a, q, dq, Mq, Cq, gq, J):
+@njit(cache=True, inline="always")
+def task_model(x, l1, l2, m1, m2, I1, I2, grav, q, dq, Mq, Cq, gq, J):
     """Task coordinates ``q = (y, x)``, velocities and ``(M_q, C_q, g_q, J)`` of the arm at
-    ``x = [θ; θ']`` into the arrays (``a``: an :data:`ARM` record); closed form on floats
-    (2x2 matrices as row-major 4-tuples: no allocation)."""
-    l1, l2, m1, m2, I1, I2, grav = a.l1, a.l2, a.m1, a.m2, a.I1, a.I2, a.g
+    ``x = [θ; θ']`` into the arrays (the :data:`ARM` fields as scalars: a record nested in
+    another costs a copy in numba); closed form on floats (2x2 matrices as row-major
+    4-tuples: no allocation)."""
     t1, t2, w1, w2 = x[0], x[1], x[2], x[3]
     s1, c1, s2, c2 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2)
     s12, c12 = math.sin(t1 + t2), math.cos(t1 + t2)
@@ -143,7 +145,7 @@ def task_model(x, a, q, dq, Mq, Cq, gq, J):
     dq[1] = Jt[2] * w1 + Jt[3] * w2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def one_dof_task_model(x, m, g, q, dq, Mq, Cq, gq, J):
     """The same for the mass on a vertical line (identity task map): ``(m, 0, m g, 1)``."""
     q[0], dq[0] = x[0], x[1]
@@ -156,11 +158,12 @@ def task_model_of(x, p):
     ``x = [θ; θ']``, as new arrays (what ``TwoLinkArm.task_model`` returns)."""
     q, dq, gq = np.empty(2), np.empty(2), np.empty(2)
     Mq, Cq, J = np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2))
-    task_model(x, p.view(ARM)[0], q, dq, Mq, Cq, gq, J)
+    a = record(p, ARM)
+    task_model(x, a.l1, a.l2, a.m1, a.m2, a.I1, a.I2, a.g, q, dq, Mq, Cq, gq, J)
     return q, dq, Mq, Cq, gq, J
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mm(A, B):
     """Product of two 2x2 matrices stored row-major as 4-tuples."""
     return (A[0] * B[0] + A[1] * B[2], A[0] * B[1] + A[1] * B[3],

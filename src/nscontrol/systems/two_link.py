@@ -71,7 +71,7 @@ class TwoLinkParams:
         """The parameters as the compiled kernels' record ``ARM`` (flat, in its order)."""
         from ._two_link_kernels import ARM
 
-        return np.array([tuple(getattr(self, name) for name in ARM.names)],
+        return np.array([tuple(getattr(self, name) for name in ARM.names or ())],
                         dtype=ARM).view(np.float64)
 
     def inertial(self) -> dict[str, float]:
