@@ -190,7 +190,7 @@ def depth(v1, law, alpha, phi, dmin, dmax):
     return min(max(raw, dmin), dmax)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def dive(t, tau0, q10, depth, delta, Delta):
     """The cubic dive for ``t >= τ0 + δ``: ``(q1*, q̇1*, q̈1*)``."""
     th = min((t - tau0 - delta) / Delta, 1.0)
@@ -250,7 +250,7 @@ def _dive_crossing(s, r):
 
 
 # -- references ---------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def warp(t, tau0, delta, r, qd, dqd, ddqd):
     """The nominal path time-warped to rest at ``τ0 + δ``:
     ``ψ(t) = τ0 + (s - δ)² s / δ²``, ``s = t - τ0``."""
@@ -280,7 +280,7 @@ def _reference_free(t, s, r, qd, dqd, ddqd):
                                   c / T**2 * q0 + 2 * b / T * v0 + a * a0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _reference_constrained(t, s, r, q, qd, dqd, ddqd):
     """Constrained motion: ``q1d = 0``; designed: the slide along a Hermite to where the
     circle leaves the ground at ``t_d``, ``λ_d = c_λ (t_d - t)``; impact-triggered: the
@@ -300,7 +300,7 @@ def _reference_constrained(t, s, r, q, qd, dqd, ddqd):
     return 0.5 * max(r.q2_end - q[1], 0.0) if n > 1 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def reference(t, s, r, q, qd, dqd, ddqd, q_star):
     """The current phase's ``(q_d, q̇_d, q̈_d)`` into the arrays; returns ``(has_q_star,
     λ_d)`` (``q_star`` filled when used)."""
@@ -370,7 +370,7 @@ def _transition(t, s, r, q, dq, Mq):
     s.phase = APPROACH
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _advance_designed(t, s, r, q, dq, Mq, lam, t_seen):
     """Transition at ``τ0ᵏ``; impacts at the first impulse; constrained after
     ``n_consecutive_contact`` steps with one; take-off at ``t_dᵏ``."""
@@ -389,7 +389,7 @@ def _advance_designed(t, s, r, q, dq, Mq, lam, t_seen):
         _take_off(s, t)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _advance_triggered(t, s, r, q, dq, Mq, lam, t_seen):
     """The 2007 logic: transition at the first impulse with ``q2 < trigger_q2``,
     ``d = √(γ2 V/γ1)``; constrained once gap and normal velocity are below 1e-4; take-off
