@@ -112,6 +112,21 @@ def test_bad_options_are_refused():
         SwitchingTrackingController(OneDofMass(), HalfSineTask(), switching="maybe")
     with pytest.raises(ModelError, match="depth_max"):
         TransitionDesign(depth_min=0.1, depth_max=0.01)
+    # the impact-triggered logic reads q2: a one-coordinate model cannot run it
+    with pytest.raises(ModelError, match="switching"):
+        SwitchingTrackingController(OneDofMass(), HalfSineTask(), switching="impact-triggered")
+
+
+def test_a_model_the_kernels_do_not_know_is_refused():
+    # the law runs as compiled kernels that know the two task maps and the two tasks: a
+    # look-alike model (right methods, other formulas) would be silently ignored
+    class Heavier(OneDofMass):
+        def task_dynamics(self, theta, dtheta):
+            return (np.array([[2.0]]), np.zeros((1, 1)), np.array([19.62]), np.eye(1))
+
+    with pytest.raises(ModelError, match="model, task") as info:
+        SwitchingTrackingController(Heavier(), HalfSineTask())
+    assert "OneDofMass" in str(info.value)
 
 
 def test_warp_is_continuous_with_the_nominal_path_at_the_transition_start():
