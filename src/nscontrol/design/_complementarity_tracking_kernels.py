@@ -27,8 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..numerics._record_kernels import record
-from ..systems._feedback_kernels import BLOCK_SIGNATURE
+from ..systems._feedback_kernels import BLOCK_SIGNATURE, record
 from ..systems._two_link_kernels import ARM, one_dof_task_model
 from ..systems._two_link_kernels import task_model as arm_task_model
 

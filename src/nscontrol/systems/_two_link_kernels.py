@@ -5,7 +5,7 @@ task-space model (:meth:`~nscontrol.systems.two_link.TwoLinkArm.task_dynamics` c
 
 The parameters are the record :data:`ARM` (``l1, l2, m1, m2, I1, I2, g``); a compiled model's
 flat ``params`` array is that record's bytes, read by name through ``record(params, ARM)``
-(:mod:`nscontrol.numerics._record_kernels`).
+(``nscontrol.systems._feedback_kernels.record``).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..numerics._record_kernels import record
+from ._feedback_kernels import record
 from ._lagrangian_kernels import (
     FORCE_JACOBIAN_SIGNATURE,
     FORCE_SIGNATURE,

@@ -6,7 +6,7 @@ import pytest
 from numba import njit
 from numba.core.errors import TypingError
 
-from nscontrol.numerics._record_kernels import record
+from nscontrol.systems._feedback_kernels import record
 
 REC = np.dtype([("a", np.float64), ("b", np.float64), ("c", np.float64)])
 
