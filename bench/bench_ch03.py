@@ -1,7 +1,8 @@
 """Chapter 3: the closed-loop tracking runs, ours against Siconos on the 1-DOF task.
 
 1. ``one-dof``: a unit mass above the ground under the chapter's switching controller
-   (half-sine task, e = 0.7, h = 1e-3, one 8 s cycle, 8 000 steps). Siconos runs the same
+   (half-sine task, e = 0.7, h = 1e-3, one 8 s cycle, 8 000 steps), ``one_dof_tracking`` on
+   its default path (the compiled closed loop; ``path`` in ``accuracy``). Siconos runs the same
    scenario (``LagrangianLinearTIDS``, Newton impact, Moreau–Jean θ = ½, LCP) with the same
    controller written in its Python (``bench/siconos/ch03_one_dof.py``). ``ratio`` = our
    steps/s over Siconos'; ``accuracy``: largest position difference over the free motion
@@ -10,9 +11,8 @@
 2. ``two-link`` (no reference): the 30 s, three-cycle run of the arm at h = 1e-3 (1e-4 unless
    ``quick``: 300 000 steps), our steps/s; the Siconos Python bindings would need a
    Python-side ``LagrangianDS`` with plugins for M(q), forces and Jacobians, not done.
-   This is the example's default run, on Moreau–Jean's Python path (``path`` in
-   ``accuracy``); record 4 runs the controller's compiled form
-   (``two_link_tracking(..., compiled=True)`` does the same).
+   This is the example's default run (compiled: ``path`` in ``accuracy``); record 4
+   compares the compiled and Python paths of the same loop.
 3. ``two-link M(q), compiled``: the arm's compiled model (``TwoLinkArm().system()`` carries a
    ``CompiledModel``) under a sampled joint PD written as a compiled block, 30 s at
    h = 1e-4 (300 000 steps, impacts on the ground), against the same loop on the Python path
@@ -24,8 +24,9 @@
    with the arm's compiled model), against the same loop on the Python path
    (``compiled=False``, a 3 s run) in the same process; ``accuracy``: the largest state
    difference over those 3 s and the cycles completed.
-5. ``1-DOF, compiled tracking controller``: scenario 1 with the compiled form; ``ratio``:
-   our steps/s over Siconos' (measured in 1.), when Siconos is there.
+5. ``1-DOF, Python path``: scenario 1 on the fallback path (``one_dof_tracking(...,
+   compiled=False)``: the same controller kernels called from Moreau–Jean's Python loop);
+   ``ratio``: its steps/s over Siconos' (measured in 1.), when Siconos is there.
 
 Run: ``nscontrol bench ch03 --json``.
 """
@@ -62,7 +63,8 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
         "scenario": f"ch03 1-DOF tracking, one 8 s cycle, e = 0.7, h = {H:g}",
         "size": steps, "ours_steps_per_s": rate, "reference": None,
         "reference_steps_per_s": None, "ratio": None,
-        "accuracy": {"impacts_ours": len(impacts), "first_impact_ours": impacts[0]}}
+        "accuracy": {"impacts_ours": len(impacts), "first_impact_ours": impacts[0],
+                     "path": ours.traj.stats["path"]}}
     sic_rate = None
     have, why = siconos_available()
     if not have:
@@ -100,7 +102,7 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
                         "path": arm.traj.stats["path"]}}
     yield _compiled_arm(quick)
     yield _compiled_tracking(quick)
-    yield _compiled_one_dof(sic_rate)
+    yield _python_one_dof(sic_rate)
 
 
 def _tracking_loop(arm: bool, compiled: bool) -> tuple[Any, Any, Any]:
@@ -165,22 +167,18 @@ def _compiled_tracking(quick: bool) -> dict[str, Any]:
                                                                    - slow.x[:k]).max())}}
 
 
-def _compiled_one_dof(sic_rate: float | None) -> dict[str, Any]:
-    import nscontrol as nsc
-
-    def run_loop() -> Any:
-        loop, x0, _ = _tracking_loop(False, True)
-        return nsc.simulate(loop, x0, (0.0, 8.0), method="moreau_jean", h=H, theta=0.5,
-                            progress=False)
-    seconds, traj = _timed(run_loop)
-    steps = traj.stats["steps"]
+def _python_one_dof(sic_rate: float | None) -> dict[str, Any]:
+    seconds, ours = _timed(lambda: one_dof_tracking(cycles=1, h=H, restitution=0.7,
+                                                    compiled=False))
+    steps = ours.traj.t.size - 1
     rate = steps / seconds
-    return {"scenario": f"ch03 1-DOF tracking, compiled controller, one 8 s cycle, e = 0.7, "
-                        f"h = {H:g}", "size": steps, "ours_steps_per_s": rate,
+    return {"scenario": f"ch03 1-DOF tracking, Python path (compiled=False), one 8 s cycle, "
+                        f"e = 0.7, h = {H:g}", "size": steps, "ours_steps_per_s": rate,
             "reference": None if sic_rate is None else "Siconos (record 1)",
             "reference_steps_per_s": sic_rate,
             "ratio": None if sic_rate is None else rate / sic_rate,
-            "accuracy": {"path": traj.stats["path"]}}
+            "accuracy": {"path": ours.traj.stats["path"],
+                         "path_reason": ours.traj.stats["path_reason"]}}
 
 
 def _compiled_arm(quick: bool) -> dict[str, Any]:

@@ -112,19 +112,41 @@ def test_bad_options_are_refused():
         SwitchingTrackingController(OneDofMass(), HalfSineTask(), switching="maybe")
     with pytest.raises(ModelError, match="depth_max"):
         TransitionDesign(depth_min=0.1, depth_max=0.01)
+    # the impact-triggered logic reads q2: a one-coordinate model cannot run it
+    with pytest.raises(ModelError, match="switching"):
+        SwitchingTrackingController(OneDofMass(), HalfSineTask(), switching="impact-triggered")
+
+
+def test_a_model_the_kernels_do_not_know_is_refused():
+    # the law runs as compiled kernels that know the two task maps and the two tasks: a
+    # look-alike model (right methods, other formulas) would be silently ignored
+    class Heavier(OneDofMass):
+        def task_dynamics(self, theta, dtheta):
+            return (np.array([[2.0]]), np.zeros((1, 1)), np.array([19.62]), np.eye(1))
+
+    with pytest.raises(ModelError, match="model, task") as info:
+        SwitchingTrackingController(Heavier(), HalfSineTask())
+    assert "OneDofMass" in str(info.value)
 
 
 def test_warp_is_continuous_with_the_nominal_path_at_the_transition_start():
+    from nscontrol.design import _complementarity_tracking_kernels as kern
+
     ctrl = SwitchingTrackingController(OneDofMass(), HalfSineTask(), PBCGains(5.0, 5.0))
-    task = ctrl.task
-    cyc = ctrl.current
-    cyc.tau0, cyc.q10, cyc.depth, cyc.q2_star = task.tau0(0), 0.01, 0.005, np.zeros(0)
-    p, v, _ = ctrl._virtual(cyc.tau0, cyc)
-    pn, vn, _ = task.nominal(cyc.tau0)
+    task, delta = ctrl.task, ctrl.transition.delta
+    rec = ctrl._kernel_params().view(kern.PARAMS)[0]
+    tau0 = task.tau0(0)
+
+    def warped(t):
+        p, v, a = np.empty(1), np.empty(1), np.empty(1)
+        kern.warp(t, tau0, delta, rec, p, v, a)
+        return p, v, a
+    p, v, _ = warped(tau0)
+    pn, vn, _ = task.nominal(tau0)
     assert p[0] == pytest.approx(pn[0], abs=4 * EPS)
     assert v[0] == pytest.approx(vn[0], abs=4 * EPS)
     # at τ0 + δ the warp has brought the path back to rest where it started
-    p, v, _ = ctrl._virtual(cyc.tau0 + ctrl.transition.delta - 1e-12, cyc)
+    p, v, _ = warped(tau0 + delta - 1e-12)
     assert v[0] == pytest.approx(0.0, abs=1e-9)
     assert p[0] == pytest.approx(pn[0], abs=1e-9)
     assert math.isfinite(p[0])

@@ -1,6 +1,7 @@
-"""The compiled form of the switching tracking controller against its Python methods: the
-same closed-loop run (trajectory, impacts, phases, logged V) on the 1-DOF mass and the
-two-link arm, and the settings that have no compiled form."""
+"""The compiled form of the switching tracking controller against its Python methods (which
+call the same kernels on Moreau–Jean's Python loop): the same closed-loop run (trajectory,
+impacts, phases, logged V) on the 1-DOF mass and the two-link arm, for both switching logics
+and the force-sensor model, and the settings that have no compiled form (the noise)."""
 
 from __future__ import annotations
 
@@ -20,20 +21,27 @@ from nscontrol.design.complementarity_tracking import (
 from nscontrol.systems.two_link import OneDofMass, TwoLinkArm
 
 U = np.finfo(float).eps
-# Both paths evaluate the same formulas; the compiled task-space model, torque sums and
-# Lyapunov function group some products differently (a few ulps per step), and Moreau–Jean
+# Both paths run the same controller kernels; Moreau–Jean's Python loop and its compiled loop
+# group some products of the plant step differently (a few ulps per step), and the loop
 # carries such differences forward without amplifying them by more than a modest factor
 # over a step of the contracting closed loop: 100 ulps per step, accumulated over the run.
 FACTOR = 100.0
 
 
+def _state(rows, name):
+    """A field of the phase logic's record in logged block-state rows."""
+    return np.ascontiguousarray(rows[:, :kern.N_STATE]).view(kern.STATE)[name][:, 0]
+
+
 def _both_paths(model, ctrl, x0, T, h):
-    """The Python run (the integrator's ``controller=`` callable) and the compiled
+    """The Python run (the closed loop on Moreau–Jean's Python loop) and the compiled
     closed-loop run; returns them with the Python log."""
     plant = model.system(0.7)
     ctrl.reset_run()
-    ref = nsc.simulate(plant, x0, (0.0, T), method="moreau_jean", h=h, theta=0.5,
-                       controller=ctrl, signals=("impulse", "gap"), progress=False)
+    ref = nsc.simulate(nsc.closed_loop(plant, ctrl, compiled=False), x0, (0.0, T),
+                       method="moreau_jean", h=h, theta=0.5, signals=("impulse", "gap"),
+                       progress=False)
+    assert ref.stats["path"] != "compiled_model"
     log = ctrl.signals()
     fast = nsc.simulate(nsc.closed_loop(plant, ctrl), x0, (0.0, T), method="moreau_jean",
                         h=h, theta=0.5, progress=False)
@@ -52,9 +60,9 @@ def _assert_same_run(ref, fast, log):
     assert np.abs(fast.x - ref.x).max() <= bound * max(1.0, np.abs(ref.x).max())
     assert np.array_equal(_impact_times(fast), _impact_times(ref))
     rows = fast.signals["xc"][1:]          # sample k + 1 shows the row of step start k
-    assert np.array_equal(rows[:, kern.X_PHASE], log["phase"])
-    assert np.array_equal(rows[:, kern.X_CYCLE], log["cycle"])
-    assert np.abs(rows[:, kern.X_V] - log["V"]).max() <= bound * np.abs(log["V"]).max()
+    assert np.array_equal(_state(rows, "phase"), log["phase"])
+    assert np.array_equal(_state(rows, "cycle"), log["cycle"])
+    assert np.abs(_state(rows, "V") - log["V"]).max() <= bound * np.abs(log["V"]).max()
 
 
 @pytest.mark.parametrize("delay", [0, 2])
@@ -78,16 +86,42 @@ def test_two_link_compiled_run_is_the_python_run():
     _assert_same_run(ref, fast, log)
 
 
-@pytest.mark.parametrize("option", [{"position_noise": 1e-4}, {"force_bias": 0.1},
-                                    {"force_scale": 0.9}, {"force_noise": 0.1},
-                                    {"switching": "impact-triggered"}])
+@pytest.mark.parametrize("option", [{"force_bias": 0.3}, {"force_scale": 0.9}])
+def test_force_sensor_model_runs_compiled_as_in_python(option):
+    # the sensor's scale and bias act from the constrained phase on: run past its start
+    model, task = OneDofMass(), HalfSineTask(omega=2 * np.pi / 8)
+    ctrl = SwitchingTrackingController(model, task, PBCGains(5.0, 5.0, 0.5),
+                                       TransitionDesign(), ContactPhaseDesign(lam_rate=1.5),
+                                       **option)
+    ref, fast, log = _both_paths(model, ctrl, np.array([0.05, 0.0]), 7.0, 1e-3)
+    assert 3.0 in set(log["phase"])
+    _assert_same_run(ref, fast, log)
+
+
+def test_impact_triggered_switching_runs_compiled_as_in_python():
+    # the 2007 logic (chapter 3's "siconos-2007" set-up) on the arm: one period of 3 s
+    arm = TwoLinkArm()
+    h = 5e-3
+    ctrl = SwitchingTrackingController(arm, CircleTask(period=3.0), PBCGains(25.0, 30.0, 3.0),
+                                       TransitionDesign(), ContactPhaseDesign(lam_rate=4.0),
+                                       switching="impact-triggered",
+                                       force_feedback_scale=h)
+    ref, fast, log = _both_paths(arm, ctrl, np.array([1.0, -1.5, 0.0, 0.0]), 4.0, h)
+    # it reaches the constrained phase and takes off: every branch of the logic ran
+    assert {0.0, 2.0, 3.0} <= set(log["phase"]) and log["cycle"].max() >= 1.0
+    _assert_same_run(ref, fast, log)
+
+
+@pytest.mark.parametrize("option", [{"position_noise": 1e-4}, {"force_noise": 0.1}])
 def test_settings_without_a_compiled_form_run_python(option):
     ctrl = SwitchingTrackingController(OneDofMass(), HalfSineTask(), **option)
-    assert ctrl.compiled() is None and ctrl.n_states == 0
+    assert ctrl.compiled() is None and "noise" in ctrl.compiled_reason()
     loop = nsc.closed_loop(OneDofMass().system(0.7), ctrl)
     traj = nsc.simulate(loop, np.array([0.05, 0.0]), (0.0, 0.01), method="moreau_jean",
                         h=1e-3, theta=0.5, progress=False)
     assert traj.stats["path"] != "compiled_model"
+    # the Python methods keep the phase logic in the loop's block state, as compiled
+    assert np.array_equal(ctrl.signals(traj)["V"], ctrl.signals()["V"])
 
 
 def test_block_state_is_finite_before_a_run():
@@ -162,13 +196,18 @@ def test_load_run_gives_the_python_run_state():
     assert ctrl.signals() == {}
 
 
-def test_example_runs_compiled_on_request_with_the_python_signals():
+def test_example_runs_compiled_by_default_with_the_python_signals():
     from nscontrol.examples.ch03_two_link_tracking import two_link_tracking
 
-    slow = two_link_tracking(cycles=1, h=1e-3)
-    fast = two_link_tracking(cycles=1, h=1e-3, compiled=True)
+    slow = two_link_tracking(cycles=1, h=1e-3, compiled=False)
+    fast = two_link_tracking(cycles=1, h=1e-3)
     assert slow.traj.stats["path"] == "python"
+    assert slow.traj.stats["path_reason"] == "compiled=False"
     assert fast.traj.stats["path"] == "compiled_model"
+    # a moved ground has no compiled model: the Python path, said so
+    moved = two_link_tracking(cycles=1, h=1e-3, ground_offset=1e-3)
+    assert moved.traj.stats["path"] == "python"
+    assert moved.traj.stats["path_reason"].startswith("ground_offset")
     bound = (slow.traj.t.size - 1) * U * FACTOR
     assert np.abs(fast.traj.x - slow.traj.x).max() <= bound
     assert set(fast.traj.signals) == set(slow.traj.signals)

@@ -1,7 +1,7 @@
 """Chapter 3 example: the two-link arm tracking a circle cut by the ground.
 
-The runs take minutes (the controller is Python code at every Moreau–Jean step), so all but
-the registration test are marked slow. The bounds are the chapter's checks; those stated at
+The runs are long (the fine one is 300 000 Moreau–Jean steps, compiled by default), so all
+but the registration test are marked slow. The bounds are the chapter's checks; those stated at
 h = 1e-4 are scaled with the scheme's order where a run uses h = 1e-3 (see each comment).
 """
 

@@ -14,10 +14,17 @@ constrained motion on ``q1 = 0``; the controller switches between
 
 with ``q̃ = q - q_d``, ``s = q̃' + γ2 q̃``, ``q̇_r = q̇_d - γ2 q̃`` and the Lyapunov function
 ``V = ½ sᵀ M(q) s + γ1 γ2 q̃ᵀ q̃``. The controller is a :class:`~nscontrol.systems.Controller`
-(continuous-time, no vector state: its phase logic is Python state) that reads the
-Moreau–Jean contact estimate ``λ̂`` (the last step's impulse over ``h``) to detect the first
-impact and the persistent contact. It logs, at every step start, the quantities the analysis
-of :mod:`nscontrol.analysis.tracking_cycles` needs (``V``, ``V1``, phase, cycle, references).
+(continuous-time; its phase logic is its block state) that reads the Moreau–Jean contact
+estimate ``λ̂`` (the last step's impulse over ``h``) to detect the first impact and the
+persistent contact. It logs, at every step start, the quantities the analysis of
+:mod:`nscontrol.analysis.tracking_cycles` needs (``V``, ``V1``, phase, cycle, references).
+
+The law, the references and the phase logic are written once, as the compiled kernels of
+``nscontrol.design._complementarity_tracking_kernels``: the compiled closed loop runs them as
+a :class:`~nscontrol.systems.feedback.CompiledBlock`, the Python methods call them (adding
+the measurement noise drawn from NumPy's generators), and the helpers below
+(:func:`virtual_dive`, :func:`liftoff_blend`, :func:`slotine_li_force`, the tasks) wrap the
+same kernels.
 
 The framework (phases, laws, virtual trajectory, Lyapunov function) is Bourgeot & Brogliato's
 (2005); the depth clip, the contact-force ramp and the quintic lift-off are our choices where
@@ -27,7 +34,6 @@ the published descriptions leave the design open (see ``docs/ch03.md``).
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any, Protocol
@@ -44,6 +50,7 @@ from .._validation import (
 )
 from ..errors import DimensionError, ModelError
 from ..systems.feedback import StaticLaw
+from . import _complementarity_tracking_kernels as kern
 
 __all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
            "CircleTask", "HalfSineTask", "TaskSpaceModel", "SwitchingTrackingController",
@@ -134,9 +141,9 @@ class TransitionDesign:
         v1 : float
             ``V1(τ0ᵏ) = ½ sᵀ M s``.
         """
-        raw = self.alpha * math.sqrt(max(v1, 0.0)) if self.depth_law == "sqrt" \
-            else self.phi * max(v1, 0.0)
-        return float(min(max(raw, self.depth_min), self.depth_max))
+        return float(kern.depth(float(v1), 0.0 if self.depth_law == "sqrt" else 1.0,
+                                float(self.alpha), float(self.phi), float(self.depth_min),
+                                float(self.depth_max)))
 
 
 @dataclass(frozen=True)
@@ -225,11 +232,9 @@ class CircleTask:
         t : float
             Time.
         """
-        w = 2 * math.pi / self.period
-        c, s = math.cos(w * t), math.sin(w * t)
-        r = self.radius
-        return (np.array([r * s, self.centre + r * c]), np.array([r * w * c, -r * w * s]),
-                np.array([-r * w * w * s, -r * w * w * c]))
+        qd, dqd, ddqd = np.empty(2), np.empty(2), np.empty(2)
+        kern.circle_nominal(float(t), self.centre, self.radius, self.period, qd, dqd, ddqd)
+        return qd, dqd, ddqd
 
     def tau0(self, k: int) -> float:
         """``kP + P/2 - P asin(y_thr/r)/(2π)``.
@@ -239,8 +244,7 @@ class CircleTask:
         k : int
             Cycle index.
         """
-        P = self.period
-        return k * P + P / 2 - P * math.asin(self.y_threshold / self.radius) / (2 * math.pi)
+        return float(kern.circle_tau0(k, self.radius, self.period, self.y_threshold))
 
     def t_detach(self, k: int) -> float:
         """``(k + 1) P``: the end of the sliding segment.
@@ -293,9 +297,9 @@ class HalfSineTask:
         t : float
             Time.
         """
-        A, w = self.amplitude, self.omega
-        return (np.array([A * math.sin(w * t)]), np.array([A * w * math.cos(w * t)]),
-                np.array([-A * w * w * math.sin(w * t)]))
+        qd, dqd, ddqd = np.empty(1), np.empty(1), np.empty(1)
+        kern.half_sine_nominal(float(t), self.amplitude, self.omega, qd, dqd, ddqd)
+        return qd, dqd, ddqd
 
     def tau0(self, k: int) -> float:
         """Where ``A sin(ωt) = threshold`` descending in cycle ``k``.
@@ -305,8 +309,8 @@ class HalfSineTask:
         k : int
             Cycle index.
         """
-        return k * self.period + (math.pi - math.asin(self.threshold / self.amplitude)) \
-            / self.omega
+        return float(kern.half_sine_tau0(k, self.amplitude, self.omega, self.threshold,
+                                         self.period))
 
     def t_detach(self, k: int) -> float:
         """``(k + 1) 2π/ω``.
@@ -362,11 +366,13 @@ def slotine_li_force(Mq: FloatArray, Cq: FloatArray, gq: FloatArray, q: FloatArr
     q_star : ndarray, optional
         Virtual reference of ``s̄``.
     """
-    g2 = gains.gamma2
-    dqr = dqd - g2 * (q - qd)
-    ddqr = ddqd - g2 * (dq - dqd)
-    s_bar = dq - dqr if q_star is None else dq - dqd + g2 * (q - q_star)
-    return Mq @ ddqr + Cq @ dqr + gq - gains.gamma1 * s_bar
+    args = [np.ascontiguousarray(a, dtype=float) for a in (Mq, Cq, gq, q, dq, qd, dqd, ddqd)]
+    tau = np.empty(args[3].size)
+    has_star = q_star is not None
+    qs = np.ascontiguousarray(q_star if has_star else args[3], dtype=float)
+    kern.slotine_li(*args, float(gains.gamma1), float(gains.gamma2), 1.0,  # type: ignore[call-arg]  # numba's stub
+                    has_star, qs, tau)
+    return tau
 
 
 def lyapunov_decay_rate(gains: PBCGains, lambda_max: float) -> float:
@@ -417,12 +423,9 @@ def virtual_dive(t: float, tau0: float, q10: float, depth: float, delta: float,
     """
     if t < tau0 + delta:
         return None
-    th = min((t - tau0 - delta) / Delta, 1.0)
-    a = q10 + depth
-    if th >= 1.0:
-        return -depth, 0.0, 0.0
-    return (q10 - 3 * a * th * th + 2 * a * th ** 3, (-6 * a * th + 6 * a * th * th) / Delta,
-            (-6 * a + 12 * a * th) / Delta ** 2)
+    q1, v1, a1 = kern.dive(float(t), float(tau0), float(q10), float(depth), float(delta),
+                           float(Delta))
+    return float(q1), float(v1), float(a1)
 
 
 def liftoff_blend(theta: float) -> tuple[float, float, float]:
@@ -438,28 +441,8 @@ def liftoff_blend(theta: float) -> tuple[float, float, float]:
     >>> liftoff_blend(0.0), liftoff_blend(1.0)
     ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
     """
-    if theta >= 1.0:
-        return 1.0, 0.0, 0.0
-    th = max(theta, 0.0)
-    return (10 * th ** 3 - 15 * th ** 4 + 6 * th ** 5, 30 * th ** 2 - 60 * th ** 3 + 30 * th ** 4,
-            60 * th - 180 * th ** 2 + 120 * th ** 3)
-
-
-def _hermite(t: float, t0: float, t1: float, p0: float, v0: float, p1: float, v1: float
-             ) -> tuple[float, float, float]:
-    """Cubic Hermite from ``(p0, v0)`` at ``t0`` to ``(p1, v1)`` at ``t1`` (clamped)."""
-    T = t1 - t0
-    if T <= 0.0 or t >= t1:
-        return p1, v1, 0.0
-    s = max((t - t0) / T, 0.0)
-    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, \
-        s**3 - s**2
-    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
-    e00, e10, e01, e11 = 12 * s - 6, 6 * s - 4, -12 * s + 6, 6 * s - 2
-    pos = h00 * p0 + h10 * T * v0 + h01 * p1 + h11 * T * v1
-    vel = (d00 * p0 + d10 * T * v0 + d01 * p1 + d11 * T * v1) / T
-    acc = (e00 * p0 + e10 * T * v0 + e01 * p1 + e11 * T * v1) / T**2
-    return pos, vel, acc
+    a, b, c = kern.liftoff_blend(float(theta))
+    return float(a), float(b), float(c)
 
 
 @dataclass
@@ -502,6 +485,14 @@ def _check_model_and_task(model: Any, task: Any) -> None:
         raise DimensionError(f"task: its nominal q_d has {q_d.size} coordinate(s), the model "
                              f"{n}; a CircleTask goes with a TwoLinkArm, a HalfSineTask with "
                              f"a OneDofMass")
+    from ..systems.two_link import OneDofMass
+
+    if type(model) not in (TwoLinkArm, OneDofMass) or type(task) not in (CircleTask,
+                                                                          HalfSineTask):
+        raise ModelError(f"model, task: the controller's kernels know the TwoLinkArm and "
+                         f"OneDofMass models and the CircleTask and HalfSineTask tasks, got "
+                         f"a {type(model).__name__} and a {type(task).__name__}; pass those "
+                         f"of nscontrol.systems.two_link and this module")
     if isinstance(model, TwoLinkArm) and isinstance(task, CircleTask):
         l1, l2 = model.params.l1, model.params.l2
         near, far = abs(task.centre) - task.radius, abs(task.centre) + task.radius
@@ -604,10 +595,16 @@ class SwitchingTrackingController(StaticLaw):
         self.force_bias = float(force_bias)
         self.force_noise = check_positive("force_noise", force_noise, allow_zero=True)
         self.n = int(model.n_dof)
+        if switching == "impact-triggered" and self.n < 2:
+            raise ModelError("switching: 'impact-triggered' reads the tangential coordinate "
+                             "q2 (its trigger and force reference); the model has one "
+                             "coordinate: use switching='designed' or a TwoLinkArm")
+        self._params = self._kernel_params()
+        self._block: Any = None
         self.reset_run()
 
-    # -- Controller protocol (update and reset from StaticLaw: the phase logic is Python
-    # state of the object, not a vector state; impacts are detected from λ̂) --------------
+    # -- Controller protocol (update and reset from StaticLaw: ``output`` advances the
+    # phase logic in the block state itself, the derivative is zero) ----------------------
     period = None
 
     @property
@@ -617,103 +614,119 @@ class SwitchingTrackingController(StaticLaw):
 
     @property
     def n_states(self) -> int:  # type: ignore[override]  # StaticLaw's is a constant 0
-        """Length of the block state: the compiled form's phase logic when it has one
-        (:meth:`compiled`; the Python methods carry it unchanged), else 0."""
-        from ._complementarity_tracking_kernels import state_size
-
-        return state_size(self.detection_delay) if self._compilable() else 0
+        """Length of the block state: the phase logic's record and the detection ring
+        (layout in ``nscontrol.design._complementarity_tracking_kernels``)."""
+        return kern.state_size(self.detection_delay)
 
     @property
     def x0(self) -> FloatArray:
         """The block state before a run (see :attr:`n_states`)."""
-        from ._complementarity_tracking_kernels import initial_state
+        return kern.initial_state(self.detection_delay)
 
-        return initial_state(self.detection_delay) if self._compilable() else np.zeros(0)
-
-    def _compilable(self) -> bool:
-        """The compiled form covers the designed switching with exact measurements on the
-        chapter's two plants and tasks; noise and a force-sensor model stay in Python."""
-        from ..systems.two_link import OneDofMass, TwoLinkArm
-
-        return (self.switching == "designed" and self.position_noise == 0.0
-                and self.force_scale == 1.0 and self.force_bias == 0.0
-                and self.force_noise == 0.0 and type(self.model) in (TwoLinkArm, OneDofMass)
-                and type(self.task) in (CircleTask, HalfSineTask)
-                and (self.n == 2) == isinstance(self.model, TwoLinkArm)
-                and (self.n == 2) == isinstance(self.task, CircleTask))
-
-    def compiled(self) -> Any:
-        """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`) for
-        the integrators' compiled loops, or ``None`` when a setting has none (the
-        ``"impact-triggered"`` switching, position noise, a force-sensor model, another
-        plant or task): the loop then runs the Python methods.
-
-        The compiled form keeps the phase logic in the block state (layout in
-        ``nscontrol.design._complementarity_tracking_kernels``), which the loop logs at
-        every step start; this object's own log (:meth:`signals`) stays empty on that path.
-        """
-        if not self._compilable():
-            return None
-        from ..systems.feedback import CompiledBlock
-        from . import _complementarity_tracking_kernels as kern
-
-        return CompiledBlock(kern.tracking_output, kern.tracking_update, self._kernel_params())
-
-    def _kernel_params(self) -> FloatArray:
-        """The parameter array of the compiled form (``P_*`` layout of the kernels)."""
-        from ..systems.two_link import OneDofMass
-        from . import _complementarity_tracking_kernels as kern
-
-        p = np.zeros(kern.N_PARAMS)
-        p[kern.P_N] = self.n
-        task = self.task
-        if isinstance(task, CircleTask):
-            p[kern.P_TASK] = kern.TASK_CIRCLE
-            p[kern.P_TASK0:kern.P_TASK0 + 4] = (task.centre, task.radius, task.period,
-                                                task.y_threshold)
-        else:
-            p[kern.P_TASK] = kern.TASK_HALF_SINE
-            p[kern.P_TASK0:kern.P_TASK0 + 4] = (task.amplitude, task.omega, task.threshold,
-                                                task.period)
-        if isinstance(self.model, OneDofMass):
-            p[kern.P_MODEL] = kern.MODEL_ONE_DOF
-            p[kern.P_MODEL0:kern.P_MODEL0 + 2] = (self.model.m, self.model.g)
-        else:
-            pr = self.model.params
-            p[kern.P_MODEL] = kern.MODEL_TWO_LINK
-            p[kern.P_MODEL0:kern.P_MODEL0 + 7] = (pr.l1, pr.l2, pr.m1, pr.m2, pr.I1, pr.I2,
-                                                  pr.g)
-        g, tr, c = self.gains, self.transition, self.contact
-        p[kern.P_G1], p[kern.P_G2], p[kern.P_KF] = g.gamma1, g.gamma2, g.Kf
-        p[kern.P_DELTA:kern.P_NCONS + 1] = (tr.delta, tr.Delta,
-                                             0.0 if tr.depth_law == "sqrt" else 1.0,
-                                             tr.alpha, tr.phi, tr.depth_min, tr.depth_max,
-                                             tr.n_consecutive_contact)
-        p[kern.P_LRATE], p[kern.P_LSAT], p[kern.P_TLIFT] = (c.lam_rate, c.lam_sat,
-                                                            c.liftoff_time)
-        p[kern.P_SCALE], p[kern.P_FFS] = self.model_scale, self.force_feedback_scale
-        p[kern.P_DELAY] = self.detection_delay
-        return p
-
-    def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
-        """Joint torques ``U = Jᵀ τ`` at a step start (also advances the phase logic).
+    def update(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
+        """A zero derivative: :meth:`output` has already moved the block state (in place,
+        as the compiled form does), so that the loop's explicit Euler step keeps it.
 
         Parameters
         ----------
         t : float
             Time.
         xc : ndarray
-            Empty internal state.
+            The block state.
+        m : Measurement
+            Unused.
+        """
+        return np.zeros(np.shape(xc)[0])
+
+    def compiled_reason(self) -> str | None:
+        """Why this setting has no compiled form (``None``: it has one)."""
+        if self.position_noise > 0.0 or self.force_noise > 0.0:
+            return ("position_noise / force_noise: the noise is drawn from NumPy's "
+                    "generators, which the compiled loop does not run")
+        return None
+
+    def compiled(self) -> Any:
+        """The compiled form (a :class:`~nscontrol.systems.feedback.CompiledBlock`) for
+        the integrators' compiled loops, or ``None`` when the setting has none (position or
+        force noise, see :meth:`compiled_reason`): the loop then runs the Python methods,
+        which call the same kernels.
+
+        The compiled form keeps the phase logic in the block state, which the loop logs at
+        every step start (:meth:`signals` with the run, :meth:`load_run`).
+        """
+        if self.compiled_reason() is not None:
+            return None
+        if self._block is None:         # built once: its checks cost milliseconds
+            from ..systems.feedback import CompiledBlock
+
+            self._block = CompiledBlock(kern.tracking_output, kern.tracking_update,
+                                        self._params)
+        return self._block
+
+    def _kernel_params(self) -> FloatArray:
+        """The parameters as the kernels' record ``PARAMS`` (flat, in its order)."""
+        from ..systems.two_link import OneDofMass
+
+        rec = np.zeros(1, dtype=kern.PARAMS)
+        r = rec[0]
+        r["n"] = self.n
+        task, model = self.task, self.model
+        if isinstance(task, CircleTask):
+            r["task"] = kern.TASK_CIRCLE
+            r["centre"], r["radius"], r["threshold"] = task.centre, task.radius, \
+                task.y_threshold
+        else:
+            r["task"] = kern.TASK_HALF_SINE
+            r["amplitude"], r["omega"], r["threshold"] = task.amplitude, task.omega, \
+                task.threshold
+        r["period"] = task.period
+        if isinstance(model, OneDofMass):
+            r["model"], r["mass"], r["gravity"] = kern.MODEL_ONE_DOF, model.m, model.g
+        else:
+            r["model"] = kern.MODEL_TWO_LINK
+            for name in ("l1", "l2", "m1", "m2", "I1", "I2", "g"):
+                r[f"arm_{name}"] = getattr(model.params, name)
+        r["switching"] = kern.DESIGNED if self.switching == "designed" \
+            else kern.IMPACT_TRIGGERED
+        g, tr, c = self.gains, self.transition, self.contact
+        r["gamma1"], r["gamma2"], r["Kf"] = g.gamma1, g.gamma2, g.Kf
+        r["delta"], r["Delta"], r["alpha"], r["phi"] = tr.delta, tr.Delta, tr.alpha, tr.phi
+        r["depth_law"] = 0.0 if tr.depth_law == "sqrt" else 1.0
+        r["depth_min"], r["depth_max"] = tr.depth_min, tr.depth_max
+        r["n_consecutive_contact"] = tr.n_consecutive_contact
+        r["lam_rate"], r["lam_sat"], r["liftoff_time"] = c.lam_rate, c.lam_sat, c.liftoff_time
+        r["model_scale"], r["force_feedback_scale"] = self.model_scale, \
+            self.force_feedback_scale
+        r["force_scale"], r["force_bias"] = self.force_scale, self.force_bias
+        r["detection_delay"] = self.detection_delay
+        r["trigger_q2"], r["q2_end"] = self.trigger_q2, self.q2_end
+        return rec.view(np.float64)
+
+    def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
+        """Joint torques ``U = Jᵀ τ`` at a step start (also advances the phase logic, and
+        leaves it in ``xc`` as the compiled form does).
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        xc : ndarray
+            The block state (see :attr:`n_states`).
         m : Measurement
             Plant state ``x = [θ; θ']`` and contact estimate ``λ̂``.
         """
         lam = 0.0 if m.lam is None or np.size(m.lam) == 0 else float(np.asarray(m.lam)[0])
-        return self.step(t, np.asarray(m.x, float), lam)
+        own = isinstance(xc, np.ndarray) and xc.shape == self._xb.shape
+        if own:               # the loop's block state is the phase logic's
+            self._xb[:] = xc
+        u = self.step(t, np.asarray(m.x, float), lam)
+        if own and xc.flags.writeable:
+            xc[:] = self._xb
+        return u
 
     def __call__(self, t: float, q: FloatArray, v: FloatArray, *,
                  lam_hat: FloatArray) -> FloatArray:
-        """The same law as a Moreau–Jean ``controller=`` callable (no closed-loop block
-        machinery: the integrator runs it inside its step loop).
+        """The same law as a Moreau–Jean ``controller=`` callable.
 
         Parameters
         ----------
@@ -730,23 +743,51 @@ class SwitchingTrackingController(StaticLaw):
     # -- run state ----------------------------------------------------------------------
     def reset_run(self) -> None:
         """Forget the phase logic and the log (before a new simulation)."""
-        self.phase = Phase.FREE
-        self.cycle = 0
-        self.contact_steps = 0
-        self.liftoff_at = -math.inf
-        self.cycles: list[_Cycle] = [_Cycle(0)]
-        self._log: list[tuple] = []
-        self._loaded: dict[str, FloatArray] | None = None     # a compiled run's (load_run)
-        self._t_prev = -math.inf
-        # (step start, impulse over h) of the last detection_delay + 1 steps: the phase
-        # logic reads the oldest one
-        self._seen: deque[tuple[float, float]] = deque(maxlen=self.detection_delay + 1)
-        self._rng = np.random.default_rng(self.noise_seed)
-        # the force sensor's own stream: adding force noise leaves the position noise alone
-        self._force_rng = np.random.default_rng((self.noise_seed, 1))
+        self._xb = kern.initial_state(self.detection_delay)
+        # the log: the block state after each step start and the true plant state there
+        self._rows: list[FloatArray] = []
+        self._xs: list[FloatArray] = []
+        self._loaded: tuple[FloatArray, FloatArray] | None = None   # load_run's
+        self._cycles: tuple[int, list[_Cycle]] | None = None
+        # the noise generators, made at the first draw (a generator costs about a millisecond)
+        self._rng: np.random.Generator | None = None
+        self._force_rng: np.random.Generator | None = None
+
+    def _field(self, name: str) -> float:
+        return float(self._xb[:kern.N_STATE].view(kern.STATE)[name][0])
+
+    @property
+    def phase(self) -> Phase:
+        """The current phase."""
+        return Phase(int(self._field("phase")))
+
+    @property
+    def cycle(self) -> int:
+        """The current cycle's index."""
+        return int(self._field("cycle"))
+
+    @property
+    def contact_steps(self) -> int:
+        """Consecutive steps with contact counted by the phase logic."""
+        return int(self._field("contact_steps"))
+
+    @property
+    def liftoff_at(self) -> float:
+        """The last take-off (``-inf`` before the first)."""
+        t = self._field("liftoff_at")
+        return -math.inf if t == kern.NEVER else t
+
+    @property
+    def cycles(self) -> list[_Cycle]:
+        """The per-cycle record of the run so far."""
+        rows, _ = self._run_rows()
+        if self._cycles is None or self._cycles[0] != rows.shape[0]:
+            self._cycles = (rows.shape[0], self._cycles_of_rows(rows))
+        return self._cycles[1]
 
     @property
     def current(self) -> _Cycle:
+        """The current cycle's record."""
         return self.cycles[-1]
 
     def step(self, t: float, x: FloatArray, lam_raw: float) -> FloatArray:
@@ -763,49 +804,24 @@ class SwitchingTrackingController(StaticLaw):
             Last step's impulse over ``h`` (unsaturated).
         """
         n = self.n
-        x_true = x
+        x_true = np.array(x, dtype=float)            # a copy: logged
+        x_meas = x_true
         if self.position_noise > 0.0:   # no draw at σ = 0: the noiseless run is unchanged
-            x = x.copy()
-            x[:n] += self._rng.normal(0.0, self.position_noise, n)
-        q, dq, Mq, Cq, gq, J = self.model.task_model(x[:n], x[n:])
-        cycle, phase = self.cycle, self.phase
-        self._advance(t, q, dq, Mq, self._detected(lam_raw))
-        qd, dqd, ddqd, q_star, lam_d = self._reference(t, q)
-        sc = self.model_scale
-        tau = slotine_li_force(sc * Mq, sc * Cq, sc * gq, q, dq, qd, dqd, ddqd, self.gains,
-                               q_star)
-        lam_hat = min(self._force_reading(lam_raw), self.contact.lam_sat)
-        if self.phase == Phase.CONSTRAINED:
-            tau[0] += -lam_d + self.force_feedback_scale * self.gains.Kf * (lam_hat - lam_d)
-        if x is not x_true:             # log and judge the true state, not the measured one
-            q, dq = self.model.task_state(x_true[:n], x_true[n:])
-            Mq = self.model.task_dynamics(x_true[:n], x_true[n:])[0]
-        V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
-        if x is not x_true and (cycle, phase) == (self.cycle, Phase.FREE) \
-                and self.phase == Phase.APPROACH:
-            self.current.V_tau0, self.current.V1_tau0 = V, V1
-        self._log.append((t, int(self.phase), self.cycle, V, V1, lam_d, lam_hat,
-                          self.current.depth, *q.tolist(), *dq.tolist(), *qd.tolist()))
-        self._t_prev = t
-        return J.T @ tau
-
-    def _force_reading(self, lam_raw: float) -> float:
-        """What the force sensor reports for the true impulse over ``h`` (``force_scale``,
-        ``force_bias``, ``force_noise``); the exact value, untouched, by default."""
-        lam = lam_raw
-        if self.force_scale != 1.0 or self.force_bias != 0.0:
-            lam = self.force_scale * lam + self.force_bias
+            if self._rng is None:
+                self._rng = np.random.default_rng(self.noise_seed)
+            x_meas = x_true.copy()
+            x_meas[:n] += self._rng.normal(0.0, self.position_noise, n)
+        noise = 0.0
         if self.force_noise > 0.0:      # no draw at σ = 0: the exact-sensor run is unchanged
-            lam += float(self._force_rng.normal(0.0, self.force_noise))
-        return lam
-
-    def _lyapunov(self, Mq: FloatArray, q: FloatArray, dq: FloatArray, qd: FloatArray,
-                  dqd: FloatArray) -> tuple[float, float]:
-        g1, g2 = self.gains.gamma1, self.gains.gamma2
-        e = q - qd
-        s = dq - dqd + g2 * e
-        V1 = 0.5 * float(s @ Mq @ s)
-        return V1 + g1 * g2 * float(e @ e), V1
+            if self._force_rng is None:
+                # the sensor's own stream: adding force noise leaves the position noise alone
+                self._force_rng = np.random.default_rng((self.noise_seed, 1))
+            noise = float(self._force_rng.normal(0.0, self.force_noise))
+        u = kern.control(float(t), self._xb, x_meas, x_true, x_meas is not x_true,
+                         float(lam_raw), noise, self._params)
+        self._rows.append(self._xb.copy())
+        self._xs.append(x_true)
+        return np.asarray(u)
 
     def lyapunov(self, t: float, x: FloatArray) -> tuple[float, float]:
         """``(V, V1)`` at ``(t, x)`` with the current phase's reference (no phase change).
@@ -817,158 +833,32 @@ class SwitchingTrackingController(StaticLaw):
         x : ndarray
             ``[θ; θ']``.
         """
-        n = self.n
-        q, dq = self.model.task_state(x[:n], x[n:])
-        Mq = self.model.task_dynamics(x[:n], x[n:])[0]
-        qd, dqd, _, _, _ = self._reference(t, q)
-        return self._lyapunov(Mq, q, dq, qd, dqd)
+        x = np.ascontiguousarray(np.asarray(x, float)[:2 * self.n])
+        V, V1 = kern.lyapunov_at(float(t), self._xb.copy(), x, self._params)
+        return float(V), float(V1)
 
-    # -- phase logic --------------------------------------------------------------------
-    def _detected(self, lam_raw: float) -> float:
-        """The impulse over ``h`` the phase logic sees: the one ``detection_delay`` steps
-        old (0 before that many steps have been taken); ``self._t_seen`` is its step start."""
-        self._seen.append((self._t_prev, lam_raw))
-        if len(self._seen) < (self._seen.maxlen or 1):
-            self._t_seen = -math.inf
-            return 0.0
-        self._t_seen, lam = self._seen[0]
-        return lam
+    def reference(self, t: float, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(q_d, q̇_d, q̈_d)`` of the current phase at ``(t, x)`` (no phase change).
 
-    def _advance(self, t: float, q: FloatArray, dq: FloatArray, Mq: FloatArray,
-                 lam_raw: float) -> None:
-        if self.switching == "designed":
-            self._advance_designed(t, q, dq, Mq, lam_raw)
-        else:
-            self._advance_triggered(t, q, dq, Mq, lam_raw)
-
-    def _advance_designed(self, t: float, q: FloatArray, dq: FloatArray, Mq: FloatArray,
-                          lam_raw: float) -> None:
-        cyc, tr = self.current, self.transition
-        if self.phase == Phase.FREE and t >= self.task.tau0(self.cycle) - 1e-12:
-            qd, dqd, _, _, _ = self._reference(t, q)
-            V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
-            q_nom = self.task.nominal(t)[0]
-            cyc.tau0, cyc.V_tau0, cyc.V1_tau0 = t, V, V1
-            cyc.depth = tr.depth(V1)
-            cyc.q10, cyc.q2_star = float(q_nom[0]), q_nom[1:].copy()
-            cyc.t_detach = self.task.t_detach(self.cycle)
-            cyc.t_star, cyc.u_star = self._dive_crossing(cyc)
-            self.phase = Phase.APPROACH
-        elif self.phase == Phase.APPROACH and lam_raw > 0.0:
-            cyc.t_first_impact = self._t_seen
-            self.phase, self.contact_steps = Phase.IMPACTS, 1
-        elif self.phase == Phase.IMPACTS:
-            self.contact_steps = self.contact_steps + 1 if lam_raw > 0.0 else 0
-            if self.contact_steps >= tr.n_consecutive_contact:
-                cyc.t_constrained = t
-                self.phase = Phase.CONSTRAINED
-        if self.phase in (Phase.IMPACTS, Phase.CONSTRAINED) and t >= cyc.t_detach - 1e-12:
-            self._take_off(t)
-
-    def _advance_triggered(self, t: float, q: FloatArray, dq: FloatArray, Mq: FloatArray,
-                           lam_raw: float) -> None:
-        cyc = self.current
-        if self.phase == Phase.FREE and lam_raw > 0.0 and q[1] < self.trigger_q2:
-            qd, dqd, _, _, _ = self._reference(t, q)
-            V, V1 = self._lyapunov(Mq, q, dq, qd, dqd)
-            cyc.tau0 = cyc.t_first_impact = self._t_seen
-            cyc.V_tau0, cyc.V1_tau0 = V, V1
-            cyc.depth = math.sqrt(self.gains.gamma2 * V / self.gains.gamma1)
-            cyc.q10, cyc.q2_star = 0.0, q[1:].copy()
-            # the nominal sliding segment of this period ends at the period's end
-            cyc.t_detach = self.task.t_detach(int(t // self.task.period))
-            self.phase = Phase.IMPACTS
-        elif self.phase == Phase.IMPACTS and q[0] <= 1e-4 and abs(dq[0]) <= 1e-4:
-            cyc.t_constrained = t
-            self.phase, self.contact_steps = Phase.CONSTRAINED, 0
-        elif self.phase == Phase.CONSTRAINED:
-            # take-off once the contact force, after it has built up, falls below 1e-4 N
-            # (a gap of up to 1e-4 m is accepted as contact: no force may follow at once)
-            if lam_raw >= 1e-4:
-                self.contact_steps += 1
-            elif self.contact_steps > 0:
-                self._take_off(t)
-                return
-            if t >= cyc.t_detach - 1e-12:   # the nominal path leaves the ground
-                self._take_off(t)
-
-    def _take_off(self, t: float) -> None:
-        self.current.t_detach = t
-        self.liftoff_at = t
-        self.phase = Phase.FREE
-        self.cycle += 1
-        self.cycles.append(_Cycle(self.cycle))
-
-    def _dive_crossing(self, cyc: _Cycle) -> tuple[float, float]:
-        """``t*`` where the dive crosses ``q1 = 0`` and its speed there (bisection on the
-        monotone cubic)."""
-        tr = self.transition
-        lo, hi = cyc.tau0 + tr.delta, cyc.tau0 + tr.delta + tr.Delta
-        if cyc.q10 <= 0.0:
-            return lo, 0.0
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            val = virtual_dive(mid, cyc.tau0, cyc.q10, cyc.depth, tr.delta, tr.Delta)
-            if val is not None and val[0] > 0.0:
-                lo = mid
-            else:
-                hi = mid
-        dive = virtual_dive(hi, cyc.tau0, cyc.q10, cyc.depth, tr.delta, tr.Delta)
-        return hi, float(dive[1]) if dive is not None else 0.0
-
-    # -- references ---------------------------------------------------------------------
-    def _reference(self, t: float, q: FloatArray
-                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None, float]:
-        """``(q_d, q̇_d, q̈_d, q*_d or None, λ_d)`` of the current phase."""
-        cyc, n = self.current, self.n
-        if self.phase == Phase.FREE:
-            qd, dqd, ddqd = self.task.nominal(t)     # fresh arrays: modified in place below
-            if self.switching == "designed":
-                a, b, c = liftoff_blend((t - self.liftoff_at) / self.contact.liftoff_time)
-                if a < 1.0:   # y = σ y_nom: leaves the surface with zero velocity
-                    T = self.contact.liftoff_time
-                    qd[0], dqd[0], ddqd[0] = (a * qd[0], b / T * qd[0] + a * dqd[0],
-                                              c / T**2 * qd[0] + 2 * b / T * dqd[0]
-                                              + a * ddqd[0])
-            return qd, dqd, ddqd, None, 0.0
-        if self.phase == Phase.APPROACH:
-            return (*self._virtual(t, cyc), None, 0.0)
-        if self.phase == Phase.IMPACTS:
-            qd = np.concatenate([[0.0], cyc.q2_star])
-            q_star = np.concatenate([[-cyc.depth], cyc.q2_star])
-            return qd, np.zeros(n), np.zeros(n), q_star, 0.0
-        # constrained
-        if self.switching == "designed":
-            qd, dqd, ddqd = np.zeros(n), np.zeros(n), np.zeros(n)
-            for i in range(1, n):
-                p1, v1 = self.task.nominal(cyc.t_detach)[0][i], \
-                    self.task.nominal(cyc.t_detach)[1][i]
-                qd[i], dqd[i], ddqd[i] = _hermite(t, cyc.t_constrained, cyc.t_detach,
-                                                  float(cyc.q2_star[i - 1]), 0.0, p1, v1)
-            lam_d = self.contact.lam_rate * max(cyc.t_detach - t, 0.0)
-            return qd, dqd, ddqd, None, lam_d
-        qd, dqd, ddqd = (a.copy() for a in self.task.nominal(t))
-        qd[0] = dqd[0] = ddqd[0] = 0.0
-        lam_d = 0.5 * max(self.q2_end - float(q[1]), 0.0) if n > 1 else 0.0
-        return qd, dqd, ddqd, None, lam_d
-
-    def _virtual(self, t: float, cyc: _Cycle) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``q*_d``: the nominal path time-warped to rest, then the cubic dive."""
-        tr, n = self.transition, self.n
-        dive = virtual_dive(t, cyc.tau0, cyc.q10, cyc.depth, tr.delta, tr.Delta)
-        if dive is not None:
-            qd = np.concatenate([[dive[0]], cyc.q2_star])
-            dqd, ddqd = np.zeros(n), np.zeros(n)
-            dqd[0], ddqd[0] = dive[1], dive[2]
-            return qd, dqd, ddqd
-        s, d = t - cyc.tau0, tr.delta
-        psi = cyc.tau0 + (s - d) ** 2 * s / d**2
-        dpsi = (s - d) * (3 * s - d) / d**2
-        ddpsi = (6 * s - 4 * d) / d**2
-        p, v, a = self.task.nominal(psi)
-        return p, v * dpsi, a * dpsi**2 + v * ddpsi
+        Parameters
+        ----------
+        t : float
+            Time.
+        x : ndarray
+            ``[θ; θ']``.
+        """
+        x = np.ascontiguousarray(np.asarray(x, float)[:2 * self.n])
+        return kern.reference_at(float(t), self._xb.copy(), x, self._params)
 
     # -- log ----------------------------------------------------------------------------
+    def _run_rows(self) -> tuple[FloatArray, FloatArray]:
+        """``(block states, true plant states)`` at every step start of the run."""
+        if self._loaded is not None:
+            return self._loaded
+        if not self._rows:
+            return np.zeros((0, self.n_states)), np.zeros((0, 2 * self.n))
+        return np.array(self._rows), np.array(self._xs)
+
     def signals(self, traj: Any = None) -> dict[str, FloatArray]:
         """The per-step log as arrays (one row per step start).
 
@@ -978,117 +868,85 @@ class SwitchingTrackingController(StaticLaw):
         Parameters
         ----------
         traj : Trajectory, optional
-            A closed-loop run on the compiled path (its ``"xc"`` signal holds the compiled
-            form's block state): the log is read back from it, with the same rows as the
-            Python path's. Without it, the Python path's own log.
+            A closed-loop run (its ``"xc"`` signal holds the block state): the log is read
+            back from it. Without it, this object's own run (or the one :meth:`load_run`
+            loaded).
         """
-        n = self.n
-        if traj is not None and self.n_states and "xc" in traj.signals:
-            return self._signals_from_block_state(traj)
-        if self._loaded is not None:
-            return self._loaded
-        if not self._log:
-            return {}
-        a = np.array(self._log, dtype=float)
-        return {"t": a[:, 0], "phase": a[:, 1], "cycle": a[:, 2], "V": a[:, 3],
-                "V1": a[:, 4], "lam_d": a[:, 5], "lam_hat": a[:, 6], "depth": a[:, 7],
-                "q_task": a[:, 8:8 + n], "dq_task": a[:, 8 + n:8 + 2 * n],
-                "qd": a[:, 8 + 2 * n:8 + 3 * n]}
+        if traj is not None and "xc" in traj.signals:
+            return self._signals_of_rows(*self._rows_of(traj))
+        rows, xs = self._run_rows()
+        return self._signals_of_rows(rows, xs) if rows.shape[0] else {}
 
-    def _signals_from_block_state(self, traj: Any) -> dict[str, FloatArray]:
-        """:meth:`signals` of a compiled run: the block state logged at every step start
-        (sample ``k + 1`` shows the row of step start ``k``)."""
-        from . import _complementarity_tracking_kernels as kern
-
-        n = self.n
+    def _rows_of(self, traj: Any) -> tuple[FloatArray, FloatArray]:
+        """The block state after each step start and the plant state there, from a
+        closed-loop run (sample ``k + 1`` shows the row of step start ``k``)."""
         xc = np.asarray(traj.signals["xc"])
         if xc.ndim != 2 or xc.shape[1] != self.n_states or xc.shape[0] != traj.t.size:
-            raise ModelError(f"traj: expected the 'xc' signal of this controller's compiled "
-                             f"form at every step ({traj.t.size} x {self.n_states}), got "
+            raise ModelError(f"traj: expected the 'xc' signal of this controller's block "
+                             f"state at every step ({traj.t.size} x {self.n_states}), got "
                              f"shape {xc.shape}; record every step")
-        rows = xc[1:]
-        x = np.ascontiguousarray(np.asarray(traj.x, float)[:-1, :2 * n])
-        task = kern.task_rows(x, self._kernel_params())
-        phase = rows[:, kern.X_PHASE]
-        # the Python log shows a cycle's depth as NaN until it is fixed (free motion)
-        depth = np.where(phase == kern.FREE, np.nan, rows[:, kern.X_DEPTH])
-        return {"t": rows[:, kern.X_TPREV].copy(), "phase": phase.copy(),
-                "cycle": rows[:, kern.X_CYCLE].copy(), "V": rows[:, kern.X_V].copy(),
-                "V1": rows[:, kern.X_V1].copy(), "lam_d": rows[:, kern.X_LAM_D].copy(),
-                "lam_hat": rows[:, kern.X_LAM_HAT].copy(), "depth": depth,
-                "q_task": task[:, :n], "dq_task": task[:, n:],
-                "qd": rows[:, kern.X_QD:kern.X_QD + n].copy()}
+        return xc[1:], np.ascontiguousarray(np.asarray(traj.x, float)[:-1, :2 * self.n])
+
+    def _signals_of_rows(self, rows: FloatArray, xs: FloatArray) -> dict[str, FloatArray]:
+        n = self.n
+        st = np.ascontiguousarray(rows[:, :kern.N_STATE]).view(kern.STATE)[:, 0]
+        task = kern.task_rows(np.ascontiguousarray(xs), self._params)
+        phase = st["phase"].copy()
+        # a cycle's depth is NaN until it is fixed (free motion)
+        depth = np.where(phase == kern.FREE, np.nan, st["depth"])
+        qd = np.stack([st["qd1"], st["qd2"]], axis=1)[:, :n].copy()
+        return {"t": st["t_prev"].copy(), "phase": phase, "cycle": st["cycle"].copy(),
+                "V": st["V"].copy(), "V1": st["V1"].copy(), "lam_d": st["lam_d"].copy(),
+                "lam_hat": st["lam_hat"].copy(), "depth": depth,
+                "q_task": task[:, :n], "dq_task": task[:, n:], "qd": qd}
 
     def cycles_of(self, traj: Any) -> list[_Cycle]:
-        """The per-cycle record (what ``self.cycles`` holds after a Python run) read back
-        from a closed-loop run on the compiled path.
+        """The per-cycle record of a closed-loop run, read back from its block state.
 
         Parameters
         ----------
         traj : Trajectory
             The run (its ``"xc"`` signal, recorded at every step).
         """
-        from . import _complementarity_tracking_kernels as kern
+        return self._cycles_of_rows(self._rows_of(traj)[0])
 
-        self._signals_from_block_state(traj)          # validates the signal's shape
-        rows = np.asarray(traj.signals["xc"])[1:]
-        cyc = rows[:, kern.X_CYCLE]
+    def _cycles_of_rows(self, rows: FloatArray) -> list[_Cycle]:
+        """Cycle ``c`` from its rows (phases only move forward in a cycle, and a take-off
+        leaves from the impacts or constrained phase: the last row holds every field fixed
+        so far; the next cycle's first row, the take-off)."""
+        st = np.ascontiguousarray(rows[:, :kern.N_STATE]).view(kern.STATE)[:, 0]
+        cyc = st["cycle"]
         out: list[_Cycle] = []
         for c in range(int(cyc.max()) + 1 if cyc.size else 1):
             lo, hi = int(np.searchsorted(cyc, c, "left")), int(np.searchsorted(cyc, c, "right"))
-            out.append(self._cycle_of_rows(c, rows, lo, hi))
+            cycle = _Cycle(c)
+            out.append(cycle)
+            if hi <= lo:
+                continue
+            last = st[hi - 1]
+            for name in kern.CYCLE_FIELDS:
+                value = float(last[name])
+                if name != "q2_star":
+                    setattr(cycle, name, math.nan if value == kern.NEVER else value)
+            if last["tau0"] != kern.NEVER:
+                cycle.q2_star = np.array([last["q2_star"]])[:self.n - 1]
+            if hi < st.shape[0]:                   # taken off: the next cycle's first row
+                cycle.t_detach = float(st[hi]["liftoff_at"])
         return out
 
-    def _cycle_of_rows(self, c: int, rows: FloatArray, lo: int, hi: int) -> _Cycle:
-        """Cycle ``c`` from its rows ``lo:hi`` (phases only move forward in a cycle, and a
-        take-off leaves from the impacts or constrained phase: the last row holds every
-        field fixed so far; the next cycle's first row, the take-off)."""
-        from . import _complementarity_tracking_kernels as kern
-
-        cycle = _Cycle(c)
-        if hi <= lo:
-            return cycle
-        last = rows[hi - 1]
-        phase = last[kern.X_PHASE]
-        if phase >= kern.APPROACH:
-            cycle.tau0, cycle.V_tau0, cycle.V1_tau0 = (float(last[kern.X_TAU0]),
-                                                       float(last[kern.X_V_TAU0]),
-                                                       float(last[kern.X_V1_TAU0]))
-            cycle.depth, cycle.q10 = float(last[kern.X_DEPTH]), float(last[kern.X_Q10])
-            cycle.q2_star = np.array([last[kern.X_Q2STAR]])[:self.n - 1]
-            cycle.t_detach = float(last[kern.X_T_DETACH])
-            cycle.t_star, cycle.u_star = float(last[kern.X_T_STAR]), float(last[kern.X_U_STAR])
-        if phase >= kern.IMPACTS:
-            cycle.t_first_impact = float(last[kern.X_T_IMPACT])
-        if phase >= kern.CONSTRAINED:
-            cycle.t_constrained = float(last[kern.X_T_CONSTRAINED])
-        if hi < rows.shape[0]:                   # taken off: the next cycle's first row
-            cycle.t_detach = float(rows[hi, kern.X_LIFTOFF])
-        if cycle.t_first_impact == kern.NEVER:
-            cycle.t_first_impact = -math.inf
-        return cycle
-
     def load_run(self, traj: Any) -> None:
-        """Make this object's run state that of a closed-loop run on the compiled path, as
-        if the run had called the Python methods: :meth:`signals` (without argument) gives
-        its log, ``cycles`` its per-cycle record, and the phase, cycle and take-off time
-        are those after its last step start (what :meth:`lyapunov` reads).
+        """Make this object's run state that of a closed-loop run, as if the run had called
+        its methods: :meth:`signals` (without argument) gives its log, ``cycles`` its
+        per-cycle record, and the phase, cycle and take-off time are those after its last
+        step start (what :meth:`lyapunov` reads).
 
         Parameters
         ----------
         traj : Trajectory
             The run (its ``"xc"`` signal, recorded at every step).
         """
-        from . import _complementarity_tracking_kernels as kern
-
-        signals = self._signals_from_block_state(traj)
+        rows, xs = self._rows_of(traj)
         self.reset_run()
-        self.cycles = self.cycles_of(traj)
-        self._loaded = signals
-        if signals["t"].size:
-            last = np.asarray(traj.signals["xc"])[-1]
-            self.phase, self.cycle = Phase(int(last[kern.X_PHASE])), int(last[kern.X_CYCLE])
-            self.contact_steps = int(last[kern.X_CONTACT])
-            lift = float(last[kern.X_LIFTOFF])
-            self.liftoff_at = -math.inf if lift == kern.NEVER else lift
-            self._t_prev = float(last[kern.X_TPREV])
+        self._loaded = (rows, xs)
+        if rows.shape[0]:
+            self._xb = np.array(rows[-1], dtype=float)

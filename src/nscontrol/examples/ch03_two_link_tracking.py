@@ -101,33 +101,32 @@ class TrackingRun:
 
 def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
               theta: float, restitution: float, ground_offset: float = 0.0,
-              compiled: bool = False) -> TrackingRun:
-    """Simulate plant + controller with Moreau–Jean and merge the controller's log."""
+              compiled: bool = True) -> TrackingRun:
+    """Simulate plant + controller (``closed_loop``) with Moreau–Jean and merge the
+    controller's log. Compiled when the controller has a compiled form and the plant a
+    compiled model; otherwise the Python path, which runs the same kernels (the reason in
+    ``traj.stats["path_reason"]``)."""
     from ..simulate import simulate
+    from ..simulate.closed_loop import closed_loop
 
     controller.reset_run()
     plant = model.system(restitution)
+    reason = None
+    if not check_bool("compiled", compiled):
+        reason = "compiled=False"
+    elif controller.compiled() is None:
+        reason = controller.compiled_reason()
     if ground_offset != 0.0:
         plant = _ground_moved(plant, ground_offset)
-    # compiled only on request: the chapter's runs (and the robustness sweeps that compare
-    # runs bit for bit with moved-ground ones, which have no compiled model) stay Python
-    if check_bool("compiled", compiled) and controller.compiled() is not None \
-            and ground_offset == 0.0:
-        # the controller's compiled form in the compiled Moreau–Jean loop; its log and
-        # cycles are read back from the block state the run recorded
-        from ..simulate.closed_loop import closed_loop
-
-        traj = simulate(closed_loop(plant, controller), x0, (0.0, T), method="moreau_jean",
-                        h=h, theta=theta, signals=("impulse", "gap"), progress=False)
-        controller.load_run(traj)
-        traj = replace(traj, signals={k: v for k, v in traj.signals.items()
-                                      if k not in ("xc", "u")})
-    else:
-        # the controller as the integrator's own step controller (its reset at impacts is
-        # trivial, so the closed-loop block machinery is not needed)
-        traj = simulate(plant, x0, (0.0, T), method="moreau_jean", h=h,
-                        theta=theta, controller=controller, signals=("impulse", "gap"),
-                        progress=False)
+        reason = reason or "ground_offset: the moved ground has no compiled model"
+    # the block state, logged at every step start, holds the controller's log and cycles
+    traj = simulate(closed_loop(plant, controller, compiled=reason is None), x0, (0.0, T),
+                    method="moreau_jean", h=h, theta=theta, signals=("impulse", "gap"),
+                    progress=False)
+    controller.load_run(traj)
+    stats = dict(traj.stats, path_reason=reason or "compiled controller and model")
+    traj = replace(traj, stats=stats, signals={k: v for k, v in traj.signals.items()
+                                               if k not in ("xc", "u")})
     log = controller.signals()
     # the log holds one row per step start; the final sample gets its own evaluation
     n = model.n_dof
@@ -167,7 +166,7 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
                       position_noise: float = 0.0, noise_seed: int = 0,
                       ground_offset: float = 0.0, force_scale: float = 1.0,
                       force_bias: float = 0.0, force_noise: float = 0.0,
-                      compiled: bool = False) -> TrackingRun:
+                      compiled: bool = True) -> TrackingRun:
     """The two-link arm tracking the circle cut by the ground.
 
     Parameters
@@ -196,7 +195,9 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         noise standard deviation in N; ``1, 0, 0``: exact).
     compiled : bool
         Run the controller's compiled form in the compiled Moreau–Jean loop when it has one
-        (same results to rounding, tens of times faster); default: the Python path.
+        (default; tens of times faster). The Python path, which runs the same kernels, is
+        taken when ``False`` or when no compiled form applies (position or force noise, a
+        moved ground); ``traj.stats["path_reason"]`` says why.
     """
     from ..design.complementarity_tracking import (
         CircleTask,
@@ -234,7 +235,7 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
 
 def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
                      omega: float = 2 * math.pi / 8, q0: float = 0.05,
-                     model_scale: float = 1.0) -> TrackingRun:
+                     model_scale: float = 1.0, compiled: bool = True) -> TrackingRun:
     """The mass above the ground under the same controller (``γ1 = γ2 = 5``).
 
     Parameters
@@ -251,6 +252,8 @@ def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
         Initial height (at rest).
     model_scale : float
         Controller's model over the plant's.
+    compiled : bool
+        The compiled closed loop (default) or the Python path (``False``).
     """
     from ..design.complementarity_tracking import (
         ContactPhaseDesign,
@@ -268,7 +271,7 @@ def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
                                        ContactPhaseDesign(lam_rate=1.5),
                                        model_scale=model_scale)
     return _run_loop(plant, ctrl, np.array([q0, 0.0]), cycles * task.period, h, 0.5,
-                     restitution)
+                     restitution, compiled=compiled)
 
 
 def robustness_point(point: dict[str, Any]) -> dict[str, Any]:

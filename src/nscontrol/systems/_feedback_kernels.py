@@ -8,8 +8,11 @@ matrices row by row.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit, types
+from numba.extending import intrinsic
 
 _VEC = types.float64[::1]
 #: The signature of a compiled block's ``output`` and ``update``
@@ -18,6 +21,34 @@ BLOCK_SIGNATURE = _VEC(types.float64, _VEC, _VEC, _VEC, _VEC, _VEC, _VEC)
 #: The signature of a compiled block's ``reset``
 #: ``(t, xb, x_minus, x_plus, impulse, params) -> array``.
 RESET_SIGNATURE = _VEC(types.float64, _VEC, _VEC, _VEC, _VEC, _VEC)
+
+
+@intrinsic
+def _record(typingctx: Any, arr: Any, dtype: Any) -> Any:
+    """The record of type ``dtype`` (a NumPy structured dtype of ``float64`` fields) stored
+    at the start of the contiguous ``float64`` array ``arr``, read and written by field name
+    (a view: writes go to ``arr``). Compiled code only.
+
+    A kernel's parameters (or the head of its state) are declared once as such a dtype;
+    Python fills a one-element array of it by name and passes its flat ``float64`` view (the
+    compiled loops' signatures take ``float64[::1]``); the kernel reads ``record(p,
+    PARAMS).gamma1``. This is ``arr.view(dtype)[0]`` without that expression's cost in
+    numba (a new array and its checks, about 0.1 µs a call): the record is the array's data
+    pointer. ``arr`` must hold at least the record's bytes (a longer array is fine).
+    """
+    if not (isinstance(arr, types.Array) and arr.dtype == types.float64 and arr.layout == "C"
+            and isinstance(dtype, types.DType) and isinstance(dtype.dtype, types.Record)):
+        return None
+    rec = dtype.dtype
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        return builder.bitcast(ary.data, context.get_value_type(rec))
+    return rec(arr, dtype), codegen
+
+
+#: ``record(arr, dtype)`` as kernels call it (numba passes the typing context itself).
+record: Any = _record
 
 
 @njit(RESET_SIGNATURE, cache=True)

@@ -1,7 +1,11 @@
 """Compiled forms of the two-link arm (:meth:`~nscontrol.systems.lagrangian.LagrangianSystem.
-two_link_arm`), the Python functions' formulas in their order.
+two_link_arm`), the Python functions' formulas in their order, and the one source of its
+task-space model (:meth:`~nscontrol.systems.two_link.TwoLinkArm.task_dynamics` calls
+:func:`task_model_of`; the tracking controller's kernel calls :func:`task_model`).
 
-``params = [l1, l2, m1, m2, I1, I2, g]``.
+The parameters are the record :data:`ARM` (``l1, l2, m1, m2, I1, I2, g``); a compiled model's
+flat ``params`` array is that record's bytes, read by name through ``record(params, ARM)``
+(``nscontrol.systems._feedback_kernels.record``).
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ._feedback_kernels import record
 from ._lagrangian_kernels import (
     FORCE_JACOBIAN_SIGNATURE,
     FORCE_SIGNATURE,
@@ -20,11 +25,17 @@ from ._lagrangian_kernels import (
     POTENTIAL_SIGNATURE,
 )
 
+_F = np.float64
+#: The arm's parameters by name (geometry, inertia, gravity; see ``TwoLinkParams``).
+ARM = np.dtype([("l1", _F), ("l2", _F), ("m1", _F), ("m2", _F), ("I1", _F), ("I2", _F),
+                ("g", _F)])
+
 
 @njit(MASS_SIGNATURE, cache=True)
 def mass(q, p):
     """``M(θ)``."""
-    l1, l2, m1, m2, I1, I2 = p[0], p[1], p[2], p[3], p[4], p[5]
+    a = record(p, ARM)
+    l1, l2, m1, m2, I1, I2 = a.l1, a.l2, a.m1, a.m2, a.I1, a.I2
     c2 = math.cos(q[1])
     m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
     m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + I2
@@ -36,7 +47,8 @@ def mass(q, p):
 @njit(FORCE_SIGNATURE, cache=True)
 def force(t, q, v, p):
     """``-C(θ, θ')θ' - G(θ)``."""
-    l1, l2, m1, m2, g = p[0], p[1], p[2], p[3], p[6]
+    a = record(p, ARM)
+    l1, l2, m1, m2, g = a.l1, a.l2, a.m1, a.m2, a.g
     h = m2 * l1 * l2 / 2 * math.sin(q[1])
     c00, c01, c10 = -h * v[1], -h * (v[0] + v[1]), h * v[0]
     c12 = math.cos(q[0] + q[1])
@@ -51,7 +63,8 @@ def force(t, q, v, p):
 @njit(FORCE_JACOBIAN_SIGNATURE, cache=True)
 def force_jacobian(t, q, v, p):
     """``[∂f/∂θ; ∂f/∂θ']``."""
-    l1, l2, m1, m2, g = p[0], p[1], p[2], p[3], p[6]
+    a = record(p, ARM)
+    l1, l2, m1, m2, g = a.l1, a.l2, a.m1, a.m2, a.g
     c = m2 * l1 * l2 / 2
     s2, c2 = c * math.sin(q[1]), c * math.cos(q[1])
     s1, s12 = math.sin(q[0]), math.sin(q[0] + q[1])
@@ -68,23 +81,90 @@ def force_jacobian(t, q, v, p):
 @njit(GAP_SIGNATURE, cache=True)
 def gaps(q, p):
     """End-effector height ``l1 sin θ1 + l2 sin(θ1 + θ2)``."""
+    a = record(p, ARM)
     out = np.empty(1)
-    out[0] = p[0] * math.sin(q[0]) + p[1] * math.sin(q[0] + q[1])
+    out[0] = a.l1 * math.sin(q[0]) + a.l2 * math.sin(q[0] + q[1])
     return out
 
 
 @njit(GAP_JACOBIAN_SIGNATURE, cache=True)
 def gap_jacobian(q, p):
     """``∂g/∂θ``."""
-    c12 = p[1] * math.cos(q[0] + q[1])
+    a = record(p, ARM)
+    c12 = a.l2 * math.cos(q[0] + q[1])
     G = np.empty((1, 2))
-    G[0, 0], G[0, 1] = p[0] * math.cos(q[0]) + c12, c12
+    G[0, 0], G[0, 1] = a.l1 * math.cos(q[0]) + c12, c12
     return G
 
 
 @njit(POTENTIAL_SIGNATURE, cache=True)
 def potential(q, p):
     """Gravity's potential."""
-    l1, l2, m1, m2, g = p[0], p[1], p[2], p[3], p[6]
+    a = record(p, ARM)
+    l1, l2, m1, m2, g = a.l1, a.l2, a.m1, a.m2, a.g
     return g * (m1 * l1 / 2 * math.sin(q[0])
                 + m2 * (l1 * math.sin(q[0]) + l2 / 2 * math.sin(q[0] + q[1])))
+
+
+@njit(cache=True, inline="always")
+def task_model(x, l1, l2, m1, m2, I1, I2, grav, q, dq, Mq, Cq, gq, J):
+    """Task coordinates ``q = (y, x)``, velocities and ``(M_q, C_q, g_q, J)`` of the arm at
+    ``x = [θ; θ']`` into the arrays (the :data:`ARM` fields as scalars: a record nested in
+    another costs a copy in numba); closed form on floats (2x2 matrices as row-major
+    4-tuples: no allocation)."""
+    t1, t2, w1, w2 = x[0], x[1], x[2], x[3]
+    s1, c1, s2, c2 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2)
+    s12, c12 = math.sin(t1 + t2), math.cos(t1 + t2)
+    Jt = (l1 * c1 + l2 * c12, l2 * c12, -l1 * s1 - l2 * s12, -l2 * s12)
+    det = Jt[0] * Jt[3] - Jt[1] * Jt[2]           # = l1 l2 sin θ2 (up to sign)
+    Ji = (Jt[3] / det, -Jt[1] / det, -Jt[2] / det, Jt[0] / det)
+    m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
+    m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + I2
+    M = (m11, m12, m12, m2 * l2**2 / 4 + I2)
+    hh = m2 * l1 * l2 / 2 * s2
+    C = (-hh * w2, -hh * (w1 + w2), hh * w1, 0.0)
+    w12 = w1 + w2
+    Jd = (-l1 * s1 * w1 - l2 * s12 * w12, -l2 * s12 * w12,
+          -l1 * c1 * w1 - l2 * c12 * w12, -l2 * c12 * w12)
+    JiT = (Ji[0], Ji[2], Ji[1], Ji[3])
+    Mq2 = _mm(_mm(JiT, M), Ji)
+    MJiJd = _mm(_mm(M, Ji), Jd)
+    Cq2 = _mm(_mm(JiT, (C[0] - MJiJd[0], C[1] - MJiJd[1], C[2] - MJiJd[2],
+                        C[3] - MJiJd[3])), Ji)
+    G1 = grav / 2 * (l1 * (m1 + 2 * m2) * c1 + m2 * l2 * c12)
+    G2 = m2 * grav * l2 / 2 * c12
+    gq[0] = JiT[0] * G1 + JiT[1] * G2
+    gq[1] = JiT[2] * G1 + JiT[3] * G2
+    off = 0.5 * (Mq2[1] + Mq2[2])                # symmetric to the last bit
+    Mq[0, 0], Mq[0, 1], Mq[1, 0], Mq[1, 1] = Mq2[0], off, off, Mq2[3]
+    Cq[0, 0], Cq[0, 1], Cq[1, 0], Cq[1, 1] = Cq2[0], Cq2[1], Cq2[2], Cq2[3]
+    J[0, 0], J[0, 1], J[1, 0], J[1, 1] = Jt[0], Jt[1], Jt[2], Jt[3]
+    # q = (y, x): the Jacobian's entries are the link sums
+    q[0], q[1] = -Jt[2], Jt[0]
+    dq[0] = Jt[0] * w1 + Jt[1] * w2
+    dq[1] = Jt[2] * w1 + Jt[3] * w2
+
+
+@njit(cache=True, inline="always")
+def one_dof_task_model(x, m, g, q, dq, Mq, Cq, gq, J):
+    """The same for the mass on a vertical line (identity task map): ``(m, 0, m g, 1)``."""
+    q[0], dq[0] = x[0], x[1]
+    Mq[0, 0], Cq[0, 0], gq[0], J[0, 0] = m, 0.0, m * g, 1.0
+
+
+@njit(cache=True)
+def task_model_of(x, p):
+    """``(q, q', M_q, C_q, g_q, J)`` of the arm (``p``: the flat :data:`ARM` array) at
+    ``x = [θ; θ']``, as new arrays (what ``TwoLinkArm.task_model`` returns)."""
+    q, dq, gq = np.empty(2), np.empty(2), np.empty(2)
+    Mq, Cq, J = np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2))
+    a = record(p, ARM)
+    task_model(x, a.l1, a.l2, a.m1, a.m2, a.I1, a.I2, a.g, q, dq, Mq, Cq, gq, J)
+    return q, dq, Mq, Cq, gq, J
+
+
+@njit(cache=True, inline="always")
+def _mm(A, B):
+    """Product of two 2x2 matrices stored row-major as 4-tuples."""
+    return (A[0] * B[0] + A[1] * B[2], A[0] * B[1] + A[1] * B[3],
+            A[2] * B[0] + A[3] * B[2], A[2] * B[1] + A[3] * B[3])

@@ -20,8 +20,8 @@ inverse map returns (``det J = l1 l2 sin θ2`` vanishes only at the stretched an
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -65,6 +65,14 @@ class TwoLinkParams:
         for name in ("l1", "l2", "m1", "m2", "I1", "I2"):
             check_positive(name, getattr(self, name))
         check_positive("g", self.g, allow_zero=True)
+
+    @cached_property
+    def array(self) -> FloatArray:
+        """The parameters as the compiled kernels' record ``ARM`` (flat, in its order)."""
+        from ._two_link_kernels import ARM
+
+        return np.array([tuple(getattr(self, name) for name in ARM.names or ())],
+                        dtype=ARM).view(np.float64)
 
     def inertial(self) -> dict[str, float]:
         """The keyword arguments of the joint-space functions (without ``g``)."""
@@ -214,7 +222,7 @@ class TwoLinkArm:
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        return self.position(theta), self.jacobian(theta) @ dtheta
+        return self.task_model(theta, dtheta)[:2]
 
     def task_dynamics(self, theta: FloatArray, dtheta: FloatArray
                       ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -225,55 +233,26 @@ class TwoLinkArm:
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        # closed form on floats: this runs at every step of a closed loop (2x2 numpy
-        # products cost more in call overhead than in arithmetic)
-        p = self.params
-        l1, l2, m1, m2 = p.l1, p.l2, p.m1, p.m2
-        t1, t2 = float(theta[0]), float(theta[1])
-        w1, w2 = float(dtheta[0]), float(dtheta[1])
-        s1, c1, s2, c2 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2)
-        s12, c12 = math.sin(t1 + t2), math.cos(t1 + t2)
-        J = (l1 * c1 + l2 * c12, l2 * c12, -l1 * s1 - l2 * s12, -l2 * s12)
-        det = J[0] * J[3] - J[1] * J[2]           # = l1 l2 sin θ2 (up to sign)
-        Ji = (J[3] / det, -J[1] / det, -J[2] / det, J[0] / det)
-        m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + p.I1 + p.I2
-        m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + p.I2
-        M = (m11, m12, m12, m2 * l2**2 / 4 + p.I2)
-        hh = m2 * l1 * l2 / 2 * s2
-        C = (-hh * w2, -hh * (w1 + w2), hh * w1, 0.0)
-        w12 = w1 + w2
-        Jd = (-l1 * s1 * w1 - l2 * s12 * w12, -l2 * s12 * w12,
-              -l1 * c1 * w1 - l2 * c12 * w12, -l2 * c12 * w12)
-        JiT = (Ji[0], Ji[2], Ji[1], Ji[3])
-        Mq = _mm(_mm(JiT, M), Ji)
-        MJiJd = _mm(_mm(M, Ji), Jd)
-        Cq = _mm(_mm(JiT, tuple(a - b for a, b in zip(C, MJiJd, strict=True))), Ji)
-        G1 = p.g / 2 * (l1 * (m1 + 2 * m2) * c1 + m2 * l2 * c12)
-        G2 = m2 * p.g * l2 / 2 * c12
-        gq = np.array([JiT[0] * G1 + JiT[1] * G2, JiT[2] * G1 + JiT[3] * G2])
-        off = 0.5 * (Mq[1] + Mq[2])
-        return (np.array([[Mq[0], off], [off, Mq[3]]]), np.array([[Cq[0], Cq[1]], [Cq[2], Cq[3]]]),
-                gq, np.array([[J[0], J[1]], [J[2], J[3]]]))
+        return self.task_model(theta, dtheta)[2:]
 
     def task_model(self, theta: FloatArray, dtheta: FloatArray
                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
                               FloatArray]:
         """``(q, q', M_q, C_q, g_q, J)`` in one evaluation (what a controller needs per step).
 
+        The closed form is the compiled kernel the tracking controller runs
+        (``nscontrol.systems._two_link_kernels.task_model``): one source for both.
+
         Parameters
         ----------
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        Mq, Cq, gq, J = self.task_dynamics(theta, dtheta)
-        # q = (y, x): y = -J[1, 0], x = J[0, 0] (the Jacobian's entries are the link sums)
-        return np.array([-J[1, 0], J[0, 0]]), J @ dtheta, Mq, Cq, gq, J
+        from . import _two_link_kernels as tk
 
-
-def _mm(A: tuple[float, ...], B: tuple[float, ...]) -> tuple[float, float, float, float]:
-    """Product of two 2x2 matrices stored row-major as 4-tuples."""
-    return (A[0] * B[0] + A[1] * B[2], A[0] * B[1] + A[1] * B[3],
-            A[2] * B[0] + A[3] * B[2], A[2] * B[1] + A[3] * B[3])
+        x = np.concatenate((np.asarray(theta, float).ravel(),
+                            np.asarray(dtheta, float).ravel()))
+        return tk.task_model_of(x, self.params.array)
 
 
 @dataclass(frozen=True)
@@ -355,18 +334,22 @@ class OneDofMass:
         theta, dtheta : (1,) ndarray
             Position and velocity.
         """
-        return (np.array([[self.m]]), np.zeros((1, 1)), np.array([self.m * self.g]),
-                np.eye(1))
+        return self.task_model(theta, dtheta)[2:]
 
     def task_model(self, theta: FloatArray, dtheta: FloatArray
                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
                               FloatArray]:
-        """``(q, q', M, C, g, J)`` in one evaluation.
+        """``(q, q', M, C, g, J)`` in one evaluation (the tracking controller's kernel).
 
         Parameters
         ----------
         theta, dtheta : (1,) ndarray
             Position and velocity.
         """
-        return (np.asarray(theta, float).copy(), np.asarray(dtheta, float).copy(),
-                *self.task_dynamics(theta, dtheta))
+        from ._two_link_kernels import one_dof_task_model
+
+        q, dq, gq = np.empty(1), np.empty(1), np.empty(1)
+        Mq, Cq, J = np.empty((1, 1)), np.empty((1, 1)), np.empty((1, 1))
+        x = np.array([float(np.asarray(theta).ravel()[0]), float(np.asarray(dtheta).ravel()[0])])
+        one_dof_task_model(x, float(self.m), float(self.g), q, dq, Mq, Cq, gq, J)
+        return q, dq, Mq, Cq, gq, J
