@@ -15,7 +15,7 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
 
 def _worked_example() -> str:
     text = DOC.read_text()
-    section = text[text.index("### Worked example"):]
+    section = text[text.index("### Worked example: a sampled force controller"):]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
