@@ -36,7 +36,7 @@ def _finite(a):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _model_forces(model, params, K, D, f0, t, q, v, f, Jq, Jv):
     """``f = f0 - K q - D v + force(t, q, v)`` and its Jacobians ``Jq``, ``Jv`` (the model's
     ``force_jacobian`` minus ``K``, ``D``); False when a value is not finite."""
@@ -98,10 +98,11 @@ def _blocks_input(k, t, q, v, h, p_prev, S, f_in, Cy, has_obs, obs_fns, obs_para
 
 
 @njit(cache=True)
-def _approaching(p_row, p_prev, un):
-    """An impulse rises on an approaching contact (closed_loop's jump listener fires)."""
-    for j in range(p_row.shape[0]):
-        if p_row[j] > 0.0 and p_prev[j] == 0.0 and un[j] < 0.0:
+def _approaching(p_out, k, p_prev, un):
+    """An impulse rises on an approaching contact in step ``k`` (closed_loop's jump listener
+    fires)."""
+    for j in range(p_prev.shape[0]):
+        if p_out[k, j] > 0.0 and p_prev[j] == 0.0 and un[j] < 0.0:
             return True
     return False
 
@@ -128,9 +129,14 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
     Jv = np.empty((n, n))
     un = np.empty(m)
     act = np.empty(m, np.int64)
+    qm = np.empty(n)
+    dv = np.empty(n)
+    mgt = np.empty((n, m))
     for k in range(times.size):
         t = times[k]
-        f_in[:] = fext[k if k < fext.shape[0] else fext.shape[0] - 1]
+        row = k if k < fext.shape[0] else fext.shape[0] - 1
+        for i in range(n):
+            f_in[i] = fext[row, i]
         if has_blocks:
             status = _blocks_input(k, t, q, v, h, p_prev, S, f_in, Cy, has_obs, obs_fns,
                                    obs_params, obs_period, xo, xhat, has_ctrl, ctrl_fns,
@@ -138,7 +144,9 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
                                    prev_lam, sched, XO, XC, U)
             if status != 0:
                 return k, BLOCKS + status
-        M = model[0][0](q + h * theta * v if predicted else q.copy(), params)
+        for i in range(n):
+            qm[i] = q[i] + h * theta * v[i] if predicted else q[i]
+        M = model[0][0](qm, params)
         info[0] = t
         if not positive_definite(M):
             return k, MODEL_ERROR
@@ -146,20 +154,22 @@ def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, p
             return k, MODEL_ERROR
         code, rcond, _ = mj_step(M, f, Jq, Jv, f_in, model[4][0](q, params),
                                  model[3][0](q, params), q, v, e, h, theta, gamma, activation,
-                                 minv, un, act, p_out[k], q_out[k], v_out[k])
+                                 minv, dv, un, act, mgt, p_out, q_out, v_out, k)
         if code:
             info[1] = rcond
             return k, code
-        if has_blocks and _approaching(p_out[k], p_prev, un):   # reset the blocks
+        if has_blocks and _approaching(p_out, k, p_prev, un):   # reset the blocks
             status = reset_blocks(t + h, np.concatenate((q, v)),
                                   np.concatenate((q_out[k], v_out[k])), p_out[k].copy(),
                                   has_obs, obs_reset, obs_params, xo, has_ctrl, ctrl_reset,
                                   ctrl_params, xc)
             if status != 0:
                 return k, BLOCKS + status
-        q[:] = q_out[k]
-        v[:] = v_out[k]
-        p_prev[:] = p_out[k]
+        for i in range(n):
+            q[i] = q_out[k, i]
+            v[i] = v_out[k, i]
+        for j in range(m):
+            p_prev[j] = p_out[k, j]
     return times.size, 0
 
 

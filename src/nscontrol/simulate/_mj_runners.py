@@ -227,8 +227,9 @@ class PythonRunner(Runner):
         n, m = system.n_dof, system.n_contacts
         self.analytic = system.force is None or system.force_jacobian is not None
         self.zeros = np.zeros((n, n))  # the Jacobians of explicit forces
-        self.minv, self.un = np.empty((n, n)), np.empty(m)
+        self.minv, self.dv, self.un = np.empty((n, n)), np.empty(n), np.empty(m)
         self.act = np.empty(m, np.int64)
+        self.mgt = np.empty((n, m))
         self.active_prev = np.zeros(0, dtype=np.int64)
         # affine gaps (possibly scipy.sparse): one dense matrix for the whole run
         self.G = (None if system.gap_matrix is None
@@ -278,7 +279,7 @@ class PythonRunner(Runner):
                 if inline is not None:
                     f_k = f_k + inline(t, q, v, p_out[k - 1] if k else state.p_prev,
                                        self.active_prev if k else state.active_prev)
-                code = self._step(t, q, v, f_k, p_out[k], q_out[k], v_out[k])
+                code = self._step(t, q, v, f_k, p_out, q_out, v_out, k)
             except StepFailure as failure:
                 code, state.failure = failure.code, failure.message
             if code:
@@ -293,8 +294,8 @@ class PythonRunner(Runner):
         return times.size, 0, q_out, v_out, p_out
 
     def _step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
-              p_row: FloatArray, q_row: FloatArray, v_row: FloatArray) -> int:
-        """One step from ``(q, v)`` at ``t`` into the rows; returns the LCP's status."""
+              p_out: FloatArray, q_out: FloatArray, v_out: FloatArray, k: int) -> int:
+        """One step from ``(q, v)`` at ``t`` into row ``k``; returns the LCP's status."""
         from ._moreau_jean_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
 
         s, o = self.system, self.opts
@@ -313,8 +314,8 @@ class PythonRunner(Runner):
             f, Jq, Jv = _checked_force(s, t, q, v), self.zeros, self.zeros
         code, rcond, na = mj_step(M, f, Jq, Jv, np.ascontiguousarray(fext, dtype=float),
                                   self.gap_jacobian(q), self.gaps(q), q, v, s.restitution, h,
-                                  th, o.gamma, o.activation, self.minv, self.un, self.act,
-                                  p_row, q_row, v_row)
+                                  th, o.gamma, o.activation, self.minv, self.dv, self.un,
+                                  self.act, self.mgt, p_out, q_out, v_out, k)
         if code == SINGULAR:
             raise StepFailure(SINGULAR, singular_message(rcond, t, o.forces))
         self.active_prev = self.act[:na].copy()

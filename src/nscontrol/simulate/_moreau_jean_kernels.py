@@ -42,7 +42,7 @@ SINGULAR = -3
 _EPS = np.finfo(np.float64).eps
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pairwise_active_set(q, v, ia, ib, ca, cb, g0, gamma, h, activation, act):
     """Write the contacts with ``g + γ h u <= activation`` into ``act``; return how many
     (contacts touching one or two coordinates: ``g_j = g0_j + ca_j q_a (+ cb_j q_b)``)."""
@@ -61,7 +61,7 @@ def pairwise_active_set(q, v, ia, ib, ca, cb, g0, gamma, h, activation, act):
     return na
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _pairwise_lcp(act, na, ia, ib, ca, cb, minv, e, vfree, vold, lower, diag, upper, qlcp):
     """The tridiagonal LCP of the active contacts ``act[:na]``: ``W`` (shared coordinates of
     neighbouring contacts only) and ``q = G_A v_free + e G_A v_k``."""
@@ -141,21 +141,21 @@ def mj_pairwise_kernel(q, v, minv, kdiag, ddiag, f0, fext, ia, ib, ca, cb, g0, e
                 b = ib[j]
                 if b >= 0:
                     vfree[b] += minv[b] * cb[j] * pj
-        _advance(q, v, vold, vfree, h, theta, q_out[k], v_out[k])
+        _advance(q, v, vold, vfree, h, theta, q_out, v_out, k)
     return q_out.shape[0], 0
 
 
-@njit(cache=True)
-def _advance(q, v, vold, vnew, h, theta, q_row, v_row):
-    """``q += h((1-θ) v_k + θ v_{k+1})``, ``v = v_{k+1}``, both also written to the rows."""
+@njit(cache=True, inline="always")
+def _advance(q, v, vold, vnew, h, theta, q_out, v_out, k):
+    """``q += h((1-θ) v_k + θ v_{k+1})``, ``v = v_{k+1}``, both also written to row ``k``."""
     for i in range(q.shape[0]):
         v[i] = vnew[i]
         q[i] += h * ((1.0 - theta) * vold[i] + theta * vnew[i])
-        q_row[i] = q[i]
-        v_row[i] = v[i]
+        q_out[k, i] = q[i]
+        v_out[k, i] = v[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def active_set(G, gq, v, gamma, h, activation, un, act):
     """Write ``u = G v`` into ``un`` and the contacts with ``g + γ h u <= activation`` into
     ``act``; return how many."""
@@ -171,7 +171,7 @@ def active_set(G, gq, v, gamma, h, activation, un, act):
     return na
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def affine_gaps(G, g0, q, out):
     """``g0 + G q`` into ``out`` (each sum from ``g0_j``, in column order)."""
     for j in range(g0.shape[0]):
@@ -234,11 +234,11 @@ def mj_dense_kernel(q, v, minv, K, D, f0, fext, G, g0, e, minv_gt, W,
                 p_out[k, c] = za[p]
                 for i in range(n):
                     vfree[i] += minv_gt[i, c] * za[p]
-        _advance(q, v, vold, vfree, h, theta, q_out[k], v_out[k])
+        _advance(q, v, vold, vfree, h, theta, q_out, v_out, k)
     return q_out.shape[0], 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_active(W, qa, z):
     """The LCP ``0 <= z ⟂ W z + qa >= 0`` of the active contacts: one contact in closed form,
     more by Lemke. Returns Lemke's status (0: solved)."""
@@ -270,45 +270,45 @@ def positive_definite(M):
     return True
 
 
-@njit(cache=True)
-def mj_step(M, f, Jq, Jv, f_in, G, gq, q, v, e, h, theta, gamma, activation, minv, un, act,
-            p_row, q_new, v_new):
+@njit(cache=True, inline="always")
+def mj_step(M, f, Jq, Jv, f_in, G, gq, q, v, e, h, theta, gamma, activation, minv, dv, un,
+            act, mgt, p_out, q_out, v_out, k):
     """One step from ``(q, v)`` of the θ-method with linearised forces; returns
     ``(code, rcond, na)``.
 
     ``M`` the mass matrix (at ``q_k`` or the predicted configuration), ``f`` the smooth force
     and ``Jq, Jv`` its Jacobians (zeros: explicit forces), ``f_in`` the input's force
-    ``S u_k``, ``G``, ``gq`` the gaps' Jacobian and values at ``q_k``. Writes the impulses
-    into ``p_row``, ``q_{k+1}``, ``v_{k+1}`` into ``q_new``, ``v_new``, ``M̂⁻¹`` into
-    ``minv``, ``G v_k`` into ``un`` and the active contacts into ``act[:na]``. ``code``: 0,
-    ``SINGULAR`` (``rcond < n ε``, nothing else written) or the LCP's status.
+    ``S u_k``, ``G``, ``gq`` the gaps' Jacobian and values at ``q_k``. Writes the impulses,
+    ``q_{k+1}`` and ``v_{k+1}`` into row ``k`` of ``p_out``, ``q_out``, ``v_out``; ``M̂⁻¹``
+    into ``minv``, ``M̂⁻¹ h f̃`` into ``dv``, ``G v_k`` into ``un``, the active contacts
+    into ``act[:na]`` and ``M̂⁻¹ G_Aᵀ`` into ``mgt[:, :na]`` (``mgt`` of shape ``(n, m)``).
+    ``code``: 0, ``SINGULAR`` (``rcond < n ε``, the rows not written) or the LCP's status.
     """
     n = q.shape[0]
-    rcond = mj_linearised_kernel(M, Jq, Jv, f, f_in, v, h, theta, minv, v_new)
+    rcond = mj_linearised_kernel(M, Jq, Jv, f, f_in, v, h, theta, minv, dv)
     if not rcond >= n * _EPS:   # also catches NaN
         return SINGULAR, rcond, 0
     for i in range(n):
-        v_new[i] = v[i] + v_new[i]          # v_free = v_k + M̂⁻¹ h f̃
+        v_out[k, i] = v[i] + dv[i]          # v_free = v_k + M̂⁻¹ h f̃
     na = active_set(G, gq, v, gamma, h, activation, un, act)
     for j in range(gq.shape[0]):
-        p_row[j] = 0.0
+        p_out[k, j] = 0.0
     if na > 0:
-        code = _contact_impulses(G, minv, e, un, act[:na], v_new, p_row)
+        code = _contact_impulses(G, minv, e, un, act, na, mgt, v_out, p_out, k)
         if code:
             return code, rcond, na
     for i in range(n):    # q + h((1 - θ) v + θ v_new), element by element
-        q_new[i] = q[i] + h * ((1 - theta) * v[i] + theta * v_new[i])
+        q_out[k, i] = q[i] + h * ((1 - theta) * v[i] + theta * v_out[k, i])
     return 0, rcond, na
 
 
-@njit(cache=True)
-def _contact_impulses(G, minv, e, un, act, v, p_row):
-    """Newton's law on the active contacts ``act``: ``W = G_A M̂⁻¹ G_Aᵀ``,
-    ``0 <= P ⟂ W P + G_A v_free + e u_A >= 0``; ``v`` (``v_free`` on entry) becomes
-    ``v_free + M̂⁻¹ G_Aᵀ P``, ``P`` goes to ``p_row[act]``. Returns the LCP's status."""
-    n = v.shape[0]
-    na = act.shape[0]
-    MinvGt = np.empty((n, na))
+@njit(cache=True, inline="always")
+def _contact_impulses(G, minv, e, un, act, na, MinvGt, v_out, p_out, k):
+    """Newton's law on the active contacts ``act[:na]``: ``W = G_A M̂⁻¹ G_Aᵀ``,
+    ``0 <= P ⟂ W P + G_A v_free + e u_A >= 0``; row ``k`` of ``v_out`` (``v_free`` on entry)
+    becomes ``v_free + M̂⁻¹ G_Aᵀ P``, ``P`` goes to ``p_out[k, act]``. Returns the LCP's
+    status."""
+    n = v_out.shape[1]
     for i in range(n):
         for c in range(na):
             s = 0.0
@@ -325,7 +325,7 @@ def _contact_impulses(G, minv, e, un, act, v, p_row):
             W[r, c] = s
         s = 0.0
         for l2 in range(n):
-            s += G[act[r], l2] * v[l2]
+            s += G[act[r], l2] * v_out[k, l2]
         qa[r] = s + e[act[r]] * un[act[r]]
     z = np.empty(na)
     code = _solve_active(W, qa, z)
@@ -335,7 +335,7 @@ def _contact_impulses(G, minv, e, un, act, v, p_row):
         s = 0.0
         for c in range(na):
             s += MinvGt[i, c] * z[c]
-        v[i] = v[i] + s
+        v_out[k, i] = v_out[k, i] + s
     for c in range(na):
-        p_row[act[c]] = z[c]
+        p_out[k, act[c]] = z[c]
     return 0
