@@ -42,7 +42,7 @@ SINGULAR = -3
 _EPS = np.finfo(np.float64).eps
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def pairwise_active_set(q, v, ia, ib, ca, cb, g0, gamma, h, activation, act):
     """Write the contacts with ``g + γ h u <= activation`` into ``act``; return how many
     (contacts touching one or two coordinates: ``g_j = g0_j + ca_j q_a (+ cb_j q_b)``)."""
@@ -61,7 +61,7 @@ def pairwise_active_set(q, v, ia, ib, ca, cb, g0, gamma, h, activation, act):
     return na
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _pairwise_lcp(act, na, ia, ib, ca, cb, minv, e, vfree, vold, lower, diag, upper, qlcp):
     """The tridiagonal LCP of the active contacts ``act[:na]``: ``W`` (shared coordinates of
     neighbouring contacts only) and ``q = G_A v_free + e G_A v_k``."""
@@ -145,7 +145,7 @@ def mj_pairwise_kernel(q, v, minv, kdiag, ddiag, f0, fext, ia, ib, ca, cb, g0, e
     return q_out.shape[0], 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _advance(q, v, vold, vnew, h, theta, q_out, v_out, k):
     """``q += h((1-θ) v_k + θ v_{k+1})``, ``v = v_{k+1}``, both also written to row ``k``."""
     for i in range(q.shape[0]):
