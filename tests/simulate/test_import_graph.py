@@ -19,7 +19,7 @@ ROOT = Path(nscontrol.__file__).resolve().parent / "simulate"
 
 #: Circles another helper of issue 30 removes (the ``mj`` branch): the coordinator deletes
 #: this entry when that branch is merged. Each entry is the circle's modules, sorted.
-PENDING: set[tuple[str, ...]] = {("_mj_compiled", "moreau_jean")}
+PENDING: set[tuple[str, ...]] = set()
 
 
 def _module_name(path: Path, root: Path, package: str) -> str:

@@ -199,7 +199,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
         "systems._two_link_kernels", "design._friction_compensation_kernels",
         "simulate._block_kernels", "simulate._lure_kernels", "simulate._mj_compiled_kernels",
-        "simulate._mj_linearised_kernel", "numerics._lcp_kernels",
+        "simulate._moreau_jean_kernels", "simulate._mj_linearised_kernel", "numerics._lcp_kernels",
         "design._complementarity_tracking_kernels"),
 }
 

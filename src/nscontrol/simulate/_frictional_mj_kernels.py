@@ -50,6 +50,92 @@ def _step_error(Hp: np.ndarray, Hi: np.ndarray, Hx: np.ndarray, vc: np.ndarray,
 
 
 @njit(cache=True)
+def _free_and_active(q, v, minv, kdiag, ddiag, f0, fe, Hp, Hi, Hx, g0, dim, h, theta, gamma,
+                     act, r, vfree, vc, active, un_k, states):
+    """``v_free`` (into ``vfree`` and ``vc``), the active set ``g + γ h u <= act`` with
+    ``u_k = G v_k`` (into ``un_k``); the warm start ``r`` of inactive contacts zeroed, that of
+    active ones added to ``vc``. Returns whether a contact is active."""
+    n = q.shape[0]
+    for i in range(n):
+        f = f0[i] + fe[i] - kdiag[i] * (q[i] + h * theta * v[i]) - ddiag[i] * v[i]
+        vfree[i] = v[i] + h * minv[i] * f
+        vc[i] = vfree[i]
+    any_active = False
+    for j in range(active.shape[0]):
+        b = j * dim
+        gap = g0[j] + _row_dot(Hp, Hi, Hx, b, q)
+        un_k[j] = _row_dot(Hp, Hi, Hx, b, v)
+        active[j] = gap + gamma * h * un_k[j] <= act
+        states[j] = 0
+        if not active[j]:
+            for c in range(dim):
+                r[b + c] = 0.0
+        else:
+            any_active = True
+            for c in range(dim):   # the warm start's contribution to v
+                row = b + c
+                for p in range(Hp[row], Hp[row + 1]):
+                    vc[Hi[p]] += minv[Hi[p]] * Hx[p] * r[row]
+    return any_active
+
+
+@njit(cache=True)
+def _sweep(minv, Hp, Hi, Hx, e, mu, blocks, inverses, dim, r, vc, active, un_k, states,
+           qloc, rloc):
+    """One non-smooth Gauss–Seidel sweep over the active contacts (``r``, ``vc`` updated)."""
+    for j in range(active.shape[0]):
+        if not active[j]:
+            continue
+        b = j * dim
+        for c in range(dim):
+            s = _row_dot(Hp, Hi, Hx, b + c, vc)
+            for c2 in range(dim):
+                s -= blocks[j, c, c2] * r[b + c2]
+            qloc[c] = s
+        qloc[0] += e[j] * un_k[j]
+        for c in range(dim):   # the local fallback's start
+            rloc[c] = r[b + c]
+        if dim == 1:
+            states[j] = local_1d(blocks[j, 0, 0], qloc[0], rloc)
+        elif dim == 2:
+            states[j] = local_2d(blocks[j], qloc, mu[j], rloc)
+        else:
+            states[j] = local_3d(blocks[j], inverses[j], qloc, mu[j], rloc)
+        for c in range(dim):
+            dr = rloc[c] - r[b + c]
+            if dr != 0.0:
+                row = b + c
+                for p in range(Hp[row], Hp[row + 1]):
+                    vc[Hi[p]] += minv[Hi[p]] * Hx[p] * dr
+                r[row] = rloc[c]
+
+
+@njit(cache=True)
+def _free_norm2(Hp, Hi, Hx, vfree, e, un_k, active, dim):
+    """``‖q‖²`` of the step's problem: the free local velocities of the active contacts."""
+    qnorm2 = 0.0
+    for j in range(active.shape[0]):
+        if active[j]:
+            for c in range(dim):
+                w = _row_dot(Hp, Hi, Hx, j * dim + c, vfree)
+                if c == 0:
+                    w += e[j] * un_k[j]
+                qnorm2 += w * w
+    return qnorm2
+
+
+@njit(cache=True)
+def _add_work(Hp, Hi, Hx, v, vc, r, active, dim, work):
+    """The work of the step's impulses, ``r · H (v_k + v_{k+1}) / 2``, normal and tangent."""
+    for j in range(active.shape[0]):
+        if active[j]:
+            for c in range(dim):
+                row = j * dim + c
+                ubar = 0.5 * (_row_dot(Hp, Hi, Hx, row, v) + _row_dot(Hp, Hi, Hx, row, vc))
+                work[0 if c == 0 else 1] += r[row] * ubar
+
+
+@njit(cache=True)
 def frictional_mj_kernel(q: np.ndarray, v: np.ndarray, minv: np.ndarray, kdiag: np.ndarray,
                          ddiag: np.ndarray, f0: np.ndarray, fext: np.ndarray, Hp: np.ndarray,
                          Hi: np.ndarray, Hx: np.ndarray, g0: np.ndarray, e: np.ndarray,
@@ -74,77 +160,24 @@ def frictional_mj_kernel(q: np.ndarray, v: np.ndarray, minv: np.ndarray, kdiag: 
     states = np.zeros(m, np.int64)
     for k in range(q_out.shape[0]):
         fe = fext[min(k, fext.shape[0] - 1)]
-        for i in range(n):
-            f = f0[i] + fe[i] - kdiag[i] * (q[i] + h * theta * v[i]) - ddiag[i] * v[i]
-            vfree[i] = v[i] + h * minv[i] * f
-            vc[i] = vfree[i]
-        any_active = False
-        for j in range(m):
-            b = j * dim
-            gap = g0[j] + _row_dot(Hp, Hi, Hx, b, q)
-            un_k[j] = _row_dot(Hp, Hi, Hx, b, v)
-            active[j] = gap + gamma * h * un_k[j] <= act
-            states[j] = 0
-            if not active[j]:
-                for c in range(dim):
-                    r[b + c] = 0.0
-            else:
-                any_active = True
-                for c in range(dim):   # the warm start's contribution to v
-                    row = b + c
-                    for p in range(Hp[row], Hp[row + 1]):
-                        vc[Hi[p]] += minv[Hi[p]] * Hx[p] * r[row]
+        any_active = _free_and_active(q, v, minv, kdiag, ddiag, f0, fe, Hp, Hi, Hx, g0, dim,
+                                      h, theta, gamma, act, r, vfree, vc, active, un_k, states)
         sweeps = 0
         err = 0.0
         if any_active:
-            qnorm2 = 0.0   # ‖q‖² of the step's problem: the free local velocities
-            for j in range(m):
-                if active[j]:
-                    for c in range(dim):
-                        w = _row_dot(Hp, Hi, Hx, j * dim + c, vfree)
-                        if c == 0:
-                            w += e[j] * un_k[j]
-                        qnorm2 += w * w
+            qnorm2 = _free_norm2(Hp, Hi, Hx, vfree, e, un_k, active, dim)
             converged = False
             while sweeps < max_sweeps:
                 sweeps += 1
-                for j in range(m):
-                    if not active[j]:
-                        continue
-                    b = j * dim
-                    for c in range(dim):
-                        s = _row_dot(Hp, Hi, Hx, b + c, vc)
-                        for c2 in range(dim):
-                            s -= blocks[j, c, c2] * r[b + c2]
-                        qloc[c] = s
-                    qloc[0] += e[j] * un_k[j]
-                    for c in range(dim):   # the local fallback's start
-                        rloc[c] = r[b + c]
-                    if dim == 1:
-                        states[j] = local_1d(blocks[j, 0, 0], qloc[0], rloc)
-                    elif dim == 2:
-                        states[j] = local_2d(blocks[j], qloc, mu[j], rloc)
-                    else:
-                        states[j] = local_3d(blocks[j], inverses[j], qloc, mu[j], rloc)
-                    for c in range(dim):
-                        dr = rloc[c] - r[b + c]
-                        if dr != 0.0:
-                            row = b + c
-                            for p in range(Hp[row], Hp[row + 1]):
-                                vc[Hi[p]] += minv[Hi[p]] * Hx[p] * dr
-                            r[row] = rloc[c]
+                _sweep(minv, Hp, Hi, Hx, e, mu, blocks, inverses, dim, r, vc, active, un_k,
+                       states, qloc, rloc)
                 err = _step_error(Hp, Hi, Hx, vc, r, active, un_k, e, mu, dim, qnorm2)
                 if err <= tol:
                     converged = True
                     break
             if not converged:
                 return k, 2
-        for j in range(m):   # the work of the step's impulses, r · H (v_k + v_{k+1}) / 2
-            if active[j]:
-                for c in range(dim):
-                    row = j * dim + c
-                    ubar = 0.5 * (_row_dot(Hp, Hi, Hx, row, v) + _row_dot(Hp, Hi, Hx, row, vc))
-                    work[0 if c == 0 else 1] += r[row] * ubar
+        _add_work(Hp, Hi, Hx, v, vc, r, active, dim, work)
         for i in range(n):
             q[i] = q[i] + h * ((1.0 - theta) * v[i] + theta * vc[i])
             v[i] = vc[i]

@@ -23,16 +23,18 @@ landing and later impacts drift by a step per bounce.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import sparse
 
 from .._progress import TimeProgress
-from .._validation import FloatArray, check_positive
+from .._validation import FloatArray
 from ..errors import ModelError, SolverError
 from .trajectory import Recorder, Trajectory
+
+if TYPE_CHECKING:
+    from ._mj_options import MoreauJeanOptions
 
 #: Signals this path records (those of plain Moreau–Jean, and the contact's).
 OFFERED = ("impulse", "gap", "energy", "friction_impulse", "contact_state", "friction_work",
@@ -93,12 +95,9 @@ class _Contacts:
         return hit
 
 
-def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float, *, h: float,
-                         theta: float, gamma: float, u: Any, record_every: int,
-                         signals: Sequence[str] | None, progress: bool | None,
-                         activation: float, projection: bool, contact_tol: float
-                         ) -> Trajectory:
-    """The frictional step loop (arguments checked by :func:`moreau_jean.integrate`).
+def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float,
+                         opts: MoreauJeanOptions) -> Trajectory:
+    """The frictional step loop (``opts`` checked by :func:`moreau_jean.integrate`).
 
     A compiled loop (:mod:`._frictional_mj_kernels`) when ``M̂`` is diagonal and no
     projection is asked; a step whose NSGS does not converge there, and every step otherwise,
@@ -108,50 +107,65 @@ def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float, *, h
         raise ModelError("friction: Moreau-Jean with friction or projection needs a constant "
                          "mass, linear forces (f0, K, D) and affine gaps; linearise the model "
                          "about its working configuration")
-    contact_tol = check_positive("contact_tol", contact_tol)
-    n = system.n_dof
+    h = opts.h
     n_full = int(np.floor((tf - t0) / h + 1e-9))
     h_last = (tf - t0) - n_full * h
     n_steps = n_full + (1 if h_last > 1e-9 * h else 0)
-    rec = Recorder(system.n_states, every=record_every, signals=signals, offered=OFFERED,
-                   capacity=Recorder.capacity_for(n_steps + 2, record_every))
-    run = _Run(system, h, theta, gamma, activation, contact_tol, projection, u)
-    q, v = x0[:n].copy(), x0[n:].copy()
+    rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
+                   offered=OFFERED, capacity=Recorder.capacity_for(n_steps + 2,
+                                                                   opts.record_every))
+    run = _Run(system, opts)
     rec.extend(np.array([t0]), x0[None], **_rows(
-        system, run.c, q[None], v[None], run.r[None], np.zeros((1, system.n_contacts)),
-        np.zeros((1, 2)), np.zeros(1), 0.0, rec))
+        system, run.c, x0[None, :system.n_dof], x0[None, system.n_dof:], run.r[None],
+        np.zeros((1, system.n_contacts)), np.zeros((1, 2)), np.zeros(1), 0.0, rec))
+    state = (x0[:system.n_dof].copy(), x0[system.n_dof:].copy())
     k, status, message = 0, 0, None
-    with TimeProgress(t0, tf, desc="moreau_jean", enable=progress) as bar:
+    with TimeProgress(t0, tf, desc="moreau_jean", enable=opts.progress) as bar:
         while k < n_steps:
-            step = h if k < n_full else h_last
-            compiled = run.compiled and step == h
-            size = max(1, min(n_full - k, 2000)) if compiled else 1
-            times: FloatArray = t0 + h * np.arange(k, k + size, dtype=np.float64)
-            q_pre, v_pre, r_pre = q.copy(), v.copy(), run.r.copy()
-            done = 0
-            if compiled:
-                out, done = run.kernel_chunk(q, v, times)
-            if not done:   # the Python step: one step, the checked solver
-                try:
-                    out = run.python_step(q, v, times[0], step)
-                except SolverError as err:
-                    status, message = -1, (f"moreau_jean: the contact problem of step {k} "
-                                           f"(t = {times[0]:.6g}) failed: {err}")
-                    break
-                done = 1
-            q_out, v_out = out[0][:done], out[1][:done]
-            q, v = q_out[-1].copy(), v_out[-1].copy()
-            _record(rec, system, run.c, times[:done] + step, q_out, v_out, out[2][:done],
-                    out[3][:done], out[4][:done], out[5][:done], run.proj["energy"], q_pre,
-                    v_pre, r_pre, step)
-            k += done
+            try:
+                k, state = _chunk(run, rec, state, k, t0, n_full, h_last)
+            except SolverError as err:
+                status, message = -1, (f"moreau_jean: the contact problem of step {k} "
+                                       f"(t = {t0 + h * k:.6g}) failed: {err}")
+                break
             bar.update(t0 + h * k)
+    return _finish(run, rec, k, status, message)
+
+
+def _chunk(run: _Run, rec: Recorder, state: tuple[FloatArray, FloatArray], k: int,
+           t0: float, n_full: int, h_last: float) -> tuple[int, tuple[FloatArray, FloatArray]]:
+    """Run and record the steps from step ``k``: a compiled chunk, or one Python step when
+    the compiled loop does not apply or its NSGS did not converge."""
+    q, v = state
+    h = run.h
+    step = h if k < n_full else h_last
+    compiled = run.compiled and step == h
+    size = max(1, min(n_full - k, 2000)) if compiled else 1
+    times: FloatArray = t0 + h * np.arange(k, k + size, dtype=np.float64)
+    q_pre, v_pre, r_pre = q.copy(), v.copy(), run.r.copy()
+    done = 0
+    if compiled:
+        out, done = run.kernel_chunk(q, v, times)
+    if not done:   # the Python step: one step, the checked solver
+        out = run.python_step(q, v, times[0], step)
+        done = 1
+    q_out, v_out = out[0][:done], out[1][:done]
+    _record(rec, run.system, run.c, times[:done] + step, q_out, v_out, out[2][:done],
+            out[3][:done], out[4][:done], out[5][:done], run.proj["energy"], q_pre, v_pre,
+            r_pre, step)
+    return k + done, (q_out[-1].copy(), v_out[-1].copy())
+
+
+def _finish(run: _Run, rec: Recorder, k: int, status: int, message: str | None
+            ) -> Trajectory:
+    """The trajectory with the run's stats (a ``SolverError`` carrying it on a failure)."""
+    system = run.system
     traj = rec.finish(status=status, message=message, method="moreau_jean", stats={
         "steps": k, "path": ("frictional" if system.friction_dim else "projection")
         + ("+compiled" if run.compiled else ""),
-        "h": h, "theta": theta, "friction_dim": system.friction_dim,
+        "h": run.h, "theta": run.theta, "friction_dim": system.friction_dim,
         "contact_sweeps": run.sweeps, "contact_python_steps": run.python_steps,
-        "max_contact_residual": run.max_residual, "projection": bool(projection),
+        "max_contact_residual": run.max_residual, "projection": bool(run.projection),
         "projections": run.proj["count"], "projection_energy": run.proj["energy"],
         "projection_lift_energy": run.proj["lift_energy"],
         "max_penetration_before_projection": run.proj["before"]},
@@ -167,10 +181,10 @@ class _Run:
     """The state carried between steps (previous impulses, cumulative work) and the two
     step implementations."""
 
-    def __init__(self, system: Any, h: float, theta: float, gamma: float, activation: float,
-                 tol: float, projection: bool, u: Any) -> None:
-        self.system, self.h, self.theta, self.gamma = system, h, theta, gamma
-        self.activation, self.tol, self.projection = float(activation), tol, projection
+    def __init__(self, system: Any, opts: MoreauJeanOptions) -> None:
+        h, theta, u, projection = opts.h, opts.theta, opts.u, opts.projection
+        self.system, self.h, self.theta, self.gamma = system, h, theta, opts.gamma
+        self.activation, self.tol, self.projection = opts.activation, opts.contact_tol, projection
         self.c = _Contacts(system, h, theta)
         self.steps: dict[float, _Contacts] = {h: self.c}
         m, n = system.n_contacts, system.n_dof
