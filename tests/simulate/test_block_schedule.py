@@ -67,10 +67,10 @@ def plant():
                       C=np.array([[1.0]]))
 
 
-def check_schedule(n_ticks, p, q, compiled, t0=0.0):
-    period = p * H / q
+def check_schedule(n_ticks, p, q, compiled, t0=0.0, h=H):
+    period = p * h / q
     loop = nsc.closed_loop(plant(), Counter(period, compiled), compiled=compiled)
-    traj = nsc.simulate(loop, [0.5], (t0, t0 + n_ticks * H), method="implicit_euler", h=H,
+    traj = nsc.simulate(loop, [0.5], (t0, t0 + n_ticks * h), method="implicit_euler", h=h,
                         progress=False)
     assert traj.stats["controller"] == ("compiled" if compiled else "python")
     t, xc = traj.t, traj.signal("xc")
@@ -88,7 +88,7 @@ def check_schedule(n_ticks, p, q, compiled, t0=0.0):
     # and those are the instants to the step times' rounding (a few ulps of t)
     exact = t0 + np.arange(n_instants) * period
     assert np.all(t[j] >= exact - 8 * U * np.maximum(abs(t0), np.abs(exact)))
-    assert np.all(t[j] - exact < H)
+    assert np.all(t[j] - exact < h)
 
 
 CASES = [(1, 1), (5, 1), (5, 2), (7, 3)]       # T = h, 5h, 2.5h, 7h/3
@@ -101,8 +101,19 @@ def test_compiled_loop_one_sample_per_instant_over_a_million_ticks(p, q):
 
 
 @pytest.mark.parametrize("p,q", CASES, ids=IDS)
-def test_python_runner_one_sample_per_instant_past_tick_21441(p, q):
-    check_schedule(50_000, p, q, False)
+def test_python_runner_one_sample_per_instant_over_1e5_ticks(p, q):
+    check_schedule(100_000, p, q, False)           # ~3-5 s each
+
+
+# step sizes whose multiples round differently: 1/3 ms and 12.5 ms are not binary fractions
+STEPS = [1e-3 / 3, 0.0125]
+
+
+@pytest.mark.parametrize("h", STEPS, ids=[f"h={h:.4g}" for h in STEPS])
+@pytest.mark.parametrize("p,q", [(5, 2), (7, 3)], ids=["T=5h/2", "T=7h/3"])
+def test_other_step_sizes_one_sample_per_instant(p, q, h):
+    check_schedule(1_000_000, p, q, True, h=h)
+    check_schedule(100_000, p, q, False, h=h)
 
 
 def test_late_start_counts_from_the_first_instant():
