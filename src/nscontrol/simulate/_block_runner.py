@@ -117,7 +117,7 @@ class BlockRunner:
         output and update at the same instant)."""
         cached = self._cached
         if cached[0] is y and cached[1] is xhat and cached[2] == t:
-            return cached[3]  # type: ignore[no-any-return]
+            return cached[3]
         given, active, w = self.before if y is self.prev[0] else self.now
         m = Measurement(t, y, x, xhat.copy() if xhat.size else None, lam if given else None,
                         active, w)
