@@ -149,9 +149,8 @@ class BlockRunner:
                             self.sched)
         if status:
             raise block_error(status, t, self.sizes(), value=self.last)
-        u = self.u.copy()
-        self.log.append((t, self.xo.copy(), self.xc.copy(), u))
-        return u
+        self.log.append((t, self.xo.copy(), self.xc.copy(), self.u.copy()))
+        return self.u.copy()           # the integrator's own: the held buffer moves on
 
     def on_jump(self, t: float, x_minus: FloatArray, x_plus: FloatArray, indices: Any,
                 impulse: Any) -> None:
