@@ -144,6 +144,9 @@ class BlockRunner:
             self.prev = (*self.prev[:3], np.zeros(lam.size))
         self.before, self.now = self.now, (lam_hat is not None, active, w)
         (has_o, o_fns, o_per), (has_c, c_fns, c_per) = self.blocks
+        # the stepper moves the states in place: on copies, so that a state read before
+        # the step (a caller's, a block's own argument) keeps its value
+        self.xo, self.xc = self.xo.copy(), self.xc.copy()
         status = self._step(t, x, self.Cy @ x, lam, has_o, o_fns, None, o_per, self.xo,
                             self.xhat, has_c, c_fns, None, c_per, self.xc, self.u, *self.prev,
                             self.sched)
@@ -157,10 +160,16 @@ class BlockRunner:
         self.jump = Jump(t, np.asarray(x_minus), np.asarray(x_plus), np.asarray(indices),
                          impulse)
         (has_o, o_fns, _), (has_c, c_fns, _) = self.blocks
+        self.xo, self.xc = self.xo.copy(), self.xc.copy()      # as in step_state
         status = self._reset(t, x_minus, x_plus, impulse, has_o, o_fns[2:], None, self.xo,
                              has_c, c_fns[2:], None, self.xc)
         if status:
             raise block_error(status, t, self.sizes(), "reset", self.last)
+
+    @property
+    def held(self) -> dict[str, FloatArray]:
+        """The outputs held since the blocks' last samples (``<role>_out``)."""
+        return {"observer_out": self.xhat, "controller_out": self.u}
 
     def sizes(self) -> tuple[int, int, int, int]:
         """The observer's state and estimate, the controller's state and ``u``: lengths."""
@@ -207,10 +216,20 @@ class CompiledBlocks:
 
         def parts(form: Any, period: float) -> tuple[Any, ...]:
             if form is None:
-                return (False, (empty_output, static_update), (keep_state,), _EMPTY, -1.0)
-            return (True, (form.output, form.update), (form.reset,), form.params, period)
+                return (False, empty_output, static_update, keep_state, _EMPTY, -1.0)
+            return (True, form.output, form.update, form.reset, form.params, period)
         (_, _, o_period), (_, _, c_period) = runner.blocks
-        self.obs_parts, self.ctrl_parts = parts(obs, o_period), parts(ctrl, c_period)
+        self._obs, self._ctrl = parts(obs, o_period), parts(ctrl, c_period)
+
+    @property
+    def obs_parts(self) -> tuple[Any, ...]:
+        """``has, output, update, reset, params, period, xo, xhat`` of the observer."""
+        return (*self._obs, self.runner.xo, self.runner.xhat)
+
+    @property
+    def ctrl_parts(self) -> tuple[Any, ...]:
+        """``has, output, update, reset, params, period, xc, u`` of the controller."""
+        return (*self._ctrl, self.runner.xc, self.runner.u)
 
     @classmethod
     def of(cls, runner: BlockRunner) -> CompiledBlocks | None:
@@ -231,14 +250,14 @@ class CompiledBlocks:
         prev_x, prev_xhat, prev_lam, sched`` for
         :func:`~nscontrol.simulate._block_kernels.step_blocks`."""
         r, o, c = self.runner, self.obs_parts, self.ctrl_parts
-        return (o[0], o[1], o[3], o[4], r.xo, r.xhat, c[0], c[1], c[3], c[4], r.xc, r.u,
-                *r.prev, r.sched)
+        return (o[0], (o[1], o[2]), o[4], o[5], o[6], o[7], c[0], (c[1], c[2]), c[4], c[5],
+                c[6], c[7], *r.prev, r.sched)
 
     def resets(self) -> tuple[Any, ...]:
         """``has_obs, obs_reset, obs_params, xo, has_ctrl, ctrl_reset, ctrl_params, xc`` for
         :func:`~nscontrol.simulate._block_kernels.reset_blocks`."""
-        r, o, c = self.runner, self.obs_parts, self.ctrl_parts
-        return (o[0], o[2], o[3], r.xo, c[0], c[2], c[3], r.xc)
+        o, c = self.obs_parts, self.ctrl_parts
+        return (o[0], (o[3],), o[4], o[6], c[0], (c[3],), c[4], c[6])
 
     def log_arrays(self, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Empty logs for ``k`` steps: the blocks' states and ``u`` at each step start."""
