@@ -70,10 +70,10 @@ class BlockRunner:
         """The stepper's arguments for the Python blocks: their methods adapted to the
         compiled forms' signature, the held outputs, the last step's measurement, the
         sampling schedule (see :mod:`._block_kernels`)."""
-        from . import _block_kernels as bk  # numba loads with the first closed loop
+        from ._block_kernels import SCHED_SIZE, python_form  # numba: with the first loop
 
-        self._step, self._reset = bk.python_form("step_blocks"), bk.python_form("reset_blocks")
-        self.sched = np.full(bk.SCHED_SIZE, np.nan)
+        self._step, self._reset = python_form("step_blocks"), python_form("reset_blocks")
+        self.sched = np.full(SCHED_SIZE, np.nan)
         self.xhat = np.zeros(0 if self.obs is None else _n_outputs(self.obs))
         self.u = np.zeros(self.n_inputs)    # an observer alone leaves the plant unforced
         self.prev = (np.zeros(self.Cy.shape[0]), np.zeros(self.n), np.zeros(self.xhat.size),
@@ -284,21 +284,27 @@ def block_error(status: int, t: float, sizes: tuple[int, int, int, int],
     blocks. ``sizes``: the observer's state and estimate, the controller's state and
     ``u``; ``what``: the method that returned the state; ``value``: what the block returned
     last, when known (a Python block's)."""
-    from . import _block_kernels as bk
+    from ._block_kernels import (
+        STATUS_CONTROLLER_OUTPUT_SIZE,
+        STATUS_CONTROLLER_SIZE,
+        STATUS_OBSERVER_NONFINITE,
+        STATUS_OBSERVER_OUTPUT_SIZE,
+        STATUS_OBSERVER_SIZE,
+    )
 
     n_xo, n_xhat, n_xc, n_u = sizes
-    role = "observer" if status in (bk.STATUS_OBSERVER_SIZE, bk.STATUS_OBSERVER_NONFINITE,
-                                    bk.STATUS_OBSERVER_OUTPUT_SIZE) else "controller"
+    role = "observer" if status in (STATUS_OBSERVER_SIZE, STATUS_OBSERVER_NONFINITE,
+                                    STATUS_OBSERVER_OUTPUT_SIZE) else "controller"
     got = "" if value is None else f": it returned {np.size(value)} values"
-    if status in (bk.STATUS_OBSERVER_SIZE, bk.STATUS_CONTROLLER_SIZE):
+    if status in (STATUS_OBSERVER_SIZE, STATUS_CONTROLLER_SIZE):
         n = n_xo if role == "observer" else n_xc
         has = "" if value is None else f", its state has {n}"
         return DimensionError(f"{role}: {what} returned a state of the wrong length (at "
                               f"t = {t:.6g}){got}{has}")
-    if status == bk.STATUS_CONTROLLER_OUTPUT_SIZE:
+    if status == STATUS_CONTROLLER_OUTPUT_SIZE:
         return ModelError(f"controller: expected a finite input of length {n_u} at "
                           f"t = {t:.6g}{'' if value is None else f', got {value!r}'}")
-    if status == bk.STATUS_OBSERVER_OUTPUT_SIZE:
+    if status == STATUS_OBSERVER_OUTPUT_SIZE:
         return DimensionError(f"observer: output returned an estimate of the wrong length, "
                               f"expected {n_xhat} (at t = {t:.6g}){got}")
     shown = value is not None and not np.all(np.isfinite(value))
