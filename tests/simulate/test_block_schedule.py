@@ -4,9 +4,12 @@ or after it, however long the run, on the compiled loops and on the Python block
 
 The expected samples are computed in exact integer arithmetic: with ``T = (p / q) h`` the
 n-th instant's step is ``ceil(n p / q)``, and the sample is taken at that step's start, the
-integrator's own ``t0 + j h`` (compared bit for bit: it is the step time the block saw).
-The old scheduler (``due += T``, slack ``1e-9 T``) drifts by one rounding per tick and
-skipped the sample at tick 21,441 of a 1e-4 s loop, so every case runs past that tick.
+integrator's own ``t0 + j h`` (compared bit for bit: it is the step time the block saw;
+Moreau–Jean records its step ends as ``(t0 + (j - 1) h) + h``, two roundings away). The old
+scheduler (``due += T``, slack ``1e-9 T``) drifts by one rounding per tick and skipped the
+sample at tick 21,441 of a 1e-4 s loop, so the implicit Euler cases run past that tick:
+10⁶ ticks compiled and 10⁵ ticks in Python (10⁶ in the ``slow`` suite), for four periods
+and three step sizes (1e-4, 1/3 ms and 12.5 ms: their multiples round differently).
 
 Chapter 7's loop is compared with a loop written here in plain numpy: implicit Euler of
 ``J w' = u - F(w)`` with the Stribeck law's graph solved directly, the PD law with
@@ -67,12 +70,25 @@ def plant():
                       C=np.array([[1.0]]))
 
 
-def check_schedule(n_ticks, p, q, compiled, t0=0.0):
-    period = p * H / q
-    loop = nsc.closed_loop(plant(), Counter(period, compiled), compiled=compiled)
-    traj = nsc.simulate(loop, [0.5], (t0, t0 + n_ticks * H), method="implicit_euler", h=H,
+def free_mass():
+    """A unit mass with no force (its gap far away): Moreau–Jean's loops, compiled (a linear
+    plant under compiled blocks) and Python."""
+    from nscontrol.systems.lagrangian import LagrangianSystem
+
+    return LagrangianSystem([[1.0]], gap_matrix=[[1.0]], gap_offset=[100.0],
+                            actuation=[[1.0]])
+
+
+def check_schedule(n_ticks, p, q, compiled, t0=0.0, h=H, method="implicit_euler"):
+    period = p * h / q
+    system, x0 = (plant(), [0.5]) if method == "implicit_euler" else (free_mass(), [0.0, 0.0])
+    loop = nsc.closed_loop(system, Counter(period, compiled), compiled=compiled)
+    traj = nsc.simulate(loop, x0, (t0, t0 + n_ticks * h), method=method, h=h,
                         progress=False)
-    assert traj.stats["controller"] == ("compiled" if compiled else "python")
+    if method == "implicit_euler":
+        assert traj.stats["controller"] == ("compiled" if compiled else "python")
+    else:
+        assert (traj.stats["path"] == "compiled_model") == compiled
     t, xc = traj.t, traj.signal("xc")
     assert t.size == n_ticks + 1
     # the instants t0 + n T, n = 0..: their steps j_n = ceil(n p / q) before the last tick
@@ -84,11 +100,14 @@ def check_schedule(n_ticks, p, q, compiled, t0=0.0):
     assert int(count[-1]) == n_instants, "a sample was skipped or doubled"
     taken = np.flatnonzero(np.diff(np.concatenate([[0.0], count])))
     np.testing.assert_array_equal(taken, j)
-    np.testing.assert_array_equal(last[taken], t[j])
+    if method == "implicit_euler":
+        np.testing.assert_array_equal(last[taken], t[j])
+    else:      # its step starts t0 + k h and recorded ends (t0 + (k - 1) h) + h: 2 roundings
+        np.testing.assert_allclose(last[taken], t[j], rtol=4 * U, atol=0)
     # and those are the instants to the step times' rounding (a few ulps of t)
     exact = t0 + np.arange(n_instants) * period
     assert np.all(t[j] >= exact - 8 * U * np.maximum(abs(t0), np.abs(exact)))
-    assert np.all(t[j] - exact < H)
+    assert np.all(t[j] - exact < h)
 
 
 CASES = [(1, 1), (5, 1), (5, 2), (7, 3)]       # T = h, 5h, 2.5h, 7h/3
@@ -101,8 +120,28 @@ def test_compiled_loop_one_sample_per_instant_over_a_million_ticks(p, q):
 
 
 @pytest.mark.parametrize("p,q", CASES, ids=IDS)
-def test_python_runner_one_sample_per_instant_past_tick_21441(p, q):
-    check_schedule(50_000, p, q, False)
+def test_python_runner_one_sample_per_instant_over_1e5_ticks(p, q):
+    check_schedule(100_000, p, q, False)           # ~3-5 s each
+
+
+# step sizes whose multiples round differently: 1/3 ms and 12.5 ms are not binary fractions
+STEPS = [1e-3 / 3, 0.0125]
+
+
+@pytest.mark.parametrize("h", STEPS, ids=[f"h={h:.4g}" for h in STEPS])
+@pytest.mark.parametrize("p,q", [(5, 2), (7, 3)], ids=["T=5h/2", "T=7h/3"])
+def test_other_step_sizes_one_sample_per_instant(p, q, h):
+    check_schedule(1_000_000, p, q, True, h=h)
+    check_schedule(100_000, p, q, False, h=h)
+
+
+@pytest.mark.parametrize("compiled,n_ticks", [(True, 200_000), (False, 5_000)],
+                         ids=["compiled", "python"])
+def test_moreau_jean_loops_one_sample_per_instant(compiled, n_ticks):
+    """The same stepper inside Moreau–Jean's compiled loop and beside its Python loop (a
+    shorter run: its Python step costs ~10x implicit Euler's; the rule is the one checked
+    over 10⁶ ticks above)."""
+    check_schedule(n_ticks, 5, 2, compiled, method="moreau_jean")
 
 
 def test_late_start_counts_from_the_first_instant():

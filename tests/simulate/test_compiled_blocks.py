@@ -149,3 +149,60 @@ def test_bad_compiled_blocks_are_refused():
         run(loop, x0=(1.0, 0.0), T=0.1)
     with pytest.raises(ModelError, match=r"^compiled: expected True or False"):
         nsc.closed_loop(relay_plant(), StateFeedback([[-1.0, -1.0]]), compiled="yes")
+
+
+@njit(BLOCK_SIGNATURE, cache=True)
+def _state_output(t, xb, y, x, xhat, lam, p):
+    return xb                    # the state itself, which the update then replaces
+
+
+@njit(BLOCK_SIGNATURE, cache=True)
+def _count_up(t, xb, y, x, xhat, lam, p):
+    return xb + 1.0
+
+
+class _SampleCounter(StaticLaw):
+    """Outputs its state (the samples taken so far), then counts one more; u = n at the
+    n-th sample (from 0), held for 10 steps."""
+
+    n_states, n_outputs, period = 1, 1, 1e-2
+
+    def output(self, t, xc, m):
+        return xc
+
+    def update(self, t, xc, m):
+        return xc + 1.0
+
+    def compiled(self):
+        return CompiledBlock(_state_output, _count_up, [])
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_a_held_output_is_the_value_before_the_update_even_if_it_is_the_state(compiled):
+    """The output is held before the state moves on: an output that is the state array
+    itself (no copy) is not changed by the update (the compiled stepper held the updated
+    state). Exact: small integers."""
+    h = 1e-3
+    traj = nsc.simulate(nsc.closed_loop(relay_plant(), _SampleCounter(), compiled=compiled),
+                        [1.0, 0.0], (0.0, 0.1), method="implicit_euler", h=h, progress=False)
+    assert traj.stats["controller"] == ("compiled" if compiled else "python")
+    steps = np.arange(traj.t.size - 1)      # row j + 1: the input held over step j
+    np.testing.assert_array_equal(traj.signal("u")[1:, 0], steps // 10)
+    np.testing.assert_array_equal(traj.signal("xc")[1:, 0], steps // 10 + 1)
+
+
+class _ShortEstimate(StaticLaw):
+    n_outputs, period = 2, None
+
+    def output(self, t, xc, m):
+        return np.zeros(1)
+
+
+def test_a_python_observer_estimate_of_the_wrong_length_is_refused():
+    """The Python blocks are checked by the compiled stepper's rules (its code, run as
+    Python): an estimate shorter than the observer's n_outputs is refused."""
+    loop = nsc.closed_loop(relay_plant(), observer=_ShortEstimate(), compiled=False)
+    with pytest.raises(DimensionError, match=r"^observer: output returned an estimate of the "
+                                             r"wrong length, expected 2 \(at t = 0\): it "
+                                             r"returned 1 values"):
+        run(loop, x0=(1.0, 0.0), T=0.01)

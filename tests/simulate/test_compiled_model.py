@@ -279,3 +279,29 @@ def test_the_python_path_and_the_compiled_loop_take_the_same_step():
     assert {e.index for e in runs[1].events_of("impact")} == {0, 1}   # both contacts act
     np.testing.assert_array_equal(runs[0].x, runs[1].x)
     np.testing.assert_array_equal(runs[0].signal("impulse"), runs[1].signal("impulse"))
+
+
+@njit(RESET_SIGNATURE, cache=True)
+def _nan_reset(t, xb, x_minus, x_plus, impulse, p):
+    return np.full(xb.size, np.nan)
+
+
+class NaNReset(ImpactCounter):
+    """A block whose reset leaves a non-finite state (Python and compiled alike)."""
+
+    def reset(self, t, xc, jump):
+        return np.full(2, np.nan)
+
+    def compiled(self):
+        return CompiledBlock(_count_output, _count_update, [], _nan_reset)
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_a_reset_to_a_non_finite_state_is_refused_on_both_paths(compiled):
+    """The one block stepper checks a reset's state as it checks an update's (the compiled
+    loop used to keep the NaN state silently). First impact: sqrt(2 / 9.81) = 0.4515 s."""
+    with pytest.raises(ModelError, match=r"^controller: returned a non-finite value at "
+                                         r"t = 0\.45") as info:
+        nsc.simulate(nsc.closed_loop(ball(), NaNReset(), compiled=compiled), [1.0, 0.0],
+                     (0.0, 3.0), method="moreau_jean", h=1e-3, progress=False)
+    assert info.value.trajectory is not None and 0.44 < info.value.trajectory.t[-1] < 0.46

@@ -1,8 +1,10 @@
-"""Compiled stepping of a loop's controller and observer (their compiled forms,
-:class:`~nscontrol.systems.feedback.CompiledBlock`), called at the start of every plant step
-by the integrators' compiled loops.
+"""The one stepping of a loop's controller and observer, at the start of every plant step:
+compiled inside the integrators' compiled loops (the blocks' compiled forms,
+:class:`~nscontrol.systems.feedback.CompiledBlock`), and run by the interpreter for blocks
+written in Python (:class:`~nscontrol.simulate._block_runner.BlockRunner`, through
+:func:`python_form`).
 
-:func:`step_blocks` does what ``closed_loop``'s Python block runner does, in the same order:
+:func:`step_blocks`, in this order:
 
 * a continuous block (``period <= 0``) first advances its state by explicit Euler over the
   previous step, ``xb += h update(t - h, xb, m_prev)``, then outputs ``output(t, xb, m)``;
@@ -10,19 +12,35 @@ by the integrators' compiled loops.
   step start it sees; the first step start at or after each instant, to the rounding of
   the step times, see :func:`take_sample`) outputs ``output(t, xb, m)``, moves to
   ``update(t, xb, m)``, and holds the output until its next instant;
-* the observer runs first; the controller reads its estimate.
+* the observer runs first; the controller reads its estimate;
+* every value a block returns is checked (its length, finiteness) before it is used.
 
 The instants are counted, never accumulated: ``t_first + k T`` is formed afresh from the
 integer count ``k``, so its error stays a few ulps however long the run (adding ``T`` at
 each tick drifts by one rounding per tick and, with a slack that is a fixed fraction of
 ``T``, skipped a sample after ~2·10⁴ ticks of a 1e-4 s loop). The scheduling state lives in
 ``sched = [t_prev, t_first_observer, k_observer, t_first_controller, k_controller]`` (NaN:
-none yet), so a run cut into chunks takes the same samples. The Python block runner calls
-the same :func:`take_sample`. A non-zero return is a status (``STATUS_*``): the integrator
-raises the error the Python path would raise.
+none yet), so a run cut into chunks takes the same samples. A non-zero return is a status
+(``STATUS_*``): the caller raises the error for it (one message per status,
+:func:`~nscontrol.simulate._block_runner.block_error`).
+
+Why one source run two ways: a Python block cannot be called from compiled code, and a
+compiled block is called ~10⁷ times a run, so the stepping has to exist as compiled code and
+as code the interpreter runs. Rather than a Python twin, :func:`python_form` runs these
+functions' own code (``py_func``) with Python callables of the compiled forms' signature in
+place of the blocks' compiled functions; the kernels on arrays alone (:func:`take_sample`,
+``_finite``) stay compiled in both (called from Python they cost less than interpreted).
+The block runner then only adapts a Python block to that signature (the
+:class:`~nscontrol.systems.feedback.Measurement` it reads, the refusal of non-numeric
+values) and turns a status into its error.
 """
 
 from __future__ import annotations
+
+import functools
+import math
+import types
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -109,13 +127,13 @@ def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
             return bad_out
         if not _finite(out):
             return bad_value
+        held[:] = out                      # before the update: ``out`` may be a view of xb
         new = fns[1](t, xb, y, x, xhat, lam, params)
         if new.size != xb.size:
             return bad_size
         if not _finite(new):
             return bad_value
         xb[:] = new
-        held[:] = out
     return STATUS_OK
 
 
@@ -128,7 +146,7 @@ def step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat
     (``y = C x``, ``lam``: the last step's multipliers, empty if none). Updates ``xo``,
     ``xc`` in place, writes the estimate into ``xhat`` and the input into ``u`` (zeros
     without a controller), keeps this step's measurement in ``prev_*``; returns a status."""
-    h = 0.0 if np.isnan(sched[0]) else t - sched[0]
+    h = 0.0 if math.isnan(sched[0]) else t - sched[0]
     sched[0] = t
     none = xhat[:0]
     if has_obs:
@@ -145,10 +163,11 @@ def step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat
                           STATUS_CONTROLLER_OUTPUT_SIZE)
         if status != STATUS_OK:
             return status
-    prev_y[:] = y
-    prev_x[:] = x
-    prev_xhat[:] = xhat
-    prev_lam[:] = lam
+    if (has_obs and obs_period <= 0.0) or (has_ctrl and ctrl_period <= 0.0):
+        prev_y[:] = y            # what a continuous block's next Euler step reads
+        prev_x[:] = x
+        prev_xhat[:] = xhat
+        prev_lam[:] = lam
     return STATUS_OK
 
 
@@ -160,10 +179,43 @@ def reset_blocks(t, x_minus, x_plus, impulse, has_obs, obs_reset, obs_params, xo
         new = obs_reset[0](t, xo, x_minus, x_plus, impulse, obs_params)
         if new.size != xo.size:
             return STATUS_OBSERVER_SIZE
+        if not _finite(new):
+            return STATUS_OBSERVER_NONFINITE
         xo[:] = new
     if has_ctrl:
         new = ctrl_reset[0](t, xc, x_minus, x_plus, impulse, ctrl_params)
         if new.size != xc.size:
             return STATUS_CONTROLLER_SIZE
+        if not _finite(new):
+            return STATUS_CONTROLLER_NONFINITE
         xc[:] = new
     return STATUS_OK
+
+
+#: The kernels above that call a block's functions: run as Python with Python blocks
+#: (:func:`python_form`). The others take arrays alone and stay compiled.
+_CALL_BLOCKS = ("_advance", "step_blocks", "reset_blocks")
+
+
+@functools.cache
+def python_form(name: str) -> Any:
+    """The kernel ``name``'s own code, run by the interpreter, so that it can call Python
+    functions in place of the blocks' compiled ones: the kernels of ``_CALL_BLOCKS`` it
+    calls run as Python too, those on arrays alone stay compiled.
+
+    Parameters
+    ----------
+    name : str
+        ``"step_blocks"`` or ``"reset_blocks"``.
+
+    Returns
+    -------
+    function
+        The same function, same arguments, interpreted.
+    """
+    scope = dict(globals())
+    for kernel in _CALL_BLOCKS:
+        py = globals()[kernel].py_func
+        scope[kernel] = types.FunctionType(py.__code__, scope, py.__name__, py.__defaults__,
+                                           py.__closure__)
+    return scope[name]

@@ -12,7 +12,7 @@ from ..._validation import FloatArray
 from ...errors import DimensionError, ModelError
 from ...systems.closed_loop import ClosedLoop
 from ...systems.feedback import PiecewiseObserver, PiecewiseStateFeedback, StateFeedback
-from .stack import Maps, input_matrix
+from ._signals import Maps, input_matrix
 
 __all__ = ["stack_pwa"]
 

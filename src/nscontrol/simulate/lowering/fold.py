@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...systems.closed_loop import ClosedLoop
+from ._signals import Maps, add_loop_signals
 from .base import Lowered, Lowering
-from .stack import Maps, add_loop_signals
 
 if TYPE_CHECKING:
     from ..trajectory import Trajectory

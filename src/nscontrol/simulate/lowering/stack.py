@@ -15,25 +15,25 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..._validation import FloatArray, as_matrix
+from ..._validation import FloatArray
 from ...errors import DimensionError, ModelError
 from ...systems.closed_loop import ClosedLoop
 from ...systems.feedback import LinearController, StateFeedback
 from .._block_runner import output_matrix
+from ._signals import Maps, add_loop_signals, input_matrix
 from .base import Lowered, Lowering, merge_options
 
 if TYPE_CHECKING:
     from ..trajectory import Trajectory
 
-__all__ = ["StackLinearBlocks", "stacked_model", "Maps", "add_loop_signals"]
+__all__ = ["StackLinearBlocks", "stacked_model"]
 
 #: The loop's signals as affine maps ``name -> (M, offset)`` of the stacked state.
-Maps = dict[str, tuple[FloatArray, FloatArray]]
 
 #: One stacking per loop (a loop is immutable): loop -> (stacked model, maps).
 _STACKS: weakref.WeakKeyDictionary[ClosedLoop, tuple[Any, Maps]] = \
@@ -103,46 +103,6 @@ def _stack(loop: ClosedLoop) -> tuple[Any, Maps]:
     if isinstance(loop.plant, LureSystem):
         return _stack_lure(loop)
     return _stack_hybrid(loop)
-
-
-def add_loop_signals(traj: Trajectory, maps: Maps, plant: Any) -> Trajectory:
-    """Adds the loop's signals (``u``, ``xhat``, ``error``) computed from the stacked state;
-    a plant input already named ``u`` (an exosystem's) is kept as ``u_exo``.
-
-    Parameters
-    ----------
-    traj : Trajectory
-        The stacked model's trajectory.
-    maps : dict
-        ``name -> (M, offset)``: the signal is ``x @ M.T + offset``.
-    plant
-        The loop's plant (a Lagrangian plant's ``energy`` is its own, not the folded
-        model's).
-
-    Returns
-    -------
-    Trajectory
-    """
-    from ...systems.lagrangian import LagrangianSystem
-
-    signals = dict(traj.signals)
-    if "u" in maps and "u" in signals:
-        signals["u_exo"] = signals.pop("u")
-    for name, (M, offset) in maps.items():
-        if name not in signals:
-            signals[name] = traj.x @ M.T + offset
-    if isinstance(plant, LagrangianSystem) and "energy" in signals:
-        signals["energy"] = plant.energy(traj.x)
-    return replace(traj, signals=signals)
-
-
-def input_matrix(loop: ClosedLoop, default: Any, n: int) -> FloatArray:
-    """The loop's ``input_matrix`` (``u`` enters ``x'`` through it), or the plant's."""
-    B = loop.input_matrix if loop.input_matrix is not None else default
-    if B is None:
-        raise ModelError(f"input_matrix: the plant does not say how u enters x'; pass "
-                         f"closed_loop(..., input_matrix=B) with B of shape ({n}, m)")
-    return as_matrix("input_matrix", B, rows=n)
 
 
 @dataclass(frozen=True)
