@@ -161,3 +161,30 @@ def test_docstrings_of_views():
     assert rec.last_time == -np.inf
     rec.sample(0.5, [0.0, 1.0])
     assert rec.last_time == 0.5 and rec.finish().n_states == 2
+
+
+def test_an_interrupt_while_the_buffers_grow_leaves_the_recorder_whole(monkeypatch):
+    """A KeyboardInterrupt that lands while the recorder copies its buffers (between the
+    time and the state buffers) must leave them as they were: the partial trajectory is
+    then recorded from consistent buffers (it used to fail with a broadcast error)."""
+    from nscontrol.simulate import trajectory as tr
+
+    rec = tr.Recorder(2, signals=["u"], offered=("u",), capacity=4)
+    rec.extend(np.arange(4.0), np.ones((4, 2)), u=np.zeros((4, 1)))
+    calls, resize = [], np.resize
+
+    def interrupted(a, shape):
+        calls.append(shape)
+        if len(calls) == 2:        # the time buffer is copied, the state buffer is not
+            raise KeyboardInterrupt
+        return resize(a, shape)
+
+    monkeypatch.setattr(tr.np, "resize", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        rec.extend(np.arange(4.0, 8.0), np.ones((4, 2)), u=np.zeros((4, 1)))
+    monkeypatch.setattr(tr.np, "resize", resize)
+    rec.extend(np.arange(4.0, 8.0), 2 * np.ones((4, 2)), u=np.ones((4, 1)))
+    traj = rec.finish()
+    np.testing.assert_array_equal(traj.t, np.arange(8.0))
+    np.testing.assert_array_equal(traj.x[4:], 2 * np.ones((4, 2)))
+    np.testing.assert_array_equal(traj.signal("u")[:, 0], [0, 0, 0, 0, 1, 1, 1, 1])

@@ -713,11 +713,14 @@ class Recorder:
         return self.keep is None or name in self.keep
 
     def _grow(self) -> None:
+        # the new buffers are built aside and swapped in by plain attribute stores (no call
+        # between them, so no KeyboardInterrupt either): an interrupt while copying leaves
+        # the old buffers whole, and the partial trajectory recorded after it consistent
         cap = 2 * self._t.shape[0]
-        self._t = np.resize(self._t, cap)
-        self._x = np.resize(self._x, (cap, self.n_states))
-        for k, v in self._sig.items():
-            self._sig[k] = np.resize(v, (cap,) + v.shape[1:])
+        t = np.resize(self._t, cap)
+        x = np.resize(self._x, (cap, self.n_states))
+        sig = {k: np.resize(v, (cap,) + v.shape[1:]) for k, v in self._sig.items()}
+        self._t, self._x, self._sig = t, x, sig
 
     def sample(self, t: float, x: np.ndarray, force: bool = False,
                **signals: Any) -> None:
