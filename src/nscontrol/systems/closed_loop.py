@@ -24,12 +24,14 @@ LureSystem or PiecewiseAffineSystem        :class:`PiecewiseAffineSystem`
 static state feedback on a linear          ``"folded"``: the plant's own model with the
 LagrangianSystem                           feedback folded into its linear forces (exact
                                            event-driven flow, compiled Moreau–Jean)
-any :class:`Controller` / :class:`Observer`  ``"blocks"``: Moreau–Jean on the plant, the
-(Python, sampled or continuous, with       blocks stepped at the start of every step
-state) around a LagrangianSystem or        (zero-order hold), fed the contact multipliers
-ImpactingBodies                            ``λ̂`` and reset at impacts
+any :class:`Controller` or                 ``"blocks"``: Moreau–Jean on the plant, the
+:class:`Observer` (Python, sampled or      blocks stepped at the start of every step
+continuous, with state) around a           (zero-order hold), fed the contact multipliers
+LagrangianSystem or ImpactingBodies        ``λ̂`` and reset at impacts
 the same around a LureSystem               ``"blocks"``: implicit Euler on the plant (its
                                            set-valued law solved every step)
+a sampled controller around a              ``"blocks"``: the method ``sampled_zoh`` runs
+SlidingModePlant                           the loop itself (exact zero-order hold)
 =========================================  ===============================================
 
 Any other combination is refused with a :class:`~nscontrol.errors.ModelError` that says what
