@@ -135,7 +135,7 @@ at most ``h |u⁻|``; with ``θ = ½`` the discrete energy does not increase at 
 References
 ----------
 Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, Springer 2008,
-ch. 10; specs ch03 §3.1 and ch04 §3.
+ch. 10.
 
 Examples
 --------
