@@ -12,6 +12,7 @@ step with the user's callables evaluated here; the compiled-model loop runs the 
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -107,16 +108,44 @@ class Runner:
 def choose_runner(system: Any, opts: MoreauJeanOptions, S: FloatArray | None) -> Runner:
     """The fastest correct step loop for this system (see the module docstring of
     :mod:`nscontrol.simulate.moreau_jean`)."""
-    if system.is_linear and opts.forces == "implicit":
+    path = kept(system, ("path", opts.forces), lambda: _path(system, opts.forces))
+    if path == "tridiagonal":
+        return PairwiseRunner(system, opts, S, system.pairwise_contacts())
+    return DenseRunner(system, opts, S) if path == "dense" else PythonRunner(system, opts, S)
+
+
+def _path(system: Any, forces: str) -> str:
+    """The path of :func:`choose_runner` (the system's structure alone decides it)."""
+    if system.is_linear and forces == "implicit":
         K = system.stiffness
         D = system.damping
         diag = system.mass_diagonal
         offdiag = [X for X in (K, D) if X is not None and np.count_nonzero(X - np.diag(np.diag(X)))]
         pairs = system.pairwise_contacts()
         if diag is not None and not offdiag and pairs is not None and _neighbour_only(pairs):
-            return PairwiseRunner(system, opts, S, pairs)
-        return DenseRunner(system, opts, S)
-    return PythonRunner(system, opts, S)
+            return "tridiagonal"
+        return "dense"
+    return "python"
+
+
+#: Per system, what the runners compute from it and the step alone (the path, the step
+#: matrices): a system is frozen, its matrices do not change; the kernels only read them.
+_SETUPS: weakref.WeakKeyDictionary[Any, dict[tuple, Any]] = weakref.WeakKeyDictionary()
+
+
+def kept(system: Any, key: tuple, build: Callable[[], Any]) -> Any:
+    """``build()``, computed once per ``system`` and ``key`` (a study of many steps keeps
+    the latest few of each system)."""
+    per_system = _SETUPS.get(system)
+    if per_system is None:
+        per_system = _SETUPS[system] = {}
+    value = per_system.pop(key, None)
+    if value is None:
+        if len(per_system) >= 8:
+            per_system.pop(next(iter(per_system)))
+        value = build()
+    per_system[key] = value   # the latest used last: evicted last
+    return value
 
 
 def _neighbour_only(pairs: tuple[np.ndarray, ...]) -> bool:
@@ -144,12 +173,18 @@ class PairwiseRunner(Runner):
     def __init__(self, system: Any, opts: MoreauJeanOptions, S: FloatArray | None,
                  pairs: tuple[np.ndarray, ...]) -> None:
         super().__init__(system, opts, S)
-        h, th = opts.h, opts.theta
+        self.kdiag, self.ddiag, self.minv, self.pairs = kept(
+            system, ("tridiagonal", opts.h, opts.theta),
+            lambda: self._matrices(system, opts.h, opts.theta, pairs))
+
+    @staticmethod
+    def _matrices(system: Any, h: float, th: float, pairs: tuple[np.ndarray, ...]
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, tuple[np.ndarray, ...]]:
         n = system.n_dof
-        self.kdiag = np.zeros(n) if system.stiffness is None else np.diag(system.stiffness).copy()
-        self.ddiag = np.zeros(n) if system.damping is None else np.diag(system.damping).copy()
-        self.minv = 1.0 / (system.mass_diagonal + h * th * self.ddiag + (h * th) ** 2 * self.kdiag)
-        self.pairs = tuple(np.ascontiguousarray(p) for p in pairs)
+        kdiag = np.zeros(n) if system.stiffness is None else np.diag(system.stiffness).copy()
+        ddiag = np.zeros(n) if system.damping is None else np.diag(system.damping).copy()
+        minv = 1.0 / (system.mass_diagonal + h * th * ddiag + (h * th) ** 2 * kdiag)
+        return kdiag, ddiag, minv, tuple(np.ascontiguousarray(p) for p in pairs)
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The kernel's active set at ``(q, v)`` (by the kernel's own function)."""
@@ -180,15 +215,19 @@ class DenseRunner(Runner):
 
     def __init__(self, system: Any, opts: MoreauJeanOptions, S: FloatArray | None) -> None:
         super().__init__(system, opts, S)
+        self.K, self.D, self.minv, self.G, self.minv_gt, self.W = kept(
+            system, ("dense", opts.h, opts.theta),
+            lambda: self._matrices(system, opts.h, opts.theta))
+
+    @staticmethod
+    def _matrices(system: Any, h: float, th: float) -> tuple[FloatArray, ...]:
         n = system.n_dof
-        h, th = opts.h, opts.theta
-        self.K = np.zeros((n, n)) if system.stiffness is None else system.stiffness
-        self.D = np.zeros((n, n)) if system.damping is None else system.damping
-        Mhat = system.mass_matrix() + h * th * self.D + (h * th) ** 2 * self.K
-        self.minv = np.linalg.inv(Mhat)
-        self.G = np.ascontiguousarray(system.dense_gap_matrix())
-        self.minv_gt = np.ascontiguousarray(self.minv @ self.G.T)
-        self.W = np.ascontiguousarray(self.G @ self.minv_gt)
+        K = np.zeros((n, n)) if system.stiffness is None else system.stiffness
+        D = np.zeros((n, n)) if system.damping is None else system.damping
+        minv = np.linalg.inv(system.mass_matrix() + h * th * D + (h * th) ** 2 * K)
+        G = np.ascontiguousarray(system.dense_gap_matrix())
+        minv_gt = np.ascontiguousarray(minv @ G.T)
+        return K, D, minv, G, minv_gt, np.ascontiguousarray(G @ minv_gt)
 
     def for_step(self, h: float) -> Runner:
         return DenseRunner(self.system, self.opts.with_step(h), self.S)

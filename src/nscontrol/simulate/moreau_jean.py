@@ -166,8 +166,9 @@ A controller reading the contact force: a unit mass on a spring ``k = 4`` pushed
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from typing import TYPE_CHECKING, Any, NoReturn
 
@@ -273,17 +274,19 @@ class _Grid:
     tf: float
     h: float
 
-    @property
-    def n_full(self) -> int:
-        return int(np.floor((self.tf - self.t0) / self.h + 1e-9))
+    def __post_init__(self) -> None:   # read at every chunk: computed once
+        n_full = math.floor((self.tf - self.t0) / self.h + 1e-9)
+        h_last = (self.tf - self.t0) - n_full * self.h
+        object.__setattr__(self, "n_full", n_full)
+        object.__setattr__(self, "h_last", h_last)
+        object.__setattr__(self, "n_steps", n_full + (1 if h_last > 1e-9 * self.h else 0))
 
-    @property
-    def h_last(self) -> float:
-        return (self.tf - self.t0) - self.n_full * self.h
-
-    @property
-    def n_steps(self) -> int:
-        return self.n_full + (1 if self.h_last > 1e-9 * self.h else 0)
+    #: whole steps of ``h``
+    n_full: int = field(init=False)
+    #: the shortened last step's length
+    h_last: float = field(init=False)
+    #: steps in all
+    n_steps: int = field(init=False)
 
 
 class _Run:
@@ -512,7 +515,7 @@ def _signals(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
 def _sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> None:
     n = system.n_dof
     sig = _signals(system, x0[None, :n], x0[None, n:], np.zeros((1, system.n_contacts)), rec)
-    rec.extend(np.array([t0]), x0[None, :], **sig)
+    rec.sample(t0, x0, **{key: val[0] for key, val in sig.items()})   # the first: kept
 
 
 def _record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
@@ -533,8 +536,12 @@ def _record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
     the chunk's signals when the caller computed them (the compiled path)."""
     rec.extend(times, (q, v), **(_signals(system, q, v, p, rec) if signals is None
                                  else signals))
+    positive = p > 0.0
+    if not positive.any():   # no impulse, no impact (most chunks of a flight)
+        state.p_prev = p[-1].copy()
+        return
     prev = np.vstack([state.p_prev[None, :], p[:-1]])
-    rising = (p > 0.0) & (prev == 0.0)
+    rising = positive & (prev == 0.0)
     steps = np.flatnonzero(rising.any(axis=1))
     for k in steps:
         qb = q_pre if k == 0 else q[k - 1]
