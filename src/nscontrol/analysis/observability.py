@@ -334,8 +334,8 @@ def impact_decay_rate(trajectory: Any, error_matrix: Any, *, floor: float = 0.0,
 
     References
     ----------
-    Chapter 2 of SICONOS D5.3, Theorems 3 and 4; spec ch02 §7 ("fit of log ||x~|| over impact
-    cycles").
+    Chapter 2 of SICONOS D5.3, Theorems 3 and 4 (the rate is read from a fit of
+    ``log ||x~||`` over impact cycles, docs/ch02.md).
 
     Examples
     --------

@@ -148,7 +148,7 @@ def theorem1_test(A_a: ArrayLike, B_a: ArrayLike, C_a: ArrayLike, C_contact: Arr
 
     Examples
     --------
-    The worked example of spec ch02 §6 (force on mass 1, springs ``k11 = 4``, ``k12 = 6``):
+    The worked example of chapter 2 (force on mass 1, springs ``k11 = 4``, ``k12 = 6``):
 
     >>> import numpy as np
     >>> A = np.array([[0.0, 0, 1, 0], [0, 0, 0, 1], [-10, 6, 0, 0], [6, -6, 0, 0]])

@@ -7,13 +7,14 @@ and (extended variant) ``K`` inside the set-valued map::
     xhat' = (A - L C) xhat + G what + B u + L y
     zhat  = (H - K C) xhat + K y + D what + g(t),      what ∈ -φ(zhat)
 
-The basic variant is ``K = 0``. The gains come from the LMIs of spec §2.3 in ``(P, Y = P L,
-K)``; the equality ``Gᵀ P = H - K C`` is enforced exactly by parametrising its affine solution
-set (so the returned certificate satisfies it to round-off, whatever the SDP solver's accuracy).
+The basic variant is ``K = 0``. The gains come from the LMIs of docs/ch08.md (in
+``(P, Y = P L, K)``); the equality ``Gᵀ P = H - K C`` is enforced exactly by parametrising its
+affine solution set (so the returned certificate satisfies it to round-off, whatever the SDP
+solver's accuracy).
 The closed loop "plant + observer" is one :class:`~nscontrol.systems.lure.LureSystem` with the
 stacked state ``[x; xhat]`` and a product law, so implicit Euler steps both on the same step and
 resolves the observer's inclusion exactly; then ``V_k = e_kᵀ P e_k`` obeys
-``V_{k+1} <= V_k / (1 + 2 α h)`` (spec §3.2).
+``V_{k+1} <= V_k / (1 + 2 α h)`` (the implicit-Euler form of the theorem).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 Variant = Literal["basic", "extended"]
 
-#: Relative tolerance of the exact-equality post-check (spec §2.3).
+#: Relative tolerance of the exact-equality post-check (``GᵀP = H - KC``).
 EQUALITY_RTOL = 1e-7
 #: Largest decay rate the bisection tries before declaring the rate unbounded.
 ALPHA_CAP = 1e4
@@ -239,7 +240,8 @@ def structural_infeasibility(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayL
 
     Notes
     -----
-    Checks, each a necessary condition of (1)–(2) of spec §2.2:
+    Checks, each a necessary condition of the certificate (``(A - LC)ᵀP + P(A - LC) <= -2αP - εI``
+    and ``GᵀP = H - KC``):
 
     * ``Gᵀ P + K C = H`` has a solution with ``P`` symmetric (``K = 0`` for the basic variant);
     * ``(A, C)`` is detectable (PBH test), else ``A - L C`` is never Hurwitz;
@@ -354,11 +356,12 @@ class LureObserverDesign:
         return np.einsum("...i,ij,...j->...", e, self.P, e)
 
     def continuous_bound(self, t: ArrayLike, V0: float) -> FloatArray:
-        """The guaranteed ``V(t) <= exp(-2 α t) V(0)`` of the theorem (spec §2.5)."""
+        """The guaranteed ``V(t) <= exp(-2 α t) V(0)`` (Brogliato & Heemels 2009)."""
         return V0 * np.exp(-2.0 * self.alpha * np.asarray(t, dtype=np.float64))
 
     def discrete_bound(self, k: ArrayLike, h: float, V0: float) -> FloatArray:
-        """The implicit-Euler guarantee ``V_k <= V_0 / (1 + 2 α h)^k`` (spec §3.2)."""
+        """The implicit-Euler guarantee ``V_k <= V_0 / (1 + 2 α h)^k`` (implicit Euler on
+        plant and observer together)."""
         return V0 * (1.0 + 2.0 * self.alpha * h) ** (-np.asarray(k, dtype=np.float64))
 
     def error_bound(self, t: ArrayLike, e0_norm: float) -> FloatArray:
@@ -373,7 +376,7 @@ class LureObserverDesign:
         with itself, ``z_cl = [z; zhat]``, and the output is the estimation error
         ``y_cl = x - xhat``. Implicit Euler on this system steps plant and observer on the same
         grid with the same ``u(t_{k+1})``, ``g(t_{k+1})`` and ``y_{k+1} = C x_{k+1}``, and
-        solves both inclusions exactly (spec §3.1).
+        solves both inclusions exactly.
 
         Parameters
         ----------
@@ -520,7 +523,7 @@ def _is_pd(P: FloatArray) -> bool:
 def recheck_lure_certificate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, P: ArrayLike,
                              L: ArrayLike, K: ArrayLike, alpha: float, *, solver: str = "given",
                              solver_status: str = "given") -> LureObserverCertificate:
-    """Re-check observer gains ``(P, L, K)`` against (1)–(2) of spec §2.2 in NumPy.
+    """Re-check observer gains ``(P, L, K)`` against the certificate, in NumPy.
 
     Useful for certificates from elsewhere (a paper, the Siconos example's ``P = I``). It
     measures, it does not decide: :func:`observer_from_gains` and the synthesis functions
@@ -547,8 +550,8 @@ def recheck_lure_certificate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayL
     -----
     Computed: ``‖Gᵀ P - (H - K C)‖_F``; ``λ_max(sym(A_Lᵀ P + P A_L) + 2 α P)`` with
     ``A_L = A - L C``; ``λ_min(sym P)`` and ``cond P``; ``max Re λ(A_L)``; ``‖P L‖_2``. With the
-    equality, a negative Lyapunov eigenvalue and ``P ≻ 0``, the theorem of spec §2.5 gives
-    ``V(t) <= exp(-2 α t) V(0)`` for every maximal monotone law (hypotheses as in
+    equality, a negative Lyapunov eigenvalue and ``P ≻ 0``, the theorem (Brogliato & Heemels 2009)
+    gives ``V(t) <= exp(-2 α t) V(0)`` for every maximal monotone law (hypotheses as in
     :func:`design_lure_observer`).
 
     References
@@ -666,7 +669,7 @@ def lure_observer_lmi(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
                       kappa: float | None = None, eps: float | None = None,
                       eps_P: float | None = None, solver: str | None = None,
                       precheck: bool = True) -> LureObserverDesign:
-    """Solve the observer LMIs of spec §2.3 at a fixed decay rate ``alpha``.
+    """Solve the observer LMIs (docs/ch08.md) at a fixed decay rate ``alpha``.
 
     Parameters
     ----------
@@ -711,9 +714,9 @@ def lure_observer_lmi(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
     solution plus null-space basis computed by SVD), so it holds to round-off. Every returned
     point is re-checked in NumPy (:func:`recheck_lure_certificate`): equality residual
     ``<= 1e-7 max(1, ||H||_F)``, Lyapunov matrix ``<= -eps/2``, ``P >= eps_P/2``, ``A - L C``
-    Hurwitz. Hypotheses of the theorem (spec §2.5) not checked here: maximal monotonicity of
-    ``φ`` (checked by :func:`design_lure_observer` through the law) and well-posedness of the
-    plant.
+    Hurwitz. Hypotheses of the theorem (Brogliato & Heemels 2009) not checked here:
+    maximal monotonicity of ``φ`` (checked by :func:`design_lure_observer` through the law) and
+    well-posedness of the plant.
 
     References
     ----------
@@ -780,14 +783,14 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
 
     Notes
     -----
-    Feasibility of the LMIs of spec §2.3 is monotone in ``α`` (a certificate at ``α`` is one
+    Feasibility of the observer LMIs is monotone in ``α`` (a certificate at ``α`` is one
     at every smaller rate), so bisection applies. The rate is a CVXPY parameter: the problem
     is compiled once. Bracket: ×4 up from 1 while feasible, or ÷4 down; then
     :func:`nscontrol.numerics.lmi.bisect_max`. An undecided solve counts as infeasible, so
     ``alpha_max`` is always a proven rate. Hypotheses of the theorem behind the rate: those of
     :func:`design_lure_observer` (maximal monotone law, ``D + Dᵀ >= 0``). Known values: the
-    damped Coulomb oscillator's basic observer has ``alpha_max = c/m`` (spec 5.2); relay
-    feedback measuring ``z`` is limited to 2 by the zero at ``-2`` (spec 5.5).
+    damped Coulomb oscillator's basic observer has ``alpha_max = c/m``; relay
+    feedback measuring ``z`` is limited to 2 by the zero at ``-2``.
 
     References
     ----------
@@ -797,7 +800,7 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
 
     Examples
     --------
-    Relay feedback with the multivalued input measured (``C = H``, spec 5.5): the rate is 2.
+    Relay feedback with the multivalued input measured (``C = H``): the rate is 2.
 
     >>> d = max_observer_decay_rate([[0, 1], [-3, -4]], [[0], [1]], [[2, 1]], [[2, 1]],
     ...                             variant="basic", tol=1e-2)
@@ -852,8 +855,8 @@ def observer_from_gains(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, 
 
     Notes
     -----
-    Accepted when (1)–(2) of spec §2.2 hold with rate ``alpha`` and the error provably
-    converges: ``‖Gᵀ P - (H - K C)‖_F <= 1e-7 max(1, ‖H‖_F)``, ``P ≻ 0``,
+    Accepted when the certificate's inequality and equality hold with rate ``alpha`` and the
+    error provably converges: ``‖Gᵀ P - (H - K C)‖_F <= 1e-7 max(1, ‖H‖_F)``, ``P ≻ 0``,
     ``λ_max(sym(A_Lᵀ P + P A_L) + 2 α P) <= 0`` and either ``alpha > 0`` or, with
     ``alpha = 0``, the Lyapunov inequality strict (``λ_max < -1e-12 ‖P‖ ‖A_L‖``, round-off
     excluded); ``A - L C`` must be Hurwitz (implied by the rest; checked as a safeguard).
@@ -866,7 +869,7 @@ def observer_from_gains(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, 
 
     Examples
     --------
-    The public certificate of the Siconos ObserverLCS example (spec 5.1), exact with ``Q = 2I``:
+    The public certificate of the Siconos ObserverLCS example, exact with ``Q = 2I``:
 
     >>> d = observer_from_gains([[1, 1], [3, 1]], [[-1], [1]], [[-1, 1]], [[2, 2]],
     ...                         L=[[1], [1]], P=[[1, 0], [0, 1]], alpha=1.0, D=[[1]])
@@ -947,7 +950,7 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
         ``StateSpace`` with inputs ``[w; u]`` and outputs ``[z; y]`` together with ``law``
         (as ``LureSystem(ss, law)``); a non-monotone law
         (Stribeck friction) through :func:`loop_transformed_lure_system`, which builds the
-        split ``φ = φ_m - σ I`` from the law itself (spec §2.6).
+        split ``φ = φ_m - σ I`` from the law itself (the loop transformation of docs/ch08.md).
     law : SetValuedLaw, optional
         The plant's law, with a ``StateSpace`` plant only.
     variant : {"extended", "basic"}
@@ -978,13 +981,15 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
 
     Notes
     -----
-    Theorem (spec §2.5): if ``φ`` is maximal monotone, ``D + Dᵀ >= 0``, and ``P > 0``, ``L``,
-    ``K`` satisfy ``(A - LC)ᵀP + P(A - LC) <= -2αP - εI`` and ``GᵀP = H - KC``, then for every
-    plant solution, input and observer initial state ``V(t) = eᵀPe <= exp(-2αt) V(0)``; with
-    implicit Euler on plant and observer together ``V_{k+1} <= V_k / (1 + 2αh)``. Checked here:
+    Theorem (Brogliato & Heemels 2009): if ``φ`` is maximal monotone, ``D + Dᵀ >= 0``, and
+    ``P > 0``, ``L``, ``K`` satisfy ``(A - LC)ᵀP + P(A - LC) <= -2αP - εI`` and
+    ``GᵀP = H - KC``, then for every plant solution, input and observer initial state
+    ``V(t) = eᵀPe <= exp(-2αt) V(0)``; with implicit Euler on plant and observer together
+    ``V_{k+1} <= V_k / (1 + 2αh)``. Checked here:
     monotonicity of the law and ``D + Dᵀ >= 0`` (by :class:`LureSystem` at construction), the
     LMIs (re-checked in NumPy). Not checked: existence of plant solutions (the plant may be
-    unstable) and the constraint qualification of spec §2.4 for laws with a bounded domain.
+    unstable) and a constraint qualification (the domain of ``φ`` reached with margin) for laws
+    with a bounded domain.
 
     References
     ----------
@@ -993,7 +998,7 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
 
     Examples
     --------
-    A damped oscillator with Coulomb friction, position measured (spec 5.2): the basic
+    A damped oscillator with Coulomb friction, position measured: the basic
     observer's best rate is ``c/m``.
 
     >>> from nscontrol.laws.set_valued import Relay
@@ -1136,7 +1141,7 @@ def loop_transformed_lure_system(A: ArrayLike, G: ArrayLike, H: ArrayLike, law: 
     by ``σ`` (Stribeck with ``delta >= 1``; ``delta < 1`` has an unbounded slope at 0 and is
     refused). With ``w = w_m + diag(σ) z`` and ``z = H x`` the substitution is exact: the
     transformed system has the same solutions. The extra ``G σ H`` acts as negative damping;
-    observers for it usually need the extended variant (spec 5.7).
+    observers for it usually need the extended variant.
 
     References
     ----------
@@ -1145,7 +1150,7 @@ def loop_transformed_lure_system(A: ArrayLike, G: ArrayLike, H: ArrayLike, law: 
 
     Examples
     --------
-    The two-inertia rotor of spec 5.7, Stribeck friction on the lower disc (``J_l = 0.05``):
+    The two-inertia rotor, Stribeck friction on the lower disc (``J_l = 0.05``):
 
     >>> from nscontrol.laws.set_valued import Stribeck
     >>> law = Stribeck(static=0.3, coulomb=0.1, stribeck_velocity=1.0, delta=2.0,
@@ -1222,7 +1227,7 @@ def lure_from_statespace(ss: Any, law: SetValuedLaw, *, u: InputSignal = None,
 
     Examples
     --------
-    The damped Coulomb oscillator of spec 5.2, inputs ``[w; u]``, outputs ``[z; y] = [q'; q]``:
+    The damped Coulomb oscillator, inputs ``[w; u]``, outputs ``[z; y] = [q'; q]``:
 
     >>> import control
     >>> from nscontrol.laws.set_valued import Relay

@@ -6,7 +6,8 @@ of a stays left of the first mass of b (``q_na <= q_na+1``), with Newton restitu
 
     H_a q_a'' + K_a q_a = E u,   H_b q_b'' + K_b q_b = 0,   y = q_1.
 
-State ``x = [x_a; x_b]``, ``x_a = [q_a; v_a]``, ``x_b = [q_b; v_b]`` (spec ch02 §1).
+State ``x = [x_a; x_b]``, ``x_a = [q_a; v_a]``, ``x_b = [q_b; v_b]`` (the chapter 2 model,
+docs/ch02.md).
 """
 
 from __future__ import annotations
