@@ -10,9 +10,14 @@ own fixed cost: checks, the solver object, the output). Times are CPU seconds of
 does not count. ``ratio`` is the reference time over ours (> 1: our call is cheaper);
 ``ours_us`` is the figure the goal is about.
 
+The sampled-ZOH scenario is a 2-state sliding-mode loop (a double integrator, a
+super-twisting controller compiled, 10 ticks of 1 ms): the fixed cost of a closed loop whose
+compiled blocks the loop's kernel calls.
+
 Accuracy figures say what each call computed: our final state against the closed form of the
 same step (implicit Euler: ``(I - hA)⁻¹ x0`` plus the relay's multiplier; PWA: ``e^{Ah} x0``,
-no crossing in that span; Moreau–Jean: the free flight of the unit mass, no contact).
+no crossing in that span; Moreau–Jean: the free flight of the unit mass, no contact;
+sampled ZOH: the compiled blocks' run against the Python blocks' run, bit for bit).
 """
 
 from __future__ import annotations
@@ -93,9 +98,37 @@ def _moreau_jean() -> tuple[Callable[[], Any], Callable[[Any], float]]:
                              progress=False)), check
 
 
+def _sampled_zoh() -> tuple[Callable[[], Any], Callable[[Any], float]]:
+    from nscontrol import closed_loop
+    from nscontrol.design import SuperTwistingController, super_twisting_gains
+    from nscontrol.numerics.lti import Exosystem
+    from nscontrol.systems import SlidingModePlant
+
+    T = 1e-3
+    k1, k2 = super_twisting_gains(1.5)
+
+    def loop(compiled: bool) -> Any:
+        plant = SlidingModePlant.double_integrator(
+            disturbance=Exosystem.sinusoid(0.3, omega=5.0))
+        return closed_loop(plant, SuperTwistingController(plant, k1, k2, T),
+                           compiled=compiled)
+
+    loops = {compiled: loop(compiled) for compiled in (True, False)}
+
+    def call(compiled: bool = True) -> Any:
+        return simulate(loops[compiled], [0.5, 0.0], (0.0, 10 * T), method="sampled_zoh",
+                        progress=False)
+
+    def check(tr: Any) -> float:   # the compiled blocks against the Python blocks: 0
+        return float(np.max(np.abs(tr.x - call(False).x)))
+
+    return call, check
+
+
 SCENARIOS = {"implicit_euler-lure-1-step": _implicit_euler,
              "switching-pwa-no-event": _switching,
-             "moreau_jean-1dof-1-step": _moreau_jean}
+             "moreau_jean-1dof-1-step": _moreau_jean,
+             "sampled_zoh-super-twisting-10-ticks": _sampled_zoh}
 
 
 def run(quick: bool = False) -> Iterator[dict]:

@@ -206,3 +206,36 @@ def test_a_python_observer_estimate_of_the_wrong_length_is_refused():
                                              r"wrong length, expected 2 \(at t = 0\): it "
                                              r"returned 1 values"):
         run(loop, x0=(1.0, 0.0), T=0.01)
+
+
+@njit(BLOCK_SIGNATURE, cache=True)
+def _divide_output(t, xb, y, x, xhat, lam, p):
+    out = np.zeros(1)
+    out[0] = 1.0 / p[0]          # p[0] = 0: numba's Python error model raises
+    return out
+
+
+def test_an_error_a_compiled_block_raises_comes_out_of_the_run():
+    """The loops call a block through its C wrapper, which cannot pass an exception on:
+    the run still raises the block's own error (not a length or finiteness status), and
+    leaves the interpreter's unraisable hook as it found it."""
+    import sys
+
+    hook = sys.unraisablehook
+    loop = nsc.closed_loop(relay_plant(), _Compiled(CompiledBlock(_divide_output, _grow,
+                                                                  [0.0])))
+    with pytest.raises(ZeroDivisionError, match="division by zero"):
+        run(loop, x0=(1.0, 0.0), T=0.1)
+    assert sys.unraisablehook is hook
+
+
+def test_compiled_entries_have_the_dispatchers_type_found_once():
+    """The loops' argument for the blocks has the type numba gives the dispatchers (so the
+    cached loops are the same) and is made once per process."""
+    from numba import typeof
+
+    from nscontrol.systems._feedback_kernels import compiled_entries
+
+    entries = compiled_entries(_state_output, _count_up)
+    assert entries.numba_type == typeof((_state_output, _count_up))
+    assert compiled_entries(_state_output, _count_up) is entries

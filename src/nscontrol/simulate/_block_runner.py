@@ -212,7 +212,12 @@ class CompiledBlocks:
     :meth:`resets`, :meth:`log_arrays`, :meth:`log` and :meth:`raise_status`."""
 
     def __init__(self, runner: BlockRunner, obs: Any, ctrl: Any) -> None:
-        from ..systems._feedback_kernels import empty_output, keep_state, static_update
+        from ..systems._feedback_kernels import (
+            compiled_entries,
+            empty_output,
+            keep_state,
+            static_update,
+        )
 
         self.runner = runner
         self.Cy = np.ascontiguousarray(runner.Cy, dtype=float)
@@ -223,6 +228,9 @@ class CompiledBlocks:
             return (True, form.output, form.update, form.reset, form.params, period)
         (_, _, o_period), (_, _, c_period) = runner.blocks
         self._obs, self._ctrl = parts(obs, o_period), parts(ctrl, c_period)
+        # the kernels' first-class functions, typed once (not at every call of a loop)
+        self._fns = (compiled_entries(*self._obs[1:3]), compiled_entries(*self._ctrl[1:3]),
+                     compiled_entries(self._obs[3]), compiled_entries(self._ctrl[3]))
 
     @property
     def obs_parts(self) -> tuple[Any, ...]:
@@ -253,14 +261,14 @@ class CompiledBlocks:
         prev_x, prev_xhat, prev_lam, sched`` for
         :func:`~nscontrol.simulate._block_kernels.step_blocks`."""
         r, o, c = self.runner, self.obs_parts, self.ctrl_parts
-        return (o[0], (o[1], o[2]), o[4], o[5], o[6], o[7], c[0], (c[1], c[2]), c[4], c[5],
+        return (o[0], self._fns[0], o[4], o[5], o[6], o[7], c[0], self._fns[1], c[4], c[5],
                 c[6], c[7], *r.prev, r.sched)
 
     def resets(self) -> tuple[Any, ...]:
         """``has_obs, obs_reset, obs_params, xo, has_ctrl, ctrl_reset, ctrl_params, xc`` for
         :func:`~nscontrol.simulate._block_kernels.reset_blocks`."""
         o, c = self.obs_parts, self.ctrl_parts
-        return (o[0], (o[3],), o[4], o[6], c[0], (c[3],), c[4], c[6])
+        return (o[0], self._fns[2], o[4], o[6], c[0], self._fns[3], c[4], c[6])
 
     def log_arrays(self, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Empty logs for ``k`` steps: the blocks' states and ``u`` at each step start."""

@@ -54,8 +54,7 @@ class ModelRunner(Runner):
                 if runner is None or getattr(fn, "__self__", None) is not runner]
 
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
-        from numba.core.errors import NumbaExperimentalFeatureWarning
-
+        from ..systems._feedback_kernels import calling_blocks
         from ._mj_compiled_kernels import mj_model_steps
 
         s, o, size = self.system, self.opts, times.size
@@ -63,8 +62,7 @@ class ModelRunner(Runner):
         q_out, v_out, p_out = np.empty((size, n)), np.empty((size, n)), np.zeros((size, m))
         XO, XC, U = self.blocks.log_arrays(size) if self.blocks is not None else \
             (np.empty((size, 0)), np.empty((size, 0)), np.empty((size, self.Su.shape[1])))
-        with warnings.catch_warnings():   # numba's first-class functions: "experimental"
-            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        with calling_blocks():      # a block's error raised from the call
             done, code = mj_model_steps(  # type: ignore[call-arg]  # numba's stub
                 self.model, self.cm.params, self.K, self.D, s.constant_force, self.Su,
                 s.restitution, o.h, o.theta, o.gamma, o.activation, o.mass_at == "predicted",
@@ -131,11 +129,16 @@ def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
 
 def _no_blocks(system: Any, n_inputs: int) -> tuple[Any, ...]:
     """The kernel's block arguments of a loop without blocks (never called)."""
-    from ..systems._feedback_kernels import empty_output, keep_state, static_update
+    from ..systems._feedback_kernels import (
+        compiled_entries,
+        empty_output,
+        keep_state,
+        static_update,
+    )
 
     n, m = system.n_dof, system.n_contacts
     e0 = np.zeros(0)
-    fns, rs = (empty_output, static_update), (keep_state,)
+    fns, rs = compiled_entries(empty_output, static_update), compiled_entries(keep_state)
     return (False, np.zeros((0, 2 * n)), False, fns, rs, e0, -1.0, e0, e0, False,
             fns, rs, e0, -1.0, e0, np.zeros(n_inputs), e0, np.zeros(2 * n), e0,
             np.zeros(m), np.full(3, np.nan))

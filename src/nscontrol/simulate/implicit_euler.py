@@ -1033,10 +1033,7 @@ class _Stepper:
         """Steps over ``times`` in one compiled loop with the compiled blocks of a closed loop
         (``blocks``, from :func:`nscontrol.closed_loop`): the same operations, in the same
         order, as :meth:`run_with_controller` with the blocks' Python methods."""
-        import warnings
-
-        from numba.core.errors import NumbaExperimentalFeatureWarning
-
+        from ..systems._feedback_kernels import calling_blocks
         from ._lure_kernels import controlled_steps
 
         k = times.size - 1
@@ -1046,8 +1043,7 @@ class _Stepper:
             np.zeros((k, mm))
         XO, XC, U = blocks.log_arrays(k)
         m, plan, (kind, p1, p2) = self.m, self.plan, self.spec
-        with warnings.catch_warnings():   # numba flags its first-class functions experimental
-            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        with calling_blocks():      # a block's error raised from the call
             done, status = controlled_steps(  # type: ignore[call-arg]  # numba's stub: 1 tuple
                 m.Phi, m.Gam, m.Gh, m.HPhi, m.HGam, plan.D, plan.order,
                 plan.structure != "diagonal", kind, p1, p2, self.curve, self.system.H,

@@ -8,11 +8,18 @@ matrices row by row.
 
 from __future__ import annotations
 
+import sys
+import threading
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit, typeof, types
+from numba.core.errors import NumbaExperimentalFeatureWarning
+from numba.core.types import CompileResultWAP
+from numba.extending import intrinsic, typeof_impl
 
 _VEC = types.float64[::1]
 #: The signature of a compiled block's ``output`` and ``update``
@@ -111,3 +118,86 @@ def linear_update(t, xb, y, x, xhat, lam, params):
     off = _matvec(params, 3, r, r, xb, out)
     _matvec(params, off, r, p, y, out)
     return out
+
+
+class CompiledEntries(tuple):
+    """Blocks' compiled functions as the compiled loops take them (a tuple of first-class
+    functions), with their numba type found once: see :func:`compiled_entries`."""
+
+    numba_type: Any
+
+
+@typeof_impl.register(CompiledEntries)
+def _typeof_entries(val: CompiledEntries, c: Any) -> Any:
+    return val.numba_type
+
+
+_ENTRIES: dict[tuple[Any, ...], CompiledEntries] = {}
+
+
+def compiled_entries(*fns: Any) -> CompiledEntries:
+    """The compiled entries of numba dispatchers of one declared signature each (the
+    blocks' ``output``, ``update``, ``reset``), as the argument of a compiled loop.
+
+    Passed as they are, a tuple of dispatchers is typed afresh at every call of the loop
+    (numba asks each dispatcher for its compile result and inspects its Python signature,
+    ~0.1 ms a function) and unboxed the same way. Here each dispatcher's compile result
+    becomes a :class:`numba.core.types.CompileResultWAP` (the address of its C wrapper,
+    which runs the same compiled code) and the tuple's type is found once: the loop's
+    argument has the very type numba gives the dispatchers, so the cached loops are the
+    same. The addresses belong to this process: the entries are made at first use in each
+    process and kept here (never pickled with a block).
+    """
+    entries = _ENTRIES.get(fns)
+    if entries is None:
+        waps = tuple(CompileResultWAP(fn.get_compile_result(_signature(fn))) for fn in fns)
+        entries = CompiledEntries(waps)
+        with warnings.catch_warnings():   # numba: first-class functions "experimental"
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            entries.numba_type = typeof(waps)
+        _ENTRIES[fns] = entries
+    return entries
+
+
+def _signature(fn: Any) -> Any:
+    """The one signature ``fn`` was compiled for (declared: see ``CompiledBlock``)."""
+    (args,) = fn.overloads
+    return fn.overloads[args].signature
+
+
+@contextmanager
+def calling_blocks() -> Iterator[None]:
+    """Around a compiled loop's call with :func:`compiled_entries`: an error a block raises
+    is raised from the call, as from the blocks' dispatchers or Python methods.
+
+    A compiled entry runs the block through its C wrapper, which cannot pass an exception
+    on: it reports it to :data:`sys.unraisablehook` and returns an empty array (which the
+    loop's checks of the block's values then flag). The first such report while the loop
+    runs in this thread is kept and raised once the loop returns; the rest are its
+    consequences. numba's warning that first-class functions are experimental is silenced.
+    """
+    caught: list[BaseException] = []
+    thread, previous = threading.get_ident(), sys.unraisablehook
+
+    def hook(report: Any) -> None:
+        if (threading.get_ident() == thread and report.exc_value is not None
+                and str(report.object).startswith(_NUMBA_WRAPPER)):
+            caught.append(report.exc_value)
+        else:
+            previous(report)
+
+    sys.unraisablehook = hook
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            yield
+    finally:
+        if sys.unraisablehook is hook:
+            sys.unraisablehook = previous
+        thread = -1                     # a hook left installed by a race forwards all
+    if caught:
+        raise caught[0]
+
+
+# what numba's C wrappers report as the object of an unraisable error (its target context)
+_NUMBA_WRAPPER = "<numba.core."

@@ -232,9 +232,19 @@ def _has_signature(fn: Any, sig: Any) -> bool:
 
     if not hasattr(fn, "py_func"):
         return False
-    with warnings.catch_warnings():   # numba flags its first-class functions experimental
-        warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-        return bool(typeof((fn,)) == types.UniTuple(types.FunctionType(sig), 1))
+    # numba's typing of a dispatcher costs ~0.1 ms, and a block makes its compiled form at
+    # every run: the answer is kept per dispatcher and the overloads it has
+    key = (fn, sig, tuple(getattr(fn, "overloads", ())))
+    known = _SIGNATURE_CHECKED.get(key)
+    if known is None:
+        with warnings.catch_warnings():   # numba flags its first-class functions experimental
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            known = bool(typeof((fn,)) == types.UniTuple(types.FunctionType(sig), 1))
+        _SIGNATURE_CHECKED[key] = known
+    return known
+
+
+_SIGNATURE_CHECKED: dict[tuple[Any, ...], bool] = {}
 
 
 def __getattr__(name: str) -> Any:

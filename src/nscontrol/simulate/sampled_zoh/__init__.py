@@ -32,7 +32,6 @@ Options: the common ones (``record_every``, ``signals``, ``progress``, ``on_fail
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -192,16 +191,14 @@ class _Run:
 
     def chunk(self, k0: int, k1: int) -> None:
         """Ticks ``k0 .. k1 - 1``."""
-        from numba.core.errors import NumbaExperimentalFeatureWarning
-
+        from ...systems._feedback_kernels import calling_blocks
         from .. import _sampled_zoh_kernels as zk
 
         if self.blocks is None:
             self._python_chunk(k0, k1)
             return
         b = self.blocks
-        with warnings.catch_warnings():   # numba flags its first-class functions experimental
-            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+        with calling_blocks():      # a block's error raised from the call
             status = zk.run_chunk(  # type: ignore[call-arg]  # numba's stub
                 k0, k1, self.t0, self.T, self.every, self.Phi, self.Gam, self.X, self.Xn,
                 b.Cy, np.zeros(0), *b.kernel_state(), *self.out, self.count)
