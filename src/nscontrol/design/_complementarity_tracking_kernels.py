@@ -471,8 +471,10 @@ def control(t, xb, x, x_true, noisy, lam_raw, force_noise, p):
 
 
 @njit(cache=True)
-def lyapunov_at(t, xb, x, p):
-    """``(V, V1)`` at ``(t, x)`` with the reference of the phase in ``xb`` (unchanged)."""
+def _model_and_reference(t, xb, x, p):
+    """The task-space model at ``x`` and the reference of the phase in ``xb`` at ``t``
+    (``xb`` unchanged): ``(γ1, γ2, M(q), q, q̇, q_d, q̇_d, q̈_d)`` (a record cannot be
+    returned, so the gains are)."""
     r = record(p, PARAMS)
     s = record(xb, STATE)
     n = int(r.n)
@@ -481,20 +483,20 @@ def lyapunov_at(t, xb, x, p):
     Mq, Cq, J = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     _task_model(x, r, q, dq, Mq, Cq, gq, J)
     reference(t, s, r, q, qd, dqd, ddqd, qs)
-    return lyapunov(Mq, q, dq, qd, dqd, r.gamma1, r.gamma2)
+    return r.gamma1, r.gamma2, Mq, q, dq, qd, dqd, ddqd
+
+
+@njit(cache=True)
+def lyapunov_at(t, xb, x, p):
+    """``(V, V1)`` at ``(t, x)`` with the reference of the phase in ``xb`` (unchanged)."""
+    gamma1, gamma2, Mq, q, dq, qd, dqd, _ = _model_and_reference(t, xb, x, p)
+    return lyapunov(Mq, q, dq, qd, dqd, gamma1, gamma2)
 
 
 @njit(cache=True)
 def reference_at(t, xb, x, p):
     """``(q_d, q̇_d, q̈_d)`` of the phase in ``xb`` at ``(t, x)`` (``xb`` unchanged)."""
-    r = record(p, PARAMS)
-    s = record(xb, STATE)
-    n = int(r.n)
-    q, dq, gq = np.empty(n), np.empty(n), np.empty(n)
-    qd, dqd, ddqd, qs = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    Mq, Cq, J = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    _task_model(x, r, q, dq, Mq, Cq, gq, J)
-    reference(t, s, r, q, qd, dqd, ddqd, qs)
+    _, _, _, _, _, qd, dqd, ddqd = _model_and_reference(t, xb, x, p)
     return qd, dqd, ddqd
 
 
