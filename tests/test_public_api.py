@@ -180,3 +180,14 @@ def test_parameters_are_documented(qualname, obj, doc):
     undocumented = [p for p in params if p not in documented and p.lstrip("*") not in plain]
     assert not undocumented, (f"{qualname}: parameters {undocumented} are not in the "
                               f"numpydoc Parameters section of its docstring")
+
+
+def test_the_root_lists_its_lazy_names():
+    # `closed_loop` and `solve_lcp` import on first use; dir() and tab completion still show
+    # them, and every name dir() shows resolves
+    import nscontrol
+
+    names = dir(nscontrol)
+    assert {"closed_loop", "solve_lcp", "simulate", "design"} <= set(names)
+    for name in nscontrol.__all__:
+        assert getattr(nscontrol, name) is not None

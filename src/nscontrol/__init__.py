@@ -57,3 +57,8 @@ def __getattr__(name: str) -> Any:
     if name in _SUBPACKAGES:
         return importlib.import_module(f"nscontrol.{name}")
     raise AttributeError(f"module 'nscontrol' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The public names, the lazily imported ones included (tab completion, ``dir()``)."""
+    return sorted(set(globals()) | set(__all__))
