@@ -188,3 +188,39 @@ def test_an_interrupt_while_the_buffers_grow_leaves_the_recorder_whole(monkeypat
     np.testing.assert_array_equal(traj.t, np.arange(8.0))
     np.testing.assert_array_equal(traj.x[4:], 2 * np.ones((4, 2)))
     np.testing.assert_array_equal(traj.signal("u")[:, 0], [0, 0, 0, 0, 1, 1, 1, 1])
+
+
+def _plot_traj():
+    t = np.linspace(0.0, 1.0, 11)
+    x = np.column_stack([t, 2 * t, -t, 1 - t, t**2])
+    return Trajectory(t=t, x=x, state_names=("q1", "q2", "v1", "v2", "xhat_0"))
+
+
+@pytest.mark.parametrize("subplots, panels", [("shared", [5]), ("groups", [2, 2, 1]),
+                                              ("each", [1, 1, 1, 1, 1])])
+def test_plot_panels(subplots, panels):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = _plot_traj().plot(subplots=subplots, signals=())
+    assert [len(a.get_lines()) for a in fig.axes] == panels
+    plt.close(fig)
+
+
+def test_plot_keeps_the_time_label_inside_a_saved_figure(tmp_path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = _plot_traj().plot()    # one panel: the case that lost its label before
+    fig.savefig(tmp_path / "p.png")   # draws: the layout is computed
+    box = fig.axes[-1].xaxis.label.get_window_extent()
+    width, height = fig.canvas.get_width_height()
+    assert box.y0 >= 0 and box.y1 <= height and box.x0 >= 0 and box.x1 <= width
+    plt.close(fig)
+
+
+def test_plot_refuses_an_unknown_layout():
+    with pytest.raises(ModelError, match="subplots"):
+        _plot_traj().plot(subplots="grid")

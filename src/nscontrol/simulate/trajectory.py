@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -393,7 +394,8 @@ class Trajectory:
     # -- plotting --------------------------------------------------------------------------
     def plot(self, states: Sequence[str | int] | None = None,
              signals: Iterable[str] = (), *, mark_events: bool | str = True,
-             ax: Any = None, units: Mapping[str, str] | None = None) -> Any:
+             ax: Any = None, units: Mapping[str, str] | None = None,
+             subplots: str = "shared") -> Any:
         """Plot states (and signals, one panel each) against time; returns the figure.
 
         Parameters
@@ -409,6 +411,15 @@ class Trajectory:
         units
             Unit of each state or signal by name (e.g. ``{"q": "m", "v": "m/s"}``): the
             axes read ``"q, v [m, m/s]"``; without units an axis is labelled by the names.
+        subplots
+            How the states share panels: ``"shared"`` (one panel, the default), ``"groups"``
+            (one panel per name stem: ``q1, q2`` together, ``v1, v2`` together, ``xhat...``
+            apart) or ``"each"`` (one panel per state). Ignored when ``ax`` is given.
+
+        Raises
+        ------
+        ModelError
+            ``subplots`` not one of the three.
 
         Examples
         --------
@@ -421,25 +432,27 @@ class Trajectory:
         import matplotlib.pyplot as plt
 
         signals = list(signals)
+        picks = list(range(min(self.n_states, 8))) if states is None else list(states)
+        names = [str(p if isinstance(p, str) else
+                     (self.state_names[p] if self.state_names else f"x{p}")) for p in picks]
+        panels = _state_panels(names, "shared" if ax is not None else subplots)
         axes: Any   # matplotlib axes: an array of them, or a list of the one given
         if ax is None:
-            fig, axes = plt.subplots(1 + len(signals), 1, sharex=True, squeeze=False,
-                                     figsize=(7, 2.6 * (1 + len(signals))))
+            rows = len(panels) + len(signals)
+            # constrained layout keeps the time label and long tick labels inside a saved PNG
+            fig, axes = plt.subplots(rows, 1, sharex=True, squeeze=False, layout="constrained",
+                                     figsize=(7, 2.0 + 2.0 * rows))
             axes = axes[:, 0]
         else:
             fig, axes = ax.figure, [ax]
         units = dict(units or {})
-        picks = list(range(min(self.n_states, 8))) if states is None else list(states)
-        names = []
-        for p in picks:
-            label = p if isinstance(p, str) else (self.state_names[p] if self.state_names
-                                                   else f"x{p}")
-            names.append(str(label))
-            axes[0].plot(self.t, self.state(p), label=str(label))
-        axes[0].set_ylabel(_axis_label(names, units))
-        if len(picks) > 1:
-            axes[0].legend(loc="best", fontsize="small")
-        for a, name in zip(axes[1:], signals, strict=False):
+        for a, panel in zip(axes, panels, strict=False):
+            for i in panel:
+                a.plot(self.t, self.state(picks[i]), label=names[i])
+            a.set_ylabel(_axis_label([names[i] for i in panel], units))
+            if len(panel) > 1:
+                a.legend(loc="best", fontsize="small")
+        for a, name in zip(axes[len(panels):], signals, strict=False):
             a.plot(self.t, self.signal(name))
             a.set_ylabel(_axis_label([name], units))
         if mark_events:
@@ -449,6 +462,21 @@ class Trajectory:
                     a.axvline(te, color="0.7", lw=0.5, zorder=0)
         axes[-1].set_xlabel("t [s]")
         return fig
+
+
+def _state_panels(names: Sequence[str], subplots: Any) -> list[list[int]]:
+    """The indices of ``names`` drawn in each panel (see :meth:`Trajectory.plot`)."""
+    if subplots == "shared":
+        return [list(range(len(names)))]
+    if subplots == "each":
+        return [[i] for i in range(len(names))]
+    if subplots != "groups":
+        raise ModelError(f"subplots: expected 'shared', 'groups' or 'each', got {subplots!r}")
+    groups: dict[str, list[int]] = {}
+    for i, name in enumerate(names):   # the stem: the name without its index or suffix
+        stem = re.match(r"[^\d_\[(]*", name)
+        groups.setdefault(stem.group(0) if stem and stem.group(0) else name, []).append(i)
+    return list(groups.values())
 
 
 def _axis_label(names: Sequence[str], units: Mapping[str, str]) -> str:
