@@ -142,3 +142,14 @@ def test_design_refuses_bad_arguments(problem_a):
     with pytest.raises(ModelError, match="b"):   # b along the flow at the anchor
         design_corner_controller(plant, cyc, target_offset=0.005,
                                  **{**base, "b": [0.0, 1.0]})
+
+
+@pytest.mark.parametrize("lam", [2.0, -0.5])
+def test_reachable_multipliers_at_the_true_field_are_the_limits(problem_a, lam):
+    # with the field at ρ = 1.01, n_outᵀ(F1 + k b) at the interval's end is a rounding of
+    # O(1) numbers, not 0: evaluating the pole there gave (-2.25e16, 0). The limits are 0
+    # (entry face) and ∞·sign λ (exit face), so the interval is (0, ∞) or (-∞, 0)
+    plant, _ = problem_a
+    f1 = plant.rhs(0.0, np.array([1.01, 0.0]))
+    lo, hi = reachable_multipliers(lam, f1, E, N_IN, N_OUT, E)
+    assert (lo, hi) == ((0.0, np.inf) if lam > 0 else (-np.inf, 0.0))

@@ -210,16 +210,19 @@ def reachable_multipliers(lam: float, F1: ArrayLike, b: ArrayLike, n_in: ArrayLi
     """
     lm = as_real_scalar("lam", lam)
     lo, hi = crossing_gain_interval(F1, b, n_in, n_out)
-    f1, bb = _vec("F1", F1), _vec("b", b)
+    f1, bb, no = _vec("F1", F1), _vec("b", b), _vec("n_out", n_out)
+    w_out = float(no @ bb)
+    pole = -float(no @ f1) / w_out if w_out != 0.0 else None
 
     def mult(k: float) -> float:
-        if not np.isfinite(k):
-            k = np.sign(k) * 1e12 * (1.0 + float(np.linalg.norm(f1)) / float(np.linalg.norm(bb)))
-        with np.errstate(divide="ignore"):
-            try:
-                return lm * (1.0 + corner_gain(f1, f1 + k * bb, n_in, n_out, e))
-            except ModelError:
-                return float(np.sign(lm)) * np.inf
+        # the interval's ends are sliding thresholds: where the exit face's normal speed
+        # n_outᵀF2 vanishes, a has a pole (1 + a > 0 inside: the limit is +∞ times sign λ);
+        # where the entry face's vanishes, 1 + a -> 0. Evaluated at the end itself, round-off
+        # in n_outᵀF2 ~ 0 gave any sign and size (-2.25e16 for λ = 1.01), so take the limits
+        if np.isfinite(k):
+            return float(np.sign(lm)) * np.inf if k == pole else 0.0
+        k = np.sign(k) * 1e12 * (1.0 + float(np.linalg.norm(f1)) / float(np.linalg.norm(bb)))
+        return lm * (1.0 + corner_gain(f1, f1 + k * bb, n_in, n_out, e))
     ends = sorted((mult(lo), mult(hi)))
     return float(ends[0]), float(ends[1])
 
