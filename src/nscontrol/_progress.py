@@ -35,11 +35,15 @@ class TimeProgress:
             self._due = self._start + delay
 
     def _open(self) -> None:
-        from tqdm.auto import tqdm
+        if not _is_terminal(sys.stderr):
+            self._bar = LineBar(total=1000, desc=self._desc, percent=True)
+        else:
+            from tqdm.auto import tqdm
 
-        # the simulated time goes into the description: tqdm prefixes a postfix with ", "
-        self._bar = tqdm(total=1000, desc=self._desc, file=sys.stderr, leave=False,
-                         bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
+            # the simulated time goes into the description: tqdm prefixes a postfix with ", "
+            self._bar = tqdm(total=1000, desc=self._desc, file=sys.stderr, leave=False,
+                             bar_format="{desc}: {percentage:3.0f}%|{bar}| "
+                                        "[{elapsed}<{remaining}]")
         self._bar.start_t = self._start   # the elapsed time counts from the run's start
         self._due = None
 
@@ -79,13 +83,98 @@ def progress_iter(iterable: Any, *, total: int | None = None, desc: str = "",
     """
     if check_bool("progress", enable, allow_none=True) is False:
         return iterable
-    from tqdm.auto import tqdm
+    if not _is_terminal(sys.stderr):
+        bar: Any = LineBar(iterable, total=total, desc=desc, delay=ITER_DELAY)
+    else:
+        from tqdm.auto import tqdm
 
-    bar = tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=ITER_DELAY, leave=False,
-               bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}")
+        bar = tqdm(iterable, total=total, desc=desc, file=sys.stderr, delay=ITER_DELAY,
+                   leave=False, bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}")
     if label is None:
         return bar
     return _labelled(bar, desc, label)
+
+
+def _is_terminal(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):   # no isatty, or a closed stream
+        return False
+
+
+class LineBar:
+    """Progress as plain lines, for a stderr that is a file or a pipe (a CI log): tqdm's
+    carriage returns and cursor moves (nested bars) would leave escape codes there. A line
+    is written when the progress passes a tenth of the total, or 30 s after the last one.
+
+    Parameters
+    ----------
+    iterable : iterable, optional
+        Items to pass through (counted), as ``tqdm(iterable)``.
+    total : int, optional
+        The count at 100 %.
+    desc : str
+        The label.
+    delay : float
+        Seconds before the first line (shorter runs write none).
+    percent : bool
+        Write the progress as a percentage (of simulated time) instead of ``n/total``.
+    """
+
+    def __init__(self, iterable: Any = None, *, total: int | None = None, desc: str = "",
+                 delay: float = 0.0, percent: bool = False) -> None:
+        self.iterable, self.desc, self.percent = iterable, desc, percent
+        self.total = total if total is not None or iterable is None else _length(iterable)
+        self.n = 0
+        self.start_t = time.perf_counter()
+        self._quiet_until = self.start_t + delay
+        self._last = (-1, self.start_t)   # (tenth, time) of the last line
+        self._labelled = False            # a line per labelled item, none after it
+
+    def __iter__(self) -> Any:
+        for item in self.iterable:
+            yield item
+            if self._labelled:
+                self.n += 1
+            else:
+                self.update(1)
+
+    def set_description_str(self, desc: str, refresh: bool = False) -> None:
+        """Change the label (``refresh=True`` writes a line now, if one is due)."""
+        self.desc = desc
+        if refresh:
+            self._labelled = True
+            self._write(force=True)
+
+    def update(self, n: int = 1) -> None:
+        """Advance the count by ``n``."""
+        self.n += n
+        self._write()
+
+    def _write(self, force: bool = False) -> None:
+        now = time.perf_counter()
+        if now < self._quiet_until:
+            return
+        tenth = int(10 * self.n / self.total) if self.total else self.n
+        if not force and tenth == self._last[0] and now - self._last[1] < 30.0:
+            return
+        self._last = (tenth, now)
+        if self.percent and self.total:
+            done = f"{100 * self.n / self.total:3.0f}%"
+        else:
+            done = f"{self.n}/{self.total}" if self.total else f"{self.n}"
+        print(f"{self.desc}: {done} [{now - self.start_t:.0f} s]", file=sys.stderr,
+              flush=True)
+
+    def close(self) -> None:
+        """Nothing to erase (a line stays in the log)."""
+
+
+def _length(iterable: Any) -> int | None:
+    try:
+        return len(iterable)
+    except TypeError:
+        return None
 
 
 def _labelled(bar: Any, desc: str, label: Any) -> Any:
