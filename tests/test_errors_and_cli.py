@@ -167,3 +167,17 @@ def test_bench_lcp_quick_json_is_one_object_per_line(monkeypatch):
     impact = [r for r in records if r["scenario"] == "lcp/impact/banded"]
     assert all(r["accuracy"]["ours_iterations"] == 0 for r in impact)
     assert "bench lcp" in result.stderr                  # the progress bar, on stderr
+
+
+def test_a_chapter_with_one_example_names_it():
+    from nscontrol.examples import all_examples, get_example
+
+    chapters: dict[str, list[str]] = {}
+    for ex in all_examples():
+        chapters.setdefault(ex.chapter, []).append(ex.name)
+    single = [c for c, names in chapters.items() if len(names) == 1]
+    several = [c for c, names in chapters.items() if len(names) > 1]
+    assert "ch08" in single and several   # as `nscontrol list` shows them today
+    assert get_example("ch08").name == "ch08-lure-observer"
+    with pytest.raises(KeyError, match="several examples"):
+        get_example(several[0])

@@ -1,6 +1,7 @@
 """`nscontrol report` runs every example, keeps going past a failing one, and writes HTML+JSON."""
 
 import json
+from pathlib import Path
 
 from click.testing import CliRunner
 
@@ -152,11 +153,15 @@ def test_run_prints_a_timed_summary_and_json_carries_passed(monkeypatch):
     import nscontrol.examples as ex_mod
 
     monkeypatch.setattr(ex_mod, "all_examples", lambda: [RICH])
-    text = CliRunner().invoke(main, ["run", "rich"])
+    runner = CliRunner()
+    with runner.isolated_filesystem():
+        as_json = runner.invoke(main, ["run", "rich", "--json", "--no-figures"])
+        assert not Path("out").exists()
+        text = runner.invoke(main, ["run", "rich"])
+        assert list(Path("out/rich").glob("*.png"))   # figures by default, in out/NAME
     assert text.exit_code == 0, text.output
     last = text.output.strip().splitlines()[-1]
     assert re.match(r"rich \(\d+\.\d s\): Reproduced: residual .*; 2 of 2 checks pass\.$", last)
-    as_json = CliRunner().invoke(main, ["run", "rich", "--json"])
     record = json.loads(as_json.output)
     assert record["passed"] is True and record["seconds"] >= 0
 

@@ -34,17 +34,22 @@ def list_examples() -> None:
 @main.command()
 @click.argument("name")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for the example's figures (default: none written).")
+              help="Folder for the example's figures (default: out/NAME).")
+@click.option("--no-figures", is_flag=True, help="Write no figures (checks and metrics only).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object of metrics/checks.")
-def run(name: str, out: Path | None, as_json: bool) -> None:
-    """Run one example; exit status 0 only when every check passed."""
+def run(name: str, out: Path | None, no_figures: bool, as_json: bool) -> None:
+    """Run one example (NAME as `nscontrol list` prints it, or its chapter, e.g. ch08) and
+    write its figures; exit status 0 only when every check passed."""
     from .errors import ModelError
     from .examples import get_example
     from .report import check_output_folder
 
     try:
         example = get_example(name)
-        if out is not None:
+        if no_figures and out is not None:
+            raise click.UsageError("--out and --no-figures: give one of them")
+        if not no_figures:
+            out = out if out is not None else Path("out") / example.name
             check_output_folder(out, "--out")
     except KeyError as exc:
         raise click.UsageError(str(exc.args[0])) from None
@@ -125,7 +130,34 @@ def report(out: Path, only: tuple[str, ...]) -> None:
     sys.exit(0 if summary["passed"] else 1)
 
 
-@main.command()
+class _ListingFamilies(click.Command):
+    """``bifurcation --help`` ends with the examples that define a parameter family and the
+    names each can vary (found when the help is shown, so ``nscontrol`` starts fast)."""
+
+    def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, ", ".join(params)) for name, params in bifurcation_families()]
+        with formatter.section("Examples with a parameter family"):
+            formatter.write_dl(rows or [("(none)", "")])
+        formatter.write_paragraph()
+        formatter.write_text("e.g. nscontrol bifurcation impact-oscillator-bifurcation "
+                             "--param forcing=0.2:2.2:200")
+
+
+def bifurcation_families() -> list[tuple[str, tuple[str, ...]]]:
+    """``(example, parameter names)`` for every example whose module defines
+    ``bifurcation_family`` (and ``bifurcation_parameters``, the names it takes)."""
+    from .examples import all_examples
+
+    out = []
+    for ex in all_examples():
+        module = sys.modules[ex.run.__module__]
+        if getattr(module, "bifurcation_family", None) is not None:
+            names = getattr(module, "bifurcation_parameters", lambda: ())()
+            out.append((ex.name, tuple(names)))
+    return out
+
+
+@main.command(cls=_ListingFamilies)
 @click.argument("example")
 @click.option("--param", "param", required=True, metavar="NAME=START:STOP:N",
               help="Parameter of the example's family and its grid.")

@@ -2,6 +2,7 @@
 through the CLI (``list``, ``run --json`` with the issue's JSON schema)."""
 
 import json
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -32,8 +33,10 @@ def test_cli_list_and_run_json():
     runner = CliRunner()
     listed = runner.invoke(main, ["list"])
     assert listed.exit_code == 0 and "foundation" in listed.output
-    ran = runner.invoke(main, ["run", "foundation", "--json"])
-    assert ran.exit_code == 0, ran.output
+    with runner.isolated_filesystem():   # figures go to out/foundation by default
+        ran = runner.invoke(main, ["run", "foundation", "--json"])
+        assert ran.exit_code == 0, ran.output
+        assert list(Path("out/foundation").glob("*.png"))
     payload = json.loads(ran.output.strip().splitlines()[-1])
     assert payload["example"] == "foundation"
     assert isinstance(payload["metrics"], dict) and payload["metrics"]

@@ -117,3 +117,11 @@ def test_failed_html_leaves_previous_index(fake_examples, old_report, monkeypatc
         report_mod.write_report(folder, ["good"])
     assert (folder / "index.html").read_bytes() == before["index.html"]
     assert not [n for n in os.listdir(folder) if n.endswith(".tmp")]
+
+
+def test_bifurcation_help_lists_the_families_and_their_parameters():
+    result = invoke("bifurcation", "--help")
+    assert result.exit_code == 0
+    text = " ".join(result.output.split())      # click wraps the table
+    assert "impact-oscillator-bifurcation" in text
+    assert all(p in text for p in ("forcing", "omega", "restitution"))

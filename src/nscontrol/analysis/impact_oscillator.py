@@ -335,10 +335,14 @@ class OscillatorFamily:
     parameter: str = "forcing"
 
     def __post_init__(self) -> None:
-        if self.parameter not in ImpactOscillator.__dataclass_fields__:
-            raise ModelError(f"parameter: expected one of "
-                             f"{sorted(ImpactOscillator.__dataclass_fields__)}, got "
+        if self.parameter not in self.parameters():
+            raise ModelError(f"parameter: expected one of {list(self.parameters())}, got "
                              f"{self.parameter!r}")
+
+    @staticmethod
+    def parameters() -> tuple[str, ...]:
+        """The names a family can vary: the fields of :class:`ImpactOscillator`, sorted."""
+        return tuple(sorted(ImpactOscillator.__dataclass_fields__))
 
     def oscillator(self, p: float) -> ImpactOscillator:
         """The oscillator at parameter value ``p``."""

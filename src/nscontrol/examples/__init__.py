@@ -312,12 +312,19 @@ def get_example(name: str) -> Example:
     Parameters
     ----------
     name : str
-        An example's name, as ``nscontrol list`` prints it.
+        An example's name, as ``nscontrol list`` prints it, or its chapter (``"ch08"``) when
+        the chapter has one example.
     """
     examples = {e.name: e for e in all_examples()}
-    if name not in examples:
-        raise KeyError(f"no example {name!r}; available: {', '.join(sorted(examples))}")
-    return examples[name]
+    if name in examples:
+        return examples[name]
+    in_chapter = [e.name for e in examples.values() if e.chapter == name]
+    if len(in_chapter) == 1:
+        return examples[in_chapter[0]]
+    if in_chapter:
+        raise KeyError(f"chapter {name!r} has several examples: {', '.join(in_chapter)}; "
+                       f"name one")
+    raise KeyError(f"no example {name!r}; available: {', '.join(sorted(examples))}")
 
 
 def jsonable(value: Any) -> Any:

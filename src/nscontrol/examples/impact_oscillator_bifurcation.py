@@ -18,7 +18,7 @@ import numpy as np
 from . import Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
 
-__all__ = ["EXAMPLES", "oscillator", "bifurcation_family", "run"]
+__all__ = ["EXAMPLES", "oscillator", "bifurcation_family", "bifurcation_parameters", "run"]
 
 #: Relative accuracy the continuation must reach (issue's requirement).
 LOCATE_RTOL = 1e-6
@@ -38,6 +38,14 @@ def bifurcation_family(parameter: str) -> Any:
     from ..analysis.impact_oscillator import OscillatorFamily
 
     return OscillatorFamily(oscillator(), parameter)
+
+
+def bifurcation_parameters() -> tuple[str, ...]:
+    """The names :func:`bifurcation_family` takes (``nscontrol bifurcation --help`` lists
+    them)."""
+    from ..analysis.impact_oscillator import OscillatorFamily
+
+    return OscillatorFamily.parameters()
 
 
 def continuation_branches(fam: Any, F_hi: float = 2.2) -> dict[str, Any]:
