@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from nscontrol.design.lure_observer import (
+    design_lure_observer,
     lure_observer_lmi,
     max_observer_decay_rate,
     observer_from_gains,
@@ -259,3 +260,58 @@ def test_observer_from_gains_refuses_a_non_converging_observer():
     with pytest.raises(InfeasibleDesignError) as err:
         observer_from_gains(**s.matrices, L=ex.SICONOS_L, P=-np.eye(2), alpha=1.0)
     assert "G^T P = H - K C fails" in str(err.value) and "positive definite" in str(err.value)
+
+
+# -- the default rate rule: the largest certified rate whose gain stays moderate -------------
+def _coulomb_oscillator():
+    from nscontrol.laws.set_valued import Relay
+    from nscontrol.systems.lure import LureSystem
+
+    return LureSystem([[0, 1], [-1, -0.1]], [[0], [1]], [[0, 1]], Relay(1.0), C=[[1, 0]])
+
+
+def test_default_extended_design_keeps_the_gain_within_the_rule():
+    from nscontrol.design.lure_observer import GAIN_MULTIPLE
+
+    plant = _coulomb_oscillator()
+    d = design_lure_observer(plant, tol=1e-2)
+    rule = GAIN_MULTIPLE * max(1.0, np.linalg.norm(plant.A, 2))
+    assert d.gain_limit == pytest.approx(rule, rel=1e-12)
+    # the rate search kept ||L|| within the bound at alpha_max; the design at half of it has
+    # a smaller gain still, and a certified positive rate
+    assert 0.0 < d.alpha == pytest.approx(d.alpha_max / 2, rel=1e-12)
+    assert np.linalg.norm(d.L, 2) <= rule
+    assert "|L|=" in repr(d) and "limit" in repr(d)
+    # without the bound the rate runs to the cap (the gains of the 1.3e7)
+    with pytest.warns(Warning, match="unbounded"):
+        free = max_observer_decay_rate(plant.A, plant.G, plant.H, plant.C, tol=1e-1)
+    assert free.alpha_max > 100 * d.alpha_max
+
+
+def test_default_design_error_stays_within_its_certificate():
+    # the theorem's bound |e(t)| <= sqrt(cond P) e^{-alpha t} |e(0)| measured on a run: the
+    # default gains (cond P ~ 14) give no large transient (the unbounded design peaked at 700
+    # for an initial error of 1)
+    from nscontrol.simulate import simulate
+
+    plant = _coulomb_oscillator()
+    d = design_lure_observer(plant, tol=1e-2)
+    h = 1e-3
+    traj = simulate(d.closed_loop(plant), [1.0, 0.0, 0.0, 0.0], (0.0, 5.0), h=h,
+                    progress=False)
+    e = np.linalg.norm(traj.signal("y"), axis=1)
+    # implicit Euler's discrete bound is V_k <= V_0/(1 + 2 alpha h)^k: compare with it
+    bound = np.sqrt(d.certificate.P_cond) * e[0] * (1 + 2 * d.alpha * h) ** (
+        -0.5 * np.arange(e.size))
+    assert np.all(e <= bound * (1 + 1e-9) + 1e-12)
+    assert e.max() <= np.sqrt(d.certificate.P_cond) * e[0] * (1 + 1e-9)
+
+
+def test_a_given_rate_above_the_rule_warns_and_bad_bounds_are_refused():
+    plant = _coulomb_oscillator()
+    with pytest.warns(Warning, match="L: "):
+        design_lure_observer(plant, alpha=20.0)
+    with pytest.raises(ModelError, match="max_gain"):
+        design_lure_observer(plant, max_gain="large")
+    with pytest.raises(ModelError, match="max_gain"):
+        design_lure_observer(plant, max_gain=-1.0)

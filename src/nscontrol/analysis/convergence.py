@@ -299,7 +299,7 @@ def bimodal_tests(A1: ArrayLike, A2: ArrayLike) -> BimodalTests:
 
     References
     ----------
-    D5.3 chapter 11, §2.4 of our spec; R. Shorten, K. S. Narendra, "On common quadratic
+    D5.3 chapter 11; R. Shorten, K. S. Narendra, "On common quadratic
     Lyapunov functions for pairs of stable LTI systems whose system matrices are in companion
     form", IEEE TAC 48(4), 2003; R. Shorten, O. Mason, F. O'Cairbre, P. Curran, "A unifying
     framework for the SISO circle criterion and other quadratic stability criteria", IJC
@@ -522,7 +522,7 @@ def isc_gain(P: ArrayLike, D: ArrayLike, epsilon: float) -> float:
 
     References
     ----------
-    D5.3 chapter 11 (§2.2 of our spec); A. Pavlov, N. van de Wouw, H. Nijmeijer, *Uniform
+    D5.3 chapter 11; A. Pavlov, N. van de Wouw, H. Nijmeijer, *Uniform
     Output Regulation of Nonlinear Systems: A Convergent Dynamics Approach*, Birkhäuser 2006
     (input-to-state convergence).
     """
@@ -581,11 +581,11 @@ def peak_to_peak_bound(As: Sequence[ArrayLike], D: ArrayLike, Cz: ArrayLike, *,
     invariant and ``|z1 - z2|² <= (x1 - x2)ᵀP(x1 - x2)``. The optimal ``α`` is below twice the
     decay rate of the modes, i.e. of the order of the slowest pole — hence the grid's unit.
     On Example A's closed loop (σ = 0.3): 1.1286 on the grid, 1.1253 refined (a 400-point
-    grid gives 1.1253; the spec's prototype reported 1.127).
+    grid gives 1.1253).
 
     References
     ----------
-    D5.3 chapter 11 (§2.3 of our spec); S. Boyd, L. El Ghaoui, E. Feron, V. Balakrishnan,
+    D5.3 chapter 11; S. Boyd, L. El Ghaoui, E. Feron, V. Balakrishnan,
     *Linear Matrix Inequalities in System and Control Theory*, SIAM 1994, §6.1.3.
 
     Examples
@@ -700,7 +700,7 @@ def incremental_l2_bound(As: Sequence[ArrayLike], D: ArrayLike, Cz: ArrayLike) -
 
     References
     ----------
-    D5.3 chapter 11 (§2.3 of our spec); S. Boyd et al., *Linear Matrix Inequalities in System
+    D5.3 chapter 11; S. Boyd et al., *Linear Matrix Inequalities in System
     and Control Theory*, SIAM 1994, §6.3.2 (bounded-real lemma).
 
     Examples
@@ -766,7 +766,7 @@ def equilibrium(system: PiecewiseAffineSystem, w0: ArrayLike) -> FloatArray:
 
     References
     ----------
-    D5.3 chapter 11 (§2.2 of our spec); A. Pavlov, A. Pogromsky, N. van de Wouw,
+    D5.3 chapter 11; A. Pavlov, A. Pogromsky, N. van de Wouw,
     H. Nijmeijer, "On convergence properties of piecewise affine systems", Int. J. Control
     80(8), 2007.
 

@@ -227,7 +227,7 @@ def periodic_steady_state(system: SimulableSystem, period: float, *, u: InputSig
 
     References
     ----------
-    D5.3 chapter 11 (§3.3 of our spec); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
+    D5.3 chapter 11; A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
     response functions for nonlinear convergent systems", IEEE TAC 52(6), 2007.
 
     Examples
@@ -424,7 +424,7 @@ def check_uniqueness(system: SimulableSystem, period: float, *, u: InputSignal =
 
     References
     ----------
-    D5.3 chapter 11 (§3.3 of our spec: ≥ 5 guesses spread ~5× the response, 1e-8 relative);
+    D5.3 chapter 11 (≥ 5 guesses spread ~5× the response, 1e-8 relative);
     A. Pavlov, A. Pogromsky, N. van de Wouw, H. Nijmeijer, "Convergent dynamics, a tribute to
     Boris Pavlovich Demidovich", Systems & Control Letters 52, 2004.
     """
@@ -566,7 +566,7 @@ def brute_force_steady_state(system: SimulableSystem, period: float, *, u: Input
 
     References
     ----------
-    D5.3 chapter 11 (§3.3 of our spec, brute force and period multiplicity).
+    D5.3 chapter 11 (brute force and period multiplicity).
 
     Examples
     --------
@@ -1394,7 +1394,7 @@ def frequency_sweep(system: SimulableSystem, omegas: ArrayLike, *,
 
     References
     ----------
-    D5.3 chapter 11 (§3.4 of our spec); A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
+    D5.3 chapter 11; A. Pavlov, N. van de Wouw, H. Nijmeijer, "Frequency
     response functions for nonlinear convergent systems", IEEE TAC 52(6), 2007 (FRFs exist
     only for convergent systems; hence sweeps that follow attractors here).
 

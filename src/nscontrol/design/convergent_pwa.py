@@ -822,7 +822,7 @@ def design_pwa_state_feedback(system: PiecewiseAffineSystem, *, nu: ArrayLike, s
 
     References
     ----------
-    D5.3 chapter 11 §2.5(b) of our spec.
+    D5.3 chapter 11.
 
     Examples
     --------
@@ -891,7 +891,7 @@ def tune_pwa_state_feedback(system: PiecewiseAffineSystem, *, sigma: float,
 
     References
     ----------
-    D5.3 chapter 11 §2.5(b) of our spec (the bilinearity and the outer search over ``ν``).
+    D5.3 chapter 11 (the bilinearity and the outer search over ``ν``).
 
     Examples
     --------

@@ -57,6 +57,12 @@ EQUALITY_RTOL = 1e-7
 #: Largest decay rate the bisection tries before declaring the rate unbounded.
 ALPHA_CAP = 1e4
 
+#: ``design_lure_observer(alpha="max")`` without ``kappa`` keeps the output-injection gain
+#: within ``GAIN_MULTIPLE · max(1, ‖A‖₂)``: the extended observer's rate is otherwise
+#: unbounded, and its gains grow like a power of the rate (``‖L‖ ≈ 1.3e7`` at the capped rate
+#: on a Coulomb oscillator), amplifying measurement noise by as much.
+GAIN_MULTIPLE = 25.0
+
 
 # -- plant matrices --------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -254,9 +260,8 @@ def structural_infeasibility(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayL
 
     References
     ----------
-    Spec ``ch08-lure-observer`` §2.2 (consequences of the equality; example 5.3, "not
-    passifiable"); B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8):1996–2001, 2009 (the
-    passivity conditions); SICONOS D5.3, ch. 8.
+    B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8):1996–2001, 2009 (the passivity
+    conditions); SICONOS D5.3, ch. 8.
 
     Examples
     --------
@@ -323,6 +328,10 @@ class LureObserverDesign:
         The (possibly loop-transformed) linear part the design was made for.
     status : str
         ``"feasible"`` (infeasible designs raise :class:`InfeasibleDesignError`).
+    gain_limit : float or None
+        The design rule's bound on ``‖L‖₂`` (see :func:`design_lure_observer`): the rate
+        search stayed within it, a given rate above it warned; ``None`` when ``kappa`` bounds
+        the gain instead or ``max_gain=None``.
     """
 
     variant: str
@@ -341,6 +350,15 @@ class LureObserverDesign:
     C: FloatArray
     D: FloatArray
     status: str = "feasible"
+    gain_limit: float | None = None
+
+    def __repr__(self) -> str:
+        limit = "" if self.gain_limit is None else f" (limit {self.gain_limit:.3g})"
+        best = "" if self.alpha_max is None else f", alpha_max={self.alpha_max:.4g}"
+        return (f"LureObserverDesign(variant={self.variant!r}, alpha={self.alpha:.4g}{best}, "
+                f"|L|={float(np.linalg.norm(self.L, 2)):.3g}{limit}, "
+                f"|K|={float(np.linalg.norm(self.K, 2)):.3g}, "
+                f"cond(P)={self.certificate.P_cond:.3g})")
 
     @property
     def A_L(self) -> FloatArray:
@@ -556,8 +574,7 @@ def recheck_lure_certificate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayL
 
     References
     ----------
-    Spec ``ch08-lure-observer`` §2.2–§2.3 (post-check); B. Brogliato, W.P.M.H. Heemels,
-    IEEE TAC 54(8), 2009.
+    B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8), 2009.
 
     Examples
     --------
@@ -618,12 +635,19 @@ def _design(mat: _Matrices, lmi: _ObserverLMI, cert: LureObserverCertificate,
         A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D)
 
 
-def _bisect(lmi: _ObserverLMI, tol: float
+def _bisect(lmi: _ObserverLMI, tol: float, max_gain: float | None = None
             ) -> tuple[float, LureObserverCertificate, dict[str, Any]]:
     """Largest certified rate: a geometric bracket (x4 up from 1, or /4 down), then bisection
-    (:func:`nscontrol.numerics.lmi.bisect_max`) to ``tol`` relative to the bracket."""
+    (:func:`nscontrol.numerics.lmi.bisect_max`) to ``tol`` relative to the bracket. With
+    ``max_gain``, a rate counts as feasible only when its gain has ``‖L‖₂ <= max_gain``."""
+    if max_gain is not None:
+        lmi = _GainLimited(lmi, max_gain)
     cert, gains, status = lmi.solve(0.0)
     if cert is None:
+        if max_gain is not None and status == "gain":
+            raise InfeasibleDesignError(
+                f"max_gain: even the rate-0 design needs ‖L‖₂ above {max_gain:.3g}; pass a "
+                f"larger max_gain, or max_gain=None for no bound", status="gain_limit")
         raise InfeasibleDesignError(
             f"{lmi.variant} Lur'e observer: LMIs infeasible even at decay rate 0 (solver "
             f"status: {status}); try the extended variant, a larger kappa, or other outputs",
@@ -662,6 +686,20 @@ def _bisect(lmi: _ObserverLMI, tol: float
 
     found = bisect_max(attempt, lo, hi, tol=tol * lo)
     return found.value, *found.result
+
+
+class _GainLimited:
+    """An observer LMI whose solutions with ``‖L‖₂ > max_gain`` count as infeasible (the
+    gain grows with the rate, so the largest such rate is found by the same bisection)."""
+
+    def __init__(self, lmi: _ObserverLMI, max_gain: float) -> None:
+        self.lmi, self.max_gain, self.variant = lmi, max_gain, lmi.variant
+
+    def solve(self, alpha: float) -> tuple[LureObserverCertificate | None, dict[str, Any], str]:
+        cert, gains, status = self.lmi.solve(alpha)
+        if cert is not None and float(np.linalg.norm(gains["L"], 2)) > self.max_gain:
+            return None, {}, "gain"
+        return cert, gains, status
 
 
 def lure_observer_lmi(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, *,
@@ -750,7 +788,8 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
                             D: ArrayLike | None = None, variant: Variant = "extended",
                             kappa: float | None = None, eps: float | None = None,
                             eps_P: float | None = None, solver: str | None = None,
-                            tol: float = 1e-3, precheck: bool = True) -> LureObserverDesign:
+                            tol: float = 1e-3, precheck: bool = True,
+                            max_gain: float | None = None) -> LureObserverDesign:
     """Maximise the certified decay rate by bisection; the design at ``alpha_max``.
 
     Parameters
@@ -759,6 +798,9 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
         As in :func:`lure_observer_lmi`.
     tol : float
         Relative width of the final bracket (``hi - lo <= tol · lo``).
+    max_gain : float, optional
+        Count a rate as reached only when its output-injection gain has
+        ``‖L‖₂ <= max_gain`` (the gain grows with the rate); default: no bound.
 
     Returns
     -------
@@ -794,9 +836,8 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
 
     References
     ----------
-    Spec ``ch08-lure-observer`` §2.3 (bisection on ``α``); SICONOS D5.3, ch. 8;
-    S. Boyd et al., *Linear Matrix Inequalities in System and Control Theory*, SIAM 1994,
-    §5.1 (decay rate).
+    SICONOS D5.3, ch. 8; S. Boyd et al., *Linear Matrix Inequalities in System and Control
+    Theory*, SIAM 1994, §5.1 (decay rate).
 
     Examples
     --------
@@ -813,7 +854,8 @@ def max_observer_decay_rate(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLi
     if check_bool("precheck", precheck):
         _raise_structural(mat, variant)
     lmi = _ObserverLMI(mat, variant, kappa_v, eps_v, eps_P_v, solver)
-    alpha_max, cert, gains = _bisect(lmi, tol)
+    limit = None if max_gain is None else check_positive("max_gain", max_gain)
+    alpha_max, cert, gains = _bisect(lmi, tol, limit)
     return _design(mat, lmi, cert, gains, alpha_max, alpha_max)
 
 
@@ -864,8 +906,8 @@ def observer_from_gains(A: ArrayLike, G: ArrayLike, H: ArrayLike, C: ArrayLike, 
 
     References
     ----------
-    Spec ``ch08-lure-observer`` §2.2, §2.5 and §5.1 (the Siconos ObserverLCS example,
-    Brogliato, Acary, Pérignon 2008); B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8), 2009.
+    The Siconos ObserverLCS example (B. Brogliato, V. Acary, O. Pérignon, 2008);
+    B. Brogliato, W.P.M.H. Heemels, IEEE TAC 54(8), 2009.
 
     Examples
     --------
@@ -939,7 +981,9 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
                          alpha: float | Literal["max"] = "max", alpha_fraction: float = 0.5,
                          kappa: float | None = None, eps: float | None = None,
                          eps_P: float | None = None, solver: str | None = None,
-                         tol: float = 1e-3, precheck: bool = True) -> LureObserverDesign:
+                         tol: float = 1e-3, precheck: bool = True,
+                         max_gain: float | Literal["auto"] | None = "auto"
+                         ) -> LureObserverDesign:
     """Design a passivity-based observer for a Lur'e plant with a maximal monotone law.
 
     Parameters
@@ -957,14 +1001,20 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
         Output injection ``K`` into the set-valued map, or ``K = 0``.
     alpha : float or "max"
         Required decay rate; ``"max"`` bisects for the largest certified rate ``alpha_max``
-        and designs at ``alpha_fraction * alpha_max`` (bisection drives ``P`` towards
-        singularity; a fraction keeps margins comfortable).
+        whose gain stays within ``max_gain`` and designs at ``alpha_fraction * alpha_max``
+        (bisection drives ``P`` towards singularity; a fraction keeps margins comfortable).
     alpha_fraction : float in (0, 1]
         See ``alpha``.
     kappa : float, optional
         Bound on ``||P L||_2`` (without it the extended observer's rate may be unbounded).
     eps, eps_P, solver, tol, precheck
         As in :func:`lure_observer_lmi` and :func:`max_observer_decay_rate`.
+    max_gain : float, "auto" or None
+        Bound on ``‖L‖₂`` while ``alpha="max"`` searches the rate. ``"auto"`` (default):
+        ``GAIN_MULTIPLE · max(1, ‖A‖₂)`` (``GAIN_MULTIPLE = 25``) when no ``kappa`` is given,
+        none otherwise; ``None``: no bound (the extended observer's rate is then limited only
+        by the cap ``1e4``, with gains to match). A design at a given ``alpha`` whose
+        ``‖L‖₂`` exceeds the bound warns.
 
     Returns
     -------
@@ -1016,10 +1066,13 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
                          "gives no convergence guarantee: pass e.g. 0.5")
     kwargs: dict[str, Any] = {"D": mat.D, "variant": variant, "kappa": kappa, "eps": eps,
                               "eps_P": eps_P, "solver": solver, "precheck": precheck}
+    rule = GAIN_MULTIPLE * max(1.0, float(np.linalg.norm(mat.A, 2)))
+    limit = _gain_bound(max_gain, rule, kappa)
     if isinstance(alpha, str):
         if alpha != "max":
             raise ModelError(f"alpha: expected a rate >= 0 or 'max', got {alpha!r}")
-        best = max_observer_decay_rate(mat.A, mat.G, mat.H, mat.C, tol=tol, **kwargs)
+        best = max_observer_decay_rate(mat.A, mat.G, mat.H, mat.C, tol=tol, max_gain=limit,
+                                       **kwargs)
         design = lure_observer_lmi(mat.A, mat.G, mat.H, mat.C, alpha=frac * best.alpha, **kwargs)
         alpha_max: float | None = best.alpha
     else:
@@ -1027,7 +1080,26 @@ def design_lure_observer(plant: LureSystem | Any, *, law: SetValuedLaw | None = 
         alpha_max = None
     from dataclasses import replace
 
-    return replace(design, alpha_max=alpha_max)
+    design = replace(design, alpha_max=alpha_max, gain_limit=limit)
+    gain = float(np.linalg.norm(design.L, 2))
+    if limit is not None and gain > limit:   # a given alpha beyond the rule's bound
+        from ..errors import NscontrolWarning
+
+        warnings.warn(f"L: ‖L‖₂ = {gain:.3g} exceeds {GAIN_MULTIPLE:g}·max(1, ‖A‖₂) = "
+                      f"{rule:.3g}: the observer amplifies measurement noise as much; pass a "
+                      f"smaller alpha, a kappa, or alpha='max' with max_gain='auto'",
+                      NscontrolWarning, stacklevel=2)
+    return design
+
+
+def _gain_bound(max_gain: Any, rule: float, kappa: Any) -> float | None:
+    """The bound on ``‖L‖₂`` of the rate search (see :func:`design_lure_observer`)."""
+    if isinstance(max_gain, str):
+        if max_gain != "auto":
+            raise ModelError(f"max_gain: expected a positive number, 'auto' or None, got "
+                             f"{max_gain!r}")
+        return rule if kappa is None else None
+    return None if max_gain is None else check_positive("max_gain", max_gain)
 
 
 # -- closed loop ---------------------------------------------------------------------------
@@ -1145,8 +1217,8 @@ def loop_transformed_lure_system(A: ArrayLike, G: ArrayLike, H: ArrayLike, law: 
 
     References
     ----------
-    Spec ``ch08-lure-observer`` §2.6 and example 5.7; A. Doris et al., IEEE TCST 16(6), 2008
-    (rotor with non-monotone friction); chapter 7 spec for ``sigma_tan``.
+    A. Doris et al., IEEE TCST 16(6), 2008 (rotor with non-monotone friction); chapter 7's
+    friction model for ``sigma_tan`` (docs/ch07.md).
 
     Examples
     --------
@@ -1222,7 +1294,7 @@ def lure_from_statespace(ss: Any, law: SetValuedLaw, *, u: InputSignal = None,
 
     References
     ----------
-    Spec ``ch08-lure-observer`` §1 (system class); python-control ``StateSpace``
+    SICONOS D5.3, ch. 8 (the system class); python-control ``StateSpace``
     (R. M. Murray et al., python-control documentation).
 
     Examples

@@ -74,7 +74,7 @@ class ImpactingBodies:
 
     Examples
     --------
-    The worked example of the spec (§6): masses 1 and 2 joined by ``k12 = 6``, mass 1 tied to
+    A worked example: masses 1 and 2 joined by ``k12 = 6``, mass 1 tied to
     the origin by ``k11 = 4``, mass 3 tied by ``k33 = 4``:
 
     >>> plant = ImpactingBodies.from_springs([1.0, 1.0], [1.0], {(0, 0): 4.0, (0, 1): 6.0},
