@@ -137,3 +137,22 @@ def test_missing_pandas_names_the_extra(monkeypatch):
     traj = Trajectory(t=np.array([0.0, 1.0]), x=np.zeros((2, 1)))
     with pytest.raises(ImportError, match=r"nscontrol\[dataframe\]"):
         traj.to_pandas()
+
+
+def test_state_names_of_a_state_space_carry_through_the_observer_loop():
+    control = pytest.importorskip("control")
+    from nscontrol.laws.set_valued import Relay
+    from nscontrol.systems.lure import LureSystem
+
+    A, BB, CC = [[0, 1], [-1, -0.1]], [[0, 0], [1, 1]], [[0, 1], [1, 0]]
+    named = control.ss(A, BB, CC, 0, states=["pos", "vel"])
+    plant = LureSystem(named, Relay(1.0))
+    assert plant.state_names == ("pos", "vel")
+    from nscontrol.design import design_lure_observer
+
+    d = design_lure_observer(named, law=Relay(1.0), variant="basic", tol=1e-2)
+    assert d.closed_loop(plant).state_names == ("pos", "vel", "pos_hat", "vel_hat")
+    # python-control's default labels x[0], x[1] are no names: the loop numbers them
+    bare = LureSystem(control.ss(A, BB, CC, 0), Relay(1.0))
+    assert bare.state_names == ()
+    assert d.closed_loop(bare).state_names == ("x1", "x2", "xhat1", "xhat2")

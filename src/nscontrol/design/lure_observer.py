@@ -1124,11 +1124,11 @@ def _observer_block(design: LureObserverDesign, plant: LureSystem) -> LinearObse
     mat, law = _plant_matrices(plant)
     _check_same_plant(design, mat)
     n = mat.n
-    names = tuple(plant.state_names) or tuple(f"x{i}" for i in range(n))
+    names = (tuple(f"{s}_hat" for s in plant.state_names) if plant.state_names
+             else tuple(f"xhat{i + 1}" for i in range(n)))
     B = plant.B if getattr(plant, "B", None) is not None else None
     return LinearObserver(design.A_L, design.L, B=B, law=law, G=mat.G,
-                          H=mat.H - design.K @ mat.C, K=design.K, D=mat.D,
-                          names=tuple(f"{s}_hat" for s in names))
+                          H=mat.H - design.K @ mat.C, K=design.K, D=mat.D, names=names)
 
 
 def _observer_system(design: LureObserverDesign, plant: LureSystem, y: InputFunction

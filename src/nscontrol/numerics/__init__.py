@@ -40,6 +40,7 @@ _EXPORTS: dict[str, str] = {
     # statespace.py
     "StateSpaceMatrices": "statespace", "is_state_space": "statespace",
     "state_space_matrices": "statespace", "state_matrix": "statespace",
+    "state_space_names": "statespace",
     # differences.py
     "central_difference_gradient": "differences", "central_difference_jacobian": "differences",
     # saltation.py

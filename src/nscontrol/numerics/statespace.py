@@ -16,7 +16,8 @@ import numpy as np
 from .._validation import FloatArray
 from ..errors import DimensionError, ModelError
 
-__all__ = ["StateSpaceMatrices", "is_state_space", "state_space_matrices", "state_matrix"]
+__all__ = ["StateSpaceMatrices", "is_state_space", "state_space_matrices", "state_matrix",
+           "state_space_names"]
 
 
 class StateSpaceMatrices(NamedTuple):
@@ -145,3 +146,25 @@ def state_matrix(name: str, value: Any) -> Any:
         ``A`` of a state-space model; anything else unchanged.
     """
     return state_space_matrices(value, name).A if is_state_space(value) else value
+
+
+def state_space_names(ss: Any) -> tuple[str, ...]:
+    """The state names a state-space model carries (python-control's ``state_labels``), or
+    ``()`` when it has none of its own (python-control's defaults ``x[0]``, ``x[1]``, ...).
+
+    Parameters
+    ----------
+    ss
+        A state-space model.
+
+    Examples
+    --------
+    >>> class SS:
+    ...     state_labels = ["pos", "vel"]
+    >>> state_space_names(SS())
+    ('pos', 'vel')
+    """
+    labels = tuple(str(s) for s in (getattr(ss, "state_labels", None) or ()))
+    if all(label == f"x[{i}]" for i, label in enumerate(labels)):
+        return ()
+    return labels

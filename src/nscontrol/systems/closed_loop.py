@@ -226,15 +226,19 @@ class ClosedLoop:
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        """The plant's state names, then the stacked blocks' (``xo1``..., ``xc1``...; none if
-        the plant has none)."""
+        """The plant's state names (``x1``... when it has none), then the stacked blocks'
+        (the observer's own names or ``xhat1``..., the controller's ``xc1``...); a loop whose
+        blocks run as code beside the plant has the plant's."""
         names = tuple(getattr(self._plant_model, "state_names", ()))
-        if self._composition == "blocks" or not names:
+        if self._composition == "blocks":
             return names
         obs, ctrl = self.observer, self.controller
+        if not names and (obs is not None and obs.n_states or ctrl is not None
+                          and ctrl.n_states):
+            names = tuple(f"x{i + 1}" for i in range(int(self._plant_model.n_states)))
         if obs is not None:
             own = tuple(getattr(obs, "names", ()) or ())
-            names += own if own else tuple(f"xo{i + 1}" for i in range(obs.n_states))
+            names += own if own else tuple(f"xhat{i + 1}" for i in range(obs.n_states))
         if ctrl is not None:
             names += tuple(f"xc{i + 1}" for i in range(ctrl.n_states))
         return names

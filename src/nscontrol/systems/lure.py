@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_matrix, as_square, as_vector
 from ..errors import DimensionError, ModelError
-from ..numerics.statespace import is_state_space, state_space_matrices
+from ..numerics.statespace import is_state_space, state_space_matrices, state_space_names
 from .protocols import InputSignal
 
 if TYPE_CHECKING:   # imported where used at run time
@@ -280,6 +280,8 @@ class LureSystem:
     def _split_state_space(self) -> None:
         """``LureSystem(ss, law)``: inputs ``[w; u]``, outputs ``[z; y]`` of a StateSpace."""
         A, Bs, Cs, Ds = state_space_matrices(self.A, "A")
+        if not self.state_names:
+            object.__setattr__(self, "state_names", state_space_names(self.A))
         law = self.law
         if law is None and getattr(self.G, "dim", None) is not None:
             law, given = self.G, [k for k in ("H",) if getattr(self, k) is not None]
