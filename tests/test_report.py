@@ -126,7 +126,7 @@ def test_section_opens_with_claim_verdict_and_key_figure(rich_report):
 
 def test_metrics_are_formatted_tables(rich_report):
     _, html, summary = rich_report
-    assert "500 values from 0.0 to 1" in html                  # a long array is summarised
+    assert "500 values from 0 to 1" in html                  # a long array is summarised
     assert "0.1235" in html and "0.123456789" not in html      # 4 significant digits
     assert "60 entries" in html                                # a big dict folds away
     assert re.search(r"<th>Alpha</th><td>0.1235</td>", html)   # nested dict: a sub-table
@@ -210,3 +210,14 @@ def test_report_page_loads_in_headless_chromium_with_every_image_decoded(rich_re
                          capture_output=True, text=True, timeout=120)
     title = re.search(r"<title>(.*?)</title>", dom.stdout)
     assert title and title.group(1) == "decoded 2 of 2", (title, dom.stderr[-2000:])
+
+
+def test_metrics_appendix_has_no_raw_python_text():
+    from nscontrol.report import _value_html
+
+    text = _value_html({None: float("nan"), "gains": [[1.0, 2.0], [3.0, 4.0]],
+                        "rate": float("inf"), "zero": 0.0})
+    for raw in (">nan<", ">None<", ">inf<", "0.0<"):
+        assert raw not in text
+    assert "not computed" in text and "(default)" in text and "2 × 2 matrix" in text
+    assert "∞" in text

@@ -251,6 +251,8 @@ def plain_name(name: str) -> str:
 def _key_text(key: Any) -> str:
     """A metrics key as a row heading: numbers (e.g. the frequencies of a sweep) formatted,
     identifiers in words."""
+    if key is None:     # a dict keyed by None: the entry of "no value of the parameter"
+        return "(default)"
     try:
         return format_value(float(key))
     except (TypeError, ValueError):
@@ -272,7 +274,8 @@ def _value_html(value: Any, depth: int = 0) -> str:
     if arr is not None and arr.ndim == 2 and arr.shape[0] <= 6 and arr.shape[1] <= 6:
         grid = "".join("<tr>" + "".join(f"<td class=num>{esc(format_value(v))}</td>"
                                         for v in row) + "</tr>" for row in arr)
-        return f"<table class=sub>{grid}</table>"
+        return (f"<table class=sub><caption>{arr.shape[0]} × {arr.shape[1]} matrix"
+                f"</caption>{grid}</table>")
     if isinstance(value, (list, tuple)) and arr is None and len(value) <= _INLINE_ENTRIES \
             and all(isinstance(v, dict) for v in value):
         return "".join(_value_html(v, depth + 1) for v in value)

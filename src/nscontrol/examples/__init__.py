@@ -200,7 +200,9 @@ class Example:
 def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
     """A verdict formatter quoting checks: each ``(key, phrase)`` finds the first check whose
     key equals ``key`` or whose name contains it, and says ``"phrase <measured> (bound <op>
-    <threshold>)"``; the count of passing checks closes the line.
+    <threshold>)"`` — or, when the phrase is a sentence with ``{value}`` (and ``{bound}``)
+    placeholders, the sentence with the figures in place; the count of passing checks closes
+    the line.
 
     Parameters
     ----------
@@ -213,6 +215,9 @@ def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
     >>> res = ExampleResult("x", checks=[check("impact time error [s]", 3e-15, 1e-12)])
     >>> verdict_from(("impact time", "impact times exact to"))(res)
     'impact times exact to 3e-15 s (bound ≤ 1e-12); 1 of 1 checks pass'
+    >>> verdict_from(("impact time", "the impacts fall within {value} s of the closed "
+    ...               "form"))(res)
+    'the impacts fall within 3e-15 s of the closed form; 1 of 1 checks pass'
     """
 
     def verdict(result: ExampleResult) -> str:
@@ -222,6 +227,10 @@ def verdict_from(*parts: tuple[str, str]) -> Callable[[ExampleResult], str]:
             if not found:
                 continue
             c = found[0]
+            if "{value}" in phrase:
+                said.append(phrase.format(value=format_value(c.value),
+                                          bound=format_value(c.threshold)))
+                continue
             unit = " s" if "[s]" in c.name else ""
             said.append(f"{phrase} {format_value(c.value)}{unit} "
                         f"(bound {_OP_TEXT.get(c.op, c.op)} {format_value(c.threshold)})")
@@ -254,8 +263,12 @@ def format_value(value: Any) -> str:
         return f"{int(value):,}".replace(",", " ")
     if isinstance(value, (float, np.floating)):
         v = float(value)
-        if v == 0.0 or not np.isfinite(v):
-            return str(v)
+        if np.isnan(v):
+            return "not computed"
+        if np.isinf(v):
+            return "∞" if v > 0 else "−∞"
+        if v == 0.0:
+            return "0"
         return f"{v:.4g}" if 1e-3 <= abs(v) < 1e5 else f"{v:.3g}"
     if isinstance(value, (complex, np.complexfloating)):
         return f"{format_value(value.real)} {'+' if value.imag >= 0 else '−'} " \

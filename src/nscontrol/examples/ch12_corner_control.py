@@ -602,9 +602,13 @@ EXAMPLES = [Example(
           "amplitude: an unstable cycle gets a stable neighbour (multiplier 0.5), a stable "
           "one is made more or less stable; with the corner inside the cycle the oscillation "
           "is suppressed.",
-    verdict=verdict_from(("check_4", "multiplier error within"),
-                         ("check_5", "cycle offset ratio within"),
-                         ("check_9", "corner sweep q error")),
+    verdict=verdict_from(("check_4", "the wedge gives the controlled cycle the multiplier "
+                                     "it was designed for, the largest error being {value} of "
+                                     "its leading-order bound 3|z_d|"),
+                         ("check_5", "the cycle's offset from the corner is the predicted one "
+                                     "to a relative {value}"),
+                         ("check_9", "moving the corner along the cycle changes the offset as "
+                                     "the theory's factor q says, to a relative {value}")),
     key_figure="ch12_phase_portraits",
     captions={
         "ch12_phase_portraits": "Left: example A near the corner; the unstable cycle r = 1 "
