@@ -633,8 +633,12 @@ EXAMPLES = [Example(
           "that dives slightly below the ground makes the impacts accumulate in finite time; "
           "the Lyapunov function measured at the start of each transition does not grow "
           "from cycle to cycle (weak stability).",
-    verdict=verdict_from(("check_6", "weak stability across cycles"),
-                         ("check_12", "smallest gap")),
+    verdict=verdict_from(("check_6", "the arm repeats its free-motion, landing and sliding "
+                                     "cycle with a Lyapunov function that never grows from one "
+                                     "cycle to the next and reaches the ground every cycle "
+                                     "(weak stability: {value})"),
+                         ("check_12", "the smallest gap is {value} m, a landing's penetration "
+                                      "of at most h·|v⁻|")),
     key_figure="ch03_height",
     captions={
         "ch03_path": "End-effector path in the (x, y) plane: the transient from the start "

@@ -627,8 +627,11 @@ EXAMPLES = [Example(
           "Hessian — the energy never increases and the posture is stable whatever contacts "
           "open, close or impact; a too soft joint or a centre of mass outside the support "
           "breaks it.",
-    verdict=verdict_from(("check_7b", "k_p = 120 fails the second-order test with eigenvalue"),
-                         ("check_8c", "the pushed robot returns within")),
+    verdict=verdict_from(("check_7b", "the strict-minimum certificate rejects the gain "
+                                      "k_p = 120, whose reduced Hessian has the negative "
+                                      "eigenvalue {value}"),
+                         ("check_8c", "the robot pushed off its posture returns to within "
+                                      "{value} of it after 8 s")),
     key_figure="ch04_robot",
     captions={
         "ch04_robot": "A1: the robot pushed forward (θ̇0 = −1 rad/s) at five instants; the "

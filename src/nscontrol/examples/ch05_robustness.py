@@ -784,15 +784,20 @@ EXAMPLES = [Example(
           "as predicted, and a ground below the deepest dive is never reached; a biased or "
           "miscalibrated force sensor shifts the contact force as the force loop predicts, "
           "and a sensor that over-reads by more than 1/K_f destabilises it.",
-    verdict=verdict_from(("nominal_stable", "nominal point weakly stable"),
-                         ("stable_below_critical_scale", "unstable points below the "
-                                                         "critical scale"),
-                         ("fails_above_critical_scale", "points above it completing a "
-                                                        "cycle"),
-                         ("failure_is_hovering", "their hover gap"),
-                         ("step_V_floor_h2", "V floor off h² (slope error)"),
-                         ("ground_force_offset", "ground-offset force, relative error"),
-                         ("sensor_scale_ratio", "sensor force ratio, relative error")),
+    verdict=verdict_from(("nominal_stable", "the nominal tracking loop is weakly stable "
+                                            "({value})"),
+                         ("stable_below_critical_scale", "below the predicted critical model "
+                                                         "scale {value} points are not"),
+                         ("fails_above_critical_scale", "above it {value} points complete a "
+                                                        "cycle, because the arm hovers "
+                                                        "instead of sliding"),
+                         ("failure_is_hovering", "at least {value} m above the ground"),
+                         ("step_V_floor_h2", "the step size sets V's floor as h², slope off "
+                                             "2 by {value}"),
+                         ("ground_force_offset", "a shifted ground moves the contact force as "
+                                                 "predicted, to a relative {value}"),
+                         ("sensor_scale_ratio", "and a miscalibrated force sensor to "
+                                                "{value}")),
     key_figure="ch05_map_restitution_model",
     captions={
         "ch05_map_restitution_model":

@@ -427,9 +427,11 @@ EXAMPLES = [Example(
           "that a model-based friction compensation uses. With exact compensation and a fast "
           "enough observer the set-point is reached exactly; undercompensation stops the link "
           "inside a predicted equilibrium set; overcompensation makes it hunt in a limit cycle.",
-    verdict=verdict_from(("check_3a", "exact compensation error"),
+    verdict=verdict_from(("check_3a", "with exact friction compensation the arm reaches its "
+                                      "set-point to {value} rad from every random start"),
                          ("check_6a_kappa_0.5",
-                          "under-compensated final error over c_max")),
+                          "with half the friction compensated it sticks at {value} of the "
+                          "predicted equilibrium half-width")),
     key_figure="ch07_kappa_diagram",
     captions={
         "ch07_set_point": "Angle and position error after a 1 rad set-point step: exact "

@@ -339,8 +339,10 @@ EXAMPLES = [Example(
           "a period doubling when the surface slope k_s drops below a boundary that a "
           "perturbation expansion in the sampling period predicts (1/δ at leading order, "
           "corrected at first and third order), as a brute-force diagram confirms.",
-    verdict=verdict_from(("check_6", "brute-force flip off the bisected one by"),
-                         ("check_6b", "first-order prediction error")),
+    verdict=verdict_from(("check_6", "a brute-force bifurcation diagram finds the flip of the "
+                                     "one-period orbit within {value} of the bisected gain k_s"),
+                         ("check_6b", "the first-order theory in the sampling period predicts "
+                                      "it to a relative {value}")),
     key_figure="ch10_duty_diagram",
     captions={
         "ch10_duty_diagram": "Duty ratio of 64 recorded periods after 40 000 against k_s "

@@ -583,8 +583,9 @@ EXAMPLES = [Example(
           "function certifies convergence (the uncontrolled oscillator has one exactly when "
           "its damping exceeds √6 − 1).",
     verdict=verdict_from(("check_01_threshold_bisection",
-                          "boundary √6 − 1 found to relative error"),
-                         ("check_12_attenuation", "resonance attenuated by a factor")),
+                          "the convergence boundary c* = √6 − 1 is found to a relative {value}"),
+                         ("check_12_attenuation", "the LMI-designed feedback attenuates the "
+                                                  "resonance by a factor {value}")),
     key_figure="ch11_trajectories_converge",
     captions={
         "ch11_trajectories_converge": "The closed loop under w = sin(2.9 t) from four "

@@ -201,8 +201,10 @@ EXAMPLES = [Example(
           "closed form, in a time linear in the number of masses, and linear flows are "
           "propagated exactly (matrix exponential) with their level crossings located to "
           "rounding error. These are the two building blocks every integrator relies on.",
-    verdict=verdict_from(("stack LCP impulses", "impulse error"),
-                         ("exact propagation agrees", "difference to DOP853")),
+    verdict=verdict_from(("stack LCP impulses", "the LCP gives a stack's impulses to a "
+                                                "relative {value} of the closed form"),
+                         ("exact propagation agrees", "exact linear propagation agrees with "
+                                                      "DOP853 to {value}")),
     captions={
         "foundation_lcp_stack": "Left: time per LCP solve against the number of masses (a "
         "slope of one on log-log axes is linear cost). Right: the largest relative error of "

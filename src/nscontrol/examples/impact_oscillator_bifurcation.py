@@ -216,8 +216,8 @@ EXAMPLES = [Example(
           "locates both to a relative error of 1e-6, and a brute-force simulation sweep shows "
           "them within its grid spacing.",
     verdict=verdict_from(("continuation locates the grazing (non-impacting side)",
-                          "grazing located to relative error"),
-                         ("continuation locates the flip", "flip to")),
+                          "continuation locates the grazing to a relative {value}"),
+                         ("continuation locates the flip", "and the flip to {value}")),
     key_figure="impact_oscillator_bifurcation",
     captions={
         "impact_oscillator_bifurcation": "Bifurcation diagram against the forcing amplitude F: "
