@@ -787,7 +787,7 @@ EXAMPLES = [Example(
     verdict=verdict_from(("nominal_stable", "the nominal tracking loop is weakly stable "
                                             "({value})"),
                          ("stable_below_critical_scale", "below the predicted critical model "
-                                                         "scale {value} points are not"),
+                                                         "scale, {value} points lose it"),
                          ("fails_above_critical_scale", "above it {value} points complete a "
                                                         "cycle, because the arm hovers "
                                                         "instead of sliding"),
