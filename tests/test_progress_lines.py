@@ -3,6 +3,7 @@ cursor moves, a bounded number of them."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -20,8 +21,9 @@ for i in P.progress_iter(range(1000), desc="sweep"):
 
 
 def test_piped_progress_is_plain_lines() -> None:
+    env = {**os.environ, "NUMBA_DISABLE_JIT": "1"}     # no first-compile notice here
     out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True,
-                         check=True, timeout=120)
+                         check=True, timeout=120, env=env)
     err = out.stderr
     assert "\r" not in err and "\x1b" not in err
     lines = err.splitlines()
@@ -31,3 +33,22 @@ def test_piped_progress_is_plain_lines() -> None:
     assert sum(line.startswith("simulate") for line in lines) <= 4 * 11
     assert 1 <= sum(line.startswith("sweep") for line in lines) <= 11
     assert any(line.startswith("simulate t=1: 100%") for line in lines)
+
+
+NOTICE = """
+import nscontrol._progress as P
+bars = [P.TimeProgress(0.0, 1.0, desc="simulate") for _ in range(2)]
+print(repr(bars[0]._desc), repr(bars[1]._desc))
+"""
+
+
+def test_the_first_run_that_compiles_says_so_once(tmp_path):
+    # a fresh NUMBA_CACHE_DIR holds no kernel: the first bar of the process announces the
+    # compile on stderr and in its own text; the second is plain
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    out = subprocess.run([sys.executable, "-c", NOTICE], capture_output=True, text=True,
+                         check=True, timeout=120, env=env)
+    assert out.stderr.count("nscontrol: compiling numerical kernels") == 1
+    assert out.stdout.split() == ["'simulate", "(compiling", "kernels,", "first", "run",
+                                  "only)'", "'simulate'"]

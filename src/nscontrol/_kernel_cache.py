@@ -24,10 +24,12 @@ import re
 from collections.abc import Iterable
 from pathlib import Path
 
-__all__ = ["KERNEL_GLOBS", "kernel_modules", "reached_kernels", "dependency_digests", "refresh"]
+__all__ = ["KERNEL_GLOBS", "kernel_modules", "reached_kernels", "dependency_digests", "refresh",
+           "cache_folder"]
 
-#: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder.
-KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py")
+#: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder, at any
+#: depth (a method's package keeps its kernels inside: ``simulate/<method>/_x_kernels.py``).
+KERNEL_GLOBS = ("**/_*_kernels.py", "**/_*_kernel.py")
 
 #: The stamp written beside numba's index of each kernel module.
 STAMP_SUFFIX = ".nscontrol-deps"
@@ -137,7 +139,7 @@ def refresh(root: Path | None = None) -> list[str]:
             for path in stale:
                 path.unlink(missing_ok=True)
             if stale:
-                cleared.append(f"{module.parent.name}.{module.stem}")
+                cleared.append(".".join(module.relative_to(root).with_suffix("").parts))
             folder.mkdir(parents=True, exist_ok=True)    # numba's own folder, made ahead
             _write_atomically(stamp, digest)
         except OSError:                  # a read-only install: numba caches elsewhere

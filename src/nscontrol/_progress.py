@@ -33,6 +33,10 @@ class TimeProgress:
         if check_bool("progress", enable, allow_none=True) is not False:
             self._start = time.perf_counter()
             self._due = self._start + delay
+            if _first_compile_expected():   # say why the bar will stand still, and show it
+                announce_compilation()
+                self._desc = f"{desc} (compiling kernels, first run only)"
+                self._open()
 
     def _open(self) -> None:
         if not _is_terminal(sys.stderr):
@@ -186,26 +190,39 @@ def _labelled(bar: Any, desc: str, label: Any) -> Any:
 
 
 _announced = False
+#: Whether this process has yet to compile kernels (None: not looked yet).
+_compile_pending: bool | None = None
+
+
+def _first_compile_expected() -> bool:
+    """True once per process, for the first run while some kernel module has no cache."""
+    global _compile_pending
+    if _compile_pending is None:
+        _compile_pending = bool(uncompiled_kernel_modules())
+    expected, _compile_pending = _compile_pending, False
+    return expected
 
 
 def uncompiled_kernel_modules() -> list[str]:
     """The kernel modules with no numba cache index yet (``[]`` once compiled).
 
-    Looks at files only (nothing is imported): a module ``m.py`` is compiled when its
-    ``__pycache__`` holds an ``m.*.nbi`` index, or when numba caches elsewhere
-    (``NUMBA_CACHE_DIR``), which this check cannot see and so assumes done.
+    Looks at files only (nothing is imported): a module ``m.py`` is compiled when numba's
+    cache folder for it (its ``__pycache__``, or the folder numba derives under
+    ``NUMBA_CACHE_DIR``) holds an ``m.*.nbi`` index.
     """
     import os
     from pathlib import Path
 
-    if os.environ.get("NUMBA_CACHE_DIR") or os.environ.get("NUMBA_DISABLE_JIT"):
+    from ._kernel_cache import cache_folder
+
+    if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
         return []
     root = Path(__file__).resolve().parent
     missing = []
     for pattern in KERNEL_GLOBS:
         for module in sorted(root.glob(pattern)):
-            if not any((module.parent / "__pycache__").glob(f"{module.stem}.*.nbi")):
-                missing.append(f"{module.parent.name}.{module.stem}")
+            if not any(cache_folder(module).glob(f"{module.stem}.*.nbi")):
+                missing.append(".".join(module.relative_to(root).with_suffix("").parts))
     return missing
 
 
@@ -213,10 +230,14 @@ def announce_compilation(stream: Any = None) -> bool:
     """Say once per process, on stderr, that the kernels are about to be compiled (first run
     of an install only). Returns whether the message was printed."""
     global _announced
-    if _announced or not uncompiled_kernel_modules():
+    if _announced:
+        return False
+    missing = uncompiled_kernel_modules()
+    if not missing:
         return False
     _announced = True
-    print("nscontrol: compiling the numerical kernels (numba) - this happens once per install "
-          "and takes tens of seconds;\n           later runs load them from the cache "
-          "(`nscontrol warmup` does it ahead).", file=stream or sys.stderr, flush=True)
+    print(f"nscontrol: compiling numerical kernels (numba; {len(missing)} modules not yet in "
+          f"the cache) - a run compiles those it uses, typically 10-30 s, once per install;\n"
+          f"           later runs load them from the cache (`nscontrol warmup` compiles all "
+          f"ahead, about 2 min).", file=stream or sys.stderr, flush=True)
     return True

@@ -44,8 +44,8 @@ def test_first_run_notice_sees_every_kernel_module(tmp_path, monkeypatch):
     kernel files: its patterns must find every one of them."""
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
-    found = {f"{p.parent.name}.{p.stem}" for pattern in _progress.KERNEL_GLOBS
-             for p in ROOT.glob(pattern)}
+    found = {".".join(p.relative_to(ROOT).with_suffix("").parts)
+             for pattern in _progress.KERNEL_GLOBS for p in ROOT.glob(pattern)}
     assert found == _kernel_modules_on_disk()
 
 
@@ -93,3 +93,11 @@ def test_warmup_compiles_every_kernel_module():
         allowed = set(COMPILES[what]) | {name[q] for p in reached if name[p] in COMPILES[what]
                                          for q in reached[p]}
         assert set(gained) <= allowed, (what, gained)
+
+
+def test_a_fresh_numba_cache_dir_counts_every_module_uncompiled(tmp_path, monkeypatch):
+    """A new ``NUMBA_CACHE_DIR`` pays the compile again: the notice must see it (it assumed
+    such a cache was complete)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
+    assert set(_progress.uncompiled_kernel_modules()) == _kernel_modules_on_disk()
