@@ -20,7 +20,7 @@ def test_example_json_has_every_check_and_passes(tmp_path):
     result = CliRunner().invoke(main, ["run", "ch08-lure-observer", "--json",
                                        "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
-    # stdout only: a first run's "compiling the numerical kernels" notice goes to stderr
+    # stdout only: a first run's "compiling numerical kernels" notice goes to stderr
     data = json.loads(result.stdout)
     # keys "check_<kind>_<what>": every kind of the acceptance list 1-9 is there
     kinds = {c["key"].split("_")[1] for c in data["checks"]}
