@@ -99,6 +99,16 @@ def progress_iter(iterable: Any, *, total: int | None = None, desc: str = "",
     return _labelled(bar, desc, label)
 
 
+def count_bar(total: int, *, desc: str, delay: float) -> Any:
+    """A bar counting ``total`` items (``update(n)``, ``close()``): tqdm on a terminal, plain
+    lines (:class:`LineBar`) in a log, shown after ``delay`` seconds."""
+    if not _is_terminal(sys.stderr):
+        return LineBar(total=total, desc=desc, delay=delay)
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, file=sys.stderr, leave=False, delay=delay)
+
+
 def _is_terminal(stream: Any) -> bool:
     try:
         return bool(stream.isatty())

@@ -1,5 +1,5 @@
 """The ``nscontrol`` command: ``list``, ``run``, ``report``, ``bench``, ``warmup``,
-``bifurcation``."""
+``bifurcation``, ``sweep``."""
 
 from __future__ import annotations
 
@@ -200,6 +200,61 @@ def bifurcation(example: str, param: str, scheduler: str | None, out: Path) -> N
     ax.figure.savefig(out / "bifurcation.png", dpi=110)
     click.echo(f"{len(bd.values)} values, {len(bd.errors)} failed; "
                f"wrote {out / 'bifurcation.h5'} and {out / 'bifurcation.png'}")
+
+
+class _ListingSweeps(click.Command):
+    """``sweep --help`` ends with the examples that offer sweeps and their parameters."""
+
+    def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        from .examples import all_examples
+        from .examples.sweeps import example_sweeps
+
+        rows = [(f"{ex.name} {name}", spec.label) for ex in all_examples()
+                for name, spec in example_sweeps(ex).items()]
+        with formatter.section("Sweepable parameters (EXAMPLE NAME: what it is)"):
+            formatter.write_dl(rows or [("(none)", "")])
+        formatter.write_paragraph()
+        formatter.write_text("e.g. nscontrol sweep ch07-friction-compensation "
+                             "--param kappa=0.3:1.5:13")
+
+
+@main.command(cls=_ListingSweeps)
+@click.argument("example")
+@click.option("--param", "param", required=True, metavar="NAME=START:STOP:N",
+              help="The parameter and its grid.")
+@click.option("--scheduler", default=None,
+              help="Dask scheduler address (default: local processes when it pays).")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out"),
+              show_default=True, help="Folder for the sweep's JSON and figure.")
+def sweep(example: str, param: str, scheduler: str | None, out: Path) -> None:
+    """Sweep one parameter of EXAMPLE over a grid (local processes or a Dask cluster); a
+    failed point is recorded and the others kept."""
+    from .analysis.bifurcation import parse_grid
+    from .errors import ModelError
+    from .examples import get_example
+    from .examples.sweeps import run_sweep
+    from .report import check_output_folder
+
+    try:
+        name, values = parse_grid(param)
+        ex = get_example(example)
+        check_output_folder(out, "--out")
+    except (KeyError, ValueError) as exc:
+        raise click.UsageError(str(exc.args[0])) from None
+    except ModelError as exc:
+        raise click.UsageError(str(exc)) from None
+    try:
+        json_path, png_path, res = run_sweep(ex, name, list(values), out=out,
+                                             executor=scheduler or "auto")
+    except ModelError as exc:
+        text = str(exc)
+        for arg in ("param", "executor"):
+            if text.startswith(f"{arg}:"):
+                text = ("--scheduler" if arg == "executor" else "--param") + text[len(arg):]
+        raise click.UsageError(text) from None
+    click.echo(f"{len(res.grid)} points, {len(res.failed)} failed; wrote {json_path} and "
+               f"{png_path}")
+    sys.exit(0 if res.ok else 1)
 
 
 def bench_dir() -> Path:

@@ -30,7 +30,6 @@ import pickle
 import re
 import shutil
 import signal
-import sys
 import tempfile
 import time
 import traceback
@@ -641,10 +640,9 @@ def _resolved(call: _Guarded, arg: tuple[int, Any]) -> Future:
 def _bar(total: int, progress: bool | None, desc: str) -> Any:
     if progress is False:
         return None
-    from tqdm.auto import tqdm
+    from ._progress import count_bar
 
-    return tqdm(total=total, desc=desc, file=sys.stderr, leave=False,
-                delay=0.0 if progress else 2.0)
+    return count_bar(total, desc=desc, delay=0.0 if progress else 2.0)
 
 
 @contextmanager

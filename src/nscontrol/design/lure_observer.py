@@ -635,13 +635,13 @@ def _design(mat: _Matrices, lmi: _ObserverLMI, cert: LureObserverCertificate,
         A=mat.A, G=mat.G, H=mat.H, C=mat.C, D=mat.D)
 
 
-def _bisect(lmi: _ObserverLMI, tol: float, max_gain: float | None = None
+def _bisect(problem: _ObserverLMI, tol: float, max_gain: float | None = None
             ) -> tuple[float, LureObserverCertificate, dict[str, Any]]:
     """Largest certified rate: a geometric bracket (x4 up from 1, or /4 down), then bisection
     (:func:`nscontrol.numerics.lmi.bisect_max`) to ``tol`` relative to the bracket. With
     ``max_gain``, a rate counts as feasible only when its gain has ``‖L‖₂ <= max_gain``."""
-    if max_gain is not None:
-        lmi = _GainLimited(lmi, max_gain)
+    lmi: _ObserverLMI | _GainLimited = (problem if max_gain is None
+                                        else _GainLimited(problem, max_gain))
     cert, gains, status = lmi.solve(0.0)
     if cert is None:
         if max_gain is not None and status == "gain":

@@ -18,8 +18,9 @@ import numpy as np
 
 from . import Check, Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
+from .sweeps import SweepSpec
 
-__all__ = ["REFERENCE", "reference_friction", "kappa_point", "EXAMPLES"]
+__all__ = ["REFERENCE", "reference_friction", "kappa_point", "SWEEPS", "EXAMPLES"]
 
 #: The reference example (our choice): inertia, friction, gains, observer, step, set-point.
 REFERENCE: dict[str, float] = {
@@ -78,6 +79,12 @@ def kappa_point(kappa: float) -> tuple[float, float, float]:
     run = _run(float(kappa), h=KAPPA_H, T=KAPPA_T)
     cyc = limit_cycle_summary(run.t, run.error, run.omega, window=4.0)
     return float(run.error[-1]), cyc["amplitude"], cyc["max_speed"]
+
+
+#: ``nscontrol sweep ch07-friction-compensation --param kappa=0.3:1.5:13``
+SWEEPS = {"kappa": SweepSpec(kappa_point, ("final error [rad]", "cycle amplitude [rad]",
+                                           "largest speed [rad/s]"),
+                             "compensated fraction κ of the friction model")}
 
 
 # -- the checks -------------------------------------------------------------------------------

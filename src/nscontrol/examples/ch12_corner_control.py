@@ -29,9 +29,11 @@ import numpy as np
 
 from . import Example, ExampleResult, check, verdict_from
 from ._figures import new_figure, save_figure
+from .sweeps import SweepSpec
 
 __all__ = ["EXAMPLES", "SIGMA", "OMEGA", "EPS", "example_a", "example_b", "design_a",
-           "design_b", "design_point", "DESIGN_TARGETS", "zdm_convergence",
+           "design_b", "design_point", "multiplier_point", "SWEEPS", "DESIGN_TARGETS",
+           "zdm_convergence",
            "sliding_cycles", "stabilisation", "suppression", "diagram", "fd_slope", "run"]
 
 SIGMA, OMEGA, EPS = 0.02, 1.0, 0.1
@@ -97,6 +99,28 @@ def design_point(target: tuple[str, float, float]) -> dict[str, float]:
     d = design_a(z_d, lam_d) if example == "A" else design_b(lam_d, z_d)
     return {"k": d.k, "mu_c": d.mu_c, "multiplier": d.verified.multiplier,
             "offset_ratio": d.verified.offset / d.predicted_section_offset}
+
+
+def multiplier_point(lam_d: float) -> tuple[float, float, float]:
+    """Van der Pol (example B) with a wedge designed for the multiplier ``lam_d`` at offset
+    ``±0.005`` (the side on which a controlled cycle crosses the wedge: ``+`` for targets
+    above the corner's threshold, ``−`` below, as in :data:`DESIGN_TARGETS`): ``(gain k,
+    measured multiplier, offset measured/predicted)`` (module level: ``nscontrol sweep``)."""
+    from ..errors import InfeasibleDesignError
+
+    try:
+        d = design_point(("B", float(lam_d), 0.005))
+    except InfeasibleDesignError as exc:
+        if "change the sign of target_offset" not in str(exc):
+            raise
+        d = design_point(("B", float(lam_d), -0.005))
+    return d["k"], d["multiplier"], d["offset_ratio"]
+
+
+#: ``nscontrol sweep ch12-corner-control --param lambda_d=0.1:0.9:9``
+SWEEPS = {"lambda_d": SweepSpec(multiplier_point, ("gain k", "measured multiplier",
+                                                   "offset ratio (measured/predicted)"),
+                                "designed multiplier λ_d of Van der Pol's cycle")}
 
 
 #: The designs of the convergence study: ``(example, λ_d, z_d)``.
