@@ -760,8 +760,10 @@ def design_corner_controller(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike
     half_angle : float
         The symmetric wedge's half-angle ``α`` in ``(0, π/2)``.
     allow_sliding : bool
-        Meet a target ``λ_d <= 0`` by the sliding design (``λ_new = 0``, the corner on the
-        controlled cycle at ``μ_c = z_d``) instead of refusing it.
+        Meet a target ``λ_d <= 0`` by the sliding design (``λ_new = 0``) instead of refusing
+        it: the controlled cycle is the plant's orbit of the corner, which returns to ``Σ_c``
+        at ``λ μ_c``, so the corner goes at ``μ_c = z_d/λ`` for the cycle to cross ``Σ_c`` at
+        ``z_d``.
 
     Returns
     -------
