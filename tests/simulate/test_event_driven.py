@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from nscontrol import closed_loop
 from nscontrol.errors import BudgetExceededError, NscontrolWarning, ZenoError
 from nscontrol.numerics.lti import Exosystem
-from nscontrol import closed_loop
 from nscontrol.simulate import simulate
 from nscontrol.systems.feedback import StateFeedback, StaticLaw
 from nscontrol.systems.hybrid import LinearHybridSystem

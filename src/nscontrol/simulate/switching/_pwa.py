@@ -398,10 +398,11 @@ class _PwaOdeStepper(SwitchingStepper):
 
         super().__init__(run)
         u = system.u if run.opts.u is None else run.opts.u
-        self.ufn = as_input_function("u", u, system.E.shape[1])
-        if self.ufn is None:   # this path is taken only for inputs given as functions of time
+        ufn = as_input_function("u", u, system.E.shape[1])
+        if ufn is None:   # this path is taken only for inputs given as functions of time
             raise ModelError("u: expected an input function of time for the DOP853 path, "
                              "got None")
+        self.ufn = ufn
         self.system, self.x = system, x0.copy()
         self.i = self.mode_at(self.x, self.t)
         if self.i < 0:
