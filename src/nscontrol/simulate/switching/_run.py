@@ -1,9 +1,11 @@
 """The shared part of the switching runners (:mod:`nscontrol.simulate.switching`): the typed
-options, the run state (recorder, events, sensitivity, budgets, Zeno guard), budgeted DOP853
-and the saltation matrix of a crossing.
+options, the run state (recorder, events, sensitivity, budgets, Zeno guard), the stepper base
+that :func:`~nscontrol.simulate.loop.drive` advances, budgeted DOP853 and the saltation matrix
+of a crossing.
 
-The runners (``_switching_pwa``, ``_switching_filippov``, ``_switching_pwm``) import from here
-and :mod:`~nscontrol.simulate.switching` dispatches to them: no module imports its importer.
+The runners (``_pwa``, ``_filippov``, ``_pwm``: steppers on :class:`SwitchingStepper`) import
+from here and :mod:`~nscontrol.simulate.switching` dispatches to them: no module imports its
+importer.
 """
 
 from __future__ import annotations
