@@ -196,7 +196,7 @@ def test_private_names_and_modules_of_another_subpackage_are_refused():
     assert "_fd_jacobian" in msg and "layer 3" in msg and "layer 4" in msg
     assert violations("from ..numerics._helpers import solve\n", "nscontrol.simulate.model_x")
     # allowed: private names within a subpackage, the base layer's modules, compiled kernels
-    assert not violations("from ._switching_pwa import _integrate\n",
+    assert not violations("from ._pwa import _integrate\n",
                           "nscontrol.simulate.switching")
     assert not violations("from .._validation import as_vector\n", "nscontrol.laws.model_x")
     assert not violations("from ..numerics._lcp_kernels import lemke_kernel\n",

@@ -25,6 +25,7 @@ from nscontrol.simulate.methods import (
     Switching,
 )
 from nscontrol.simulate.trajectory import Recorder
+from nscontrol.systems.feedback import StaticLaw
 from nscontrol.systems.lagrangian import LagrangianSystem
 
 G = 9.81
@@ -186,14 +187,22 @@ def test_keyboard_interrupt_keeps_the_run_so_far():
     assert info.value.trajectory.t[-1] == pytest.approx(0.3)
 
 
-def test_a_user_force_error_on_the_event_driven_path_keeps_the_run(ball):
-    def controller(t, q, v):      # a callable controller: the DOP853 path
-        if q[0] < 0.5:
+class _Saturating(StaticLaw):
+    """A law written in Python that fails once the ball is below 0.5."""
+
+    n_outputs, period = 1, None
+
+    def output(self, t, xc, m):
+        if m.x[0] < 0.5:
             raise ValueError("actuator saturated")
         return np.zeros(1)
 
+
+def test_a_user_force_error_on_the_event_driven_path_keeps_the_run(ball):
+    # a law written in Python: the DOP853 path
     with pytest.raises(ValueError) as info:
-        nsc.simulate(ball, [1.0, 0.0], (0.0, 2.0), controller=controller)
+        nsc.simulate(nsc.closed_loop(ball, _Saturating()), [1.0, 0.0], (0.0, 2.0),
+                     method="event_driven")
     assert info.value.trajectory.x[-1, 0] >= 0.5 - 1e-9 and len(info.value.trajectory.t) > 1
 
 

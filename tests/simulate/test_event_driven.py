@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+from nscontrol import closed_loop
 from nscontrol.errors import BudgetExceededError, NscontrolWarning, ZenoError
 from nscontrol.numerics.lti import Exosystem
 from nscontrol.simulate import simulate
+from nscontrol.systems.feedback import StateFeedback, StaticLaw
 from nscontrol.systems.hybrid import LinearHybridSystem
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
@@ -372,34 +374,82 @@ def test_failed_runs_keep_their_part_in_the_callers_state_order() -> None:
     part = err.value.trajectory
     assert part.state_names == plant.state_names and part.status == -1
     assert len(part.events_of("impact")) == 2
-    # an error raised inside the run (a controller that returns NaN) keeps the run too
+    # an error raised inside the run (a closed loop's law that returns NaN) keeps the run too
     from nscontrol.errors import ModelError
 
     ball = BouncingBall()
-    with pytest.raises(ModelError, match=r"^controller: expected a finite input") as err2:
-        simulate(ball.system(), ball.x0, (0.0, 2.0),
-                 controller=lambda t, q, v: np.array([np.nan if t > 0.5 else 0.0]))
+    with pytest.raises(ModelError, match=r"^controller: returned a non-finite value") as err2:
+        simulate(closed_loop(ball.system(), _NaNAfter()), ball.x0, (0.0, 2.0),
+                 method="event_driven")
     assert err2.value.trajectory is not None and err2.value.trajectory.t[-1] > 0.4
 
 
+class _NaNAfter(StaticLaw):
+    """A law whose output turns NaN after ``t = 0.5``."""
+
+    n_outputs, period = 1, None
+
+    def output(self, t, xc, m):
+        return np.array([np.nan if t > 0.5 else 0.0])
+
+
+class _PD(StaticLaw):
+    """``u = -4 q - 0.3 v`` written in Python: the flow is DOP853's."""
+
+    n_outputs, period = 1, None
+
+    def output(self, t, xc, m):
+        return -4.0 * m.x[:1] - 0.3 * m.x[1:]
+
+
 def test_linear_state_feedback_stays_exact() -> None:
-    # u = -K [q; v] on a free mass is the spring-damper k = 4, c = 0.3: same impacts
+    # u = K [q; v] = -[4, 0.3] [q; v] on a free mass is the spring-damper k = 4, c = 0.3:
+    # the same impacts (the gain is folded into the model: the flow stays exact)
     free = LagrangianSystem(np.eye(1), gap_matrix=[[-1.0]], gap_offset=[0.5],
                             restitution=0.7, actuation=[[1.0]], constant_force=[2.0])
     spring = LagrangianSystem(np.eye(1), stiffness=[[4.0]], damping=[[0.3]],
                               gap_matrix=[[-1.0]], gap_offset=[0.5], restitution=0.7,
                               constant_force=[2.0])
-    a = simulate(free, [0.0, 0.0], (0.0, 20.0), controller=[[4.0, 0.3]])
+    a = simulate(closed_loop(free, StateFeedback([[-4.0, -0.3]])), [0.0, 0.0], (0.0, 20.0),
+                 method="event_driven")
     b = simulate(spring, [0.0, 0.0], (0.0, 20.0))
     ta, tb = a.event_times("impact"), b.event_times("impact")
     assert ta.size == tb.size >= 3
     assert np.max(np.abs(ta - tb)) < 1e-12
-    # the same feedback as a callable takes the DOP853 path
-    c = simulate(free, [0.0, 0.0], (0.0, 20.0),
-                 controller=lambda t, q, v: -4.0 * q - 0.3 * v)
+    # the same feedback as a law written in Python takes the DOP853 path
+    c = simulate(closed_loop(free, _PD()), [0.0, 0.0], (0.0, 20.0), method="event_driven")
     tc = c.event_times("impact")[: ta.size]
     # DOP853 at the default rtol = 1e-10 per step, hundreds of steps: 1e3 rtol (measured 7e-10)
     assert np.max(np.abs(tc - ta)) < 1e-7
+    # its input is the law at every sample (pre- and post-impact samples included)
+    np.testing.assert_array_equal(c.signals["u"][:, 0], -4.0 * c.x[:, 0] - 0.3 * c.x[:, 1])
+
+
+def test_a_state_feedback_on_a_nonlinear_plant_runs_as_a_law() -> None:
+    # M(q) constant but given as a callable: the loop is not folded, its gain is evaluated
+    # along DOP853's flow, and meets the folded loop of the linear plant (impact times to the
+    # DOP853 tolerance, as above)
+    K = [[-4.0, -0.3]]
+    kw = dict(gap_matrix=[[-1.0]], gap_offset=[0.5], restitution=0.7, actuation=[[1.0]],
+              constant_force=[2.0])
+    linear = simulate(closed_loop(LagrangianSystem(np.eye(1), **kw), StateFeedback(K)),
+                      [0.0, 0.0], (0.0, 20.0), method="event_driven")
+    curved = closed_loop(LagrangianSystem(lambda q: np.eye(1), **kw), StateFeedback(K))
+    assert curved.composition == "blocks"
+    c = simulate(curved, [0.0, 0.0], (0.0, 20.0), method="event_driven")
+    ta = linear.event_times("impact")
+    assert ta.size >= 3
+    assert np.max(np.abs(c.event_times("impact")[: ta.size] - ta)) < 1e-7
+
+
+def test_sampled_or_dynamic_blocks_are_refused_by_event_driven() -> None:
+    from nscontrol.errors import ModelError
+
+    ball = BouncingBall()
+    with pytest.raises(ModelError, match=r"^event_driven: runs a closed loop whose controller "
+                                         r"is a continuous law without state"):
+        simulate(closed_loop(ball.system(), StateFeedback([[-1.0, 0.0]], period=0.1)),
+                 ball.x0, (0.0, 1.0), method="event_driven")
 
 
 def test_bad_options_each_their_error() -> None:
@@ -419,8 +469,10 @@ def test_bad_options_each_their_error() -> None:
         simulate(s, x0, (0.0, 1.0), u=lambda t: 0.0)
     with pytest.raises(DimensionError, match=r"^u: expected an Exosystem with 1 input"):
         simulate(s, x0, (0.0, 1.0), u=Exosystem.constant([1.0, 2.0]))
-    with pytest.raises(DimensionError, match=r"^controller"):
-        simulate(s, x0, (0.0, 1.0), controller=[[1.0, 2.0, 3.0]])
+    with pytest.raises(DimensionError, match=r"^controller: K must have shape \(1, 2\)"):
+        closed_loop(s, StateFeedback([[1.0, 2.0, 3.0]]))
+    with pytest.raises(ModelError, match=r"^event_driven: unknown option\(s\) \['controller'\]"):
+        simulate(s, x0, (0.0, 1.0), controller=[[1.0, 2.0]])
     # the model: a zero gap row, a jacobian with the wrong sign
     with pytest.raises(ModelError, match=r"^gap_matrix: row 1 is zero"):
         LagrangianSystem(np.eye(1), gap_matrix=[[1.0], [0.0]])

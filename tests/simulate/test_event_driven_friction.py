@@ -9,6 +9,7 @@ import nscontrol as nsc
 from nscontrol.errors import ModelError
 from nscontrol.numerics.lti import Exosystem
 from nscontrol.systems import LagrangianSystem, brick_stack, inclined_block
+from nscontrol.systems.feedback import StateFeedback, StaticLaw
 
 EPS = np.finfo(float).eps
 G = 9.81
@@ -124,8 +125,34 @@ def test_refuses_what_it_cannot_locate_exactly():
         _ed(brick_stack(1, MU), np.array([0.0, 0.05, 0.0, 0.0, 0.0, 0.0]), 1.0)
     with pytest.raises(ModelError, match="sensitivity"):
         _ed(block, [0.0, 0.0, 1.0, 0.0], 1.0, sensitivity=True)
-    with pytest.raises(ModelError, match="controller"):
-        _ed(block, [0.0, 0.0, 1.0, 0.0], 1.0, controller=lambda t, q, v: np.zeros(2))
+    with pytest.raises(ModelError, match="^controller: .*StateFeedback.*moreau_jean"):
+        _ed(nsc.closed_loop(block, _Zero()), [0.0, 0.0, 1.0, 0.0], 1.0)
+
+
+class _Zero(StaticLaw):
+    """A law written in Python (no force): refused with friction, which needs a linear flow."""
+
+    n_outputs, period = 2, None
+
+    def output(self, t, xc, m):
+        return np.zeros(2)
+
+
+def test_a_state_feedback_is_folded_into_the_frictional_flow():
+    # u = K [q; v] with K = -[50, 0, 0, 0] on the x force is the spring of _spring_block:
+    # the same flow, folded into the model, so the same exact events and states
+    spring = _spring_block()
+    free = LagrangianSystem([1.0, 1.0], constant_force=[0.0, -G], gap_matrix=[[0.0, 1.0]],
+                            friction=MU, tangent_matrix=[[1.0, 0.0]], names=("x", "y"))
+    loop = nsc.closed_loop(free, StateFeedback([[-50.0, 0.0, 0.0, 0.0],
+                                                [0.0, 0.0, 0.0, 0.0]]))
+    x0 = [0.1, 0.0, 0.0, 0.0]
+    a, b = _ed(loop, x0, 2.0), _ed(spring, x0, 2.0)
+    assert [e.kind for e in a.events] == [e.kind for e in b.events] == ["stick"]
+    # the same model: every number equal (the fold builds the stiffness 0 - 1·(-50) = 50)
+    np.testing.assert_array_equal(a.event_times(), b.event_times())
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.signals["u"][:, 0], -50.0 * a.x[:, 0])
 
 
 def test_lift_off_is_refused_with_the_run_so_far():

@@ -12,6 +12,7 @@ from nscontrol.simulate import Integrator, Lowering, Trajectory, register_loweri
 from nscontrol.simulate.driver import check_run
 from nscontrol.simulate.lowering import lowerings
 from nscontrol.systems.closed_loop import ClosedLoop
+from nscontrol.systems.feedback import StateFeedback
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
 
@@ -88,10 +89,13 @@ def test_one_lowering_gives_both_integrators_the_bodies_order():
     bodies = _bodies()
     x0 = np.array([0.0, 0.1, 0.3, 0.0, 1.0, -0.5])
     h = 1e-3
-    for method, opts in (("event_driven", {"controller": [[0.0, 0.0, 0.0, 0.5, 0.0, 0.0]]}),
-                         ("moreau_jean", {"h": h, "controller": lambda t, q, v: -0.5 * v[1:2]})):
+    # event_driven: the gain as a closed loop on [x_a; x_b] (its law evaluated along the flow)
+    gain = nsc.closed_loop(bodies, StateFeedback([[0.0, 0.0, 0.0, -0.5, 0.0, 0.0]]))
+    for method, system, opts in (
+            ("event_driven", gain, {}),
+            ("moreau_jean", bodies, {"h": h, "controller": lambda t, q, v: -0.5 * v[1:2]})):
         jumps = []
-        traj = nsc.simulate(bodies, x0, (0.0, 3.0), method=method, progress=False,
+        traj = nsc.simulate(system, x0, (0.0, 3.0), method=method, progress=False,
                             listeners=[lambda t, a, b, c, p, seen=jumps: seen.append(b)],
                             **opts)
         assert jumps, method

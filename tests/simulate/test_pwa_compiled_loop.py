@@ -6,8 +6,8 @@ from scipy.integrate import solve_ivp
 
 from nscontrol import simulate
 from nscontrol.numerics.lti import Exosystem
-from nscontrol.simulate import _switching_pwa
-from nscontrol.simulate._switching_pwa import _Buffers
+from nscontrol.simulate.switching import _pwa as _switching_pwa
+from nscontrol.simulate.switching._pwa import _Buffers
 from nscontrol.systems.pwa import PiecewiseAffineSystem
 from nscontrol.testing import setvalued_problems as sp
 

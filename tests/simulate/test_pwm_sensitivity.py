@@ -12,7 +12,7 @@ from scipy.optimize import brentq
 from nscontrol import simulate
 from nscontrol.analysis.orbits import Forced, find_orbit
 from nscontrol.errors import NscontrolWarning
-from nscontrol.simulate._switching_pwm import _OFFSET_RATES
+from nscontrol.simulate.switching._pwm import _OFFSET_RATES
 from nscontrol.systems.switched import PWMController, SwitchedAffineSystem
 
 EPS = np.finfo(float).eps

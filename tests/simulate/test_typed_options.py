@@ -17,14 +17,14 @@ from nscontrol import simulate
 from nscontrol._progress import TimeProgress
 from nscontrol.errors import ModelError
 from nscontrol.laws.relay import Relay
-from nscontrol.simulate._switching_run import SwitchingOptions
 from nscontrol.simulate.implicit_euler import ImplicitEulerOptions
+from nscontrol.simulate.switching._run import SwitchingOptions
 from nscontrol.systems.lure import LureSystem
 from nscontrol.systems.pwa import PiecewiseAffineSystem
 
 SIMULATE = Path(nscontrol.__file__).resolve().parent / "simulate"
-TYPED = ("switching.py", "_switching_run.py", "_switching_pwa.py", "_switching_filippov.py",
-         "_switching_pwm.py", "implicit_euler.py")
+TYPED = ("switching/__init__.py", "switching/_run.py", "switching/_pwa.py",
+         "switching/_filippov.py", "switching/_pwm.py", "implicit_euler.py")
 
 
 def _lure() -> LureSystem:

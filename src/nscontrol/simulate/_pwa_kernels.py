@@ -1,4 +1,4 @@
-"""numba loop of the exact piecewise-affine integrator (:mod:`._switching_pwa`).
+"""numba loop of the exact piecewise-affine integrator (:mod:`.switching._pwa`).
 
 In region ``i`` the augmented state ``ξ = [x; ω; 1]`` flows by ``ξ' = M_i ξ``: a piece is
 ``e^{M_i τ} ξ`` (:func:`nscontrol.numerics._lti_kernels.propagate`) and its end is the first

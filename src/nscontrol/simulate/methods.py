@@ -8,7 +8,7 @@ algorithm.
 method             systems                                     capabilities
 =================  ==========================================  ============================
 ``event_driven``   LinearHybridSystem, LagrangianSystem,       events, exact flow,
-                   ImpactingBodies                             listeners, controller,
+                   ImpactingBodies                             listeners,
                                                                sensitivity (Lagrangian)
 ``moreau_jean``    LagrangianSystem, ImpactingBodies           time stepping, listeners,
                                                                controller, multipliers
@@ -37,10 +37,11 @@ class EventDriven(_ModuleIntegrator):
     module = "nscontrol.simulate.event_driven"
     # sensitivity: LagrangianSystem only (DOP853 with the variational equation); the
     # integrator refuses it for the other systems with a ModelError
-    capabilities = frozenset({"events", "exact_flow", "listeners", "controller",
-                              "multipliers", "sensitivity"})
+    capabilities = frozenset({"events", "exact_flow", "listeners", "multipliers",
+                              "sensitivity"})
+    # blocks: internal, a closed loop's static law set by the python_blocks lowering
     options: ClassVar[frozenset[str]] = frozenset(
-        {"u", "controller", "dt", "max_events", "min_interval", "zeno_ratio_tol",
+        {"u", "blocks", "dt", "max_events", "min_interval", "zeno_ratio_tol",
          "zeno_horizon", "zeno_rel", "rtol", "atol"})
 
     @classmethod

@@ -65,10 +65,15 @@ u : Exosystem, optional
     Input of a Lagrangian system or of :class:`ImpactingBodies` (through its actuation),
     ``u(t) = Cu w(t)`` with ``w(0) = w0`` (absolute time, as in every integrator); its
     state is propagated exactly with the plant.
-controller : (m, 2 n) array_like or callable ``(t, q, v) -> u``, optional
-    State feedback added to ``u`` through the actuation. A matrix ``K`` means
-    ``u = -K [q; v]``: linear, so the closed loop stays exact. A callable makes the flow
-    nonlinear: the run uses DOP853 with event location (no persistent contact there).
+blocks : BlockRunner, optional
+    Internal: a closed loop's continuous static law (``closed_loop(plant, law)`` with a
+    :class:`~nscontrol.systems.feedback.StaticLaw` written in Python, or a state feedback
+    that cannot be folded into the model) evaluated along the flow, ``u = law(t, x)``
+    added through the actuation; set by the lowering
+    :mod:`~nscontrol.simulate.lowering.python_blocks`, not by a user. Such a law makes the
+    flow nonlinear: the run uses DOP853 with event location (no persistent contact there).
+    A gain on a linear plant is folded into the model instead
+    (:mod:`~nscontrol.simulate.lowering.fold`): the closed loop stays exact.
 dt : float, optional
     Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
     event adds its pre- and post-event samples.
@@ -121,8 +126,10 @@ compiled flights with the arrays a run writes into (``_flight``).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._validation import check_bool
@@ -132,19 +139,23 @@ from ...systems.lagrangian import LagrangianSystem
 from ...systems.protocols import InputSignal
 from ..callbacks import Listener
 from ..trajectory import Trajectory
-from ._options import _check_gain, _check_input, _linear_controller, _Options
+from ._options import _check_input, _Options
 from ._recording import _guarded, reorder_listeners, reorder_states
 from .frictional_contact import FrictionalContactRun, check_frictional_system
 from .hybrid_run import HybridRun
 from .linear_mechanics import LinearMechanicsRun, checked_state
 from .nonlinear_mechanics import NonlinearMechanicsRun
 
+if TYPE_CHECKING:
+    from .._block_runner import BlockRunner
+
 __all__ = ["integrate", "reorder_listeners", "reorder_states"]
 
 
 def integrate(system: LagrangianSystem | LinearHybridSystem, x0: ArrayLike,
               t_span: tuple[float, float], *, u: InputSignal = None,
-              controller: Any = None, dt: float | None = None, max_events: int = 100_000,
+              blocks: BlockRunner | None = None, dt: float | None = None,
+              max_events: int = 100_000,
               min_interval: float = 1e-12, zeno_ratio_tol: float = 1e-3,
               zeno_horizon: float | None = None, zeno_rel: float = 1e-3,
               listeners: Sequence[Listener] = (),
@@ -159,7 +170,7 @@ def integrate(system: LagrangianSystem | LinearHybridSystem, x0: ArrayLike,
     x0 : array_like
         Admissible initial state (``[q; v]``, ``[x_a; x_b]`` or the hybrid state).
     t_span : (float, float)
-    u, controller, dt, max_events, min_interval, zeno_ratio_tol, zeno_horizon, zeno_rel, \
+    u, blocks, dt, max_events, min_interval, zeno_ratio_tol, zeno_horizon, zeno_rel, \
 listeners, rtol, atol, record_every, signals, progress, sensitivity
         The options: see "Options" in the module docstring.
 
@@ -204,9 +215,10 @@ listeners, rtol, atol, record_every, signals, progress, sensitivity
         signals=signals, progress=progress)
     sensitivity = _check_sensitivity(system, sensitivity)
     if isinstance(system, LinearHybridSystem):
-        return _run_hybrid(system, x0, t0, tf, u, controller, opts)
+        return _run_hybrid(system, x0, t0, tf, u, blocks, opts)
     if isinstance(system, LagrangianSystem):
-        return _run_lagrangian(system, x0, t0, tf, u, controller, opts, sensitivity)
+        return _with_law_signal(blocks, lambda: _run_lagrangian(
+            system, x0, t0, tf, u, blocks, opts, sensitivity))
     raise ModelError(f"event_driven: integrates LinearHybridSystem and LagrangianSystem (and "
                      f"ImpactingBodies through nscontrol.simulate), got "
                      f"{type(system).__name__}")
@@ -222,9 +234,9 @@ def _check_sensitivity(system: Any, sensitivity: Any) -> bool:
 
 
 def _run_hybrid(system: LinearHybridSystem, x0: ArrayLike, t0: float, tf: float, u: Any,
-                controller: Any, opts: _Options) -> Trajectory:
+                blocks: Any, opts: _Options) -> Trajectory:
     """A linear hybrid system: its input and controller are in its state, never options."""
-    for name, value in (("u", u), ("controller", controller)):
+    for name, value in (("u", u), ("blocks", blocks)):
         if value is not None:
             raise ModelError(f"{name}: a LinearHybridSystem carries its input generator "
                              "and controller in its state; stack them into A instead")
@@ -232,35 +244,44 @@ def _run_hybrid(system: LinearHybridSystem, x0: ArrayLike, t0: float, tf: float,
 
 
 def _run_lagrangian(system: LagrangianSystem, x0: ArrayLike, t0: float, tf: float, u: Any,
-                    controller: Any, opts: _Options, sensitivity: bool) -> Trajectory:
+                    blocks: Any, opts: _Options, sensitivity: bool) -> Trajectory:
     """A Lagrangian system: on one frictional contact held closed (stick/slip exactly), or
     by :func:`_mechanics_run`."""
     if system.friction_dim:   # one planar contact held closed: stick/slip exactly
         if sensitivity:
             raise ModelError("sensitivity: not available with Coulomb friction; simulate "
                              "with method='moreau_jean' and a step h")
-        check_frictional_system(system, controller, opts.listeners)
-        gain = None if controller is None else _check_gain(system, controller)
+        check_frictional_system(system, blocks, opts.listeners)
         return _guarded(FrictionalContactRun(system, checked_state(system, x0), t0, tf,
-                                             _check_input(system, u), opts, gain))
+                                             _check_input(system, u), opts))
     return _guarded(_mechanics_run(system, checked_state(system, x0), t0, tf,
-                                   _check_input(system, u), controller, opts, sensitivity))
+                                   _check_input(system, u), blocks, opts, sensitivity))
 
 
-def _mechanics_run(system: Any, x0: Any, t0: float, tf: float, u: Any, controller: Any,
+def _mechanics_run(system: Any, x0: Any, t0: float, tf: float, u: Any, blocks: Any,
                    opts: _Options, sensitivity: bool = False) -> Any:
-    """The runner of a Lagrangian system: exact (linear flow, a gain ``K`` keeps it linear)
-    or DOP853 (nonlinear model, a callable controller, or the state transition asked)."""
-    if sensitivity:
-        if controller is not None and not callable(controller):
-            controller = _linear_controller(system, controller)
-        return NonlinearMechanicsRun(system, x0, t0, tf, u, opts, controller=controller,
-                                     sensitivity=True)
-    if controller is not None and not callable(controller):
-        if system.is_linear:
-            return LinearMechanicsRun(system, x0, t0, tf, u, opts,
-                                      gain=_check_gain(system, controller))
-        controller = _linear_controller(system, controller)
-    elif system.is_linear and controller is None:
+    """The runner of a Lagrangian system: exact (a linear flow) or DOP853 (a nonlinear
+    model, a law evaluated along the flow, or the state transition asked)."""
+    if system.is_linear and blocks is None and not sensitivity:
         return LinearMechanicsRun(system, x0, t0, tf, u, opts)
-    return NonlinearMechanicsRun(system, x0, t0, tf, u, opts, controller=controller)
+    law = None if blocks is None else blocks.step
+    return NonlinearMechanicsRun(system, x0, t0, tf, u, opts, controller=law,
+                                 sensitivity=sensitivity)
+
+
+def _with_law_signal(blocks: Any, run: Any) -> Trajectory:
+    """``run()``, and with a law evaluated along the flow (``blocks``) its input ``u`` at
+    every sample as the signal ``"u"``. The law's calls during the run (DOP853's stages,
+    not in time order) are dropped from the runner's log, which would otherwise map them
+    onto the samples as held values."""
+    if blocks is None:
+        return run()
+    try:
+        traj = run()
+    finally:
+        blocks.log.clear()
+    n = traj.x.shape[1] // 2
+    law = np.array([blocks.step(t, x[:n], x[n:]) for t, x in zip(traj.t, traj.x,
+                                                                    strict=True)])
+    blocks.log.clear()
+    return replace(traj, signals={**traj.signals, "u": law.reshape(len(traj.t), -1)})

@@ -1,4 +1,4 @@
-"""Options of :func:`integrate`, checked once, and the checks of an input and a feedback gain."""
+"""Options of :func:`integrate`, checked once, and the check of an input."""
 
 from __future__ import annotations
 
@@ -6,9 +6,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from ..._validation import FloatArray, as_matrix, check_bool, check_integer, check_positive
+from ..._validation import check_bool, check_integer, check_positive
 from ...errors import DimensionError, ModelError
 from ...numerics.lti import Exosystem
 
@@ -27,17 +25,6 @@ def _check_input(system: Any, u: Any) -> Any:
         raise DimensionError(f"u: expected an Exosystem with {m} input(s) (the actuation's "
                              f"columns), got {u.n_inputs}")
     return u
-
-
-def _check_gain(system: Any, K: Any) -> FloatArray:
-    """A state-feedback gain ``K`` (``u = -K [q; v]``) of the right shape."""
-    m = system.n_dof if system.actuation is None else system.actuation.shape[1]
-    return as_matrix("controller", K, rows=m, cols=2 * system.n_dof)
-
-
-def _linear_controller(system: Any, K: Any) -> Callable[..., FloatArray]:
-    K = _check_gain(system, K)
-    return lambda t, q, v: -K @ np.concatenate([q, v])
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from ..._validation import FloatArray
 from ...errors import BudgetExceededError, NscontrolError, ZenoError
+from ..loop import drive
 from ..trajectory import Event, Recorder, Trajectory
 from ._options import _Options
 
@@ -139,7 +140,7 @@ def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) ->
 
 
 def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
-               ) -> Trajectory:
+               ) -> NoReturn:
     traj = rec.finish(status=-1, message=message, **finish)
     raise ZenoError(message + "; pass on_failure='return' (or 'warn') to keep the partial "
                     "trajectory, or use method='moreau_jean' which passes through "
@@ -147,7 +148,7 @@ def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: 
 
 
 def _fail_budget(opts: _Options, rec: _Samples, t: float, used: int, **finish: Any
-                 ) -> Trajectory:
+                 ) -> NoReturn:
     """The run spent its event budget ``max_events``: raise with the part computed."""
     message = (f"max_events: the run spent its budget of {opts.max_events} events by t = "
                f"{t:.12g} ({used} events); raise max_events for a long run (one event per "
@@ -159,11 +160,13 @@ def _fail_budget(opts: _Options, rec: _Samples, t: float, used: int, **finish: A
 
 
 def _guarded(run: Any) -> Trajectory:
-    """Run; an error raised mid-run carries the trajectory computed so far. Any other
-    exception (a listener's own error, an interrupt) leaves every sample computed in the
-    recorder, where a caller holding it (the run's driver) finds them."""
+    """Drive the run's stepper (:func:`~nscontrol.simulate.loop.drive`: its progress bar,
+    one flight and its event per step); an error raised mid-run carries the trajectory
+    computed so far. Any other exception (a listener's own error, an interrupt) leaves
+    every sample computed in the recorder, where a caller holding it (the run's driver)
+    finds them."""
     try:
-        return run.run()
+        return drive(run, (run.t0, run.tf), desc="event_driven", progress=run.opts.progress)
     except NscontrolError as err:
         if err.trajectory is None:
             err.trajectory = run.samples.finish(status=-1, message=str(err),

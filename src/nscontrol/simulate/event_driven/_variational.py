@@ -3,11 +3,11 @@
 With ``x = [q; v]`` and ``x' = f(t, x) = [v; M(q)⁻¹ F(t, q, v)]``, the state transition
 ``Φ = ∂x(t)/∂x(t0)`` obeys ``Φ' = A(t, x) Φ``, ``A = ∂f/∂x``, integrated with the state (one
 augmented vector ``[x; vec Φ]``, row-major). ``A`` comes from the system's own force
-Jacobians when they are analytic (constant mass matrix, no callable controller, and no
+Jacobians when they are analytic (constant mass matrix, no law evaluated along the flow, no
 ``force`` or its ``force_jacobian`` given): ``A = [[0, I], [M⁻¹ ∂F/∂q, M⁻¹ ∂F/∂v]]``
 (:meth:`LagrangianSystem.force_jacobians`). Otherwise (``M(q)``, whose derivative the model
-does not give, a force without its Jacobian, a controller) ``A`` is a central difference of
-the whole field, fourth order
+does not give, a force without its Jacobian, a closed loop's law) ``A`` is a central
+difference of the whole field, fourth order
 (:func:`~nscontrol.numerics.differences.central_difference_jacobian` with ``order=4``: about
 ``5e-13`` relative). Second-order differences (``1e-10``) would not do: their rounding noise
 enters ``Φ'``, and DOP853's error controller at ``rtol = 1e-10`` chases it with ever smaller

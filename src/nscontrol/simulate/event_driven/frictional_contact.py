@@ -16,13 +16,14 @@ reverses (direction ``-sign(λ_T)``). ``λ_N`` reaching zero (lift-off) is refus
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from ..._validation import FloatArray
 from ...errors import BudgetExceededError, ModelError, ZenoError
 from ...numerics.lti import LTIFlow, first_event, project_restart
+from ..loop import END, Stop
 from ..trajectory import Recorder, Trajectory
 from ._flight import projection_stats
 from ._options import _Options
@@ -36,7 +37,7 @@ OFFERED = ("gap", "energy", "contact_state", "friction", "normal_force")
 _USE_MJ = "simulate it with method='moreau_jean' and a step h"
 
 
-def check_frictional_system(system: Any, controller: Any, listeners: Any) -> None:
+def check_frictional_system(system: Any, blocks: Any, listeners: Any) -> None:
     """Refuse what the exact frictional runner does not cover (a :class:`ModelError` that
     points to Moreau–Jean)."""
     if system.friction_dim != 1 or system.n_contacts != 1:
@@ -46,9 +47,10 @@ def check_frictional_system(system: Any, controller: Any, listeners: Any) -> Non
     if not system.is_linear:
         raise ModelError(f"system: event_driven with friction needs a constant mass matrix and "
                          f"linear forces; {_USE_MJ}")
-    if callable(controller):
-        raise ModelError(f"controller: event_driven with friction takes a gain matrix K only "
-                         f"(a linear flow); {_USE_MJ}")
+    if blocks is not None:
+        raise ModelError(f"controller: event_driven with friction takes linear state feedback "
+                         f"only, folded into the model (closed_loop(plant, StateFeedback(K)): "
+                         f"a linear flow), not a law written in Python; {_USE_MJ}")
     if listeners:
         raise ModelError(f"listeners: not supported with friction (no impacts to report); "
                          f"{_USE_MJ}")
@@ -59,9 +61,9 @@ class FrictionalContactRun:
     (gap and normal velocity zero throughout)."""
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
-                 opts: _Options, gain: FloatArray | None = None) -> None:
+                 opts: _Options) -> None:
         self.s, self.t0, self.tf, self.opts = system, t0, tf, opts
-        model = _LinearModel.of(system, u, gain)
+        model = _LinearModel.of(system, u)
         self.n, self.N, self.model = model.n, model.N, model
         self.Gn = model.G[0]
         self.Tt = np.asarray(system.tangent_matrix.todense()
@@ -78,10 +80,16 @@ class FrictionalContactRun:
         self.n_events = 0
         self.samples = self  # what ``_guarded`` finishes when the run fails
         self._check_closed(x0)
-
-    def finish(self, **kw: Any) -> Trajectory:
-        """The samples so far as a trajectory (for a run that fails)."""
-        return self.rec.finish(**kw)
+        self.t = t0
+        self.mode = self._initial_mode(z)
+        L = self._mode(self.mode)[2]
+        if float(L[0] @ z) <= 0.0:
+            self._fail(f"x0: the normal force would be {float(L[0] @ z):.3g} <= 0 (the body "
+                       f"leaves the contact); {_USE_MJ}", t0)
+        self._record(np.array([t0]), z[None], self.mode, L)
+        self.proj = np.zeros(5)  # round-off projections at restarts (lti.project_restart)
+        self.restart = False     # the first piece starts from the user's x0
+        self.ended = False
 
     def flush(self) -> None:
         """Nothing is buffered: every sample goes to the recorder at once."""
@@ -168,7 +176,8 @@ class FrictionalContactRun:
         grid = grid[(grid > t) & (grid < t_end)]
         return np.append(grid, t_end)
 
-    def _fail(self, message: str, t: float, error: type[Exception] = ModelError) -> None:
+    def _fail(self, message: str, t: float, error: type[Exception] = ModelError
+              ) -> NoReturn:
         traj = self.rec.finish(status=-1, message=message, method="event_driven",
                                state_names=self.s.state_names)
         if error is BudgetExceededError:
@@ -178,54 +187,63 @@ class FrictionalContactRun:
             raise ZenoError(message, time=t, trajectory=traj)
         raise ModelError(message, trajectory=traj)
 
-    # -- main loop -----------------------------------------------------------------------
-    def run(self) -> Trajectory:
-        t, z = self.t0, self.z
-        mode = self._initial_mode(z)
+    # -- the stepper (driven by nscontrol.simulate.loop.drive) ----------------------------
+    def advance(self) -> float | Stop:
+        """The flow of the current mode up to its first event (or ``tf``) and that event;
+        a :class:`Stop` once ``tf`` is reached."""
+        if self.ended or self.t >= self.tf:
+            return END
+        t, z, mode = self.t, self.z, self.mode
         flow, guards, L = self._mode(mode)
-        if float(L[0] @ z) <= 0.0:
-            self._fail(f"x0: the normal force would be {float(L[0] @ z):.3g} <= 0 (the body "
-                       f"leaves the contact); {_USE_MJ}", t)
-        self._record(np.array([t]), z[None], mode, L)
-        proj = np.zeros(5)   # round-off projections at restarts (numerics.lti.project_restart)
-        restart = False      # the first piece starts from the user's x0
-        while t < self.tf:
-            flow, guards, L = self._mode(mode)
-            if restart:
-                z = project_restart(flow, z, guards, np.zeros(len(guards)), t, proj,
-                                    n_free=2 * self.n)
-            restart = True
-            ev = first_event(flow, z, guards, np.zeros(len(guards)), self.tf - t)
-            t_end = self.tf if ev is None else t + ev.t
-            times = self._grid(t, t_end)
-            offsets = times - t
-            # the piece ends at the event's own offset, not at (t + τ) - t, which rounds by
-            # eps·t and would leave the state past its guard in a long run
-            offsets[-1] = self.tf - t if ev is None else ev.t
-            Z = flow.propagate(z, offsets)
-            self._record(times, Z, mode, L)
-            t, z = t_end, Z[-1].copy()
-            if ev is None:
-                break
-            x = z[:2 * self.n]
-            self.n_events += 1   # every event spends the budget, a touch too
-            if self.n_events > self.opts.max_events:
-                self._fail(f"max_events: the run spent its budget of {self.opts.max_events} "
-                           f"stick-slip events by t = {t:.12g}; raise max_events", t,
-                           BudgetExceededError)
-            if ev.grazing:
-                self.rec.event(t, "grazing", 0, x, x, mode, mode)
-                continue
-            if 0 in ev.indices:
-                self._fail(f"event_driven: the normal force reaches zero at t = {t:.12g} (the "
-                           f"body would leave the contact); {_USE_MJ}", t)
-            new = self._settle(z) if mode != STICK else (
-                SLIP_BACKWARD if 1 in ev.indices else SLIP_FORWARD)
-            kind = ("slip" if mode == STICK else "stick" if new == STICK else "slip_reversal")
-            self.rec.event(t, kind, 0, x, x, mode, new)
-            mode = new
-            self._record(np.array([t]), z[None], mode, self._mode(mode)[2])
+        if self.restart:
+            z = project_restart(flow, z, guards, np.zeros(len(guards)), t, self.proj,
+                                n_free=2 * self.n)
+        self.restart = True
+        ev = first_event(flow, z, guards, np.zeros(len(guards)), self.tf - t)
+        t_end = self.tf if ev is None else t + ev.t
+        times = self._grid(t, t_end)
+        offsets = times - t
+        # the piece ends at the event's own offset, not at (t + τ) - t, which rounds by
+        # eps·t and would leave the state past its guard in a long run
+        offsets[-1] = self.tf - t if ev is None else ev.t
+        Z = flow.propagate(z, offsets)
+        self._record(times, Z, mode, L)
+        self.t, self.z = t_end, Z[-1].copy()
+        if ev is None:
+            self.ended = True
+        else:
+            self._switch(ev)
+        return self.t
+
+    def _switch(self, ev: Any) -> None:
+        """The event ``ev`` at ``self.t``: a grazing, or the next mode (stick, slip or its
+        reversal); lift-off and a spent budget raise."""
+        t, z, mode = self.t, self.z, self.mode
+        x = z[:2 * self.n]
+        self.n_events += 1   # every event spends the budget, a touch too
+        if self.n_events > self.opts.max_events:
+            self._fail(f"max_events: the run spent its budget of {self.opts.max_events} "
+                       f"stick-slip events by t = {t:.12g}; raise max_events", t,
+                       BudgetExceededError)
+        if ev.grazing:
+            self.rec.event(t, "grazing", 0, x, x, mode, mode)
+            return
+        if 0 in ev.indices:
+            self._fail(f"event_driven: the normal force reaches zero at t = {t:.12g} (the "
+                       f"body would leave the contact); {_USE_MJ}", t)
+        new = self._settle(z) if mode != STICK else (
+            SLIP_BACKWARD if 1 in ev.indices else SLIP_FORWARD)
+        kind = ("slip" if mode == STICK else "stick" if new == STICK else "slip_reversal")
+        self.rec.event(t, kind, 0, x, x, mode, new)
+        self.mode = new
+        self._record(np.array([t]), z[None], new, self._mode(new)[2])
+
+    def finish(self, stop: Stop | None = None, **kw: Any) -> Trajectory:
+        """The trajectory: at the run's end (``stop``), or so far (a failing run's, ``kw``
+        as :meth:`Recorder.finish`'s)."""
+        if stop is None:
+            return self.rec.finish(**kw)
         stats = {"events": self.n_events, "impacts": 0,
-                 "impulses": np.zeros((0, self.s.n_contacts)), **projection_stats(proj)}
-        return self.rec.finish(status=0, stats=stats, method="event_driven",
+                 "impulses": np.zeros((0, self.s.n_contacts)), **projection_stats(self.proj)}
+        return self.rec.finish(status=stop.status, stats=stats, method="event_driven",
                                state_names=self.s.state_names)

@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from ..._progress import TimeProgress
 from ..._validation import FloatArray
 from ...numerics.lti import LTIFlow
+from ..loop import END, Stop
 from ..trajectory import Trajectory
 from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
@@ -33,6 +33,11 @@ class HybridRun:
             k: X @ C.T for k, C in system.outputs.items()}, buffer=(ws.s_t, ws.s_x))
         self.rec = self.samples.rec
         self.zeno = _Zeno(opts, p, ws.zeno)
+        self.finish_kw = dict(method="event_driven", state_names=system.state_names)
+        self.t = t0
+        self.samples.add(t0, self.x)
+        self.restart = False  # the first flight starts from the user's x0
+        self.ended = False
 
     def _jumped(self, times: FloatArray, idx: np.ndarray, pre: FloatArray,
                 post: FloatArray) -> None:
@@ -42,43 +47,42 @@ class HybridRun:
             for listener in self.opts.listeners:
                 listener(float(t), xm.copy(), xp.copy(), np.array([i]), None)
 
-    def run(self) -> Trajectory:
-        s, t, x = self.s, self.t0, self.x
-        self.samples.add(t, x)
-        finish = dict(method="event_driven", state_names=s.state_names)
-        with TimeProgress(self.t0, self.tf, desc="event_driven",
-                          enable=self.opts.progress) as bar:
-            restart = False  # the first flight starts from the user's x0
-            while t < self.tf:
-                t, x, ev = self.flight.run(x, t, self.tf, self.zeno, False, self.opts,
-                                           self.samples, self.ws, sample_pre=True,
-                                           on_events=self._jumped, restart=restart)
-                restart = True
-                bar.update(t)
-                if ev is None:
-                    break
-                self.zeno.n_events += 1   # every event spends the budget, a touch too
-                if self.zeno.n_events > self.opts.max_events:
-                    return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
-                                        **finish)
-                if ev.grazing:
-                    for i in ev.indices:
-                        self.rec.event(t, "grazing", i, x, x)
-                    continue
-                idx = np.asarray(ev.indices, dtype=np.int64)
-                if any(self.zeno.too_close(int(i), t) for i in idx):
-                    return _fail_zeno(self.opts, self.samples, f"event_driven: accumulation of "
-                                      f"events of guards {idx.tolist()} near t = {t:.12g}",
-                                      t, **finish)
-                for i in idx:
-                    self.zeno.push(int(i), t)
-                x_plus = np.asarray(s.apply_jump(t, x, idx), float)
-                for i in idx:
-                    self.rec.event(t, "jump", int(i), x, x_plus)
-                for listener in self.opts.listeners:
-                    listener(t, x.copy(), x_plus.copy(), idx, None)
-                x = x_plus
-                self.samples.add(t, x)
-        return self.samples.finish(status=0, stats={"events": self.zeno.n_events,
-                                                    **projection_stats(self.ws.proj)},
-                                   **finish)
+    def advance(self) -> float | Stop:
+        """One flight (the matrix jumps the compiled loop settles included) and the event it
+        hands back; a :class:`Stop` once ``tf`` is reached."""
+        if self.ended or self.t >= self.tf:
+            return END
+        s, opts = self.s, self.opts
+        t, x, ev = self.flight.run(self.x, self.t, self.tf, self.zeno, False, opts,
+                                   self.samples, self.ws, sample_pre=True,
+                                   on_events=self._jumped, restart=self.restart)
+        self.restart = True
+        self.t, self.x = t, x
+        if ev is None:
+            self.ended = True
+            return t
+        self.zeno.n_events += 1   # every event spends the budget, a touch too
+        if self.zeno.n_events > opts.max_events:
+            _fail_budget(opts, self.samples, t, self.zeno.n_events, **self.finish_kw)
+        if ev.grazing:
+            for i in ev.indices:
+                self.rec.event(t, "grazing", i, x, x)
+            return t
+        idx = np.asarray(ev.indices, dtype=np.int64)
+        if any(self.zeno.too_close(int(i), t) for i in idx):
+            _fail_zeno(opts, self.samples, f"event_driven: accumulation of events of guards "
+                       f"{idx.tolist()} near t = {t:.12g}", t, **self.finish_kw)
+        for i in idx:
+            self.zeno.push(int(i), t)
+        x_plus = np.asarray(s.apply_jump(t, x, idx), float)
+        for i in idx:
+            self.rec.event(t, "jump", int(i), x, x_plus)
+        for listener in opts.listeners:
+            listener(t, x.copy(), x_plus.copy(), idx, None)
+        self.x = x_plus
+        self.samples.add(t, x_plus)
+        return t
+
+    def finish(self, stop: Stop) -> Trajectory:
+        return self.samples.finish(status=stop.status, stats={
+            "events": self.zeno.n_events, **projection_stats(self.ws.proj)}, **self.finish_kw)

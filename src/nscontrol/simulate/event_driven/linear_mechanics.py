@@ -5,17 +5,17 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
-from ..._progress import TimeProgress
 from ..._validation import FloatArray
 from ...errors import SolverError
 from ...laws.impact import NewtonImpactLaw
 from ...numerics.lcp import solve_lcp
 from ...numerics.lti import LTIFlow
 from .._event_kernels import bounce_impulses, contact_state, open_and_finite
+from ..loop import END, Stop
 from ..trajectory import Trajectory
 from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
@@ -26,26 +26,25 @@ from ._zeno import _Zeno
 class _LinearModel:
     """What every run of a linear Lagrangian system needs, prepared once: the augmented flow
     ``z = [q; v; 1; w]`` (gravity and the input generator inside), the free accelerations,
-    the Delassus diagonal and the modes built so far. It depends on the (immutable) system,
-    the input's generator and the feedback gain only, so runs of the same closed loop
-    (sweeps, benchmarks) share it."""
+    the Delassus diagonal and the modes built so far. It depends on the (immutable) system
+    and the input's generator only, so runs of the same system or closed loop (a state
+    feedback is folded into the system) in sweeps and benchmarks share it."""
 
     _cache: weakref.WeakKeyDictionary[Any, dict[Any, _LinearModel]] = \
         weakref.WeakKeyDictionary()
 
     @classmethod
-    def of(cls, system: Any, u: Any, gain: FloatArray | None) -> _LinearModel:
-        key = (None if u is None else (u.S.shape, u.S.tobytes(), u.Cu.tobytes()),
-               None if gain is None else gain.tobytes())
+    def of(cls, system: Any, u: Any) -> _LinearModel:
+        key = None if u is None else (u.S.shape, u.S.tobytes(), u.Cu.tobytes())
         models = cls._cache.get(system)
         if models is None:
             models = cls._cache[system] = {}
         model = models.get(key)
         if model is None:
-            model = models[key] = cls(system, u, gain)
+            model = models[key] = cls(system, u)
         return model
 
-    def __init__(self, s: Any, u: Any, gain: FloatArray | None) -> None:
+    def __init__(self, s: Any, u: Any) -> None:
         n = s.n_dof
         self.M = s.mass_matrix()
         self.G = s.dense_gap_matrix()
@@ -58,8 +57,6 @@ class _LinearModel:
         S = np.eye(n) if s.actuation is None else s.actuation
         if u is not None:
             F[:, 2 * n + 1:] = S @ u.Cu
-        if gain is not None:  # u = -K [q; v]: still a linear flow
-            F[:, :2 * n] -= S @ gain
         self.Minv = np.linalg.inv(self.M)
         self.W_diag = np.einsum("jn,nm,jm->j", self.G, self.Minv, self.G)  # Delassus diagonal
         self.Afree = self.Minv @ F  # accelerations, (n, N)
@@ -83,10 +80,10 @@ class LinearMechanicsRun:
     """Exact simulation of a Lagrangian system that is linear between events."""
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
-                 opts: _Options, gain: FloatArray | None = None) -> None:
+                 opts: _Options) -> None:
         s = system
         self.s, self.t0, self.tf, self.opts = s, t0, tf, opts
-        self.model = model = _LinearModel.of(s, u, gain)
+        self.model = model = _LinearModel.of(s, u)
         self.M, self.G, self.Minv = model.M, model.G, model.Minv
         self.W_diag, self.Afree, self.base = model.W_diag, model.Afree, model.base
         self.n, self.N = model.n, model.N
@@ -105,6 +102,11 @@ class LinearMechanicsRun:
         self.n_impacts = 0
         self.impulses: list[FloatArray] = []  # blocks of rows, one row per "impact" event
         self.finish_kw = model.finish_kw
+        self.t = t0
+        self.samples.add(t0, z)
+        self._set_mode(t0, z, self._persistent(z, self._resting(z, self._contacts(z)[0])))
+        self.restart = False  # the first flight starts from the user's x0
+        self.ended = False
 
     # -- modes ---------------------------------------------------------------------------
     def _mode(self, C: frozenset[int]) -> tuple[_Flight, np.ndarray]:
@@ -193,8 +195,8 @@ class LinearMechanicsRun:
             self.zeno.reset(j)
         self.contact = new
 
-    def _fail(self, message: str, t: float) -> Trajectory:
-        return _fail_zeno(self.opts, self.samples, message, t, **self.finish_kw)
+    def _fail(self, message: str, t: float) -> NoReturn:
+        _fail_zeno(self.opts, self.samples, message, t, **self.finish_kw)
 
     # -- contact state -------------------------------------------------------------------
     def _persistent(self, z: FloatArray, candidates: Sequence[int]) -> set[int]:
@@ -224,30 +226,28 @@ class LinearMechanicsRun:
         still = self._contacts(z)[1]
         return [j for j in closed if still[j]]
 
-    # -- main loop -----------------------------------------------------------------------
-    def run(self) -> Trajectory:
-        t, z = self.t0, self.z
-        self.samples.add(t, z)
-        self._set_mode(t, z, self._persistent(z, self._resting(z, self._contacts(z)[0])))
-        restart = False  # the first flight starts from the user's x0
-        with TimeProgress(self.t0, self.tf, desc="event_driven",
-                          enable=self.opts.progress) as bar:
-            while t < self.tf:
-                flight, ids = self._mode(frozenset(self.contact))
-                t, z, ev = self._fly(flight, ids, z, t, self.tf, restart)
-                restart = True
-                bar.update(t)
-                if ev is None:
-                    break
-                out = self._event(t, z, [int(ids[i]) for i in ev.indices], ev.grazing)
-                if isinstance(out, Trajectory):
-                    return out
-                t, z = out
+    # -- the stepper (driven by nscontrol.simulate.loop.drive) ----------------------------
+    def advance(self) -> float | Stop:
+        """One flight of the current mode (the events the compiled loop settles included)
+        and the event it hands back; a :class:`Stop` once ``tf`` is reached."""
+        if self.ended or self.t >= self.tf:
+            return END
+        flight, ids = self._mode(frozenset(self.contact))
+        t, z, ev = self._fly(flight, ids, self.z, self.t, self.tf, self.restart)
+        self.restart = True
+        self.t, self.z = t, z
+        if ev is None:
+            self.ended = True
+            return t
+        self.t, self.z = self._event(t, z, [int(ids[i]) for i in ev.indices], ev.grazing)
+        return self.t
+
+    def finish(self, stop: Stop) -> Trajectory:
         stats = {"events": self.zeno.n_events, "impacts": self.n_impacts,
                  "impulses": (np.concatenate(self.impulses) if self.impulses
                               else np.zeros((0, self.s.n_contacts))),
                  **projection_stats(self.ws.proj)}
-        traj = self.samples.finish(status=0, stats=stats, **self.finish_kw)
+        traj = self.samples.finish(status=stop.status, stats=stats, **self.finish_kw)
         self.ws.give_back(self.model.workspaces)
         return traj
 
@@ -256,12 +256,13 @@ class LinearMechanicsRun:
         return flight.run(z, t, t_end, self.zeno, True, self.opts, self.samples, self.ws,
                           sample_pre=True, on_events=self._bounced(ids), restart=restart)
 
-    def _event(self, t: float, z: FloatArray, hit: list[int], grazing: bool) -> Any:
+    def _event(self, t: float, z: FloatArray, hit: list[int], grazing: bool
+               ) -> tuple[float, FloatArray]:
         """An event handed back by the compiled loop (``hit``: guard ids). Returns
-        ``(t, z)`` to go on from, or a failed trajectory."""
+        ``(t, z)`` to go on from; a spent budget or an accumulation raises."""
         self.zeno.n_events += 1   # every event spends the budget, a touch too
         if self.zeno.n_events > self.opts.max_events:
-            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
+            _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
                                 **self.finish_kw)
         if grazing:  # a gap or a contact force touching zero: nothing changes
             for j in hit:
@@ -275,14 +276,15 @@ class LinearMechanicsRun:
         self._set_mode(t, z, self._persistent(z, sorted(self.contact - ended)))
         return t, z
 
-    def _impact(self, t: float, z: FloatArray, impacts: list[int]) -> Any:
-        """Apply Newton's law at ``t``; handle accumulations. Returns ``(t, z)`` or a failed
-        trajectory."""
+    def _impact(self, t: float, z: FloatArray, impacts: list[int]
+                ) -> tuple[float, FloatArray]:
+        """Apply Newton's law at ``t``; handle accumulations. Returns ``(t, z)``; an
+        accumulation that cannot be resolved raises."""
         closed = sorted(set(self._contacts(z)[0]) | set(impacts) | self.contact)
         checks = [self.zeno.check(j, t) for j in impacts]
         for j, (too_close, _) in zip(impacts, checks, strict=True):
             if too_close:
-                return self._fail(f"event_driven: impacts of contact {j} accumulate near "
+                self._fail(f"event_driven: impacts of contact {j} accumulate near "
                                   f"t = {t:.12g} without a geometric pattern", t)
         for j in impacts:
             self.zeno.push(j, t)
@@ -297,7 +299,7 @@ class LinearMechanicsRun:
         self.samples.add(t, z)
         if t_acc is not None:
             if not set(impacts) <= new:
-                return self._fail(f"event_driven: impacts of contacts {impacts} accumulate "
+                self._fail(f"event_driven: impacts of contacts {impacts} accumulate "
                                   f"at t = {t_acc:.12g} but the contact force there would be "
                                   "negative", t)
             t, z = self._hold_closed(t, z, new, impacts, t_acc)

@@ -1,5 +1,5 @@
 """Event-driven run of a nonlinear Lagrangian system (``M(q)``, nonlinear forces or gaps, a
-callable controller): scipy's DOP853 with gap events and Newton's impact law.
+law evaluated along the flow): scipy's DOP853 with gap events and Newton's impact law.
 
 With ``sensitivity=True`` the variational equation is integrated with the state and every
 impact multiplies the transition by its saltation matrix (:mod:`._variational`); the run
@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ..._progress import TimeProgress
 from ..._validation import FloatArray
 from ...errors import ModelError, SolverError
+from ..loop import END, Stop
 from ..trajectory import Trajectory
 from ._flight import _sample_times
 from ._options import _Options
@@ -33,8 +33,7 @@ class NonlinearMechanicsRun:
         from ...laws.impact import NewtonImpactLaw
 
         self.s, self.x, self.t0, self.tf, self.u, self.opts = system, x0, t0, tf, u, opts
-        self.controller = controller
-        self.m = system.n_dof if system.actuation is None else system.actuation.shape[1]
+        self.controller = controller   # a closed loop's law (t, q, v) -> u, or None
         self.law = NewtonImpactLaw(system.restitution)
         n = system.n_dof
         self.samples = _Samples(system.n_states, opts, ("gap", "energy"), lambda X: {
@@ -47,14 +46,14 @@ class NonlinearMechanicsRun:
             else None
         self.saltations: list[FloatArray] = []
         self.closed: list[int] = []   # the contacts of the last impact
+        self._start()
 
     def _input(self, t: float, q: FloatArray, v: FloatArray) -> FloatArray | None:
+        """The input at ``(t, q, v)``: the exosystem's, plus the law's (the block runner
+        checks its length and finiteness)."""
         uu = None if self.u is None else self.u.u(t)
         if self.controller is not None:
-            c = np.asarray(self.controller(t, q, v), dtype=float).reshape(-1)
-            if c.shape != (self.m,) or not np.all(np.isfinite(c)):
-                raise ModelError(f"controller: expected a finite input of length {self.m} "
-                                 f"from controller(t, q, v), got {c!r} at t = {t:.6g}")
+            c = self.controller(t, q, v)
             uu = c if uu is None else uu + c
         return uu
 
@@ -73,56 +72,60 @@ class NonlinearMechanicsRun:
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
         self.samples.extend(times, X)
 
-    def run(self) -> Trajectory:
+    def _start(self) -> None:
+        """The first sample, the gap events and the integrated vector (with sensitivity
+        ``[x; vec Φ]``, whose first ``n`` entries the events read)."""
+        s, t, x = self.s, self.t0, self.x.copy()
+        self.finish_kw = dict(method="event_driven", state_names=s.state_names)
+        self._sample(np.array([t]), x[None])
+        self.events = [self._gap_event(j) for j in range(s.n_contacts)]
+        self.z = x if self.var is None else self.var.augment(x, np.eye(s.n_states))
+        self.rhs = self._rhs if self.var is None else self.var.rhs
+        # windows of at most 1/50 of the span: an error raised inside the model (a law that
+        # returns NaN, M(q) losing definiteness) loses one window, never the run
+        self.window = max(self.opts.dt, (self.tf - self.t0) / 50)
+        self.t = t
+
+    def advance(self) -> float | Stop:
+        """DOP853 over one window or up to the first impact, and that impact; a
+        :class:`Stop` once ``tf`` is reached."""
         from scipy.integrate import solve_ivp
 
-        s = self.s
-        t, x = self.t0, self.x.copy()
-        finish = dict(method="event_driven", state_names=s.state_names)
-        self._sample(np.array([t]), x[None])
-        events = [self._gap_event(j) for j in range(s.n_contacts)]
-        N = s.n_states
-        # with sensitivity the integrated vector is [x; vec Φ] (events read its first n)
-        z = x if self.var is None else self.var.augment(x, np.eye(N))
-        rhs = self._rhs if self.var is None else self.var.rhs
-        # windows of at most 1/50 of the span: an error raised inside the model (a controller
-        # returning NaN, M(q) losing definiteness) loses one window, never the run
-        window = max(self.opts.dt, (self.tf - self.t0) / 50)
-        with TimeProgress(self.t0, self.tf, desc="event_driven",
-                          enable=self.opts.progress) as bar:
-            while t < self.tf:
-                # a contact closed and separating at t is not re-detected: only falling
-                # crossings (direction -1) count
-                t_stop = min(self.tf, t + window)
-                grid = _sample_times(t, t_stop, self.opts.dt, self.t0)
-                sol = solve_ivp(rhs, (t, t_stop), z, method="DOP853",
-                                rtol=self.opts.rtol, atol=self.opts.atol,
-                                events=events or None, dense_output=True)
-                if not sol.success:
-                    raise SolverError(f"event_driven: DOP853 failed at t = {sol.t[-1]:.6g}: "
-                                      f"{sol.message}")
-                t_end = float(sol.t[-1])
-                grid = grid[grid < t_end]
-                if grid.size:
-                    self._sample(grid, sol.sol(grid).T[:, :N])
-                z = sol.y[:, -1].copy()
-                x = z[:N]
-                t = t_end
-                self._sample(np.array([t]), x[None])
-                bar.update(t)
-                if sol.status != 1:
-                    continue
-                out = self._impact(t, x)
-                if isinstance(out, Trajectory):
-                    return out
-                z = out if self.var is None else self._carry_transition(self.var, t, x, out, z)
+        if self.t >= self.tf:
+            return END
+        t, N = self.t, self.s.n_states
+        # a contact closed and separating at t is not re-detected: only falling crossings
+        # (direction -1) count
+        t_stop = min(self.tf, t + self.window)
+        grid = _sample_times(t, t_stop, self.opts.dt, self.t0)
+        sol = solve_ivp(self.rhs, (t, t_stop), self.z, method="DOP853", rtol=self.opts.rtol,
+                        atol=self.opts.atol, events=self.events or None, dense_output=True)
+        if not sol.success:
+            raise SolverError(f"event_driven: DOP853 failed at t = {sol.t[-1]:.6g}: "
+                              f"{sol.message}")
+        t_end = float(sol.t[-1])
+        grid = grid[grid < t_end]
+        if grid.size:
+            self._sample(grid, sol.sol(grid).T[:, :N])
+        z = sol.y[:, -1].copy()
+        x = z[:N]
+        self.t, self.z = t_end, z
+        self._sample(np.array([t_end]), x[None])
+        if sol.status == 1:
+            xp = self._impact(t_end, x)
+            self.z = xp if self.var is None else self._carry_transition(self.var, t_end, x,
+                                                                        xp, z)
+        return t_end
+
+    def finish(self, stop: Stop) -> Trajectory:
+        s, N = self.s, self.s.n_states
         stats = {"events": self.zeno.n_events,
                  "impacts": sum(e.kind == "impact" for e in self.rec.events),
                  "impulses": np.array(self.impulses).reshape(-1, s.n_contacts)}
         if self.var is not None:
-            stats["state_transition"] = self.var.transition(z).copy()
+            stats["state_transition"] = self.var.transition(self.z).copy()
             stats["saltation_matrices"] = np.array(self.saltations).reshape(-1, N, N)
-        return self.samples.finish(status=0, stats=stats, **finish)
+        return self.samples.finish(status=stop.status, stats=stats, **self.finish_kw)
 
     def _carry_transition(self, var: Variational, t: float, x_minus: FloatArray,
                           x_plus: FloatArray, z: FloatArray) -> FloatArray:
@@ -140,9 +143,9 @@ class NonlinearMechanicsRun:
         event.direction = -1  # type: ignore[attr-defined]  # solve_ivp reads it
         return event
 
-    def _impact(self, t: float, x: FloatArray) -> Any:
+    def _impact(self, t: float, x: FloatArray) -> FloatArray:
         s, n = self.s, self.s.n_dof
-        finish = dict(method="event_driven", state_names=s.state_names)
+        finish = self.finish_kw
         q, v = x[:n], x[n:]
         g = s.gaps(q)
         closed = np.flatnonzero(np.abs(g) <= 1e-9 * (1.0 + np.max(np.abs(q))))
@@ -151,15 +154,15 @@ class NonlinearMechanicsRun:
         J = s.gap_jacobian(q)
         hitting = [int(j) for j in closed if J[j] @ v < 0]
         if not hitting:
-            return _fail_zeno(self.opts, self.samples, f"event_driven: contacts {closed.tolist()} "
+            _fail_zeno(self.opts, self.samples, f"event_driven: contacts {closed.tolist()} "
                               f"are closed at t = {t:.12g} with zero normal velocity and pushed "
                               "inwards (persistent contact), which is supported for linear "
                               "systems only", t, **finish)
         if self.zeno.n_events > self.opts.max_events:
-            return _fail_budget(self.opts, self.samples, t, self.zeno.n_events, **finish)
+            _fail_budget(self.opts, self.samples, t, self.zeno.n_events, **finish)
         if any(
                 self.zeno.too_close(j, t) or self.zeno.add(j, t) is not None for j in hitting):
-            return _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
+            _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
                               f"{hitting} accumulate near t = {t:.12g}; persistent contact "
                               "is supported for linear systems only", t, **finish)
         res = self.law.apply(s.mass_matrix(q), J.T, v, closed)

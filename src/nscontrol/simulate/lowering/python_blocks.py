@@ -42,7 +42,8 @@ class PythonBlocks(Lowering):
         from ...systems.lure import LureSystem
 
         lure = isinstance(system.plant, LureSystem)
-        runner, own = (_lure_options if lure else _mechanical_options)(system, method)
+        runner, own = (_lure_options if lure else _event_driven_options
+                       if method.name == "event_driven" else _mechanical_options)(system, method)
         return Lowered(system.plant, x0, merge_options(options, own), runner)
 
     def invert(self, traj: Trajectory, lowered: Lowered) -> Trajectory:
@@ -71,6 +72,24 @@ def _mechanical_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dic
     compiled = None if isinstance(loop.plant, ImpactingBodies) else CompiledBlocks.of(runner)
     if compiled is not None:       # used when the plant has a compiled model too
         options["compiled_blocks"] = compiled
+    return runner, options
+
+
+def _event_driven_options(loop: ClosedLoop, method: Any
+                          ) -> tuple[BlockRunner, dict[str, Any]]:
+    """Event-driven with ``blocks=``: a continuous law without state (a ``StaticLaw``),
+    evaluated along the flow."""
+    ctrl = loop.controller
+    if loop.observer is not None or ctrl is None or int(ctrl.n_states) != 0 or \
+            getattr(ctrl, "period", None) is not None:
+        raise ModelError("event_driven: runs a closed loop whose controller is a continuous "
+                         "law without state (a StaticLaw with period None, no observer), "
+                         "evaluated along the flow; use method='moreau_jean' for sampled or "
+                         "dynamic blocks and observers")
+    runner = BlockRunner(loop)
+    options: dict[str, Any] = {"blocks": runner}
+    if loop.exosystem is not None:
+        options["u"] = loop.exosystem
     return runner, options
 
 

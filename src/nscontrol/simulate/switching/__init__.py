@@ -22,7 +22,7 @@ Accepted systems:
 
 Event kinds: ``"crossing"``, ``"sliding_start"``, ``"sliding_exit"``, ``"two_sliding_start"``,
 ``"two_sliding_exit"`` (second-order sliding of a Filippov system, see
-``_switching_filippov``), ``"grazing"``,
+``_filippov``), ``"grazing"``,
 ``"domain_exit"`` (PWA with a domain) and ``"switch"`` (PWM instants), each with ``mode_from``
 / ``mode_to`` and the surface/facet (or domain row) in ``index``.
 
@@ -69,15 +69,16 @@ from typing import TYPE_CHECKING, Any
 
 from numpy.typing import ArrayLike
 
-from .._validation import as_vector
-from ..errors import ModelError, NscontrolError
-from ._switching_run import SwitchingOptions, SwitchingRun, saltation_matrix
-from .trajectory import Trajectory
+from ..._validation import as_vector
+from ...errors import ModelError, NscontrolError
+from ..loop import drive
+from ..trajectory import Trajectory
+from ._run import SwitchingOptions, SwitchingRun, saltation_matrix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
-    from ..systems.nonlinear import NonlinearSystem
-    from ..systems.pwa import PiecewiseAffineSystem
-    from ..systems.switched import FilippovSystem, SwitchedAffineSystem
+    from ...systems.nonlinear import NonlinearSystem
+    from ...systems.pwa import PiecewiseAffineSystem
+    from ...systems.switched import FilippovSystem, SwitchedAffineSystem
 
 __all__ = ["integrate", "saltation_matrix", "SwitchingOptions"]
 
@@ -130,36 +131,37 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
     >>> [e.kind for e in tr.events], tr.stats["saltation_matrices"].shape
     (['sliding_start'], (1, 2, 2))
     """
-    runner = _runner_for(system)
+    stepper_for = _stepper_for(system)
     opts = SwitchingOptions.parse(options)
     x0 = as_vector("x0", x0, system.n_states)
     run = SwitchingRun(system, x0, t_span, opts)
     try:
-        extra = runner(system, x0, run)
+        return drive(stepper_for(system, x0, run), t_span, desc="switching",
+                     progress=opts.progress)
     except NscontrolError as exc:
-        exc.trajectory = run.finish(status=-1, message=str(exc))
+        if exc.trajectory is None:
+            exc.trajectory = run.finish(status=-1, message=str(exc))
         raise
-    return run.finish(status=run.status, message=run.message, extra=extra)
 
 
-def _runner_for(system: Any) -> Any:
-    """The runner of ``system``'s class, ``runner(system, x0, run) -> extra stats``."""
-    from ..systems.nonlinear import NonlinearSystem
-    from ..systems.pwa import PiecewiseAffineSystem
-    from ..systems.switched import FilippovSystem, SwitchedAffineSystem
+def _stepper_for(system: Any) -> Any:
+    """The stepper of ``system``'s class, ``stepper(system, x0, run) -> SwitchingStepper``."""
+    from ...systems.nonlinear import NonlinearSystem
+    from ...systems.pwa import PiecewiseAffineSystem
+    from ...systems.switched import FilippovSystem, SwitchedAffineSystem
 
     if isinstance(system, PiecewiseAffineSystem):
-        from ._switching_pwa import run_pwa
-        return run_pwa
+        from ._pwa import pwa_stepper
+        return pwa_stepper
     if isinstance(system, FilippovSystem):
-        from ._switching_filippov import run_filippov
-        return run_filippov
+        from ._filippov import FilippovStepper
+        return FilippovStepper
     if isinstance(system, SwitchedAffineSystem):
-        from ._switching_pwm import run_pwm
-        return run_pwm
+        from ._pwm import PwmStepper
+        return PwmStepper
     if isinstance(system, NonlinearSystem):
-        from ._switching_filippov import run_smooth
-        return run_smooth
+        from ._filippov import smooth_stepper
+        return smooth_stepper
     raise ModelError(f"switching: expected a PiecewiseAffineSystem, FilippovSystem, "
                      f"SwitchedAffineSystem or NonlinearSystem, got "
                      f"{type(system).__name__}; Lur'e systems use method='implicit_euler'")

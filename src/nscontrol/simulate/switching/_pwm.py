@@ -32,10 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
-from ..errors import ModelError
-from ..numerics.differences import central_difference_gradient
-from ..numerics.saltation import time_shift_term
+from ..._validation import FloatArray
+from ...errors import ModelError
+from ...numerics.differences import central_difference_gradient
+from ...numerics.saltation import time_shift_term
+from ._run import SwitchingStepper
 
 #: ``∂o_j/∂d`` of the pieces' offsets, in the order of ``PWMController.offsets(d)`` for
 #: ``0 < d < T`` (every piece nonempty): centred ``(0, d/2, T - d/2)``, leading ``(0, d)``,
@@ -43,59 +44,82 @@ from ..numerics.saltation import time_shift_term
 _OFFSET_RATES = {"centered": (0.0, 0.5, -0.5), "leading": (0.0, 1.0), "trailing": (0.0, -1.0)}
 
 
-def run_pwm(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
-    ctrl = system.controller
-    if ctrl is None:
-        raise ModelError("system.controller: a SwitchedAffineSystem needs its PWMController to "
-                         "be simulated, and the controller is part of the model (not a "
-                         "simulate option): build SwitchedAffineSystem(modes, "
-                         "controller=PWMController(period, duty))")
-    n = system.n_states
-    flows: dict[int, Any] = {}
+class PwmStepper(SwitchingStepper):
+    """A PWM run, one controller period per :meth:`piece`."""
 
-    def flow(mode: int) -> Any:
-        if mode not in flows:
-            flows[mode] = system.flow(mode)
-        return flows[mode]
+    def __init__(self, system: Any, x0: FloatArray, run: Any) -> None:
+        super().__init__(run)
+        ctrl = system.controller
+        if ctrl is None:
+            raise ModelError("system.controller: a SwitchedAffineSystem needs its PWMController "
+                             "to be simulated, and the controller is part of the model (not a "
+                             "simulate option): build SwitchedAffineSystem(modes, "
+                             "controller=PWMController(period, duty))")
+        self.system, self.ctrl, self.n = system, ctrl, system.n_states
+        self.flows: dict[int, Any] = {}
+        self.n_periods = math.ceil((run.tf - run.t0) / ctrl.period - 1e-12)
+        self.xi = np.r_[x0, 1.0]
+        run.rec.sample(run.t0, x0, force=True)
+        self.duties: list[float] = []
+        self.mode_prev = -1
+        self.degenerate = 0
+        self.k = 0
+        self.done = self.n_periods <= 0
 
-    T, t0, tf = ctrl.period, run.t0, run.tf
-    n_periods = math.ceil((tf - t0) / T - 1e-12)
-    xi = np.r_[x0, 1.0]
-    t = t0
-    run.rec.sample(t, x0, force=True)
-    duties, mode_prev = [], -1
-    degenerate = 0
-    k = 0
-    while k < n_periods:
-        t_k = t0 + k * T                      # exact instants, not accumulated
-        t_next = t0 + (k + 1) * T
+    def flow(self, mode: int) -> Any:
+        if mode not in self.flows:
+            self.flows[mode] = self.system.flow(mode)
+        return self.flows[mode]
+
+    def state(self) -> FloatArray:
+        return self.xi[:self.n]
+
+    def piece(self) -> float:
+        """Period ``k``: the duty read at the exact ``t_k = t0 + kT``, the sub-intervals
+        propagated exactly."""
+        run, ctrl, n = self.run, self.ctrl, self.n
+        T, k = ctrl.period, self.k
+        t_k = run.t0 + k * T                      # exact instants, not accumulated
+        t_next = run.t0 + (k + 1) * T
         _check_advance(T, t_k, t_next)
-        run.step(t_k)                         # one period: one step of the budget
-        d = ctrl.duty_at(t_k, xi[:n])
-        duties.append(d)
+        run.step(t_k)                             # one period: one step of the budget
+        d = ctrl.duty_at(t_k, self.xi[:n])
+        self.duties.append(d)
         offs = ctrl.offsets(d)
         starts = [t_k + o for o, _ in offs]
-        ends = starts[1:] + [t_next]
         rates = None
         if run.sensitivity:
-            rates, corner = _instant_gradients(ctrl, t_k, xi[:n], len(offs))
-            degenerate += corner
-            Phi = np.eye(n)
+            rates, corner = _instant_gradients(ctrl, t_k, self.xi[:n], len(offs))
+            self.degenerate += corner
+        Phi = self._pieces(offs, starts, starts[1:] + [t_next], rates)
+        if run.sensitivity:
+            run.Phi = Phi @ run.Phi
+        self.k = k + 1
+        self.done = self.k >= self.n_periods
+        return self.t
+
+    def _pieces(self, offs: Any, starts: list[float], ends: list[float], rates: Any
+                ) -> FloatArray:
+        """Propagate over the period's sub-intervals, recording the switches; the period's
+        transition (with sensitivity)."""
+        run, system, n, tf = self.run, self.system, self.n, self.run.tf
+        Phi = np.eye(n)
+        xi = self.xi
         for j, ((_, mode), a, b) in enumerate(zip(offs, starts, ends, strict=True)):
             if a >= tf:
                 break
             b = min(b, tf)
-            if mode_prev >= 0 and mode != mode_prev:  # a switching instant, exact
+            if self.mode_prev >= 0 and mode != self.mode_prev:  # a switching instant, exact
                 x = xi[:n]
-                run.event(a, "switch", -1, x, x, mode_prev, mode)
+                run.event(a, "switch", -1, x, x, self.mode_prev, mode)
                 run.rec.sample(a, x, force=True)
                 if rates is not None and rates[j] is not None:
-                    Phi += time_shift_term(system.field(mode_prev, x), system.field(mode, x),
-                                           rates[j])
-            mode_prev = mode
+                    Phi += time_shift_term(system.field(self.mode_prev, x),
+                                           system.field(mode, x), rates[j])
+            self.mode_prev = mode
             if b <= a:
                 continue
-            fl = flow(mode)
+            fl = self.flow(mode)
             ts = run.samples(a, b, last=False)
             if ts.size:
                 run.rec.extend(ts, np.atleast_2d(fl.propagate(xi, ts - a))[:, :n])
@@ -103,14 +127,13 @@ def run_pwm(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
                 Phi = np.asarray(fl.expm(b - a))[:n, :n] @ Phi
             xi = fl.state_at(xi, b - a)
             xi[n] = 1.0
-            t = b
-        if run.sensitivity:
-            run.Phi = Phi @ run.Phi
-        k += 1
-        run.bar.update(t)
-    if run.rec.last_time < tf:
-        run.rec.sample(tf, xi[:n], force=True)
-    return _pwm_stats(k, duties, mode_prev, degenerate if run.sensitivity else None)
+            self.xi = xi
+            self.t = b
+        return Phi
+
+    def extra(self) -> dict[str, Any]:
+        return _pwm_stats(self.k, self.duties, self.mode_prev,
+                          self.degenerate if self.run.sensitivity else None)
 
 
 def _check_advance(T: float, t_k: float, t_next: float) -> None:
@@ -131,7 +154,7 @@ def _pwm_stats(periods: int, duties: list[float], final_mode: int,
         if degenerate:
             import warnings
 
-            from ..errors import NscontrolWarning
+            from ...errors import NscontrolWarning
 
             warnings.warn(f"switching: the duty sat exactly on 0 or the period in {degenerate} "
                           f"period(s), a corner of the clipped duty law where the map is not "

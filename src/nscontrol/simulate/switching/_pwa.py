@@ -29,10 +29,10 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
-from .._validation import FloatArray
-from ..errors import InadmissibleStateError, ModelError, SlidingError, ZenoError
-from ._switching_run import saltation_matrix
-from .event_driven._flight import projection_stats
+from ..._validation import FloatArray
+from ...errors import InadmissibleStateError, ModelError, SlidingError, ZenoError
+from ..event_driven._flight import projection_stats
+from ._run import SwitchingStepper, saltation_matrix
 
 
 def _exosystem(system: Any, u: Any) -> Any:
@@ -53,7 +53,7 @@ class _Modes:
     or a sweep simulates the same model many times."""
 
     def __init__(self, system: Any, S: FloatArray, Bu: FloatArray) -> None:
-        from ..numerics.lti import TAYLOR_DEGREE
+        from ...numerics.lti import TAYLOR_DEGREE
 
         n, r, R = system.n_states, S.shape[0], system.n_regions
         m = n + r + 1
@@ -136,7 +136,7 @@ class _Modes:
 
     def prepare(self, k: int) -> None:
         """Build region ``k``'s flow and guard data for the compiled loop."""
-        from ..numerics.lti import LTIFlow
+        from ...numerics.lti import LTIFlow
 
         flow = LTIFlow.shared(self.aug[k])
         ctx = flow.guard_context()
@@ -166,12 +166,12 @@ class _Modes:
 
     def choose(self, xi: FloatArray, exclude: int = -1) -> int:
         """The region whose flow from ``ξ`` enters it (:func:`._pwa_kernels.choose_region`)."""
-        from ._pwa_kernels import choose_region
+        from .._pwa_kernels import choose_region
 
         return int(choose_region(self.H, self.h, self.nf, self.aug, xi, self.n, exclude))
 
     def entering(self, j: int, xi: FloatArray, tol: float) -> bool:
-        from ._pwa_kernels import entering
+        from .._pwa_kernels import entering
 
         return bool(entering(self.H, self.h, self.nf, self.aug, j, xi, self.n, tol))
 
@@ -256,67 +256,83 @@ def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int) -> None:
         run.rec.extend(te[ptr0:ptr], buf.s_x[ptr0:ptr])
 
 
-def run_pwa(system: Any, x0: FloatArray, run: Any) -> dict[str, Any]:
+def pwa_stepper(system: Any, x0: FloatArray, run: Any) -> SwitchingStepper:
+    """The stepper of a PWA run: exact pieces (no input or an exosystem), or DOP853 pieces
+    (an input given as a function of time)."""
     _check_x0(system, x0)
     exo = _exosystem(system, run.opts.u)
     if exo == "function":
-        return _run_pwa_ode(system, x0, run)
-    from ..numerics.lti import TAYLOR_REMAINDER
-    from . import _pwa_kernels as K
+        return _PwaOdeStepper(system, x0, run)
+    return _PwaStepper(system, x0, run, exo)
 
-    n = system.n_states
-    modes = _Modes.of(system, exo)
-    w_t0 = np.zeros(0) if exo is None else np.asarray(exo.w0, float).reshape(-1)
-    if exo is not None and run.t0 != 0.0:   # the exosystem's state at t0
-        w_t0 = expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0) @ w_t0
-    xi = np.concatenate([x0, w_t0, [1.0]])
-    i = modes.choose(xi)
-    if i < 0:
-        raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
-    if not modes.ready[i]:
-        modes.prepare(i)
-    buf = _Buffers(modes, run.t_eval.shape[0])
-    t = run.t0
-    ptr = int(np.searchsorted(run.t_eval, t, side="right"))  # t0 itself: the forced sample
-    run.rec.sample(t, x0, force=True)
-    segments = 0
-    restart = False   # the first piece starts from the user's x0
-    proj = np.zeros(5)   # round-off projections (_lti_kernels.project_restart)
-    clock = np.array([np.nan, 0.0])   # the loop's time label and its carried rounding
-    while t < run.tf:
-        ptr0 = ptr
-        user = not restart
-        code, t, i, ptr, n_e, run.stuck, pieces, index = K.run_pieces(
+
+class _PwaStepper(SwitchingStepper):
+    """Exact pieces: one call of the compiled loop (:mod:`.._pwa_kernels`) per
+    :meth:`piece`, and the event it hands back settled here."""
+
+    def __init__(self, system: Any, x0: FloatArray, run: Any, exo: Any) -> None:
+        super().__init__(run)
+        self.system = system
+        self.modes = modes = _Modes.of(system, exo)
+        w_t0 = np.zeros(0) if exo is None else np.asarray(exo.w0, float).reshape(-1)
+        if exo is not None and run.t0 != 0.0:   # the exosystem's state at t0
+            w_t0 = expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0) @ w_t0
+        self.xi = np.concatenate([x0, w_t0, [1.0]])
+        self.i = modes.choose(self.xi)
+        if self.i < 0:
+            raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
+        if not modes.ready[self.i]:
+            modes.prepare(self.i)
+        self.buf = _Buffers(modes, run.t_eval.shape[0])
+        # t0 itself: the forced sample
+        self.ptr = int(np.searchsorted(run.t_eval, run.t0, side="right"))
+        run.rec.sample(run.t0, x0, force=True)
+        self.segments = 0
+        self.restart = False   # the first piece starts from the user's x0
+        self.proj = np.zeros(5)   # round-off projections (_lti_kernels.project_restart)
+        self.clock = np.array([np.nan, 0.0])   # the loop's time label and its rounding
+
+    def state(self) -> FloatArray:
+        return self.xi[:self.modes.n]
+
+    def piece(self) -> float:
+        from ...numerics.lti import TAYLOR_REMAINDER
+        from .. import _pwa_kernels as K
+
+        run, modes, buf = self.run, self.modes, self.buf
+        ptr0 = self.ptr
+        user = not self.restart
+        code, self.t, i, self.ptr, n_e, run.stuck, pieces, index = K.run_pieces(
             modes.kinds, modes.lams, modes.Vs, modes.Vinvs, modes.phis, modes.taylors,
             modes.ds, modes.hs, modes.kappas, modes.ready, modes.Ws, modes.g0s,
             modes.row_norms, modes.bern, TAYLOR_REMAINDER, 1e-12, 1e-12, modes.H, modes.h,
-            modes.nf, modes.aug, xi, float(t), float(run.tf), int(i), run.Phi,
-            run.sensitivity, run.t_eval, ptr, buf.s_x, buf.e_t, buf.e_row, buf.e_from,
+            modes.nf, modes.aug, self.xi, float(self.t), float(run.tf), int(self.i), run.Phi,
+            run.sensitivity, run.t_eval, self.ptr, buf.s_x, buf.e_t, buf.e_row, buf.e_from,
             buf.e_to, buf.e_x, buf.e_S, buf.e_ptr, run.max_events - run.n_events + 1,
-            buf.hit, buf.graze, run.stuck, restart, proj, clock)
-        restart = restart or code != K.NEED_FLOW or pieces > 0
-        segments += pieces
-        _replay(run, buf, ptr0, ptr, n_e)
-        run.bar.update(t)
+            buf.hit, buf.graze, run.stuck, self.restart, self.proj, self.clock)
+        self.i = i
+        self.restart = self.restart or code != K.NEED_FLOW or pieces > 0
+        self.segments += pieces
+        _replay(run, buf, ptr0, self.ptr, n_e)
+        t = self.t
         if code == K.DONE:
-            break
-        if code == K.NEED_FLOW:
+            self.done = True
+        elif code == K.NEED_FLOW:
             modes.prepare(i)
         elif code == K.STUCK:
             raise ZenoError(f"switching: {K.MAX_STUCK} consecutive events at t = {t:.12g} "
                             f"without progress (Zeno point or an undecidable mode)", time=t)
         elif code == K.INADMISSIBLE:
-            raise _inadmissible(modes, i, index, xi, t, proj, user)
+            raise _inadmissible(modes, i, index, self.xi, t, self.proj, user)
         elif code == K.HANDOFF:
             hits = [int(r) for r in np.flatnonzero(buf.hit)]
             grazing = bool(buf.graze[hits].all())
-            stop, i = _settle(system, modes, run, t, i, xi, hits, grazing)
-            if stop:
-                break
-    if run.rec.last_time < run.tf and run.status == 0:
-        run.rec.sample(run.tf, xi[:n], force=True)
-    return {"segments": segments, "final_mode": i, "propagation": "exact",
-            **projection_stats(proj)}
+            self.done, self.i = _settle(self.system, modes, run, t, i, self.xi, hits, grazing)
+        return t
+
+    def extra(self) -> dict[str, Any]:
+        return {"segments": self.segments, "final_mode": self.i, "propagation": "exact",
+                **projection_stats(self.proj)}
 
 
 def _inadmissible(modes: _Modes, i: int, index: int, xi: FloatArray, t: float,
@@ -371,35 +387,44 @@ def _settle(system: Any, modes: _Modes, run: Any, t: float, i: int, xi: FloatArr
     return False, j
 
 
-def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
-                 ) -> dict[str, Any]:
+class _PwaOdeStepper(SwitchingStepper):
     """Pieces by DOP853 for inputs given as arbitrary functions of time: one terminal event
-    per facet (leaving the region) and per domain facet, and one non-terminal event per facet
-    on the slack's derivative (grazing candidates: a minimum of the slack at zero)."""
-    u = system.u if run.opts.u is None else run.opts.u
-    from ..systems.lure import as_input_function
+    per facet (leaving the region) and per domain facet, and one non-terminal event per
+    facet on the slack's derivative (grazing candidates: a minimum of the slack at zero);
+    one piece and its event per :meth:`piece`."""
 
-    ufn = as_input_function("u", u, system.E.shape[1])
-    if ufn is None:   # this path is taken only for inputs given as functions of time
-        raise ModelError("u: expected an input function of time for the DOP853 path, got None")
+    def __init__(self, system: Any, x0: FloatArray, run: Any) -> None:
+        from ...systems.lure import as_input_function
 
-    def field(i: int, t: float, x: FloatArray) -> FloatArray:
-        return system.A[i] @ x + system.b[i] + system.E @ ufn(t)[0]
+        super().__init__(run)
+        u = system.u if run.opts.u is None else run.opts.u
+        ufn = as_input_function("u", u, system.E.shape[1])
+        if ufn is None:   # this path is taken only for inputs given as functions of time
+            raise ModelError("u: expected an input function of time for the DOP853 path, "
+                             "got None")
+        self.ufn = ufn
+        self.system, self.x = system, x0.copy()
+        self.i = self.mode_at(self.x, self.t)
+        if self.i < 0:
+            raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
+        run.rec.sample(self.t, x0, force=True)
+        self.segments = 0
+        self.last_graze: dict[int, float] = {}
 
-    def mode_at(x: FloatArray, t: float, exclude: int = -1) -> int:
-        return _inward_region(system, field, x, t, exclude)
+    def field(self, i: int, t: float, x: FloatArray) -> FloatArray:
+        s = self.system
+        return s.A[i] @ x + s.b[i] + s.E @ self.ufn(t)[0]
 
-    t, x = run.t0, x0.copy()
-    i = mode_at(x, t)
-    if i < 0:
-        raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
-    run.rec.sample(t, x0, force=True)
-    segments = 0
-    last_graze: dict[int, float] = {}
-    while t < run.tf:
-        H, h = system.regions[i]
-        events, kinds = _region_events(system, i, field)
-        sol = run.dop853(lambda tt, xx, i=i: field(i, tt, xx), t, x, events)
+    def mode_at(self, x: FloatArray, t: float, exclude: int = -1) -> int:
+        return _inward_region(self.system, self.field, x, t, exclude)
+
+    def state(self) -> FloatArray:
+        return self.x
+
+    def piece(self) -> float:
+        run, system, i, t = self.run, self.system, self.i, self.t
+        events, kinds = _region_events(system, i, self.field)
+        sol = run.dop853(lambda tt, xx, i=i: self.field(i, tt, xx), t, self.x, events)
         t_end = float(sol.t[-1])
         ts = run.samples(t, t_end, last=sol.status == 0)
         if ts.size and sol.sol is not None:
@@ -407,40 +432,47 @@ def _run_pwa_ode(system: Any, x0: FloatArray, run: Any
         if sol.status < 0:
             raise run.piece_failure(sol, t_end, f"in region {i}; check the input function for "
                                                 f"NaN or infinite values")
-        _record_ode_grazings(run, sol, kinds, system.regions[i], i, t_end, last_graze)
+        _record_ode_grazings(run, sol, kinds, system.regions[i], i, t_end, self.last_graze)
         if run.sensitivity:
             run.Phi = expm(system.A[i] * (t_end - t)) @ run.Phi
-        segments += 1
-        t, x = t_end, sol.y[:, -1].copy()
-        run.bar.update(t)
+        self.segments += 1
+        self.t, self.x = t_end, sol.y[:, -1].copy()
         if sol.status != 1:
-            break
+            self.done = True
+        else:
+            self._event(sol, kinds)
+        return self.t
+
+    def _event(self, sol: Any, kinds: list[tuple[str, int]]) -> None:
+        """The event that ended the piece: leaving the domain, or a crossing."""
+        run, system, i, t, x = self.run, self.system, self.i, self.t, self.x
         hit = [k for k, te in enumerate(sol.t_events) if te.size and kinds[k][0] != "graze"
-               and float(te[-1]) >= t_end]
+               and float(te[-1]) >= t]
         dom = [kinds[k][1] for k in hit if kinds[k][0] == "domain"]
         if not dom and system.domain is not None:   # a facet on the domain's boundary
             Hd, hd = system.domain                   # fired first: is the flow leaving?
             on = np.abs(hd - Hd @ x) <= 1e-9 * (1.0 + np.abs(hd) + np.abs(Hd) @ np.abs(x))
-            dom = [int(r) for r in np.flatnonzero(on & (Hd @ field(i, t, x) > 0.0))]
+            dom = [int(r) for r in np.flatnonzero(on & (Hd @ self.field(i, t, x) > 0.0))]
         if dom:
             _domain_exit(run, t, dom[0], x, i)
-            break
+            self.done = True
+            return
         row = kinds[hit[0]][1]
-        j = mode_at(x, t, exclude=i)
+        j = self.mode_at(x, t, exclude=i)
         if j < 0:
             raise SlidingError(f"switching: at t = {t:.12g} no region's field points inward "
                                f"at x = {x} (sliding on a discontinuous PWA facet); simulate "
                                f"FilippovSystem.from_pwa(system) instead", time=t,
                                state=x.copy())
-        S = (saltation_matrix(field(i, t, x), field(j, t, x), H[row])
-             if run.sensitivity else None)
+        S = (saltation_matrix(self.field(i, t, x), self.field(j, t, x),
+                              system.regions[i][0][row]) if run.sensitivity else None)
         run.event(t, "crossing", row, x, x, i, j, S)
         run.rec.sample(t, x, force=True)
-        last_graze.clear()
-        i = j
-    if run.rec.last_time < run.tf and run.status == 0:
-        run.rec.sample(run.tf, x, force=True)
-    return {"segments": segments, "final_mode": i, "propagation": "dop853"}
+        self.last_graze.clear()
+        self.i = j
+
+    def extra(self) -> dict[str, Any]:
+        return {"segments": self.segments, "final_mode": self.i, "propagation": "dop853"}
 
 
 def _inward_region(system: Any, field: Any, x: FloatArray, t: float, exclude: int) -> int:

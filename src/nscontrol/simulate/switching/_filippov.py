@@ -63,10 +63,10 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
-from ..errors import ModelError
-from ..numerics.differences import central_difference_jacobian
-from ._switching_run import saltation_matrix
+from ..._validation import FloatArray
+from ...errors import ModelError
+from ...numerics.differences import central_difference_jacobian
+from ._run import SwitchingStepper, saltation_matrix
 
 _GRAZE_FACTOR = 100.0
 #: Onset of second-order sliding at a crossing: |σ| below this times |∇h| |F|. In the
@@ -209,13 +209,10 @@ class _NoSurfaces:
         return np.zeros(0)
 
 
-def run_smooth(system: Any, x0: FloatArray, run: Any
-               ) -> dict[str, Any]:
-    """Integrate a smooth :class:`~nscontrol.systems.nonlinear.NonlinearSystem` (input from
-    the ``u`` option or the system's) by the Filippov path with no surface."""
-    extra = run_filippov(_NoSurfaces(system, run.opts.u), x0, run)
-    del extra["final_mode"]      # a single mode: nothing to report
-    return extra
+def smooth_stepper(system: Any, x0: FloatArray, run: Any) -> SwitchingStepper:
+    """The stepper of a smooth :class:`~nscontrol.systems.nonlinear.NonlinearSystem` (input
+    from the ``u`` option or the system's): the Filippov path with no surface."""
+    return FilippovStepper(_NoSurfaces(system, run.opts.u), x0, run, smooth=True)
 
 
 def _mode_code(signs: tuple[int, ...], sliding: int) -> int:
@@ -259,62 +256,80 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
     return tuple(signs), sliding
 
 
-def run_filippov(system: Any, x0: FloatArray, run: Any
-                 ) -> dict[str, Any]:
-    fields = _Fields(system)
-    n = system.n_states
-    t, x = run.t0, x0.copy()
-    signs, sliding = _initial_mode(fields, t, x)
-    second = -1                      # the surface of second-order sliding, -1 when none
-    if sliding >= 0 and _two_sliding_onset(fields, t, x, signs, sliding, -np.inf):
-        second, sliding = sliding, -1    # starts on s = s' = 0: no first-order sliding field
-        x = _enter_two_sliding(fields, run, t, x, signs, second)
-    run.rec.sample(t, x, force=True)
-    if sliding >= 0:
-        run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
-                  _mode_code(signs, sliding), np.eye(n))
-    pieces = 0
-    last_graze: dict[int, float] = {}
-    last_cross: dict[int, float] = {}
-    while t < run.tf:
-        sol, kinds, t, x = _piece(system, fields, run, t, x, signs, sliding, second,
-                                  last_graze)
-        pieces += 1
-        run.bar.update(t)
+class FilippovStepper(SwitchingStepper):
+    """A Filippov run: one DOP853 piece of the current mode and the event that ends it per
+    :meth:`piece` (crossing, sliding start or exit, second-order sliding)."""
+
+    def __init__(self, system: Any, x0: FloatArray, run: Any, smooth: bool = False) -> None:
+        super().__init__(run)
+        self.system, self.smooth = system, smooth
+        self.fields = fields = _Fields(system)
+        n, t, x = system.n_states, self.t, x0.copy()
+        signs, sliding = _initial_mode(fields, t, x)
+        self.second = -1                 # the surface of second-order sliding, -1 when none
+        if sliding >= 0 and _two_sliding_onset(fields, t, x, signs, sliding, -np.inf):
+            self.second, sliding = sliding, -1  # starts on s = s' = 0: no first-order field
+            x = _enter_two_sliding(fields, run, t, x, signs, self.second)
+        run.rec.sample(t, x, force=True)
+        if sliding >= 0:
+            run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
+                      _mode_code(signs, sliding), np.eye(n))
+        self.x, self.signs, self.sliding = x, signs, sliding
+        self.pieces = 0
+        self.last_graze: dict[int, float] = {}
+        self.last_cross: dict[int, float] = {}
+
+    def state(self) -> FloatArray:
+        return self.x
+
+    def piece(self) -> float:
+        sol, kinds, self.t, self.x = _piece(self.system, self.fields, self.run, self.t,
+                                            self.x, self.signs, self.sliding, self.second,
+                                            self.last_graze)
+        self.pieces += 1
         if sol.status != 1:
-            break
+            self.done = True
+            return self.t
         which = next(i for i, te in enumerate(sol.t_events)
                      if te.size and kinds[i][0] != "graze")
-        kind, k = kinds[which]
+        self._event(*kinds[which])
+        return self.t
+
+    def _event(self, kind: str, k: int) -> None:
+        """The event of kind ``kind`` on surface (or side) ``k`` that ended the piece."""
+        fields, run, t, x, n = self.fields, self.run, self.t, self.x, self.system.n_states
+        signs, sliding = self.signs, self.sliding
         if kind == "exit2":
-            signs = _leave_two_sliding(fields, run, t, x, signs, second, k)
-            second = -1
-            continue
+            self.signs = _leave_two_sliding(fields, run, t, x, signs, self.second, k)
+            self.second = -1
+            return
         if kind == "exit":
             old = _mode_code(signs, sliding)
             new_signs = list(signs)
             new_signs[sliding] = k
-            j, sliding, signs = sliding, -1, tuple(new_signs)
-            run.event(t, "sliding_exit", j, x, x, old, _mode_code(signs, -1), np.eye(n))
+            j, self.sliding, self.signs = sliding, -1, tuple(new_signs)
+            run.event(t, "sliding_exit", j, x, x, old, _mode_code(self.signs, -1), np.eye(n))
             run.rec.sample(t, x, force=True)
-            last_graze[j] = t   # a tangential exit: the σ root at its start is not a graze
-            continue
-        if sliding < 0 and second < 0 and _two_sliding_onset(fields, t, x, signs, k,
-                                                              last_cross.get(k, -np.inf)):
-            x = _enter_two_sliding(fields, run, t, x, signs, k)
-            second = k
-            continue
-        last_cross[k] = t
-        signs, sliding = _hit_surface(fields, run, t, x, signs, sliding, k)
+            self.last_graze[j] = t  # a tangential exit: the σ root at its start is no graze
+            return
+        if sliding < 0 and self.second < 0 and _two_sliding_onset(
+                fields, t, x, signs, k, self.last_cross.get(k, -np.inf)):
+            self.x = _enter_two_sliding(fields, run, t, x, signs, k)
+            self.second = k
+            return
+        self.last_cross[k] = t
+        self.signs, self.sliding = _hit_surface(fields, run, t, x, signs, sliding, k)
         last = run.rec.events[-1] if run.rec.events else None
         if last is not None and last.kind == "grazing" and last.index == k:
-            last_graze[k] = t   # a σ root right after this touch is the same grazing
+            self.last_graze[k] = t   # a σ root right after this touch is the same grazing
         run.rec.sample(t, x, force=True)
-    if run.rec.last_time < run.tf:
-        run.rec.sample(run.tf, x, force=True)
-    final = _two_sliding_code(signs, second) if second >= 0 else _mode_code(signs, sliding)
-    return {"pieces": pieces, "final_mode": final,
-            "propagation": "dop853"}
+
+    def extra(self) -> dict[str, Any]:
+        if self.smooth:          # a single mode: nothing to report
+            return {"pieces": self.pieces, "propagation": "dop853"}
+        final = (_two_sliding_code(self.signs, self.second) if self.second >= 0
+                 else _mode_code(self.signs, self.sliding))
+        return {"pieces": self.pieces, "final_mode": final, "propagation": "dop853"}
 
 
 def _piece(system: Any, fields: _Fields, run: Any, t: float, x: FloatArray,

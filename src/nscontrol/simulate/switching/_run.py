@@ -1,9 +1,11 @@
 """The shared part of the switching runners (:mod:`nscontrol.simulate.switching`): the typed
-options, the run state (recorder, events, sensitivity, budgets, Zeno guard), budgeted DOP853
-and the saltation matrix of a crossing.
+options, the run state (recorder, events, sensitivity, budgets, Zeno guard), the stepper base
+that :func:`~nscontrol.simulate.loop.drive` advances, budgeted DOP853 and the saltation matrix
+of a crossing.
 
-The runners (``_switching_pwa``, ``_switching_filippov``, ``_switching_pwm``) import from here
-and :mod:`~nscontrol.simulate.switching` dispatches to them: no module imports its importer.
+The runners (``_pwa``, ``_filippov``, ``_pwm``: steppers on :class:`SwitchingStepper`) import
+from here and :mod:`~nscontrol.simulate.switching` dispatches to them: no module imports its
+importer.
 """
 
 from __future__ import annotations
@@ -15,8 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .._progress import TimeProgress
-from .._validation import (
+from ..._validation import (
     FloatArray,
     as_float_array,
     check_bool,
@@ -24,10 +25,12 @@ from .._validation import (
     check_integer,
     check_positive,
 )
-from ..errors import BudgetExceededError, ModelError, SolverError, ZenoError
-from .trajectory import Recorder, Trajectory
+from ...errors import BudgetExceededError, ModelError, SolverError, ZenoError
+from ...numerics.saltation import saltation_matrix as _saltation
+from ..loop import Stop
+from ..trajectory import Recorder, Trajectory
 
-__all__ = ["SwitchingOptions", "SwitchingRun", "saltation_matrix"]
+__all__ = ["SwitchingOptions", "SwitchingRun", "SwitchingStepper", "saltation_matrix"]
 
 
 @dataclass(frozen=True)
@@ -96,6 +99,9 @@ def _check_t_eval(t_eval: Any) -> FloatArray | None:
 def saltation_matrix(f_minus: Any, f_plus: Any, normal: Any) -> FloatArray:
     """The jump of the state sensitivity at a transversal crossing of a switching surface.
 
+    The case without a state jump of :func:`nscontrol.numerics.saltation.saltation_matrix`
+    (the one source of the formula), in the switching runners' argument order.
+
     Parameters
     ----------
     f_minus : (n,) array_like
@@ -113,8 +119,8 @@ def saltation_matrix(f_minus: Any, f_plus: Any, normal: Any) -> FloatArray:
 
     Raises
     ------
-    ModelError
-        ``nᵀF⁻ = 0`` (grazing: the saltation matrix is unbounded).
+    SolverError
+        ``nᵀF⁻ = 0`` to rounding (grazing: the saltation matrix is unbounded).
 
     Notes
     -----
@@ -128,11 +134,8 @@ def saltation_matrix(f_minus: Any, f_plus: Any, normal: Any) -> FloatArray:
     >>> S.tolist()
     [[1.0, 0.0], [0.0, -1.0]]
     """
-    fm, fp, n = (np.asarray(v, float) for v in (f_minus, f_plus, normal))
-    den = float(n @ fm)
-    if den == 0.0:
-        raise ModelError("saltation_matrix: nᵀF⁻ = 0 (grazing contact): no saltation matrix")
-    return np.eye(fm.shape[0]) + np.outer(fp - fm, n) / den
+    fm = np.asarray(f_minus, dtype=float).reshape(-1)
+    return _saltation(np.eye(fm.shape[0]), fm, f_plus, normal)
 
 
 class SwitchingRun:
@@ -162,7 +165,6 @@ class SwitchingRun:
         self.Phi = np.eye(self.n)
         self.saltations: list[FloatArray] = []
         self.counts: dict[str, int] = {}
-        self.bar = TimeProgress(self.t0, self.tf, desc="switching", enable=opts.progress)
         self.n_events = 0
         self.stuck = 0
 
@@ -251,7 +253,6 @@ class SwitchingRun:
 
     def finish(self, status: int = 0, message: str | None = None,
                extra: dict[str, Any] | None = None) -> Trajectory:
-        self.bar.close()
         stats: dict[str, Any] = {"events": self.n_events, "steps": self.steps,
                                  **{f"n_{k}": v for k, v in self.counts.items()}}
         stats.update(extra or {})
@@ -261,6 +262,43 @@ class SwitchingRun:
                                            else np.zeros((0, self.n, self.n)))
         return self.rec.finish(status=status, message=message, method="switching", stats=stats,
                                state_names=getattr(self.system, "state_names", ()))
+
+
+class SwitchingStepper:
+    """What a switching runner gives :func:`~nscontrol.simulate.loop.drive`: its
+    :meth:`advance` runs one piece (a flight to the next event and that event, a call of
+    the compiled PWA loop, a PWM period) and returns the time reached; at the end it
+    records the final sample and returns a :class:`~nscontrol.simulate.loop.Stop`.
+    A runner keeps the time reached in ``t``, sets ``done`` when its last piece ran, and
+    gives :meth:`extra` (its stats)."""
+
+    def __init__(self, run: SwitchingRun) -> None:
+        self.run = run
+        self.t = run.t0
+        self.done = False
+
+    def state(self) -> FloatArray:
+        """The current state (recorded at ``tf`` when the last sample is earlier)."""
+        raise NotImplementedError
+
+    def piece(self) -> float:
+        """Run and record the next piece; the time reached (``done`` set after the last)."""
+        raise NotImplementedError
+
+    def extra(self) -> dict[str, Any]:
+        """The runner's own statistics."""
+        return {}
+
+    def advance(self) -> float | Stop:
+        run = self.run
+        if not self.done and self.t < run.tf:
+            return self.piece()
+        if run.rec.last_time < run.tf and run.status == 0:
+            run.rec.sample(run.tf, self.state(), force=True)
+        return Stop(run.status, run.message)
+
+    def finish(self, stop: Stop) -> Trajectory:
+        return self.run.finish(status=stop.status, message=stop.message, extra=self.extra())
 
 
 @functools.cache
