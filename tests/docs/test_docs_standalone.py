@@ -12,8 +12,9 @@ PAGES = [p for p in PAGES if p.name != "gallery.md"]          # written by the d
 CHAPTERS = ["ch02", "ch03", "ch04", "ch05", "ch06", "ch07", "ch08", "ch09", "ch10", "ch11",
             "ch12", "frictional_contacts", "sliding_mode"]
 # Material outside the repository: internal specification files, a design notebook, the
-# numbered sections of a specification ("spec §6").
-UNSEEN = re.compile(r"shared/|specs?/|DESIGN\.md|\bspec(?:'s)?\s*§|\bthe spec\b", re.I)
+# numbered sections of a specification ("spec §6"), a folder of the machine the page was written on
+# ("cd /work/main": a reader runs commands from their own clone).
+UNSEEN = re.compile(r"shared/|specs?/|DESIGN\.md|\bspec(?:'s)?\s*§|\bthe spec\b|/work/", re.I)
 
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
