@@ -27,12 +27,7 @@ import numpy as np
 
 from .._validation import FloatArray, check_in_interval, check_positive
 from ..errors import InadmissibleStateError
-from .lagrangian import (
-    LagrangianSystem,
-    two_link_arm_coriolis,
-    two_link_arm_gravity,
-    two_link_arm_mass,
-)
+from .lagrangian import LagrangianSystem, _f64
 
 __all__ = ["TwoLinkParams", "TwoLinkArm", "OneDofMass"]
 
@@ -69,10 +64,9 @@ class TwoLinkParams:
     @cached_property
     def array(self) -> FloatArray:
         """The parameters as the compiled kernels' record ``ARM`` (flat, in its order)."""
-        from ._two_link_kernels import ARM
+        from ._two_link_kernels import arm_array
 
-        return np.array([tuple(getattr(self, name) for name in ARM.names or ())],
-                        dtype=ARM).view(np.float64)
+        return arm_array(self.l1, self.l2, self.m1, self.m2, self.I1, self.I2, self.g)
 
     def inertial(self) -> dict[str, float]:
         """The keyword arguments of the joint-space functions (without ``g``)."""
@@ -112,7 +106,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        return two_link_arm_mass(theta, **self.params.inertial())
+        from . import _two_link_kernels as tk
+
+        return tk.mass(_f64(theta), self.params.array)
 
     def coriolis(self, theta: FloatArray, dtheta: FloatArray) -> FloatArray:
         """``C(θ, θ')`` in Christoffel form.
@@ -122,7 +118,9 @@ class TwoLinkArm:
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        return two_link_arm_coriolis(theta, dtheta, **self.params.inertial())
+        from . import _two_link_kernels as tk
+
+        return tk.coriolis(_f64(theta), _f64(dtheta), self.params.array)
 
     def gravity(self, theta: FloatArray) -> FloatArray:
         """``G(θ) = ∂P/∂θ``.
@@ -132,7 +130,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        return two_link_arm_gravity(theta, g=self.params.g, **self.params.inertial())
+        from . import _two_link_kernels as tk
+
+        return tk.gravity(_f64(theta), self.params.array)
 
     def system(self, restitution: float = 0.7) -> LagrangianSystem:
         """The plant for the integrators: gravity on, ground ``y >= 0``, fully actuated.
@@ -156,10 +156,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        l1, l2 = self.params.l1, self.params.l2
-        t12 = theta[0] + theta[1]
-        return np.array([l1 * np.sin(theta[0]) + l2 * np.sin(t12),
-                         l1 * np.cos(theta[0]) + l2 * np.cos(t12)])
+        from . import _two_link_kernels as tk
+
+        return tk.position(_f64(theta), self.params.array)
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """``J = ∂(y, x)/∂θ``.
@@ -169,11 +168,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        l1, l2 = self.params.l1, self.params.l2
-        t12 = theta[0] + theta[1]
-        c12, s12 = l2 * np.cos(t12), l2 * np.sin(t12)
-        return np.array([[l1 * np.cos(theta[0]) + c12, c12],
-                         [-l1 * np.sin(theta[0]) - s12, -s12]])
+        from . import _two_link_kernels as tk
+
+        return tk.jacobian(_f64(theta), self.params.array)
 
     def jacobian_rate(self, theta: FloatArray, dtheta: FloatArray) -> FloatArray:
         """``J̇ = d/dt J(θ(t))``.
@@ -183,11 +180,9 @@ class TwoLinkArm:
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        l1, l2 = self.params.l1, self.params.l2
-        t12, w12 = theta[0] + theta[1], dtheta[0] + dtheta[1]
-        c12, s12 = l2 * np.cos(t12) * w12, l2 * np.sin(t12) * w12
-        return np.array([[-l1 * np.sin(theta[0]) * dtheta[0] - s12, -s12],
-                         [-l1 * np.cos(theta[0]) * dtheta[0] - c12, -c12]])
+        from . import _two_link_kernels as tk
+
+        return tk.jacobian_rate(_f64(theta), _f64(dtheta), self.params.array)
 
     def inverse(self, q: FloatArray) -> FloatArray:
         """Joint angles of the end-effector position ``q = (y, x)`` on the elbow branch
