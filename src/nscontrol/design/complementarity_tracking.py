@@ -463,6 +463,10 @@ class _Cycle:
     u_star: float = math.nan
 
 
+#: The compiled blocks made so far, by their parameters' bytes (see ``compiled``).
+_BLOCKS: dict[bytes, Any] = {}
+
+
 def _check_model_and_task(model: Any, task: Any) -> None:
     """A task-space model and a cyclic task of the same dimension, the task in the arm's
     reach: refused here rather than by an ``AttributeError`` or a run that cannot track."""
@@ -656,32 +660,34 @@ class SwitchingTrackingController(StaticLaw):
         """
         if self.compiled_reason() is not None:
             return None
-        if self._block is None:         # built once: its checks cost milliseconds
+        if self._block is None:         # its checks cost a millisecond: kept per params
             from ..systems.feedback import CompiledBlock
 
-            self._block = CompiledBlock(kern.tracking_output, kern.tracking_update,
-                                        self._params)
+            key = self._params.tobytes()
+            block = _BLOCKS.pop(key, None)
+            if block is None:
+                block = CompiledBlock(kern.tracking_output, kern.tracking_update,
+                                      self._params.copy())
+                if len(_BLOCKS) >= 64:          # the least recently used goes
+                    del _BLOCKS[next(iter(_BLOCKS))]
+            _BLOCKS[key] = self._block = block
         return self._block
 
     def _kernel_params(self) -> FloatArray:
         """The parameters as the kernels' record ``PARAMS`` (flat, in its order)."""
         from ..systems.two_link import OneDofMass
 
-        rec = np.zeros(1, dtype=kern.PARAMS)
-        r = rec[0]
-        r["n"] = self.n
+        r: dict[str, float] = {"n": self.n}
         task, model = self.task, self.model
         if isinstance(task, CircleTask):
-            r["task"] = kern.TASK_CIRCLE
-            r["centre"], r["radius"], r["threshold"] = task.centre, task.radius, \
-                task.y_threshold
+            r.update(task=kern.TASK_CIRCLE, centre=task.centre, radius=task.radius,
+                     threshold=task.y_threshold)
         else:
-            r["task"] = kern.TASK_HALF_SINE
-            r["amplitude"], r["omega"], r["threshold"] = task.amplitude, task.omega, \
-                task.threshold
+            r.update(task=kern.TASK_HALF_SINE, amplitude=task.amplitude, omega=task.omega,
+                     threshold=task.threshold)
         r["period"] = task.period
         if isinstance(model, OneDofMass):
-            r["model"], r["mass"], r["gravity"] = kern.MODEL_ONE_DOF, model.m, model.g
+            r.update(model=kern.MODEL_ONE_DOF, mass=model.m, gravity=model.g)
         else:
             r["model"] = kern.MODEL_TWO_LINK
             for name in ("l1", "l2", "m1", "m2", "I1", "I2", "g"):
@@ -689,18 +695,19 @@ class SwitchingTrackingController(StaticLaw):
         r["switching"] = kern.DESIGNED if self.switching == "designed" \
             else kern.IMPACT_TRIGGERED
         g, tr, c = self.gains, self.transition, self.contact
-        r["gamma1"], r["gamma2"], r["Kf"] = g.gamma1, g.gamma2, g.Kf
-        r["delta"], r["Delta"], r["alpha"], r["phi"] = tr.delta, tr.Delta, tr.alpha, tr.phi
-        r["depth_law"] = 0.0 if tr.depth_law == "sqrt" else 1.0
-        r["depth_min"], r["depth_max"] = tr.depth_min, tr.depth_max
-        r["n_consecutive_contact"] = tr.n_consecutive_contact
-        r["lam_rate"], r["lam_sat"], r["liftoff_time"] = c.lam_rate, c.lam_sat, c.liftoff_time
-        r["model_scale"], r["force_feedback_scale"] = self.model_scale, \
-            self.force_feedback_scale
-        r["force_scale"], r["force_bias"] = self.force_scale, self.force_bias
-        r["detection_delay"] = self.detection_delay
-        r["trigger_q2"], r["q2_end"] = self.trigger_q2, self.q2_end
-        return rec.view(np.float64)
+        r.update(gamma1=g.gamma1, gamma2=g.gamma2, Kf=g.Kf, delta=tr.delta, Delta=tr.Delta,
+                 alpha=tr.alpha, phi=tr.phi, depth_law=0.0 if tr.depth_law == "sqrt" else 1.0,
+                 depth_min=tr.depth_min, depth_max=tr.depth_max,
+                 n_consecutive_contact=tr.n_consecutive_contact, lam_rate=c.lam_rate,
+                 lam_sat=c.lam_sat, liftoff_time=c.liftoff_time, model_scale=self.model_scale,
+                 force_feedback_scale=self.force_feedback_scale, force_scale=self.force_scale,
+                 force_bias=self.force_bias, detection_delay=self.detection_delay,
+                 trigger_q2=self.trigger_q2, q2_end=self.q2_end)
+        # the record by name (a field left out is 0), made in one go
+        names = kern.PARAMS.names or ()
+        assert set(r) <= set(names), sorted(set(r) - set(names))
+        return np.array([tuple(r.get(name, 0.0) for name in names)],
+                        dtype=kern.PARAMS).view(np.float64)
 
     def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
         """Joint torques ``U = Jᵀ τ`` at a step start (also advances the phase logic, and

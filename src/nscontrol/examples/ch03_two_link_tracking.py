@@ -124,9 +124,6 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
                     method="moreau_jean", h=h, theta=theta, signals=("impulse", "gap"),
                     progress=False)
     controller.load_run(traj)
-    stats = dict(traj.stats, path_reason=reason or "compiled controller and model")
-    traj = replace(traj, stats=stats, signals={k: v for k, v in traj.signals.items()
-                                               if k not in ("xc", "u")})
     log = controller.signals()
     # the log holds one row per step start; the final sample gets its own evaluation
     n = model.n_dof
@@ -139,12 +136,14 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
     if log["t"].shape[0] + 1 != traj.t.shape[0]:
         raise ModelError(f"record: expected one controller row per step "
                          f"({traj.t.shape[0] - 1}), got {log['t'].shape[0]}")
-    signals = dict(traj.signals)
+    signals = {k: v for k, v in traj.signals.items() if k not in ("xc", "u")}
     for key, rows in log.items():
         if key != "t":
             signals[key] = np.concatenate([rows, np.atleast_1d(last[key])[None] if
                                            np.ndim(rows) > 1 else [last[key]]])
-    return TrackingRun(replace(traj, signals=signals), controller, restitution, h, model)
+    stats = dict(traj.stats, path_reason=reason or "compiled controller and model")
+    return TrackingRun(replace(traj, stats=stats, signals=signals), controller, restitution,
+                       h, model)
 
 
 def _ground_moved(plant: Any, offset: float) -> Any:

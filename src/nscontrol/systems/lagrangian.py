@@ -72,6 +72,8 @@ class CompiledModel:
         The model's parameters, passed to every function.
     potential : numba dispatcher, optional
         The compiled ``potential`` (the energy signal otherwise calls the Python one).
+    entries : tuple
+        The five functions as the compiled loop takes them (read-only).
     """
 
     mass: Any
@@ -99,6 +101,17 @@ class CompiledModel:
                                  f"{getattr(self, name)!r}")
         object.__setattr__(self, "params", np.ascontiguousarray(
             np.asarray(self.params, dtype=np.float64).reshape(-1)))
+
+    @property
+    def entries(self) -> Any:
+        """``((mass,), (force,), (force_jacobian,), (gaps,), (gap_jacobian,))`` as the
+        compiled loop's argument, its numba type found once per process (a tuple of
+        dispatchers is typed and unboxed afresh at every call, about a millisecond for
+        five; ``nscontrol.systems._feedback_kernels.compiled_entries``)."""
+        from ._feedback_kernels import compiled_entries
+
+        return compiled_entries((self.mass,), (self.force,), (self.force_jacobian,),
+                                (self.gaps,), (self.gap_jacobian,))
 
     def check_against(self, system: LagrangianSystem, tol: float = 1e-10) -> None:
         """Compare with the system's Python callables at a fixed configuration
@@ -168,8 +181,19 @@ def affine_compiled_model(system: LagrangianSystem) -> CompiledModel | None:
     n, m = system.n_dof, system.n_contacts
     params = np.concatenate([[float(n), float(m)], system.mass_matrix().ravel(),
                              system.dense_gap_matrix().ravel(), system.gap_offset])
-    return CompiledModel(lk.constant_mass, lk.no_force, lk.no_force_jacobian, lk.affine_gaps,
-                         lk.affine_gap_jacobian, params)
+    # kept per parameters: a model's checks cost far more than a short run's set-up
+    key = params.tobytes()
+    model = _AFFINE_MODELS.pop(key, None)
+    if model is None:
+        model = CompiledModel(lk.constant_mass, lk.no_force, lk.no_force_jacobian,
+                              lk.affine_gaps, lk.affine_gap_jacobian, params)
+        if len(_AFFINE_MODELS) >= 64:           # the least recently used goes
+            del _AFFINE_MODELS[next(iter(_AFFINE_MODELS))]
+    _AFFINE_MODELS[key] = model
+    return model
+
+
+_AFFINE_MODELS: dict[bytes, CompiledModel] = {}
 
 
 @dataclass(frozen=True, eq=False)

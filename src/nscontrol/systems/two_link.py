@@ -20,8 +20,10 @@ inverse map returns (``det J = l1 l2 sin θ2`` vanishes only at the stretched an
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -137,15 +139,18 @@ class TwoLinkArm:
     def system(self, restitution: float = 0.7) -> LagrangianSystem:
         """The plant for the integrators: gravity on, ground ``y >= 0``, fully actuated.
 
+        The same (immutable) system for the same parameters and coefficient: the
+        integrators keep their set-ups per system, so repeated runs skip them.
+
         Parameters
         ----------
         restitution : float
             Newton coefficient of the ground, in ``[0, 1]``.
         """
-        p = self.params
-        check_in_interval("restitution", restitution, 0.0, 1.0)
-        return LagrangianSystem.two_link_arm(l1=p.l1, l2=p.l2, m1=p.m1, m2=p.m2, I1=p.I1,
-                                             I2=p.I2, g=p.g, restitution=restitution)
+        e = check_in_interval("restitution", restitution, 0.0, 1.0)
+        return _kept(("two-link", self.params, e), lambda: LagrangianSystem.two_link_arm(
+            l1=self.params.l1, l2=self.params.l2, m1=self.params.m1, m2=self.params.m2,
+            I1=self.params.I1, I2=self.params.I2, g=self.params.g, restitution=e))
 
     # -- task map ------------------------------------------------------------------------
     def position(self, theta: FloatArray) -> FloatArray:
@@ -281,13 +286,18 @@ class OneDofMass:
     def system(self, restitution: float = 0.7) -> LagrangianSystem:
         """The plant: ``m q'' = -m g + u + λ``, ``0 <= q ⟂ λ >= 0``.
 
+        The same (immutable) system for the same mass, gravity and coefficient (see
+        :meth:`TwoLinkArm.system`).
+
         Parameters
         ----------
         restitution : float
             Newton coefficient, in ``[0, 1]``.
         """
-        return LagrangianSystem([[self.m]], constant_force=[-self.m * self.g],
-                                gap_matrix=[[1.0]], restitution=restitution, names=("q",))
+        e = check_in_interval("restitution", restitution, 0.0, 1.0)
+        return _kept(("one-dof", float(self.m), float(self.g), e), lambda: LagrangianSystem(
+            [[self.m]], constant_force=[-self.m * self.g], gap_matrix=[[1.0]],
+            restitution=e, names=("q",)))
 
     def position(self, theta: FloatArray) -> FloatArray:
         """Task coordinate (the position itself).
@@ -348,3 +358,17 @@ class OneDofMass:
         x = np.array([float(np.asarray(theta).ravel()[0]), float(np.asarray(dtheta).ravel()[0])])
         one_dof_task_model(x, float(self.m), float(self.g), q, dq, Mq, Cq, gq, J)
         return q, dq, Mq, Cq, gq, J
+
+
+_SYSTEMS: dict[tuple[Any, ...], LagrangianSystem] = {}
+
+
+def _kept(key: tuple[Any, ...], make: Callable[[], LagrangianSystem]) -> LagrangianSystem:
+    """The system made for ``key``, kept (the 64 most recently used)."""
+    system = _SYSTEMS.pop(key, None)
+    if system is None:
+        system = make()
+        if len(_SYSTEMS) >= 64:
+            del _SYSTEMS[next(iter(_SYSTEMS))]
+    _SYSTEMS[key] = system
+    return system
