@@ -54,7 +54,8 @@ from . import _complementarity_tracking_kernels as kern
 
 __all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
            "CircleTask", "HalfSineTask", "TaskSpaceModel", "SwitchingTrackingController",
-           "slotine_li_force", "lyapunov_decay_rate", "virtual_dive", "liftoff_blend"]
+           "TrackingCycle", "slotine_li_force", "lyapunov_decay_rate", "virtual_dive",
+           "liftoff_blend"]
 
 
 class Phase(IntEnum):
@@ -446,8 +447,37 @@ def liftoff_blend(theta: float) -> tuple[float, float, float]:
 
 
 @dataclass
-class _Cycle:
-    """What the controller fixes and detects in one cycle (read by the analysis)."""
+class TrackingCycle:
+    """What the controller fixed and detected in one cycle of the task (the analysis of
+    :mod:`nscontrol.analysis.tracking_cycles` reads it). An instant or value the cycle has
+    not reached yet is NaN.
+
+    Attributes
+    ----------
+    index : int
+        The cycle ``k`` (from 0).
+    tau0 : float
+        ``τ0ᵏ``: the start of the transition phase (s).
+    V_tau0, V1_tau0 : float
+        The Lyapunov function ``V`` and its kinetic part ``V1 = ½ sᵀ M s`` at ``τ0ᵏ``.
+    depth : float
+        ``d_k``: the depth of the virtual dive below the constraint (m).
+    q10 : float
+        The nominal normal coordinate at ``τ0ᵏ``, where the dive starts (m).
+    q2_star : ndarray
+        ``q*_2d``: the tangential coordinates frozen during the impacts (empty for the
+        one-coordinate mass, and before ``τ0ᵏ``).
+    t_first_impact : float
+        The step start of the first contact impulse of the cycle (s).
+    t_constrained : float
+        The start of the constrained phase (s).
+    t_detach : float
+        The planned take-off ``t_dᵏ`` while the cycle runs; once the arm has taken off, the
+        take-off's step start (s).
+    t_star, u_star : float
+        Where the designed dive crosses ``q1 = 0`` (s) and its speed there (m/s); NaN for
+        the impact-triggered switching.
+    """
 
     index: int
     tau0: float = math.nan
@@ -755,7 +785,7 @@ class SwitchingTrackingController(StaticLaw):
         self._rows: list[FloatArray] = []
         self._xs: list[FloatArray] = []
         self._loaded: tuple[FloatArray, FloatArray] | None = None   # load_run's
-        self._cycles: tuple[int, list[_Cycle]] | None = None
+        self._cycles: tuple[int, list[TrackingCycle]] | None = None
         # the noise generators, made at the first draw (a generator costs about a millisecond)
         self._rng: np.random.Generator | None = None
         self._force_rng: np.random.Generator | None = None
@@ -785,15 +815,15 @@ class SwitchingTrackingController(StaticLaw):
         return -math.inf if t == kern.NEVER else t
 
     @property
-    def cycles(self) -> list[_Cycle]:
-        """The per-cycle record of the run so far."""
+    def cycles(self) -> list[TrackingCycle]:
+        """The per-cycle record of the run so far (one :class:`TrackingCycle` a cycle)."""
         rows, _ = self._run_rows()
         if self._cycles is None or self._cycles[0] != rows.shape[0]:
             self._cycles = (rows.shape[0], self._cycles_of_rows(rows))
         return self._cycles[1]
 
     @property
-    def current(self) -> _Cycle:
+    def current(self) -> TrackingCycle:
         """The current cycle's record."""
         return self.cycles[-1]
 
@@ -907,7 +937,7 @@ class SwitchingTrackingController(StaticLaw):
                 "lam_hat": st["lam_hat"].copy(), "depth": depth,
                 "q_task": task[:, :n], "dq_task": task[:, n:], "qd": qd}
 
-    def cycles_of(self, traj: Any) -> list[_Cycle]:
+    def cycles_of(self, traj: Any) -> list[TrackingCycle]:
         """The per-cycle record of a closed-loop run, read back from its block state.
 
         Parameters
@@ -917,16 +947,16 @@ class SwitchingTrackingController(StaticLaw):
         """
         return self._cycles_of_rows(self._rows_of(traj)[0])
 
-    def _cycles_of_rows(self, rows: FloatArray) -> list[_Cycle]:
+    def _cycles_of_rows(self, rows: FloatArray) -> list[TrackingCycle]:
         """Cycle ``c`` from its rows (phases only move forward in a cycle, and a take-off
         leaves from the impacts or constrained phase: the last row holds every field fixed
         so far; the next cycle's first row, the take-off)."""
         st = np.ascontiguousarray(rows[:, :kern.N_STATE]).view(kern.STATE)[:, 0]
         cyc = st["cycle"]
-        out: list[_Cycle] = []
+        out: list[TrackingCycle] = []
         for c in range(int(cyc.max()) + 1 if cyc.size else 1):
             lo, hi = int(np.searchsorted(cyc, c, "left")), int(np.searchsorted(cyc, c, "right"))
-            cycle = _Cycle(c)
+            cycle = TrackingCycle(c)
             out.append(cycle)
             if hi <= lo:
                 continue
