@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
+from numba import njit
 
 from ._feedback_kernels import record
 from ._lagrangian_kernels import (
@@ -35,8 +35,6 @@ _F = np.float64
 #: The arm's parameters by name (geometry, inertia, gravity; see ``TwoLinkParams``).
 ARM = np.dtype([("l1", _F), ("l2", _F), ("m1", _F), ("m2", _F), ("I1", _F), ("I2", _F),
                 ("g", _F)])
-_VEC = types.float64[::1]
-_MAT = types.float64[:, ::1]
 
 
 def arm_array(l1: float, l2: float, m1: float, m2: float, I1: float, I2: float,
@@ -157,15 +155,16 @@ def potential(q, p):
                 + m2 * (l1 * math.sin(q[0]) + l2 / 2 * math.sin(q[0] + q[1])))
 
 
-# -- joint-space terms and the task map, for the Python functions -------------------------
-@njit(_MAT(_VEC, _VEC, _VEC), cache=True)
+# -- joint-space terms and the task map, for the Python functions (compiled at first use,
+# for the contiguous float64 arrays they are given) -----------------------------------------
+@njit(cache=True)
 def coriolis(q, v, p):
     """``C(θ, θ')``."""
     a = record(p, ARM)
     return _mat(_coriolis(math.sin(q[1]), v[0], v[1], a.l1, a.l2, a.m2), 2, 2)
 
 
-@njit(_VEC(_VEC, _VEC), cache=True)
+@njit(cache=True)
 def gravity(q, p):
     """``G(θ)``."""
     a = record(p, ARM)
@@ -175,7 +174,7 @@ def gravity(q, p):
     return out
 
 
-@njit(_VEC(_VEC, _VEC), cache=True)
+@njit(cache=True)
 def position(q, p):
     """End-effector task coordinates ``(y, x)``."""
     a = record(p, ARM)
@@ -185,7 +184,7 @@ def position(q, p):
     return out
 
 
-@njit(_MAT(_VEC, _VEC), cache=True)
+@njit(cache=True)
 def jacobian(q, p):
     """``J = ∂(y, x)/∂θ``."""
     a = record(p, ARM)
@@ -193,7 +192,7 @@ def jacobian(q, p):
     return _mat(_jacobian(math.sin(q[0]), math.cos(q[0]), s12, c12, a.l1, a.l2), 2, 2)
 
 
-@njit(_MAT(_VEC, _VEC, _VEC), cache=True)
+@njit(cache=True)
 def jacobian_rate(q, v, p):
     """``J̇``."""
     a = record(p, ARM)
