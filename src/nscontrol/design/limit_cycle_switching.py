@@ -757,11 +757,8 @@ def design_corner_controller(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike
     half_angle : float
         The symmetric wedge's half-angle ``α`` in ``(0, π/2)``.
     allow_sliding : bool
-        Meet a target ``λ_d <= 0`` by the sliding design instead of refusing it: the motion
-        slides along the entry face into the corner, so the controlled cycle is the orbit
-        of the corner (``λ_new = 0``); to first order that orbit returns to ``Σ_c`` at
-        ``λ μ_c``, so the corner goes to ``μ_c = z_d/λ`` and the cycle crosses ``Σ_c`` at
-        ``z_d``.
+        Meet a target ``λ_d <= 0`` by the sliding design (``λ_new = 0``, the corner on the
+        controlled cycle at ``μ_c = z_d``) instead of refusing it.
 
     Returns
     -------
