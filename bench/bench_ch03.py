@@ -32,6 +32,7 @@ Run: ``nscontrol bench ch03 --json``.
 """
 
 import math
+import os
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -64,7 +65,9 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
         "size": steps, "ours_steps_per_s": rate, "reference": None,
         "reference_steps_per_s": None, "ratio": None,
         "accuracy": {"impacts_ours": len(impacts), "first_impact_ours": impacts[0],
-                     "path": ours.traj.stats["path"]}}
+                     "path": ours.traj.stats["path"]},
+        # the ratio moves with the machine's load (both sides share its cores)
+        "load_average_1min": os.getloadavg()[0]}
     sic_rate = None
     have, why = siconos_available()
     if not have:

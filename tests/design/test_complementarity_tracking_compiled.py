@@ -215,3 +215,16 @@ def test_example_runs_compiled_by_default_with_the_python_signals():
         assert np.array_equal(fast.traj.signals[key], slow.traj.signals[key])
     assert np.abs(fast.traj.signals["V"] - slow.traj.signals["V"]).max() \
         <= bound * np.abs(slow.traj.signals["V"]).max()
+
+
+def test_compiled_blocks_are_shared_only_between_equal_settings():
+    """The compiled block is kept per parameter record: two controllers of the same setting
+    share it, a different gain gets its own (and each block carries its own gains)."""
+    def make(gamma1):
+        return SwitchingTrackingController(OneDofMass(), HalfSineTask(), PBCGains(gamma1, 5.0))
+    a, b, c = make(5.0), make(5.0), make(6.0)
+    assert a.compiled() is b.compiled()
+    assert c.compiled() is not a.compiled()
+    gamma1 = [kern.PARAMS.names.index("gamma1")]
+    assert a.compiled().params[gamma1] == 5.0 and c.compiled().params[gamma1] == 6.0
+

@@ -127,6 +127,11 @@ def test_design_refuses_targets_needing_a_below_minus_one(problem_a, lam_d):
     d = design_corner_controller(plant, cyc, allow_sliding=True, **kwargs)
     assert d.regime == "sliding" and d.predicted_multiplier == 0.0
     assert d.system.face_status(d.wedge.corner, "in") == "attracting_sliding"
+    # the cycle is the corner's orbit, back on Σ_c at λ μ_c to first order: the corner sits
+    # at μ_c = z_d/λ (not at z_d), the cycle's predicted offset is z_d (one rounding each)
+    assert d.mu_c == pytest.approx(0.005 / d.site.lam, rel=4 * EPS)
+    assert d.predicted_offset == 0.005 and d.mu_c != 0.005
+    assert d.wedge.corner == pytest.approx([1.0 + d.mu_c, 0.0], abs=1e-9)
 
 
 def test_design_refuses_bad_arguments(problem_a):

@@ -194,3 +194,49 @@ def test_robustness_point_runs_through_a_sweep():
     (rec,) = result.values
     assert rec["cycles_completed"] == 1 and rec["impacts_per_cycle"] == [1]
     assert rec["weakly_stable"] and rec["penetration"] <= 1e-4
+
+
+def test_tracking_runs_take_moreau_jeans_forces_option():
+    """``forces=`` reaches Moreau–Jean. The mass's only force is gravity, constant: the
+    implicit forces' Jacobians are zero and the explicit θ-method takes the same steps; the
+    explicit run is on the Python path, the default one compiled, and the two loops group
+    the same products differently (a few ulps per step, carried without amplification by
+    more than a modest factor: 100 ulps per step over the run, as for the compiled and Python
+    paths of the controller)."""
+    from nscontrol.errors import ModelError
+    from nscontrol.examples.ch03_two_link_tracking import one_dof_tracking
+
+    implicit = one_dof_tracking(cycles=1, h=1e-3)
+    explicit = one_dof_tracking(cycles=1, h=1e-3, forces="explicit")
+    assert implicit.traj.stats["path"] == "compiled_model"
+    assert explicit.traj.stats["path"] == "python"
+    assert explicit.traj.stats["forces"] == "explicit"
+    assert explicit.traj.stats["path_reason"].startswith("forces='explicit'")
+    bound = (implicit.traj.t.size - 1) * np.finfo(float).eps * 100
+    assert np.array_equal(explicit.traj.t, implicit.traj.t)
+    assert np.abs(explicit.traj.x - implicit.traj.x).max() <= bound
+    for bad in ("semi", 1):
+        with pytest.raises(ModelError, match="^forces: expected 'implicit' or 'explicit'"):
+            one_dof_tracking(cycles=1, h=1e-3, forces=bad)
+        with pytest.raises(ModelError, match="^forces: expected 'implicit' or 'explicit'"):
+            two_link_tracking(cycles=1, h=1e-3, forces=bad)
+
+
+def test_cycles_are_public_tracking_cycle_records():
+    """The per-cycle record is the documented ``TrackingCycle`` of ``nscontrol.design``:
+    the instants in the order of the phases, NaN for what the last cycle has not reached."""
+    from nscontrol.design import TrackingCycle
+    from nscontrol.examples.ch03_two_link_tracking import one_dof_tracking
+
+    run = one_dof_tracking(cycles=1, h=1e-3)
+    cycles = run.controller.cycles
+    assert cycles and all(isinstance(c, TrackingCycle) for c in cycles)
+    first = cycles[0]
+    assert first.index == 0
+    assert first.tau0 <= first.t_first_impact < first.t_constrained < first.t_detach
+    # the dive (default δ = 0.4 s, Δ = 1 s) crosses q1 = 0 within its own interval
+    assert first.tau0 + 0.4 <= first.t_star <= first.tau0 + 0.4 + 1.0
+    assert first.q2_star.shape == (0,)          # one coordinate: no tangential part
+    assert cycles[-1].index == len(cycles) - 1
+    if len(cycles) > 1:                          # the cycle begun at the end of the run
+        assert math.isnan(cycles[-1].t_first_impact)

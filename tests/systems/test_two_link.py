@@ -94,3 +94,28 @@ def test_one_dof_mass_is_the_identity_task_map():
     assert (M[0, 0], C[0, 0], g[0], J[0, 0]) == (2.0, 0.0, 2.0 * 9.81, 1.0)
     sys = plant.system(0.5)
     assert sys.forces(0.0, np.array([0.1]), np.array([0.0]))[0] == -2.0 * 9.81
+
+
+def test_plants_are_kept_per_parameters_and_never_mixed():
+    """``system()`` returns the same immutable plant for the same parameters (the integrators
+    keep their set-ups per system) and a different one as soon as a parameter differs."""
+    from nscontrol.systems.lagrangian import affine_compiled_model
+
+    a, b = OneDofMass(), OneDofMass()
+    assert a.system(0.7) is b.system(0.7)
+    assert a.system(0.5) is not a.system(0.7)
+    assert a.system(0.5).restitution[0] == 0.5 and a.system(0.7).restitution[0] == 0.7
+    heavy = OneDofMass(m=2.0).system(0.7)
+    assert heavy.mass_matrix()[0, 0] == 2.0 and a.system(0.7).mass_matrix()[0, 0] == 1.0
+    # the compiled model of the affine plant: kept per parameters too
+    assert affine_compiled_model(a.system(0.7)) is affine_compiled_model(b.system(0.5))
+    assert affine_compiled_model(heavy) is not affine_compiled_model(a.system(0.7))
+    assert affine_compiled_model(heavy).mass(np.zeros(1), affine_compiled_model(heavy).params
+                                             )[0, 0] == 2.0
+    arm = TwoLinkArm()
+    assert arm.system(0.7) is TwoLinkArm().system(0.7)
+    long_arm = TwoLinkArm(TwoLinkParams(l1=0.6))
+    theta = np.array([0.9, -1.6])
+    assert long_arm.system(0.7).gaps(theta)[0] == pytest.approx(
+        long_arm.position(theta)[0], abs=4 * EPS)
+    assert long_arm.system(0.7).gaps(theta)[0] != arm.system(0.7).gaps(theta)[0]

@@ -70,6 +70,7 @@ _EXPORTS: dict[str, str] = {
     "CyclicTask": "complementarity_tracking", "CircleTask": "complementarity_tracking",
     "HalfSineTask": "complementarity_tracking", "TaskSpaceModel": "complementarity_tracking",
     "SwitchingTrackingController": "complementarity_tracking",
+    "TrackingCycle": "complementarity_tracking",
     "slotine_li_force": "complementarity_tracking",
     "lyapunov_decay_rate": "complementarity_tracking",
     "virtual_dive": "complementarity_tracking", "liftoff_blend": "complementarity_tracking",

@@ -54,7 +54,8 @@ from . import _complementarity_tracking_kernels as kern
 
 __all__ = ["PBCGains", "TransitionDesign", "ContactPhaseDesign", "CyclicTask",
            "CircleTask", "HalfSineTask", "TaskSpaceModel", "SwitchingTrackingController",
-           "slotine_li_force", "lyapunov_decay_rate", "virtual_dive", "liftoff_blend"]
+           "TrackingCycle", "slotine_li_force", "lyapunov_decay_rate", "virtual_dive",
+           "liftoff_blend"]
 
 
 class Phase(IntEnum):
@@ -446,8 +447,37 @@ def liftoff_blend(theta: float) -> tuple[float, float, float]:
 
 
 @dataclass
-class _Cycle:
-    """What the controller fixes and detects in one cycle (read by the analysis)."""
+class TrackingCycle:
+    """What the controller fixed and detected in one cycle of the task (the analysis of
+    :mod:`nscontrol.analysis.tracking_cycles` reads it). An instant or value the cycle has
+    not reached yet is NaN.
+
+    Attributes
+    ----------
+    index : int
+        The cycle ``k`` (from 0).
+    tau0 : float
+        ``τ0ᵏ``: the start of the transition phase (s).
+    V_tau0, V1_tau0 : float
+        The Lyapunov function ``V`` and its kinetic part ``V1 = ½ sᵀ M s`` at ``τ0ᵏ``.
+    depth : float
+        ``d_k``: the depth of the virtual dive below the constraint (m).
+    q10 : float
+        The nominal normal coordinate at ``τ0ᵏ``, where the dive starts (m).
+    q2_star : ndarray
+        ``q*_2d``: the tangential coordinates frozen during the impacts (empty for the
+        one-coordinate mass, and before ``τ0ᵏ``).
+    t_first_impact : float
+        The step start of the first contact impulse of the cycle (s).
+    t_constrained : float
+        The start of the constrained phase (s).
+    t_detach : float
+        The planned take-off ``t_dᵏ`` while the cycle runs; once the arm has taken off, the
+        take-off's step start (s).
+    t_star, u_star : float
+        Where the designed dive crosses ``q1 = 0`` (s) and its speed there (m/s); NaN for
+        the impact-triggered switching.
+    """
 
     index: int
     tau0: float = math.nan
@@ -461,6 +491,10 @@ class _Cycle:
     t_detach: float = math.nan
     t_star: float = math.nan
     u_star: float = math.nan
+
+
+#: The compiled blocks made so far, by their parameters' bytes (see ``compiled``).
+_BLOCKS: dict[bytes, Any] = {}
 
 
 def _check_model_and_task(model: Any, task: Any) -> None:
@@ -656,32 +690,34 @@ class SwitchingTrackingController(StaticLaw):
         """
         if self.compiled_reason() is not None:
             return None
-        if self._block is None:         # built once: its checks cost milliseconds
+        if self._block is None:         # its checks cost a millisecond: kept per params
             from ..systems.feedback import CompiledBlock
 
-            self._block = CompiledBlock(kern.tracking_output, kern.tracking_update,
-                                        self._params)
+            key = self._params.tobytes()
+            block = _BLOCKS.pop(key, None)
+            if block is None:
+                block = CompiledBlock(kern.tracking_output, kern.tracking_update,
+                                      self._params.copy())
+                if len(_BLOCKS) >= 64:          # the least recently used goes
+                    del _BLOCKS[next(iter(_BLOCKS))]
+            _BLOCKS[key] = self._block = block
         return self._block
 
     def _kernel_params(self) -> FloatArray:
         """The parameters as the kernels' record ``PARAMS`` (flat, in its order)."""
         from ..systems.two_link import OneDofMass
 
-        rec = np.zeros(1, dtype=kern.PARAMS)
-        r = rec[0]
-        r["n"] = self.n
+        r: dict[str, float] = {"n": self.n}
         task, model = self.task, self.model
         if isinstance(task, CircleTask):
-            r["task"] = kern.TASK_CIRCLE
-            r["centre"], r["radius"], r["threshold"] = task.centre, task.radius, \
-                task.y_threshold
+            r.update(task=kern.TASK_CIRCLE, centre=task.centre, radius=task.radius,
+                     threshold=task.y_threshold)
         else:
-            r["task"] = kern.TASK_HALF_SINE
-            r["amplitude"], r["omega"], r["threshold"] = task.amplitude, task.omega, \
-                task.threshold
+            r.update(task=kern.TASK_HALF_SINE, amplitude=task.amplitude, omega=task.omega,
+                     threshold=task.threshold)
         r["period"] = task.period
         if isinstance(model, OneDofMass):
-            r["model"], r["mass"], r["gravity"] = kern.MODEL_ONE_DOF, model.m, model.g
+            r.update(model=kern.MODEL_ONE_DOF, mass=model.m, gravity=model.g)
         else:
             r["model"] = kern.MODEL_TWO_LINK
             for name in ("l1", "l2", "m1", "m2", "I1", "I2", "g"):
@@ -689,18 +725,19 @@ class SwitchingTrackingController(StaticLaw):
         r["switching"] = kern.DESIGNED if self.switching == "designed" \
             else kern.IMPACT_TRIGGERED
         g, tr, c = self.gains, self.transition, self.contact
-        r["gamma1"], r["gamma2"], r["Kf"] = g.gamma1, g.gamma2, g.Kf
-        r["delta"], r["Delta"], r["alpha"], r["phi"] = tr.delta, tr.Delta, tr.alpha, tr.phi
-        r["depth_law"] = 0.0 if tr.depth_law == "sqrt" else 1.0
-        r["depth_min"], r["depth_max"] = tr.depth_min, tr.depth_max
-        r["n_consecutive_contact"] = tr.n_consecutive_contact
-        r["lam_rate"], r["lam_sat"], r["liftoff_time"] = c.lam_rate, c.lam_sat, c.liftoff_time
-        r["model_scale"], r["force_feedback_scale"] = self.model_scale, \
-            self.force_feedback_scale
-        r["force_scale"], r["force_bias"] = self.force_scale, self.force_bias
-        r["detection_delay"] = self.detection_delay
-        r["trigger_q2"], r["q2_end"] = self.trigger_q2, self.q2_end
-        return rec.view(np.float64)
+        r.update(gamma1=g.gamma1, gamma2=g.gamma2, Kf=g.Kf, delta=tr.delta, Delta=tr.Delta,
+                 alpha=tr.alpha, phi=tr.phi, depth_law=0.0 if tr.depth_law == "sqrt" else 1.0,
+                 depth_min=tr.depth_min, depth_max=tr.depth_max,
+                 n_consecutive_contact=tr.n_consecutive_contact, lam_rate=c.lam_rate,
+                 lam_sat=c.lam_sat, liftoff_time=c.liftoff_time, model_scale=self.model_scale,
+                 force_feedback_scale=self.force_feedback_scale, force_scale=self.force_scale,
+                 force_bias=self.force_bias, detection_delay=self.detection_delay,
+                 trigger_q2=self.trigger_q2, q2_end=self.q2_end)
+        # the record by name (a field left out is 0), made in one go
+        names = kern.PARAMS.names or ()
+        assert set(r) <= set(names), sorted(set(r) - set(names))
+        return np.array([tuple(r.get(name, 0.0) for name in names)],
+                        dtype=kern.PARAMS).view(np.float64)
 
     def output(self, t: float, xc: FloatArray, m: Any) -> FloatArray:
         """Joint torques ``U = Jᵀ τ`` at a step start (also advances the phase logic, and
@@ -748,7 +785,7 @@ class SwitchingTrackingController(StaticLaw):
         self._rows: list[FloatArray] = []
         self._xs: list[FloatArray] = []
         self._loaded: tuple[FloatArray, FloatArray] | None = None   # load_run's
-        self._cycles: tuple[int, list[_Cycle]] | None = None
+        self._cycles: tuple[int, list[TrackingCycle]] | None = None
         # the noise generators, made at the first draw (a generator costs about a millisecond)
         self._rng: np.random.Generator | None = None
         self._force_rng: np.random.Generator | None = None
@@ -778,15 +815,15 @@ class SwitchingTrackingController(StaticLaw):
         return -math.inf if t == kern.NEVER else t
 
     @property
-    def cycles(self) -> list[_Cycle]:
-        """The per-cycle record of the run so far."""
+    def cycles(self) -> list[TrackingCycle]:
+        """The per-cycle record of the run so far (one :class:`TrackingCycle` a cycle)."""
         rows, _ = self._run_rows()
         if self._cycles is None or self._cycles[0] != rows.shape[0]:
             self._cycles = (rows.shape[0], self._cycles_of_rows(rows))
         return self._cycles[1]
 
     @property
-    def current(self) -> _Cycle:
+    def current(self) -> TrackingCycle:
         """The current cycle's record."""
         return self.cycles[-1]
 
@@ -900,7 +937,7 @@ class SwitchingTrackingController(StaticLaw):
                 "lam_hat": st["lam_hat"].copy(), "depth": depth,
                 "q_task": task[:, :n], "dq_task": task[:, n:], "qd": qd}
 
-    def cycles_of(self, traj: Any) -> list[_Cycle]:
+    def cycles_of(self, traj: Any) -> list[TrackingCycle]:
         """The per-cycle record of a closed-loop run, read back from its block state.
 
         Parameters
@@ -910,16 +947,16 @@ class SwitchingTrackingController(StaticLaw):
         """
         return self._cycles_of_rows(self._rows_of(traj)[0])
 
-    def _cycles_of_rows(self, rows: FloatArray) -> list[_Cycle]:
+    def _cycles_of_rows(self, rows: FloatArray) -> list[TrackingCycle]:
         """Cycle ``c`` from its rows (phases only move forward in a cycle, and a take-off
         leaves from the impacts or constrained phase: the last row holds every field fixed
         so far; the next cycle's first row, the take-off)."""
         st = np.ascontiguousarray(rows[:, :kern.N_STATE]).view(kern.STATE)[:, 0]
         cyc = st["cycle"]
-        out: list[_Cycle] = []
+        out: list[TrackingCycle] = []
         for c in range(int(cyc.max()) + 1 if cyc.size else 1):
             lo, hi = int(np.searchsorted(cyc, c, "left")), int(np.searchsorted(cyc, c, "right"))
-            cycle = _Cycle(c)
+            cycle = TrackingCycle(c)
             out.append(cycle)
             if hi <= lo:
                 continue

@@ -101,7 +101,7 @@ class TrackingRun:
 
 def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
               theta: float, restitution: float, ground_offset: float = 0.0,
-              compiled: bool = True) -> TrackingRun:
+              compiled: bool = True, forces: str = "implicit") -> TrackingRun:
     """Simulate plant + controller (``closed_loop``) with Moreau–Jean and merge the
     controller's log. Compiled when the controller has a compiled form and the plant a
     compiled model; otherwise the Python path, which runs the same kernels (the reason in
@@ -109,6 +109,9 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
     from ..simulate import simulate
     from ..simulate.closed_loop import closed_loop
 
+    if forces not in ("implicit", "explicit"):
+        raise ModelError(f"forces: expected 'implicit' or 'explicit' (Moreau–Jean's smooth "
+                         f"forces), got {forces!r}")
     controller.reset_run()
     plant = model.system(restitution)
     reason = None
@@ -116,17 +119,16 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
         reason = "compiled=False"
     elif controller.compiled() is None:
         reason = controller.compiled_reason()
+    elif forces == "explicit":
+        reason = "forces='explicit': the compiled loop linearises the forces (implicit)"
     if ground_offset != 0.0:
         plant = _ground_moved(plant, ground_offset)
         reason = reason or "ground_offset: the moved ground has no compiled model"
     # the block state, logged at every step start, holds the controller's log and cycles
     traj = simulate(closed_loop(plant, controller, compiled=reason is None), x0, (0.0, T),
-                    method="moreau_jean", h=h, theta=theta, signals=("impulse", "gap"),
-                    progress=False)
+                    method="moreau_jean", h=h, theta=theta, forces=forces,
+                    signals=("impulse", "gap"), progress=False)
     controller.load_run(traj)
-    stats = dict(traj.stats, path_reason=reason or "compiled controller and model")
-    traj = replace(traj, stats=stats, signals={k: v for k, v in traj.signals.items()
-                                               if k not in ("xc", "u")})
     log = controller.signals()
     # the log holds one row per step start; the final sample gets its own evaluation
     n = model.n_dof
@@ -139,12 +141,14 @@ def _run_loop(model: Any, controller: Any, x0: np.ndarray, T: float, h: float,
     if log["t"].shape[0] + 1 != traj.t.shape[0]:
         raise ModelError(f"record: expected one controller row per step "
                          f"({traj.t.shape[0] - 1}), got {log['t'].shape[0]}")
-    signals = dict(traj.signals)
+    signals = {k: v for k, v in traj.signals.items() if k not in ("xc", "u")}
     for key, rows in log.items():
         if key != "t":
             signals[key] = np.concatenate([rows, np.atleast_1d(last[key])[None] if
                                            np.ndim(rows) > 1 else [last[key]]])
-    return TrackingRun(replace(traj, signals=signals), controller, restitution, h, model)
+    stats = dict(traj.stats, path_reason=reason or "compiled controller and model")
+    return TrackingRun(replace(traj, stats=stats, signals=signals), controller, restitution,
+                       h, model)
 
 
 def _ground_moved(plant: Any, offset: float) -> Any:
@@ -166,7 +170,7 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
                       position_noise: float = 0.0, noise_seed: int = 0,
                       ground_offset: float = 0.0, force_scale: float = 1.0,
                       force_bias: float = 0.0, force_noise: float = 0.0,
-                      compiled: bool = True) -> TrackingRun:
+                      compiled: bool = True, forces: str = "implicit") -> TrackingRun:
     """The two-link arm tracking the circle cut by the ground.
 
     Parameters
@@ -197,7 +201,11 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
         Run the controller's compiled form in the compiled Moreau–Jean loop when it has one
         (default; tens of times faster). The Python path, which runs the same kernels, is
         taken when ``False`` or when no compiled form applies (position or force noise, a
-        moved ground); ``traj.stats["path_reason"]`` says why.
+        moved ground, explicit forces); ``traj.stats["path_reason"]`` says why.
+    forces : {"implicit", "explicit"}
+        Moreau–Jean's smooth forces (its ``forces`` option): ``"implicit"`` linearises the
+        arm's Coriolis and gravity terms about each step's start (the default, compiled);
+        ``"explicit"`` evaluates them at the step's start only, on the Python path.
     """
     from ..design.complementarity_tracking import (
         CircleTask,
@@ -230,12 +238,13 @@ def two_link_tracking(config: str = "siconos-current", cycles: int = 3, h: float
     e = cfg.restitution if restitution is None else restitution
     step = cfg.h if h is None else h
     return _run_loop(arm, ctrl, x0, cycles * cfg.period, step, cfg.theta, e,
-                     ground_offset=float(ground_offset), compiled=compiled)
+                     ground_offset=float(ground_offset), compiled=compiled, forces=forces)
 
 
 def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
                      omega: float = 2 * math.pi / 8, q0: float = 0.05,
-                     model_scale: float = 1.0, compiled: bool = True) -> TrackingRun:
+                     model_scale: float = 1.0, compiled: bool = True,
+                     forces: str = "implicit") -> TrackingRun:
     """The mass above the ground under the same controller (``γ1 = γ2 = 5``).
 
     Parameters
@@ -254,6 +263,9 @@ def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
         Controller's model over the plant's.
     compiled : bool
         The compiled closed loop (default) or the Python path (``False``).
+    forces : {"implicit", "explicit"}
+        Moreau–Jean's smooth forces (its ``forces`` option; ``"explicit"`` runs the Python
+        path). Gravity is the mass's only force, constant: both give the same steps.
     """
     from ..design.complementarity_tracking import (
         ContactPhaseDesign,
@@ -271,7 +283,7 @@ def one_dof_tracking(cycles: int = 3, h: float = 1e-4, restitution: float = 0.7,
                                        ContactPhaseDesign(lam_rate=1.5),
                                        model_scale=model_scale)
     return _run_loop(plant, ctrl, np.array([q0, 0.0]), cycles * task.period, h, 0.5,
-                     restitution, compiled=compiled)
+                     restitution, compiled=compiled, forces=forces)
 
 
 def robustness_point(point: dict[str, Any]) -> dict[str, Any]:

@@ -31,8 +31,7 @@ class ModelRunner(Runner):
         super().__init__(system, opts, S)
         n = system.n_dof
         self.cm, self.blocks = model, blocks
-        self.model = ((model.mass,), (model.force,), (model.force_jacobian,), (model.gaps,),
-                      (model.gap_jacobian,))
+        self.model = model.entries      # typed once per process, not at every chunk
         zero = np.zeros((n, n))
         self.K = zero if system.stiffness is None else np.ascontiguousarray(system.stiffness)
         self.D = zero if system.damping is None else np.ascontiguousarray(system.damping)
@@ -113,9 +112,9 @@ def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
     if rec.wants("impulse"):
         out["impulse"] = p
     if rec.wants("gap"):
-        out["gap"] = gap_rows(((cm.gaps,),), cm.params, q, system.n_contacts)
+        out["gap"] = gap_rows((cm.entries[3],), cm.params, q, system.n_contacts)
     if rec.wants("energy"):
-        energy = kinetic_energy_rows(((cm.mass,),), cm.params, q, v) - q @ system.constant_force
+        energy = kinetic_energy_rows((cm.entries[0],), cm.params, q, v) - q @ system.constant_force
         if system.stiffness is not None:
             energy = energy + 0.5 * np.einsum("...i,ij,...j->...", q, system.stiffness, q)
         if system.potential is not None:

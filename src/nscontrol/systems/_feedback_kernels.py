@@ -137,7 +137,9 @@ _ENTRIES: dict[tuple[Any, ...], CompiledEntries] = {}
 
 def compiled_entries(*fns: Any) -> CompiledEntries:
     """The compiled entries of numba dispatchers of one declared signature each (the
-    blocks' ``output``, ``update``, ``reset``), as the argument of a compiled loop.
+    blocks' ``output``, ``update``, ``reset``), as the argument of a compiled loop. A tuple
+    of dispatchers among ``fns`` becomes a nested tuple of entries (a compiled model's
+    ``((mass,), (force,), ...)``).
 
     Passed as they are, a tuple of dispatchers is typed afresh at every call of the loop
     (numba asks each dispatcher for its compile result and inspects its Python signature,
@@ -150,7 +152,8 @@ def compiled_entries(*fns: Any) -> CompiledEntries:
     """
     entries = _ENTRIES.get(fns)
     if entries is None:
-        waps = tuple(CompileResultWAP(fn.get_compile_result(_signature(fn))) for fn in fns)
+        waps = tuple(compiled_entries(*fn) if isinstance(fn, tuple) else
+                     CompileResultWAP(fn.get_compile_result(_signature(fn))) for fn in fns)
         entries = CompiledEntries(waps)
         with warnings.catch_warnings():   # numba: first-class functions "experimental"
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)

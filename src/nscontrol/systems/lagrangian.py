@@ -72,6 +72,8 @@ class CompiledModel:
         The model's parameters, passed to every function.
     potential : numba dispatcher, optional
         The compiled ``potential`` (the energy signal otherwise calls the Python one).
+    entries : tuple
+        The five functions as the compiled loop takes them (read-only).
     """
 
     mass: Any
@@ -99,6 +101,17 @@ class CompiledModel:
                                  f"{getattr(self, name)!r}")
         object.__setattr__(self, "params", np.ascontiguousarray(
             np.asarray(self.params, dtype=np.float64).reshape(-1)))
+
+    @property
+    def entries(self) -> Any:
+        """``((mass,), (force,), (force_jacobian,), (gaps,), (gap_jacobian,))`` as the
+        compiled loop's argument, its numba type found once per process (a tuple of
+        dispatchers is typed and unboxed afresh at every call, about a millisecond for
+        five; ``nscontrol.systems._feedback_kernels.compiled_entries``)."""
+        from ._feedback_kernels import compiled_entries
+
+        return compiled_entries((self.mass,), (self.force,), (self.force_jacobian,),
+                                (self.gaps,), (self.gap_jacobian,))
 
     def check_against(self, system: LagrangianSystem, tol: float = 1e-10) -> None:
         """Compare with the system's Python callables at a fixed configuration
@@ -168,8 +181,19 @@ def affine_compiled_model(system: LagrangianSystem) -> CompiledModel | None:
     n, m = system.n_dof, system.n_contacts
     params = np.concatenate([[float(n), float(m)], system.mass_matrix().ravel(),
                              system.dense_gap_matrix().ravel(), system.gap_offset])
-    return CompiledModel(lk.constant_mass, lk.no_force, lk.no_force_jacobian, lk.affine_gaps,
-                         lk.affine_gap_jacobian, params)
+    # kept per parameters: a model's checks cost far more than a short run's set-up
+    key = params.tobytes()
+    model = _AFFINE_MODELS.pop(key, None)
+    if model is None:
+        model = CompiledModel(lk.constant_mass, lk.no_force, lk.no_force_jacobian,
+                              lk.affine_gaps, lk.affine_gap_jacobian, params)
+        if len(_AFFINE_MODELS) >= 64:           # the least recently used goes
+            del _AFFINE_MODELS[next(iter(_AFFINE_MODELS))]
+    _AFFINE_MODELS[key] = model
+    return model
+
+
+_AFFINE_MODELS: dict[bytes, CompiledModel] = {}
 
 
 @dataclass(frozen=True, eq=False)
@@ -796,47 +820,47 @@ class LagrangianSystem:
         >>> bool(np.allclose(M, M.T) and np.all(np.linalg.eigvalsh(M) > 0))
         True
         """
-        p = dict(l1=l1, l2=l2, m1=m1, m2=m2, I1=I1, I2=I2)
-        for key, value in p.items():
+        for key, value in dict(l1=l1, l2=l2, m1=m1, m2=m2, I1=I1, I2=I2).items():
             check_positive(key, value)
         g = check_positive("g", g, allow_zero=True)
+        from . import _two_link_kernels as tk
+
+        # one source: the Python callables are the compiled kernels (the arrays made
+        # contiguous float64, as their declared signatures take them)
+        p = tk.arm_array(l1, l2, m1, m2, I1, I2, g)
 
         def force(t: float, q: FloatArray, v: FloatArray) -> FloatArray:
-            return -two_link_arm_coriolis(q, v, **p) @ v - two_link_arm_gravity(q, g=g, **p)
-
-        def gap(q: FloatArray) -> FloatArray:
-            return np.array([l1 * np.sin(q[0]) + l2 * np.sin(q[0] + q[1])])
-
-        def jacobian(q: FloatArray) -> FloatArray:
-            c12 = l2 * np.cos(q[0] + q[1])
-            return np.array([[l1 * np.cos(q[0]) + c12, c12]])
-
-        def potential(q: FloatArray) -> float:
-            return float(g * (m1 * l1 / 2 * np.sin(q[0])
-                              + m2 * (l1 * np.sin(q[0]) + l2 / 2 * np.sin(q[0] + q[1]))))
+            return tk.force(float(t), _f64(q), _f64(v), p)
 
         def force_jacobian(t: float, q: FloatArray, v: FloatArray
                            ) -> tuple[FloatArray, FloatArray]:
-            return two_link_arm_force_jacobian(q, v, g=g, **p)
-
-        from . import _two_link_kernels as tk
+            J = tk.force_jacobian(float(t), _f64(q), _f64(v), p)
+            return J[:2], J[2:]
 
         compiled = CompiledModel(tk.mass, tk.force, tk.force_jacobian, tk.gaps,
-                                 tk.gap_jacobian, np.array([l1, l2, m1, m2, I1, I2, g]),
-                                 potential=tk.potential)
-        return cls(lambda q: two_link_arm_mass(q, **p), force=force, gap=gap,
-                   jacobian=jacobian, restitution=restitution, potential=potential,
+                                 tk.gap_jacobian, p, potential=tk.potential)
+        return cls(lambda q: tk.mass(_f64(q), p), force=force,
+                   gap=lambda q: tk.gaps(_f64(q), p),
+                   jacobian=lambda q: tk.gap_jacobian(_f64(q), p), restitution=restitution,
+                   potential=lambda q: float(tk.potential(_f64(q), p)),
                    names=("theta1", "theta2"), force_jacobian=force_jacobian,
                    compiled=compiled)
 
 
-def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: float,
+def _f64(a: ArrayLike) -> FloatArray:
+    """``a`` as a contiguous ``float64`` array (what a declared kernel takes)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def two_link_arm_mass(q: ArrayLike, *, l1: float, l2: float, m1: float, m2: float,
                       I1: float, I2: float) -> FloatArray:
     """Mass matrix of the two-link arm (ch03 §4.1).
 
+    The compiled model's kernel (``nscontrol.systems._two_link_kernels.mass``): one source.
+
     Parameters
     ----------
-    q : (2,) ndarray
+    q : (2,) array_like
         Joint angles ``θ``.
     l1, l2 : float
         Link lengths.
@@ -845,21 +869,20 @@ def two_link_arm_mass(q: FloatArray, *, l1: float, l2: float, m1: float, m2: flo
     I1, I2 : float
         Link moments of inertia about their centres of mass.
     """
-    c2 = np.cos(q[1])
-    m11 = m1 * l1**2 / 4 + m2 * (l1**2 + l2**2 / 4 + l1 * l2 * c2) + I1 + I2
-    m12 = m2 * l2**2 / 4 + m2 * l1 * l2 / 2 * c2 + I2
-    return np.array([[m11, m12], [m12, m2 * l2**2 / 4 + I2]])
+    from . import _two_link_kernels as tk
+
+    return tk.mass(_f64(q), tk.arm_array(l1, l2, m1, m2, I1, I2))
 
 
-def two_link_arm_coriolis(q: FloatArray, v: FloatArray, *, l1: float, l2: float, m1: float,
+def two_link_arm_coriolis(q: ArrayLike, v: ArrayLike, *, l1: float, l2: float, m1: float,
                           m2: float, I1: float, I2: float) -> FloatArray:
     """Coriolis matrix in Christoffel form (``Ṁ - 2C`` skew-symmetric), ch03 §4.1.
 
     Parameters
     ----------
-    q : (2,) ndarray
+    q : (2,) array_like
         Joint angles ``θ``.
-    v : (2,) ndarray
+    v : (2,) array_like
         Joint velocities ``θ'``.
     l1, l2 : float
         Link lengths.
@@ -868,17 +891,18 @@ def two_link_arm_coriolis(q: FloatArray, v: FloatArray, *, l1: float, l2: float,
     I1, I2 : float
         Link moments of inertia about their centres of mass.
     """
-    h = m2 * l1 * l2 / 2 * np.sin(q[1])
-    return np.array([[-h * v[1], -h * (v[0] + v[1])], [h * v[0], 0.0]])
+    from . import _two_link_kernels as tk
+
+    return tk.coriolis(_f64(q), _f64(v), tk.arm_array(l1, l2, m1, m2, I1, I2))
 
 
-def two_link_arm_gravity(q: FloatArray, *, g: float, l1: float, l2: float, m1: float,
+def two_link_arm_gravity(q: ArrayLike, *, g: float, l1: float, l2: float, m1: float,
                          m2: float, I1: float, I2: float) -> FloatArray:
     """Gravity torques ``G = ∂P/∂θ`` of the two-link arm, ch03 §4.1.
 
     Parameters
     ----------
-    q : (2,) ndarray
+    q : (2,) array_like
         Joint angles ``θ``.
     g : float
         Gravitational acceleration.
@@ -889,12 +913,12 @@ def two_link_arm_gravity(q: FloatArray, *, g: float, l1: float, l2: float, m1: f
     I1, I2 : float
         Link moments of inertia about their centres of mass.
     """
-    c12 = np.cos(q[0] + q[1])
-    return np.array([g / 2 * (l1 * (m1 + 2 * m2) * np.cos(q[0]) + m2 * l2 * c12),
-                     m2 * g * l2 / 2 * c12])
+    from . import _two_link_kernels as tk
+
+    return tk.gravity(_f64(q), tk.arm_array(l1, l2, m1, m2, I1, I2, g))
 
 
-def two_link_arm_force_jacobian(q: FloatArray, v: FloatArray, *, g: float, l1: float,
+def two_link_arm_force_jacobian(q: ArrayLike, v: ArrayLike, *, g: float, l1: float,
                                 l2: float, m1: float, m2: float, I1: float, I2: float
                                 ) -> tuple[FloatArray, FloatArray]:
     """``(∂f/∂θ, ∂f/∂θ')`` of the two-link arm's force ``f = -C(θ, θ')θ' - G(θ)``.
@@ -903,9 +927,9 @@ def two_link_arm_force_jacobian(q: FloatArray, v: FloatArray, *, g: float, l1: f
 
     Parameters
     ----------
-    q : (2,) ndarray
+    q : (2,) array_like
         Joint angles ``θ``.
-    v : (2,) ndarray
+    v : (2,) array_like
         Joint velocities ``θ'``.
     g : float
         Gravitational acceleration.
@@ -916,14 +940,10 @@ def two_link_arm_force_jacobian(q: FloatArray, v: FloatArray, *, g: float, l1: f
     I1, I2 : float
         Link moments of inertia about their centres of mass.
     """
-    c = m2 * l1 * l2 / 2
-    s2, c2 = c * np.sin(q[1]), c * np.cos(q[1])
-    s1, s12 = np.sin(q[0]), np.sin(q[0] + q[1])
-    dq = np.array([[g / 2 * (l1 * (m1 + 2 * m2) * s1 + m2 * l2 * s12),
-                    g / 2 * m2 * l2 * s12 + c2 * (2 * v[0] * v[1] + v[1] ** 2)],
-                   [m2 * g * l2 / 2 * s12, m2 * g * l2 / 2 * s12 - c2 * v[0] ** 2]])
-    dv = np.array([[2 * s2 * v[1], 2 * s2 * (v[0] + v[1])], [-2 * s2 * v[0], 0.0]])
-    return dq, dv
+    from . import _two_link_kernels as tk
+
+    J = tk.force_jacobian(0.0, _f64(q), _f64(v), tk.arm_array(l1, l2, m1, m2, I1, I2, g))
+    return J[:2], J[2:]
 
 
 def _as_jacobian_pair(value: Any, n: int, where: str, *, runtime: bool = False

@@ -20,19 +20,16 @@ inverse map returns (``det J = l1 l2 sin θ2`` vanishes only at the stretched an
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
 from .._validation import FloatArray, check_in_interval, check_positive
 from ..errors import InadmissibleStateError
-from .lagrangian import (
-    LagrangianSystem,
-    two_link_arm_coriolis,
-    two_link_arm_gravity,
-    two_link_arm_mass,
-)
+from .lagrangian import LagrangianSystem, _f64
 
 __all__ = ["TwoLinkParams", "TwoLinkArm", "OneDofMass"]
 
@@ -69,10 +66,9 @@ class TwoLinkParams:
     @cached_property
     def array(self) -> FloatArray:
         """The parameters as the compiled kernels' record ``ARM`` (flat, in its order)."""
-        from ._two_link_kernels import ARM
+        from ._two_link_kernels import arm_array
 
-        return np.array([tuple(getattr(self, name) for name in ARM.names or ())],
-                        dtype=ARM).view(np.float64)
+        return arm_array(self.l1, self.l2, self.m1, self.m2, self.I1, self.I2, self.g)
 
     def inertial(self) -> dict[str, float]:
         """The keyword arguments of the joint-space functions (without ``g``)."""
@@ -112,7 +108,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        return two_link_arm_mass(theta, **self.params.inertial())
+        from . import _two_link_kernels as tk
+
+        return tk.mass(_f64(theta), self.params.array)
 
     def coriolis(self, theta: FloatArray, dtheta: FloatArray) -> FloatArray:
         """``C(θ, θ')`` in Christoffel form.
@@ -122,7 +120,9 @@ class TwoLinkArm:
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        return two_link_arm_coriolis(theta, dtheta, **self.params.inertial())
+        from . import _two_link_kernels as tk
+
+        return tk.coriolis(_f64(theta), _f64(dtheta), self.params.array)
 
     def gravity(self, theta: FloatArray) -> FloatArray:
         """``G(θ) = ∂P/∂θ``.
@@ -132,20 +132,25 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        return two_link_arm_gravity(theta, g=self.params.g, **self.params.inertial())
+        from . import _two_link_kernels as tk
+
+        return tk.gravity(_f64(theta), self.params.array)
 
     def system(self, restitution: float = 0.7) -> LagrangianSystem:
         """The plant for the integrators: gravity on, ground ``y >= 0``, fully actuated.
+
+        The same (immutable) system for the same parameters and coefficient: the
+        integrators keep their set-ups per system, so repeated runs skip them.
 
         Parameters
         ----------
         restitution : float
             Newton coefficient of the ground, in ``[0, 1]``.
         """
-        p = self.params
-        check_in_interval("restitution", restitution, 0.0, 1.0)
-        return LagrangianSystem.two_link_arm(l1=p.l1, l2=p.l2, m1=p.m1, m2=p.m2, I1=p.I1,
-                                             I2=p.I2, g=p.g, restitution=restitution)
+        e = check_in_interval("restitution", restitution, 0.0, 1.0)
+        return _kept(("two-link", self.params, e), lambda: LagrangianSystem.two_link_arm(
+            l1=self.params.l1, l2=self.params.l2, m1=self.params.m1, m2=self.params.m2,
+            I1=self.params.I1, I2=self.params.I2, g=self.params.g, restitution=e))
 
     # -- task map ------------------------------------------------------------------------
     def position(self, theta: FloatArray) -> FloatArray:
@@ -156,10 +161,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        l1, l2 = self.params.l1, self.params.l2
-        t12 = theta[0] + theta[1]
-        return np.array([l1 * np.sin(theta[0]) + l2 * np.sin(t12),
-                         l1 * np.cos(theta[0]) + l2 * np.cos(t12)])
+        from . import _two_link_kernels as tk
+
+        return tk.position(_f64(theta), self.params.array)
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """``J = ∂(y, x)/∂θ``.
@@ -169,11 +173,9 @@ class TwoLinkArm:
         theta : (2,) ndarray
             Joint angles.
         """
-        l1, l2 = self.params.l1, self.params.l2
-        t12 = theta[0] + theta[1]
-        c12, s12 = l2 * np.cos(t12), l2 * np.sin(t12)
-        return np.array([[l1 * np.cos(theta[0]) + c12, c12],
-                         [-l1 * np.sin(theta[0]) - s12, -s12]])
+        from . import _two_link_kernels as tk
+
+        return tk.jacobian(_f64(theta), self.params.array)
 
     def jacobian_rate(self, theta: FloatArray, dtheta: FloatArray) -> FloatArray:
         """``J̇ = d/dt J(θ(t))``.
@@ -183,11 +185,9 @@ class TwoLinkArm:
         theta, dtheta : (2,) ndarray
             Joint angles and velocities.
         """
-        l1, l2 = self.params.l1, self.params.l2
-        t12, w12 = theta[0] + theta[1], dtheta[0] + dtheta[1]
-        c12, s12 = l2 * np.cos(t12) * w12, l2 * np.sin(t12) * w12
-        return np.array([[-l1 * np.sin(theta[0]) * dtheta[0] - s12, -s12],
-                         [-l1 * np.cos(theta[0]) * dtheta[0] - c12, -c12]])
+        from . import _two_link_kernels as tk
+
+        return tk.jacobian_rate(_f64(theta), _f64(dtheta), self.params.array)
 
     def inverse(self, q: FloatArray) -> FloatArray:
         """Joint angles of the end-effector position ``q = (y, x)`` on the elbow branch
@@ -286,13 +286,18 @@ class OneDofMass:
     def system(self, restitution: float = 0.7) -> LagrangianSystem:
         """The plant: ``m q'' = -m g + u + λ``, ``0 <= q ⟂ λ >= 0``.
 
+        The same (immutable) system for the same mass, gravity and coefficient (see
+        :meth:`TwoLinkArm.system`).
+
         Parameters
         ----------
         restitution : float
             Newton coefficient, in ``[0, 1]``.
         """
-        return LagrangianSystem([[self.m]], constant_force=[-self.m * self.g],
-                                gap_matrix=[[1.0]], restitution=restitution, names=("q",))
+        e = check_in_interval("restitution", restitution, 0.0, 1.0)
+        return _kept(("one-dof", float(self.m), float(self.g), e), lambda: LagrangianSystem(
+            [[self.m]], constant_force=[-self.m * self.g], gap_matrix=[[1.0]],
+            restitution=e, names=("q",)))
 
     def position(self, theta: FloatArray) -> FloatArray:
         """Task coordinate (the position itself).
@@ -353,3 +358,17 @@ class OneDofMass:
         x = np.array([float(np.asarray(theta).ravel()[0]), float(np.asarray(dtheta).ravel()[0])])
         one_dof_task_model(x, float(self.m), float(self.g), q, dq, Mq, Cq, gq, J)
         return q, dq, Mq, Cq, gq, J
+
+
+_SYSTEMS: dict[tuple[Any, ...], LagrangianSystem] = {}
+
+
+def _kept(key: tuple[Any, ...], make: Callable[[], LagrangianSystem]) -> LagrangianSystem:
+    """The system made for ``key``, kept (the 64 most recently used)."""
+    system = _SYSTEMS.pop(key, None)
+    if system is None:
+        system = make()
+        if len(_SYSTEMS) >= 64:
+            del _SYSTEMS[next(iter(_SYSTEMS))]
+    _SYSTEMS[key] = system
+    return system
