@@ -169,13 +169,13 @@ class ZOHStepper:
 
     def _compiled_chunk(self, k0: int, k1: int, last: bool) -> None:
         from ...systems._feedback_kernels import calling_blocks
-        from . import _zoh_kernels as zk
+        from ._zoh_kernels import run_chunk
 
         b = self.blocks
         assert b is not None
         ks = b.kernel_state()     # the runner's arrays, stepped in place chunk after chunk
         with calling_blocks():     # a block's error raised from the call
-            status = zk.run_chunk(  # type: ignore[call-arg]  # numba's stub
+            status = run_chunk(  # type: ignore[call-arg]  # numba's stub
                 k0, k1, last, self.t0, self.T, self.every, self.Phi, self.Gam, self.X,
                 self.Xn, self.c, b.Cy, _EMPTY, self.addresses, ks[0], *ks[2:7], *ks[8:],
                 *self.out, self.count)
@@ -183,7 +183,7 @@ class ZOHStepper:
             b.raise_status(int(status), self.t0 + int(self.count[0]) * self.T)
 
     def _python_chunk(self, k0: int, k1: int, last: bool) -> None:
-        from . import _zoh_kernels as zk
+        from ._zoh_kernels import keep, tick
 
         runner, m, n = self.runner, self.runner.n_inputs, self.n
         for k in range(k0, k1):
@@ -193,11 +193,11 @@ class ZOHStepper:
             if u.size != m:
                 raise ModelError(f"controller: expected a finite input of length {m} at "
                                  f"t = {t:.6g}, got {u.size} values")
-            zk.tick(k, t, self.every, self.Phi, self.Gam, self.X, self.Xn, self.c, u, xc,
+            tick(k, t, self.every, self.Phi, self.Gam, self.X, self.Xn, self.c, u, xc,
                     *self.out, self.count)
         runner.log.clear()          # the runner's own log is not used here
         if last:                    # the input held before the last tick, the block's state
-            zk.keep(k1, self.every, True, self.t0 + k1 * self.T, self.X, self.c,
+            keep(k1, self.every, True, self.t0 + k1 * self.T, self.X, self.c,
                     runner.held["controller_out"], runner.xc, *self.out, self.count)
 
     def _record(self) -> None:

@@ -65,7 +65,7 @@ def block_functions(typingctx, addresses, first):
     return pair(addresses, first), codegen
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def keep(k, every, force, t, X, c, u, xc, out_t, out_x, out_s, out_u, out_xc, count):
     """Keep the sample of tick ``k`` when ``k`` is a multiple of ``every`` (or ``force``):
     the time, the plant part of ``X``, its sliding variable ``c x``, the held input ``u`` and
@@ -86,7 +86,7 @@ def keep(k, every, force, t, X, c, u, xc, out_t, out_x, out_s, out_u, out_xc, co
     count[1] = r + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def zoh_step(Phi, Gam, X, u, Xn):
     """``Xn = Γ u + Φ X``, summed in that order (``Γ`` of shape ``(N, m)``)."""
     N = X.shape[0]
@@ -99,7 +99,7 @@ def zoh_step(Phi, Gam, X, u, Xn):
         Xn[i] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def tick(k, t, every, Phi, Gam, X, Xn, c, u, xc, out_t, out_x, out_s, out_u, out_xc,
          count):
     """After the blocks ran at tick ``k`` (time ``t``): keep the sample, step ``X`` over one
