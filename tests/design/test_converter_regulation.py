@@ -56,6 +56,32 @@ def test_check1_closed_form_map_equals_the_generic_switching_route(rng, levels, 
     assert worst <= 2e-12
 
 
+@pytest.mark.parametrize("variant", ["pl", "exact"])
+def test_map_iterates_are_the_samples_of_the_simulated_loop(variant):
+    # the map's run against simulate(method="switching") of the same closed loop over 60
+    # periods from a cold start (saturated periods first, then the approach to the orbit)
+    buck = BuckConverter.normalized(DELTA)
+    ctrl = ZADController(buck, 5.0, T, XREF, variant)
+    loop, x0, n = ctrl.loop(), np.array([0.3, 0.4]), 60
+    rec = loop.run(x0, n)
+    times = np.arange(n) * T
+    tr = simulate(ctrl.switched(), x0, (0.0, (n - 1) * T), method="switching",
+                  t_eval=times)
+    at = np.searchsorted(tr.t, times)          # the samples at the instants (not the switches)
+    np.testing.assert_array_equal(tr.t[at], times)
+    assert np.any(rec.saturated) and not np.all(rec.saturated)
+    # each period of either route is within check 1's 2e-12 of the exact one; an error made
+    # at period k reaches period j through DP_{j-1} ... DP_k (first order): the bound is
+    # 2e-12 times the sum over k of the largest such product's norm, times 2 (safety)
+    growth = np.zeros(n)
+    for k in range(n):
+        M = np.eye(2)
+        for j in range(k, n):
+            growth[k] = max(growth[k], np.linalg.norm(M, 2))
+            M = loop.jacobian(rec.states[j]) @ M
+    assert np.max(np.abs(tr.x[at] - rec.states)) <= 2 * 2e-12 * np.sum(growth)
+
+
 @pytest.mark.parametrize("levels", LEVELS)
 def test_check2_pl_duty_zeroes_the_piecewise_linear_average(rng, levels):
     buck = BuckConverter.normalized(DELTA, levels)
