@@ -24,22 +24,27 @@ block, ``KeyboardInterrupt`` between chunks) finds the rows already computed.
 
 from __future__ import annotations
 
+import warnings
+from typing import Any
+
 import numpy as np
-from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils
+from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.extending import intrinsic
 
-from .._block_kernels import step_blocks
 from ...systems._feedback_kernels import BLOCK_SIGNATURE
+from .._block_kernels import step_blocks
 
 #: The numba type of a compiled block's ``output`` or ``update`` as the block stepper takes
 #: it (the type :func:`~nscontrol.systems._feedback_kernels.compiled_entries` gives them).
-_BLOCK_FUNCTION = types.FunctionType(BLOCK_SIGNATURE)
+with warnings.catch_warnings():   # numba: first-class functions "experimental"
+    warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+    _BLOCK_FUNCTION = types.FunctionType(BLOCK_SIGNATURE)
 
 
 @intrinsic
-def block_functions(typingctx, addresses, first):
+def _block_functions(typingctx, addresses, first):
     """``(output, update)``: the first-class functions whose C wrappers are at
     ``addresses[first]`` and ``addresses[first + 1]`` (``int64``), of the type the block
     stepper takes. Compiled code only."""
@@ -54,7 +59,7 @@ def block_functions(typingctx, addresses, first):
         null = context.get_constant_null(types.voidptr)
         items = []
         for i in range(2):
-            at = builder.add(start, ir.Constant(start.type, i))
+            at = builder.add(start, context.get_constant(types.intp, i))
             address = builder.load(builder.gep(ary.data, [at]))
             fn = cgutils.create_struct_proxy(_BLOCK_FUNCTION)(context, builder)
             fn.c_addr = builder.inttoptr(address, context.get_value_type(types.voidptr))
@@ -63,6 +68,10 @@ def block_functions(typingctx, addresses, first):
             items.append(fn._getvalue())
         return context.make_tuple(builder, pair, items)
     return pair(addresses, first), codegen
+
+
+#: ``block_functions(addresses, first)`` as kernels call it (numba passes the typing context).
+block_functions: Any = _block_functions
 
 
 @njit(cache=True, inline="always")
