@@ -56,6 +56,32 @@ def test_check1_closed_form_map_equals_the_generic_switching_route(rng, levels, 
     assert worst <= 2e-12
 
 
+@pytest.mark.parametrize("variant", ["pl", "exact"])
+def test_map_iterates_are_the_samples_of_the_simulated_loop(variant):
+    # the map's run against simulate(method="switching") of the same closed loop over 60
+    # periods from a cold start (saturated periods first, then the approach to the orbit)
+    buck = BuckConverter.normalized(DELTA)
+    ctrl = ZADController(buck, 5.0, T, XREF, variant)
+    loop, x0, n = ctrl.loop(), np.array([0.3, 0.4]), 60
+    rec = loop.run(x0, n)
+    times = np.arange(n) * T
+    tr = simulate(ctrl.switched(), x0, (0.0, (n - 1) * T), method="switching",
+                  t_eval=times)
+    at = np.searchsorted(tr.t, times)          # the samples at the instants (not the switches)
+    np.testing.assert_array_equal(tr.t[at], times)
+    assert np.any(rec.saturated) and not np.all(rec.saturated)
+    # each period of either route is within check 1's 2e-12 of the exact one; an error made
+    # at period k reaches period j through DP_{j-1} ... DP_k (first order): the bound is
+    # 2e-12 times the sum over k of the largest such product's norm, times 2 (safety)
+    growth = np.zeros(n)
+    for k in range(n):
+        M = np.eye(2)
+        for j in range(k, n):
+            growth[k] = max(growth[k], np.linalg.norm(M, 2))
+            M = loop.jacobian(rec.states[j]) @ M
+    assert np.max(np.abs(tr.x[at] - rec.states)) <= 2 * 2e-12 * np.sum(growth)
+
+
 @pytest.mark.parametrize("levels", LEVELS)
 def test_check2_pl_duty_zeroes_the_piecewise_linear_average(rng, levels):
     buck = BuckConverter.normalized(DELTA, levels)
@@ -134,6 +160,35 @@ def test_check4_one_period_orbit_duty_and_newton_iterations(levels):
         assert abs(orbit.duties[0] / T - D0) <= 1e-3
         assert orbit.iterations <= 10
 
+
+
+def test_period_two_orbit_just_past_the_flip_is_found_from_on_and_near_it():
+    # k_s = 3.251, just past the flip of the 1T orbit: the 2T orbit born there has a
+    # multiplier of DP² within ~4e-5 of 1, so DP² - I is nearly singular and a residual of
+    # rounding size gives Newton steps of rounding size / 4e-5, which a step tolerance of
+    # 1e-13 does not bound (before: 5 of these 22 starts on the orbit raised SolverError)
+    loop = ZADController(BuckConverter.normalized(DELTA), 3.251, T, XREF).loop()
+    one = loop.fixed_point()
+    assert np.min(one.multipliers.real) < -1.0            # the 1T orbit has flipped
+    # the 2T attractor: 2e6 periods contract a start 1e-3 away by (1 - 4e-5)^1e6 ≈ e^-40
+    orbit = loop.run(one.states[0] + [1e-3, 0.0], 2, n_transient=2_000_000).states
+    assert np.ptp(orbit[:, 1]) > 0.02                     # two points, not the 1T orbit
+    gap = 1.0 - np.max(np.abs(np.linalg.eigvals(loop.jacobian(orbit[1])
+                                                @ loop.jacobian(orbit[0]))))
+    assert 0.0 < gap < 1e-4
+    for start in orbit:
+        for i in range(-5, 6):                            # on it, to rounding
+            x = start.copy()
+            x[1] += i * np.spacing(x[1])
+            found = loop.fixed_point(x, period=2)
+            assert found.iterations <= 2
+            assert np.max(np.abs(found.states[0] - start)) <= 1e-12
+        # 1e-8 off: Newton converges to within the residual's rounding floor / gap
+        # (2 · 64 eps · (1 + |x|) / gap ≈ 1.5e-9, the accuracy the map's rounding allows)
+        found = loop.fixed_point(start + [1e-8, -1e-8], period=2)
+        floor = 2 * 64 * U * (1.0 + np.sum(np.abs(start)))
+        assert np.max(np.abs(found.states[0] - start)) <= floor / gap
+        assert found.iterations <= 10
 
 def test_check5_multipliers_follow_the_first_order_series():
     buck = BuckConverter.normalized(DELTA)

@@ -28,13 +28,13 @@ FO_N, FO_IMPLICIT, FO_ALPHA, FO_CG, FO_ROWS = 0, 1, 2, 3, 4
 ST_N, ST_IMPLICIT, ST_ESTIMATE, ST_K1, ST_K2, ST_H, ST_CG, ST_ROWS = 0, 1, 2, 3, 4, 5, 6, 7
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def psi(s: float) -> float:
     """``|s|^{1/2} sign(s)``."""
     return math.copysign(math.sqrt(abs(s)), s) if s != 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def st_resolvent(p: float, a: float, b: float) -> float:
     """``z`` with ``z + a |z|^{1/2} sign(z) + b Sign(z) ∋ p`` (``a, b >= 0``): a quadratic in
     ``r = |z|^{1/2}`` solved without cancellation."""
@@ -45,7 +45,7 @@ def st_resolvent(p: float, a: float, b: float) -> float:
     return math.copysign(r * r, p)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def first_order_switching(s: float, cG: float, alpha: float, implicit: bool) -> float:
     """The switching part ``u_s`` of first-order SMC from ``s_k`` (``cG = c Γ``).
 
@@ -60,7 +60,7 @@ def first_order_switching(s: float, cG: float, alpha: float, implicit: bool) -> 
     return -alpha if s * cG > 0.0 else alpha
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def super_twisting_implicit(p: float, nu: float, cG: float, k1: float, k2: float,
                             h: float) -> tuple[float, float, float]:
     """Implicit super-twisting step: ``(u, nu_next, s_next)`` from the predicted drift ``p``.
@@ -77,7 +77,7 @@ def super_twisting_implicit(p: float, nu: float, cG: float, k1: float, k2: float
     return -k1 * ps + nu1, nu1, s1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def super_twisting_explicit(s: float, nu: float, k1: float, k2: float,
                             h: float) -> tuple[float, float]:
     """Explicit super-twisting step ``(u, nu_next)``: ``u = -k1 ψ(s_k) + ν_k``,
@@ -104,14 +104,15 @@ def first_order_output(t, xb, y, x, xhat, lam, params):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def super_twisting_step(xb, x, params):
-    """``(u_k, state at the next sample)`` of ``SuperTwistingController``.
+    """``(u_k, ν_{k+1}, s̃_{k+1}, d̂_k)`` of ``SuperTwistingController``: its output and the
+    entries of its state at the next sample (scalars: the output does not build the state).
 
-    Explicit: ``xb = [ν]``. Implicit: ``xb = [ν, s̃, d̂, started]``; with the estimate, the
-    one-step disturbance estimate ``d̂_k = d̂_{k-1} + (s_k - s̃_k) / cΓ`` (``s̃_k`` the law's own
-    prediction of ``s_k``, from the second sample on) enters the prediction
-    ``p = c Φ x_k + cΓ (ν_k + d̂_k)``.
+    Explicit: ``xb = [ν]`` (``s̃``, ``d̂`` unused, zero). Implicit: ``xb = [ν, s̃, d̂, started]``;
+    with the estimate, the one-step disturbance estimate ``d̂_k = d̂_{k-1} + (s_k - s̃_k) / cΓ``
+    (``s̃_k`` the law's own prediction of ``s_k``, from the second sample on) enters the
+    prediction ``p = c Φ x_k + cΓ (ν_k + d̂_k)``.
     """
     n = int(params[ST_N])
     cG, k1, k2, h = params[ST_CG], params[ST_K1], params[ST_K2], params[ST_H]
@@ -127,13 +128,9 @@ def super_twisting_step(xb, x, params):
         for i in range(n):
             p += params[ST_ROWS + n + i] * x[i]
         u, nu1, s1 = super_twisting_implicit(p, nu, cG, k1, k2, h)
-        nxt = np.empty(4)
-        nxt[0], nxt[1], nxt[2], nxt[3] = nu1, s1, dhat, 1.0
-        return u, nxt
+        return u, nu1, s1, dhat
     u, nu1 = super_twisting_explicit(s, nu, k1, k2, h)
-    nxt = np.empty(1)
-    nxt[0] = nu1
-    return u, nxt
+    return u, nu1, 0.0, 0.0
 
 
 @njit(BLOCK_SIGNATURE, cache=True)
@@ -147,5 +144,12 @@ def super_twisting_output(t, xb, y, x, xhat, lam, params):
 @njit(BLOCK_SIGNATURE, cache=True)
 def super_twisting_update(t, xb, y, x, xhat, lam, params):
     """The state of ``SuperTwistingController`` at the next sample
-    (:func:`super_twisting_step`)."""
-    return super_twisting_step(xb, x, params)[1]
+    (:func:`super_twisting_step`): ``[ν]`` (explicit) or ``[ν, s̃, d̂, 1]`` (implicit)."""
+    _, nu1, s1, dhat = super_twisting_step(xb, x, params)
+    if params[ST_IMPLICIT] != 0.0:
+        nxt = np.empty(4)
+        nxt[0], nxt[1], nxt[2], nxt[3] = nu1, s1, dhat, 1.0
+        return nxt
+    nxt = np.empty(1)
+    nxt[0] = nu1
+    return nxt

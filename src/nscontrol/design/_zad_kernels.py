@@ -98,17 +98,25 @@ def map_duty_derivative(delta, u_off, u_on, T, d, states):
 
 
 @njit(cache=True)
-def pl_duty_raw(p, x0, x1):
-    """PL-ZAD duty before saturation, ``(2s + Tṡ_off)/(ṡ_off - ṡ_on)``, and its gradient."""
+def pl_duty(p, x0, x1):
+    """PL-ZAD duty before saturation, ``(2s + Tṡ_off)/(ṡ_off - ṡ_on)``: the one formula of
+    the duty law (:func:`pl_duty_raw`, the controller that ``simulate`` runs) and of the
+    map's period (:func:`pl_step`)."""
     ks, dm, T = p[P_KS], p[P_DELTA_MODEL], p[P_T]
-    du = p[P_U_ON] - p[P_U_OFF]
     s = x0 - p[P_XREF] + ks * x1
     sdot_off = x1 + ks * (-x0 - dm * x1 + p[P_U_OFF])
-    den = -ks * du                          # ṡ_off - ṡ_on = -k_s Δu
+    return (2.0 * s + T * sdot_off) / (-ks * (p[P_U_ON] - p[P_U_OFF]))   # ṡ_off - ṡ_on
+
+
+@njit(cache=True)
+def pl_duty_raw(p, x0, x1):
+    """PL-ZAD duty before saturation (:func:`pl_duty`) and its gradient."""
+    ks, dm, T = p[P_KS], p[P_DELTA_MODEL], p[P_T]
+    den = -ks * (p[P_U_ON] - p[P_U_OFF])    # ṡ_off - ṡ_on = -k_s Δu
     grad = np.empty(2)
     grad[0] = (2.0 - T * ks) / den          # (2g + T gA)/den with gA = [-k_s, 1 - k_s δ]
     grad[1] = (2.0 * ks + T * (1.0 - ks * dm)) / den
-    return (2.0 * s + T * sdot_off) / den, grad
+    return pl_duty(p, x0, x1), grad
 
 
 @njit(cache=True)
@@ -190,11 +198,7 @@ def pl_step(p, ET, x0, x1):
     exponential per period (``E(d/2)`` is near the identity, so its inverse loses nothing:
     its condition number is ``e^{δ d/2}``-close to 1)."""
     T, u_off, u_on = p[P_T], p[P_U_OFF], p[P_U_ON]
-    ks, dm = p[P_KS], p[P_DELTA_MODEL]
-    s = x0 - p[P_XREF] + ks * x1
-    sdot_off = x1 + ks * (-x0 - dm * x1 + u_off)
-    d = (2.0 * s + T * sdot_off) / (-ks * (u_on - u_off))
-    d = min(max(d, 0.0), T)
+    d = min(max(pl_duty(p, x0, x1), 0.0), T)
     h0, h1, h2, h3 = flow_coefficients(p[P_DELTA], 0.5 * d)    # both on-pieces last d/2
     g0 = h0 * h0 + h1 * h2                                     # E(d) = E(d/2)²
     g1 = h0 * h1 + h1 * h3
@@ -269,10 +273,26 @@ def iterate(p, x0, x1, n_transient, n_record):
     return X, D, M, last
 
 
+#: The rounding floor of the residual ``P^k(x) - x`` per period, relative to ``1 + |x|``
+#: (sum of the components): a period is about 60 operations on numbers of the size of ``x``
+#: (three closed-form pieces, the duty), each within one rounding ``u = eps/2``, so the
+#: residual of an exact orbit evaluates to at most ``~60 u (1 + |x|)`` per period; twice
+#: that, ``64 eps``, is the floor. Measured on the ZAD loops: at most ``5 eps``.
+RESIDUAL_FLOOR_EPS = 64.0 * np.finfo(np.float64).eps
+
+
 @njit(cache=True)
 def fixed_point(p, x0, x1, period, tol, max_iter):
     """Newton on ``P^period(x) - x`` with the closed-form Jacobian; returns
-    ``(x, iterations, converged)``."""
+    ``(x, iterations, converged)``.
+
+    Converged: the Newton step is below ``tol (1 + |x|)``, or the residual is at its
+    rounding floor (``period`` times :data:`RESIDUAL_FLOOR_EPS` ``(1 + |x|)``). Near a flip
+    ``DP^period - I`` is nearly singular (the 2T orbit just past it has a multiplier close
+    to 1), so a residual of rounding size gives Newton steps of rounding size divided by
+    that gap, which no ``tol`` bounds: ``x`` is then as accurate as the map's rounding
+    allows, and a further step would only move it by that noise.
+    """
     x = np.array([x0, x1])
     for it in range(1, max_iter + 1):
         y0, y1 = x[0], x[1]
@@ -282,6 +302,9 @@ def fixed_point(p, x0, x1, period, tol, max_iter):
             M = J @ M
             y0, y1, _ = step(p, y0, y1)
         r0, r1 = y0 - x[0], y1 - x[1]
+        scale = 1.0 + abs(x[0]) + abs(x[1])
+        if abs(r0) + abs(r1) <= period * RESIDUAL_FLOOR_EPS * scale:
+            return x, it, True
         a, b = M[0, 0] - 1.0, M[0, 1]
         c, e = M[1, 0], M[1, 1] - 1.0
         det = a * e - b * c

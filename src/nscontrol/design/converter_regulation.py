@@ -403,7 +403,9 @@ class ZADLoopMap:
         period : int
             Number of map periods of the orbit.
         tol : float
-            Newton step tolerance, relative to ``1 + |x|``.
+            Newton step tolerance, relative to ``1 + |x|``; Newton also stops when the
+            residual ``P^period(x) - x`` is at its rounding floor (near a flip, where
+            ``DP^period - I`` is nearly singular, rounding alone moves the steps by more).
         max_iter : int
             Newton iterations allowed.
 

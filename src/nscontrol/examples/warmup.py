@@ -178,7 +178,7 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("compiled controllers, observers and models", _compiled_blocks),
 ]
 
-#: Step name to the kernel modules (``subpackage._module``, as
+#: Step name to the kernel modules (their dotted path in the package, as
 #: :func:`nscontrol._progress.uncompiled_kernel_modules` names them) its runs compile.
 COMPILES: dict[str, tuple[str, ...]] = {
     "LCP solvers": ("numerics._lcp_kernels",),
@@ -193,7 +193,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
                             "simulate._frictional_mj_kernels"),
     "sampled sliding-mode control": ("design._sliding_mode_kernels",
-                                     "simulate._sampled_zoh_kernels", "simulate._block_kernels",
+                                     "simulate.sampled_zoh._zoh_kernels", "simulate._block_kernels",
                                      "systems._feedback_kernels"),
     "compiled controllers, observers and models": (
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",

@@ -64,7 +64,7 @@ SLOT_OBSERVER = 1
 SLOT_CONTROLLER = 3
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _finite(a):
     for i in range(a.size):
         if not np.isfinite(a[i]):
@@ -72,7 +72,7 @@ def _finite(a):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def take_sample(sched, slot, t, period):
     """Whether a sampled block of period ``period`` samples at the step start ``t``.
 
@@ -99,7 +99,7 @@ def take_sample(sched, slot, t, period):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
              prev_y, prev_x, prev_xhat, prev_lam, bad_size, bad_value, bad_out):
     """One block at the step start ``t``; writes its (held) output into ``held``."""
@@ -137,7 +137,7 @@ def _advance(fns, params, period, xb, held, sched, slot, t, h, y, x, xhat, lam,
     return STATUS_OK
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat,
                 has_ctrl, ctrl_fns, ctrl_params, ctrl_period, xc, u,
                 prev_y, prev_x, prev_xhat, prev_lam, sched):
@@ -171,7 +171,7 @@ def step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat
     return STATUS_OK
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def reset_blocks(t, x_minus, x_plus, impulse, has_obs, obs_reset, obs_params, xo,
                  has_ctrl, ctrl_reset, ctrl_params, xc):
     """The blocks' states after a plant jump (``*_reset = (reset,)``); returns a status."""

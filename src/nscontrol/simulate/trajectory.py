@@ -783,11 +783,12 @@ class Recorder:
         t = np.asarray(t, float)
         k = t.shape[0]
         offset = (-self._calls) % self.every
-        sel = np.arange(offset, k, self.every)
+        sel = slice(offset, k, self.every)     # a basic slice: views, no index array
+        size = len(range(offset, k, self.every))
         self._calls += k
-        while self._n + sel.size > self._t.shape[0]:
+        while self._n + size > self._t.shape[0]:
             self._grow()
-        i0, i1 = self._n, self._n + sel.size
+        i0, i1 = self._n, self._n + size
         self._t[i0:i1] = t[sel]
         if isinstance(x, tuple):
             col = 0
