@@ -26,8 +26,10 @@ from pathlib import Path
 
 __all__ = ["KERNEL_GLOBS", "kernel_modules", "reached_kernels", "dependency_digests", "refresh"]
 
-#: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder.
-KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py")
+#: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder: in a
+#: subpackage (``simulate/_block_kernels.py``) or in a method's folder inside one
+#: (``simulate/implicit_euler/_lure_kernels.py``).
+KERNEL_GLOBS = ("*/_*_kernels.py", "*/_*_kernel.py", "*/*/_*_kernels.py", "*/*/_*_kernel.py")
 
 #: The stamp written beside numba's index of each kernel module.
 STAMP_SUFFIX = ".nscontrol-deps"

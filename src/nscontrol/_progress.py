@@ -116,7 +116,7 @@ def uncompiled_kernel_modules() -> list[str]:
     for pattern in KERNEL_GLOBS:
         for module in sorted(root.glob(pattern)):
             if not any((module.parent / "__pycache__").glob(f"{module.stem}.*.nbi")):
-                missing.append(f"{module.parent.name}.{module.stem}")
+                missing.append(".".join(module.relative_to(root).with_suffix("").parts))
     return missing
 
 
