@@ -69,14 +69,17 @@ def test_feedback_reaches_implicit_euler_only_as_a_closed_loop():
 
 
 class _NaNAfter(StaticLaw):
-    """-x1 until t = 0.5, then NaN (a sampled block, so a compiled form can run it)."""
+    """-x1 until t = 0.5, then NaN or ``fault`` raised (a sampled block, so a compiled form
+    can run it)."""
 
     n_outputs, period = 1, H
 
-    def __init__(self, form=None):
-        self.form = form
+    def __init__(self, form=None, fault=None):
+        self.form, self.fault = form, fault
 
     def output(self, t, xc, m):
+        if t >= 0.5 - 0.5 * H and self.fault is not None:
+            raise self.fault()
         return np.array([np.nan if t >= 0.5 - 0.5 * H else -m.x[0]])
 
     def compiled(self):
@@ -95,15 +98,17 @@ def _keep(t, xb, y, x, xhat, lam, p):
     return xb
 
 
-@pytest.mark.parametrize("compiled", [False, True])
-def test_a_failing_block_keeps_every_step_before_it(compiled):
-    """A block's NaN at t = 0.5 ends the run with the 50 steps before it, equal to a run
-    stopped there, by the Python runner and by the compiled loop (whose chunk is cut short
-    by the block's status)."""
+@pytest.mark.parametrize("compiled, fault", [(False, None), (True, None),
+                                             (False, KeyboardInterrupt)])
+def test_a_failing_block_keeps_every_step_before_it(compiled, fault):
+    """A block's NaN at t = 0.5 (or a Ctrl-C while it runs) ends the run with the 50 steps
+    before it, equal to a run stopped there, by the Python runner and by the compiled loop
+    (whose chunk is cut short by the block's status)."""
     form = CompiledBlock(_nan_after_output, _keep, [H]) if compiled else None
-    loop = nsc.closed_loop(relay_plant(), _NaNAfter(form))
-    with pytest.raises(ModelError, match=r"^controller: returned a non-finite value at "
-                                         r"t = 0\.5") as info:
+    loop = nsc.closed_loop(relay_plant(), _NaNAfter(form, fault))
+    error, match = (ModelError, r"^controller: returned a non-finite value at t = 0\.5") \
+        if fault is None else (fault, None)
+    with pytest.raises(error, match=match) as info:
         nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), h=H, progress=False)
     partial = info.value.trajectory
     assert partial.status == -1 and partial.t[-1] == pytest.approx(0.5, abs=1e-12)

@@ -97,7 +97,9 @@ class Steps:
         except Exception:
             self._run_until_input_fails(x, times)
             raise
-        return self.solve(x, times, ubar, gnext)
+        rows = self.solve(x, times, ubar, gnext)
+        self.progress.rows, self.progress.done = rows, times.size - 1   # kept if interrupted
+        return rows
 
     def _run_until_input_fails(self, x: FloatArray, times: FloatArray) -> None:
         """The steps of a chunk whose input cannot be evaluated over it whole (``u``
@@ -124,7 +126,7 @@ class Steps:
         elif self.plan.solver == "lcp":
             self._lcp(x, times, ubar, gnext, rows)
         else:
-            self._python(x, ubar, gnext, rows)
+            self._python(x, ubar, gnext, rows, track=out is None)
         return rows
 
     def _lcp(self, x: FloatArray, times: FloatArray, ubar: FloatArray, gnext: FloatArray,
@@ -149,8 +151,10 @@ class Steps:
             f"solution: {why}; the step matrix may be badly conditioned (reduce h)",
             status=name), rows, done)
 
-    def _python(self, x: FloatArray, ubar: FloatArray, gnext: FloatArray, rows: Rows) -> None:
-        """One inclusion per step in Python, block by block in dependency order."""
+    def _python(self, x: FloatArray, ubar: FloatArray, gnext: FloatArray, rows: Rows, *,
+                track: bool) -> None:
+        """One inclusion per step in Python, block by block in dependency order (``track``:
+        count the finished steps in :attr:`progress`; not when the caller owns it)."""
         m, plan, H = self.m, self.plan, self.system.H
         X, Z, W = rows
         mm = self.system.n_multipliers
@@ -169,7 +173,8 @@ class Steps:
                 raise _with_partial(exc, rows, j) from None
             x = q + m.Gh @ w
             X[j], Z[j], W[j] = x, z, w
-            self.progress.rows, self.progress.done = rows, j + 1
+            if track:
+                self.progress.rows, self.progress.done = rows, j + 1
 
     # -- a closed loop's blocks --------------------------------------------------------------
     def run_with_runner(self, x: FloatArray, times: FloatArray, runner: Any) -> Rows:
