@@ -9,7 +9,8 @@ import pytest
 
 MODULES = {
     "nscontrol.systems.lure": 3, "nscontrol.systems.pwa": 3, "nscontrol.systems.switched": 5,
-    "nscontrol.simulate.implicit_euler": 5, "nscontrol.simulate.switching": 1,
+    "nscontrol.simulate.implicit_euler": 5, "nscontrol.simulate.implicit_euler._matrices": 2,
+    "nscontrol.simulate.implicit_euler._law_data": 5, "nscontrol.simulate.switching": 1,
     "nscontrol.testing.setvalued_problems": 5,
 }
 

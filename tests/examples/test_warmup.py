@@ -26,7 +26,7 @@ def _kernel_modules_on_disk():
 
 
 def test_there_are_kernel_modules():
-    assert {"numerics._lcp_kernels", "simulate._lure_lcp_kernels",
+    assert {"numerics._lcp_kernels", "simulate.implicit_euler._lure_lcp_kernels",
             "simulate._mj_linearised_kernel"} <= _kernel_modules_on_disk()
 
 

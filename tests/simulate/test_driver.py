@@ -128,6 +128,23 @@ def test_every_method_refuses_an_unknown_option_with_one_message(method, system_
         nsc.simulate(system, x0, (0.0, 1.0), method=method, stepsize=1e-3)
 
 
+def test_feedback_given_as_an_option_is_told_to_be_a_closed_loop():
+    """``controller=`` is no option of a method: feedback is a closed loop, a system too.
+    The same message from ``simulate`` and from the up-front checks of a sweep."""
+    from nscontrol.simulate.driver import CAPABILITIES, check_run
+    from nscontrol.systems.feedback import StateFeedback
+    from nscontrol.testing.setvalued_problems import relay_feedback
+
+    plant = relay_feedback().system
+    message = (r"^controller: unknown option of simulate; feedback is a closed loop.*"
+               r"simulate\(closed_loop\(plant, block\), x0, t_span, ...\)")
+    with pytest.raises(ModelError, match=message):
+        nsc.simulate(plant, [1.0, 0.0], (0.0, 1.0), h=1e-2, controller=lambda t, x: [0.0])
+    with pytest.raises(ModelError, match=message):
+        check_run(plant, "implicit_euler", {"h": 1e-2, "controller": StateFeedback([[0.0]])})
+    assert "controller" not in CAPABILITIES
+
+
 class WholeLoop(Integrator):
     """A user's integrator that runs a closed loop as it is (no lowering)."""
 

@@ -229,14 +229,14 @@ def test_failed_one_step_solutions_raise_solver_error_with_the_partial_run(monke
     from nscontrol.errors import SolverError
     from nscontrol.laws.monotone_function import MonotoneFunction
     from nscontrol.laws.product import Product
-    from nscontrol.simulate import _lure_lcp_kernels, implicit_euler
+    from nscontrol.simulate.implicit_euler import _inclusion, _lure_lcp_kernels
 
     # Python path: a residual check that nothing can pass
     law = MonotoneFunction(lambda z: z**3, lambda z: 3 * z**2)
     curved = LureSystem([[0.0, 1.0], [-1.0, 0.0]], [[1.0, 0.2], [0.3, 1.0]], np.eye(2),
                         Product(law, law))
     assert simulate(curved, [1.0, 0.5], (0.0, 0.1), h=1e-2).stats["solver"] == "python"
-    monkeypatch.setattr(implicit_euler, "GRAPH_TOL", -1.0)
+    monkeypatch.setattr(_inclusion, "GRAPH_TOL", -1.0)
     with pytest.raises(SolverError, match="graph residual") as info:
         simulate(curved, [1.0, 0.5], (0.0, 0.1), h=1e-2)
     assert info.value.trajectory.status == -1 and info.value.trajectory.t.size == 1

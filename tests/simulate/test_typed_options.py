@@ -24,7 +24,8 @@ from nscontrol.systems.pwa import PiecewiseAffineSystem
 
 SIMULATE = Path(nscontrol.__file__).resolve().parent / "simulate"
 TYPED = ("switching/__init__.py", "switching/_run.py", "switching/_pwa.py",
-         "switching/_filippov.py", "switching/_pwm.py", "implicit_euler.py")
+         "switching/_filippov.py", "switching/_pwm.py", "implicit_euler/__init__.py",
+         "implicit_euler/_options.py", "implicit_euler/_stepper.py", "implicit_euler/_steps.py")
 
 
 def _lure() -> LureSystem:
@@ -35,7 +36,7 @@ def test_options_are_parsed_into_frozen_records() -> None:
     sw = SwitchingOptions.parse({"rtol": 1e-8, "n_samples": 5})
     assert (sw.rtol, sw.n_samples, sw.atol, sw.max_events) == (1e-8, 5, 1e-13, 1_000_000)
     ie = ImplicitEulerOptions.parse({"h": 0.01, "theta": 0.5, "signals": ["z"]})
-    assert (ie.h, ie.theta, ie.signals, ie.controller) == (0.01, 0.5, frozenset({"z"}), None)
+    assert (ie.h, ie.theta, ie.signals, ie.blocks) == (0.01, 0.5, frozenset({"z"}), None)
     for record in (sw, ie):
         with pytest.raises(dataclasses.FrozenInstanceError):
             record.u = 1.0  # type: ignore[misc]
@@ -54,10 +55,9 @@ def test_options_are_parsed_into_frozen_records() -> None:
     (ImplicitEulerOptions.parse, {"h": 0.1, "theta": 0.2}, "theta"),
     (ImplicitEulerOptions.parse, {"h": 0.1, "record_every": 0}, "record_every"),
     (ImplicitEulerOptions.parse, {"h": 0.1, "signals": ["q"]}, r"signals: unknown name"),
-    (ImplicitEulerOptions.parse, {"h": 0.1, "controller": 3}, "controller: expected a callable"),
-    (ImplicitEulerOptions.parse, {"h": 0.1, "controller": abs, "u": 1.0}, "controller, u"),
-    (ImplicitEulerOptions.parse, {"h": 0.1, "controller": abs, "sensitivity": True},
-     "sensitivity: not available with a controller"),
+    (ImplicitEulerOptions.parse, {"h": 0.1, "controller": abs},
+     r"unknown option\(s\) \['controller'\]"),
+    (ImplicitEulerOptions.parse, {"h": 0.1, "blocks": abs}, "blocks: expected the BlockRunner"),
 ])
 def test_bad_options_are_refused_by_the_parser(parse, options, match) -> None:
     with pytest.raises(ModelError, match=match):

@@ -11,6 +11,7 @@ import nscontrol as nsc
 from nscontrol.errors import ModelError
 from nscontrol.laws import Coulomb, Stribeck
 from nscontrol.systems import OneLinkRobot
+from nscontrol.systems.feedback import StaticLaw
 from nscontrol.testing.check import check_system
 
 J = 0.05
@@ -66,10 +67,22 @@ def test_the_law_and_its_monotone_part_keep_the_law_contract():
 
 
 # -- check 2: the plant step -------------------------------------------------------------
+class Torque(StaticLaw):
+    """A constant torque ``u``, held over the step."""
+
+    n_outputs, period = 1, None
+
+    def __init__(self, u):
+        self.u = u
+
+    def output(self, t, xc, m):
+        return np.array([self.u])
+
+
 def one_step(robot, omega, u, h=1e-4):
     """One implicit-Euler step of the plant from (0, omega) under the torque u."""
-    tr = nsc.simulate(robot.lure_system(), [0.0, omega], (0.0, h), method="implicit_euler",
-                      h=h, controller=lambda t, x: np.array([u]), progress=False)
+    tr = nsc.simulate(nsc.closed_loop(robot.lure_system(), Torque(u)), [0.0, omega], (0.0, h),
+                      method="implicit_euler", h=h, progress=False)
     v = tr.x[-1, 1]
     return v, float(robot.friction_torque(v, tr.signal("w")[-1, 0])), tr
 

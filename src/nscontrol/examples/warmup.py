@@ -187,7 +187,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "simulate._mj_linearised_kernel"),
     "impacting bodies with an observer": ("numerics._lti_kernels", "simulate._event_kernels"),
     "Lur'e systems (implicit Euler) and switching": (
-        "simulate._lure_kernels", "simulate._lure_lcp_kernels", "numerics._lti_kernels",
+        "simulate.implicit_euler._lure_kernels", "simulate.implicit_euler._lure_lcp_kernels",
+        "numerics._lti_kernels",
         "simulate._pwa_kernels"),
     "ZAD-controlled buck converter": ("design._zad_kernels",),
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
@@ -198,7 +199,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "compiled controllers, observers and models": (
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
         "systems._two_link_kernels", "design._friction_compensation_kernels",
-        "simulate._block_kernels", "simulate._lure_kernels", "simulate._mj_compiled_kernels",
+        "simulate._block_kernels", "simulate.implicit_euler._lure_kernels",
+        "simulate._mj_compiled_kernels",
         "simulate._moreau_jean_kernels", "simulate._mj_linearised_kernel", "numerics._lcp_kernels",
         "design._complementarity_tracking_kernels"),
 }

@@ -68,7 +68,6 @@ CAPABILITIES: Mapping[str, str] = {
     "sensitivity": "stats['state_transition'] and saltation matrices (sensitivity=True)",
     "t_eval": "samples exactly at requested times",
     "listeners": "calls listeners at every jump during the run",
-    "controller": "takes a state feedback controller= (gain matrix or callable)",
     "multipliers": "records the contact multipliers (impulses or forces)",
 }
 
@@ -272,9 +271,20 @@ def _unsupported(cls: type[Integrator], system: Any) -> str:
     return f"{cls.name}: integrates {cls.systems()}, got {type(system).__name__}; {todo}"
 
 
+#: What ``simulate(..., controller=...)`` is told: feedback is a closed loop, a system too.
+FEEDBACK_IS_A_CLOSED_LOOP = (
+    "controller: unknown option of simulate; feedback is a closed loop, a system of its own: "
+    "write simulate(closed_loop(plant, block), x0, t_span, ...) with the block a "
+    "StateFeedback(K) (u = K x + k), a StaticLaw subclass for a law written in Python, or "
+    "any Controller (see nscontrol.systems.feedback); a PWM controller is part of its model: "
+    "SwitchedAffineSystem(modes, controller=PWMController(period, duty))")
+
+
 def _split_options(cls: type[Integrator], options: dict[str, Any]
                    ) -> tuple[dict[str, Any], dict[str, Any]]:
     unknown = sorted(set(options) - COMMON_OPTIONS - set(cls.options))
+    if "controller" in unknown:
+        raise ModelError(FEEDBACK_IS_A_CLOSED_LOOP)
     if unknown:
         accepted = set(cls.options) | COMMON_OPTIONS
         if "sensitivity" not in cls.capabilities:

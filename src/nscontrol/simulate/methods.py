@@ -8,10 +8,10 @@ algorithm.
 method             systems                                     capabilities
 =================  ==========================================  ============================
 ``event_driven``   LinearHybridSystem, LagrangianSystem,       events, exact flow,
-                   ImpactingBodies                             listeners,
+                   ImpactingBodies                             listeners, multipliers,
                                                                sensitivity (Lagrangian)
 ``moreau_jean``    LagrangianSystem, ImpactingBodies           time stepping, listeners,
-                                                               controller, multipliers
+                                                               multipliers
 ``implicit_euler`` LureSystem                                  time stepping, multipliers,
                                                                sensitivity (discrete map)
 ``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
@@ -62,7 +62,7 @@ class MoreauJean(_ModuleIntegrator):
 
     name = "moreau_jean"
     module = "nscontrol.simulate.moreau_jean"
-    capabilities = frozenset({"time_stepping", "listeners", "controller", "multipliers"})
+    capabilities = frozenset({"time_stepping", "listeners", "multipliers"})
     options: ClassVar[frozenset[str]] = frozenset(
         {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at",
          "projection", "contact_tol", "compiled_blocks"})
@@ -84,9 +84,9 @@ class ImplicitEuler(_ModuleIntegrator):
 
     name = "implicit_euler"
     module = "nscontrol.simulate.implicit_euler"
-    capabilities = frozenset({"time_stepping", "multipliers", "sensitivity", "controller"})
-    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u", "controller",
-                                                   "compiled_blocks"})
+    capabilities = frozenset({"time_stepping", "multipliers", "sensitivity"})
+    # blocks: a closed loop's block runner, set by the python_blocks lowering (internal)
+    options: ClassVar[frozenset[str]] = frozenset({"h", "theta", "u", "blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:

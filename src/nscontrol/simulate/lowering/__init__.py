@@ -13,7 +13,7 @@ lowering (module)                              what it does
 ``fold state feedback`` (:mod:`.fold`)         static state feedback folded into a linear
                                                Lagrangian plant's forces
 ``run Python blocks`` (:mod:`.python_blocks`)  blocks stepped as code beside Moreau–Jean or
-                                               implicit Euler (a ``controller=``)
+                                               implicit Euler (the loop's block runner)
 ``Lagrangian form of impacting bodies``        :class:`ImpactingBodies` in the ``[q; v]``
 (:mod:`.impacting_bodies`)                     order of their Lagrangian form, and back
 =============================================  ===============================================

@@ -6,11 +6,14 @@ controller and observer as code at the start of every step (zero-order hold over
 * around a :class:`LagrangianSystem` or :class:`ImpactingBodies`: Moreau–Jean on the plant,
   the blocks fed the contact multipliers ``λ̂`` and reset at impacts (a listener);
 * around a :class:`LureSystem`: implicit Euler on the plant, its set-valued law solved every
-  step (chapter 7's digital friction compensation).
+  step (chapter 7's digital friction compensation), given the loop's
+  :class:`~nscontrol.simulate._block_runner.BlockRunner` as its internal option ``blocks=``;
+  the integrator runs the blocks' compiled forms inside its compiled loop when every block
+  has one (``CompiledBlocks.of(runner)``), else the runner's Python methods.
 
-Blocks that all offer a compiled form run inside the integrator's compiled loop
-(``compiled_blocks=``). :meth:`PythonBlocks.invert` adds the blocks' signals (``u``, ``xo``,
-``xc``, ``xhat``) to the trajectory.
+Blocks that all offer a compiled form run inside the integrator's compiled loop.
+:meth:`PythonBlocks.invert` adds the blocks' signals (``u``, ``xo``, ``xc``, ``xhat``) to the
+trajectory.
 """
 
 from __future__ import annotations
@@ -30,7 +33,8 @@ __all__ = ["PythonBlocks"]
 
 
 class PythonBlocks(Lowering):
-    """A ``"blocks"`` closed loop as its plant with the blocks as a ``controller=``."""
+    """A ``"blocks"`` closed loop as its plant, its blocks stepped by the plant's
+    integrator."""
 
     name = "run Python blocks"
 
@@ -94,7 +98,7 @@ def _event_driven_options(loop: ClosedLoop, method: Any
 
 
 def _lure_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str, Any]]:
-    """Implicit Euler with ``controller=(t, x) -> u`` (zero-order hold)."""
+    """Implicit Euler with the loop's block runner (``blocks=``; zero-order hold)."""
     if method.name != "implicit_euler":
         raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
                          f"a LureSystem plant; use method='implicit_euler'")
@@ -103,8 +107,4 @@ def _lure_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str,
                          "through the blocks themselves (the plant's input is the controller's "
                          "output)")
     runner = BlockRunner(loop)
-    options: dict[str, Any] = {"controller": runner.step_state}
-    compiled = CompiledBlocks.of(runner)
-    if compiled is not None:
-        options["compiled_blocks"] = compiled
-    return runner, options
+    return runner, {"blocks": runner}

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lcp_kernels import NUMERICAL_FAILURE, lemke_kernel, verify_dense
+from ...numerics._lcp_kernels import NUMERICAL_FAILURE, lemke_kernel, verify_dense
 from ._lure_kernels import _affine_part
 
 

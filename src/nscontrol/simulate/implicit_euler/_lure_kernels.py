@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._block_kernels import step_blocks
+from .._block_kernels import step_blocks
 
 KIND_SOFT = 0
 KIND_CLIP = 1

@@ -48,8 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
-from ..errors import ModelError
+from ..._validation import FloatArray
+from ...errors import ModelError
 
 #: A component is on a piece when its distance to it is below ``CORNER_ULPS · ε · scale``
 #: (``scale = 1 + |a_i| + Σ_j |D_ij w_j| + |w_i|``): the rounding of ``z = a + D_h w`` with a
@@ -139,9 +139,9 @@ class StepJacobians:
 
 # -- per-law graph pieces: (z, w, tol) -> (rho, corner) -----------------------------------
 def _piece_rule(law: Any) -> Any:
-    from ..laws.monotone_function import MonotoneFunction, PiecewiseLinearFunction
-    from ..laws.normal_cone import NormalConeBox
-    from ..laws.relay import Relay
+    from ...laws.monotone_function import MonotoneFunction, PiecewiseLinearFunction
+    from ...laws.normal_cone import NormalConeBox
+    from ...laws.relay import Relay
 
     if isinstance(law, Relay):
         return lambda z, w, tol: _relay_pieces(law.bound, z, w, tol)
