@@ -4,8 +4,9 @@ stack by Moreau-Jean with friction.
 Run by /usr/bin/python3 (Debian's python3-siconos). Reads JSON on stdin:
 ``{"kind": "one_step", "dim", "W" (rows), "q", "mu", "solver": "nsgs"|"lemke", "tol",
 "max_iter", "budget"}``, ``{"kind": "stack", "n", "mu", "width", "height", "mass", "g",
-"angle", "h", "steps", "solver", "tol", "max_iter"}`` or ``{"kind": "fc3d", "npz", "path" (optional), "tol", "max_iter",
-"runs", "budget"}`` (:func:`fc3d`); prints one JSON line.
+"angle", "h", "steps", "solver", "tol", "max_iter"}`` or ``{"kind": "fc3d", "npz",
+"path" (optional), "tol", "max_iter", "runs", "budget"}`` (:func:`fc3d`); prints one JSON
+line.
 """
 
 import json

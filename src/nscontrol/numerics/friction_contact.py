@@ -244,8 +244,8 @@ class FrictionContactSolver:
             raise DimensionError(f"W: expected a size divisible by dim = {dim}, got shape "
                                  f"{Wc.shape}")
         self._setup(Wc, _friction_coefficients(mu, n // dim), dim, max_local_iter)
-        code, terms = kernels.prepare_columns(*self._columns, dim, self._blocks,
-                                              self._inverses)
+        code, terms = kernels.prepare_columns(  # type: ignore[call-arg]  # numba's stub
+            *self._columns, dim, self._blocks, self._inverses)
         self._raise_for(code)
         self._terms = int(terms)
 
@@ -493,7 +493,8 @@ def _dense_once(W: np.ndarray, q: np.ndarray, mu: Any, dim: Any, method: str, to
     if not (type(dim) is int and 1 <= dim <= 3 and q.ndim == 1 and n and n % dim == 0
             and (method == "nsgs" or (method == "auto" and dim != 2))
             and (r0 is not None or n <= dim * AUTO_LCP_MAX_CONTACTS) and W.shape == (n, n)
-            and W.dtype == np.float64 and q.dtype == np.float64 and type(tol) is float and 0.0 < tol < math.inf
+            and W.dtype == np.float64 and q.dtype == np.float64
+            and type(tol) is float and 0.0 < tol < math.inf
             and type(max_sweeps) is int and max_sweeps >= 1
             and type(max_local_iter) is int and max_local_iter >= 1):
         return None
