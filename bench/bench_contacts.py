@@ -270,7 +270,9 @@ def _read_dat(path: Path) -> tuple[int, Any, np.ndarray, np.ndarray]:
     if storage == 0:
         s0, s1 = (int(x) for x in take(2))
         take(2)
-        W: Any = np.array(take(s0 * s1), float).reshape(s1, s0).T
+        # column-major in the file: each side gets its own layout of the same matrix (ours
+        # C order here, Siconos Fortran order in its script)
+        W: Any = np.ascontiguousarray(np.array(take(s0 * s1), float).reshape(s1, s0).T)
     else:
         s0, s1 = (int(x) for x in take(2))
         take(1)                                         # nbblocks
