@@ -659,13 +659,16 @@ def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.
                   tol: float, max_sweeps: int, max_local_iter: int
                   ) -> tuple[int, int, float, float, bool, int]:
     """One solve of :class:`~nscontrol.numerics.friction_contact.FrictionContactSolver`:
-    ``W`` prepared first when ``terms`` is 0 (:func:`prepare_columns`, whose codes it
-    returns), ``q`` and the start ``r`` checked finite (code :data:`NOT_FINITE`), then
+    ``W`` prepared first when ``terms`` is 0 (``μ`` checked, code :data:`MU_INVALID`, then
+    :func:`prepare_columns`, whose codes it returns), ``q`` and the start ``r`` checked finite (code :data:`NOT_FINITE`), then
     :func:`nsgs_columns` and :func:`certify_columns`, sweeping on from the exact ``u`` when
     the running one passed ``tol`` and the exact one does not. Returns ``(code, sweeps,
     error, tolerance, certified, terms)``."""
     dim = blocks.shape[1]
     if terms == 0:
+        for i in range(mu.shape[0]):
+            if not (mu[i] >= 0.0 and mu[i] < np.inf):
+                return MU_INVALID, 0, np.nan, np.nan, False, 0
         code, terms = prepare_columns(WT, bptr, brow, bdata, dim, blocks, inverses)
         if code != 0:
             return code, 0, np.nan, np.nan, False, terms
@@ -687,14 +690,11 @@ def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.
 def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
                      u: np.ndarray, states: np.ndarray, tol: float, max_sweeps: int,
                      max_local_iter: int) -> tuple[int, int, float, float, bool]:
-    """:func:`solve_columns` on a dense ``W`` used once (``dim = len(q) / len(states)``):
-    ``μ`` checked (code :data:`MU_INVALID`), the blocks prepared in this call. The one
+    """:func:`solve_columns` on a dense ``W`` used once (``dim = len(q) / len(states)``),
+    the blocks prepared in this call. The one
     compiled call of :func:`~nscontrol.numerics.friction_contact.solve_friction_contact` on
     a small dense problem. Returns ``(code, sweeps, error, tolerance, certified)``."""
     m = states.shape[0]
-    for i in range(m):
-        if not (mu[i] >= 0.0 and mu[i] < np.inf):
-            return MU_INVALID, 0, np.nan, np.nan, False
     dim = q.shape[0] // m
     blocks = np.empty((m, dim, dim))
     inverses = np.empty((m, dim, dim))

@@ -274,6 +274,8 @@ class FrictionContactSolver:
         """The error of a kernel's refusal code (nothing for the others)."""
         if code == kernels.W_NOT_FINITE:
             check_finite("W", self._W.data if sparse.issparse(self._W) else self._W)
+        if code == kernels.MU_INVALID:
+            _friction_coefficients(np.array(self.mu), self.m)
         if code >= kernels.BAD_DIAGONAL:
             i = code - kernels.BAD_DIAGONAL
             raise ModelError(f"W: the normal diagonal entry of contact {i} (row {i * self.dim})"
@@ -437,7 +439,9 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
         max_local_iter = check_integer("max_local_iter", max_local_iter, minimum=1)
     if max_pivots is not None:
         max_pivots = check_integer("max_pivots", max_pivots, minimum=1)
-    r_start = None if r0 is None else as_vector("r0", r0, qv.shape[0])
+    n = qv.shape[0]
+    r_start = (r0 if type(r0) is np.ndarray and r0.dtype == np.float64 and r0.shape == (n,)
+               else None if r0 is None else as_vector("r0", r0, n))   # values: in the kernel
     if not isinstance(method, str) or method not in ("auto", "lcp", "nsgs"):
         raise ModelError(f"method: expected 'auto', 'lcp' or 'nsgs', got {method!r}")
     if method == "lcp" and dim != 2:
@@ -455,6 +459,9 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
         if name == "lcp":
             check_finite("W", Wc.data if sparse.issparse(Wc) else Wc)
             check_finite("q", qv)
+            _friction_coefficients(np.array(muv), m)      # the values (the LCP does not)
+            if r_start is not None:
+                check_finite("r0", r_start)
             result = _solve_lcp(Wc, qv, muv, tol, max_pivots)
         else:
             solver = FrictionContactSolver._checked(Wc, muv, dim, max_local_iter)
@@ -704,10 +711,15 @@ def _columns(W: Any, dim: int) -> tuple[FloatArray, np.ndarray, np.ndarray, Floa
     return (W if W.flags.writeable else W.copy(), *_NO_BLOCKS)
 
 
-def _friction_coefficients(mu: Any, m: int) -> FloatArray:
-    """``μ`` as a contiguous vector of ``m`` finite coefficients ``>= 0``."""
+def _friction_coefficients(mu: Any, m: int, checked_later: bool = False) -> FloatArray:
+    """``μ`` as a contiguous vector of ``m`` finite coefficients ``>= 0`` (with
+    ``checked_later``, a float64 vector of length ``m`` is taken as it is: the compiled
+    solve checks its values, code ``MU_INVALID``)."""
     if type(mu) is float and 0.0 <= mu < math.inf:
         return np.full(m, mu)
+    if (checked_later and type(mu) is np.ndarray and mu.dtype == np.float64
+            and mu.shape == (m,) and mu.flags.c_contiguous and mu.flags.writeable):
+        return mu
     if np.ndim(mu) == 0:
         return np.full(m, check_positive("mu", mu, allow_zero=True))
     muv = as_vector("mu", mu, m)
@@ -735,4 +747,4 @@ def _problem(W: Any, q: Any, mu: Any, dim: int, finite: bool = True
     if n % dim:
         raise DimensionError(f"q: expected a length divisible by dim = {dim}, got {n}")
     Wc = _delassus(W, n, finite)
-    return Wc, qv, _friction_coefficients(mu, n // dim)
+    return Wc, qv, _friction_coefficients(mu, n // dim, checked_later=not finite)
