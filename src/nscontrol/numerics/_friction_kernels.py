@@ -661,8 +661,9 @@ def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.
     """One solve of :class:`~nscontrol.numerics.friction_contact.FrictionContactSolver`:
     ``W`` prepared first when ``terms`` is 0 (``μ`` checked, code :data:`MU_INVALID`, then
     :func:`prepare_columns`, whose codes it returns), ``q`` and the start ``r`` checked
-    finite (code :data:`NOT_FINITE`), then :func:`nsgs_columns` and :func:`certify_columns`, sweeping on from the exact ``u`` when
-    the running one passed ``tol`` and the exact one does not. Returns ``(code, sweeps,
+    finite (code :data:`NOT_FINITE`), then :func:`nsgs_columns` and
+    :func:`certify_columns`, sweeping on from the exact ``u`` when the running one passed
+    ``tol`` and the exact one does not. Returns ``(code, sweeps,
     error, tolerance, certified, terms)``."""
     dim = blocks.shape[1]
     if terms == 0:
