@@ -4,8 +4,9 @@ stack by Moreau-Jean with friction.
 Run by /usr/bin/python3 (Debian's python3-siconos). Reads JSON on stdin:
 ``{"kind": "one_step", "dim", "W" (rows), "q", "mu", "solver": "nsgs"|"lemke", "tol",
 "max_iter", "budget"}``, ``{"kind": "stack", "n", "mu", "width", "height", "mass", "g",
-"angle", "h", "steps", "solver", "tol", "max_iter"}`` or ``{"kind": "file", "path", "tol",
-"max_iter", "budget"}``; prints one JSON line.
+"angle", "h", "steps", "solver", "tol", "max_iter"}`` or ``{"kind": "fc3d", "npz",
+"path" (optional), "tol", "max_iter", "runs", "budget"}`` (:func:`fc3d`); prints one JSON
+line.
 """
 
 import json
@@ -57,26 +58,76 @@ def one_step(sc):
             "iterations": int(its), "residual": float(res)}
 
 
-def from_file(sc):
-    """A benchmark file read by Siconos itself, solved by its NSGS (full error evaluation)."""
-    pb = sn.frictionContact_new_from_filename(sc["path"])
-    size = pb.dimension * pb.numberOfContacts
-    driver = sn.fc3d_driver if pb.dimension == 3 else sn.fc2d_driver
+def _cpu_runs(fn, runs, budget):
+    """Seconds of CPU time per call of ``fn`` in ``runs`` runs (each a batch of calls sized to
+    about ``budget / runs``); ``fn`` returns the seconds to count (it times itself)."""
+    once = max(fn(), 1e-7)
+    batch = max(1, min(20000, int(budget / runs / once)))
+    return [sum(fn() for _ in range(batch)) / batch for _ in range(runs)]
 
-    def solve():
-        r, u = np.zeros(size), np.zeros(size)
-        so = _options(pb.dimension, "nsgs", sc["tol"], sc["max_iter"])
-        info = driver(pb, r, u, so)
-        return info, so.iparam[sn.SICONOS_IPARAM_ITER_DONE], so.dparam[sn.SICONOS_DPARAM_RESIDU]
 
-    times, start = [], time.perf_counter()
-    while len(times) < 1 or (time.perf_counter() - start < sc["budget"] and len(times) < 50):
-        t0 = time.perf_counter()
-        info, its, res = solve()
-        times.append(time.perf_counter() - t0)
-    times.sort()
-    return {"seconds": times[len(times) // 2], "info": int(info), "iterations": int(its),
-            "residual": float(res)}
+def fc3d(sc):
+    """One FC3D problem given as arrays (``npz``: dense ``W`` or CSC ``p, i, x, shape``;
+    ``q``, ``mu``), NSGS with full error evaluation. Times, in CPU seconds per call and
+    ``runs`` runs: ``whole`` (build the problem from the arrays, the options, solve),
+    ``alone`` (the driver on a built problem: the file read by Siconos itself when ``path``
+    is a ``.dat``) and ``warm`` (the driver from its own solution)."""
+    import warnings
+
+    import scipy.sparse as sp
+
+    warnings.simplefilter("ignore")
+    data = np.load(sc["npz"])
+    q, mu = data["q"], data["mu"]
+    nc = mu.size
+    dense = "W" in data
+    if dense:
+        W = np.asfortranarray(data["W"])
+    else:
+        W = sp.csc_matrix((data["x"], data["i"], data["p"]), shape=tuple(data["shape"]))
+
+    def build():
+        if dense:
+            return sn.FrictionContactProblem(3, nc, W, q, mu)
+        _, Wsbm = sn.SBM_from_csparse(3, W)
+        pb = sn.FrictionContactProblem()
+        pb.dimension, pb.numberOfContacts, pb.M, pb.q, pb.mu = 3, nc, Wsbm, q, mu
+        return pb
+
+    def whole():
+        t0 = time.process_time()
+        pb = build()
+        r, u = np.zeros(q.size), np.zeros(q.size)
+        so = _options(3, "nsgs", sc["tol"], sc["max_iter"])
+        sn.fc3d_driver(pb, r, u, so)
+        return time.process_time() - t0
+
+    path = sc.get("path")
+    built = (sn.frictionContact_new_from_filename(path) if path and path.endswith(".dat")
+             else build())
+    last = {}
+
+    def alone(start=None):
+        r = np.zeros(q.size) if start is None else start.copy()
+        u = np.zeros(q.size)
+        so = _options(3, "nsgs", sc["tol"], sc["max_iter"])
+        t0 = time.process_time()
+        info = sn.fc3d_driver(built, r, u, so)
+        seconds = time.process_time() - t0
+        last.update(info=int(info), r=r, iterations=int(so.iparam[sn.SICONOS_IPARAM_ITER_DONE]),
+                    residual=float(so.dparam[sn.SICONOS_DPARAM_RESIDU]))
+        return seconds
+
+    runs, budget = sc["runs"], sc["budget"]
+    t_alone = _cpu_runs(alone, runs, budget)
+    cold = dict(last)
+    t_whole = _cpu_runs(whole, runs, budget)
+    solution = cold["r"].copy()
+    t_warm = _cpu_runs(lambda: alone(solution), runs, budget)
+    return {"whole": t_whole, "alone": t_alone, "warm": t_warm, "info": cold["info"],
+            "iterations": cold["iterations"], "residual": cold["residual"],
+            "warm_iterations": last["iterations"], "r": cold["r"].tolist(),
+            "alone_native_file": bool(path and path.endswith(".dat"))}
 
 
 def stack(sc):
@@ -135,7 +186,7 @@ def stack(sc):
 
 def main():
     sc = json.loads(sys.stdin.read())
-    out = {"one_step": one_step, "file": from_file, "stack": stack}[sc["kind"]](sc)
+    out = {"one_step": one_step, "stack": stack, "fc3d": fc3d}[sc["kind"]](sc)
     print(json.dumps(out))
 
 

@@ -21,7 +21,7 @@ _EXPORTS: dict[str, str] = {
     "FrictionContactResult": "friction_contact", "solve_friction_contact": "friction_contact",
     "friction_residual": "friction_contact", "contact_states": "friction_contact",
     "planar_friction_lcp": "friction_contact", "CONTACT_STATES": "friction_contact",
-    "frictionless_impulses": "friction_contact",
+    "frictionless_impulses": "friction_contact", "FrictionContactSolver": "friction_contact",
     # lti.py
     "Exosystem": "lti", "augment": "lti", "LTIFlow": "lti", "discretize": "lti",
     "Discretization": "lti", "GuardEvent": "lti", "first_event": "lti",

@@ -1,8 +1,9 @@
 """Compiled kernels of the frictional contact problem ``u = W r + q``, ``r_i ∈ K_{μ_i}``,
 ``û_i = u_i + μ_i |u_{T,i}| e_N ∈ K*_{μ_i}``, ``r_i ⟂ û_i`` (De Saxcé's form of Coulomb's law).
 
-Unknowns are ordered per contact (normal, then ``dim - 1`` tangents); ``W`` is given in CSR
-form (``indptr, indices, data``). The exact local solvers enumerate the three cases of one
+Unknowns are ordered per contact (normal, then ``dim - 1`` tangents). The solver reads ``W``
+by columns, dense or CSC (:func:`add_columns`); the integrator's one-step path hands it a
+CSR matrix (:func:`nsgs_kernel`). The exact local solvers enumerate the three cases of one
 contact (take-off, stick, slip); the slip direction of a spatial contact is the root of a
 scalar function of the slip angle, bracketed on a grid and bisected to machine precision.
 """
@@ -28,6 +29,9 @@ MAX_LOCAL_ITER = 20_000
 #: budget to tune (the bracket is at most 2 pi / 32 wide, and the iteration stops at its
 #: machine resolution, which bisection alone reaches in 53 halvings).
 _SLIP_ROOT_STEPS = 200
+#: Newton steps on the slip angle before the brackets take over (from a good start it
+#: settles in 2 to 5).
+_NEWTON_STEPS = 12
 
 
 @njit(cache=True)
@@ -51,15 +55,29 @@ def cone_projection(x: np.ndarray, mu: float, out: np.ndarray) -> None:
             out[k] = mu * a * x[k] / s
 
 
-@njit(cache=True)
-def csr_matvec_add(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
-                   r: np.ndarray, q: np.ndarray, u: np.ndarray) -> None:
-    """``u = W r + q``."""
-    for i in range(q.shape[0]):
-        s = q[i]
-        for p in range(indptr[i], indptr[i + 1]):
-            s += data[p] * r[indices[p]]
-        u[i] = s
+@njit(cache=True, inline="always")
+def _error2(r0: float, r1: float, r2: float, u0: float, u1: float, u2: float, mu: float,
+            dim: int) -> float:
+    """``‖r - P_K(r - û)‖²`` of one contact from its entries (``r2 = u2 = 0`` when
+    ``dim = 2``, ``r1 = u1 = 0`` too when ``dim = 1``): :func:`cone_projection` written on
+    scalars, which the error of a whole problem evaluates once per contact and sweep."""
+    x0 = r0 - (u0 + mu * np.sqrt(u1 * u1 + u2 * u2))
+    if dim == 1:
+        p0 = max(x0, 0.0)
+        return (r0 - p0) * (r0 - p0)
+    x1 = r1 - u1
+    x2 = r2 - u2
+    s = np.sqrt(x1 * x1 + x2 * x2)
+    if s <= mu * x0:
+        p0, p1, p2 = x0, x1, x2
+    elif mu * s <= -x0:
+        p0, p1, p2 = 0.0, 0.0, 0.0
+    else:
+        a = (x0 + mu * s) / (1.0 + mu * mu)
+        p0 = a
+        p1 = mu * a * x1 / s
+        p2 = mu * a * x2 / s
+    return (r0 - p0) * (r0 - p0) + (r1 - p1) * (r1 - p1) + (r2 - p2) * (r2 - p2)
 
 
 @njit(cache=True)
@@ -67,84 +85,45 @@ def contact_error2(r: np.ndarray, b: int, u: np.ndarray, ub: int, mu: float, dim
                    x: np.ndarray, p: np.ndarray) -> float:
     """``‖r_i - P_K(r_i - û_i)‖²`` for one contact: its impulse ``r[b:b+dim]``, its local
     velocity ``u[ub:ub+dim]`` (De Saxcé's ``û`` adds ``μ|u_T|`` to the normal row); ``x``
-    and ``p`` are work arrays of length ``dim``."""
-    ut = 0.0
-    for k in range(1, dim):
-        ut += u[ub + k] * u[ub + k]
-    x[0] = r[b] - (u[ub] + mu * np.sqrt(ut))
-    for k in range(1, dim):
-        x[k] = r[b + k] - u[ub + k]
-    if dim == 1:
-        p[0] = max(x[0], 0.0)
-    else:
-        cone_projection(x, mu, p)
-    total = 0.0
-    for k in range(dim):
-        e = r[b + k] - p[k]
-        total += e * e
-    return total
+    and ``p`` (work arrays of length ``dim``) are not used any more."""
+    r1 = r[b + 1] if dim > 1 else 0.0
+    u1 = u[ub + 1] if dim > 1 else 0.0
+    r2 = r[b + 2] if dim > 2 else 0.0
+    u2 = u[ub + 2] if dim > 2 else 0.0
+    return _error2(r[b], r1, r2, u[ub], u1, u2, mu, dim)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def natural_map_error(u: np.ndarray, r: np.ndarray, mu: np.ndarray, dim: int) -> float:
     """``sqrt(Σ_i ‖r_i - P_K(r_i - û_i)‖²)``: zero exactly at a solution."""
-    x = np.empty(dim)
-    p = np.empty(dim)
     total = 0.0
     for i in range(mu.shape[0]):
-        total += contact_error2(r, i * dim, u, i * dim, mu[i], dim, x, p)
+        b = i * dim
+        r1 = r[b + 1] if dim > 1 else 0.0
+        u1 = u[b + 1] if dim > 1 else 0.0
+        r2 = r[b + 2] if dim > 2 else 0.0
+        u2 = u[b + 2] if dim > 2 else 0.0
+        total += _error2(r[b], r1, r2, u[b], u1, u2, mu[i], dim)
     return np.sqrt(total)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _norm(x: np.ndarray) -> float:
+    """The 2-norm of a vector by a plain loop (``np.linalg.norm`` costs a BLAS call's setup,
+    more than a small problem's whole sweep)."""
+    total = 0.0
+    for v in x:
+        total += v * v
+    return np.sqrt(total)
+
+
+@njit(cache=True, inline="always")
 def relative_error(q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
                    dim: int) -> float:
     """The natural-map error over ``max(‖q‖, ‖r‖, ‖u‖)`` (1 when all three vanish)."""
-    scale = float(max(np.linalg.norm(q), np.linalg.norm(r), np.linalg.norm(u)))
+    scale = max(_norm(q), _norm(r), _norm(u))
     err = natural_map_error(u, r, mu, dim)
     return err / scale if scale > 0.0 else err
-
-
-@njit(cache=True)
-def certify(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
-            r: np.ndarray, u: np.ndarray, mu: np.ndarray, dim: int, tol: float
-            ) -> tuple[float, float, bool]:
-    """The acceptance test of every frictional-contact path: ``u = W r + q`` recomputed
-    from ``r``, then ``(error, tolerance, certified)`` with the relative natural-map
-    :func:`relative_error` and the tolerance ``tol`` plus the round-off bound of ``u``.
-
-    One entry of ``u`` from ``k`` terms (a row's non-zeros and ``q_i``) is off by at most
-    ``gamma_k (|W||r| + |q|)_i``; ``û`` adds ``μ |u_T|`` (at most ``1 + max μ`` times that),
-    and the 2-norm over ``n`` entries at most ``sqrt(n)`` times the largest. With the factor
-    :data:`~nscontrol.numerics._lcp_kernels.ROUNDOFF_FACTOR`: ``2 k eps (1 + max μ) sqrt(n)
-    max_i (|W||r| + |q|)_i / max(|q|, |r|, |u|)``. As for the LCP, the tolerance is ``-inf``
-    (nothing certified) when ``|W||r|`` exceeds the scale by
-    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`.
-    """
-    n = q.shape[0]
-    big = 0.0
-    terms = 1
-    for i in range(n):
-        s = q[i]
-        a = abs(q[i])
-        for p in range(indptr[i], indptr[i + 1]):
-            t = data[p] * r[indices[p]]
-            s += t
-            a += abs(t)
-        u[i] = s
-        if not (a <= big):     # also propagates NaN
-            big = a
-        terms = max(terms, indptr[i + 1] - indptr[i] + 1)
-    err = relative_error(q, r, u, mu, dim)
-    scale = float(max(np.linalg.norm(q), np.linalg.norm(r), np.linalg.norm(u)))
-    cancellation = big / scale if scale > 0.0 else 0.0   # scale 0: r = u = q = 0, exact
-    if not (cancellation <= MAX_CANCELLATION):     # also NaN and inf
-        return err, -np.inf, False
-    mu_max = 0.0
-    for i in range(mu.shape[0]):
-        mu_max = max(mu_max, mu[i])
-    tolerance = tol + ROUNDOFF_FACTOR * terms * _EPS * (1.0 + mu_max) * np.sqrt(n) * cancellation
-    return err, tolerance, bool(err <= tolerance)
 
 
 @njit(cache=True)
@@ -239,6 +218,45 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
 
 
 @njit(cache=True)
+def _newton_slip(W: np.ndarray, q: np.ndarray, mu: float, phi: float
+                 ) -> tuple[bool, float, float]:
+    """A slip root (:func:`_slip_residual`) by Newton's method on the slip angle from
+    ``phi``, to machine resolution: ``(found, φ, r_N)``; not found when a step leaves the
+    slip conditions (``den > 0``, ``u_T · t > 0``), the derivative vanishes or
+    :data:`_NEWTON_STEPS` steps do not settle."""
+    for _ in range(_NEWTON_STEPS):
+        c, s = np.cos(phi), np.sin(phi)
+        den = W[0, 0] - mu * (W[0, 1] * c + W[0, 2] * s)
+        if not (den > 0.0):
+            return False, phi, 0.0
+        rn = -q[0] / den
+        r1, r2 = -mu * rn * c, -mu * rn * s
+        u1 = W[1, 0] * rn + W[1, 1] * r1 + W[1, 2] * r2 + q[1]
+        u2 = W[2, 0] * rn + W[2, 1] * r1 + W[2, 2] * r2 + q[2]
+        f = u1 * s - u2 * c
+        along = u1 * c + u2 * s
+        # derivatives in φ: t' = (-s, c), den' = -μ W_0T t', r_N' = -r_N den' / den,
+        # r_T' = -μ (r_N' t + r_N t'), u_T' = W_TN r_N' + W_TT r_T'
+        dden = -mu * (-W[0, 1] * s + W[0, 2] * c)
+        drn = -rn * dden / den
+        dr1 = -mu * (drn * c - rn * s)
+        dr2 = -mu * (drn * s + rn * c)
+        du1 = W[1, 0] * drn + W[1, 1] * dr1 + W[1, 2] * dr2
+        du2 = W[2, 0] * drn + W[2, 1] * dr1 + W[2, 2] * dr2
+        df = du1 * s - du2 * c + along
+        if f == 0.0:
+            return along > 0.0, phi, rn
+        if not (df != 0.0 and np.isfinite(df)):
+            return False, phi, 0.0
+        step = f / df
+        phi -= step
+        if abs(step) <= 4.0 * _EPS * (1.0 + abs(phi)):
+            _, p, rn, den = _slip_residual(W, q, mu, phi)
+            return (p > 0.0 and den > 0.0), phi, rn
+    return False, phi, 0.0
+
+
+@njit(cache=True)
 def _local_fixed_point(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray,
                        max_iter: int) -> tuple[int, int]:
     """The projected fixed point ``r <- P_K(r - ρ û(r))``, ``ρ = 1 / trace W``, from the
@@ -273,19 +291,43 @@ def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.nd
     """Exact solution of one spatial contact: take-off, stick, or slip (angle root); writes
     ``r`` (read as the fallback's start) and returns the state. When no slip root is
     bracketed, the projected fixed point runs for at most ``max_local_iter`` steps."""
-    if q[0] >= 0.0:
-        r[0], r[1], r[2] = 0.0, 0.0, 0.0
-        return OPEN
-    rs = np.empty(3)
-    for k in range(3):
-        rs[k] = -(Winv[k, 0] * q[0] + Winv[k, 1] * q[1] + Winv[k, 2] * q[2])
-    if rs[0] >= 0.0 and np.sqrt(rs[1] ** 2 + rs[2] ** 2) <= mu * rs[0] * (1.0 + 4.0 * _EPS):
-        r[0], r[1], r[2] = rs[0], rs[1], rs[2]
-        return STICK
-    best_rn, best_phi, found = 0.0, 0.0, False
-    if r[0] > 0.0 and r[1] * r[1] + r[2] * r[2] > 0.0:
-        # the previous sweep's slip direction: the root is usually within a narrow bracket
-        phi_w = np.arctan2(-r[2], -r[1])
+    state, r0, r1, r2 = _quick_3d(Winv.reshape((1, 3, 3)), 0, q[0], q[1], q[2], mu)
+    if state == SLIP:
+        return _slip_3d(W, q, mu, r, r1, r2, max_local_iter)
+    r[0], r[1], r[2] = r0, r1, r2
+    return state
+
+
+@njit(cache=True, inline="always")
+def _quick_3d(inverses: np.ndarray, i: int, q0: float, q1: float, q2: float, mu: float
+              ) -> tuple[int, float, float, float]:
+    """Take-off or stick of spatial contact ``i`` (``inverses[i]`` its block's inverse),
+    on scalars: ``(state, r0, r1, r2)``; state :data:`SLIP` means neither, and then
+    ``(r1, r2)`` is the tangential stick guess, where the slip search starts. Written on
+    scalars because a call with arrays costs more than these two cases (~0.1 µs)."""
+    if q0 >= 0.0:
+        return OPEN, 0.0, 0.0, 0.0
+    rs0 = -(inverses[i, 0, 0] * q0 + inverses[i, 0, 1] * q1 + inverses[i, 0, 2] * q2)
+    rs1 = -(inverses[i, 1, 0] * q0 + inverses[i, 1, 1] * q1 + inverses[i, 1, 2] * q2)
+    rs2 = -(inverses[i, 2, 0] * q0 + inverses[i, 2, 1] * q1 + inverses[i, 2, 2] * q2)
+    if rs0 >= 0.0 and np.sqrt(rs1 ** 2 + rs2 ** 2) <= mu * rs0 * (1.0 + 4.0 * _EPS):
+        return STICK, rs0, rs1, rs2
+    return SLIP, 0.0, rs1, rs2
+
+
+@njit(cache=True)
+def _slip_3d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray, rs1: float, rs2: float,
+             max_local_iter: int) -> int:
+    """The slip case of :func:`local_3d` (neither take-off nor stick): the slip angle's
+    root, ``(rs1, rs2)`` the tangential stick guess. Kept apart so that the two quick cases
+    stay a short function."""
+    warm = r[0] > 0.0 and r[1] * r[1] + r[2] * r[2] > 0.0
+    # Newton from the previous sweep's slip direction, else from the stick guess's (the
+    # slip direction when W is isotropic); the brackets below when it does not converge
+    phi_w = np.arctan2(-r[2], -r[1]) if warm else np.arctan2(-rs2, -rs1)
+    found, best_phi, best_rn = _newton_slip(W, q, mu, phi_w)
+    if not found and warm:
+        # the root is usually within a narrow bracket around the previous direction
         for width in (1e-6, 1e-3, 0.1):
             found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi_w - width,
                                                        phi_w + width)
@@ -295,7 +337,7 @@ def local_3d(W: np.ndarray, Winv: np.ndarray, q: np.ndarray, mu: float, r: np.nd
         step = 2.0 * np.pi / _ANGLE_GRID
         # centre the first bracket on the direction of -r_T of the stick guess (the slip
         # direction when W is isotropic): that root is then inside it, never at a node
-        phi0 = np.arctan2(-rs[2], -rs[1]) - 0.5 * step
+        phi0 = np.arctan2(-rs2, -rs1) - 0.5 * step
         for g in range(_ANGLE_GRID):
             found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi0 + g * step,
                                                        phi0 + (g + 1) * step)
@@ -325,31 +367,205 @@ def diagonal_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, m
     return blocks
 
 
-@njit(cache=True)
-def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
-                mu: np.ndarray, dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray,
-                tol: float, max_sweeps: int, max_local_iter: int = MAX_LOCAL_ITER
-                ) -> tuple[int, int, float]:
-    """Non-smooth Gauss–Seidel over contacts, exact local solves; stops when the relative
-    natural-map error (checked on the whole problem after every sweep) is ``<= tol``, or
-    after ``max_sweeps`` sweeps (the budget; ``max_local_iter`` is that of a spatial
-    contact's projected fixed point, :func:`local_3d`).
 
-    Returns ``(code, sweeps, error)``: code 0 converged, 2 sweep limit, 3 a diagonal block
-    not positive definite. :func:`certify` then decides whether ``r`` solves the problem.
+
+# -- the Gauss–Seidel solver on W's columns ---------------------------------------------------
+# ``W`` reaches the solver by columns, dense or sparse, through one set of arguments: either
+# ``WT``, the dense (n, n) C-contiguous ``W`` itself (the name says how it is read: contact
+# ``i``'s columns are the entries ``i dim ... i dim + dim - 1`` of every row), with empty
+# block arrays, or an empty (0, 0) ``WT`` with W by block columns: contact ``i``'s
+# columns hold the ``dim x dim`` blocks ``bdata[p]`` at block rows ``brow[p]``,
+# ``bptr[i] <= p < bptr[i + 1]`` (:func:`csc_to_blocks`; one index per block instead of one
+# per entry). The sweep keeps ``u = W r + q`` up to date by adding a contact's columns times
+# the change of its impulse; a contact's local free velocity is then ``u_i - W_ii r_i``, and
+# the error of the whole problem is known after every sweep without a product by W.
+
+#: Sweeps between two exact recomputations of ``u = W r + q`` (the running update drifts by
+#: round-off: one exact product every so many sweeps costs a few per cent of them).
+REFRESH_SWEEPS = 64
+#: Codes of :func:`solve_columns`: converged, sweep budget spent, a non-finite ``q`` or ``r0``,
+#: a non-finite ``W``, a ``μ`` not finite and ``>= 0`` (:func:`solve_dense_once`);
+#: ``BAD_DIAGONAL + i``: contact ``i``'s normal diagonal entry is not
+#: positive.
+CONVERGED, SWEEP_LIMIT, NOT_FINITE, W_NOT_FINITE, MU_INVALID, BAD_DIAGONAL = 0, 2, 4, 5, 6, 16
+
+
+@njit(cache=True)
+def _all_finite(x: np.ndarray) -> bool:
+    for v in x.flat:
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def add_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                i: int, dim: int, d0: float, d1: float, d2: float, u: np.ndarray) -> None:
+    """``u += W[:, i dim:(i+1) dim] (d0, d1, d2)[:dim]``: contact ``i``'s columns (dense when
+    ``WT`` has rows, else its blocks). Inlined and indexed without views: a call or a view
+    with arrays costs reference counting per contact."""
+    b = i * dim
+    if WT.shape[0] > 0:
+        n = u.shape[0]
+        if dim == 3:
+            for k in range(n):
+                u[k] += WT[k, b] * d0 + WT[k, b + 1] * d1 + WT[k, b + 2] * d2
+        elif dim == 2:
+            for k in range(n):
+                u[k] += WT[k, b] * d0 + WT[k, b + 1] * d1
+        else:
+            for k in range(n):
+                u[k] += WT[k, b] * d0
+        return
+    for p in range(bptr[i], bptr[i + 1]):
+        j = brow[p] * dim
+        if dim == 3:
+            u[j] += bdata[p, 0, 0] * d0 + bdata[p, 0, 1] * d1 + bdata[p, 0, 2] * d2
+            u[j + 1] += bdata[p, 1, 0] * d0 + bdata[p, 1, 1] * d1 + bdata[p, 1, 2] * d2
+            u[j + 2] += bdata[p, 2, 0] * d0 + bdata[p, 2, 1] * d1 + bdata[p, 2, 2] * d2
+        elif dim == 2:
+            u[j] += bdata[p, 0, 0] * d0 + bdata[p, 0, 1] * d1
+            u[j + 1] += bdata[p, 1, 0] * d0 + bdata[p, 1, 1] * d1
+        else:
+            u[j] += bdata[p, 0, 0] * d0
+
+
+@njit(cache=True)
+def column_product(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                   q: np.ndarray, r: np.ndarray, dim: int, u: np.ndarray) -> None:
+    """``u = W r + q``, column block after column block (zero impulses skipped)."""
+    for k in range(q.shape[0]):
+        u[k] = q[k]
+    for i in range(q.shape[0] // dim):
+        b = i * dim
+        d0 = r[b]
+        d1 = r[b + 1] if dim > 1 else 0.0
+        d2 = r[b + 2] if dim > 2 else 0.0
+        if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+            add_columns(WT, bptr, brow, bdata, i, dim, d0, d1, d2, u)
+
+
+@njit(cache=True)
+def csc_to_blocks(colptr: np.ndarray, rowidx: np.ndarray, cdata: np.ndarray, n: int,
+                  dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The block columns ``(bptr, brow, bdata)`` of an ``(n, n)`` CSC matrix: every
+    ``dim x dim`` block holding a stored entry, its other entries zero, duplicates summed."""
+    m = n // dim
+    marker = np.full(m, -1, np.int64)
+    bptr = np.zeros(m + 1, np.int64)
+    for i in range(m):
+        count = 0
+        for col in range(i * dim, (i + 1) * dim):
+            for p in range(colptr[col], colptr[col + 1]):
+                jb = rowidx[p] // dim
+                if marker[jb] != i:
+                    marker[jb] = i
+                    count += 1
+        bptr[i + 1] = bptr[i] + count
+    brow = np.empty(bptr[m], np.int64)
+    bdata = np.zeros((bptr[m], dim, dim))
+    slot = np.empty(m, np.int64)
+    marker[:] = -1
+    for i in range(m):
+        pos = bptr[i]
+        for c in range(dim):
+            col = i * dim + c
+            for p in range(colptr[col], colptr[col + 1]):
+                jb = rowidx[p] // dim
+                if marker[jb] != i:
+                    marker[jb] = i
+                    slot[jb] = pos
+                    brow[pos] = jb
+                    pos += 1
+                bdata[slot[jb], rowidx[p] - jb * dim, c] += cdata[p]
+    return bptr, brow, bdata
+
+
+@njit(cache=True)
+def prepare_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                    dim: int, blocks: np.ndarray, inverses: np.ndarray) -> tuple[int, int]:
+    """What the solver needs of ``W`` once, written into ``blocks`` and ``inverses`` (both
+    ``(m, dim, dim)``): the diagonal blocks and the inverses of spatial blocks (NaN first
+    entry when a block is too close to singular for a unique stick impulse: the slip case
+    then decides). Returns ``(code, terms)``: code :data:`W_NOT_FINITE`, or
+    :data:`BAD_DIAGONAL` ``+ i`` for the first contact ``i`` whose normal diagonal entry is
+    not positive, else 0; ``terms`` bounds the terms of one entry of ``W r + q`` (a row's
+    stored entries plus one, for :func:`certify_columns`).
+    """
+    m = blocks.shape[0]
+    n = m * dim
+    if WT.shape[0] > 0:
+        if not _all_finite(WT):
+            return W_NOT_FINITE, 0
+        for i in range(m):
+            for k in range(dim):
+                for col in range(dim):
+                    blocks[i, k, col] = WT[i * dim + k, i * dim + col]
+        terms = n + 1
+    else:
+        if not _all_finite(bdata):
+            return W_NOT_FINITE, 0
+        blocks[:] = 0.0
+        per_row = np.zeros(m, np.int64)
+        for i in range(m):
+            for p in range(bptr[i], bptr[i + 1]):
+                per_row[brow[p]] += 1
+                if brow[p] == i:
+                    blocks[i] += bdata[p]
+        terms = dim * per_row.max() + 1 if m else 1
+    inverses[:] = 0.0
+    for i in range(m):
+        if not (blocks[i, 0, 0] > 0.0):
+            return BAD_DIAGONAL + i, terms
+        if dim == 3:
+            _inverse_3x3(blocks, inverses, i)
+    return 0, terms
+
+
+@njit(cache=True, inline="always")
+def _inverse_3x3(blocks: np.ndarray, inverses: np.ndarray, i: int) -> None:
+    """``inverses[i] = blocks[i]⁻¹`` by cofactors when the determinant exceeds
+    ``1e3 eps trace³`` (a 3 x 3 LAPACK call costs more than the solve of a small problem);
+    otherwise no unique stick impulse: a NaN first entry makes the stick test fail and the
+    slip case decides. Cofactors of a block that far from singular lose at most about
+    ``1e-3 / eps`` of relative accuracy in the worst case, and the stick impulse they give
+    is checked by the whole problem's residual like every other."""
+    a = blocks[i]
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    scale = a[0, 0] + a[1, 1] + a[2, 2]
+    if not (det > 1e3 * _EPS * scale ** 3):
+        inverses[i, 0, 0] = np.nan
+        return
+    inverses[i, 0, 0] = c00 / det
+    inverses[i, 1, 0] = c01 / det
+    inverses[i, 2, 0] = c02 / det
+    inverses[i, 0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) / det
+    inverses[i, 1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) / det
+    inverses[i, 2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) / det
+    inverses[i, 0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) / det
+    inverses[i, 1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det
+    inverses[i, 2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
+
+
+@njit(cache=True)
+def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                 blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
+                 dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
+                 max_sweeps: int, max_local_iter: int) -> tuple[int, int, float]:
+    """Non-smooth Gauss–Seidel over contacts from the impulses in ``r``, exact local solves
+    (:func:`local_1d`, :func:`local_2d`, :func:`local_3d`), ``u = W r + q`` kept up to date.
+
+    Stops when the relative natural-map error of the whole problem (:func:`relative_error`,
+    checked after every sweep on the running ``u``) is ``<= tol``, or after ``max_sweeps``
+    sweeps. ``u`` is recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
+    confirms the last on an exact product. Returns ``(code, sweeps, error)``: code
+    :data:`CONVERGED` or :data:`SWEEP_LIMIT`.
     """
     m = mu.shape[0]
-    blocks = diagonal_blocks(indptr, indices, data, m, dim)
-    inverses = np.zeros((m, dim, dim))
-    for i in range(m):
-        if blocks[i, 0, 0] <= 0.0:
-            return 3, 0, np.inf
-        if dim == 3:
-            scale = blocks[i, 0, 0] + blocks[i, 1, 1] + blocks[i, 2, 2]
-            if np.linalg.det(blocks[i]) > 1e3 * _EPS * scale ** 3:
-                inverses[i] = np.linalg.inv(blocks[i])
-            else:   # no unique stick impulse: NaN makes the stick test fail, slip decides
-                inverses[i, 0, 0] = np.nan
+    column_product(WT, bptr, brow, bdata, q, r, dim, u)
     qloc = np.empty(dim)
     rloc = np.empty(dim)
     err = np.inf
@@ -357,25 +573,195 @@ def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np
         for i in range(m):
             b = i * dim
             for k in range(dim):
-                row = b + k
-                s = q[row]
-                for p in range(indptr[row], indptr[row + 1]):
-                    col = indices[p]
-                    if col < b or col >= b + dim:
-                        s += data[p] * r[col]
+                s = u[b + k]
+                for col in range(dim):
+                    s -= blocks[i, k, col] * r[b + col]
                 qloc[k] = s
-                rloc[k] = r[row]   # the local fallback's start
+                rloc[k] = r[b + k]   # the local fallback's start, the slip direction's guess
             if dim == 1:
                 states[i] = local_1d(blocks[i, 0, 0], qloc[0], rloc)
             elif dim == 2:
                 states[i] = local_2d(blocks[i], qloc, mu[i], rloc)
-            else:
-                states[i] = local_3d(blocks[i], inverses[i], qloc, mu[i], rloc,
-                                     max_local_iter)
-            for k in range(dim):
-                r[b + k] = rloc[k]
-        csr_matvec_add(indptr, indices, data, r, q, u)
+            else:   # local_3d, its quick cases inlined (no call with arrays)
+                state, r0, r1, r2 = _quick_3d(inverses, i, qloc[0], qloc[1], qloc[2], mu[i])
+                if state == SLIP:
+                    state = _slip_3d(blocks[i], qloc, mu[i], rloc, r1, r2, max_local_iter)
+                else:
+                    rloc[0], rloc[1], rloc[2] = r0, r1, r2
+                states[i] = state
+            d0 = rloc[0] - r[b]
+            d1 = rloc[1] - r[b + 1] if dim > 1 else 0.0
+            d2 = rloc[2] - r[b + 2] if dim > 2 else 0.0
+            if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+                add_columns(WT, bptr, brow, bdata, i, dim, d0, d1, d2, u)
+                for k in range(dim):
+                    r[b + k] = rloc[k]
         err = relative_error(q, r, u, mu, dim)
         if err <= tol:
-            return 0, sweep, err
-    return 2, max_sweeps, err
+            return CONVERGED, sweep, err
+        if sweep % REFRESH_SWEEPS == 0:
+            column_product(WT, bptr, brow, bdata, q, r, dim, u)
+    return SWEEP_LIMIT, max_sweeps, err
+
+
+@njit(cache=True)
+def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                    terms: int, q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
+                    dim: int, tol: float) -> tuple[float, float, bool]:
+    """The acceptance test of every frictional-contact path: ``u = W r + q`` recomputed
+    from ``r``, then ``(error, tolerance, certified)`` with the relative natural-map
+    :func:`relative_error` and the tolerance ``tol`` plus the round-off bound of ``u``.
+
+    One entry of ``u`` from ``k`` terms (a row's stored entries and ``q_i``; ``terms`` is
+    the largest ``k``) is off by at most ``gamma_k (|W||r| + |q|)_i``; ``û`` adds
+    ``μ |u_T|`` (at most ``1 + max μ`` times that), and the 2-norm over ``n`` entries at
+    most ``sqrt(n)`` times the largest. With the factor
+    :data:`~nscontrol.numerics._lcp_kernels.ROUNDOFF_FACTOR`: ``2 k eps (1 + max μ) sqrt(n)
+    max_i (|W||r| + |q|)_i / max(|q|, |r|, |u|)``. As for the LCP, the tolerance is ``-inf``
+    (nothing certified) when ``|W||r|`` exceeds the scale by
+    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`.
+    """
+    n = q.shape[0]
+    column_product(WT, bptr, brow, bdata, q, r, dim, u)
+    a = np.empty(n)
+    for k in range(n):
+        a[k] = abs(q[k])
+    if WT.shape[0] > 0:
+        for k in range(n):
+            for c in range(n):
+                a[k] += abs(WT[k, c]) * abs(r[c])
+    for i in range(bptr.shape[0] - 1):    # no block column when W is dense
+        for p in range(bptr[i], bptr[i + 1]):
+            j = brow[p] * dim
+            for k in range(dim):
+                for c in range(dim):
+                    a[j + k] += abs(bdata[p, k, c]) * abs(r[i * dim + c])
+    big = 0.0
+    for k in range(n):
+        if not (a[k] <= big):     # also propagates NaN
+            big = a[k]
+    err = relative_error(q, r, u, mu, dim)
+    scale = max(_norm(q), _norm(r), _norm(u))
+    cancellation = big / scale if scale > 0.0 else 0.0   # scale 0: r = u = q = 0, exact
+    if not (cancellation <= MAX_CANCELLATION):     # also NaN and inf
+        return err, -np.inf, False
+    mu_max = 0.0
+    for i in range(mu.shape[0]):
+        mu_max = max(mu_max, mu[i])
+    tolerance = tol + ROUNDOFF_FACTOR * terms * _EPS * (1.0 + mu_max) * np.sqrt(n) * cancellation
+    return err, tolerance, bool(err <= tolerance)
+
+
+@njit(cache=True)
+def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                  blocks: np.ndarray, inverses: np.ndarray, terms: int, q: np.ndarray,
+                  mu: np.ndarray, r: np.ndarray, u: np.ndarray, states: np.ndarray,
+                  tol: float, max_sweeps: int, max_local_iter: int
+                  ) -> tuple[int, int, float, float, bool, int]:
+    """One solve of :class:`~nscontrol.numerics.friction_contact.FrictionContactSolver`:
+    ``W`` prepared first when ``terms`` is 0 (``μ`` checked, code :data:`MU_INVALID`, then
+    :func:`prepare_columns`, whose codes it returns), ``q`` and the start ``r`` checked
+    finite (code :data:`NOT_FINITE`), then :func:`nsgs_columns` and
+    :func:`certify_columns`, sweeping on from the exact ``u`` when the running one passed
+    ``tol`` and the exact one does not. Returns ``(code, sweeps,
+    error, tolerance, certified, terms)``."""
+    dim = blocks.shape[1]
+    if terms == 0:
+        for i in range(mu.shape[0]):
+            if not (mu[i] >= 0.0 and mu[i] < np.inf):
+                return MU_INVALID, 0, np.nan, np.nan, False, 0
+        code, terms = prepare_columns(WT, bptr, brow, bdata, dim, blocks, inverses)
+        if code != 0:
+            return code, 0, np.nan, np.nan, False, terms
+    if not (_all_finite(q) and _all_finite(r)):
+        return NOT_FINITE, 0, np.nan, np.nan, False, terms
+    done = 0
+    while True:
+        code, sweeps, err = nsgs_columns(WT, bptr, brow, bdata, blocks, inverses, q, mu,
+                                         dim, r, u, states, tol, max_sweeps - done,
+                                         max_local_iter)
+        done += sweeps
+        err, tolerance, ok = certify_columns(WT, bptr, brow, bdata, terms, q, r, u, mu, dim,
+                                             tol)
+        if ok or code != CONVERGED or err <= tol or done >= max_sweeps:
+            return code, done, err, tolerance, ok, terms
+
+
+@njit(cache=True)
+def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
+                     u: np.ndarray, states: np.ndarray, tol: float, max_sweeps: int,
+                     max_local_iter: int) -> tuple[int, int, float, float, bool]:
+    """:func:`solve_columns` on a dense ``W`` used once (``dim = len(q) / len(states)``),
+    the blocks prepared in this call. The one
+    compiled call of :func:`~nscontrol.numerics.friction_contact.solve_friction_contact` on
+    a small dense problem. Returns ``(code, sweeps, error, tolerance, certified)``."""
+    m = states.shape[0]
+    dim = q.shape[0] // m
+    blocks = np.empty((m, dim, dim))
+    inverses = np.empty((m, dim, dim))
+    code, sweeps, err, tolerance, ok, _ = solve_columns(
+        W, np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
+        inverses, 0, q, mu, r, u, states, tol, max_sweeps, max_local_iter)
+    return code, sweeps, err, tolerance, ok
+
+
+@njit(cache=True)
+def csr_to_csc(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, n: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The CSC arrays of an ``(n, n)`` CSR matrix."""
+    nnz = indptr[n]
+    colptr = np.zeros(n + 1, np.int64)
+    for p in range(nnz):
+        colptr[indices[p] + 1] += 1
+    for j in range(n):
+        colptr[j + 1] += colptr[j]
+    fill = colptr[:n].copy()
+    rowidx = np.empty(nnz, np.int64)
+    cdata = np.empty(nnz)
+    for i in range(n):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            rowidx[fill[j]] = i
+            cdata[fill[j]] = data[p]
+            fill[j] += 1
+    return colptr, rowidx, cdata
+
+
+@njit(cache=True)
+def csr_to_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, n: int,
+                  dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`csc_to_blocks` of an ``(n, n)`` CSR matrix."""
+    colptr, rowidx, cdata = csr_to_csc(indptr, indices, data, n)
+    return csc_to_blocks(colptr, rowidx, cdata, n, dim)
+
+
+@njit(cache=True)
+def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
+                mu: np.ndarray, dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray,
+                tol: float, max_sweeps: int, max_local_iter: int = MAX_LOCAL_ITER
+                ) -> tuple[int, int, float]:
+    """:func:`nsgs_columns` on a CSR ``W`` (the integrator's one-step path), its convergence
+    confirmed on an exact ``u = W r + q``: returns ``(code, sweeps, error)``, code 0
+    converged, 2 sweep limit, 3 a contact whose normal diagonal entry is not positive."""
+    n = q.shape[0]
+    bptr, brow, bdata = csr_to_blocks(indptr, indices, data, n, dim)
+    WT = np.empty((0, 0))
+    blocks = np.empty((n // dim, dim, dim))
+    inverses = np.empty_like(blocks)
+    code, _ = prepare_columns(WT, bptr, brow, bdata, dim, blocks, inverses)
+    if code != 0:
+        return 3, 0, np.inf
+    done = 0
+    while True:
+        code, sweeps, err = nsgs_columns(WT, bptr, brow, bdata, blocks, inverses, q, mu,
+                                         dim, r, u, states, tol, max_sweeps - done,
+                                         max_local_iter)
+        done += sweeps
+        if code != CONVERGED:
+            return code, done, err
+        column_product(WT, bptr, brow, bdata, q, r, dim, u)   # confirm on the exact u
+        err = relative_error(q, r, u, mu, dim)
+        if err <= tol:
+            return CONVERGED, done, err
+        if done >= max_sweeps:
+            return SWEEP_LIMIT, done, err

@@ -21,10 +21,18 @@ Two methods:
   equation in the slip angle, to machine precision); the relative natural-map error of the
   whole problem is computed after every sweep and must reach ``tol``.
 
+:class:`FrictionContactSolver` is the reusable form of ``"nsgs"``: ``W`` and ``μ`` are
+checked and prepared once (diagonal blocks and their inverses; ``W`` kept dense, or sparse
+by columns), then :meth:`~FrictionContactSolver.solve` takes one ``q`` and optionally the
+impulses to start from (a warm start, such as the previous time step's). Its sweep keeps
+``u = W r + q`` current by adding a contact's columns times the change of its impulse, so
+the error of the whole problem is known after every sweep without another product by ``W``.
+
 The reported ``residual`` is ``‖r - P_K(r - û)‖ / max(‖q‖, ‖r‖, ‖u‖)`` (the scaling Siconos
 uses, so that figures compare like with like), recomputed from ``r`` on every path; the
 status is ``"solved"`` exactly when it is at most ``tolerance``: ``tol`` plus the round-off
-bound of evaluating ``W r + q`` (:func:`~nscontrol.numerics._friction_kernels.certify`).
+bound of evaluating ``W r + q``
+(:func:`~nscontrol.numerics._friction_kernels.certify_columns`).
 """
 
 from __future__ import annotations
@@ -47,7 +55,8 @@ from .._validation import (
 from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
 from . import _friction_kernels as kernels
 
-__all__ = ["FrictionContactResult", "solve_friction_contact", "friction_residual",
+__all__ = ["FrictionContactResult", "FrictionContactSolver", "solve_friction_contact",
+           "friction_residual",
            "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
@@ -94,6 +103,18 @@ class FrictionContactResult:
     status: str
     tolerance: float = field(default=math.nan)
     message: str = field(default="")
+
+    @classmethod
+    def _make(cls, r: FloatArray, u: FloatArray, states: np.ndarray, residual: float,
+              iterations: int, method: str, status: str, tolerance: float, message: str
+              ) -> FrictionContactResult:
+        """A result of fields already of their types, built without the frozen
+        ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve)."""
+        result = object.__new__(cls)
+        result.__dict__.update(r=r, u=u, states=states, residual=residual,
+                               iterations=iterations, method=method, status=status,
+                               tolerance=tolerance, message=message)
+        return result
 
     @property
     def success(self) -> bool:
@@ -159,6 +180,179 @@ def _states(r: FloatArray, u: FloatArray, tol: float = 1e-9) -> np.ndarray:
     threshold = tol * max(1.0, float(np.max(np.abs(u), initial=0.0)))
     states = np.where(slip > threshold, kernels.SLIP, kernels.STICK)
     return np.where(r[:, 0] > 0.0, states, kernels.OPEN).astype(np.int64)
+
+
+class FrictionContactSolver:
+    """Non-smooth Gauss–Seidel for one Delassus matrix ``W`` and many right-hand sides ``q``.
+
+    The constructor checks ``W`` and ``μ`` and prepares what every solve needs: ``W`` kept
+    dense (its transpose, so that a column is contiguous) or sparse by columns (CSC), its
+    diagonal blocks and their inverses. :meth:`solve` then checks ``q`` (finiteness inside
+    the compiled kernel) and makes one compiled call: the sweeps, then the verification of
+    the residual (``docs/frictional_contacts.md``). :func:`solve_friction_contact` with
+    ``method="nsgs"`` is this class used once.
+
+    Parameters
+    ----------
+    W : (m dim, m dim) array_like or scipy.sparse matrix
+        Delassus matrix (its diagonal blocks positive definite). A writeable C-contiguous
+        float64 array is used without a copy (do not modify it afterwards); sparse ``W`` is
+        kept by ``dim x dim`` blocks.
+    mu : float or array_like (m,)
+        Friction coefficients ``>= 0``.
+    dim : int
+        Unknowns per contact: 1 (frictionless), 2 (planar) or 3 (spatial).
+    max_local_iter : int
+        Budget of a spatial contact's projected fixed point (as in
+        :func:`solve_friction_contact`).
+
+    Attributes
+    ----------
+    n, m, dim : int
+        Unknowns, contacts and unknowns per contact.
+
+    Raises
+    ------
+    ModelError
+        ``W`` or ``μ`` with NaN, infinite, complex or string entries, ``μ < 0``, a contact
+        whose normal diagonal entry of ``W`` is not positive, bad ``dim`` or budget.
+    DimensionError
+        ``W`` not square, its size not a multiple of ``dim``, ``μ`` of the wrong length.
+
+    Examples
+    --------
+    One solver, three loads; the second starts from the first's impulses.
+
+    >>> solver = FrictionContactSolver(np.eye(3), 0.5, dim=3)
+    >>> stick = solver.solve(np.array([-1.0, 0.2, 0.0]))
+    >>> stick.r.round(12).tolist(), stick.states.tolist()
+    ([1.0, -0.2, -0.0], [1])
+    >>> slip = solver.solve(np.array([-1.0, 1.0, 0.0]), stick.r)
+    >>> slip.r.round(12).tolist(), slip.u.round(12).tolist(), slip.states.tolist()
+    ([1.0, -0.5, -0.0], [0.0, 0.5, 0.0], [2])
+    >>> solver.solve(np.array([1.0, 0.3, 0.0])).states.tolist()
+    [0]
+    """
+
+    def __init__(self, W: Any, mu: Any, *, dim: int,
+                 max_local_iter: int = kernels.MAX_LOCAL_ITER) -> None:
+        dim = _check_dim(dim)
+        max_local_iter = check_integer("max_local_iter", max_local_iter, minimum=1)
+        Wc = _delassus(W, None)
+        n = Wc.shape[0]
+        if n % dim:
+            raise DimensionError(f"W: expected a size divisible by dim = {dim}, got shape "
+                                 f"{Wc.shape}")
+        self._setup(Wc, _friction_coefficients(mu, n // dim), dim, max_local_iter)
+        code, terms = kernels.prepare_columns(  # type: ignore[call-arg]  # numba's stub
+            *self._columns, dim, self._blocks, self._inverses)
+        self._raise_for(code)
+        self._terms = int(terms)
+
+    @classmethod
+    def _checked(cls, W: Any, mu: FloatArray, dim: int, max_local_iter: int
+                 ) -> FrictionContactSolver:
+        """A solver of arguments already checked (by :func:`solve_friction_contact`), but for
+        the finiteness of ``W``: the first solve prepares ``W`` and checks it."""
+        solver = cls.__new__(cls)
+        solver._setup(W, mu, dim, max_local_iter)
+        return solver
+
+    def _setup(self, W: Any, mu: FloatArray, dim: int, max_local_iter: int) -> None:
+        self.n: int = int(W.shape[0])
+        self.dim: int = dim
+        self.m: int = self.n // dim
+        self.mu = mu
+        self._W = W
+        self._max_local_iter = max_local_iter
+        self._columns = _columns(W, dim)
+        self._blocks = np.empty((self.m, dim, dim))
+        self._inverses = np.empty((self.m, dim, dim))
+        self._terms = 0            # W not prepared yet: the next solve does it
+
+    def _raise_for(self, code: int, q: Any = None, r: Any = None) -> None:
+        """The error of a kernel's refusal code (nothing for the others)."""
+        if code == kernels.W_NOT_FINITE:
+            check_finite("W", self._W.data if sparse.issparse(self._W) else self._W)
+        if code == kernels.MU_INVALID:
+            _friction_coefficients(np.array(self.mu), self.m)
+        if code >= kernels.BAD_DIAGONAL:
+            i = code - kernels.BAD_DIAGONAL
+            raise ModelError(f"W: the normal diagonal entry of contact {i} (row {i * self.dim})"
+                             " is not positive; every contact needs a normal direction some "
+                             "motion can change")
+        if code == kernels.NOT_FINITE:
+            check_finite("q", q)
+            check_finite("r0", r)
+
+    def __repr__(self) -> str:
+        kind = "dense" if self._columns[0].shape[0] else "sparse"
+        return f"FrictionContactSolver(m={self.m}, dim={self.dim}, {kind})"
+
+    def solve(self, q: Any, r0: Any = None, *, tol: float = 1e-12,
+              max_sweeps: int = 100_000) -> FrictionContactResult:
+        """Solve ``u = W r + q`` with Coulomb's law at every contact, from ``r0``.
+
+        Parameters
+        ----------
+        q : (n,) array_like
+            Free local velocity (a writeable C-contiguous float64 array is not copied).
+        r0 : (n,) array_like, optional
+            Starting impulses (a warm start, e.g. the previous time step's); zeros by
+            default. Copied: the result's ``r`` is a new array.
+        tol : float
+            Tolerance of the relative natural-map error.
+        max_sweeps : int
+            Budget of sweeps.
+
+        Returns
+        -------
+        FrictionContactResult
+            Its ``status`` says whether ``tol`` was reached (``"solved"``), the budget spent
+            (``"max_iter"``) or the sweeps' claim refuted by the verification
+            (``"numerical_failure"``); nothing is raised for these.
+
+        Raises
+        ------
+        DimensionError
+            ``q`` or ``r0`` not a vector of length :attr:`n`.
+        ModelError
+            ``q`` or ``r0`` with NaN, infinite, complex or string entries; ``tol`` or
+            ``max_sweeps`` not a positive number.
+        """
+        n = self.n
+        if not (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1
+                and q.shape[0] == n and q.flags.c_contiguous and q.flags.writeable):
+            q = np.array(as_vector("q", q, n))
+        if not (type(tol) is float and 0.0 < tol < math.inf):
+            tol = check_positive("tol", tol)
+        if not (type(max_sweeps) is int and max_sweeps >= 1):
+            max_sweeps = check_integer("max_sweeps", max_sweeps, minimum=1)
+        if r0 is None:
+            r = np.zeros(n)
+        elif (type(r0) is np.ndarray and r0.dtype == np.float64 and r0.ndim == 1
+              and r0.shape[0] == n):
+            r = r0.copy()
+        else:
+            r = np.array(as_vector("r0", r0, n))
+        u = np.empty(n)
+        states = np.zeros(self.m, np.int64)
+        code, sweeps, err, tolerance, ok, terms = kernels.solve_columns(
+            *self._columns, self._blocks, self._inverses, self._terms, q, self.mu, r, u,
+            states, tol, max_sweeps, self._max_local_iter)
+        if ok:
+            self._terms = terms
+            return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved",
+                                               tolerance, "")
+        if code > kernels.SWEEP_LIMIT:
+            self._raise_for(code, q, r)
+        self._terms = terms
+        if code == kernels.CONVERGED:
+            return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs",
+                                               "numerical_failure", tolerance, "")
+        return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "max_iter",
+                                           tolerance,
+                                           f"budget max_sweeps = {max_sweeps} sweeps spent")
 
 
 def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
@@ -230,14 +424,24 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     >>> slip.r.round(12).tolist(), slip.u.round(12).tolist(), slip.states.tolist()
     ([1.0, -0.5, -0.0], [0.0, 0.5, 0.0], [2])
     """
+    if type(W) is np.ndarray and type(q) is np.ndarray and method != "lcp":
+        once = _dense_once(W, q, mu, dim, method, tol, max_sweeps, r0, max_local_iter)
+        if once is not None:
+            return once
     dim = _check_dim(dim)
-    Wc, qv, muv = _problem(W, q, mu, dim)
-    tol = check_positive("tol", tol)
-    max_sweeps = check_integer("max_sweeps", max_sweeps, minimum=1)
-    max_local_iter = check_integer("max_local_iter", max_local_iter, minimum=1)
+    # the finiteness of W and q is checked by the compiled solve (NSGS), or before the LCP
+    Wc, qv, muv = _problem(W, q, mu, dim, finite=False)
+    if not (type(tol) is float and 0.0 < tol < math.inf):
+        tol = check_positive("tol", tol)
+    if not (type(max_sweeps) is int and max_sweeps >= 1):
+        max_sweeps = check_integer("max_sweeps", max_sweeps, minimum=1)
+    if not (type(max_local_iter) is int and max_local_iter >= 1):
+        max_local_iter = check_integer("max_local_iter", max_local_iter, minimum=1)
     if max_pivots is not None:
         max_pivots = check_integer("max_pivots", max_pivots, minimum=1)
-    r_start = None if r0 is None else as_vector("r0", r0, qv.shape[0])
+    n = qv.shape[0]
+    r_start = (r0 if type(r0) is np.ndarray and r0.dtype == np.float64 and r0.shape == (n,)
+               else None if r0 is None else as_vector("r0", r0, n))   # values: in the kernel
     if not isinstance(method, str) or method not in ("auto", "lcp", "nsgs"):
         raise ModelError(f"method: expected 'auto', 'lcp' or 'nsgs', got {method!r}")
     if method == "lcp" and dim != 2:
@@ -252,9 +456,20 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
         else ["nsgs", "lcp"] if dim == 2 and m <= 5 * AUTO_LCP_MAX_CONTACTS else ["nsgs"])
     attempts = []
     for name in order:
-        result = (_solve_lcp(Wc, qv, muv, tol, max_pivots) if name == "lcp"
-                  else _solve_nsgs(Wc, qv, muv, dim, tol, max_sweeps, r_start,
-                                   max_local_iter))
+        if name == "lcp":
+            check_finite("W", Wc.data if sparse.issparse(Wc) else Wc)
+            check_finite("q", qv)
+            _friction_coefficients(np.array(muv), m)      # the values (the LCP does not)
+            if r_start is not None:
+                check_finite("r0", r_start)
+            result = _solve_lcp(Wc, qv, muv, tol, max_pivots)
+        else:
+            solver = FrictionContactSolver._checked(Wc, muv, dim, max_local_iter)
+            if r_start is None and m > AUTO_LCP_MAX_CONTACTS:   # a cold start of a large set
+                check_finite("W", Wc.data if sparse.issparse(Wc) else Wc)
+                check_finite("q", qv)
+                r_start = frictionless_impulses(Wc, qv, dim)
+            result = solver.solve(qv, r_start, tol=tol, max_sweeps=max_sweeps)
         if result.success:
             return result
         attempts.append(f"{name}: {result.status}, residual {result.residual:.3g} "
@@ -270,6 +485,52 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
             budget=budget, limit=limit, used=result.iterations, partial=result)
     raise SolverError(f"{text}; raise tol, or check that W's diagonal blocks are positive "
                       "definite", status=result.status)
+
+
+def _dense_once(W: np.ndarray, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
+                max_sweeps: Any, r0: Any, max_local_iter: Any) -> FrictionContactResult | None:
+    """The short path of :func:`solve_friction_contact`: NSGS on a dense problem given as
+    float64 arrays, started from ``r0`` or, up to :data:`AUTO_LCP_MAX_CONTACTS` contacts,
+    from zero (beyond, the general path starts from the frictionless impulses), in one
+    compiled call
+    (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once`, which checks the
+    values). None when the arguments are of another kind, refused, or the solve does not
+    reach ``tol``: the general path then runs, and raises what it must."""
+    n = q.shape[0]
+    if not (type(dim) is int and 1 <= dim <= 3 and q.ndim == 1 and n and n % dim == 0
+            and (method == "nsgs" or (method == "auto" and dim != 2))
+            and (r0 is not None or n <= dim * AUTO_LCP_MAX_CONTACTS) and W.shape == (n, n)
+            and W.dtype == np.float64 and q.dtype == np.float64
+            and type(tol) is float and 0.0 < tol < math.inf
+            and type(max_sweeps) is int and max_sweeps >= 1
+            and type(max_local_iter) is int and max_local_iter >= 1):
+        return None
+    if not (W.flags.c_contiguous and W.flags.writeable):
+        W = np.array(W, order="C")       # a copy costs less than a second compile
+    if not (q.flags.c_contiguous and q.flags.writeable):
+        q = q.copy()
+    m = n // dim
+    if type(mu) is float:
+        muv = np.full(m, mu)
+    elif (type(mu) is np.ndarray and mu.dtype == np.float64 and mu.shape == (m,)
+          and mu.flags.c_contiguous and mu.flags.writeable):
+        muv = mu
+    else:
+        return None
+    if r0 is None:
+        r = np.zeros(n)
+    elif (type(r0) is np.ndarray and r0.dtype == np.float64 and r0.shape == (n,)):
+        r = r0.copy()
+    else:
+        return None
+    u = np.empty(n)
+    states = np.empty(m, np.int64)
+    code, sweeps, err, tolerance, ok = kernels.solve_dense_once(
+        W, q, muv, r, u, states, tol, max_sweeps, max_local_iter)
+    if not ok:
+        return None
+    return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved", tolerance,
+                                       "")
 
 
 def planar_friction_lcp(W: Any, q: Any, mu: Any) -> tuple[FloatArray, FloatArray]:
@@ -294,7 +555,7 @@ def planar_friction_lcp(W: Any, q: Any, mu: Any) -> tuple[FloatArray, FloatArray
     ((4, 4), [-1.0, 0.2, -0.2, 0.0])
     """
     Wc, qv, muv = _problem(W, q, mu, 2)
-    Wd = Wc.toarray()
+    Wd = Wc.toarray() if sparse.issparse(Wc) else Wc
     m = muv.shape[0]
     n_, t_ = np.arange(0, 2 * m, 2), np.arange(1, 2 * m, 2)
     Wnn, Wnt = Wd[np.ix_(n_, n_)], Wd[np.ix_(n_, t_)]
@@ -315,9 +576,13 @@ def _pivot_limit(m: int, max_pivots: int | None) -> int:
 
 def _certified(W: Any, q: FloatArray, mu: FloatArray, dim: int, r: FloatArray, tol: float
                ) -> tuple[FloatArray, float, float, bool]:
-    """``u = W r + q`` recomputed and :func:`kernels.certify`'s verdict."""
+    """``u = W r + q`` recomputed and :func:`kernels.certify_columns`'s verdict."""
     u = np.empty_like(q)
-    err, tolerance, ok = kernels.certify(W.indptr, W.indices, W.data, q, r, u, mu, dim, tol)
+    columns = _columns(W, dim)
+    m = mu.shape[0]
+    _, terms = kernels.prepare_columns(*columns, dim, np.empty((m, dim, dim)),
+                                       np.empty((m, dim, dim)))
+    err, tolerance, ok = kernels.certify_columns(*columns, terms, q, r, u, mu, dim, tol)
     return u, float(err), float(tolerance), bool(ok)
 
 
@@ -346,30 +611,6 @@ def _solve_lcp(W: Any, q: FloatArray, mu: FloatArray, tol: float, max_pivots: in
     return FrictionContactResult(r, u, _states(r.reshape(-1, 2), u.reshape(-1, 2)), err,
                                  int(res.iterations),
                                  "lcp", _status(ok, res.status), tolerance, message)
-
-
-def _solve_nsgs(W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
-                max_sweeps: int, r0: FloatArray | None, max_local_iter: int
-                ) -> FrictionContactResult:
-    if r0 is not None:
-        r = r0.copy()
-    elif mu.shape[0] > AUTO_LCP_MAX_CONTACTS:   # a cold start of a large (stacked) set
-        r = frictionless_impulses(W, q, dim)
-    else:
-        r = np.zeros_like(q)
-    u = np.empty_like(q)
-    states = np.zeros(mu.shape[0], np.int64)
-    code, sweeps, _ = kernels.nsgs_kernel(W.indptr, W.indices, W.data, q, mu, dim, r, u,
-                                          states, tol, max_sweeps, max_local_iter)
-    if code == 3:
-        raise ModelError("W: a diagonal entry of a contact's normal row is not positive; "
-                         "every contact needs a normal direction some motion can change")
-    u, err, tolerance, ok = _certified(W, q, mu, dim, r, tol)
-    status = _status(ok, "solved" if code == 0 else "max_iter")
-    message = (f"budget max_sweeps = {max_sweeps} sweeps spent" if status == "max_iter"
-               else "")
-    return FrictionContactResult(r, u, states, err, int(sweeps), "nsgs", status, tolerance,
-                                 message)
 
 
 def frictionless_impulses(W: Any, q: Any, dim: int) -> FloatArray:
@@ -408,6 +649,8 @@ def frictionless_impulses(W: Any, q: Any, dim: int) -> FloatArray:
 
 
 def _check_dim(dim: Any) -> int:
+    if type(dim) is int and 1 <= dim <= 3:
+        return dim
     dim = check_integer("dim", dim, minimum=1)
     if dim > 3:
         raise ModelError(f"dim: expected 1, 2 or 3 unknowns per contact, got {dim}")
@@ -422,33 +665,86 @@ def _per_contact(name: str, v: FloatArray, dim: int) -> FloatArray:
     return v.reshape(-1, dim)
 
 
-def _delassus(W: Any, n: int) -> Any:
-    """``W`` as a finite real square ``(n, n)`` CSR float64 matrix, duplicates summed and
-    indices sorted (the layout of the kernels); strings, complex and NaN are refused."""
+def _delassus(W: Any, n: int | None, finite: bool = True) -> Any:
+    """``W`` as a finite real square ``(n, n)`` float64 matrix: a C-contiguous array, or a
+    scipy CSR or CSC matrix when sparse (not copied when it is one already, else converted
+    to CSC); strings, complex and NaN are refused
+    (NaN and infinities not with ``finite=False``: the caller checks them).
+    ``n = None`` checks squareness only. A C-contiguous float64 array is not copied."""
     if sparse.issparse(W):
-        Wc = sparse.csr_matrix(W)
-        if Wc.dtype.kind not in "fiub":
-            raise ModelError(f"W: expected a real sparse matrix, got dtype {Wc.dtype}")
-        Wc = Wc.astype(np.float64)
-        check_finite("W", Wc.data)
+        if W.format in ("csr", "csc") and W.dtype == np.float64:
+            Wc = W        # read as it is: the kernels sum duplicates and accept any order
+        else:
+            Wc = sparse.csc_matrix(W)
+            if Wc.dtype.kind not in "fiub":
+                raise ModelError(f"W: expected a real sparse matrix, got dtype {Wc.dtype}")
+            Wc = Wc.astype(np.float64)
+        if finite:
+            check_finite("W", Wc.data)
+    elif (type(W) is np.ndarray and W.dtype == np.float64 and W.ndim == 2
+          and W.flags.c_contiguous):
+        Wc = W
+        if finite:
+            check_finite("W", Wc)
     else:
-        Wc = sparse.csr_matrix(as_float_array("W", W, ndim=2))
-    if Wc.shape != (n, n):
-        raise DimensionError(f"W: expected shape ({n}, {n}) to match q, got {Wc.shape}")
-    Wc.sum_duplicates()
-    Wc.sort_indices()
+        Wc = np.ascontiguousarray(as_float_array("W", W, ndim=2, finite=finite))
+    rows, cols = Wc.shape
+    if rows != cols or (n is not None and rows != n):
+        want = f"({n}, {n}) to match q" if n is not None else "a square matrix"
+        raise DimensionError(f"W: expected shape {want}, got {Wc.shape}")
     return Wc
 
 
-def _problem(W: Any, q: Any, mu: Any, dim: int) -> tuple[Any, FloatArray, FloatArray]:
-    """``W`` as sorted CSR float64, ``q`` and ``μ`` as vectors, shapes and values checked."""
-    qv = as_vector("q", q)
-    m = _per_contact("q", qv, dim).shape[0]
-    Wc = _delassus(W, qv.shape[0])
+_NO_DENSE = np.zeros((0, 0))
+_NO_BLOCKS = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)))
+
+
+def _columns(W: Any, dim: int) -> tuple[FloatArray, np.ndarray, np.ndarray, FloatArray]:
+    """``W`` (checked by :func:`_delassus`) as the kernels read it: ``(WT, bptr, brow,
+    bdata)``, the dense C-contiguous ``W`` with empty block arrays, or an empty ``WT`` with
+    ``W``'s ``dim x dim`` block columns
+    (:func:`~nscontrol.numerics._friction_kernels.csc_to_blocks`, from CSC or CSR)."""
+    if sparse.issparse(W):
+        convert = kernels.csc_to_blocks if W.format == "csc" else kernels.csr_to_blocks
+        return (_NO_DENSE, *convert(W.indptr, W.indices,
+                                    np.ascontiguousarray(W.data, np.float64), W.shape[0], dim))
+    return (W if W.flags.writeable else W.copy(), *_NO_BLOCKS)
+
+
+def _friction_coefficients(mu: Any, m: int, checked_later: bool = False) -> FloatArray:
+    """``μ`` as a contiguous vector of ``m`` finite coefficients ``>= 0`` (with
+    ``checked_later``, a float64 vector of length ``m`` is taken as it is: the compiled
+    solve checks its values, code ``MU_INVALID``)."""
+    if type(mu) is float and 0.0 <= mu < math.inf:
+        return np.full(m, mu)
+    if (checked_later and type(mu) is np.ndarray and mu.dtype == np.float64
+            and mu.shape == (m,) and mu.flags.c_contiguous and mu.flags.writeable):
+        return mu
     if np.ndim(mu) == 0:
-        muv = np.full(m, check_positive("mu", mu, allow_zero=True))
+        return np.full(m, check_positive("mu", mu, allow_zero=True))
+    muv = as_vector("mu", mu, m)
+    negative = np.flatnonzero(muv < 0.0)
+    if negative.size:
+        i = int(negative[0])
+        check_positive(f"mu[{i}]", muv[i], allow_zero=True)
+    return np.ascontiguousarray(muv)
+
+
+def _problem(W: Any, q: Any, mu: Any, dim: int, finite: bool = True
+             ) -> tuple[Any, FloatArray, FloatArray]:
+    """``W`` checked (:func:`_delassus`), ``q`` and ``μ`` as vectors, shapes and values
+    checked (but for NaN and infinities in ``W`` and ``q`` with ``finite=False``)."""
+    if (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1
+            and q.flags.c_contiguous and q.flags.writeable):
+        if finite:
+            check_finite("q", q)
+        qv = q
     else:
-        muv = as_vector("mu", mu, m)
-        for i, mi in enumerate(muv):
-            check_positive(f"mu[{i}]", mi, allow_zero=True)
-    return Wc, qv, np.ascontiguousarray(muv)
+        qv = np.atleast_1d(as_float_array("q", q, finite=finite))
+        if qv.ndim != 1:
+            raise DimensionError(f"q: expected a vector, got shape {qv.shape}")
+    n = qv.shape[0]
+    if n % dim:
+        raise DimensionError(f"q: expected a length divisible by dim = {dim}, got {n}")
+    Wc = _delassus(W, n, finite)
+    return Wc, qv, _friction_coefficients(mu, n // dim, checked_later=not finite)
