@@ -291,6 +291,8 @@ def run_one(run, M, lower, diag, upper, has_bands, q, z, w, z0, warm, limit, tol
     if run == BANDED:
         _start(z, z0, warm)
         if has_bands:
+            if diag.shape[0] != q.shape[0]:      # bands not given: read them from M
+                lower, diag, upper = dense_bands(M)
             return tridiagonal_verified(lower, diag, upper, q, z, w, limit, warm, tol)
         code, its = dense_howard(M, q, z, w, limit)
         res, tolerance, ok = verify_dense(M, q, z, w, tol)
@@ -370,16 +372,23 @@ def solve_dense(M, q, z, w, work, method, tol, max_iter, omega, skip_python):
     if not finite:
         return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan, 0, -1
     n = q.shape[0]
-    has_bands = tridiagonal
-    if has_bands:
-        lower, diag, upper = dense_bands(M)
-    else:
-        lower = diag = upper = np.empty(0)
     structured = n > 2 and (tridiagonal or banded)
     run = first_run(method, structured, large_symmetric)
+    lower = diag = upper = np.empty(0)   # read from M by run_one if banded runs
+    has_bands = tridiagonal
     return run_chain(M, True, lower, diag, upper, has_bands, banded, q, z, w, z, False,
                      method, run, 0, structured, large_symmetric, positive_diagonal, tol,
                      max_iter, omega, work, 0, skip_python)
+
+
+@njit(cache=True)
+def solve_dense_into(M, q, buf, method, tol, max_iter, omega):
+    """:func:`solve_dense` with ``z, w`` and the work array in one buffer of ``4 n + 24``
+    floats: ``buf[:n]`` receives ``z``, ``buf[n:2 n]`` ``w`` (one allocation and four
+    arguments fewer for a caller in Python)."""
+    n = q.shape[0]
+    return solve_dense(M, q, buf[:n], buf[n:2 * n], buf[2 * n:], method, tol, max_iter,
+                       omega, False)
 
 
 @njit(cache=True)

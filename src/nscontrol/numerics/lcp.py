@@ -286,18 +286,19 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
         if mflags.c_contiguous and mflags.writeable and qflags.c_contiguous and qflags.writeable:
             # the per-call path: LCPSolver's analysis and chain, in one compiled call
             n = q.shape[0]
-            z, w = np.empty(n), np.empty(n)
-            work = np.empty(2 * n + _LOG_SIZE)
-            code, run, its, res, tolerance, tried, nlog = dispatch.solve_dense(
-                M, q, z, w, work, dispatch.METHOD_CODES[method], tol, max_iter or 0, omega,
-                False)
+            buf = np.empty(4 * n + _LOG_SIZE)
+            code, run, its, res, tolerance, tried, nlog = dispatch.solve_dense_into(
+                M, q, buf, dispatch.METHOD_CODES[method], tol, max_iter or 0, omega)
             if code == 0 and nlog == 1:
-                return _solved(z, w, its, res, _RUN_METHOD[run], tolerance)
+                buf.setflags(write=False)          # z and w, its views, are read-only
+                return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
+                               False)
             if nlog >= 0 and code != kernels.Q_NOT_FINITE:
                 # the runs done are kept: the solver goes on from where the chain stopped
                 solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict,
                                    omega=omega)
-                return solver._finish(q, None, z, w, work, (code, run, tried, nlog))
+                return solver._finish(q, None, buf[:n], buf[n:2 * n], buf[2 * n:],
+                                      (code, run, tried, nlog))
     solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict, omega=omega)
     return solver.solve(q, z0=z0)
 
@@ -797,12 +798,35 @@ class LCPSolver:
 
 
 def _solved(z: NDArray[np.float64], w: NDArray[np.float64], iterations: int, res: float,
-            method: str, tolerance: float) -> LCPResult:
-    """The result of a first run that was verified (the per-call path, kept short)."""
-    z.setflags(write=False)
-    w.setflags(write=False)
-    return LCPResult(z, w, "solved", iterations, res, method,
-                     f"{method}: solved (residual {res:.3g})", tolerance)
+            method: str, tolerance: float, writeable: bool = True) -> LCPResult:
+    """The result of a first run that was verified (the per-call path, kept short: the
+    frozen dataclass filled directly, its message formatted once per method and residual).
+    ``z`` and ``w`` are made read-only (``writeable=False``: they already are)."""
+    if writeable:
+        z.setflags(write=False)
+        w.setflags(write=False)
+    key = (method, res)
+    message = _SOLVED_MESSAGES.get(key)
+    if message is None:
+        if len(_SOLVED_MESSAGES) > 4096:
+            _SOLVED_MESSAGES.clear()
+        message = _SOLVED_MESSAGES[key] = f"{method}: solved (residual {res:.3g})"
+    result = object.__new__(LCPResult)
+    fields = result.__dict__
+    fields["z"] = z
+    fields["w"] = w
+    fields["status"] = "solved"
+    fields["iterations"] = iterations
+    fields["residual"] = res
+    fields["method"] = method
+    fields["message"] = message
+    fields["tolerance"] = tolerance
+    return result
+
+
+#: The messages of verified first runs, by (method, residual): formatting a float costs
+#: as much as the rest of building a result.
+_SOLVED_MESSAGES: dict[tuple[str, float], str] = {}
 
 
 def _choose(tried: list[_Outcome]) -> tuple[LCPResult, _Outcome]:
