@@ -9,7 +9,7 @@ import scipy.sparse as sp
 from numba import njit
 
 from nscontrol.errors import DimensionError, ModelError
-from nscontrol.numerics import _lcp_dispatch as dispatch
+from nscontrol.numerics import _lcp_dispatch_kernels as dispatch
 from nscontrol.numerics.lcp import LCPResult, LCPSolver, solve_lcp, solve_lcp_kernel
 from nscontrol.testing.lcp_problems import random_p_matrix
 

@@ -52,15 +52,15 @@ from .._validation import (
     check_positive,
 )
 from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
-from . import _lcp_dispatch as dispatch
+from . import _lcp_dispatch_kernels as dispatch
 from . import _lcp_kernels as kernels
-from ._lcp_dispatch import AUTO_BANDED_MIN_SIZE as AUTO_BANDED_MIN_SIZE
-from ._lcp_dispatch import AUTO_DENSE_HOWARD_MAX_SIZE as AUTO_DENSE_HOWARD_MAX_SIZE
-from ._lcp_dispatch import AUTO_LEMKE_MAX_SIZE as AUTO_LEMKE_MAX_SIZE
-from ._lcp_dispatch import AUTO_PGS_FALLBACK_SWEEPS as AUTO_PGS_FALLBACK_SWEEPS
-from ._lcp_dispatch import AUTO_PGS_MIN_SIZE as AUTO_PGS_MIN_SIZE
-from ._lcp_dispatch import PGS_SWEEPS as PGS_SWEEPS
-from ._lcp_dispatch import solve_lcp_kernel as solve_lcp_kernel
+from ._lcp_dispatch_kernels import AUTO_BANDED_MIN_SIZE as AUTO_BANDED_MIN_SIZE
+from ._lcp_dispatch_kernels import AUTO_DENSE_HOWARD_MAX_SIZE as AUTO_DENSE_HOWARD_MAX_SIZE
+from ._lcp_dispatch_kernels import AUTO_LEMKE_MAX_SIZE as AUTO_LEMKE_MAX_SIZE
+from ._lcp_dispatch_kernels import AUTO_PGS_FALLBACK_SWEEPS as AUTO_PGS_FALLBACK_SWEEPS
+from ._lcp_dispatch_kernels import AUTO_PGS_MIN_SIZE as AUTO_PGS_MIN_SIZE
+from ._lcp_dispatch_kernels import PGS_SWEEPS as PGS_SWEEPS
+from ._lcp_dispatch_kernels import solve_lcp_kernel as solve_lcp_kernel
 
 __all__ = ["LCPResult", "LCPSolver", "solve_lcp", "solve_lcp_kernel", "residual"]
 
@@ -470,7 +470,7 @@ class LCPSolver:
                z0: NDArray[np.float64], warm: bool, run: int, tried: int,
                work: NDArray[np.float64], nlog: int) -> tuple[int, int, int, float, float,
                                                                int, int]:
-        """:func:`_lcp_dispatch.run_chain` from ``run`` with this solver's matrix and
+        """:func:`_lcp_dispatch_kernels.run_chain` from ``run`` with this solver's matrix and
         flags. A sparse ``M``'s flags are read only once its first run has failed: until
         then the chain runs that run alone."""
         has_dense = not self._sparse or "_dense" in self.__dict__
@@ -538,7 +538,7 @@ class LCPSolver:
         return result
 
     def _next_run(self, tried: int) -> int:
-        """``auto``'s next run (:func:`_lcp_dispatch.next_run`), the flags read first."""
+        """``auto``'s next run (:func:`_lcp_dispatch_kernels.next_run`), the flags read first."""
         if self._flags is None:
             large = self.n > AUTO_PGS_MIN_SIZE and self._symmetric_positive_diagonal
             self._flags = (bool(large), bool(np.all(self._M.diagonal() > 0.0)))
@@ -707,7 +707,7 @@ class LCPSolver:
     def _howard(self, q: NDArray[np.float64], z: NDArray[np.float64], limit: int
                 ) -> tuple[int, int, NDArray[np.float64]]:
         """Howard's policy iteration with SuperLU on the active set (sparse or narrow-band
-        ``M``): the iteration of :func:`~nscontrol.numerics._lcp_dispatch.dense_howard`,
+        ``M``): the iteration of :func:`~nscontrol.numerics._lcp_dispatch_kernels.dense_howard`,
         whose stopping test and cycle detection it shares (``howard_converged``,
         ``howard_cycle``: a repeated active set is a cycle, it stops at once with
         ``"max_iter"`` and ``auto`` falls back to the next method)."""
