@@ -1,11 +1,15 @@
 """Linear complementarity problems: ``w = M z + q,  0 <= z ⟂ w >= 0``.
 
-Two entry points, one code path:
+Three entry points, one analysis and one compiled chain of methods
+(:mod:`nscontrol.numerics._lcp_dispatch_kernels`):
 
-- :class:`LCPSolver` validates and analyses ``M`` once (structure, method choice, norms)
-  and then solves for many right-hand sides: ``LCPSolver(M).solve(q)`` pays per call only
-  for a check of ``q``, the compiled kernel and the residual check.
-- :func:`solve_lcp` solves one problem: it is ``LCPSolver(M, ...).solve(q)``.
+- :class:`LCPSolver` validates and analyses ``M`` once (structure, method choice) and then
+  solves for many right-hand sides: ``LCPSolver(M).solve(q)`` pays per call for a check of
+  ``q`` and one compiled call (the methods, ``auto``'s fallbacks, the residual test).
+- :func:`solve_lcp` solves one problem: it is ``LCPSolver(M, ...).solve(q)``, run for a
+  clean dense ``M`` as one compiled call.
+- :func:`solve_lcp_kernel` is ``auto`` for a dense ``M`` as a numba function, for other
+  ``@njit`` kernels (no Python in between).
 
 Four methods:
 
@@ -28,7 +32,8 @@ A problem whose solution does not fit in float64 (``solve_lcp([[0.5]], [-1.7e308
 ``q``, not as infeasible.
 
 The numba kernels behind the methods live in :mod:`nscontrol.numerics._lcp_kernels` and can
-be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and figures.
+be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms, the compiled
+entry and the figures.
 """
 
 from __future__ import annotations
