@@ -298,6 +298,10 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
                 buf.setflags(write=False)          # z and w, its views, are read-only
                 return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
                                False)
+            if code == 0:
+                # verified after fallbacks: the log has every run, nothing is left to do
+                return _choose(_logged_runs(buf[2 * n:], n, 0, nlog, buf[:n],
+                                            buf[n:2 * n]))[0]
             if nlog >= 0 and code != kernels.Q_NOT_FINITE:
                 # the runs done are kept: the solver goes on from where the chain stopped
                 solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict,
@@ -552,23 +556,7 @@ class LCPSolver:
 
     def _logged(self, work: NDArray[np.float64], start: int, end: int,
                 z: NDArray[np.float64], w: NDArray[np.float64]) -> list[_Outcome]:
-        """The runs the chain logged in rows ``start:end``, as outcomes. Only the last one's
-        point (``z, w``) and a ray's (kept in ``work``) can be the answer: the others'
-        are not kept."""
-        n = self.n
-        log = work[2 * n:].reshape(dispatch.LOG_ROWS, dispatch.LOG_WIDTH)
-        out = []
-        for k in range(start, end):
-            run, code, its, res, tolerance, limit = log[k].tolist()
-            if k == end - 1:
-                zk, wk = z.copy(), w.copy()
-            elif int(code) == kernels.RAY_TERMINATION:
-                zk, wk = work[:n].copy(), work[n:2 * n].copy()
-            else:
-                zk = wk = _EMPTY_1D
-            out.append(self._outcome(zk, wk, int(code), int(its), res, tolerance,
-                                     _RUN_METHOD[int(run)], int(limit)))
-        return out
+        return _logged_runs(work, self.n, start, end, z, w)
 
     def _limit(self, name: str, max_iter: int | None = None) -> int:
         """The budget of one run of method ``name``: ``max_iter`` when given (else the
@@ -634,11 +622,7 @@ class LCPSolver:
     def _outcome(self, z: NDArray[np.float64], w: NDArray[np.float64], code: int,
                  iterations: int, res: float, tolerance: float, method: str, limit: int
                  ) -> _Outcome:
-        """A run's outcome from a status already reconciled with the residual test."""
-        z.setflags(write=False)
-        w.setflags(write=False)
-        return _Outcome(z, w, STATUSES[code], int(iterations), float(res), method,
-                        float(tolerance), int(limit))
+        return _make_outcome(z, w, code, iterations, res, tolerance, method, limit)
 
     def _verify(self, z: NDArray[np.float64], q: NDArray[np.float64]
                 ) -> tuple[NDArray[np.float64], float, float, bool]:
@@ -832,6 +816,36 @@ def _solved(z: NDArray[np.float64], w: NDArray[np.float64], iterations: int, res
 #: The messages of verified first runs, by (method, residual): formatting a float costs
 #: as much as the rest of building a result.
 _SOLVED_MESSAGES: dict[tuple[str, float], str] = {}
+
+
+def _make_outcome(z: NDArray[np.float64], w: NDArray[np.float64], code: int,
+                  iterations: int, res: float, tolerance: float, method: str, limit: int
+                  ) -> _Outcome:
+    """A run's outcome from a status already reconciled with the residual test."""
+    z.setflags(write=False)
+    w.setflags(write=False)
+    return _Outcome(z, w, STATUSES[code], int(iterations), float(res), method,
+                    float(tolerance), int(limit))
+
+
+def _logged_runs(work: NDArray[np.float64], n: int, start: int, end: int,
+                 z: NDArray[np.float64], w: NDArray[np.float64]) -> list[_Outcome]:
+    """The runs the chain logged in rows ``start:end`` of ``work``, as outcomes. Only the
+    last one's point (``z, w``) and a ray's (kept in ``work``) can be the answer: the
+    others' are not kept."""
+    log = work[2 * n:].reshape(dispatch.LOG_ROWS, dispatch.LOG_WIDTH)
+    out = []
+    for k in range(start, end):
+        run, code, its, res, tolerance, limit = log[k].tolist()
+        if k == end - 1:
+            zk, wk = z.copy(), w.copy()
+        elif int(code) == kernels.RAY_TERMINATION:
+            zk, wk = work[:n].copy(), work[n:2 * n].copy()
+        else:
+            zk = wk = _EMPTY_1D
+        out.append(_make_outcome(zk, wk, int(code), int(its), res, tolerance,
+                                 _RUN_METHOD[int(run)], int(limit)))
+    return out
 
 
 def _choose(tried: list[_Outcome]) -> tuple[LCPResult, _Outcome]:
