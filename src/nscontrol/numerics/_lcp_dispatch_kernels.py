@@ -381,6 +381,31 @@ def solve_dense(M, q, z, w, work, method, tol, max_iter, omega, skip_python):
                      max_iter, omega, work, 0, skip_python)
 
 
+def pack_state(method, run, has_dense, has_bands, sparse_lu, structured, large_symmetric,
+               positive_diagonal):
+    """A reusable solver's state for :func:`solve_packed`, in one integer (bits 0-2 the
+    method, 3-5 the first run, then one bit per flag, in the order of the arguments)."""
+    bits = int(method) | int(run) << 3
+    for k, flag in enumerate((has_dense, has_bands, sparse_lu, structured, large_symmetric,
+                              positive_diagonal)):
+        bits |= int(bool(flag)) << (6 + k)
+    return bits
+
+
+@njit(cache=True)
+def solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega):
+    """:func:`run_chain` from a reusable solver's first run, without warm start, its state
+    packed by :func:`pack_state` and ``z, w``, the work array in one buffer of ``4 n + 24``
+    floats (as :func:`solve_dense_into`): ten arguments for a caller in Python instead of
+    twenty-four."""
+    n = q.shape[0]
+    z = buf[:n]
+    return run_chain(M, (bits >> 6) & 1 == 1, lower, diag, upper, (bits >> 7) & 1 == 1,
+                     (bits >> 8) & 1 == 1, q, z, buf[n:2 * n], z, False, bits & 7,
+                     (bits >> 3) & 7, 0, (bits >> 9) & 1 == 1, (bits >> 10) & 1 == 1,
+                     (bits >> 11) & 1 == 1, tol, max_iter, omega, buf[2 * n:], 0, False)
+
+
 @njit(cache=True)
 def solve_dense_into(M, q, buf, method, tol, max_iter, omega):
     """:func:`solve_dense` with ``z, w`` and the work array in one buffer of ``4 n + 24``

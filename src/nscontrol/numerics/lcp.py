@@ -423,6 +423,13 @@ class LCPSolver:
                                                       large_symmetric))
         self.first_method: str = dispatch.RUN_NAMES[self._first_run]
         self._rescaled_solvers: dict[int, LCPSolver] = {}
+        # the per-call arguments of dispatch.solve_packed, fixed once
+        flags = self._flags or (False, False)
+        self._packed = (
+            _EMPTY_2D if self._sparse else M, *(self._bands or _NO_BANDS),
+            dispatch.pack_state(self._method_code if self._flags else self._first_run,
+                                self._first_run, not self._sparse, self._bands is not None,
+                                self._sparse or self._banded_dense, self._structured, *flags))
 
     def __repr__(self) -> str:
         kind = "sparse" if self._sparse else "dense"
@@ -459,21 +466,28 @@ class LCPSolver:
                 and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == self.n):
             q = self._check_q(q)
         n = self.n
-        z, w = np.empty(n), np.empty(n)
-        work = np.empty(2 * n + _LOG_SIZE)
         if z0 is None:
-            z0v, warm = z, False                   # (z0 is not read without warm)
-        else:
-            z0v, warm = as_vector("z0", z0, size=n), True
-        code, run, its, res, tolerance, tried, nlog = self._chain(
-            q, z, w, z0v, warm, self._first_run, 0, work, 0)
-        if code == 0 and nlog == 1:
             # the per-call path of a reusable solver: one compiled call, whose status is
             # already reconciled with the residual test (kernels.certify)
-            return _solved(z, w, its, res, _RUN_METHOD[run], tolerance)
+            M, lower, diag, upper, bits = self._packed
+            buf = np.empty(4 * n + _LOG_SIZE)
+            code, run, its, res, tolerance, tried, nlog = dispatch.solve_packed(
+                M, lower, diag, upper, q, buf, bits, self.tol, self.max_iter or 0, self.omega)
+            if code == 0 and nlog == 1:
+                buf.setflags(write=False)          # z and w, its views, are read-only
+                return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
+                               False)
+            z, w, work = buf[:n], buf[n:2 * n], buf[2 * n:]
+            z0v = None
+        else:
+            z, w = np.empty(n), np.empty(n)
+            work = np.empty(2 * n + _LOG_SIZE)
+            z0v = as_vector("z0", z0, size=n)
+            code, run, its, res, tolerance, tried, nlog = self._chain(
+                q, z, w, z0v, True, self._first_run, 0, work, 0)
         if code == kernels.Q_NOT_FINITE:
             check_finite("q", q)
-        return self._finish(q, z0v if warm else None, z, w, work, (code, run, tried, nlog))
+        return self._finish(q, z0v, z, w, work, (code, run, tried, nlog))
 
     def _chain(self, q: NDArray[np.float64], z: NDArray[np.float64], w: NDArray[np.float64],
                z0: NDArray[np.float64], warm: bool, run: int, tried: int,
