@@ -15,7 +15,20 @@ impact reaches an end of the chain (N <= 1000) and only partly in the middle of 
 through temporary ``.npy`` files; its Lemke is skipped above N = 1000 (dense n^2 tableau:
 seconds at N = 1000, minutes at 10000) and its PGS above N = 100 (10^4 sweeps of O(N^2)).
 
-``ratio`` = Siconos seconds per solve / ours (> 1: we are faster). ``accuracy`` holds both
+Like with like, both warm, both printed: ``ratio`` compares the whole Python calls
+(``solve_lcp(M, q)`` against Siconos's ``sn.LCP(M, q)``, ``SolverOptions``, ``z, w`` and
+the solve), ``solver_ratio`` the solvers alone (``LCPSolver(M).solve(q)`` with the solver
+built once, against Siconos's solve on a problem and options built once); ``reusable``
+records are solver alone against solver alone, and ``kernel_ratio`` sets the bare compiled
+entry (``solve_lcp_kernel``, or the method's kernel) called from Python against Siconos's
+solver alone. ``ratio`` = Siconos seconds per solve / ours (> 1: we are faster).
+
+Siconos's own 20 LCP test problems (``shared/benchmarks/siconos-lcp``, skipped when absent;
+not in ``--quick``) are solved by ``solve_lcp`` and Siconos's Lemke, whole call against
+whole call: records ``lcp/siconos-suite/<problem>`` with each side's verdict (right when it
+returns a verified solution of a feasible problem, or no solution of the one infeasible
+problem), and ``lcp/siconos-suite/summary`` (verdicts right, the smallest time ratio at
+n <= 9, the cost of ``auto``'s fallbacks where Lemke alone fails). ``accuracy`` holds both
 residuals (``max |min(z, Mz + q)| / (1 + max|q|)``), both statuses, ``max |z_ours - z_ref|``
 and, for the stack, both errors against the analytic impulses.
 
@@ -29,6 +42,7 @@ Run: ``nscontrol bench lcp --json`` (``--quick`` for a smoke run).
 
 # No `from __future__ import annotations`: the CLI loads this file without registering it in
 # sys.modules, and dataclasses then cannot resolve string annotations.
+import os
 import tempfile
 import time
 from collections.abc import Iterator
@@ -40,7 +54,7 @@ import numpy as np
 from harness import run_siconos, siconos_available, siconos_version
 
 from nscontrol.numerics import _lcp_kernels as kernels
-from nscontrol.numerics.lcp import LCPSolver, solve_lcp
+from nscontrol.numerics.lcp import LCPSolver, solve_lcp, solve_lcp_kernel
 from nscontrol.testing.lcp_problems import random_p_matrix, stack_delassus
 
 SICONOS_LEMKE_MAX = 1000
@@ -75,7 +89,7 @@ class Case:
 def cases(quick: bool) -> list[Case]:
     rng = np.random.default_rng(20261122)
     out = []
-    for n in (10,) if quick else (10, 100):
+    for n in (3, 10) if quick else (3, 10, 100):
         out.append(Case("random-P", n, random_p_matrix(n, rng), rng.standard_normal(n),
                         ("lemke", "auto", "reusable")))
     for n in (10,) if quick else (10, 100):
@@ -129,6 +143,9 @@ def kernel_time(case: Case, method: str, budget: float) -> float | None:
         return _seconds_per_call(
             lambda: kernels.tridiagonal_lcp_kernel(lower, diag, upper, q, z, w, 0), budget)
     M = case.dense()
+    if method == "auto" and isinstance(case.M, np.ndarray):
+        # the compiled entry of auto (choice, fallbacks, verification) for other kernels
+        return _seconds_per_call(lambda: solve_lcp_kernel(M, q, z, w, 1e-12, 0), budget)
     if method in ("lemke", "reusable"):    # reusable: what auto picks for these (dense) M
         return _seconds_per_call(lambda: kernels.lemke_kernel(M, q, z, w, 0), budget)
     if method == "pgs":
@@ -162,49 +179,70 @@ def _seconds_per_call(fn, budget: float) -> float:
     return times[len(times) // 2]
 
 
-def solve_and_time(case: Case, method: str, budget: float) -> tuple[Any, float]:
-    """Our result and seconds per solve (``reusable``: ``LCPSolver(M)`` built once, not
-    timed, then ``solver.solve(q)``; otherwise ``solve_lcp`` with everything included)."""
+def solve_and_time(case: Case, method: str, budget: float) -> tuple[Any, float, float]:
+    """Our result, seconds per whole call and seconds per solve of a solver built once.
+
+    Whole call: ``solve_lcp(M, q, method=...)`` (validation, analysis, solve, verification,
+    result); ``reusable`` is ``LCPSolver(M)`` built outside the timing, so both figures are
+    its ``solve(q)``. Solver alone: ``LCPSolver(M, method).solve(q)``, built once."""
     M, q = case.M, case.q
     if method in ("lemke", "pgs"):
         M = case.dense()
+    solver_method = "auto" if method == "reusable" else method
+    solver = LCPSolver(M, solver_method)
+    alone = _seconds_per_call(lambda: solver.solve(q), budget)
     if method == "reusable":
-        solver = LCPSolver(M)
-        return solver.solve(q), _seconds_per_call(lambda: solver.solve(q), budget)
+        return solver.solve(q), alone, alone
     res = solve_lcp(M, q, method=method)
-    return res, _seconds_per_call(lambda: solve_lcp(M, q, method=method), budget)
+    return res, _seconds_per_call(lambda: solve_lcp(M, q, method=method), budget), alone
+
+
+def _compare(out: dict, ref: dict, method: str) -> None:
+    """The ratios, like with like: whole call against whole call (``ratio``; ``reusable``:
+    solver alone against solver alone) and solver alone against solver alone."""
+    ref_whole, ref_alone = ref["whole_s_per_solve"], ref["s_per_solve"]
+    ref_s = ref_alone if method == "reusable" else ref_whole
+    out.update(reference_s_per_solve=ref_s, ratio=ref_s / out["ours_s_per_solve"],
+               reference_whole_s_per_solve=ref_whole, reference_solver_s_per_solve=ref_alone,
+               solver_ratio=ref_alone / out["ours_solver_s_per_solve"])
+    kernel = out.get("ours_kernel_s_per_solve")
+    if kernel:
+        out["kernel_ratio"] = ref_alone / kernel
 
 
 def interleave(case: Case, records: list[dict], budget: float) -> None:
     """Per-call figures of microseconds drift with the load of a shared machine between
     the Siconos run (before all of ours) and ours: time Siconos on this case again and ours
     once more, and keep the minimum of the two measurements of each side (order: Siconos,
-    ours, Siconos, ours)."""
+    ours, Siconos, ours), for the whole calls and the solvers alone."""
     again = siconos_results([case], budget)
     for rec in records:
         method = rec["scenario"].rsplit("/", 1)[1]
         ref = again.get((case.name, COUNTERPART[method]))
         if ref is None or rec["reference_s_per_solve"] is None:
             continue
-        _, ours = solve_and_time(case, method, budget)
+        _, ours, alone = solve_and_time(case, method, budget)
         rec["ours_s_per_solve"] = min(rec["ours_s_per_solve"], ours)
-        rec["reference_s_per_solve"] = min(rec["reference_s_per_solve"], ref["s_per_solve"])
-        rec["ratio"] = rec["reference_s_per_solve"] / rec["ours_s_per_solve"]
+        rec["ours_solver_s_per_solve"] = min(rec["ours_solver_s_per_solve"], alone)
+        best = {"whole_s_per_solve": min(rec["reference_whole_s_per_solve"],
+                                         ref["whole_s_per_solve"]),
+                "s_per_solve": min(rec["reference_solver_s_per_solve"], ref["s_per_solve"])}
+        _compare(rec, best, method)
         rec["timing"] = "min of two interleaved runs per side (Siconos, ours, Siconos, ours)"
 
 
 def record(case: Case, method: str, ref: dict | None, ref_note: str | None,
            budget: float) -> dict:
-    res, ours = solve_and_time(case, method, budget)
+    res, ours, alone = solve_and_time(case, method, budget)
     accuracy: dict[str, Any] = {"ours_status": res.status, "ours_method": res.method,
                                 "ours_residual": res.residual, "ours_iterations": res.iterations}
     if case.exact is not None:
         accuracy["ours_max_err_vs_analytic"] = float(np.abs(res.z - case.exact).max())
     out = {"scenario": f"lcp/{case.family}/{method}", "size": case.size,
-           "ours_s_per_solve": ours, "reference": None, "reference_solver": None,
-           "reference_s_per_solve": None, "ratio": None, "accuracy": accuracy}
-    kernel = kernel_time(case, method, budget)
-    out["ours_kernel_s_per_solve"] = kernel
+           "ours_s_per_solve": ours, "ours_solver_s_per_solve": alone, "reference": None,
+           "reference_solver": None, "reference_s_per_solve": None, "ratio": None,
+           "accuracy": accuracy}
+    out["ours_kernel_s_per_solve"] = kernel_time(case, method, budget)
     if ref is None:
         out["note"] = ref_note
         return out
@@ -214,10 +252,8 @@ def record(case: Case, method: str, ref: dict | None, ref_note: str | None,
                     max_abs_dz=float(np.abs(res.z - z_ref).max()))
     if case.exact is not None:
         accuracy["reference_max_err_vs_analytic"] = float(np.abs(z_ref - case.exact).max())
-    out.update(reference=siconos_version(), reference_solver=f"siconos {ref['method']}",
-               reference_s_per_solve=ref["s_per_solve"], ratio=ref["s_per_solve"] / ours)
-    if kernel:
-        out["kernel_ratio"] = ref["s_per_solve"] / kernel
+    out.update(reference=siconos_version(), reference_solver=f"siconos {ref['method']}")
+    _compare(out, ref, method)
     return out
 
 
@@ -227,6 +263,8 @@ def _warm_up_kernels() -> None:
     kernels.lemke_kernel(M, q, z, w, 0)
     kernels.pgs_kernel(M, q, z, w, 1e-12, 10, 1.0)
     kernels.tridiagonal_lcp_kernel(b, np.diagonal(M).copy(), b, q, z, w, 0)
+    solve_lcp_kernel(M, q, z, w, 1e-12, 0)
+    solve_lcp(M, q)
 
 
 def run(quick: bool = False) -> Iterator[dict]:
@@ -254,4 +292,183 @@ def run(quick: bool = False) -> Iterator[dict]:
         if ok and case.family in INTERLEAVED_FAMILIES:
             interleave(case, records, budget)
         yield from records
+    if not quick:
+        yield from suite_records(budget, ok, why)
 
+
+
+# ----------------------------------------------------------------------------- Siconos's suite
+
+#: The one problem of the suite without solution (``shared/benchmarks/README.md``: an LP
+#: feasibility test, an exact MILP and enumeration agree); every other one has a solution.
+INFEASIBLE = {"lcp_Pang_isolated_sol_perturbed"}
+#: Problems where Lemke alone does not end with a verified solution (``auto`` falls back):
+#: the time of the fallbacks is the whole call minus that of ``method="lemke"``.
+FALLBACK_PROBLEMS = ("lcp_CPS_3", "lcp_Pang_isolated_sol_perturbed")
+
+
+def _suite_dir() -> Path:
+    """``shared/benchmarks/siconos-lcp`` in the nearest folder above this one that has it
+    (``$NSCONTROL_LCP_SUITE_DIR`` first)."""
+    env = os.environ.get("NSCONTROL_LCP_SUITE_DIR")
+    if env:
+        return Path(env)
+    for parent in Path(__file__).resolve().parents:
+        candidate = parent / "shared" / "benchmarks" / "siconos-lcp"
+        if candidate.is_dir():
+            return candidate
+    return Path("shared/benchmarks/siconos-lcp")
+
+
+def read_siconos_lcp(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, q)`` of one of Siconos's ``lcp_*.dat`` files: ``n``, a matrix (storage 0:
+    dense, values column-major; 1: sparse block, blocks row by row, each column-major),
+    then ``q``; anything after ``q`` is a comment."""
+    tokens = path.read_text().split()
+    pos = 0
+
+    def take(k: int = 1) -> list[str]:
+        nonlocal pos
+        out = tokens[pos:pos + k]
+        pos += k
+        return out
+
+    n = int(take()[0])
+    storage, rows, cols = (int(t) for t in take(3))
+    if storage == 0:
+        rows, cols = (int(t) for t in take(2))
+        M = np.array(take(rows * cols), dtype=float).reshape((cols, rows)).T
+    else:
+        take()                                             # number of blocks
+        brows, bcols = (int(t) for t in take(2))
+        row_ends = [int(t) for t in take(brows)]
+        col_ends = [int(t) for t in take(bcols)]
+        filled1, filled2 = (int(t) for t in take(2))
+        pointers = [int(t) for t in take(filled1)]
+        block_cols = [int(t) for t in take(filled2)]
+        M = np.zeros((rows, cols))
+        for bi in range(brows):
+            r0 = row_ends[bi - 1] if bi else 0
+            for k in range(pointers[bi], pointers[bi + 1]):
+                bj = block_cols[k]
+                c0 = col_ends[bj - 1] if bj else 0
+                h, w = row_ends[bi] - r0, col_ends[bj] - c0
+                take()                                     # the block's number
+                M[r0:r0 + h, c0:c0 + w] = np.array(take(h * w), dtype=float).reshape((w, h)).T
+    q = np.array(take(rows), dtype=float)
+    assert M.shape == (n, n), (path.name, M.shape)
+    return np.ascontiguousarray(M), q
+
+
+def _certified(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> tuple[float, bool]:
+    """The residual ``max|min(z, Mz + q)| / (1 + max|q|)`` of a point and whether it
+    certifies a solution: at most the round-off bound of evaluating ``M z + q`` in float64,
+    ``2 (n + 1) eps (max(|M||z|) + max|q|) / (1 + max|q|)`` (Higham §3.1, the bound
+    ``solve_lcp`` itself applies with ``tol`` = 0), plus 1e-12 for a solver's own
+    stopping tolerance; the same test for both sides."""
+    n = q.shape[0]
+    w = M @ z + q
+    scale = 1.0 + float(np.max(np.abs(q), initial=0.0))
+    res = float(np.max(np.abs(np.minimum(z, w)), initial=0.0)) / scale
+    mz = float(np.max(np.abs(M) @ np.abs(z), initial=0.0))
+    bound = 2 * (n + 1) * np.finfo(float).eps * (mz + scale) / scale + 1e-12
+    return res, bool(np.all(np.isfinite(z)) and res <= bound)
+
+
+def _suite_ours(problems: dict[str, tuple[np.ndarray, np.ndarray]], budget: float
+                ) -> dict[str, dict]:
+    out = {}
+    for name, (M, q) in problems.items():
+        res = solve_lcp(M, q)
+        whole = _seconds_per_call(lambda M=M, q=q: solve_lcp(M, q), budget)
+        solver = LCPSolver(M)
+        alone = _seconds_per_call(lambda s=solver, q=q: s.solve(q), budget)
+        rec = {"res": res, "whole": whole, "alone": alone}
+        if name in FALLBACK_PROBLEMS:
+            rec["lemke_only"] = _seconds_per_call(
+                lambda M=M, q=q: solve_lcp(M, q, method="lemke"), budget)
+        out[name] = rec
+    return out
+
+
+def _min_suite(a: dict[str, dict], b: dict[str, dict]) -> None:
+    """``a`` updated with the smaller time of each measurement of ``b``."""
+    for name, rec in b.items():
+        for key in ("whole", "alone", "lemke_only"):
+            if key in rec:
+                a[name][key] = min(a[name][key], rec[key])
+
+
+def suite_records(budget: float, ok: bool, why: str) -> Iterator[dict]:
+    """Siconos's 20 LCP test problems: ours (``solve_lcp``, ``auto``) against Siconos's
+    Lemke, whole call against whole call and solver alone against solver alone, both warm,
+    timed twice interleaved (Siconos, ours, Siconos, ours; the minimum of each side)."""
+    folder = _suite_dir()
+    files = sorted(folder.glob("lcp_*.dat")) if folder.is_dir() else []
+    if not files:
+        return
+    problems = {f.stem: read_siconos_lcp(f) for f in files}
+    cases_ = [Case(name, q.shape[0], M, q, ("auto",)) for name, (M, q) in problems.items()]
+    refs: dict[tuple[str, str], dict] = {}
+    ours = _suite_ours(problems, budget)
+    if ok:
+        refs = siconos_results(cases_, budget)
+        again = siconos_results(cases_, budget)
+        for key, rec in again.items():
+            for field_ in ("s_per_solve", "whole_s_per_solve"):
+                refs[key][field_] = min(refs[key][field_], rec[field_])
+        _min_suite(ours, _suite_ours(problems, budget))
+    right_ours = right_ref = 0
+    small_ratios, small_solver_ratios, fallback = [], [], {}
+    for case, (name, (M, q)) in zip(cases_, problems.items(), strict=True):
+        n = q.shape[0]
+        mine = ours[name]
+        res = mine["res"]
+        feasible = name not in INFEASIBLE
+        res_ours, cert_ours = _certified(M, q, res.z)
+        ours_right = (res.success and cert_ours) if feasible else not res.success
+        right_ours += ours_right
+        accuracy: dict[str, Any] = {"ours_status": res.status, "ours_method": res.method,
+                                    "ours_residual": res_ours, "feasible": feasible,
+                                    "ours_right": ours_right, "ours_message": res.message}
+        out = {"scenario": f"lcp/siconos-suite/{name}", "size": n,
+               "ours_s_per_solve": mine["whole"], "ours_solver_s_per_solve": mine["alone"],
+               "reference": None, "reference_solver": None, "reference_s_per_solve": None,
+               "ratio": None, "accuracy": accuracy}
+        if "lemke_only" in mine:
+            out["ours_lemke_only_s_per_solve"] = mine["lemke_only"]
+            out["fallback_s"] = mine["whole"] - mine["lemke_only"]
+            fallback[name] = out["fallback_s"]
+        ref = refs.get((case.name, "lemke"))
+        if ref is None:
+            out["note"] = why or "siconos gave no result"
+            yield out
+            continue
+        res_ref, cert_ref = _certified(M, q, np.asarray(ref["z"]))
+        ref_right = (ref["info"] == 0 and cert_ref) if feasible else not (
+            ref["info"] == 0 and cert_ref)
+        right_ref += ref_right
+        accuracy.update(reference_info=ref["info"], reference_residual=res_ref,
+                        reference_right=ref_right)
+        out.update(reference=siconos_version(), reference_solver="siconos lemke")
+        _compare(out, ref, "auto")
+        if n <= 9:
+            small_ratios.append(out["ratio"])
+            small_solver_ratios.append(out["solver_ratio"])
+        yield out
+    summary = {"scenario": "lcp/siconos-suite/summary", "size": len(problems),
+               "ours_s_per_solve": float(np.median([r["whole"] for r in ours.values()])),
+               "reference": siconos_version() if refs else None, "reference_solver":
+               "siconos lemke" if refs else None, "reference_s_per_solve": None, "ratio": None,
+               "accuracy": {"ours_right": f"{right_ours}/{len(problems)}",
+                            "reference_right": f"{right_ref}/{len(problems)}" if refs
+                            else None},
+               "fallback_s": fallback}
+    if small_ratios:
+        summary.update(min_ratio_n_le_9=min(small_ratios),
+                       median_ratio_n_le_9=float(np.median(small_ratios)),
+                       min_solver_ratio_n_le_9=min(small_solver_ratios),
+                       median_solver_ratio_n_le_9=float(np.median(small_solver_ratios)))
+    else:
+        summary["note"] = why
+    yield summary

@@ -181,7 +181,7 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
 #: Step name to the kernel modules (their dotted path in the package, as
 #: :func:`nscontrol._progress.uncompiled_kernel_modules` names them) its runs compile.
 COMPILES: dict[str, tuple[str, ...]] = {
-    "LCP solvers": ("numerics._lcp_kernels",),
+    "LCP solvers": ("numerics._lcp_kernels", "numerics._lcp_dispatch_kernels"),
     "event-driven and Moreau-Jean mechanics": (
         "numerics._lti_kernels", "simulate._event_kernels", "simulate._moreau_jean_kernels",
         "simulate._mj_linearised_kernel"),

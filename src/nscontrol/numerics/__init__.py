@@ -17,6 +17,7 @@ from .._lazy import lazy_exports
 _EXPORTS: dict[str, str] = {
     # lcp.py
     "LCPResult": "lcp", "LCPSolver": "lcp", "solve_lcp": "lcp", "residual": "lcp",
+    "solve_lcp_kernel": "lcp",
     # friction_contact.py
     "FrictionContactResult": "friction_contact", "solve_friction_contact": "friction_contact",
     "friction_residual": "friction_contact", "contact_states": "friction_contact",

@@ -183,14 +183,14 @@ def _matvec_plus_abs(M, z, q, w_out):
 
 # --------------------------------------------------------------------------------- Lemke
 @njit(cache=True)
-def _lemke_entering_column(M, binv, var, n, col):
-    """Column of the current tableau for variable ``var`` (w_j: j, z_j: n + j, z0: 2n)."""
+def _lemke_entering_column(M, binv, var, n, col, mcol):
+    """Column of the current tableau for variable ``var`` (w_j: j, z_j: n + j, z0: 2n);
+    ``mcol`` is scratch of length n (a contiguous copy of ``M[:, j]``, for BLAS gemv)."""
     if var < n:
         for i in range(n):
             col[i] = binv[i, var]
     elif var < 2 * n:
         j = var - n
-        mcol = np.empty(n)  # contiguous copy for BLAS gemv
         for k in range(n):
             mcol[k] = M[k, j]
         # BLAS gemv is 2-3x faster than the loop for mid-sized n; for tiny n its call
@@ -287,14 +287,14 @@ def _lemke_pivot(binv, rhs, col, r, n, prow):
 
 
 @njit(cache=True)
-def _lemke_refine(M, q, binv, rhs, basis, n):
+def _lemke_refine(M, q, binv, rhs, basis, n, r):
     """Two steps of iterative refinement of the basic solution ``x = B^{-1} q``.
 
     ``B^{-1}`` accumulates round-off over the pivots; the basis itself is exact, so
     ``x += B^{-1}(q - B x)`` (with ``B`` rebuilt from the basis: column ``e_j`` for ``w_j``,
     ``-M[:, j]`` for ``z_j``, ``-1`` for ``z0``) restores full accuracy at O(n^2) cost.
+    ``r`` is scratch of length n.
     """
-    r = np.empty(n)
     for _ in range(2):
         for i in range(n):
             r[i] = q[i]
@@ -360,12 +360,24 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
     if qmin >= 0.0:
         return SOLVED, 0
 
-    binv = np.eye(n)
-    rhs = q.copy()
-    basis = np.arange(n)  # row i holds variable basis[i]; w_i = i, z_i = n + i, z0 = 2n
-    col = np.empty(n)
-    prow = np.empty(n)
-    cand = np.empty(n, dtype=np.int64)
+    # one float and one integer allocation (on small problems the allocations cost more
+    # than the pivots): B^-1, B^-1 q, the entering column, the pivot row, M[:, j], scratch
+    work = np.empty(n * n + 5 * n)
+    binv = work[:n * n].reshape((n, n))
+    rhs = work[n * n:n * n + n]
+    col = work[n * n + n:n * n + 2 * n]
+    prow = work[n * n + 2 * n:n * n + 3 * n]
+    mcol = work[n * n + 3 * n:n * n + 4 * n]
+    scratch = work[n * n + 4 * n:]
+    for i in range(n):
+        rhs[i] = q[i]
+        for j in range(n):
+            binv[i, j] = 1.0 if i == j else 0.0
+    iwork = np.empty(2 * n, dtype=np.int64)
+    basis = iwork[:n]  # row i holds variable basis[i]; w_i = i, z_i = n + i, z0 = 2n
+    cand = iwork[n:]
+    for i in range(n):
+        basis[i] = i
 
     # First pivot: z0 enters at the row of the most negative q (largest index among ties is
     # the lexicographic choice for the column -d = -1).
@@ -383,7 +395,7 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
     status = MAX_ITER
     while it < max_iter:
         entering = leaving + n if leaving < n else leaving - n
-        _lemke_entering_column(M, binv, entering, n, col)
+        _lemke_entering_column(M, binv, entering, n, col, mcol)
         r = _lemke_ratio_test(binv, rhs, col, basis, n, cand)
         if r < 0:
             status = RAY_TERMINATION
@@ -400,7 +412,7 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
             break
 
     if status == SOLVED:
-        _lemke_refine(M, q, binv, rhs, basis, n)
+        _lemke_refine(M, q, binv, rhs, basis, n, scratch)
     # Read the basic point off the tableau.
     for i in range(n):
         z_out[i] = 0.0

@@ -1,11 +1,15 @@
 """Linear complementarity problems: ``w = M z + q,  0 <= z ⟂ w >= 0``.
 
-Two entry points, one code path:
+Three entry points, one analysis and one compiled chain of methods
+(:mod:`nscontrol.numerics._lcp_dispatch_kernels`):
 
-- :class:`LCPSolver` validates and analyses ``M`` once (structure, method choice, norms)
-  and then solves for many right-hand sides: ``LCPSolver(M).solve(q)`` pays per call only
-  for a check of ``q``, the compiled kernel and the residual check.
-- :func:`solve_lcp` solves one problem: it is ``LCPSolver(M, ...).solve(q)``.
+- :class:`LCPSolver` validates and analyses ``M`` once (structure, method choice) and then
+  solves for many right-hand sides: ``LCPSolver(M).solve(q)`` pays per call for a check of
+  ``q`` and one compiled call (the methods, ``auto``'s fallbacks, the residual test).
+- :func:`solve_lcp` solves one problem: it is ``LCPSolver(M, ...).solve(q)``, run for a
+  clean dense ``M`` as one compiled call.
+- :func:`solve_lcp_kernel` is ``auto`` for a dense ``M`` as a numba function, for other
+  ``@njit`` kernels (no Python in between).
 
 Four methods:
 
@@ -28,13 +32,13 @@ A problem whose solution does not fit in float64 (``solve_lcp([[0.5]], [-1.7e308
 ``q``, not as infeasible.
 
 The numba kernels behind the methods live in :mod:`nscontrol.numerics._lcp_kernels` and can
-be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms and figures.
+be called from other ``@njit`` code. See ``docs/lcp.md`` for the algorithms, the compiled
+entry and the figures.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any, Literal, NamedTuple
@@ -53,33 +57,37 @@ from .._validation import (
     check_positive,
 )
 from ..errors import BudgetExceededError, DimensionError, ModelError, SolverError
+from . import _lcp_dispatch_kernels as dispatch
 from . import _lcp_kernels as kernels
+from ._lcp_dispatch_kernels import AUTO_BANDED_MIN_SIZE as AUTO_BANDED_MIN_SIZE
+from ._lcp_dispatch_kernels import AUTO_DENSE_HOWARD_MAX_SIZE as AUTO_DENSE_HOWARD_MAX_SIZE
+from ._lcp_dispatch_kernels import AUTO_LEMKE_MAX_SIZE as AUTO_LEMKE_MAX_SIZE
+from ._lcp_dispatch_kernels import AUTO_PGS_FALLBACK_SWEEPS as AUTO_PGS_FALLBACK_SWEEPS
+from ._lcp_dispatch_kernels import AUTO_PGS_MIN_SIZE as AUTO_PGS_MIN_SIZE
+from ._lcp_dispatch_kernels import PGS_SWEEPS as PGS_SWEEPS
+from ._lcp_dispatch_kernels import solve_lcp_kernel as solve_lcp_kernel
 
-__all__ = ["LCPResult", "LCPSolver", "solve_lcp", "residual"]
+__all__ = ["LCPResult", "LCPSolver", "solve_lcp", "solve_lcp_kernel", "residual"]
 
 Method = Literal["auto", "lemke", "pgs", "banded"]
 METHODS = ("auto", "lemke", "pgs", "banded")
 STATUSES = ("solved", "ray_termination", "max_iter", "numerical_failure", "overflow")
 
-#: ``auto`` uses PGS instead of Lemke for symmetric PSD problems larger than this.
-AUTO_PGS_MIN_SIZE = 400
-#: ``auto`` does not fall back to dense Lemke or PGS above this size (memory n^2, time n^3).
-AUTO_LEMKE_MAX_SIZE = 3000
-#: PGS's default budget of sweeps (``max_iter``).
-PGS_SWEEPS = 10_000
 #: Sweeps of ``auto``'s PGS before it pays for a definiteness test (see ``_run_pgs_auto``).
 AUTO_PGS_PROBE_SWEEPS = 100
-#: Sweeps of PGS as a fallback of ``auto`` on a matrix it is not known to converge for
-#: (a cost comparable to dense Lemke's O(n^3)).
-AUTO_PGS_FALLBACK_SWEEPS = 1000
-#: ``auto`` tries ``banded`` first on dense matrices this large with a narrow band.
-AUTO_BANDED_MIN_SIZE = 64
-#: ``auto`` falls back to Howard's iteration with dense LU (O(n^3) per iteration) up to here.
-AUTO_DENSE_HOWARD_MAX_SIZE = 200
 #: A failed solve is retried on the problem rescaled by powers of two (exact) when
 #: ``max|M|``, ``max|q|`` or their ratio lies outside ``2^(+-this)``: the scales at which
 #: the float64 arithmetic of a solver can overflow or underflow.
 RESCALE_EXPONENT = 64
+
+_F64 = np.dtype(np.float64)
+_LOG_SIZE = dispatch.LOG_ROWS * dispatch.LOG_WIDTH
+_EMPTY_1D = np.empty(0)
+_EMPTY_1D.setflags(write=False)
+_EMPTY_2D = np.empty((0, 0))
+_NO_BANDS = (np.empty(0), np.empty(0), np.empty(0))
+#: The method that a run reports (``auto``'s two forms of PGS are PGS).
+_RUN_METHOD = ("lemke", "pgs", "banded", "pgs", "pgs")
 
 
 @dataclass(frozen=True)
@@ -272,6 +280,34 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
+    if (z0 is None and type(M) is np.ndarray and type(q) is np.ndarray and M.dtype == _F64
+            and q.dtype == _F64 and M.ndim == 2 and q.ndim == 1
+            and M.shape[0] == M.shape[1] == q.shape[0] and type(tol) is float
+            and 0.0 < tol < math.inf and type(omega) is float and 0.0 < omega < 2.0
+            and (max_iter is None or (type(max_iter) is int and max_iter >= 1))
+            and (strict is False or strict is True) and type(method) is str
+            and method in dispatch.METHOD_CODES):
+        mflags, qflags = M.flags, q.flags
+        if mflags.c_contiguous and mflags.writeable and qflags.c_contiguous and qflags.writeable:
+            # the per-call path: LCPSolver's analysis and chain, in one compiled call
+            n = q.shape[0]
+            buf = np.empty(4 * n + _LOG_SIZE)
+            code, run, its, res, tolerance, tried, nlog = dispatch.solve_dense_into(
+                M, q, buf, dispatch.METHOD_CODES[method], tol, max_iter or 0, omega)
+            if code == 0 and nlog == 1:
+                buf.setflags(write=False)          # z and w, its views, are read-only
+                return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
+                               False)
+            if code == 0:
+                # verified after fallbacks: the log has every run, nothing is left to do
+                return _choose(_logged_runs(buf[2 * n:], n, 0, nlog, buf[:n],
+                                            buf[n:2 * n]))[0]
+            if nlog >= 0 and code != kernels.Q_NOT_FINITE:
+                # the runs done are kept: the solver goes on from where the chain stopped
+                solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict,
+                                   omega=omega)
+                return solver._finish(q, None, buf[:n], buf[n:2 * n], buf[2 * n:],
+                                      (code, run, tried, nlog))
     solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict, omega=omega)
     return solver.solve(q, z0=z0)
 
@@ -312,12 +348,13 @@ _UNITS = {"lemke": "pivots", "pgs": "sweeps", "banded": "iterations"}
 class LCPSolver:
     """An LCP solver for one matrix ``M`` and many right-hand sides ``q``.
 
-    The constructor validates ``M`` and the options, reads its structure (tridiagonal
-    bands, sparsity, bandwidth, symmetry where ``auto`` needs it), chooses ``auto``'s first
-    method and computes ``||M||_inf`` for the residual check. :meth:`solve` then checks
-    ``q`` (type, length, finiteness inside the compiled kernel), runs the kernel and
-    verifies the residual: on a dense ``n = 10`` problem a few microseconds above the bare
-    kernel (``docs/lcp.md`` has the figures). :func:`solve_lcp` is this class used once.
+    The constructor validates ``M`` and the options and reads its structure once, in one
+    compiled scan for a dense ``M`` (finiteness, tridiagonal bands, bandwidth, symmetry and
+    diagonal where ``auto`` needs them): ``auto``'s first method and its fallbacks follow
+    from it. :meth:`solve` then checks ``q`` and makes one compiled call that runs the
+    methods and verifies the residual (``auto``'s fallbacks included; only ``auto``'s PGS
+    for large symmetric ``M`` and Howard's iteration with sparse LU go through Python).
+    :func:`solve_lcp` runs the same analysis and the same compiled chain.
 
     Parameters
     ----------
@@ -353,6 +390,7 @@ class LCPSolver:
         if not isinstance(method, str) or method not in METHODS:
             raise ModelError(f"method: expected one of {list(METHODS)}, got {method!r}")
         self.method = method
+        self._method_code: int = dispatch.METHOD_CODES[method]
         # plain floats in range skip the general checks (solve_lcp pays these per call)
         self.tol = tol if type(tol) is float and 0.0 < tol < math.inf else check_positive(
             "tol", tol)
@@ -361,31 +399,37 @@ class LCPSolver:
         self.max_iter = None if max_iter is None else check_integer("max_iter", max_iter,
                                                                      minimum=1)
         self.strict = check_bool("strict", strict)
-        if (type(M) is np.ndarray and M.dtype == np.float64 and M.ndim == 2
-                and M.flags.c_contiguous and M.flags.writeable and M.shape[0] == M.shape[1]):
-            # the common case in one compiled scan: finiteness, tridiagonality
-            finite, tridiagonal = kernels.dense_structure(M)
+        M = M if _clean(M, 2, finite=False) else _as_lcp_matrix(M)
+        self._M = M
+        self.n: int = int(M.shape[0])
+        if isinstance(M, np.ndarray):
+            # one compiled scan: finiteness, tridiagonality, band, symmetry, diagonal
+            finite, tridiagonal, banded, large_symmetric, positive_diagonal = (
+                dispatch.analyse_dense(M))
             if not finite:
-                check_finite("M", M)
-            self._M = self._dense = M
+                check_finite("M", M)               # raises, with the count of bad entries
             self._bands = _bands_of(M) if tridiagonal else None
+            self._banded_dense = bool(banded)
+            self._flags: tuple[bool, bool] | None = (bool(large_symmetric),
+                                                     bool(positive_diagonal))
         else:
-            self._M = _as_lcp_matrix(M)
-            self._bands = _tridiagonal_bands(self._M)
-        self.n: int = int(self._M.shape[0])
-        self.first_method: str = self._first_method()
-        self._fused = self._fused_first_call()
+            self._bands = _tridiagonal_bands(M)
+            self._banded_dense = False
+            self._flags = None                     # read when a fallback needs them
+        self._structured = self.n > 2 and (self._bands is not None or self._sparse
+                                           or self._banded_dense)
+        large_symmetric = self._flags[0] if self._flags is not None else False
+        self._first_run: int = int(dispatch.first_run(self._method_code, self._structured,
+                                                      large_symmetric))
+        self.first_method: str = dispatch.RUN_NAMES[self._first_run]
         self._rescaled_solvers: dict[int, LCPSolver] = {}
-
-    def __getstate__(self) -> dict[str, Any]:
-        # the fused call is a closure (not picklable): rebuilt on unpickling
-        state = dict(self.__dict__)
-        del state["_fused"]
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._fused = self._fused_first_call()
+        # the per-call arguments of dispatch.solve_packed, fixed once
+        flags = self._flags or (False, False)
+        self._packed = (
+            _EMPTY_2D if self._sparse else M, *(self._bands or _NO_BANDS),
+            dispatch.pack_state(self._method_code if self._flags else self._first_run,
+                                self._first_run, not self._sparse, self._bands is not None,
+                                self._sparse or self._banded_dense, self._structured, *flags))
 
     def __repr__(self) -> str:
         kind = "sparse" if self._sparse else "dense"
@@ -418,35 +462,90 @@ class LCPSolver:
         SolverError
             With ``strict=True``, when no method reached a verified solution.
         """
-        if not (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1
+        if not (type(q) is np.ndarray and q.dtype == _F64 and q.ndim == 1
                 and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == self.n):
             q = self._check_q(q)
-        if z0 is None and self._fused is not None:
-            # the per-call path of a reusable solver, kept short: one compiled call, whose
-            # status is already reconciled with the residual test (kernels.certify)
-            n = self.n
-            z, w = np.empty(n), np.empty(n)
-            code, its, res, tolerance = self._fused(q, z, w)
-            if code == 0:
-                z.setflags(write=False)
-                w.setflags(write=False)
-                method = self.first_method
-                return LCPResult(z, w, "solved", its, res, method,
-                                 f"{method}: solved (residual {res:.3g})", tolerance)
-            if code == kernels.Q_NOT_FINITE:
-                check_finite("q", q)
-            first = self._outcome(z, w, code, its, res, tolerance, self.first_method,
-                                  self._limit(self.first_method))
+        n = self.n
+        if z0 is None:
+            # the per-call path of a reusable solver: one compiled call, whose status is
+            # already reconciled with the residual test (kernels.certify)
+            M, lower, diag, upper, bits = self._packed
+            buf = np.empty(4 * n + _LOG_SIZE)
+            code, run, its, res, tolerance, tried, nlog = dispatch.solve_packed(
+                M, lower, diag, upper, q, buf, bits, self.tol, self.max_iter or 0, self.omega)
+            if code == 0 and nlog == 1:
+                buf.setflags(write=False)          # z and w, its views, are read-only
+                return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
+                               False)
+            z, w, work = buf[:n], buf[n:2 * n], buf[2 * n:]
             z0v = None
         else:
-            z0v = None if z0 is None else as_vector("z0", z0, size=self.n)
-            first = _RUNNERS[self.first_method](self, q, z0v, self.max_iter)
-        if first.status == "solved":
-            return LCPResult(first.z, first.w, "solved", first.iterations, first.residual,
-                             first.method, first.describe(), first.tolerance)
-        result, chosen = self._run_fallbacks(q, z0v, first)
+            z, w = np.empty(n), np.empty(n)
+            work = np.empty(2 * n + _LOG_SIZE)
+            z0v = as_vector("z0", z0, size=n)
+            code, run, its, res, tolerance, tried, nlog = self._chain(
+                q, z, w, z0v, True, self._first_run, 0, work, 0)
+        if code == kernels.Q_NOT_FINITE:
+            check_finite("q", q)
+        return self._finish(q, z0v, z, w, work, (code, run, tried, nlog))
+
+    def _chain(self, q: NDArray[np.float64], z: NDArray[np.float64], w: NDArray[np.float64],
+               z0: NDArray[np.float64], warm: bool, run: int, tried: int,
+               work: NDArray[np.float64], nlog: int) -> tuple[int, int, int, float, float,
+                                                               int, int]:
+        """:func:`_lcp_dispatch_kernels.run_chain` from ``run`` with this solver's matrix and
+        flags. A sparse ``M``'s flags are read only once its first run has failed: until
+        then the chain runs that run alone."""
+        has_dense = not self._sparse or "_dense" in self.__dict__
+        M = self._dense if has_dense else _EMPTY_2D
+        lower, diag, upper = self._bands if self._bands is not None else _NO_BANDS
+        if self._flags is None:
+            method, large_symmetric, positive_diagonal = run, False, False
+        else:
+            method = self._method_code
+            large_symmetric, positive_diagonal = self._flags
+        return dispatch.run_chain(
+            M, has_dense, lower, diag, upper, self._bands is not None,
+            self._sparse or self._banded_dense, q, z, w, z0, warm, method, run, tried,
+            self._structured, large_symmetric, positive_diagonal, self.tol,
+            self.max_iter or 0, self.omega, work, nlog, False)
+
+    def _finish(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
+                z: NDArray[np.float64], w: NDArray[np.float64], work: NDArray[np.float64],
+                state: tuple[int, int, int, int]) -> LCPResult:
+        """The rest of a solve whose first run was not verified: the runs that need Python
+        (handed over by the chain), the chain again after them, then the choice of the
+        result, the rescaled retry and ``strict``."""
+        code, run, tried, nlog = state
+        tried_runs = self._logged(work, 0, nlog, z, w)
+        while True:
+            if code == dispatch.HANDOFF:
+                if run == dispatch.PGS_AUTO or (run == dispatch.BANDED and self._bands is None):
+                    outcome = (self._run_pgs_auto(q, z0, self.max_iter)
+                               if run == dispatch.PGS_AUTO else self._run_banded_lu(q, z0))
+                    tried_runs.append(outcome)
+                    tried |= int(dispatch.family(run))
+                    if outcome.status == "solved":
+                        break
+                    run = self._next_run(tried)
+                else:
+                    self.__dict__.setdefault("_dense", self._dense)   # densify sparse M once
+            elif code == 0:
+                break
+            elif self._flags is None and self._method_code == dispatch.AUTO:
+                run = self._next_run(tried)        # a sparse M's first run failed
+            else:
+                break
+            if run == dispatch.NO_RUN:
+                break
+            z0v, warm = (z, False) if z0 is None else (z0, True)
+            code, run, _, _, _, tried, end = self._chain(q, z, w, z0v, warm, run, tried,
+                                                         work, nlog)
+            tried_runs += self._logged(work, nlog, end, z, w)
+            nlog = end
+        result, chosen = _choose(tried_runs)
         if result.status != "solved":
-            result = self._retry_rescaled(q, z0v, result)
+            result = self._retry_rescaled(q, z0, result)
         if self.strict and result.status == "max_iter":
             raise BudgetExceededError(
                 f"max_iter: the LCP of size {self.n} was not solved within the budget "
@@ -461,62 +560,28 @@ class LCPSolver:
                               status=result.status)
         return result
 
-    def _fused_first_call(self) -> Callable[..., tuple[int, int, float, float]] | None:
-        """``f(q, z, w) -> (code, iterations, residual, tolerance)``: the first method's
-        kernel fused with its verification, when it has one (Lemke, PGS with its polish from zero,
-        tridiagonal ``banded`` from its own start); None otherwise."""
-        tol = self.tol
-        limit = self._limit(self.first_method)
-        if self.first_method == "lemke":
-            M = self._dense
-            lemke = kernels.lemke_verified
-            return lambda q, z, w: lemke(M, q, z, w, limit, tol)
-        if self.first_method == "pgs":
-            M, omega = self._dense, self.omega
-            pgs = kernels.pgs_verified
-            return lambda q, z, w: pgs(M, q, z, w, tol, limit, omega, True)
-        if self.first_method == "banded" and self._bands is not None:
-            lower, diag, upper = self._bands
-            howard = kernels.tridiagonal_verified
-            return lambda q, z, w: howard(lower, diag, upper, q, z, w, limit, False, tol)
-        return None
+    def _next_run(self, tried: int) -> int:
+        """``auto``'s next run (:func:`_lcp_dispatch_kernels.next_run`), the flags read first."""
+        if self._flags is None:
+            large = self.n > AUTO_PGS_MIN_SIZE and self._symmetric_positive_diagonal
+            self._flags = (bool(large), bool(np.all(self._M.diagonal() > 0.0)))
+        return int(dispatch.next_run(self._method_code, tried, self.n, self._structured,
+                                     *self._flags))
+
+    def _logged(self, work: NDArray[np.float64], start: int, end: int,
+                z: NDArray[np.float64], w: NDArray[np.float64]) -> list[_Outcome]:
+        return _logged_runs(work, self.n, start, end, z, w)
 
     def _limit(self, name: str, max_iter: int | None = None) -> int:
         """The budget of one run of method ``name``: ``max_iter`` when given (else the
         solver's), otherwise the method's default (see :func:`solve_lcp`)."""
-        limit = max_iter or self.max_iter
-        if limit:
-            return int(limit)
-        if name == "lemke":
-            return 50 * (self.n + 1)
-        if name == "banded":
-            return self.n + 2
-        if name == "pgs_fallback":
-            return AUTO_PGS_FALLBACK_SWEEPS
-        return PGS_SWEEPS
-
-    def _run_fallbacks(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
-                       first: _Outcome) -> tuple[LCPResult, _Outcome]:
-        """Run ``auto``'s fallbacks after a failed first method until one is verified;
-        the message lists every method run, in order. When all fail, the result is Lemke's
-        ray termination if there was one (for copositive-plus ``M`` a certificate that the
-        LCP is infeasible), else the last method's. Returns it with the chosen run."""
-        tried = [first]
-        for name in self._fallbacks():
-            tried.append(_RUNNERS[name](self, q, z0, self.max_iter))
-            if tried[-1].status == "solved":
-                break
-        chosen = tried[-1]
-        if chosen.status != "solved":
-            chosen = next((o for o in tried if o.status == "ray_termination"), chosen)
-        message = "; ".join(o.describe() for o in tried)
-        return LCPResult(chosen.z, chosen.w, chosen.status, chosen.iterations,
-                         chosen.residual, chosen.method, message, chosen.tolerance), chosen
+        run = dispatch.RUN_NAMES.index(name)
+        return int(dispatch.run_limit(run, self.n, max_iter or self.max_iter or 0))
 
     def _check_q(self, q: Any) -> NDArray[np.float64]:
         """``q`` as a writeable C-contiguous float64 vector of length n; finiteness is
-        checked here only off the fast path (the fused kernels check it, and the runners
-        raise)."""
+        checked here only off the fast path (the compiled chain checks it, and the caller
+        raises)."""
         if not (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim == 1):
             q = as_vector("q", q)
         elif not (q.flags.c_contiguous and q.flags.writeable):
@@ -540,24 +605,10 @@ class LCPSolver:
         return self._M if isinstance(self._M, np.ndarray) else np.asarray(self._M.toarray())
 
     @cached_property
-    def _banded_dense(self) -> bool:
-        """Dense ``M`` with a narrow band (half-bandwidth ``<= sqrt(n)``, ``n >= 64``): worth
-        Howard's iteration with sparse LU (O(n b^2) per step) before dense pivoting."""
-        n = self.n
-        if self._sparse or n < AUTO_BANDED_MIN_SIZE:
-            return False
-        limit = max(2, int(np.sqrt(n)))
-        return bool(kernels.half_bandwidth(self._M, limit) <= limit)
-
-    @cached_property
     def _symmetric_positive_diagonal(self) -> bool:
         M = self._dense
         scale = max(float(np.max(np.abs(M), initial=0.0)), 1.0)
         return bool(np.all(np.diagonal(M) > 0.0) and kernels.is_symmetric(M, 1e-12 * scale))
-
-    @cached_property
-    def _positive_diagonal(self) -> bool:
-        return bool(np.all(self._M.diagonal() > 0.0))
 
     @cached_property
     def _symmetric_psd(self) -> bool:
@@ -580,54 +631,12 @@ class LCPSolver:
             return False
         return True
 
-    def _large_symmetric(self) -> bool:  # densifies sparse M: only evaluated when reached
-        return self.n > AUTO_PGS_MIN_SIZE and self._symmetric_positive_diagonal
-
-    def _structured(self) -> bool:
-        """Tridiagonal, sparse or narrow-band (``auto`` starts with ``banded``)."""
-        if self.n <= 2:
-            return False
-        if self._bands is not None or self._sparse:
-            return True
-        return self.n >= AUTO_BANDED_MIN_SIZE and self._banded_dense
-
-    def _first_method(self) -> str:
-        if self.method != "auto":
-            return self.method
-        if self._structured():
-            return "banded"
-        if self._large_symmetric():
-            return "pgs_auto"
-        return "lemke"
-
-    def _fallbacks(self) -> Iterator[str]:
-        """``auto``'s methods after the first, each decided only when reached."""
-        if self.method != "auto":
-            return
-        n = self.n
-        tried = {self.first_method.removesuffix("_auto")}
-        candidates = (
-            ("pgs_auto", lambda: self._structured() and self._large_symmetric()),
-            ("lemke", lambda: n <= AUTO_LEMKE_MAX_SIZE),
-            ("pgs_fallback", lambda: n <= AUTO_LEMKE_MAX_SIZE and self._positive_diagonal),
-            ("banded", lambda: n <= AUTO_DENSE_HOWARD_MAX_SIZE),
-        )
-        for name, applies in candidates:
-            family = name.split("_")[0]
-            if family not in tried and applies():
-                tried.add(family)
-                yield name
-
-    # ------------------------------------------------------------------ runners
+    # ------------------------------------------------------------------ runners in Python
 
     def _outcome(self, z: NDArray[np.float64], w: NDArray[np.float64], code: int,
                  iterations: int, res: float, tolerance: float, method: str, limit: int
                  ) -> _Outcome:
-        """A run's outcome from a status already reconciled with the residual test."""
-        z.setflags(write=False)
-        w.setflags(write=False)
-        return _Outcome(z, w, STATUSES[code], int(iterations), float(res), method,
-                        float(tolerance), int(limit))
+        return _make_outcome(z, w, code, iterations, res, tolerance, method, limit)
 
     def _verify(self, z: NDArray[np.float64], q: NDArray[np.float64]
                 ) -> tuple[NDArray[np.float64], float, float, bool]:
@@ -653,17 +662,6 @@ class LCPSolver:
         csr: Any = self._M
         return int(np.max(np.diff(csr.indptr), initial=0)) + 1
 
-    def _run_lemke(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
-                   max_iter: int | None) -> _Outcome:
-        n = self.n
-        z, w = np.empty(n), np.empty(n)
-        limit = self._limit("lemke", max_iter)
-        code, its, res, tolerance = kernels.lemke_verified(self._dense, q, z, w, limit,
-                                                           self.tol)
-        if code == kernels.Q_NOT_FINITE:
-            check_finite("q", q)
-        return self._outcome(z, w, code, its, res, tolerance, "lemke", limit)
-
     def _run_pgs(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                  max_iter: int | None) -> _Outcome:
         n = self.n
@@ -672,13 +670,7 @@ class LCPSolver:
         limit = self._limit("pgs", max_iter)
         code, its, res, tolerance = kernels.pgs_verified(
             self._dense, q, z, w, self.tol, limit, self.omega, False)
-        if code == kernels.Q_NOT_FINITE:
-            check_finite("q", q)
         return self._outcome(z, w, code, its, res, tolerance, "pgs", limit)
-
-    def _run_pgs_fallback(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
-                          max_iter: int | None) -> _Outcome:
-        return self._run_pgs(q, z0, self._limit("pgs_fallback", max_iter))
 
     def _run_pgs_auto(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
                       max_iter: int | None) -> _Outcome:
@@ -698,67 +690,55 @@ class LCPSolver:
         rest = self._run_pgs(q, np.array(first.z), total - probe)
         return rest._replace(iterations=probe + rest.iterations, limit=total)
 
-    def _run_banded(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None,
-                    max_iter: int | None) -> _Outcome:
-        n = self.n
-        limit = self._limit("banded", max_iter)
-        z = np.zeros(n) if z0 is None else z0.copy()
-        if self._bands is None:
-            check_finite("q", q)
-            code, its, z = self._howard(q, z, limit)
-            w, res, tolerance, ok = self._verify(z, q)
-            return self._outcome(z, w, int(kernels.verified_status(code, ok)), its, res,
-                                 tolerance, "banded", limit)
-        lower, diag, upper = self._bands
-        w = np.empty(n)
-        code, its, res, tolerance = kernels.tridiagonal_verified(
-            lower, diag, upper, q, z, w, limit, z0 is not None, self.tol)
-        if code == kernels.Q_NOT_FINITE:
-            check_finite("q", q)
-        return self._outcome(z, w, code, its, res, tolerance, "banded", limit)
+    def _run_banded_lu(self, q: NDArray[np.float64], z0: NDArray[np.float64] | None
+                       ) -> _Outcome:
+        """Howard's iteration with sparse LU (sparse or narrow-band ``M`` without
+        tridiagonal bands), verified."""
+        limit = self._limit("banded")
+        z = np.zeros(self.n) if z0 is None else z0.copy()
+        code, its, z = self._howard(q, z, limit)
+        w, res, tolerance, ok = self._verify(z, q)
+        return self._outcome(z, w, int(kernels.verified_status(code, ok)), its, res,
+                             tolerance, "banded", limit)
 
     @cached_property
     def _howard_matrix(self) -> Any:
-        """``M`` for Howard's active-set solves: CSC for sparse or narrow-band ``M`` (SuperLU,
-        O(n b^2)), the dense array otherwise (LAPACK)."""
-        if self._sparse or self._banded_dense:
-            import scipy.sparse as sp
-            return sp.csc_matrix(self._M)
-        return self._M
+        """``M`` for Howard's active-set solves with SuperLU (O(n b^2) per step)."""
+        import scipy.sparse as sp
+        return sp.csc_matrix(self._M)
 
     def _howard(self, q: NDArray[np.float64], z: NDArray[np.float64], limit: int
                 ) -> tuple[int, int, NDArray[np.float64]]:
-        """Howard's policy iteration with a direct solve on the active set (non-tridiagonal M).
-
-        The same iteration as :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard`;
-        each step factors ``M[a, a]`` (SuperLU for sparse or banded ``M``: O(n b^2) per
-        step). The next iterate depends only on the active set, so a repeated active set is
-        a cycle: it stops at once with ``"max_iter"`` (instead of running to the limit) and
-        ``auto`` falls back to the next method.
-        """
+        """Howard's policy iteration with SuperLU on the active set (sparse or narrow-band
+        ``M``): the iteration of :func:`~nscontrol.numerics._lcp_dispatch_kernels.dense_howard`,
+        whose stopping test and cycle detection it shares (``howard_converged``,
+        ``howard_cycle``: a repeated active set is a cycle, it stops at once with
+        ``"max_iter"`` and ``auto`` falls back to the next method)."""
         M = self._howard_matrix
-        solve_block = _sparse_block_solver if not isinstance(M, np.ndarray) else _dense_block_solve
-        eps = 1e-13 * (1.0 + float(np.max(np.abs(q), initial=0.0)))
-        w = M @ z + q
-        seen: set[bytes] = set()
+        n = self.n
+        eps = float(dispatch.howard_eps(q))
+        w = np.ascontiguousarray(M @ z + q, dtype=np.float64)
+        active = np.empty(n, dtype=np.bool_)
+        seen = np.empty((min(limit + 1, 16), n), dtype=np.bool_)
+        nseen = 0
         for it in range(limit + 1):
-            if np.all(z >= -eps) and np.all(w >= -eps) and np.all(np.minimum(z, w) <= eps):
+            if dispatch.howard_converged(z, w, eps):
                 return kernels.SOLVED, it, z
             if it == limit:
                 break
-            active = w <= z
-            key = np.packbits(active).tobytes()
-            if key in seen:                      # Howard's iteration is cycling
+            if nseen == seen.shape[0]:
+                seen = dispatch.grow_rows(seen)
+            if dispatch.howard_cycle(z, w, active, seen, nseen):
                 return kernels.MAX_ITER, it, z
-            seen.add(key)
+            nseen += 1
             z = np.zeros_like(z)
             idx = np.flatnonzero(active)
             if idx.size:
-                z_a = solve_block(M, idx, -q[idx])
+                z_a = _sparse_block_solver(M, idx, -q[idx])
                 if z_a is None:                  # singular principal block
                     return kernels.NUMERICAL_FAILURE, it + 1, z
                 z[idx] = z_a
-            w = M @ z + q
+            w = np.ascontiguousarray(M @ z + q, dtype=np.float64)
             if not np.all(np.isfinite(z)):
                 return kernels.NUMERICAL_FAILURE, it + 1, z
         return kernels.MAX_ITER, limit, z
@@ -820,9 +800,79 @@ class LCPSolver:
                          message, -math.inf)
 
 
-_RUNNERS = {"lemke": LCPSolver._run_lemke, "pgs": LCPSolver._run_pgs,
-            "banded": LCPSolver._run_banded, "pgs_auto": LCPSolver._run_pgs_auto,
-            "pgs_fallback": LCPSolver._run_pgs_fallback}
+def _solved(z: NDArray[np.float64], w: NDArray[np.float64], iterations: int, res: float,
+            method: str, tolerance: float, writeable: bool = True) -> LCPResult:
+    """The result of a first run that was verified (the per-call path, kept short: the
+    frozen dataclass filled directly, its message formatted once per method and residual).
+    ``z`` and ``w`` are made read-only (``writeable=False``: they already are)."""
+    if writeable:
+        z.setflags(write=False)
+        w.setflags(write=False)
+    key = (method, res)
+    message = _SOLVED_MESSAGES.get(key)
+    if message is None:
+        if len(_SOLVED_MESSAGES) > 4096:
+            _SOLVED_MESSAGES.clear()
+        message = _SOLVED_MESSAGES[key] = f"{method}: solved (residual {res:.3g})"
+    result = object.__new__(LCPResult)
+    fields = result.__dict__
+    fields["z"] = z
+    fields["w"] = w
+    fields["status"] = "solved"
+    fields["iterations"] = iterations
+    fields["residual"] = res
+    fields["method"] = method
+    fields["message"] = message
+    fields["tolerance"] = tolerance
+    return result
+
+
+#: The messages of verified first runs, by (method, residual): formatting a float costs
+#: as much as the rest of building a result.
+_SOLVED_MESSAGES: dict[tuple[str, float], str] = {}
+
+
+def _make_outcome(z: NDArray[np.float64], w: NDArray[np.float64], code: int,
+                  iterations: int, res: float, tolerance: float, method: str, limit: int
+                  ) -> _Outcome:
+    """A run's outcome from a status already reconciled with the residual test."""
+    z.setflags(write=False)
+    w.setflags(write=False)
+    return _Outcome(z, w, STATUSES[code], int(iterations), float(res), method,
+                    float(tolerance), int(limit))
+
+
+def _logged_runs(work: NDArray[np.float64], n: int, start: int, end: int,
+                 z: NDArray[np.float64], w: NDArray[np.float64]) -> list[_Outcome]:
+    """The runs the chain logged in rows ``start:end`` of ``work``, as outcomes. Only the
+    last one's point (``z, w``) and a ray's (kept in ``work``) can be the answer: the
+    others' are not kept."""
+    log = work[2 * n:].reshape(dispatch.LOG_ROWS, dispatch.LOG_WIDTH)
+    out = []
+    for k in range(start, end):
+        run, code, its, res, tolerance, limit = log[k].tolist()
+        if k == end - 1:
+            zk, wk = z.copy(), w.copy()
+        elif int(code) == kernels.RAY_TERMINATION:
+            zk, wk = work[:n].copy(), work[n:2 * n].copy()
+        else:
+            zk = wk = _EMPTY_1D
+        out.append(_make_outcome(zk, wk, int(code), int(its), res, tolerance,
+                                 _RUN_METHOD[int(run)], int(limit)))
+    return out
+
+
+def _choose(tried: list[_Outcome]) -> tuple[LCPResult, _Outcome]:
+    """The result of the runs ``tried`` (in the order they ran): the last one if verified;
+    otherwise Lemke's ray termination if there was one (for copositive-plus ``M`` a
+    certificate that the LCP is infeasible), else the last run's. The message lists every
+    run. Returns it with the chosen run."""
+    chosen = tried[-1]
+    if chosen.status != "solved":
+        chosen = next((o for o in tried if o.status == "ray_termination"), chosen)
+    message = "; ".join(o.describe() for o in tried)
+    return LCPResult(chosen.z, chosen.w, chosen.status, chosen.iterations, chosen.residual,
+                     chosen.method, message, chosen.tolerance), chosen
 
 
 def _with_message(result: LCPResult, message: str) -> LCPResult:
@@ -836,14 +886,6 @@ def _sparse_block_solver(M: Any, idx: NDArray[np.intp], rhs: NDArray[np.float64]
     try:
         return splu(M[idx][:, idx].tocsc()).solve(rhs)
     except RuntimeError:  # singular principal block
-        return None
-
-
-def _dense_block_solve(M: NDArray[np.float64], idx: NDArray[np.intp],
-                       rhs: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    try:
-        return np.linalg.solve(M[np.ix_(idx, idx)], rhs).astype(np.float64, copy=False)
-    except np.linalg.LinAlgError:
         return None
 
 
@@ -870,13 +912,15 @@ def _as_lcp_matrix(M: Any) -> Any:
     return np.ascontiguousarray(as_square("M", M))
 
 
-def _clean(a: Any, ndim: int) -> bool:
-    """Fast path: already a writeable C-contiguous finite float64 array of rank ``ndim``
-    (the checks of ``nscontrol._validation`` run otherwise, and raise their specific errors;
-    a read-only array is copied rather than given its own numba specialisation)."""
-    return (type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == ndim
+def _clean(a: Any, ndim: int, finite: bool = True) -> bool:
+    """Fast path: already a writeable C-contiguous float64 array of rank ``ndim`` (square
+    when ``ndim == 2``), finite unless ``finite=False`` (the caller's compiled scan checks it);
+    the checks of ``nscontrol._validation`` run otherwise, and raise their specific errors.
+    A read-only array is copied rather than given its own numba specialisation."""
+    return (type(a) is np.ndarray and a.dtype == _F64 and a.ndim == ndim
             and a.flags.c_contiguous and a.flags.writeable
-            and bool(kernels.all_finite(a.reshape(-1))))
+            and (ndim != 2 or a.shape[0] == a.shape[1])
+            and (not finite or bool(kernels.all_finite(a.reshape(-1)))))
 
 
 def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:

@@ -1,0 +1,471 @@
+"""Compiled dispatch of the LCP methods: ``auto``'s order, its chain of verified runs, and the
+compiled entry :func:`solve_lcp_kernel` for other ``@njit`` code.
+
+:class:`~nscontrol.numerics.lcp.LCPSolver` and :func:`~nscontrol.numerics.lcp.solve_lcp` run
+every method here except two, which need LAPACK or SuperLU through Python: ``auto``'s PGS
+with its positive-semidefiniteness test (``n > 400``) and Howard's iteration with sparse LU
+(scipy.sparse ``M``, or dense ``M`` with ``n >= 64`` and a narrow band). The chain
+(:func:`run_chain`) runs methods until one is verified; when the next one needs Python it
+returns :data:`HANDOFF` with that run, and the caller runs it and calls the chain again.
+Which method comes next is decided in one place, :func:`next_run`, for both.
+
+*Runs* (what the log records): :data:`LEMKE`, :data:`PGS`, :data:`BANDED`, and ``auto``'s
+two forms of PGS, :data:`PGS_AUTO` (the probe and the definiteness test, large symmetric
+``M``) and :data:`PGS_FALLBACK` (any matrix with a positive diagonal, 1000 sweeps).
+*Families* (``auto`` runs each at most once): Lemke 1, PGS 2, banded 4.
+
+The log: ``work[2 n:]`` holds :data:`LOG_ROWS` rows of :data:`LOG_WIDTH` numbers, one per run
+in the order they ran: ``(run, status, iterations, residual, tolerance, limit)``; ``work[:2
+n]`` receives ``(z, w)`` of a Lemke run that ended on a ray (``auto`` reports that
+certificate of infeasibility when every method fails).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ._lcp_kernels import (
+    MAX_ITER,
+    NUMERICAL_FAILURE,
+    Q_NOT_FINITE,
+    RAY_TERMINATION,
+    SOLVED,
+    _matvec_plus,
+    _solve_principal_block,
+    all_finite,
+    half_bandwidth,
+    is_symmetric,
+    lemke_verified,
+    pgs_verified,
+    tridiagonal_verified,
+    verified_status,
+    verify_dense,
+)
+
+#: ``auto`` uses PGS instead of Lemke for symmetric PSD problems larger than this.
+AUTO_PGS_MIN_SIZE = 400
+#: ``auto`` does not fall back to dense Lemke or PGS above this size (memory n^2, time n^3).
+AUTO_LEMKE_MAX_SIZE = 3000
+#: PGS's default budget of sweeps (``max_iter``).
+PGS_SWEEPS = 10_000
+#: Sweeps of PGS as a fallback of ``auto`` on a matrix it is not known to converge for
+#: (a cost comparable to dense Lemke's O(n^3)).
+AUTO_PGS_FALLBACK_SWEEPS = 1000
+#: ``auto`` tries ``banded`` first on dense matrices this large with a narrow band.
+AUTO_BANDED_MIN_SIZE = 64
+#: ``auto`` falls back to Howard's iteration with dense LU (O(n^3) per iteration) up to here.
+AUTO_DENSE_HOWARD_MAX_SIZE = 200
+
+# runs
+NO_RUN = -1
+LEMKE = 0
+PGS = 1
+BANDED = 2
+PGS_AUTO = 3
+PGS_FALLBACK = 4
+#: The ``method`` option ``"auto"`` (the explicit methods are their runs).
+AUTO = 5
+RUN_NAMES = ("lemke", "pgs", "banded", "pgs_auto", "pgs_fallback")
+METHOD_CODES = {"lemke": LEMKE, "pgs": PGS, "banded": BANDED, "auto": AUTO}
+
+#: Status of :func:`run_chain`: the next run needs Python (returned with that run).
+HANDOFF = -3
+#: Rows and columns of the log (at most one run per family, and ``auto``'s PGS probe).
+LOG_ROWS = 4
+LOG_WIDTH = 6
+
+
+@njit(cache=True)
+def family(run):
+    """The family of a run (1 Lemke, 2 PGS, 4 banded): ``auto`` runs each at most once."""
+    if run == LEMKE:
+        return 1
+    if run == BANDED:
+        return 4
+    return 2
+
+
+@njit(cache=True)
+def first_run(method, structured, large_symmetric):
+    """The first run of ``method``: an explicit method is its own run; ``auto`` picks
+    ``banded`` for structured ``M`` (tridiagonal, sparse or narrow-band, ``n > 2``), the PGS
+    probe for large symmetric ``M`` with a positive diagonal (``n > 400``), else Lemke."""
+    if method != AUTO:
+        return method
+    if structured:
+        return BANDED
+    if large_symmetric:
+        return PGS_AUTO
+    return LEMKE
+
+
+@njit(cache=True)
+def next_run(method, tried, n, structured, large_symmetric, positive_diagonal):
+    """``auto``'s next run after the families in the bit set ``tried`` failed, or
+    :data:`NO_RUN` (always for an explicit method). The one place the order is decided:
+    the PGS probe (after ``banded``), Lemke (``n <= 3000``), PGS on a positive diagonal
+    (``n <= 3000``), Howard's iteration with dense LU (``n <= 200``)."""
+    if method != AUTO:
+        return NO_RUN
+    if tried & 2 == 0 and structured and large_symmetric:
+        return PGS_AUTO
+    if tried & 1 == 0 and n <= AUTO_LEMKE_MAX_SIZE:
+        return LEMKE
+    if tried & 2 == 0 and n <= AUTO_LEMKE_MAX_SIZE and positive_diagonal:
+        return PGS_FALLBACK
+    if tried & 4 == 0 and n <= AUTO_DENSE_HOWARD_MAX_SIZE:
+        return BANDED
+    return NO_RUN
+
+
+@njit(cache=True)
+def run_limit(run, n, max_iter):
+    """The budget of one run: ``max_iter`` when positive, else the run's default (Lemke
+    ``50 (n + 1)`` pivots, banded ``n + 2`` iterations, PGS ``10^4`` sweeps, ``auto``'s PGS
+    fallback 1000)."""
+    if max_iter > 0:
+        return max_iter
+    if run == LEMKE:
+        return 50 * (n + 1)
+    if run == BANDED:
+        return n + 2
+    if run == PGS_FALLBACK:
+        return AUTO_PGS_FALLBACK_SWEEPS
+    return PGS_SWEEPS
+
+
+# --------------------------------------------------------------------------------- analysis
+@njit(cache=True)
+def analyse_dense(M):
+    """One look at a dense square ``M`` (done once per matrix): ``(finite, tridiagonal,
+    banded, large_symmetric, positive_diagonal)``. ``banded``: ``n >= 64`` and half-bandwidth
+    ``<= max(2, sqrt(n))`` (Howard's iteration with sparse LU first); ``large_symmetric``:
+    ``n > 400``, symmetric to ``1e-12 max(max|M|, 1)`` with a positive diagonal."""
+    n = M.shape[0]
+    finite = True
+    tridiagonal = True
+    big = 0.0
+    for i in range(n):
+        for j in range(n):
+            v = M[i, j]
+            if not np.isfinite(v):
+                finite = False
+            elif v != 0.0 and (j > i + 1 or j < i - 1):
+                tridiagonal = False
+            big = max(big, abs(v))
+    positive_diagonal = True
+    for i in range(n):
+        if not (M[i, i] > 0.0):
+            positive_diagonal = False
+    banded = False
+    if finite and not tridiagonal and n >= AUTO_BANDED_MIN_SIZE:
+        limit = max(2, int(np.sqrt(n)))
+        banded = half_bandwidth(M, limit) <= limit
+    large_symmetric = (finite and n > AUTO_PGS_MIN_SIZE and positive_diagonal
+                       and is_symmetric(M, 1e-12 * max(big, 1.0)))
+    return finite, tridiagonal, banded, large_symmetric, positive_diagonal
+
+
+@njit(cache=True)
+def dense_bands(M):
+    """``(lower, diag, upper)`` of a dense matrix, as contiguous copies."""
+    n = M.shape[0]
+    lower = np.empty(max(n - 1, 0))
+    diag = np.empty(n)
+    upper = np.empty(max(n - 1, 0))
+    for i in range(n):
+        diag[i] = M[i, i]
+        if i < n - 1:
+            lower[i] = M[i + 1, i]
+            upper[i] = M[i, i + 1]
+    return lower, diag, upper
+
+
+# --------------------------------------------------------------------------------- Howard
+@njit(cache=True)
+def howard_converged(z, w, eps):
+    """Howard's stopping test: ``z, w >= -eps`` and ``min(z, w) <= eps`` (False on NaN)."""
+    for i in range(z.shape[0]):
+        if not (z[i] >= -eps and w[i] >= -eps and min(z[i], w[i]) <= eps):
+            return False
+    return True
+
+
+@njit(cache=True)
+def howard_cycle(z, w, active, seen, nseen):
+    """Howard's next active set ``{w <= z}`` into ``active``; True when it equals one of
+    ``seen[:nseen]`` (the next iterate depends only on the active set: a cycle), else it is
+    recorded as ``seen[nseen]`` (the caller grows ``seen`` by :func:`grow_rows` first)."""
+    n = z.shape[0]
+    for i in range(n):
+        active[i] = w[i] <= z[i]
+    for k in range(nseen):
+        same = True
+        for i in range(n):
+            if seen[k, i] != active[i]:
+                same = False
+                break
+        if same:
+            return True
+    for i in range(n):
+        seen[nseen, i] = active[i]
+    return False
+
+
+@njit(cache=True)
+def grow_rows(seen):
+    """``seen`` with twice the rows (the first ones copied)."""
+    rows, n = seen.shape
+    out = np.empty((2 * rows, n), dtype=np.bool_)
+    out[:rows] = seen
+    return out
+
+
+@njit(cache=True)
+def howard_eps(q):
+    """Howard's feasibility tolerance ``1e-13 (1 + max|q|)``."""
+    qmax = 0.0
+    for i in range(q.shape[0]):
+        qmax = max(qmax, abs(q[i]))
+    return 1e-13 * (1.0 + qmax)
+
+
+@njit(cache=True)
+def dense_howard(M, q, z, w, limit):
+    """Howard's policy iteration from ``z`` for a dense ``M`` (Gaussian elimination with
+    partial pivoting on the active block): the iteration of
+    :func:`~nscontrol.numerics._lcp_kernels.tridiagonal_howard` without the tridiagonal
+    structure, stopped at once when an active set repeats (a cycle: ``max_iter``). Returns
+    ``(status_code, iterations)``; ``w`` receives ``M z + q``."""
+    n = q.shape[0]
+    eps = howard_eps(q)
+    _matvec_plus(M, z, q, w)
+    active = np.empty(n, dtype=np.bool_)
+    seen = np.empty((min(limit + 1, 16), n), dtype=np.bool_)
+    idx = np.empty(n, dtype=np.int64)
+    x = np.empty(n)
+    nseen = 0
+    for it in range(limit + 1):
+        if howard_converged(z, w, eps):
+            return SOLVED, it
+        if it == limit:
+            break
+        if nseen == seen.shape[0]:
+            seen = grow_rows(seen)
+        if howard_cycle(z, w, active, seen, nseen):
+            return MAX_ITER, it
+        nseen += 1
+        k = 0
+        for i in range(n):
+            z[i] = 0.0
+            if active[i]:
+                idx[k] = i
+                k += 1
+        if k > 0:
+            if not _solve_principal_block(M, q, idx, k, x):
+                _matvec_plus(M, z, q, w)
+                return NUMERICAL_FAILURE, it + 1
+            for r in range(k):
+                z[idx[r]] = x[r]
+        _matvec_plus(M, z, q, w)
+        if not all_finite(z):
+            return NUMERICAL_FAILURE, it + 1
+    return MAX_ITER, limit
+
+
+# --------------------------------------------------------------------------------- the chain
+@njit(cache=True)
+def _start(z, z0, warm):
+    """``z`` set to the warm start ``z0`` (copied), or to zero."""
+    for i in range(z.shape[0]):
+        z[i] = z0[i] if warm else 0.0
+
+
+@njit(cache=True)
+def run_one(run, M, lower, diag, upper, has_bands, q, z, w, z0, warm, limit, tol, omega):
+    """One verified run that needs no Python: ``(status_code, iterations, residual,
+    tolerance)``, the status reconciled with the residual test (``certify``)."""
+    if run == LEMKE:
+        return lemke_verified(M, q, z, w, limit, tol)
+    if run == BANDED:
+        _start(z, z0, warm)
+        if has_bands:
+            if diag.shape[0] != q.shape[0]:      # bands not given: read them from M
+                lower, diag, upper = dense_bands(M)
+            return tridiagonal_verified(lower, diag, upper, q, z, w, limit, warm, tol)
+        code, its = dense_howard(M, q, z, w, limit)
+        res, tolerance, ok = verify_dense(M, q, z, w, tol)
+        return verified_status(code, ok), its, res, tolerance
+    _start(z, z0, warm)   # PGS (the kernel clamps a warm start to z >= 0)
+    return pgs_verified(M, q, z, w, tol, limit, omega, False)
+
+
+@njit(cache=True)
+def needs_python(run, has_dense, has_bands, sparse_lu):
+    """Whether a run must go through Python: ``auto``'s PGS probe (its definiteness test),
+    Howard's iteration with sparse LU (``sparse_lu``: scipy.sparse or narrow-band ``M``
+    without tridiagonal bands), a dense method while only a sparse ``M`` is at hand."""
+    if run == PGS_AUTO:
+        return True
+    if run == BANDED:
+        return not has_bands and (sparse_lu or not has_dense)
+    return not has_dense
+
+
+@njit(cache=True)
+def run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z, w, z0, warm,
+              method, run, tried, structured, large_symmetric, positive_diagonal, tol,
+              max_iter, omega, work, nlog, skip_python):
+    """Run ``run``, then ``auto``'s next runs (:func:`next_run`), until one is verified.
+
+    Appends one log row per run to ``work`` (module docstring) from row ``nlog``. Returns
+    ``(code, run, iterations, residual, tolerance, tried, nlog)``: ``code`` :data:`SOLVED`
+    with the verified run and its figures; :data:`HANDOFF` with the run that needs Python
+    (``needs_python``; with ``skip_python`` such runs are passed over instead);
+    :data:`~nscontrol.numerics._lcp_kernels.Q_NOT_FINITE` when ``q`` is not finite; else
+    the last run's status (no run verified, or no run at all: ``run`` :data:`NO_RUN`).
+    ``z, w`` hold the last run's point.
+    """
+    n = q.shape[0]
+    if not all_finite(q):
+        return Q_NOT_FINITE, run, 0, np.nan, np.nan, tried, nlog
+    code, its, res, tolerance = NUMERICAL_FAILURE, 0, np.nan, np.nan
+    last = NO_RUN
+    log = work[2 * n:]
+    while run != NO_RUN:
+        if needs_python(run, has_dense, has_bands, sparse_lu):
+            if not skip_python:
+                return HANDOFF, run, 0, np.nan, np.nan, tried, nlog
+            tried |= family(run)
+        else:
+            limit = run_limit(run, n, max_iter)
+            code, its, res, tolerance = run_one(run, M, lower, diag, upper, has_bands, q, z,
+                                                w, z0, warm, limit, tol, omega)
+            row = LOG_WIDTH * nlog
+            log[row] = run
+            log[row + 1] = code
+            log[row + 2] = its
+            log[row + 3] = res
+            log[row + 4] = tolerance
+            log[row + 5] = limit
+            nlog += 1
+            last = run
+            tried |= family(run)
+            if code == SOLVED:
+                return SOLVED, run, its, res, tolerance, tried, nlog
+            if code == RAY_TERMINATION:
+                for i in range(n):
+                    work[i] = z[i]
+                    work[n + i] = w[i]
+        run = next_run(method, tried, n, structured, large_symmetric, positive_diagonal)
+    return code, last, its, res, tolerance, tried, nlog
+
+
+@njit(cache=True)
+def solve_dense(M, q, z, w, work, method, tol, max_iter, omega, skip_python):
+    """:func:`analyse_dense` and :func:`run_chain` from the first run, in one call: what
+    ``LCPSolver(M, method, ...).solve(q)`` computes for a dense ``M`` (the same analysis,
+    the same chain). Returns the chain's tuple; :data:`NUMERICAL_FAILURE` with ``run``
+    :data:`NO_RUN` and ``nlog = -1`` when ``M`` is not finite."""
+    finite, tridiagonal, banded, large_symmetric, positive_diagonal = analyse_dense(M)
+    if not finite:
+        return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan, 0, -1
+    n = q.shape[0]
+    structured = n > 2 and (tridiagonal or banded)
+    run = first_run(method, structured, large_symmetric)
+    lower = diag = upper = np.empty(0)   # read from M by run_one if banded runs
+    has_bands = tridiagonal
+    return run_chain(M, True, lower, diag, upper, has_bands, banded, q, z, w, z, False,
+                     method, run, 0, structured, large_symmetric, positive_diagonal, tol,
+                     max_iter, omega, work, 0, skip_python)
+
+
+def pack_state(method, run, has_dense, has_bands, sparse_lu, structured, large_symmetric,
+               positive_diagonal):
+    """A reusable solver's state for :func:`solve_packed`, in one integer (bits 0-2 the
+    method, 3-5 the first run, then one bit per flag, in the order of the arguments)."""
+    bits = int(method) | int(run) << 3
+    for k, flag in enumerate((has_dense, has_bands, sparse_lu, structured, large_symmetric,
+                              positive_diagonal)):
+        bits |= int(bool(flag)) << (6 + k)
+    return bits
+
+
+@njit(cache=True)
+def solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega):
+    """:func:`run_chain` from a reusable solver's first run, without warm start, its state
+    packed by :func:`pack_state` and ``z, w``, the work array in one buffer of ``4 n + 24``
+    floats (as :func:`solve_dense_into`): ten arguments for a caller in Python instead of
+    twenty-four."""
+    n = q.shape[0]
+    z = buf[:n]
+    return run_chain(M, (bits >> 6) & 1 == 1, lower, diag, upper, (bits >> 7) & 1 == 1,
+                     (bits >> 8) & 1 == 1, q, z, buf[n:2 * n], z, False, bits & 7,
+                     (bits >> 3) & 7, 0, (bits >> 9) & 1 == 1, (bits >> 10) & 1 == 1,
+                     (bits >> 11) & 1 == 1, tol, max_iter, omega, buf[2 * n:], 0, False)
+
+
+@njit(cache=True)
+def solve_dense_into(M, q, buf, method, tol, max_iter, omega):
+    """:func:`solve_dense` with ``z, w`` and the work array in one buffer of ``4 n + 24``
+    floats: ``buf[:n]`` receives ``z``, ``buf[n:2 n]`` ``w`` (one allocation and four
+    arguments fewer for a caller in Python)."""
+    n = q.shape[0]
+    return solve_dense(M, q, buf[:n], buf[n:2 * n], buf[2 * n:], method, tol, max_iter,
+                       omega, False)
+
+
+@njit(cache=True)
+def solve_lcp_kernel(M, q, z, w, tol, max_iter):
+    """``solve_lcp(M, q, tol=tol, max_iter=max_iter)`` for a dense ``M``, callable from
+    ``@njit`` code (no Python in between): ``auto``'s choice, its fallbacks and the residual
+    test, compiled.
+
+    Parameters
+    ----------
+    M : (n, n) float64 array
+    q : (n,) float64 array
+    z, w : (n,) float64 arrays
+        Receive the solution and ``w = M z + q`` (recomputed from ``z``). On failure: the
+        last method's point, or Lemke's ray point when there was one.
+    tol : float
+        As in ``solve_lcp`` (``1e-12`` there).
+    max_iter : int
+        The budget of each method run; ``<= 0``: the methods' defaults.
+
+    Returns
+    -------
+    (status, method, iterations, residual, tolerance) : (int, int, int, float, float)
+        ``status``: 0 solved (verified), 1 ray termination, 2 max_iter, 3 numerical failure
+        (also for non-finite ``M`` or ``q``); ``method`` the run that produced ``z``
+        (:data:`RUN_NAMES`, -1 when none ran).
+
+    Notes
+    -----
+    Bit-identical to :func:`~nscontrol.numerics.lcp.solve_lcp` whenever that one needs no
+    Python step: every dense ``M`` with ``n < 64``, tridiagonal ``M`` of any size, and any
+    ``M`` up to ``n = 400`` that is not narrow-band. Otherwise the runs that need Python
+    (``auto``'s PGS with its definiteness test for symmetric ``M`` above ``n = 400``,
+    Howard's iteration with sparse LU first for narrow-band ``M`` with ``n >= 64``) are
+    passed over and the chain goes on with the next method; there is no rescaled retry
+    for extreme scales. Allocates ``2 n + 24`` floats of work per call.
+    """
+    n = q.shape[0]
+    work = np.empty(2 * n + LOG_ROWS * LOG_WIDTH)
+    code, run, its, res, tolerance, tried, nlog = solve_dense(
+        M, q, z, w, work, AUTO, tol, max_iter, 1.0, True)
+    if code == Q_NOT_FINITE or nlog < 0:
+        return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan
+    if code != SOLVED:
+        # Lemke's ray, when there was one, is the answer (for copositive-plus M: infeasible)
+        log = work[2 * n:]
+        for k in range(nlog):
+            if log[LOG_WIDTH * k + 1] == RAY_TERMINATION:
+                row = LOG_WIDTH * k
+                for i in range(n):
+                    z[i] = work[i]
+                    w[i] = work[n + i]
+                return (RAY_TERMINATION, int(log[row]), int(log[row + 2]), log[row + 3],
+                        log[row + 4])
+    return code, run, its, res, tolerance

@@ -1,0 +1,173 @@
+"""The compiled dispatch of the LCP methods: ``solve_lcp``, ``LCPSolver`` and the compiled
+entry ``solve_lcp_kernel`` give the same answers from the same analysis and chain; ``auto``'s
+fallbacks run in compiled code; the order of the fallbacks is decided in one place; bad
+input is refused with the argument named."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from numba import njit
+
+from nscontrol.errors import DimensionError, ModelError
+from nscontrol.numerics import _lcp_dispatch_kernels as dispatch
+from nscontrol.numerics.lcp import LCPResult, LCPSolver, solve_lcp, solve_lcp_kernel
+from nscontrol.testing.lcp_problems import random_p_matrix
+
+pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
+
+EPS = np.finfo(np.float64).eps
+
+#: A bimatrix game ``[[0, A], [B, 0]]`` with positive ``A``, ``B`` and ``q = -1`` (the
+#: game's equilibria are its solutions, Cottle, Pang & Stone 1992, §1.2): Lemke's path with
+#: the covering vector ``d = 1`` ends on a ray at once, so ``auto`` must fall back (no PGS:
+#: the diagonal is zero; Howard's iteration solves it).
+GAME = np.block([[np.zeros((2, 2)), np.array([[1.0, 3.0], [2.0, 1.0]])],
+                 [np.array([[3.0, 1.0], [1.0, 2.0]]), np.zeros((2, 2))]])
+#: No solution: ``M`` is skew-symmetric (copositive-plus) and ``w_2 = -z_1 - 1 < 0`` for
+#: every ``z >= 0``. Lemke ends on a ray (for copositive-plus ``M``: infeasible), and so
+#: must the result be after every fallback failed.
+INFEASIBLE = (np.array([[0.0, 1.0], [-1.0, 0.0]]), np.array([-1.0, -1.0]))
+
+
+def independent_residual(M, q, z):
+    """``max|min(z, Mz + q)| / (1 + max|q|)`` in numpy, and its round-off bound
+    ``2 (n + 1) eps (max(|M||z|) + max|q|) / (1 + max|q|)`` (Higham §3.1, the bound of
+    evaluating ``M z + q`` in float64, doubled for the evaluation here)."""
+    n = len(q)
+    scale = 1.0 + np.abs(q).max()
+    res = np.abs(np.minimum(z, M @ z + q)).max() / scale
+    bound = 2 * (n + 1) * EPS * ((np.abs(M) @ np.abs(z)).max() + np.abs(q).max()) / scale
+    return res, bound
+
+
+def assert_same(a: LCPResult, b: LCPResult) -> None:
+    assert (a.status, a.method, a.iterations, a.message) == (
+        b.status, b.method, b.iterations, b.message)
+    np.testing.assert_array_equal(a.z, b.z)     # same analysis, same chain: bit for bit
+    np.testing.assert_array_equal(a.w, b.w)
+    assert a.residual == b.residual and a.tolerance == b.tolerance
+
+
+@njit(cache=False)
+def kernel_author_loop(M, Q, Z, codes):
+    """What a kernel author writes: solve one LCP per row of Q inside compiled code."""
+    n = M.shape[0]
+    w = np.empty(n)
+    for k in range(Q.shape[0]):
+        status, method, its, res, tol = solve_lcp_kernel(M, Q[k], Z[k], w, 1e-12, 0)
+        codes[k, 0] = status
+        codes[k, 1] = method
+        codes[k, 2] = its
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 10, 30])
+def test_solve_lcp_and_a_reused_solver_agree_bit_for_bit(n):
+    rng = np.random.default_rng(100 + n)
+    M = random_p_matrix(n, rng)
+    solver = LCPSolver(M)
+    for _ in range(20):
+        q = rng.standard_normal(n)
+        assert_same(solve_lcp(M, q), solver.solve(q))
+
+
+@pytest.mark.parametrize(("M", "q"), [(GAME, -np.ones(4)), INFEASIBLE])
+def test_auto_falls_back_in_compiled_code_and_both_entries_agree(M, q):
+    res = solve_lcp(M, q)
+    assert_same(res, LCPSolver(M).solve(q))
+    assert res.message.startswith("lemke: ray_termination")
+    if M is GAME:                 # the fallback (Howard's iteration) finds a solution
+        assert res.success and res.method == "banded", res.message
+        r, bound = independent_residual(M, q, res.z)
+        assert r <= 1e-12 + bound
+        assert np.all(res.z >= 0) and np.all(res.w >= -bound * (1 + np.abs(q).max()))
+    else:                         # nothing solves it: Lemke's ray is the answer
+        assert res.status == "ray_termination" and res.method == "lemke", res.message
+        assert "; banded: " in res.message
+
+
+def test_the_compiled_entry_called_from_a_kernel_gives_solve_lcps_answers():
+    rng = np.random.default_rng(7)
+    n = 6
+    M = random_p_matrix(n, rng)
+    Q = rng.standard_normal((25, n))
+    Z = np.empty((25, n))
+    codes = np.zeros((25, 3), dtype=np.int64)
+    kernel_author_loop(M, Q, Z, codes)
+    for k in range(25):
+        res = solve_lcp(M, Q[k])
+        assert codes[k, 0] == 0 and dispatch.RUN_NAMES[codes[k, 1]] == res.method
+        assert codes[k, 2] == res.iterations
+        np.testing.assert_array_equal(Z[k], res.z)
+
+
+@pytest.mark.parametrize(("M", "q", "status", "method"), [
+    (GAME, -np.ones(4), 0, dispatch.BANDED),
+    (INFEASIBLE[0], INFEASIBLE[1], 1, dispatch.LEMKE),
+])
+def test_the_compiled_entry_runs_the_fallbacks_and_keeps_lemkes_ray(M, q, status, method):
+    n = len(q)
+    z, w = np.empty(n), np.empty(n)
+    got = solve_lcp_kernel(M, q, z, w, 1e-12, 0)
+    res = solve_lcp(M, q)
+    assert got[:2] == (status, method)
+    np.testing.assert_array_equal(z, res.z)
+    np.testing.assert_array_equal(w, res.w)
+
+
+def test_the_compiled_entry_reports_non_finite_input_as_a_failure():
+    z, w = np.empty(2), np.empty(2)
+    assert solve_lcp_kernel(np.array([[1.0, np.nan], [0.0, 1.0]]), -np.ones(2), z, w,
+                            1e-12, 0)[0] == 3
+    assert solve_lcp_kernel(np.eye(2), np.array([np.inf, 1.0]), z, w, 1e-12, 0)[0] == 3
+
+
+def test_fallback_order_is_decided_in_one_place():
+    auto = dispatch.AUTO
+    order = []
+    tried = dispatch.family(dispatch.BANDED)
+    run = dispatch.next_run(auto, tried, 500, True, True, True)
+    while run != dispatch.NO_RUN:
+        order.append(dispatch.RUN_NAMES[run])
+        tried |= dispatch.family(run)
+        run = dispatch.next_run(auto, tried, 500, True, True, True)
+    assert order == ["pgs_auto", "lemke"]          # banded then PGS's probe, then Lemke
+    # a small dense matrix with a zero on the diagonal: Lemke, then Howard (no PGS)
+    tried = dispatch.family(dispatch.LEMKE)
+    assert dispatch.next_run(auto, tried, 4, False, False, False) == dispatch.BANDED
+    assert dispatch.next_run(auto, tried, 4, False, False, True) == dispatch.PGS_FALLBACK
+    assert dispatch.next_run(auto, 7, 4, False, False, True) == dispatch.NO_RUN
+    assert dispatch.next_run(dispatch.LEMKE, 1, 4, False, False, True) == dispatch.NO_RUN
+    assert dispatch.next_run(auto, 1, 201, False, False, False) == dispatch.NO_RUN
+
+
+def test_results_of_the_per_call_path_are_read_only_and_do_not_share_memory():
+    M = np.array([[2.0, 1.0], [1.0, 2.0]])
+    a, b = solve_lcp(M, np.array([-5.0, -6.0])), solve_lcp(M, np.array([-5.0, 6.0]))
+    for res in (a, b):
+        assert not res.z.flags.writeable and not res.w.flags.writeable
+        with pytest.raises(ValueError):
+            res.z[0] = 1.0
+    assert not np.shares_memory(a.z, b.z) and not np.shares_memory(a.z, a.w)
+    np.testing.assert_allclose(a.z, [4 / 3, 7 / 3], rtol=0, atol=8 * EPS)
+    assert a.message == "lemke: solved (residual 0)" and isinstance(a, LCPResult)
+    # a read-only result passed back as q takes the general path, with the same answer
+    assert_same(solve_lcp(M, -a.z), solve_lcp(M, -a.z.copy()))
+
+
+@pytest.mark.parametrize("entry", ["solve_lcp", "LCPSolver"])
+@pytest.mark.parametrize(("M", "q", "error", "start"), [
+    (np.ones((2, 3)), np.ones(2), DimensionError, "M: expected"),
+    (np.array([[1.0, np.nan], [0.0, 1.0]]), np.ones(2), ModelError, "M: "),
+    (np.array([["1", "a"], ["0", "1"]], dtype=object), np.ones(2), ModelError, "M: expected"),
+    (np.array([["1", "a"], ["0", "1"]]), np.ones(2), ModelError, "M: expected"),
+    (sp.csr_matrix(np.ones((3, 2))), np.ones(3), DimensionError, "M: expected"),
+    (np.eye(2), np.array([1.0, np.nan]), ModelError, "q: "),
+    (np.eye(2), np.array(["1", "x"]), ModelError, "q: expected"),
+    (np.eye(2), np.ones(3), DimensionError, "q: expected"),
+])
+def test_bad_input_is_refused_naming_the_argument(entry, M, q, error, start):
+    with pytest.raises(error, match=f"^{start}"):
+        if entry == "solve_lcp":
+            solve_lcp(M, q)
+        else:
+            LCPSolver(M).solve(q)
