@@ -33,12 +33,12 @@ def test_state_feedback_on_a_linear_mechanical_plant_stays_exact_and_compiled():
     loop = nsc.closed_loop(plant, StateFeedback(K, k=[5.0]))
     assert isinstance(stacked_model(loop), LagrangianSystem) and stacked_model(loop).is_linear
     folded = nsc.simulate(loop, [0.2, 0.0], (0.0, 10.0))
-    # the same law through the integrator's own gain path (u = -K' x, with the offset as a
-    # constant force): both are exact flows, so they agree to roundoff x number of samples
-    legacy_plant = _mass_on_wall(restitution=0.5, actuation=[[1.0]])
-    legacy_plant = LagrangianSystem([[1.0]], gap_matrix=[[1.0]], gap_offset=[0.0],
-                                    constant_force=[4.0], restitution=0.5, actuation=[[1.0]])
-    legacy = nsc.simulate(legacy_plant, [0.2, 0.0], (0.0, 10.0), controller=-K)
+    # the same law written into the plant by hand (u = K x + 5: stiffness 4, damping 1, the
+    # offset plus the unit weight a constant force 4): both are exact flows, so they agree to
+    # roundoff x number of samples
+    by_hand = LagrangianSystem([[1.0]], stiffness=[[4.0]], damping=[[1.0]], gap_matrix=[[1.0]],
+                               gap_offset=[0.0], constant_force=[4.0], restitution=0.5)
+    legacy = nsc.simulate(by_hand, [0.2, 0.0], (0.0, 10.0))
     np.testing.assert_allclose(folded.x, legacy.x, rtol=0, atol=1e3 * len(folded.t) * EPS)
     np.testing.assert_allclose(folded.signal("u")[:, 0], folded.x @ K[0] + 5.0, atol=1e-15)
     mj = nsc.simulate(loop, [0.2, 0.0], (0.0, 10.0), method="moreau_jean", h=1e-3)
@@ -144,7 +144,8 @@ def test_composition_refuses_what_no_integrator_runs():
     with pytest.raises(ModelError, match=r"^observer: a StateFeedback/LinearController "):
         nsc.closed_loop(ball, observer=StateFeedback([[1.0, 0.0]]))
     loop = nsc.closed_loop(ball, observer=ImpactCounter())
-    with pytest.raises(ModelError, match=r"^event_driven: this loop's blocks run as Python"):
+    with pytest.raises(ModelError, match=r"^event_driven: runs a closed loop whose controller "
+                                         r"is a continuous law without state"):
         nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method="event_driven")
     from nscontrol.testing.setvalued_problems import relay_feedback
 

@@ -471,7 +471,8 @@ def test_bad_options_each_their_error() -> None:
         simulate(s, x0, (0.0, 1.0), u=Exosystem.constant([1.0, 2.0]))
     with pytest.raises(DimensionError, match=r"^controller: K must have shape \(1, 2\)"):
         closed_loop(s, StateFeedback([[1.0, 2.0, 3.0]]))
-    with pytest.raises(ModelError, match=r"^event_driven: unknown option\(s\) \['controller'\]"):
+    with pytest.raises(ModelError, match=r"^controller: unknown option of simulate; feedback "
+                                         r"is a closed loop"):
         simulate(s, x0, (0.0, 1.0), controller=[[1.0, 2.0]])
     # the model: a zero gap row, a jacobian with the wrong sign
     with pytest.raises(ModelError, match=r"^gap_matrix: row 1 is zero"):
