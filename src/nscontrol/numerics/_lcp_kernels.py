@@ -869,23 +869,6 @@ def tridiagonal_inf_norm(lower, diag, upper):
     return best
 
 
-@njit(cache=True)
-def dense_structure(M):
-    """One scan of a dense square matrix: ``(all entries finite, tridiagonal)`` (what
-    :class:`~nscontrol.numerics.lcp.LCPSolver` needs of ``M`` before anything else)."""
-    n = M.shape[0]
-    finite = True
-    tridiagonal = True
-    for i in range(n):
-        for j in range(n):
-            v = M[i, j]
-            if not np.isfinite(v):
-                finite = False
-            elif v != 0.0 and (j > i + 1 or j < i - 1):
-                tridiagonal = False
-    return finite, tridiagonal
-
-
 # --------------------------------------------------------------------------------- PGS polish
 @njit(cache=True)
 def _solve_principal_block(M, q, idx, k, x):
