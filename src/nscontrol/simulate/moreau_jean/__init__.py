@@ -239,15 +239,22 @@ mass_at, projection, contact_tol
         record_every=record_every, signals=signals, progress=progress)
     t0, tf = (float(t) for t in t_span)
     if system.friction_dim or opts.projection:   # Coulomb friction, or the position projection
-        from .._frictional_moreau_jean import integrate_frictional
-
-        if blocks is not None:
-            raise ModelError("controller: a closed loop's Python blocks are not supported "
-                             "yet with friction or projection=True; give the feedback as "
-                             "a StateFeedback gain, or simulate the plant alone")
-        if listeners:
-            raise ModelError("listeners: not supported yet with friction or "
-                             "projection=True; simulate without them")
-        return integrate_frictional(system, x0, t0, tf, opts)
+        return _frictional(system, x0, (t0, tf), opts, feedback)
     return drive(Run(system, x0, (t0, tf), opts, feedback), (t0, tf), desc="moreau_jean",
                  progress=opts.progress)
+
+
+def _frictional(system: LagrangianSystem, x0: Any, t_span: tuple[float, float], opts: Any,
+                feedback: Any) -> Trajectory:
+    """The run of a system with friction or the position projection (its own loop, without
+    blocks or listeners yet)."""
+    from .._frictional_moreau_jean import integrate_frictional
+
+    if feedback.blocks is not None:
+        raise ModelError("controller: a closed loop's Python blocks are not supported yet "
+                         "with friction or projection=True; give the feedback as a "
+                         "StateFeedback gain, or simulate the plant alone")
+    if feedback.listeners:
+        raise ModelError("listeners: not supported yet with friction or projection=True; "
+                         "simulate without them")
+    return integrate_frictional(system, x0, t_span[0], t_span[1], opts)

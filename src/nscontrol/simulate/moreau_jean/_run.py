@@ -169,7 +169,7 @@ def first_runner(system: Any, opts: MoreauJeanOptions, feedback: Feedback,
                  S: FloatArray | None) -> Runner:
     """The compiled model's loop (with the compiled form of a closed loop's blocks) when it
     applies, else the fastest step loop for the system."""
-    compiled = None if feedback.blocks is None else compiled_blocks(feedback.blocks)
+    compiled = None if feedback.blocks is None else compiled_form_of(feedback.blocks)
     model = system.compiled
     if model is None and compiled is not None:   # a linear plant under compiled blocks
         from ...systems.lagrangian import affine_compiled_model
@@ -183,7 +183,7 @@ def first_runner(system: Any, opts: MoreauJeanOptions, feedback: Feedback,
     return choose_runner(system, opts, S)
 
 
-def compiled_blocks(blocks: Any) -> Any:
+def compiled_form_of(blocks: Any) -> Any:
     """The compiled form of the blocks (``CompiledBlocks.of``), or ``None``: also for
     impacting bodies, whose Lagrangian form permutes the state the blocks read (their
     Python form puts it back, the compiled one would not)."""
