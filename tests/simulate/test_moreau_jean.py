@@ -247,6 +247,14 @@ def test_bad_moreau_jean_options_each_their_error() -> None:
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, listeners=["no"])
     with pytest.raises(ModelError, match=r"^signals: unknown name\(s\) \['impulses'\]"):
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, signals=["impulses"])
+    # blocks= is the closed loop's own (its BlockRunner): a raw callable is refused, the
+    # controller= keyword is gone (a closed loop carries the law)
+    with pytest.raises(ModelError, match=r"^blocks: expected the BlockRunner of a closed loop"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
+                 blocks=lambda t, q, v: np.zeros(1))
+    with pytest.raises(ModelError, match=r"^moreau_jean: unknown option\(s\) \['controller'\]"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
+                 controller=lambda t, q, v: np.zeros(1))
     with pytest.raises(ModelError, match=r"^controller: returned a non-finite value at "
                        r"t = 0\.501") as err:
         simulate(closed_loop(s, _Law(lambda t, q, v: np.nan if t > 0.5 else 0.0)), x0,

@@ -119,9 +119,7 @@ class Feedback:
     @classmethod
     def checked(cls, blocks: Any, listeners: Sequence[Any]) -> Feedback:
         """The feedback of a run, its parts checked."""
-        from .._block_runner import BlockRunner
-
-        if blocks is not None and not isinstance(blocks, BlockRunner):
+        if blocks is not None and not _is_block_runner(blocks):
             raise ModelError(f"blocks: expected the BlockRunner of a closed loop (set by "
                              f"simulate for closed_loop(plant, controller)), got "
                              f"{type(blocks).__name__}; close the loop with "
@@ -131,6 +129,12 @@ class Feedback:
                 raise ModelError(f"listeners[{i}]: expected a callable (t, x_minus, x_plus, "
                                  f"contacts, impulse), got {type(fn).__name__}")
         return cls(blocks, tuple(listeners))
+
+
+def _is_block_runner(blocks: Any) -> bool:
+    from .._block_runner import BlockRunner
+
+    return isinstance(blocks, BlockRunner)
 
 
 def check_input(system: Any, u: Any) -> None:
