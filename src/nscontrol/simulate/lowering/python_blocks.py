@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from ...errors import ModelError
 from ...systems.closed_loop import ClosedLoop
-from .._block_runner import BlockRunner, CompiledBlocks
+from .._block_runner import BlockRunner
 from .base import Lowered, Lowering, merge_options
 
 if TYPE_CHECKING:
