@@ -252,7 +252,8 @@ def test_bad_moreau_jean_options_each_their_error() -> None:
     with pytest.raises(ModelError, match=r"^blocks: expected the BlockRunner of a closed loop"):
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
                  blocks=lambda t, q, v: np.zeros(1))
-    with pytest.raises(ModelError, match=r"^moreau_jean: unknown option\(s\) \['controller'\]"):
+    with pytest.raises(ModelError, match=r"^controller: unknown option of simulate; feedback "
+                                         r"is a closed loop"):
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
                  controller=lambda t, q, v: np.zeros(1))
     with pytest.raises(ModelError, match=r"^controller: returned a non-finite value at "
