@@ -152,21 +152,22 @@ def test_warp_is_continuous_with_the_nominal_path_at_the_transition_start():
     assert math.isfinite(p[0])
 
 
-def test_controller_works_as_a_closed_loop_block_and_as_a_step_controller():
-    """The same law through nscontrol.closed_loop (a Controller block fed λ̂) and as the
-    integrator's controller= callable: the same torques, hence the same trajectory."""
+def test_controller_works_compiled_and_as_python_blocks():
+    """The same law through nscontrol.closed_loop run compiled (inside the compiled model's
+    loop) and as Python blocks (its output method, fed λ̂, before each step of the plant's
+    step loop): the same torques, hence the same trajectory."""
     import nscontrol as nsc
 
     plant = OneDofMass()
     runs = []
-    for as_block in (True, False):
+    for compiled in (True, False):
         ctrl = SwitchingTrackingController(plant, HalfSineTask(), PBCGains(5.0, 5.0))
-        system = nsc.closed_loop(plant.system(0.7), ctrl) if as_block else plant.system(0.7)
-        extra = {} if as_block else {"controller": ctrl}
+        system = nsc.closed_loop(plant.system(0.7), ctrl, compiled=compiled)
         traj = nsc.simulate(system, [0.05, 0.0], (0.0, 0.5), method="moreau_jean", h=1e-3,
-                            progress=False, **extra)
-        # the block runs compiled: its log is read back from the run's block state
-        runs.append((traj.x[:, :2], ctrl.signals(traj if as_block else None)["V"]))
+                            progress=False)
+        assert (traj.stats["path"] == "compiled_model") == compiled
+        # compiled, the block's log is read back from the run's block state
+        runs.append((traj.x[:, :2], ctrl.signals(traj if compiled else None)["V"]))
     assert np.array_equal(runs[0][0], runs[1][0])
     assert np.array_equal(runs[0][1], runs[1][1])
     assert runs[0][1][-1] < runs[0][1][0]            # V decays in free motion

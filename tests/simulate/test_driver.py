@@ -178,14 +178,17 @@ def test_a_method_that_integrates_a_closed_loop_gets_it_unlowered(ball):
 
 
 def test_a_user_callback_error_keeps_the_run_so_far(ball):
-    def controller(t, q, v):
-        if t > 0.5:
-            raise RuntimeError("sensor unplugged")
-        return np.zeros(1)
+    class Controller(nsc.systems.StaticLaw):
+        n_outputs, period = 1, None
+
+        def output(self, t, xc, m):
+            if t > 0.5:
+                raise RuntimeError("sensor unplugged")
+            return np.zeros(1)
 
     with pytest.raises(RuntimeError, match="sensor unplugged") as info:
-        nsc.simulate(ball, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-3,
-                     controller=controller)
+        nsc.simulate(nsc.closed_loop(ball, Controller()), [1.0, 0.0], (0.0, 1.0),
+                     method="moreau_jean", h=1e-3)
     partial = info.value.trajectory
     assert isinstance(partial, Trajectory) and partial.status == -1
     # the controller is called at each step's start: the last recorded step ends at 0.501

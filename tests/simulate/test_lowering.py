@@ -64,7 +64,7 @@ def test_a_method_that_integrates_loops_natively_sees_the_loop_unlowered():
 
 
 def test_python_blocks_around_impacting_bodies_chain_two_lowerings():
-    """Python blocks -> the bodies with a controller= -> their Lagrangian form: the blocks
+    """Python blocks -> the bodies with their blocks= -> their Lagrangian form: the blocks
     read the bodies' own state order, the trajectory comes back in it. The same loop written
     on the Lagrangian form (the block reading the same entry there) is the same arithmetic."""
     bodies = _bodies()
@@ -85,15 +85,16 @@ def test_python_blocks_around_impacting_bodies_chain_two_lowerings():
 def test_one_lowering_gives_both_integrators_the_bodies_order():
     """Listeners receive the states in the bodies' order from event_driven and moreau_jean
     alike (the gap ``q_{na+1} - q_na`` of the bodies' order closes at every impact), and a
-    gain controller= on ``[x_a; x_b]`` acts on the entries it names."""
+    closed loop's law on ``[x_a; x_b]`` acts on the entries it names."""
     bodies = _bodies()
     x0 = np.array([0.0, 0.1, 0.3, 0.0, 1.0, -0.5])
     h = 1e-3
-    # event_driven: the gain as a closed loop on [x_a; x_b] (its law evaluated along the flow)
+    # event_driven: the gain as a closed loop on [x_a; x_b] (its law evaluated along the flow);
+    # moreau_jean: a Python block on the same entry (stepped with the plant)
     gain = nsc.closed_loop(bodies, StateFeedback([[0.0, 0.0, 0.0, -0.5, 0.0, 0.0]]))
     for method, system, opts in (
             ("event_driven", gain, {}),
-            ("moreau_jean", bodies, {"h": h, "controller": lambda t, q, v: -0.5 * v[1:2]})):
+            ("moreau_jean", nsc.closed_loop(bodies, Damper(0.5, 3)), {"h": h})):
         jumps = []
         traj = nsc.simulate(system, x0, (0.0, 3.0), method=method, progress=False,
                             listeners=[lambda t, a, b, c, p, seen=jumps: seen.append(b)],

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
+from nscontrol import closed_loop
 from nscontrol.numerics.lti import Exosystem
 from nscontrol.simulate import simulate
+from nscontrol.systems.feedback import StaticLaw
 from nscontrol.systems.impacting_bodies import ImpactingBodies
 from nscontrol.systems.lagrangian import LagrangianSystem
 from nscontrol.testing.mechanics_problems import (
@@ -13,6 +15,19 @@ from nscontrol.testing.mechanics_problems import (
     RestingStack,
     impact_oscillator,
 )
+
+
+class _Law(StaticLaw):
+    """A Python feedback law ``u = fn(t, q, v)`` of the plant's state (a closed loop)."""
+
+    n_outputs, period = 1, None
+
+    def __init__(self, fn):
+        object.__setattr__(self, "fn", fn)
+
+    def output(self, t, xc, m):
+        n = m.x.size // 2
+        return np.atleast_1d(np.asarray(self.fn(t, m.x[:n], m.x[n:]), dtype=float))
 
 
 def test_bouncing_ball_impacts_within_two_steps_then_rest() -> None:
@@ -127,9 +142,9 @@ def test_controller_hook_and_jump_listener() -> None:
     # every impact with the post-impact state
     system = impact_oscillator(stiffness=0.0, damping=0.0, wall=0.3, restitution=0.5)
     seen = []
-    traj = simulate(system, [0.0, 0.0], (0.0, 10.0), method="moreau_jean", h=1e-3,
-                    controller=lambda t, q, v: -4.0 * (q - 0.5) - 1.0 * v,
-                    listeners=[lambda t, xm, xp, c, p: seen.append((t, xm, xp, p))])
+    law = _Law(lambda t, q, v: -4.0 * (q - 0.5) - 1.0 * v)
+    traj = simulate(closed_loop(system, law), [0.0, 0.0], (0.0, 10.0), method="moreau_jean",
+                    h=1e-3, listeners=[lambda t, xm, xp, c, p: seen.append((t, xm, xp, p))])
     assert len(seen) == len(traj.events_of("impact")) >= 1
     t, xm, xp, p = seen[0]
     assert xm[1] > 0 and xp[1] < 0 and p[0] > 0
@@ -232,8 +247,17 @@ def test_bad_moreau_jean_options_each_their_error() -> None:
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, listeners=["no"])
     with pytest.raises(ModelError, match=r"^signals: unknown name\(s\) \['impulses'\]"):
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3, signals=["impulses"])
-    with pytest.raises(ModelError, match=r"^controller: expected a finite input of length 1"
-                       ) as err:
+    # blocks= is the closed loop's own (its BlockRunner): a raw callable is refused, the
+    # controller= keyword is gone (a closed loop carries the law)
+    with pytest.raises(ModelError, match=r"^blocks: expected the BlockRunner of a closed loop"):
         simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
-                 controller=lambda t, q, v: np.nan if t > 0.5 else 0.0)
+                 blocks=lambda t, q, v: np.zeros(1))
+    with pytest.raises(ModelError, match=r"^controller: unknown option of simulate; feedback "
+                                         r"is a closed loop"):
+        simulate(s, x0, (0.0, 1.0), method="moreau_jean", h=1e-3,
+                 controller=lambda t, q, v: np.zeros(1))
+    with pytest.raises(ModelError, match=r"^controller: returned a non-finite value at "
+                       r"t = 0\.501") as err:
+        simulate(closed_loop(s, _Law(lambda t, q, v: np.nan if t > 0.5 else 0.0)), x0,
+                 (0.0, 1.0), method="moreau_jean", h=1e-3)
     assert err.value.trajectory.t[-1] == pytest.approx(0.5, abs=2e-3)   # the last step before

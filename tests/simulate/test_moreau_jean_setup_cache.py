@@ -1,5 +1,5 @@
 """The step matrices of Moreau–Jean's compiled paths are kept per system and step
-(``_mj_runners._SETUPS``): a second run reuses them, another step or another system does
+(``moreau_jean._runners._SETUPS``): a second run reuses them, another step or another system does
 not, and a run's result does not depend on what the cache held before it."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import nscontrol as nsc
-from nscontrol.simulate import _mj_runners
+from nscontrol.simulate.moreau_jean import _runners as _mj_runners
 from nscontrol.systems.lagrangian import LagrangianSystem
 
 
@@ -58,6 +58,7 @@ def test_a_second_run_reuses_the_setup_and_another_step_or_system_does_not(make,
 def test_the_setup_does_not_keep_the_system_alive():
     system = _tridiagonal()
     _run(system, 1e-3)
+    gc.collect()     # systems of earlier tests left in reference cycles (a traceback's frames)
     before = len(_mj_runners._SETUPS)
     del system
     gc.collect()

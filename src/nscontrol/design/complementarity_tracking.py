@@ -761,22 +761,6 @@ class SwitchingTrackingController(StaticLaw):
             xc[:] = self._xb
         return u
 
-    def __call__(self, t: float, q: FloatArray, v: FloatArray, *,
-                 lam_hat: FloatArray) -> FloatArray:
-        """The same law as a Moreau–Jean ``controller=`` callable.
-
-        Parameters
-        ----------
-        t : float
-            Time (a step start).
-        q, v : ndarray
-            Joint angles and velocities.
-        lam_hat : ndarray
-            Last step's impulses over ``h``.
-        """
-        lam = float(lam_hat[0]) if np.size(lam_hat) else 0.0
-        return self.step(t, np.concatenate([q, v]), lam)
-
     # -- run state ----------------------------------------------------------------------
     def reset_run(self) -> None:
         """Forget the phase logic and the log (before a new simulation)."""

@@ -34,7 +34,7 @@ from ..errors import ModelError, SolverError
 from .trajectory import Recorder, Trajectory
 
 if TYPE_CHECKING:
-    from ._mj_options import MoreauJeanOptions
+    from .moreau_jean._options import MoreauJeanOptions
 
 #: Signals this path records (those of plain Moreau–Jean, and the contact's).
 OFFERED = ("impulse", "gap", "energy", "friction_impulse", "contact_state", "friction_work",

@@ -63,9 +63,10 @@ class MoreauJean(_ModuleIntegrator):
     name = "moreau_jean"
     module = "nscontrol.simulate.moreau_jean"
     capabilities = frozenset({"time_stepping", "listeners", "multipliers"})
+    # blocks: the BlockRunner of a closed loop, set by the python_blocks lowering
     options: ClassVar[frozenset[str]] = frozenset(
-        {"h", "theta", "gamma", "u", "controller", "activation", "forces", "mass_at",
-         "projection", "contact_tol", "compiled_blocks"})
+        {"h", "theta", "gamma", "u", "activation", "forces", "mass_at", "projection",
+         "contact_tol", "blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:   # ImpactingBodies: lowering.impacting_bodies

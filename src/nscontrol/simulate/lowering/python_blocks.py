@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from ...errors import ModelError
 from ...systems.closed_loop import ClosedLoop
-from .._block_runner import BlockRunner, CompiledBlocks
+from .._block_runner import BlockRunner
 from .base import Lowered, Lowering, merge_options
 
 if TYPE_CHECKING:
@@ -55,9 +55,9 @@ class PythonBlocks(Lowering):
 
 
 def _mechanical_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str, Any]]:
-    """Moreau–Jean with ``controller=(t, q, v, *, lam_hat, active)`` and a listener that
-    resets the blocks at impacts."""
-    from ...systems.impacting_bodies import ImpactingBodies
+    """Moreau–Jean with the loop's blocks (``blocks=``, stepped before each step; the
+    integrator runs their compiled form when it can) and a listener that resets them at
+    impacts."""
     from ...systems.sliding_mode import SlidingModePlant
 
     if isinstance(loop.plant, SlidingModePlant):
@@ -68,14 +68,9 @@ def _mechanical_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dic
                          f"the plant; use method='moreau_jean' (or give the blocks as "
                          f"matrices: StateFeedback, LinearController, LinearObserver)")
     runner = BlockRunner(loop)
-    options: dict[str, Any] = {"controller": runner.step, "listeners": [runner.on_jump]}
+    options: dict[str, Any] = {"blocks": runner, "listeners": [runner.on_jump]}
     if loop.exosystem is not None:
         options["u"] = loop.exosystem
-    # the compiled blocks read the plant's state order, which the Lagrangian form of
-    # impacting bodies permutes: those run their blocks in Python
-    compiled = None if isinstance(loop.plant, ImpactingBodies) else CompiledBlocks.of(runner)
-    if compiled is not None:       # used when the plant has a compiled model too
-        options["compiled_blocks"] = compiled
     return runner, options
 
 

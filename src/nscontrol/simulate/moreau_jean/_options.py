@@ -2,22 +2,21 @@
 
 :func:`nscontrol.simulate.moreau_jean.integrate` turns its keyword arguments into a
 :class:`MoreauJeanOptions` (the scheme's and the run's settings) and a :class:`Feedback`
-(what reaches the plant between steps: the ``controller=``, its listeners, the compiled
-blocks of a closed loop); every path (the compiled loops, the Python runner, the frictional
+(what reaches the plant between steps: the block runner of a closed loop and the jump
+listeners); every path (the compiled loops, the Python runner, the frictional
 loop) reads these records, never the raw keywords.
 """
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray, check_bool, check_in_interval, check_positive
-from ..errors import DimensionError, ModelError
+from ..._validation import FloatArray, check_bool, check_in_interval, check_positive
+from ...errors import DimensionError, ModelError
 
 __all__ = ["Feedback", "MoreauJeanOptions"]
 
@@ -100,58 +99,47 @@ class MoreauJeanOptions:
 
 @dataclass(frozen=True)
 class Feedback:
-    """What acts between steps: a ``controller`` (with the keyword arguments it reads),
-    jump ``listeners`` and the ``compiled_blocks`` of a closed loop.
+    """What acts between steps: the ``blocks`` of a closed loop and the jump ``listeners``.
 
     Attributes
     ----------
-    controller : callable or None
-        ``(t, q, v[, lam_hat=, active=]) -> u``, added to the input.
-    reads : frozenset of str
-        Which of ``lam_hat`` and ``active`` the controller accepts.
+    blocks : BlockRunner or None
+        The loop's blocks (set by the ``python_blocks`` lowering of
+        :func:`nscontrol.closed_loop`): stepped at every step start, they read the plant's
+        state, the last step's impulses over ``h`` and its active set; their output is
+        added to the input. The run takes their compiled form when it can.
     listeners : tuple of callables
-        ``(t, x_minus, x_plus, contacts, impulse)``, called for every step with an impact.
-    compiled_blocks : object or None
-        The compiled form of a closed loop's blocks (see
-        :func:`nscontrol.simulate.moreau_jean.integrate`).
+        ``(t, x_minus, x_plus, contacts, impulse)``, called for every step with an impact
+        (the blocks' reset among them).
     """
 
-    controller: Callable[..., Any] | None = None
-    reads: frozenset[str] = frozenset()
+    blocks: Any = None
     listeners: tuple[Callable[..., None], ...] = ()
-    compiled_blocks: Any = None
 
     @classmethod
-    def checked(cls, controller: Any, listeners: Sequence[Any], compiled_blocks: Any
-                ) -> Feedback:
-        """The feedback of a run, its callables checked."""
-        if controller is not None and not callable(controller):
-            raise ModelError("controller: expected a callable (t, q, v) -> u")
+    def checked(cls, blocks: Any, listeners: Sequence[Any]) -> Feedback:
+        """The feedback of a run, its parts checked."""
+        if blocks is not None and not _is_block_runner(blocks):
+            raise ModelError(f"blocks: expected the BlockRunner of a closed loop (set by "
+                             f"simulate for closed_loop(plant, controller)), got "
+                             f"{type(blocks).__name__}; close the loop with "
+                             f"nscontrol.closed_loop instead")
         for i, fn in enumerate(listeners):
             if not callable(fn):
                 raise ModelError(f"listeners[{i}]: expected a callable (t, x_minus, x_plus, "
                                  f"contacts, impulse), got {type(fn).__name__}")
-        return cls(controller, controller_reads(controller), tuple(listeners), compiled_blocks)
+        return cls(blocks, tuple(listeners))
 
 
-def controller_reads(controller: Any) -> frozenset[str]:
-    """Which of ``lam_hat`` and ``active`` the controller accepts as keyword arguments."""
-    if controller is None:
-        return frozenset()
-    try:
-        params = inspect.signature(controller).parameters.values()
-    except (TypeError, ValueError):  # some builtins have no signature: (t, q, v) only
-        return frozenset()
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        return frozenset(("lam_hat", "active"))
-    keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    return frozenset(p.name for p in params
-                     if p.name in ("lam_hat", "active") and p.kind in keyword)
+def _is_block_runner(blocks: Any) -> bool:
+    from .._block_runner import BlockRunner
+
+    return isinstance(blocks, BlockRunner)
 
 
 def check_input(system: Any, u: Any) -> None:
     """An :class:`Exosystem` input must have one output per actuator column."""
-    from ..numerics.lti import Exosystem
+    from ...numerics.lti import Exosystem
 
     if u is None or callable(u) and not isinstance(u, Exosystem):
         return

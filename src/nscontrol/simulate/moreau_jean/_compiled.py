@@ -1,8 +1,9 @@
 """Moreau–Jean on a Lagrangian system with a compiled model (``system.compiled``): the
 runner of the compiled loop :func:`~nscontrol.simulate._mj_compiled_kernels.mj_model_steps`,
 whose step is the Python path's (:func:`~nscontrol.simulate._moreau_jean_kernels.mj_step`),
-optionally with the compiled blocks of a closed loop. The run of
-:func:`nscontrol.simulate.moreau_jean.integrate` drives it as any other runner.
+optionally with the compiled blocks of a closed loop (``CompiledBlocks.of`` the loop's block
+runner). The run of :func:`nscontrol.simulate.moreau_jean.integrate` drives it as any other
+runner.
 """
 
 from __future__ import annotations
@@ -13,18 +14,17 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import FloatArray
-from ._mj_options import MoreauJeanOptions
-from ._mj_runners import Runner, RunState, singular_message
-from .trajectory import Recorder
+from ..._validation import FloatArray
+from ..trajectory import Recorder
+from ._options import MoreauJeanOptions
+from ._runners import Runner, RunState, singular_message
 
 
 class ModelRunner(Runner):
-    """The compiled model's loop; with ``blocks`` the loop steps and resets them itself (the
-    run's controller stands for them), other listeners observe after each chunk."""
+    """The compiled model's loop; with ``blocks`` the loop steps and resets them itself,
+    other listeners observe after each chunk."""
 
     path = "compiled_model"
-    takes_controller = False
 
     def __init__(self, system: Any, opts: MoreauJeanOptions, S: FloatArray | None,
                  model: Any, blocks: Any) -> None:
@@ -53,8 +53,8 @@ class ModelRunner(Runner):
                 if runner is None or getattr(fn, "__self__", None) is not runner]
 
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
-        from ..systems._feedback_kernels import calling_blocks
-        from ._mj_compiled_kernels import mj_model_steps
+        from ...systems._feedback_kernels import calling_blocks
+        from .._mj_compiled_kernels import mj_model_steps
 
         s, o, size = self.system, self.opts, times.size
         n, m = s.n_dof, s.n_contacts
@@ -78,7 +78,7 @@ class ModelRunner(Runner):
 
     def failure(self, code: int, t: float, state: RunState) -> str:
         """A block's failure is raised (the run context attaches the steps so far)."""
-        from ._mj_compiled_kernels import BLOCKS, MODEL_ERROR, SINGULAR
+        from .._mj_compiled_kernels import BLOCKS, MODEL_ERROR, SINGULAR
 
         if code >= BLOCKS:
             self.blocks.raise_status(int(code - BLOCKS), t)
@@ -106,7 +106,7 @@ class ModelRunner(Runner):
 
 def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
                      ) -> dict[str, Any]:
-    from ._mj_compiled_kernels import gap_rows, kinetic_energy_rows, potential_rows
+    from .._mj_compiled_kernels import gap_rows, kinetic_energy_rows, potential_rows
 
     out: dict[str, Any] = {}
     if rec.wants("impulse"):
@@ -128,7 +128,7 @@ def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
 
 def _no_blocks(system: Any, n_inputs: int) -> tuple[Any, ...]:
     """The kernel's block arguments of a loop without blocks (never called)."""
-    from ..systems._feedback_kernels import (
+    from ...systems._feedback_kernels import (
         compiled_entries,
         empty_output,
         keep_state,

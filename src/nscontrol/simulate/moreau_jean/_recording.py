@@ -1,0 +1,109 @@
+"""What a Moreau–Jean run records: the states, the signals ``impulse``, ``gap`` and
+``energy``, and the ``"impact"`` events (a contact whose impulse becomes positive while
+approaching), with the jump listeners called for each step that has one."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..._validation import FloatArray
+from ..trajectory import ChunkProgress, Recorder
+from ._runners import RunState
+
+__all__ = ["signals_of", "sample_initial", "record_chunk", "record_finished", "impact"]
+
+
+def signals_of(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
+               rec: Recorder) -> dict[str, FloatArray]:
+    """The signals ``rec`` wants of the rows ``q``, ``v``, ``p``."""
+    out: dict[str, FloatArray] = {}
+    if rec.wants("impulse"):
+        out["impulse"] = p
+    if rec.wants("gap"):
+        out["gap"] = np.array([system.gaps(qi) for qi in q]) if system.gap is not None \
+            else np.asarray((system.gap_matrix @ q.T).T) + system.gap_offset
+    if rec.wants("energy"):
+        out["energy"] = system.energy(np.hstack([q, v]))
+    return out
+
+
+def sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> None:
+    """The first sample (always kept)."""
+    n = system.n_dof
+    sig = signals_of(system, x0[None, :n], x0[None, n:], np.zeros((1, system.n_contacts)),
+                     rec)
+    rec.sample(t0, x0, **{key: val[0] for key, val in sig.items()})
+
+
+def impact(system: Any, q: FloatArray, v: FloatArray, rising: np.ndarray
+           ) -> tuple[np.ndarray, FloatArray]:
+    """Of the contacts whose impulse rose over a step from ``(q, v)`` (the mask
+    ``rising``), those approaching at the step's start, ``G v < 0``, and their ``G v``."""
+    contacts = np.flatnonzero(rising)
+    un = np.asarray(system.gap_jacobian(q)[contacts] @ v).ravel()
+    keep = un < 0.0
+    return contacts[keep], un[keep]
+
+
+def jump_listener(system: Any, listeners: Sequence[Callable[..., None]]
+                  ) -> Callable[..., None]:
+    """``after_step(t, x_minus, x_plus, p, p_before)``: the listeners called at once for a
+    step with an impact (the blocks' reset, before their next step)."""
+    n = system.n_dof
+
+    def after_step(t: float, x_minus: FloatArray, x_plus: FloatArray, p: FloatArray,
+                   p_before: FloatArray) -> None:
+        rising = (p > 0.0) & (p_before == 0.0)
+        if not rising.any():
+            return
+        contacts, _ = impact(system, x_minus[:n], x_minus[n:], rising)
+        if contacts.size:
+            for listener in listeners:
+                listener(t, x_minus, x_plus, contacts, p.copy())
+
+    return after_step
+
+
+def record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
+                    times: FloatArray, state: RunState, q_pre: FloatArray,
+                    v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                    h: float) -> None:
+    """Record the steps a failed chunk finished (see :meth:`Recorder.chunk`)."""
+    q, v, p = progress.written()
+    record_chunk(rec, system, times[:progress.done] + h, q, v, p, state, q_pre, v_pre,
+                 listeners, h)
+
+
+def record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
+                 v: FloatArray, p: FloatArray, state: RunState, q_pre: FloatArray,
+                 v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                 h: float, signals: dict[str, FloatArray] | None = None) -> None:
+    """Write a chunk of steps and its impact events; call the jump listeners. ``signals``:
+    the chunk's signals when the caller computed them (the compiled path)."""
+    rec.extend(times, (q, v), **(signals_of(system, q, v, p, rec) if signals is None
+                                 else signals))
+    positive = p > 0.0
+    if not positive.any():   # no impulse, no impact (most chunks of a flight)
+        state.p_prev = p[-1].copy()
+        return
+    prev = np.vstack([state.p_prev[None, :], p[:-1]])
+    rising = positive & (prev == 0.0)
+    for k in np.flatnonzero(rising.any(axis=1)):
+        qb = q_pre if k == 0 else q[k - 1]
+        vb = v_pre if k == 0 else v[k - 1]
+        contacts, un = impact(system, qb, vb, rising[k])
+        if contacts.size == 0:
+            continue
+        # the impact time inside the step, where the gap extrapolated from the step's start
+        # reaches zero (the step's end would bias every impact time by up to h)
+        gap = np.asarray(system.gaps(qb))[contacts]
+        tau = np.clip(gap / -un, 0.0, h)
+        x_minus, x_plus = np.concatenate([qb, vb]), np.concatenate([q[k], v[k]])
+        for j, tj in zip(contacts, tau, strict=True):
+            rec.event(times[k] - h + tj, "impact", int(j), x_minus, x_plus)
+        for listener in listeners:
+            listener(float(times[k]), x_minus, x_plus, contacts, p[k].copy())
+    state.p_prev = p[-1].copy()
