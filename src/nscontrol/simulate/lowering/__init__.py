@@ -18,9 +18,9 @@ lowering (module)                              what it does
 (:mod:`.impacting_bodies`)                     order of their Lagrangian form, and back
 =============================================  ===============================================
 
-Lowerings chain: a loop of Python blocks around impacting bodies is first the bodies with a
-``controller=``, then their Lagrangian form. A method whose ``supports(system)`` is true for
-the system as given (a method that integrates closed loops natively) sees it unlowered.
+Lowerings chain: a loop of Python blocks around impacting bodies is first the bodies with the
+loop's block runner (``blocks=``), then their Lagrangian form. A method whose
+``supports(system)`` is true for the system as given (a method that integrates closed loops natively) sees it unlowered.
 """
 
 from __future__ import annotations

@@ -49,7 +49,7 @@ class Lowered:
         The initial state of ``system``.
     options : mapping
         The run's options: the user's, with what the lowering adds or changes (a
-        ``controller=``, listeners in another state order ...).
+        ``blocks=``, listeners in another state order ...).
     data
         What :meth:`Lowering.invert` needs to map the trajectory back.
     """

@@ -3,7 +3,7 @@
 :class:`~nscontrol.systems.ImpactingBodies` keep the chapter's state order ``[x_a; x_b]``
 (positions and velocities of body a, then of body b); their Lagrangian form
 (:meth:`~nscontrol.systems.ImpactingBodies.lagrangian`) has ``[q; v]``. The lowering permutes
-``x0``, a gain ``controller=`` and the states the listeners receive into the Lagrangian order,
+``x0`` and the states the listeners receive into the Lagrangian order,
 and :meth:`LagrangianForm.invert` puts the trajectory (states, names, events) back — a
 partial one too, when the run fails.
 """
@@ -16,14 +16,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..._validation import check_bool
-from ...errors import DimensionError, ModelError
+from ...errors import ModelError
 from ...systems.impacting_bodies import ImpactingBodies
 from .base import Lowered, Lowering
 
 if TYPE_CHECKING:
     from ..trajectory import Trajectory
 
-__all__ = ["LagrangianForm", "permuted_gain"]
+__all__ = ["LagrangianForm"]
 
 
 class LagrangianForm(Lowering):
@@ -58,8 +58,6 @@ class LagrangianForm(Lowering):
         listeners = opts.get("listeners", ())
         if _callables(listeners):   # others are refused by the driver as given
             opts["listeners"] = reorder_listeners(listeners, back)
-        if opts.get("controller") is not None:
-            opts["controller"] = permuted_gain(opts["controller"], perm)
         return Lowered(self._form(system), system.check_state(x0)[perm], opts,
                        (back, system.state_names))
 
@@ -78,33 +76,3 @@ def _callables(listeners: Any) -> bool:
         return all(callable(fn) for fn in listeners)
     except TypeError:   # not iterable
         return False
-
-
-def permuted_gain(controller: Any, perm: np.ndarray) -> Any:
-    """A gain on ``[x_a; x_b]`` as a gain on the Lagrangian ``[q; v]`` (callables pass).
-
-    Parameters
-    ----------
-    controller : array_like or callable
-        ``u = -K x`` with ``x`` in the bodies' order, or a callable ``(t, q, v) -> u``.
-    perm : ndarray of int
-        ``x_lagrangian = x[perm]``.
-
-    Returns
-    -------
-    ndarray or callable
-
-    Raises
-    ------
-    DimensionError
-        A gain without one column per state.
-    """
-    if controller is None or callable(controller):
-        return controller
-    K = np.atleast_2d(np.asarray(controller, dtype=float))
-    if K.shape[-1] != perm.size:
-        raise DimensionError(f"controller: expected {perm.size} columns (the state), got "
-                             f"shape {K.shape}")
-    out = np.empty_like(K)
-    out[:, np.arange(perm.size)] = K[:, perm]
-    return out
