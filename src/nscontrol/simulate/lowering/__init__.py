@@ -20,7 +20,8 @@ lowering (module)                              what it does
 
 Lowerings chain: a loop of Python blocks around impacting bodies is first the bodies with the
 loop's block runner (``blocks=``), then their Lagrangian form. A method whose
-``supports(system)`` is true for the system as given (a method that integrates closed loops natively) sees it unlowered.
+``supports(system)`` is true for the system as given (a method that integrates closed loops
+natively) sees it unlowered.
 """
 
 from __future__ import annotations
