@@ -1,7 +1,6 @@
 """`nscontrol report` runs every example, keeps going past a failing one, and writes HTML+JSON."""
 
 import json
-from pathlib import Path
 
 from click.testing import CliRunner
 
@@ -149,16 +148,16 @@ def test_unlabelled_axes_names_the_bare_panel():
     assert unlabelled_axes(fig) == ["panel 1 (untitled): no y label"]
 
 
-def test_run_prints_a_timed_summary_and_json_carries_passed(monkeypatch):
+def test_run_prints_a_timed_summary_and_json_carries_passed(monkeypatch, tmp_path):
     import nscontrol.examples as ex_mod
 
     monkeypatch.setattr(ex_mod, "all_examples", lambda: [RICH])
     runner = CliRunner()
-    with runner.isolated_filesystem():
-        as_json = runner.invoke(main, ["run", "rich", "--json", "--no-figures"])
-        assert not Path("out").exists()
-        text = runner.invoke(main, ["run", "rich"])
-        assert list(Path("out/rich").glob("*.png"))   # figures by default, in out/NAME
+    monkeypatch.chdir(tmp_path)
+    as_json = runner.invoke(main, ["run", "rich", "--json", "--no-figures"])
+    assert not (tmp_path / "out").exists()
+    text = runner.invoke(main, ["run", "rich"])
+    assert list((tmp_path / "out" / "rich").glob("*.png"))   # figures by default, in out/NAME
     assert text.exit_code == 0, text.output
     last = text.output.strip().splitlines()[-1]
     assert re.match(r"rich \(\d+\.\d s\): Reproduced: residual .*; 2 of 2 checks pass\.$", last)

@@ -2,7 +2,6 @@
 through the CLI (``list``, ``run --json`` with the issue's JSON schema)."""
 
 import json
-from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -29,14 +28,14 @@ def test_every_check_passes_and_figures_exist(result):
     assert res.metrics["lti_events"] >= 10  # the guard search found every crossing
 
 
-def test_cli_list_and_run_json():
+def test_cli_list_and_run_json(tmp_path, monkeypatch):
     runner = CliRunner()
     listed = runner.invoke(main, ["list"])
     assert listed.exit_code == 0 and "foundation" in listed.output
-    with runner.isolated_filesystem():   # figures go to out/foundation by default
-        ran = runner.invoke(main, ["run", "foundation", "--json"])
-        assert ran.exit_code == 0, ran.output
-        assert list(Path("out/foundation").glob("*.png"))
+    monkeypatch.chdir(tmp_path)          # figures go to out/foundation by default
+    ran = runner.invoke(main, ["run", "foundation", "--json"])
+    assert ran.exit_code == 0, ran.output
+    assert list((tmp_path / "out" / "foundation").glob("*.png"))
     payload = json.loads(ran.output.strip().splitlines()[-1])
     assert payload["example"] == "foundation"
     assert isinstance(payload["metrics"], dict) and payload["metrics"]
