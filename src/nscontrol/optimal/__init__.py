@@ -19,7 +19,9 @@ from ._casadi import require_casadi
 require_casadi()
 
 from .contact import ContactProblem, Relaxation  # noqa: E402
+from .fesd import SwitchingPlan, SwitchingProblem  # noqa: E402
 from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
-from .problems import PushedBlock  # noqa: E402
+from .problems import PushedBlock, SpeedUp  # noqa: E402
 
-__all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock"]
+__all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock",
+           "SwitchingProblem", "SwitchingPlan", "SpeedUp"]

@@ -209,7 +209,8 @@ class ContactProblem:
         rounds, consistent, polished = 0, False, False
         while rounds < max_rounds and not consistent:
             rounds += 1
-            guess, polished = solve_homotopy(self, active, guess, relaxation, stages)
+            guess, polished = solve_homotopy(_ContactNLP(self, active), guess, relaxation,
+                                             stages)
             new = active_sets(self, guess["X"], guess["h"])
             consistent = bool(np.array_equal(new, active))
             if not consistent and rounds < max_rounds:
@@ -275,22 +276,116 @@ def _plan(problem: ContactProblem, sol: dict[str, Any], active: np.ndarray,
           stages: list[dict[str, Any]], polished: bool, rounds: int, consistent: bool
           ) -> ContactPlan:
     """The plan of a solution (its residual measured here, on the active pairs)."""
-    from .homotopy import pair_values
+    from .homotopy import residual, stage_stats
 
     h, N = float(sol["h"]), problem.steps
-    pairs = pair_values(problem, sol, active)
-    residual = max((float(np.max(np.abs(np.minimum(a, b)), initial=0.0)) for a, b in pairs),
-                   default=0.0)
-    stats = {"stages": stages, "solve_time": float(sum(st["solve_time"] for st in stages)),
-             "iterations": int(sum(st["iterations"] for st in stages)),
-             "polished": polished, "active_set_rounds": rounds,
+    stats = {**stage_stats(stages, polished), "active_set_rounds": rounds,
              "active_set_consistent": consistent, "theta": problem.theta,
              "gamma": problem.gamma}
-    return ContactPlan(t=h * np.arange(N + 1, dtype=np.float64), x=sol["X"].T.copy(), u=sol["U"].T.copy(),
-                       normal=sol["LN"].T.copy(), friction=(sol["BP"] - sol["BM"]).T.copy(),
-                       active=active.T.copy(), h=h, cost=float(sol["cost"]),
-                       residual=residual, stats=stats,
+    return ContactPlan(t=h * np.arange(N + 1, dtype=np.float64), x=sol["X"].T.copy(),
+                       u=sol["U"].T.copy(), normal=sol["LN"].T.copy(),
+                       friction=(sol["BP"] - sol["BM"]).T.copy(), active=active.T.copy(),
+                       h=h, cost=float(sol["cost"]),
+                       residual=residual(_ContactNLP(problem, active), sol), stats=stats,
                        state_names=problem.system.state_names)
+
+
+#: The contact unknowns, (m, N) each: normal force, friction β⁺, β⁻, slip speed.
+CONTACT_VARS = ("LN", "BP", "BM", "S")
+
+
+class _ContactNLP:
+    """The NLP of a :class:`ContactProblem` with fixed active sets (a
+    :class:`~nscontrol.optimal.homotopy.Builder`)."""
+
+    def __init__(self, problem: ContactProblem, active: np.ndarray) -> None:
+        self.problem, self.active = problem, np.asarray(active, bool)
+        self.on = np.flatnonzero(self.active.ravel(order="F"))
+        self.off = np.flatnonzero(~self.active.ravel(order="F"))
+
+    def variables(self, opti: Any) -> dict[str, Any]:
+        p = self.problem
+        s, N = p.system, p.steps
+        var = {"X": opti.variable(s.n_states, N + 1), "U": opti.variable(p.n_inputs, N),
+               "h": opti.variable() if p.minimum_time else float(p.h)}
+        for name in CONTACT_VARS[: 4 if s.friction_dim else 1] if s.n_contacts else ():
+            var[name] = opti.variable(s.n_contacts, N)
+        return var
+
+    def constraints(self, opti: Any, var: dict[str, Any]) -> None:
+        """The Moreau–Jean steps, the end conditions, the bounds, no force on the inactive
+        contacts."""
+        ca = casadi()
+        _dynamics(opti, self.problem, var)
+        _bounds(opti, self.problem, var)
+        for name in CONTACT_VARS:
+            if name in var and self.off.size:
+                opti.subject_to(ca.vec(var[name])[self.off.tolist()] == 0)
+
+    def cost(self, var: dict[str, Any]) -> Any:
+        p, ca = self.problem, casadi()
+        J = p.effort * var["h"] * ca.sumsqr(var["U"])
+        return J + p.steps * var["h"] if p.minimum_time else J
+
+    def pair_keys(self) -> list[tuple[Any, Any]]:
+        """The unknown each pair's first entries are (the second are expressions)."""
+        names = CONTACT_VARS[: 4 if self.problem.system.friction_dim else 1]
+        return [([(name, int(j)) for j in self.on], None) for name in names]
+
+    def pairs(self, var: dict[str, Any], ops: Any) -> list[tuple[Any, Any]]:
+        """Newton's law at velocity level and planar Coulomb friction (the module
+        docstring), on the active entries."""
+        s, n, N = self.problem.system, self.problem.system.n_dof, self.problem.steps
+        if not s.n_contacts:
+            return []
+        X = var["X"]
+        Vk, Vn = X[n:, :-1], X[n:, 1:]
+        G = ops.const(s.dense_gap_matrix())
+        e = ops.const(np.tile(s.restitution[:, None], (1, N)))
+        out = [(var["LN"], ops.mm(G, Vn) + e * ops.mm(G, Vk))]
+        if s.friction_dim:
+            ut = ops.mm(ops.const(s.tangent_matrix), Vn)
+            mu = ops.const(np.tile(np.asarray(s.friction)[:, None], (1, N)))
+            out += [(var["BP"], var["S"] + ut), (var["BM"], var["S"] - ut),
+                    (var["S"], mu * var["LN"] - var["BP"] - var["BM"])]
+        return [(ops.select(a, self.on), ops.select(b, self.on)) for a, b in out]
+
+
+def _dynamics(opti: Any, problem: ContactProblem, var: dict[str, Any]) -> None:
+    """The Moreau–Jean step between every two grid points and the end conditions."""
+    ca = casadi()
+    s, n, N, th, h = problem.system, problem.system.n_dof, problem.steps, problem.theta, var["h"]
+    X, U = var["X"], var["U"]
+    Qk, Qn, Vk, Vn = X[:n, :-1], X[:n, 1:], X[n:, :-1], X[n:, 1:]
+    S = np.eye(n) if s.actuation is None else s.actuation
+    f = ca.DM(np.tile(s.constant_force[:, None], (1, N))) + ca.mtimes(ca.DM(S), U)
+    Mhat = ca.DM(s.mass_matrix())
+    if s.stiffness is not None:
+        f = f - ca.mtimes(ca.DM(s.stiffness), Qk + h * th * Vk)
+        Mhat = Mhat + h ** 2 * th ** 2 * ca.DM(s.stiffness)
+    if s.damping is not None:
+        f = f - ca.mtimes(ca.DM(s.damping), Vk)
+        Mhat = Mhat + h * th * ca.DM(s.damping)
+    if s.n_contacts:
+        f = f + ca.mtimes(ca.DM(s.dense_gap_matrix().T), var["LN"])
+    if s.friction_dim:
+        f = f + ca.mtimes(ca.DM(np.asarray(s.tangent_matrix).T), var["BP"] - var["BM"])
+    opti.subject_to(ca.vec(ca.mtimes(Mhat, Vn - Vk) - h * f) == 0)
+    opti.subject_to(ca.vec(Qn - Qk - h * ((1 - th) * Vk + th * Vn)) == 0)
+    opti.subject_to(X[:, 0] == problem.x0)
+    if problem.x_final is not None:
+        idx = np.flatnonzero(~np.isnan(problem.x_final)).tolist()
+        opti.subject_to(X[idx, N] == problem.x_final[idx])
+
+
+def _bounds(opti: Any, problem: ContactProblem, var: dict[str, Any]) -> None:
+    ca, N = casadi(), problem.steps
+    for bound, sign in ((problem.u_min, 1.0), (problem.u_max, -1.0)):
+        if bound is not None:
+            opti.subject_to(ca.vec(sign * (var["U"] - np.tile(bound[:, None], (1, N)))) >= 0)
+    if problem.minimum_time:
+        lo, hi = problem.h_bounds
+        opti.subject_to(opti.bounded(lo, var["h"], hi))
 
 
 def casadi() -> Any:

@@ -35,6 +35,19 @@ the mean of the push and the brake: that step covers
 ``δx = (2U / m) h² τ (1 - τ) / 2 <= U h² / (4 m)`` less than the bang-bang, and each extra
 metre costs ``dT*/dd = T* / (2 d) = 1 / v̂`` seconds, so
 ``T* <= T*_h <= T* + U h² / (4 m v̂)`` to first order in ``δx``.
+
+**A drift that speeds up across a surface** (:class:`SpeedUp`): ``x' = u + a₁`` where
+``x < 0`` and ``x' = u + a₂`` where ``x > 0`` (``0 < a₁ < a₂``), from ``x0 = -L < 0`` to
+``x_T > 0`` in time ``T``, least effort ``∫ u² dt``. Between crossings the costate is
+constant, so ``u`` is constant on each side: ``u₁ = L / s - a₁`` before the crossing at
+``s``, ``u₂ = x_T / r - a₂`` after it (``r = T - s``), and the cost is the convex function
+
+    J(s) = s (L / s - a₁)² + r (x_T / r - a₂)²,     J'(s) = a₁² - L² / s² - a₂² + x_T² / r²,
+
+whose root is the optimal switching time: ``x_T² / r² - L² / s² = a₂² - a₁²`` (the
+speed squared jumps by the fields' difference). With ``a₁ = 1``, ``a₂ = 3``, ``L = 1``,
+``T = 1`` and ``x_T = √3``: ``s = 1/2``, ``u₁ = 1``, ``u₂ = 2√3 - 3``,
+``J* = 1/2 + 2 (√3 - 3/2)²``.
 """
 
 from __future__ import annotations
@@ -46,8 +59,9 @@ import numpy as np
 from .._validation import check_positive
 from ..errors import ModelError
 from ..systems.lagrangian import LagrangianSystem
+from .fesd import SwitchingProblem
 
-__all__ = ["PushedBlock"]
+__all__ = ["PushedBlock", "SpeedUp"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +148,70 @@ class PushedBlock:
             raise ModelError(f"U: the bound {U} does not exceed the friction force "
                              f"{self.friction_force}; the block cannot move")
         return (U - self.friction_force) / self.mass, (U + self.friction_force) / self.mass
+
+
+@dataclass(frozen=True)
+class SpeedUp:
+    """``x' = u + a₁`` for ``x < 0``, ``u + a₂`` for ``x > 0``, pushed from ``-L`` to
+    ``x_T`` in time ``T`` at least effort (the module docstring); the defaults switch at
+    ``T / 2`` exactly.
+
+    Parameters
+    ----------
+    a1, a2 : float
+        The drifts, ``0 < a1 < a2``.
+    L : float
+        Start at ``-L < 0``.
+    x_T : float
+        Target ``> 0``.
+    T : float
+        Horizon.
+    """
+
+    a1: float = 1.0
+    a2: float = 3.0
+    L: float = 1.0
+    x_T: float = float(np.sqrt(3.0))
+    T: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("a1", "a2", "L", "x_T", "T"):
+            check_positive(name, getattr(self, name))
+        if not self.a1 < self.a2:
+            raise ModelError(f"a2: must exceed a1 = {self.a1}, got {self.a2}")
+
+    def problem(self, elements: int, switch_detection: bool = True) -> SwitchingProblem:
+        """The transcription with ``elements`` finite elements.
+
+        Parameters
+        ----------
+        elements : int
+            Number of finite elements.
+        switch_detection : bool
+            FESD, or a fixed grid.
+
+        Returns
+        -------
+        SwitchingProblem
+        """
+        zero = np.zeros((1, 1))
+        return SwitchingProblem(A=(zero, zero), b=([self.a1], [self.a2]), B=[[1.0]], c=[1.0],
+                                d=0.0, x0=[-self.L], x_final=[self.x_T], T=self.T,
+                                elements=elements, switch_detection=switch_detection)
+
+    def switch_time(self) -> float:
+        """The root of ``J'(s)`` in ``(0, T)`` (``J`` is convex: one root)."""
+        from scipy.optimize import brentq
+
+        def slope(s: float) -> float:
+            r = self.T - s
+            return self.a1 ** 2 - self.L ** 2 / s ** 2 - self.a2 ** 2 + self.x_T ** 2 / r ** 2
+
+        eps = 1e-12 * self.T
+        return float(brentq(slope, eps, self.T - eps, xtol=1e-15))
+
+    def cost(self) -> float:
+        """``J(s*)``."""
+        s = self.switch_time()
+        r = self.T - s
+        return s * (self.L / s - self.a1) ** 2 + r * (self.x_T / r - self.a2) ** 2
