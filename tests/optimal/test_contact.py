@@ -164,3 +164,29 @@ def test_without_casadi_the_import_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "casadi", None)   # `import casadi` raises ImportError
     with pytest.raises(ImportError, match=r"pip install 'nscontrol\[optimal\]'"):
         importlib.import_module("nscontrol.optimal")
+
+
+# ---------------------------------------------------------------------------------------------
+# A contact that closes along the plan (the active sets change)
+# ---------------------------------------------------------------------------------------------
+def test_a_landing_plan_from_a_simulated_guess_replays_through_the_impact():
+    from nscontrol.errors import SolverError
+    from nscontrol.systems import LagrangianSystem
+
+    ball = LagrangianSystem([[1.0]], constant_force=[-9.81], gap_matrix=[[1.0]],
+                            gap_offset=[0.0], actuation=[[1.0]])
+    steps, h, x0 = 60, 0.01, [0.5, 0.0]
+    problem = ContactProblem(ball, x0, steps, h, x_final=[0.0, 0.0], u_min=-5.0, u_max=5.0)
+    # the straight line never closes the floor before the last step: no force can stop the
+    # fall, and the failure says so instead of returning a penetrating plan
+    with pytest.raises(SolverError, match="IPOPT failed"):
+        problem.solve()
+    free = nsc.simulate(ball, x0, (0.0, steps * h), method="moreau_jean", h=h)
+    plan = problem.solve(guess=free)
+    closed = plan.active[:, 0]
+    assert plan.stats["active_set_consistent"] and not closed[0] and closed[-1]
+    assert np.all(np.diff(closed.astype(int)) >= 0)        # lands once, stays
+    assert plan.residual <= RESIDUAL_TOL
+    traj = nsc.simulate(ball, x0, (0.0, plan.duration), method="moreau_jean", h=h,
+                        u=plan.input())
+    assert np.max(np.abs(traj.x - plan.x)) <= 1e-6

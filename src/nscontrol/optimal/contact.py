@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
+    as_matrix,
     as_real_scalar,
     as_vector,
     check_bool,
@@ -175,8 +176,8 @@ class ContactProblem:
         set_(self, "active_tol", check_positive("active_tol", self.active_tol,
                                                 allow_zero=True))
 
-    def solve(self, relaxation: Relaxation | None = None, *, max_rounds: int = 5
-              ) -> ContactPlan:
+    def solve(self, relaxation: Relaxation | None = None, *, max_rounds: int = 5,
+              guess: Any = None) -> ContactPlan:
         """Solve the homotopy (and the polish), recomputing the active sets from the plan
         until they agree (at most ``max_rounds`` times).
 
@@ -186,6 +187,11 @@ class ContactProblem:
             The homotopy (default :class:`Relaxation()`).
         max_rounds : int
             Rounds of the active-set iteration.
+        guess : Trajectory or array_like (N + 1, 2 n), optional
+            States to start from (a ``Trajectory``'s ``x``, e.g. a Moreau–Jean run at the
+            same ``h``); the first active sets are read from it. Default: the straight line
+            of :func:`initial_guess`. A contact the guess never closes starts inactive: a
+            motion that must land on it needs a guess that lands.
 
         Returns
         -------
@@ -203,7 +209,7 @@ class ContactProblem:
         relaxation = Relaxation() if relaxation is None else check_type(
             "relaxation", relaxation, Relaxation)
         check_integer("max_rounds", max_rounds, minimum=1)
-        guess = initial_guess(self)
+        guess = initial_guess(self, guess)
         active = active_sets(self, guess["X"], self.h)
         stages: list[dict[str, Any]] = []
         rounds, consistent, polished = 0, False, False
@@ -245,11 +251,12 @@ def _h_bounds(value: Any, h: float) -> tuple[float, float]:
     return (lo, hi)
 
 
-def initial_guess(problem: ContactProblem) -> dict[str, Any]:
-    """Positions on the straight line from ``q0`` to the final ones (``q0`` where free) at
-    the matching constant speed (the end velocities as given), zero inputs and forces, the
-    given step. (A guess at rest would start the homotopy in the stuck branch of friction,
-    a local optimum that never moves on some steps.)"""
+def initial_guess(problem: ContactProblem, states: Any = None) -> dict[str, Any]:
+    """The given ``states`` (``(N + 1, 2 n)``, or a ``Trajectory``'s), or positions on the
+    straight line from ``q0`` to the final ones (``q0`` where free) at the matching constant
+    speed (the end velocities as given); zero inputs and forces, the given step. (A guess
+    at rest would start the homotopy in the stuck branch of friction, a local optimum that
+    never moves on some steps.)"""
     s, N, n = problem.system, problem.steps, problem.system.n_dof
     x0 = problem.x0
     xf = x0 if problem.x_final is None else np.where(np.isnan(problem.x_final), x0,
@@ -257,6 +264,8 @@ def initial_guess(problem: ContactProblem) -> dict[str, Any]:
     X = x0[:, None] + (xf - x0)[:, None] * np.linspace(0.0, 1.0, N + 1)[None, :]
     if N > 1:
         X[n:, 1:-1] = ((xf[:n] - x0[:n]) / (N * problem.h))[:, None]
+    if states is not None:
+        X = as_matrix("guess", getattr(states, "x", states), rows=N + 1, cols=s.n_states).T
     zeros = np.zeros((s.n_contacts, N))
     return {"X": X, "U": np.zeros((problem.n_inputs, N)), "LN": zeros, "BP": zeros,
             "BM": zeros, "S": zeros, "h": problem.h, "lam_g": None}

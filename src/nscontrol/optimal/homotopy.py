@@ -122,6 +122,7 @@ class _NLP:
         _pair_constraints(opti, pairs, self.sigma, branches, pair_keys(builder, pairs))
         self.cost = builder.cost(self.var)
         opti.minimize(self.cost)
+        self.warm: bool | None = None
 
     def solve(self, guess: dict[str, Any], sigma: float) -> tuple[dict[str, Any], dict]:
         """Solve from ``guess`` (primal, and dual when it has ``lam_g`` of this NLP's size);
@@ -134,10 +135,13 @@ class _NLP:
         if warm:
             opti.set_initial(opti.lam_g, guess["lam_g"])
         opti.set_value(self.sigma, sigma)
-        opti.solver("ipopt", {"print_time": False, "error_on_fail": False},
-                    {"print_level": 0, "sb": "yes", "tol": rel.tol,
-                     "acceptable_constr_viol_tol": rel.tol, "max_iter": int(rel.max_iter),
-                     **({"warm_start_init_point": "yes", "mu_init": 1e-6} if warm else {})})
+        if warm != self.warm:   # a new solver only when its options change (it costs)
+            self.warm = warm
+            opti.solver("ipopt", {"print_time": False, "error_on_fail": False},
+                        {"print_level": 0, "sb": "yes", "tol": rel.tol,
+                         "acceptable_constr_viol_tol": rel.tol, "max_iter": int(rel.max_iter),
+                         **({"warm_start_init_point": "yes", "mu_init": 1e-6} if warm
+                            else {})})
         start = time.perf_counter()
         try:
             sol = opti.solve()
