@@ -152,6 +152,10 @@ def test_bad_problems_are_refused_naming_the_argument():
                        [0.0, 0.0], 10, 0.1)
     with pytest.raises(ModelError, match="^h_bounds"):
         ContactProblem(s, BLOCK.x0, 10, 0.1, minimum_time=True, h_bounds=(0.2, 0.3))
+    with pytest.raises(ModelError, match="^u_max"):
+        ContactProblem(s, BLOCK.x0, 10, 0.1, u_min=1.0, u_max=-1.0)
+    with pytest.raises(ModelError, match="^x_final"):
+        ContactProblem(s, BLOCK.x0, 10, 0.1, x_final=["1.0", 0.0, 0.0, 0.0])
     with pytest.raises(ModelError, match="^factor"):
         Relaxation(factor=1.5)
     with pytest.raises(ModelError, match="^relaxation"):

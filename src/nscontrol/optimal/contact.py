@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import (
     FloatArray,
+    as_float_array,
     as_matrix,
     as_real_scalar,
     as_vector,
@@ -168,6 +169,9 @@ class ContactProblem:
             "x_final", self.x_final, s.n_states))
         for name in ("u_min", "u_max"):
             set_(self, name, _bound(name, getattr(self, name), p))
+        if self.u_min is not None and self.u_max is not None and np.any(self.u_min > self.u_max):
+            raise ModelError(f"u_max: below u_min somewhere ({self.u_max} < {self.u_min}); "
+                             "give u_min <= u_max")
         set_(self, "effort", check_positive("effort", self.effort, allow_zero=True))
         set_(self, "minimum_time", check_bool("minimum_time", self.minimum_time))
         set_(self, "h_bounds", _h_bounds(self.h_bounds, self.h))
@@ -226,7 +230,7 @@ class ContactProblem:
 
 def _vector_with_nan(name: str, value: ArrayLike, size: int) -> FloatArray:
     """A float vector of ``size`` whose NaN entries mean 'free' (infinities refused)."""
-    arr = np.asarray(value, dtype=float).reshape(-1)
+    arr = as_float_array(name, value, finite=False).reshape(-1)
     if arr.shape != (size,):
         raise DimensionError(f"{name}: expected {size} values, got shape {np.shape(value)}")
     if np.isinf(arr).any():

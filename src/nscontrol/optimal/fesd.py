@@ -43,7 +43,7 @@ from .._validation import (
     check_type,
 )
 from ..errors import DimensionError
-from .contact import Relaxation
+from .contact import Relaxation, _vector_with_nan
 from .homotopy import residual, solve_homotopy, stage_stats
 
 __all__ = ["SwitchingProblem", "SwitchingPlan"]
@@ -160,10 +160,7 @@ class SwitchingProblem:
         set_(self, "B", as_matrix("B", self.B, rows=n))
         set_(self, "c", as_vector("c", self.c, n))
         set_(self, "d", as_real_scalar("d", self.d))
-        xf = np.asarray(self.x_final, float).reshape(-1)
-        if xf.shape != (n,):
-            raise DimensionError(f"x_final: expected {n} values, got shape {xf.shape}")
-        set_(self, "x_final", xf)
+        set_(self, "x_final", _vector_with_nan("x_final", self.x_final, n))
         set_(self, "T", check_positive("T", self.T))
         set_(self, "elements", check_integer("elements", self.elements, minimum=2))
         set_(self, "switch_detection", check_bool("switch_detection", self.switch_detection))
