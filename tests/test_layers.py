@@ -6,7 +6,7 @@ check also sees imports made inside functions and ``importlib.import_module("...
 with a literal name. The layers, lowest first (docs/architecture.md)::
 
     errors, _validation, _progress, _lazy, sweep -> numerics -> laws -> systems -> simulate
-    -> design -> analysis -> testing -> examples -> cli, report, the package root
+    -> design, optimal -> analysis -> testing -> examples -> cli, report, the package root
 
 Modules of one layer may import each other. A name starting with ``_`` belongs to its
 subpackage: importing it from another subpackage is refused, and so is importing a private
@@ -36,7 +36,7 @@ LAYERS: dict[str, int] = {
     "laws": 2,
     "systems": 3,
     "simulate": 4,
-    "design": 5,
+    "design": 5, "optimal": 5,   # optimal: trajectory optimisation (imports systems, numerics)
     "analysis": 6,
     "testing": 7,
     "examples": 8,

@@ -19,8 +19,8 @@ import pytest
 
 import nscontrol
 
-SUBPACKAGES = ("laws", "systems", "numerics", "simulate", "design", "analysis", "testing",
-               "examples")
+SUBPACKAGES = ("laws", "systems", "numerics", "simulate", "design", "optimal", "analysis",
+               "testing", "examples")
 SRC = Path(nscontrol.__file__).parent
 
 

@@ -1,0 +1,97 @@
+"""Finite elements with switch detection (nscontrol.optimal.fesd) on a drift that speeds up
+across a surface (nscontrol.optimal.problems.SpeedUp): the optimal switching time has a
+closed form (1/2 here); FESD finds it to the solver's tolerance, a fixed grid misses it by
+steps; the plan replayed by the library's event-locating switching integrator."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("casadi")
+
+import nscontrol as nsc  # noqa: E402
+from nscontrol.errors import DimensionError, ModelError  # noqa: E402
+from nscontrol.optimal import SpeedUp, SwitchingProblem  # noqa: E402
+from nscontrol.systems import FilippovSystem  # noqa: E402
+
+CASE = SpeedUp()
+N = 25
+
+
+@pytest.fixture(scope="module")
+def fesd_plan():
+    return CASE.problem(N).solve()
+
+
+def test_closed_form_switches_at_half_the_horizon():
+    assert CASE.switch_time() == pytest.approx(0.5, abs=1e-15)
+    assert CASE.cost() == pytest.approx(0.5 + 2 * (np.sqrt(3) - 1.5) ** 2, rel=1e-14)
+
+
+def test_fesd_switching_time_and_cost_are_exact(fesd_plan):
+    # constant fields: implicit Euler is exact on every element, the switch sits on an
+    # element boundary; what is left is the polish's constraint tolerance (1e-10) over the
+    # O(1) slopes of x, times 100
+    (ts,) = fesd_plan.switch_times([1.0], 0.0)
+    assert abs(ts - CASE.switch_time()) <= 1e-8
+    assert abs(fesd_plan.cost - CASE.cost()) <= 1e-8
+    assert fesd_plan.residual <= 1e-8 and fesd_plan.stats["polished"]
+    # the inputs: 1 before the switch, 2√3 - 3 after it
+    before = fesd_plan.t[:-1] < ts - 1e-9
+    assert np.allclose(fesd_plan.u[before, 0], 1.0, atol=1e-7)
+    assert np.allclose(fesd_plan.u[~before, 0], 2 * np.sqrt(3) - 3, atol=1e-7)
+
+
+def test_a_fixed_grid_misses_the_switch_by_steps():
+    plan = CASE.problem(N, switch_detection=False).solve()
+    (ts,) = plan.switch_times([1.0], 0.0)
+    h = CASE.T / N
+    # the step that lands on the surface may take the faster field (the set-valued right-hand
+    # side there): the grid's optimum moves the switch by whole steps (2.5 h measured)
+    assert abs(ts - CASE.switch_time()) >= h / 2
+    assert plan.residual <= 1e-8
+
+
+def test_fesd_plan_replays_through_the_switching_integrator(fesd_plan):
+    """Element by element (the input is held on each; a run across an input jump that sits
+    within 1e-11 of the crossing makes DOP853 shrink its step below its floor), each run
+    starting where the last one ended: the replayed boundary states and crossing instant
+    against the plan's. Constant fields: DOP853 at rtol 1e-12 is exact to roundoff, so what
+    is left is the plan's constraint tolerance (1e-10) accumulated over 25 elements."""
+    plan = fesd_plan
+    x, ends, crossings = np.array([-CASE.L]), [], []
+    for n in range(len(plan.u)):
+        un = float(plan.u[n, 0])
+        f = FilippovSystem.two_sided(lambda t, x, un=un: np.array([un + CASE.a1]),
+                                     lambda t, x, un=un: np.array([un + CASE.a2]),
+                                     lambda x: float(x[0]), 1,
+                                     gradient=lambda x: np.array([1.0]))
+        # each element on (0, h_n) (autonomous fields): on a span starting at 0.5 the
+        # switching integrator stops right after a crossing (BudgetExceededError
+        # min_rel_step; reported, left to simulate/switching)
+        traj = nsc.simulate(f, x, (0.0, plan.t[n + 1] - plan.t[n]), rtol=1e-12, atol=1e-12)
+        crossings += [plan.t[n] + e.time for e in traj.events if e.kind == "crossing"]
+        x = traj.x[-1]
+        ends.append(x[0])
+    assert np.max(np.abs(np.array(ends) - plan.x[1:, 0])) <= 1e-8
+    assert len(crossings) <= 1   # located when the next element starts below 0 (by 5e-12 here)
+    for tc in crossings:
+        assert abs(tc - CASE.switch_time()) <= 1e-8
+    replayed = replace(plan, x=np.concatenate([[[-CASE.L]], np.array(ends)[:, None]]))
+    (ts,) = replayed.switch_times([1.0], 0.0)
+    assert abs(ts - CASE.switch_time()) <= 1e-8
+
+
+def test_bad_switching_problems_are_refused():
+    z = np.zeros((1, 1))
+    with pytest.raises(DimensionError, match="^A, b"):
+        SwitchingProblem(A=(z,), b=([1.0],), B=[[1.0]], c=[1.0], d=0.0, x0=[-1.0],
+                         x_final=[1.0], T=1.0, elements=5)
+    with pytest.raises(ModelError, match="^elements"):
+        SwitchingProblem(A=(z, z), b=([1.0], [3.0]), B=[[1.0]], c=[1.0], d=0.0, x0=[-1.0],
+                         x_final=[1.0], T=1.0, elements=1)
+    with pytest.raises(ModelError, match="^a2"):
+        SpeedUp(a1=3.0, a2=1.0)
