@@ -154,6 +154,11 @@ def _stepper_for(system: Any) -> Any:
         from ._pwa import pwa_stepper
         return pwa_stepper
     if isinstance(system, FilippovSystem):
+        from ._affine_filippov import affine_sides
+        pwa = affine_sides(system)
+        if pwa is not None:     # the compiled loop of the PWA path
+            from ._affine_filippov import AffineFilippovStepper
+            return lambda system, x0, run: AffineFilippovStepper(system, x0, run, pwa)
         from ._filippov import FilippovStepper
         return FilippovStepper
     if isinstance(system, SwitchedAffineSystem):
