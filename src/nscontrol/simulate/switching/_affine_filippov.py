@@ -80,14 +80,15 @@ def _modes(pwa: Any) -> _Modes:
     if known is not None:
         return known
     n = pwa.n_states
-    (H0, h0), side_plus = pwa.regions
-    c, d = np.asarray(H0[0], float), float(h0[0])
+    H0, h0 = pwa.regions[0]
+    c, d = np.asarray(H0[0], float), float(h0[0])   # from_pwa's surface: h = cᵀx - d
     A, (b0, b1) = np.asarray(pwa.A[0], float), (np.asarray(b, float) for b in pwa.b)
     # sliding: the exits σ⁻ >= 0, σ⁺ <= 0 first (guard row = facet row), then cᵀx = d
     H = np.vstack([-(c @ A), c @ A, c, -c])
     h = np.array([c @ b0, -(c @ b1), d, -d])
     lowered = types.SimpleNamespace(n_states=n, n_regions=3, A=(A, A, A), b=(b0, b1, b0),
-                                    regions=((H0, h0), side_plus, (H, h)), domain=None)
+                                    regions=((c[None, :], [d]), (-c[None, :], [-d]), (H, h)),
+                                    domain=None)
     modes = _Modes(lowered, np.zeros((0, 0)), np.zeros((n, 0)))
     modes.aug[SLIDING] = _sliding_aug(modes.aug, c, n)
     G, g0 = modes.guards[SLIDING]
