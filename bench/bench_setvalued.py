@@ -10,6 +10,15 @@
    atol 1e-12, a terminal event on the facet, restarted at every crossing); accuracy: number of
    crossings and final-state difference between the two.
 
+3. Filippov relay (the fields of 1. as a Filippov system, sliding from ``√3 - 1``, ``T = 2``):
+   ``simulate`` of ``FilippovSystem.from_pwa`` (the compiled loop: exact pieces and sliding
+   mode) and of the same fields as Python callables (``two_sided``: the DOP853 path) vs a
+   hand-written ``solve_ivp`` loop (DOP853 and RK45 at rtol 1e-11, atol 1e-13: a terminal
+   event at the surface, then the Filippov field with its two exit events); 1001 samples
+   (``t_eval``) and 2; accuracy: the largest error against the closed form at the samples and
+   of the reaching time. ``ratio``: the loop's time over ours (compiled path, DOP853 loop,
+   1001 samples), the other pairs beside it.
+
 Run: ``nscontrol bench setvalued --json`` (``--quick``: 100 periods, shorter budgets).
 """
 
@@ -105,6 +114,90 @@ def _pwa(quick: bool) -> dict:
                          "final_state_difference": float(np.max(np.abs(x_ref - tr.x[-1])))}}
 
 
+def _scipy_filippov(method: str, t_eval: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """The relay run as one would write it with ``solve_ivp``: until the surface, then the
+    Filippov field ``(σ⁺F⁻ - σ⁻F⁺)/(σ⁺ - σ⁻)`` with its exits ``σ⁻ = 0``, ``σ⁺ = 0``.
+    Returns the states at ``t_eval`` (or at the end) and the reaching time."""
+    from scipy.integrate import solve_ivp
+
+    A, g, c = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0]), np.array([1.0, 1.0])
+
+    def f_minus(t: float, x: np.ndarray) -> np.ndarray:
+        return A @ x + g
+
+    def f_plus(t: float, x: np.ndarray) -> np.ndarray:
+        return A @ x - g
+
+    def f_s(t: float, x: np.ndarray) -> np.ndarray:
+        fm, fp = f_minus(t, x), f_plus(t, x)
+        sm, sp = c @ fm, c @ fp
+        return (sp * fm - sm * fp) / (sp - sm)
+
+    def surface(t: float, x: np.ndarray) -> float:
+        return float(c @ x)
+    surface.terminal = True  # type: ignore[attr-defined]
+
+    def exit_minus(t: float, x: np.ndarray) -> float:
+        return float(c @ f_minus(t, x))
+    exit_minus.terminal = True  # type: ignore[attr-defined]
+
+    def exit_plus(t: float, x: np.ndarray) -> float:
+        return float(c @ f_plus(t, x))
+    exit_plus.terminal = True  # type: ignore[attr-defined]
+
+    opts = {"method": method, "rtol": 1e-11, "atol": 1e-13}
+    a = solve_ivp(f_plus, (0.0, 2.0), np.array([1.0, 0.0]), events=surface, t_eval=t_eval,
+                  **opts)
+    t_r = float(a.t_events[0][0])
+    rest = None if t_eval is None else t_eval[t_eval > t_r]
+    b = solve_ivp(f_s, (t_r, 2.0), a.y_events[0][0], events=(exit_minus, exit_plus),
+                  t_eval=rest, **opts)
+    x = b.y[:, -1:].T if t_eval is None else np.vstack([a.y.T, b.y.T])
+    return x, t_r
+
+
+def _filippov_relay(quick: bool) -> dict:
+    from nscontrol.systems.pwa import PiecewiseAffineSystem
+    from nscontrol.systems.switched import FilippovSystem
+
+    p = sp.relay_feedback(T=2.0)
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])
+    compiled = FilippovSystem.from_pwa(PiecewiseAffineSystem.bimodal(
+        A, A, [1.0, 1.0], b1=[0.0, 1.0], b2=[0.0, -1.0], continuous=False))
+    budget = 0.3 if quick else 1.5
+    out: dict = {"scenario": "filippov-relay-T2", "size": 2, "unit": "solves",
+                 "reference": "scipy solve_ivp loop (reaching event, then the Filippov field)"}
+    acc: dict = {}
+    for ns in (1001, 2):
+        t_eval = np.linspace(0.0, 2.0, ns)
+        exact = p.facts["exact"](t_eval if ns > 2 else t_eval[-1:])
+        for name, system in (("compiled", compiled), ("python", p.switched)):
+            def ours(system: object = system, ns: int = ns) -> object:
+                return simulate(system, p.x0, p.t_span, n_samples=ns, progress=False)
+            out[f"ours_{name}_s_per_solve_{ns}"] = time_per_call(ours, budget=budget)
+            tr = ours()
+            ev = tr.events[0].time
+            keep = np.isin(tr.t, t_eval) if ns > 2 else slice(-1, None)
+            acc[f"ours_{name}_error_{ns}"] = float(np.max(np.abs(tr.x[keep] - exact)))
+            acc[f"ours_{name}_reaching_error"] = abs(ev - p.facts["reaching_time"])
+        for method in ("DOP853", "RK45"):
+            te = t_eval if ns > 2 else None
+            out[f"scipy_{method}_s_per_solve_{ns}"] = time_per_call(
+                lambda method=method, te=te: _scipy_filippov(method, te), budget=budget)
+            x, t_r = _scipy_filippov(method, te)
+            acc[f"scipy_{method}_error_{ns}"] = float(np.max(np.abs(x - exact)))
+            acc[f"scipy_{method}_reaching_error"] = abs(t_r - p.facts["reaching_time"])
+        for name in ("compiled", "python"):
+            for method in ("DOP853", "RK45"):
+                out[f"ratio_{name}_vs_{method}_{ns}"] = (
+                    out[f"scipy_{method}_s_per_solve_{ns}"] / out[f"ours_{name}_s_per_solve_{ns}"])
+    out.update(ours_s_per_solve=out["ours_compiled_s_per_solve_1001"],
+               reference_s_per_solve=out["scipy_DOP853_s_per_solve_1001"],
+               ratio=out["ratio_compiled_vs_DOP853_1001"], accuracy=acc)
+    return out
+
+
 def run(quick: bool = False) -> Iterator[dict]:
+    yield _filippov_relay(quick)
     yield _relay(quick)
     yield _pwa(quick)

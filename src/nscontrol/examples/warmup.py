@@ -189,7 +189,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
     "Lur'e systems (implicit Euler) and switching": (
         "simulate.implicit_euler._lure_kernels", "simulate.implicit_euler._lure_lcp_kernels",
         "numerics._lti_kernels",
-        "simulate._pwa_kernels"),
+        "simulate.switching._pwa_kernels", "simulate.switching._filippov_kernels"),
     "ZAD-controlled buck converter": ("design._zad_kernels",),
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
                             "simulate._frictional_mj_kernels"),

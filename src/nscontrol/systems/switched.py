@@ -293,6 +293,7 @@ class FilippovSystem:
 
         def field(t: float, x: FloatArray, s: tuple[int, ...]) -> FloatArray:
             return pwa.field(1 if s[0] > 0 else 0, x, t)
+        field.pwa = pwa   # type: ignore[attr-defined]  # the switching method's compiled path reads it
 
         def jac(t: float, x: FloatArray, s: tuple[int, ...]) -> FloatArray:
             return pwa.A[1 if s[0] > 0 else 0]

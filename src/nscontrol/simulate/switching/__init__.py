@@ -12,7 +12,9 @@ Accepted systems:
 * :class:`~nscontrol.systems.switched.FilippovSystem` — smooth fields on the sides of switching
   surfaces ``h_j(x) = 0``; DOP853 with event location and grazing detection; attracting
   sliding by the Filippov (equivalent) vector field with exit detection, the state projected
-  back onto the surface; repelling sliding raises ``ModelError``.
+  back onto the surface; repelling sliding raises ``ModelError``. A ``from_pwa`` system whose
+  two fields differ by a constant (a relay on a linear plant; no input) runs exactly in the
+  PWA path's compiled loop instead, the sliding motion a mode of its own (``_affine_filippov``).
 * :class:`~nscontrol.systems.nonlinear.NonlinearSystem` — a smooth field ``f(t, x[, u])``:
   the Filippov path with no surface (one DOP853 piece; with ``sensitivity=True`` the
   variational equation gives the state transition).
@@ -154,6 +156,11 @@ def _stepper_for(system: Any) -> Any:
         from ._pwa import pwa_stepper
         return pwa_stepper
     if isinstance(system, FilippovSystem):
+        from ._affine_filippov import affine_sides
+        pwa = affine_sides(system)
+        if pwa is not None:     # the compiled loop of the PWA path
+            from ._affine_filippov import AffineFilippovStepper
+            return lambda system, x0, run: AffineFilippovStepper(system, x0, run, pwa)
         from ._filippov import FilippovStepper
         return FilippovStepper
     if isinstance(system, SwitchedAffineSystem):

@@ -104,8 +104,11 @@ class _Fields:
         return float(n @ fm), float(n @ fp), fm, fp, n
 
     def sliding(self, t: float, x: FloatArray, signs: tuple[int, ...], j: int) -> FloatArray:
-        sm, sp, fm, fp, _ = self.sigmas(t, x, signs, j)
-        return (sp * fm - sm * fp) / (sp - sm)
+        """The Filippov field on surface ``j`` (:func:`._filippov_kernels.filippov_field`)."""
+        from ._filippov_kernels import filippov_field
+
+        fm, fp = self.side(t, x, signs, j, -1), self.side(t, x, signs, j, 1)
+        return filippov_field(fm, fp, np.asarray(self.s.gradient(j, x), float))
 
     def on_surface(self, t: float, y: FloatArray, signs: tuple[int, ...], j: int, side: int
                    ) -> FloatArray:
@@ -256,28 +259,51 @@ def _initial_mode(fields: _Fields, t: float, x: FloatArray) -> tuple[tuple[int, 
     return tuple(signs), sliding
 
 
+def start_mode(fields: _Fields, run: Any, t: float, x: FloatArray
+               ) -> tuple[FloatArray, tuple[int, ...], int, int]:
+    """The mode a run starts in at ``(t, x)``, its first sample and (on a surface) its sliding
+    start recorded: ``(x, signs, sliding, second)`` (``x`` projected when the motion starts
+    in second-order sliding, ``-1`` for no sliding of either order)."""
+    signs, sliding = _initial_mode(fields, t, x)
+    second = -1
+    if sliding >= 0 and _two_sliding_onset(fields, t, x, signs, sliding, -np.inf):
+        second, sliding = sliding, -1  # starts on s = s' = 0: no first-order field
+        x = _enter_two_sliding(fields, run, t, x, signs, second)
+    run.rec.sample(t, x, force=True)
+    if sliding >= 0:
+        run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
+                  _mode_code(signs, sliding), np.eye(x.shape[0]))
+    return x, signs, sliding, second
+
+
 class FilippovStepper(SwitchingStepper):
     """A Filippov run: one DOP853 piece of the current mode and the event that ends it per
     :meth:`piece` (crossing, sliding start or exit, second-order sliding)."""
 
-    def __init__(self, system: Any, x0: FloatArray, run: Any, smooth: bool = False) -> None:
+    def __init__(self, system: Any, x0: FloatArray, run: Any, smooth: bool = False,
+                 mode: tuple[tuple[int, ...], int] | None = None) -> None:
         super().__init__(run)
         self.system, self.smooth = system, smooth
         self.fields = fields = _Fields(system)
-        n, t, x = system.n_states, self.t, x0.copy()
-        signs, sliding = _initial_mode(fields, t, x)
-        self.second = -1                 # the surface of second-order sliding, -1 when none
-        if sliding >= 0 and _two_sliding_onset(fields, t, x, signs, sliding, -np.inf):
-            self.second, sliding = sliding, -1  # starts on s = s' = 0: no first-order field
-            x = _enter_two_sliding(fields, run, t, x, signs, self.second)
-        run.rec.sample(t, x, force=True)
-        if sliding >= 0:
-            run.event(t, "sliding_start", sliding, x, x, _mode_code(signs, -1),
-                      _mode_code(signs, sliding), np.eye(n))
-        self.x, self.signs, self.sliding = x, signs, sliding
         self.pieces = 0
         self.last_graze: dict[int, float] = {}
         self.last_cross: dict[int, float] = {}
+        self.second = -1                 # the surface of second-order sliding, -1 when none
+        if mode is not None:             # resumed at (run.t0, x0) in a known mode: see resume
+            self.x, (self.signs, self.sliding) = x0.copy(), mode
+            return
+        self.x, self.signs, self.sliding, self.second = start_mode(fields, run, self.t,
+                                                                   x0.copy())
+
+    @classmethod
+    def resume(cls, system: Any, run: Any, t: float, x: FloatArray,
+               mode: tuple[tuple[int, ...], int]) -> FilippovStepper:
+        """The Python stepper going on from ``(t, x)`` in ``mode = (signs, sliding)`` (the
+        compiled path, :mod:`._affine_filippov`, hands it an event it does not settle),
+        nothing recorded."""
+        stepper = cls(system, x, run, mode=mode)
+        stepper.t = t
+        return stepper
 
     def state(self) -> FloatArray:
         return self.x
@@ -292,10 +318,10 @@ class FilippovStepper(SwitchingStepper):
             return self.t
         which = next(i for i, te in enumerate(sol.t_events)
                      if te.size and kinds[i][0] != "graze")
-        self._event(*kinds[which])
+        self.settle(*kinds[which])
         return self.t
 
-    def _event(self, kind: str, k: int) -> None:
+    def settle(self, kind: str, k: int) -> None:
         """The event of kind ``kind`` on surface (or side) ``k`` that ended the piece."""
         fields, run, t, x, n = self.fields, self.run, self.t, self.x, self.system.n_states
         signs, sliding = self.signs, self.sliding
@@ -608,8 +634,10 @@ def _hit_surface(fields: _Fields, run: Any, t: float, x: FloatArray, signs: tupl
             raise ModelError(f"switching: at t = {t:.12g} the motion slides on surfaces "
                              f"{sliding} and {k} at once (codimension-2 sliding), which is "
                              f"not supported")
-        f_s = (sp * fm - sm * fp) / (sp - sm)
-        S = saltation_matrix(f_before, f_s, nrm) if run.sensitivity else None
+        from ._filippov_kernels import filippov_combination
+
+        S = saltation_matrix(f_before, filippov_combination(sm, sp, fm, fp), nrm) \
+            if run.sensitivity else None
         run.event(t, "sliding_start", k, x, x, old, _mode_code(signs, k), S)
         return signs, k
     raise ModelError(f"switching: repelling sliding on surface {k} at t = {t:.12g}, x = {x} "

@@ -166,12 +166,12 @@ class _Modes:
 
     def choose(self, xi: FloatArray, exclude: int = -1) -> int:
         """The region whose flow from ``ξ`` enters it (:func:`._pwa_kernels.choose_region`)."""
-        from .._pwa_kernels import choose_region
+        from ._pwa_kernels import choose_region
 
         return int(choose_region(self.H, self.h, self.nf, self.aug, xi, self.n, exclude))
 
     def entering(self, j: int, xi: FloatArray, tol: float) -> bool:
-        from .._pwa_kernels import entering
+        from ._pwa_kernels import entering
 
         return bool(entering(self.H, self.h, self.nf, self.aug, j, xi, self.n, tol))
 
@@ -237,9 +237,10 @@ class _Buffers:
         self.hit, self.graze = np.zeros(p, dtype=np.int8), np.zeros(p, dtype=np.int8)
 
 
-def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int) -> None:
-    """Record the samples and settled crossings of one call of the compiled loop, in time
-    order (the samples up to an event's time come before it)."""
+def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int, label: Any) -> None:
+    """Record the samples and settled events of one call of the compiled loop, in time
+    order (the samples up to an event's time come before it); ``label(row, i, j)`` gives the
+    kind, index and mode numbers of the event from region ``i`` to ``j`` through ``row``."""
     te = run.t_eval
     for k in range(n_e):
         p = int(buf.e_ptr[k])
@@ -247,8 +248,9 @@ def _replay(run: Any, buf: _Buffers, ptr0: int, ptr: int, n_e: int) -> None:
             run.rec.extend(te[ptr0:p], buf.s_x[ptr0:p])
         ptr0 = p
         x = buf.e_x[k].copy()
-        run.event(float(buf.e_t[k]), "crossing", int(buf.e_row[k]), x, x, int(buf.e_from[k]),
-                  int(buf.e_to[k]))
+        kind, index, mode_from, mode_to = label(int(buf.e_row[k]), int(buf.e_from[k]),
+                                                int(buf.e_to[k]))
+        run.event(float(buf.e_t[k]), kind, index, x, x, mode_from, mode_to)
         if run.sensitivity:   # already multiplied into Φ by the loop
             run.saltations.append(buf.e_S[k].copy())
         run.rec.sample(float(buf.e_t[k]), x, force=True)
@@ -263,30 +265,34 @@ def pwa_stepper(system: Any, x0: FloatArray, run: Any) -> SwitchingStepper:
     exo = _exosystem(system, run.opts.u)
     if exo == "function":
         return _PwaOdeStepper(system, x0, run)
-    return _PwaStepper(system, x0, run, exo)
+    modes = _Modes.of(system, exo)
+    w_t0 = np.zeros(0) if exo is None else np.asarray(exo.w0, float).reshape(-1)
+    if exo is not None and run.t0 != 0.0:   # the exosystem's state at t0
+        w_t0 = expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0) @ w_t0
+    xi = np.concatenate([x0, w_t0, [1.0]])
+    i = modes.choose(xi)
+    if i < 0:
+        raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
+    return CompiledPiecesStepper(system, run, modes, xi, i)
 
 
-class _PwaStepper(SwitchingStepper):
-    """Exact pieces: one call of the compiled loop (:mod:`.._pwa_kernels`) per
-    :meth:`piece`, and the event it hands back settled here."""
+class CompiledPiecesStepper(SwitchingStepper):
+    """Exact pieces: one call of the compiled loop (:mod:`._pwa_kernels`) per
+    :meth:`piece` from region ``i`` at the augmented state ``xi``, the events it settles
+    recorded as :meth:`label` names them, and the event it hands back settled by
+    :meth:`handoff` (a PWA's here; a Filippov system's in :mod:`._affine_filippov`)."""
 
-    def __init__(self, system: Any, x0: FloatArray, run: Any, exo: Any) -> None:
+    def __init__(self, system: Any, run: Any, modes: _Modes, xi: FloatArray, i: int,
+                 first_sample: bool = True) -> None:
         super().__init__(run)
-        self.system = system
-        self.modes = modes = _Modes.of(system, exo)
-        w_t0 = np.zeros(0) if exo is None else np.asarray(exo.w0, float).reshape(-1)
-        if exo is not None and run.t0 != 0.0:   # the exosystem's state at t0
-            w_t0 = expm(np.atleast_2d(np.asarray(exo.S, float)) * run.t0) @ w_t0
-        self.xi = np.concatenate([x0, w_t0, [1.0]])
-        self.i = modes.choose(self.xi)
-        if self.i < 0:
-            raise InadmissibleStateError(f"x0: {x0} lies in no region of the partition")
-        if not modes.ready[self.i]:
-            modes.prepare(self.i)
+        self.system, self.modes, self.xi, self.i = system, modes, xi, i
+        if not modes.ready[i]:
+            modes.prepare(i)
         self.buf = _Buffers(modes, run.t_eval.shape[0])
         # t0 itself: the forced sample
         self.ptr = int(np.searchsorted(run.t_eval, run.t0, side="right"))
-        run.rec.sample(run.t0, x0, force=True)
+        if first_sample:
+            run.rec.sample(run.t0, xi[:modes.n].copy(), force=True)
         self.segments = 0
         self.restart = False   # the first piece starts from the user's x0
         self.proj = np.zeros(5)   # round-off projections (_lti_kernels.project_restart)
@@ -295,14 +301,26 @@ class _PwaStepper(SwitchingStepper):
     def state(self) -> FloatArray:
         return self.xi[:self.modes.n]
 
+    def label(self, row: int, i: int, j: int) -> tuple[str, int, int, int]:
+        """Kind, index, ``mode_from``, ``mode_to`` of a settled event (a PWA crossing)."""
+        return "crossing", row, i, j
+
     def piece(self) -> float:
         from ...numerics.lti import TAYLOR_REMAINDER
-        from .. import _pwa_kernels as K
+        from ._pwa_kernels import (
+            DONE,
+            HANDOFF,
+            INADMISSIBLE,
+            MAX_STUCK,
+            NEED_FLOW,
+            STUCK,
+            run_pieces,
+        )
 
         run, modes, buf = self.run, self.modes, self.buf
         ptr0 = self.ptr
         user = not self.restart
-        code, self.t, i, self.ptr, n_e, run.stuck, pieces, index = K.run_pieces(
+        code, self.t, i, self.ptr, n_e, run.stuck, pieces, index = run_pieces(
             modes.kinds, modes.lams, modes.Vs, modes.Vinvs, modes.phis, modes.taylors,
             modes.ds, modes.hs, modes.kappas, modes.ready, modes.Ws, modes.g0s,
             modes.row_norms, modes.bern, TAYLOR_REMAINDER, 1e-12, 1e-12, modes.H, modes.h,
@@ -311,24 +329,32 @@ class _PwaStepper(SwitchingStepper):
             buf.e_to, buf.e_x, buf.e_S, buf.e_ptr, run.max_events - run.n_events + 1,
             buf.hit, buf.graze, run.stuck, self.restart, self.proj, self.clock)
         self.i = i
-        self.restart = self.restart or code != K.NEED_FLOW or pieces > 0
+        self.restart = self.restart or code != NEED_FLOW or pieces > 0
         self.segments += pieces
-        _replay(run, buf, ptr0, self.ptr, n_e)
+        _replay(run, buf, ptr0, self.ptr, n_e, self.label)
         t = self.t
-        if code == K.DONE:
+        if code == DONE:
             self.done = True
-        elif code == K.NEED_FLOW:
+        elif code == NEED_FLOW:
             modes.prepare(i)
-        elif code == K.STUCK:
-            raise ZenoError(f"switching: {K.MAX_STUCK} consecutive events at t = {t:.12g} "
+        elif code == STUCK:
+            raise ZenoError(f"switching: {MAX_STUCK} consecutive events at t = {t:.12g} "
                             f"without progress (Zeno point or an undecidable mode)", time=t)
-        elif code == K.INADMISSIBLE:
-            raise _inadmissible(modes, i, index, self.xi, t, self.proj, user)
-        elif code == K.HANDOFF:
-            hits = [int(r) for r in np.flatnonzero(buf.hit)]
-            grazing = bool(buf.graze[hits].all())
-            self.done, self.i = _settle(self.system, modes, run, t, i, self.xi, hits, grazing)
+        elif code == INADMISSIBLE:
+            self.inadmissible(t, i, index, user)
+        elif code == HANDOFF:
+            self.handoff(t, i, [int(r) for r in np.flatnonzero(buf.hit)])
         return t
+
+    def inadmissible(self, t: float, i: int, index: int, user: bool) -> None:
+        """A piece starts with guard ``index`` of region ``i`` violated: raise."""
+        raise _inadmissible(self.modes, i, index, self.xi, t, self.proj, user)
+
+    def handoff(self, t: float, i: int, hits: list[int]) -> None:
+        """Settle the event the loop hands back at ``t`` in region ``i`` (guards ``hits``)."""
+        grazing = bool(self.buf.graze[hits].all())
+        self.done, self.i = _settle(self.system, self.modes, self.run, t, i, self.xi, hits,
+                                    grazing)
 
     def extra(self) -> dict[str, Any]:
         return {"segments": self.segments, "final_mode": self.i, "propagation": "exact",

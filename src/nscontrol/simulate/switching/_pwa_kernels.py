@@ -1,4 +1,4 @@
-"""numba loop of the exact piecewise-affine integrator (:mod:`.switching._pwa`).
+"""numba loop of the exact piecewise-affine integrator (:mod:`._pwa`).
 
 In region ``i`` the augmented state ``ξ = [x; ω; 1]`` flows by ``ξ' = M_i ξ``: a piece is
 ``e^{M_i τ} ξ`` (:func:`nscontrol.numerics._lti_kernels.propagate`) and its end is the first
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lti_kernels import (
+from ...numerics._lti_kernels import (
     EVENT,
     NEGATIVE,
     flight_end,
