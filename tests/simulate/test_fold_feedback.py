@@ -79,7 +79,7 @@ def test_state_feedback_on_impacting_bodies_is_folded_and_exact_to_the_closed_fo
     assert loop.composition == "folded"          # "blocks" before: DOP853 beside the law
     applied = lower(loop, integrator_for(loop, "event_driven"), X0, {})[3]
     assert [lw.name for lw, _ in applied] == [
-        "state feedback on the Lagrangian form of impacting bodies", "fold state feedback"]
+        "state feedback on impacting bodies", "fold state feedback"]
     tr = nsc.simulate(loop, X0, (0.0, 3.0), method="event_driven", dt=0.01, progress=False)
     assert tr.state_names == bodies.state_names
     t1 = first_crossing(0.0, 0.0, 0.5)
@@ -185,7 +185,7 @@ def test_a_nonlinear_plant_keeps_its_terms_and_gets_the_gain_as_linear_forces():
 
 def test_the_new_lowering_is_registered_after_the_bodies_own_form():
     names = [lw.name for lw in lowerings()]
-    assert names.index("state feedback on the Lagrangian form of impacting bodies") > \
+    assert names.index("state feedback on impacting bodies") > \
         names.index("Lagrangian form of impacting bodies")
 
 

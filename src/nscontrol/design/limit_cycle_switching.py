@@ -709,7 +709,8 @@ class CornerDesign:
     predicted_multiplier: float
     regime: Literal["crossing", "sliding"]
     #: the verification once made: {"cycle": ControlledCycle, "status": str}
-    _checked: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    _checked: dict[str, Any] = field(default_factory=dict, init=False, repr=False,
+                                     compare=False)
 
     @property
     def verified(self) -> Any:
@@ -740,7 +741,9 @@ class CornerDesign:
         -------
         CornerDesign
         """
-        return replace(self, _checked={"cycle": cycle, "status": str(status)})
+        copy = replace(self)
+        copy._checked.update(cycle=cycle, status=str(status))
+        return copy
 
     @property
     def wedge(self) -> Wedge:

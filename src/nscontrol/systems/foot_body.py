@@ -26,8 +26,8 @@ import numpy as np
 from .._validation import FloatArray, as_matrix, check_positive, named_record
 from ..errors import DimensionError, ModelError
 
-__all__ = ["ActuatedContactModel", "FootBodyParameters", "FOOT_BODY_ACTIVATION",
-           "foot_body_model", "foot_body_points", "wall_mass_model"]
+__all__ = ["ActuatedContactModel", "FootBodyParameters", "foot_body_model", "foot_body_points",
+           "wall_mass_model"]
 
 VectorFn = Callable[[FloatArray], FloatArray]
 

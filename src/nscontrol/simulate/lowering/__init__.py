@@ -16,8 +16,8 @@ lowering (module)                              what it does
                                                implicit Euler (the loop's block runner)
 ``Lagrangian form of impacting bodies``        :class:`ImpactingBodies` in the ``[q; v]``
 (:mod:`.impacting_bodies`)                     order of their Lagrangian form, and back
-``state feedback on the Lagrangian form of     a state-feedback loop around impacting bodies
-impacting bodies`` (:mod:`.impacting_bodies`)  as the loop around their Lagrangian form (the
+``state feedback on impacting bodies``         a state-feedback loop around impacting bodies
+(:mod:`.impacting_bodies`)                     as the loop around their Lagrangian form (the
                                                gain permuted), for the fold
 =============================================  ===============================================
 

@@ -90,7 +90,7 @@ class FeedbackOnLagrangianForm(LagrangianForm):
     their Lagrangian form (gain permuted to ``[q; v]``; the state order, listeners and
     trajectory handled as :class:`LagrangianForm` does), for :mod:`.fold` to fold."""
 
-    name = "state feedback on the Lagrangian form of impacting bodies"
+    name = "state feedback on impacting bodies"
 
     def _bodies(self, system: Any) -> ImpactingBodies:
         return system.plant
