@@ -19,7 +19,7 @@ from nscontrol.examples import Example, ExampleResult, check, verdict_from
 from nscontrol.examples._figures import new_figure, save_figure
 
 BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(
+needs_chromium = pytest.mark.skipif(
     BROWSER is None, reason="headless Chromium is not installed (Debian: apt-get install -y "
                             "chromium); the report's browser check needs it")
 
@@ -89,6 +89,7 @@ class _Visible(HTMLParser):
             self.figures[-1]["caption"] += data
 
 
+@needs_chromium
 def test_the_report_page_in_headless_chromium_shows_no_raw_text(tmp_path, monkeypatch,
                                                                  tmp_path_factory):
     monkeypatch.setattr(report_mod, "all_examples", lambda: [AWKWARD])
