@@ -37,7 +37,7 @@ def _foot(h: float) -> Iterator[dict[str, Any]]:
 
     def run(sys_: Any) -> Any:
         return nsc.simulate(sys_, x0, (0.0, 8.0), method="moreau_jean", h=h, progress=False,
-                            activation=ex.ACTIVATION)
+                            activation=model.contact_activation)
 
     run(system)                                   # warm-up (compiled kernels)
     start = time.perf_counter()

@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from . import _kernel_cache, errors
+from . import _kernel_cache, _lazy, errors
 from .errors import (
     BudgetExceededError,
     DimensionError,
@@ -33,6 +33,10 @@ from .simulate import Trajectory, simulate  # noqa: E402  (the verb shadows its 
 # numba stamps a cached kernel with its own file only: drop the caches of kernels whose
 # imported kernels changed since (an edit, an upgrade) before any kernel module loads
 _kernel_cache.refresh()
+
+# what a lower layer calls in a higher one (imported at the first call): a corner design's
+# `verified` is shot by the analysis layer's orbit engine
+_lazy.provide("corner_verifier", "nscontrol.analysis.corner_maps:verify_corner_design")
 
 if TYPE_CHECKING:   # the lazy names below, typed for type checkers (imported on first use)
     from .numerics.lcp import solve_lcp as solve_lcp

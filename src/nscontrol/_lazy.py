@@ -1,5 +1,10 @@
 """Lazy public names for the subpackages (PEP 562): ``from nscontrol.laws import Relay``
-imports the defining module on first use, so ``import nscontrol`` stays fast."""
+imports the defining module on first use, so ``import nscontrol`` stays fast.
+
+Also the hooks through which a lower layer calls what a higher one provides without importing
+it (:func:`provide`, :func:`provided`): the package root names the provider, which is
+imported at the first call.
+"""
 
 from __future__ import annotations
 
@@ -34,3 +39,44 @@ def lazy_exports(package: str, exports: Mapping[str, str], namespace: dict[str, 
         return sorted({*namespace, *exports})
 
     return getattr_, dir_
+
+
+#: hook -> ``"module:attr"`` of its provider (set by the package root, imported on first use)
+_PROVIDERS: dict[str, str] = {}
+
+
+def provide(hook: str, target: str) -> None:
+    """Name the function behind ``hook`` (``"package.module:function"``).
+
+    Parameters
+    ----------
+    hook : str
+        The hook's name.
+    target : str
+        ``"module:attr"``, imported on the hook's first use.
+    """
+    _PROVIDERS[hook] = target
+
+
+def provided(hook: str) -> Any:
+    """The function behind ``hook``, its module imported now.
+
+    Parameters
+    ----------
+    hook : str
+        A hook named by :func:`provide`.
+
+    Returns
+    -------
+    callable
+
+    Raises
+    ------
+    LookupError
+        No provider named for ``hook``.
+    """
+    target = _PROVIDERS.get(hook)
+    if target is None:
+        raise LookupError(f"hook: nothing provides {hook!r} (known: {sorted(_PROVIDERS)})")
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)

@@ -74,6 +74,25 @@ def test_design_achieves_multiplier_and_amplitude_example_a(design_a):
     assert 0.95 <= d.verified.offset / d.predicted_section_offset <= 1.05
 
 
+def test_a_design_is_verified_at_the_first_read_of_verified(problem_a, design_a):
+    """``design_corner_controller(...).verified`` is the shot cycle at once (it was ``None``
+    until verify_corner_design was called): the same shooting from the same start gives the
+    same cycle, to the last bit."""
+    from nscontrol.design.limit_cycle_switching import design_corner_controller
+
+    plant, cyc, sec = problem_a
+    fresh = design_corner_controller(plant, cyc, b=[1.0, 0.0], target_multiplier=0.5,
+                                     target_offset=0.005, anchor=[1.0, 0.0], axis=[1.0, 0.0],
+                                     section=sec)     # ch12.design_a's arguments
+    assert fresh.status.startswith("predicted only")
+    cc = fresh.verified
+    assert cc is not None and fresh.verified is cc                 # shot once, then kept
+    assert fresh.status.startswith("verified: cycle at section offset")
+    assert cc.offset == design_a.verified.offset
+    assert cc.multiplier == design_a.verified.multiplier
+    assert verify_corner_design(fresh).verified.offset == cc.offset
+
+
 def test_local_corner_map_converges_to_the_corner_gain():
     g = ch12.zdm_convergence(1.01, -0.62, xis=(1e-3, 5e-4))
     e1, e2 = (p["error"] for p in g["points"])

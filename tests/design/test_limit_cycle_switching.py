@@ -110,7 +110,8 @@ def test_design_places_the_corner_and_gain(problem_a):
     assert d.predicted_offset == pytest.approx(0.005, rel=1e-12)
     # the anchor lies on the shot cycle: radius within find_cycle's tolerance 1e-9 of 1
     assert d.wedge.corner == pytest.approx([1.0 + d.mu_c, 0.0], abs=1e-9)
-    assert d.regime == "crossing" and d.system.crosses_only() and d.verified is None
+    assert d.regime == "crossing" and d.system.crosses_only()
+    assert d.status.startswith("predicted only")     # nothing shot until .verified is read
     # τ: the default section is a quarter period upstream (the ray θ = −π/2); offsets on it
     # reach θ = 0 multiplied by λ^(1/4) (polar normal form, θ' = ω exactly); the
     # transition's error is the integration's, ~1e-10

@@ -65,6 +65,26 @@ def test_push_forward_lifts_the_heel_and_recovers():
     assert np.abs(r["final_force"] - lam).max() <= 0.03 * lam.max()
 
 
+def test_the_foot_models_activation_is_the_default_and_removes_the_toe_drift():
+    """Moreau–Jean's own threshold (1e-12 m) lets the toe fall out of the index set when the
+    heel lands (A1, h = 1 ms): the toe sinks by ~0.3 mm and the rest offset grows ~4×. The
+    model's threshold, taken by default, keeps the toe closed: its gap stays within the
+    threshold (1e-6 m), while the heel's landing drift h|U⁻| (~1e-4 m) is the only one left."""
+    from nscontrol.systems.foot_body import FOOT_BODY_ACTIVATION, foot_body_model
+
+    assert foot_body_model().contact_activation == FOOT_BODY_ACTIVATION == 1e-6
+    default = run_foot(-1.0, T=3.0)
+    tight = run_foot(-1.0, T=3.0, activation=1e-12)
+    h, heel_landing = 1e-3, 0.1                       # |U⁻| of the heel < 0.1 m/s
+    assert default["gap"][:, 1].min() >= -FOOT_BODY_ACTIVATION      # the toe held
+    assert tight["gap"][:, 1].min() < -h * heel_landing             # the toe sank
+    assert default["gap"][:, 0].min() >= -h * heel_landing          # the landing drift only
+    assert tight["final_deviation"] > 3 * default["final_deviation"]
+    np.testing.assert_array_equal(
+        default["trajectory"].x,
+        run_foot(-1.0, T=3.0, activation=FOOT_BODY_ACTIVATION)["trajectory"].x)
+
+
 @pytest.mark.slow
 def test_example_runs_all_checks(tmp_path):
     res = get_example("ch04-posture-regulation").run(tmp_path)

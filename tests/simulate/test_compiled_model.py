@@ -25,6 +25,7 @@ from nscontrol.systems._lagrangian_kernels import (
     MASS_SIGNATURE,
 )
 from nscontrol.systems.feedback import BLOCK_SIGNATURE, RESET_SIGNATURE, CompiledBlock
+from nscontrol.systems.foot_body import FOOT_BODY_ACTIVATION
 from nscontrol.systems.lagrangian import CompiledModel, LagrangianSystem
 
 U = np.finfo(float).eps / 2
@@ -43,7 +44,7 @@ def foot():
 
 def run(system, x0, **kw):
     return nsc.simulate(system, x0, (0.0, T), method="moreau_jean", h=H, progress=False,
-                        activation=ex.ACTIVATION, **kw)
+                        activation=FOOT_BODY_ACTIVATION, **kw)
 
 
 def test_foot_body_folded_law_compiled_matches_the_python_path(foot):

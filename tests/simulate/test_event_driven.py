@@ -425,17 +425,17 @@ def test_linear_state_feedback_stays_exact() -> None:
     np.testing.assert_array_equal(c.signals["u"][:, 0], -4.0 * c.x[:, 0] - 0.3 * c.x[:, 1])
 
 
-def test_a_state_feedback_on_a_nonlinear_plant_runs_as_a_law() -> None:
-    # M(q) constant but given as a callable: the loop is not folded, its gain is evaluated
-    # along DOP853's flow, and meets the folded loop of the linear plant (impact times to the
-    # DOP853 tolerance, as above)
+def test_a_state_feedback_on_a_nonlinear_plant_is_folded_too() -> None:
+    # M(q) constant but given as a callable: the gain is folded into the plant's linear forces
+    # (its own terms kept), the plant runs on DOP853's flow, and meets the folded loop of the
+    # linear plant (impact times to the DOP853 tolerance, as above)
     K = [[-4.0, -0.3]]
     kw = dict(gap_matrix=[[-1.0]], gap_offset=[0.5], restitution=0.7, actuation=[[1.0]],
               constant_force=[2.0])
     linear = simulate(closed_loop(LagrangianSystem(np.eye(1), **kw), StateFeedback(K)),
                       [0.0, 0.0], (0.0, 20.0), method="event_driven")
     curved = closed_loop(LagrangianSystem(lambda q: np.eye(1), **kw), StateFeedback(K))
-    assert curved.composition == "blocks"
+    assert curved.composition == "folded"
     c = simulate(curved, [0.0, 0.0], (0.0, 20.0), method="event_driven")
     ta = linear.event_times("impact")
     assert ta.size >= 3

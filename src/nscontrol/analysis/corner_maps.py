@@ -23,7 +23,6 @@ a cycle (:func:`corner_site`) — is defined in :mod:`nscontrol.design.limit_cyc
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -234,7 +233,7 @@ def verify_corner_design(design: CornerDesign) -> CornerDesign:
                                     f"{cc.multiplier:.6g} is outside the unit circle")
     status = (f"verified: cycle at section offset {cc.offset:.6g} (predicted {guess:.6g}), "
               f"multiplier {cc.multiplier:.6g} (predicted {design.predicted_multiplier:.6g})")
-    return dataclasses.replace(design, verified=cc, status=status)
+    return design.with_verification(cc, status)
 
 
 

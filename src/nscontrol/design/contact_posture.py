@@ -384,20 +384,17 @@ class ContactRegulator(StaticLaw):
         stiffness ``Sᵀ K_p S``, damping ``Sᵀ K_d S``, constant force ``Sᵀ (K_p θ* + τ*)``.
 
         Its :meth:`~nscontrol.systems.LagrangianSystem.energy` is ``E`` up to the constant
-        ``½ θ*ᵀ K_p θ*``. Moreau–Jean's θ-method then integrates the law implicitly.
+        ``½ θ*ᵀ K_p θ*``. Moreau–Jean's θ-method then integrates the law implicitly. It is
+        the model ``simulate(closed_loop(plant, self.state_feedback()), ...)`` runs (the fold
+        lowering, :mod:`nscontrol.simulate.lowering.fold`).
         """
-        from dataclasses import replace
+        from ..simulate.lowering.fold import folded_plant
+        from ..systems.closed_loop import closed_loop
 
-        S = self.model.actuation
         n = self.model.n_dof
         if plant.n_dof != n:
             raise DimensionError(f"plant: expected {n} coordinates, got {plant.n_dof}")
-        zero = np.zeros((n, n))
-        K = (plant.stiffness if plant.stiffness is not None else zero) + S.T @ self.Kp @ S
-        D = (plant.damping if plant.damping is not None else zero) + S.T @ self.Kd @ S
-        f0 = plant.constant_force + S.T @ (self.Kp @ self.design.theta_star
-                                           + self.design.tau_star)
-        return replace(plant, stiffness=K, damping=D, constant_force=f0)
+        return folded_plant(closed_loop(plant, self.state_feedback()))[0]
 
 
 def design_contact_regulator(model: Any, q_star: ArrayLike, active: Any, Kp: Any, Kd: Any, *,

@@ -9,10 +9,13 @@ cycle appears at offset ``z* = −λaμ_c/(1 − λ(1 + a))`` with multiplier ``
 
 Design (:func:`design_corner_controller`) for a target multiplier ``λ_d`` and offset ``z_d``:
 ``a = λ_d/λ − 1``, ``μ_c = z_d(1 − λ_d)/(λ − λ_d)``, then ``k`` from ``a(k) = a`` in closed
-form; the crossing condition is checked at the corner. The prediction is then verified by
+form; the crossing condition is checked at the corner. The prediction is verified by
 shooting the closed loop with saltation matrices,
-:func:`nscontrol.analysis.corner_maps.verify_corner_design` (the orbit engine sits in the
-analysis layer, above this one). While both faces are crossed ``1 + a > 0``:
+:func:`nscontrol.analysis.corner_maps.verify_corner_design`, the first time the design's
+:attr:`CornerDesign.verified` is read. The orbit engine sits in the analysis layer, above this
+one, so this module does not import it: the package root provides it as the hook
+``"corner_verifier"`` (``nscontrol._lazy.provided``), resolved at that first read. While
+both faces are crossed ``1 + a > 0``:
 a target ``λ_d <= 0`` (``a <= −1``) is refused, or met with the sliding design when
 ``allow_sliding=True`` (the motion slides along the entry face into the corner: every
 orbit that meets the wedge leaves it at the corner, ``λ_new = 0`` whatever ``k``).
@@ -20,7 +23,7 @@ orbit that meets the wedge leaves it at the corner, ``λ_new = 0`` whatever ``k`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -654,8 +657,8 @@ def _transport(plant: NonlinearSystem, ps: FloatArray, d: FloatArray, p: FloatAr
     return float(e @ (P @ Phi @ d))
 
 
-_UNVERIFIED = ("predicted only: verify by shooting with "
-               "nscontrol.analysis.corner_maps.verify_corner_design")
+_UNVERIFIED = ("predicted only: read .verified to shoot the controlled cycle "
+               "(nscontrol.analysis.corner_maps.verify_corner_design)")
 
 #: The sliding design's gain is this multiple of the entry face's sliding threshold (any
 #: gain beyond it gives the same cycle; a margin keeps the design away from the threshold).
@@ -684,13 +687,16 @@ class CornerDesign:
         ``z*`` on ``Σ_c`` (the sliding design: ``μ_c``).
     predicted_multiplier : float
         ``λ(1 + a)`` (the sliding design: ``0``).
-    verified : ControlledCycle or None
-        The shot cycle, once checked by
-        :func:`nscontrol.analysis.corner_maps.verify_corner_design` (``None`` before).
+    verified : ControlledCycle
+        The shot cycle: found at the first read by
+        :func:`nscontrol.analysis.corner_maps.verify_corner_design` (a shooting run, about a
+        second), then kept. Reading it raises :class:`~nscontrol.errors.InfeasibleDesignError`
+        when no controlled cycle is found near the prediction, or its multiplier is outside
+        the unit circle.
     regime : {"crossing", "sliding"}
         Whether the motion crosses both faces or slides on the entry face.
     status : str
-        A sentence on the verification.
+        A sentence on the verification ("predicted only" until :attr:`verified` is read).
     """
 
     system: WedgeSwitchedSystem
@@ -701,9 +707,43 @@ class CornerDesign:
     return_map: PWLReturnMap
     predicted_offset: float
     predicted_multiplier: float
-    verified: Any
     regime: Literal["crossing", "sliding"]
-    status: str
+    #: the verification once made: {"cycle": ControlledCycle, "status": str}
+    _checked: dict[str, Any] = field(default_factory=dict, init=False, repr=False,
+                                     compare=False)
+
+    @property
+    def verified(self) -> Any:
+        """The shot cycle (a ``ControlledCycle``), found at the first read and kept."""
+        if "cycle" not in self._checked:
+            from .._lazy import provided
+
+            checked = provided("corner_verifier")(self)   # the analysis layer's shooting
+            self._checked.update(checked._checked)
+        return self._checked["cycle"]
+
+    @property
+    def status(self) -> str:
+        """A sentence on the verification."""
+        return str(self._checked.get("status", _UNVERIFIED))
+
+    def with_verification(self, cycle: Any, status: str) -> CornerDesign:
+        """A copy of this design with its verification made.
+
+        Parameters
+        ----------
+        cycle : ControlledCycle
+            The shot cycle.
+        status : str
+            A sentence on it.
+
+        Returns
+        -------
+        CornerDesign
+        """
+        copy = replace(self)
+        copy._checked.update(cycle=cycle, status=str(status))
+        return copy
 
     @property
     def wedge(self) -> Wedge:
@@ -833,7 +873,7 @@ def design_corner_controller(plant: NonlinearSystem, cycle: Any, *, b: ArrayLike
                                     f"target_offset")
     z_star, lam_new = right[0].z, pwl.right_slope
     return CornerDesign(system, site, float(k), float(mu), float(a_check), pwl, float(z_star),
-                        float(lam_new), None, "crossing", _UNVERIFIED)
+                        float(lam_new), "crossing")
 
 
 def _sliding_design(site: CornerSite, b: FloatArray, z_d: float, alpha: float
@@ -861,4 +901,4 @@ def _sliding_design(site: CornerSite, b: FloatArray, z_d: float, alpha: float
                                     "become attracting; no sliding design")
     pwl = PWLReturnMap(lam, -1.0, mu)
     return CornerDesign(system, site, float(k), float(mu), -1.0, pwl, float(z_d), 0.0,
-                        None, "sliding", _UNVERIFIED)
+                        "sliding")

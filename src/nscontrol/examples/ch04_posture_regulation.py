@@ -27,12 +27,6 @@ _EPS = float(np.finfo(float).eps)
 #: Example A: the posture (ankle at the ground, foot flat, forward lean 0.1 rad) and gains.
 Q_STAR = np.array([0.0, 0.05, 0.0, -0.1])
 KP, KD = 400.0, 30.0
-#: Index-set threshold of Moreau–Jean for Example A [m]. The gaps are nonlinear in φ: a
-#: contact kept closed at velocity level drifts by the curvature term ½ δqᵀ∇²g δq ≈ 1e-12 m
-#: per step, enough to fall out of the default threshold (1e-12); the light foot then turns
-#: freely for one step and the toe sinks by 0.3 mm, which velocity-level constraints never
-#: undo. 1 µm is far above that drift and far below the landing drift ``h |U⁻|`` ≈ 1e-4 m.
-ACTIVATION = 1e-6
 #: Example C: stiffness, damping, desired contact force, start.
 WALL_KP, WALL_KD, WALL_FORCE, WALL_Q0 = 100.0, 2.0, 5.0, -0.5
 
@@ -222,10 +216,13 @@ def run_wall(restitution: float, h: float, theta: float = 0.5) -> dict[str, Any]
 # -- Example A -------------------------------------------------------------------------------
 def run_foot(theta_dot: float, *, h: float = 1e-3, T: float = 8.0, kp: float = KP,
              kd: float = KD, theta_star: float = -0.1, m_b_design: float | None = None,
-             as_block: bool = False) -> dict[str, Any]:
+             as_block: bool = False, activation: float | None = None) -> dict[str, Any]:
     """Example A from ``q*`` with body rate ``θ̇0`` (zero horizontal momentum). The law is
     folded into the plant's forces (implicit in the θ-method) unless ``as_block``: then it
-    runs as a :class:`~nscontrol.systems.Controller` block held over each step."""
+    runs as a :class:`~nscontrol.systems.Controller` block held over each step.
+    ``activation`` is Moreau–Jean's index-set threshold, by default the model's
+    (:data:`~nscontrol.systems.foot_body.FOOT_BODY_ACTIVATION`, 1 µm: its curved gaps need
+    more than Moreau–Jean's own default)."""
     from ..simulate import simulate
     from ..simulate.closed_loop import closed_loop
 
@@ -234,7 +231,7 @@ def run_foot(theta_dot: float, *, h: float = 1e-3, T: float = 8.0, kp: float = K
     x0 = initial_state(model, q_star, theta_dot)
     system = closed_loop(plant, reg) if check_bool("as_block", as_block) else reg.folded(plant)
     tr = simulate(system, x0, (0.0, T), method="moreau_jean", h=h, progress=False,
-                      activation=ACTIVATION)
+                  activation=model.contact_activation if activation is None else activation)
     n = model.n_dof
     E = np.array([reg.energy(x[:n], x[n:]) for x in tr.x])
     p = model.parameters

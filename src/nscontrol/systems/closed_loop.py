@@ -5,7 +5,9 @@
 chosen method integrates (:mod:`nscontrol.simulate.lowering`) and records the loop's named
 signals:
 
-* ``"xhat"`` — the observer's estimate, ``"error"`` — ``S x - x̂`` (with an observer);
+* ``"xhat"`` — the observer's estimate, ``"e"`` — the estimation error ``S x - x̂`` (with
+  an observer; also kept under its older name ``"error"``), and ``"y"`` the plant's measured
+  output (the stacked Lur'e model's own output is that error);
 * ``"u"`` — the controller's output (with a controller);
 * the plant's own signals (``"gap"``, ``"impulse"``, ``"z"``, ``"w"``, ``"y"`` ...).
 
@@ -21,9 +23,12 @@ continuous :class:`LinearController`,      event-driven flow, compiled event loo
 :class:`PiecewiseObserver`) around a       (implicit Euler's compiled paths, the observer's
 LinearHybridSystem / ImpactingBodies,      law solved with the plant's), a
 LureSystem or PiecewiseAffineSystem        :class:`PiecewiseAffineSystem`
-static state feedback on a linear          ``"folded"``: the plant's own model with the
-LagrangianSystem                           feedback folded into its linear forces (exact
-                                           event-driven flow, compiled Moreau–Jean)
+continuous static state feedback           ``"folded"``: the plant's own model with the
+(:class:`StateFeedback` on the state) on   feedback folded into its linear forces
+a LagrangianSystem or ImpactingBodies      (stiffness, damping, constant force; the
+                                           bodies through their Lagrangian form): exact
+                                           event-driven flow when the plant is linear,
+                                           compiled Moreau–Jean
 any :class:`Controller` or                 ``"blocks"``: Moreau–Jean on the plant, the
 :class:`Observer` (Python, sampled or      blocks stepped at the start of every step
 continuous, with state) around a           (zero-order hold), fed the contact multipliers
@@ -245,17 +250,24 @@ class ClosedLoop:
 
     def force_input_matrix(self) -> FloatArray:
         """``S`` with which ``u`` enters a Lagrangian plant's forces ``S u``: the loop's
-        ``input_matrix``, the plant's ``actuation``, or the identity.
+        ``input_matrix``, the plant's ``actuation``, or the identity (impacting bodies: the
+        forces on ``[q_a; q_b]``, their actuation ``[E; 0]``).
 
         Raises
         ------
         DimensionError
             An ``input_matrix`` without one row per degree of freedom.
         """
-        n = int(self.plant.n_dof)
+        from .impacting_bodies import ImpactingBodies
+
+        plant = self.plant
+        if isinstance(plant, ImpactingBodies):   # its force enters [q_a; q_b] through [E; 0]
+            n, actuation = plant.n, np.concatenate([plant.E, np.zeros(plant.n_b)])[:, None]
+        else:
+            n, actuation = int(plant.n_dof), plant.actuation
         if self.input_matrix is not None:
             return as_matrix("input_matrix", self.input_matrix, rows=n)
-        return np.eye(n) if self.plant.actuation is None else self.plant.actuation
+        return np.eye(n) if actuation is None else actuation
 
     def initial_state(self, plant: Any, observer: Any = None, controller: Any = None
                       ) -> FloatArray:
@@ -305,7 +317,8 @@ class ClosedLoop:
         return self.plant
 
     def _check_folded_gain(self) -> None:
-        S, n = self.force_input_matrix(), int(self.plant.n_dof)
+        S = self.force_input_matrix()
+        n = S.shape[0]
         K = self.controller.K
         if K.shape != (S.shape[1], 2 * n):
             raise DimensionError(f"controller: K must have shape ({S.shape[1]}, {2 * n}) "
@@ -353,10 +366,9 @@ def _composition(loop: ClosedLoop) -> str:
         return "stacked"
     if isinstance(plant, LureSystem):
         return "stacked" if linear_blocks else "blocks"   # Python blocks: implicit Euler
-    if isinstance(plant, LagrangianSystem) and obs is None and \
-            isinstance(ctrl, StateFeedback) and ctrl.on == "state" and \
-            ctrl.period is None and plant.is_linear:
-        return "folded"
+    if isinstance(plant, LagrangianSystem | ImpactingBodies) and obs is None and \
+            isinstance(ctrl, StateFeedback) and ctrl.on == "state" and ctrl.period is None:
+        return "folded"   # u = K x + k is a linear force: the plant's own model runs it
     if isinstance(plant, LagrangianSystem | ImpactingBodies | SlidingModePlant):
         return "blocks"         # Python blocks beside the plant (or the loop itself: sampled_zoh)
     raise ModelError(f"plant: closed_loop composes LagrangianSystem, ImpactingBodies, "

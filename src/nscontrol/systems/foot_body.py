@@ -31,6 +31,14 @@ __all__ = ["ActuatedContactModel", "FootBodyParameters", "foot_body_model", "foo
 
 VectorFn = Callable[[FloatArray], FloatArray]
 
+#: Moreau–Jean's index-set threshold for the foot + body [m]. Its gaps are nonlinear in φ: a
+#: contact held closed at velocity level drifts by ½ δqᵀ∇²g δq ≈ 1e-12 m per step at
+#: h = 1e-3, enough to leave Moreau–Jean's default threshold (1e-12 (1 + |q0|)); the light foot
+#: then turns freely for one step and the toe sinks by 0.3 mm, which velocity-level
+#: constraints never undo (Example A's rest offset grows 4×). 1 µm is far above that drift
+#: and far below a landing's drift h |U⁻| ≈ 1e-4 m.
+FOOT_BODY_ACTIVATION = 1e-6
+
 
 @dataclass(frozen=True, eq=False)
 class ActuatedContactModel:
@@ -66,6 +74,13 @@ class ActuatedContactModel:
         the centre of pressure (the static ZMP) of a force distribution is computed from it.
     parameters
         The physical parameters the model was built from (for drawings and reports).
+    contact_activation
+        The index-set threshold [m] Moreau–Jean needs for these gaps (``activation=``), or
+        ``None`` for its own default. Curved gaps need more than that default (1e-12 m): a
+        contact held closed at velocity level drifts by the curvature term
+        ``½ δqᵀ ∇²g δq`` each step (``δq = h v``), and a contact that drifts out of the
+        threshold turns free for a step, an error velocity-level constraints never undo.
+        :func:`foot_body_model` sets 1e-6 m; the chapter-4 runs use it by default.
     """
 
     n_dof: int
@@ -84,6 +99,7 @@ class ActuatedContactModel:
     contact_names: tuple[str, ...]
     support_abscissae: VectorFn | None = None
     parameters: Any = None
+    contact_activation: float | None = None
 
     def __post_init__(self) -> None:
         S = as_matrix("actuation", self.actuation, cols=self.n_dof)
@@ -97,6 +113,9 @@ class ActuatedContactModel:
         object.__setattr__(self, "symmetry", sym)
         if len(self.names) != self.n_dof:
             raise DimensionError(f"names: expected {self.n_dof} names, got {len(self.names)}")
+        if self.contact_activation is not None:
+            object.__setattr__(self, "contact_activation", check_positive(
+                "contact_activation", self.contact_activation, allow_zero=True))
 
     @property
     def n_contacts(self) -> int:
@@ -208,6 +227,8 @@ def foot_body_model(**parameters: Any) -> ActuatedContactModel:
     ``g = y - a sin φ - d cos φ`` and ``y + b sin φ - d cos φ``; the ankle torque acts on
     ``ψ = θ - φ`` (``S = [0, 0, -1, 1]``). ``x`` is cyclic (the symmetry direction).
 
+    Its :attr:`~ActuatedContactModel.contact_activation` is :data:`FOOT_BODY_ACTIVATION`.
+
     Parameters
     ----------
     **parameters
@@ -246,7 +267,8 @@ def foot_body_model(**parameters: Any) -> ActuatedContactModel:
         potential_hessian, gaps, gap_jacobian, gap_hessians,
         actuation=np.array([[0.0, 0.0, -1.0, 1.0]]), symmetry=np.array([[1.0, 0.0, 0.0, 0.0]]),
         names=("x", "y", "phi", "theta"), contact_names=("heel", "toe"),
-        support_abscissae=support_abscissae, parameters=p)
+        support_abscissae=support_abscissae, parameters=p,
+        contact_activation=FOOT_BODY_ACTIVATION)
 
 
 def foot_body_points(model: ActuatedContactModel, q: Any) -> dict[str, FloatArray]:

@@ -67,13 +67,14 @@ u : Exosystem, optional
     state is propagated exactly with the plant.
 blocks : BlockRunner, optional
     Internal: a closed loop's continuous static law (``closed_loop(plant, law)`` with a
-    :class:`~nscontrol.systems.feedback.StaticLaw` written in Python, or a state feedback
-    that cannot be folded into the model) evaluated along the flow, ``u = law(t, x)``
+    :class:`~nscontrol.systems.feedback.StaticLaw` written in Python) evaluated along the
+    flow, ``u = law(t, x)``
     added through the actuation; set by the lowering
     :mod:`~nscontrol.simulate.lowering.python_blocks`, not by a user. Such a law makes the
     flow nonlinear: the run uses DOP853 with event location (no persistent contact there).
-    A gain on a linear plant is folded into the model instead
-    (:mod:`~nscontrol.simulate.lowering.fold`): the closed loop stays exact.
+    A continuous :class:`~nscontrol.systems.feedback.StateFeedback` on a Lagrangian plant or
+    on impacting bodies is folded into the model instead
+    (:mod:`~nscontrol.simulate.lowering.fold`): a linear plant's loop stays exact.
 dt : float, optional
     Spacing of the regular samples between events (default ``(tf - t0) / 1000``); every
     event adds its pre- and post-event samples.

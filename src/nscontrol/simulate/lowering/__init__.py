@@ -10,12 +10,15 @@ lowering (module)                              what it does
 =============================================  ===============================================
 ``stack linear blocks`` (:mod:`.stack`)        a loop of linear blocks around a linear plant
                                                as ONE model of the plant's family
-``fold state feedback`` (:mod:`.fold`)         static state feedback folded into a linear
-                                               Lagrangian plant's forces
+``fold state feedback`` (:mod:`.fold`)         continuous state feedback folded into a
+                                               Lagrangian plant's linear forces
 ``run Python blocks`` (:mod:`.python_blocks`)  blocks stepped as code beside Moreau–Jean or
                                                implicit Euler (the loop's block runner)
 ``Lagrangian form of impacting bodies``        :class:`ImpactingBodies` in the ``[q; v]``
 (:mod:`.impacting_bodies`)                     order of their Lagrangian form, and back
+``state feedback on impacting bodies``         a state-feedback loop around impacting bodies
+(:mod:`.impacting_bodies`)                     as the loop around their Lagrangian form (the
+                                               gain permuted), for the fold
 =============================================  ===============================================
 
 Lowerings chain: a loop of Python blocks around impacting bodies is first the bodies with the

@@ -21,8 +21,10 @@ Maps = dict[str, tuple[FloatArray, FloatArray]]
 
 
 def add_loop_signals(traj: Trajectory, maps: Maps, plant: Any) -> Trajectory:
-    """Adds the loop's signals (``u``, ``xhat``, ``error``) computed from the stacked state;
-    a plant input already named ``u`` (an exosystem's) is kept as ``u_exo``.
+    """Adds the loop's signals (``u``, ``xhat``, the estimation error ``e``, also kept as
+    ``error``) computed from the stacked state; a plant input already named ``u`` (an
+    exosystem's) is kept as ``u_exo``, and a map named ``y`` (the plant's measured output)
+    replaces the stacked model's own output.
 
     Parameters
     ----------
@@ -44,8 +46,10 @@ def add_loop_signals(traj: Trajectory, maps: Maps, plant: Any) -> Trajectory:
     if "u" in maps and "u" in signals:
         signals["u_exo"] = signals.pop("u")
     for name, (M, offset) in maps.items():
-        if name not in signals:
+        if name not in signals or name == "y":   # "y": the plant's, not the stacked model's
             signals[name] = traj.x @ M.T + offset
+    if "error" in signals:      # the estimation error x - x̂, named e beside x and xhat
+        signals["e"] = signals["error"]
     if isinstance(plant, LagrangianSystem) and "energy" in signals:
         signals["energy"] = plant.energy(traj.x)
     return replace(traj, signals=signals)

@@ -111,6 +111,7 @@ _REGISTRY = _Registry([
     "nscontrol.simulate.lowering.fold:FoldStateFeedback",
     "nscontrol.simulate.lowering.python_blocks:PythonBlocks",
     "nscontrol.simulate.lowering.impacting_bodies:LagrangianForm",
+    "nscontrol.simulate.lowering.impacting_bodies:FeedbackOnLagrangianForm",
 ])
 
 

@@ -266,8 +266,12 @@ def _stack_lure(loop: ClosedLoop) -> tuple[Any, Maps]:
         u = (p.u if isinstance(p.u, Exosystem) else p.input_at if p.has_input else None)
     C = net.Err if loop.observer is not None else \
         np.hstack([p.C, np.zeros((p.C.shape[0], net.r + net.c))])
+    maps = _maps(loop, net)
+    if loop.observer is not None:   # the stacked output is the error: y is the plant's Cy x
+        maps["y"] = (np.hstack([Cy, np.zeros((Cy.shape[0], net.r + net.c))]),
+                     np.zeros(Cy.shape[0]))
     return LureSystem(net.A, G, H, law, B=Bu, C=C, D=D, u=u, g=g,
-                      state_names=loop.state_names), _maps(loop, net)
+                      state_names=loop.state_names), maps
 
 
 def _lure_constraints(p: Any, obs: Any, net: _Interconnection) -> tuple[Any, ...]:
