@@ -33,10 +33,10 @@ VectorFn = Callable[[FloatArray], FloatArray]
 
 #: Moreau–Jean's index-set threshold for the foot + body [m]. Its gaps are nonlinear in φ: a
 #: contact held closed at velocity level drifts by ½ δqᵀ∇²g δq ≈ 1e-12 m per step at
-#: h = 1e-3, enough to leave Moreau–Jean's default threshold (1e-12 (1 + |q0|)); the light foot
+#: h = 1e-3, enough to leave Moreau–Jean's default threshold (1e-12 (1 + ‖q₀‖)); the light foot
 #: then turns freely for one step and the toe sinks by 0.3 mm, which velocity-level
 #: constraints never undo (Example A's rest offset grows 4×). 1 µm is far above that drift
-#: and far below a landing's drift h |U⁻| ≈ 1e-4 m.
+#: and far below a landing's drift h ‖U⁻‖ ≈ 1e-4 m.
 FOOT_BODY_ACTIVATION = 1e-6
 
 
