@@ -148,6 +148,21 @@ def test_a_crash_inside_a_chunk_costs_only_its_point():
     assert res.failed == (res.errors[3],) and res.errors[3].type == "WorkerDied"
 
 
+def _hang_at_3(p):
+    if p == 3:
+        import time
+
+        time.sleep(3600)
+    return p * p
+
+
+def test_a_point_over_its_budget_inside_a_chunk_costs_only_itself():
+    # 2 s: a healthy point takes microseconds, even on a loaded machine far below that
+    res = sweep.run(_hang_at_3, range(12), chunk=6, point_timeout=2.0, progress=False)
+    assert res.values == tuple(None if i == 3 else i * i for i in range(12))
+    assert res.failed == (res.errors[3],) and res.errors[3].type == "BudgetExceededError"
+
+
 def test_an_unpicklable_point_inside_a_chunk_costs_only_itself():
     res = sweep.run(_identity, [1, 2, threading.Lock(), 4, 5], chunk=5, progress=False)
     assert res.values[:2] == (1, 2) and res.values[3:] == (4, 5)
