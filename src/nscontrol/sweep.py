@@ -21,7 +21,8 @@ Tasks
 -----
 Points travel to workers in *chunks*: one task runs several points one after the other, so
 that a task lasts about :data:`MIN_TASK_SECONDS` and a scheduler's fixed cost per task (about
-a millisecond on Dask, more under load) stays small beside it. The first task on each worker is
+a millisecond on a local pool, several on Dask: see :data:`MIN_TASK_SECONDS`) stays small
+beside it. The first task on each worker is
 one point, timed in the worker; later chunks are sized from the measured time per point,
 and never so large that fewer than two chunks per worker remain (the last chunks shrink, so
 the workers finish together). Results do not depend on the chunking: each point is still
