@@ -12,9 +12,12 @@ Scenarios:
   system by EulerMoreauOSI + Relay, the same controller and observer written again in its
   script, the torque held in the system's ``b``): steps/s of both and
   ``max |theta_ours - theta_siconos|`` (our compiled blocks, and the Python ones);
-* the kappa diagram (kappa in [0, 1.5], set-point runs at h = 1e-3, T = 10): wall time
-  serial, on 2 local worker processes and on 2 Dask workers (a ``LocalCluster``, when
-  ``dask.distributed`` is installed), all through ``nscontrol.sweep``;
+* the kappa diagram (kappa in [0, 1.5], set-point runs at h = 1e-3, T = 10, ~30 ms each):
+  wall time serial, on 2 local worker processes and on 2 Dask workers (a ``LocalCluster``,
+  one thread each, both warm, when ``dask.distributed`` is installed), all through
+  ``nscontrol.sweep``; ``parallel_efficiency`` is ``t_serial / (2 t_dask)`` with the points
+  chunked as ``sweep.run`` chooses, beside the same with one point per task (``chunk=1``),
+  and the values of every run compared bit for bit with the serial ones;
 * the chapter 7 example end to end (``nscontrol run ch07``, without figures; not with
   ``--quick``): its wall time.
 
@@ -28,7 +31,14 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
-from harness import run_siconos, siconos_available, siconos_version
+from harness import (
+    dask_client,
+    efficiency,
+    run_siconos,
+    siconos_available,
+    siconos_version,
+    warm_workers,
+)
 
 from nscontrol import sweep
 from nscontrol.design.friction_compensation import PDLaw, SetPoint, simulate_friction_loop
@@ -106,38 +116,45 @@ def _coulomb_run(quick: bool) -> dict[str, Any]:
     return record
 
 
-def _dask_seconds(kappas: list[float]) -> tuple[float | None, str]:
-    """Wall time of the diagram on a 2-worker Dask ``LocalCluster`` (processes, one thread
-    each), the cluster's start-up excluded; ``None`` and why when Dask is missing."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        return None, "dask.distributed not installed (the 'cluster' extra)"
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        ex_dask = client.get_executor()
-        sweep.run(ex.kappa_point, kappas[:2], executor=ex_dask, progress=False)   # warm-up
-        _, seconds = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=ex_dask,
-                                              progress=False))
-    return seconds, ""
+def _same(a: Any, b: Any) -> bool:
+    """Two sweeps of the diagram gave the same values, bit for bit (NaN where NaN)."""
+    return bool(np.array_equal(np.asarray(a.values, float), np.asarray(b.values, float),
+                               equal_nan=True))
+
+
+def _dask(kappas: list[float], serial: Any, t_serial: float) -> dict[str, Any]:
+    """The diagram on a 2-worker Dask ``LocalCluster`` (both workers warm, the cluster's
+    start-up excluded): chunked as ``sweep.run`` chooses, and one point per task."""
+    with dask_client() as client:
+        if client is None:
+            return {"dask_note": "dask.distributed not installed (the 'cluster' extra)"}
+        warm_workers(client, ex.kappa_point, 1.0)
+        chunked, t_dask = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=client,
+                                                   progress=False))
+        single, t_single = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=client,
+                                                    chunk=1, progress=False))
+    return {"two_dask_workers_seconds": t_dask,
+            "parallel_efficiency": efficiency(t_serial, t_dask),
+            "dask_identical_to_serial": _same(chunked, serial) and _same(single, serial),
+            "dask_one_point_per_task_seconds": t_single,
+            "parallel_efficiency_one_point_per_task": efficiency(t_serial, t_single)}
 
 
 def _diagram(quick: bool) -> dict[str, Any]:
     kappas = list(np.linspace(0.0, 1.5, 21 if quick else ex.KAPPA_POINTS))
     ex.kappa_point(1.0)                                  # warm-up (compiled kernels)
-    _, serial = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor="serial",
-                                         progress=False))
-    with ProcessPoolExecutor(2) as pool:
-        _, parallel = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=pool,
-                                               progress=False))
-    dask_seconds, why = _dask_seconds(kappas)
+    ser, serial = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor="serial",
+                                           progress=False))
+    with ProcessPoolExecutor(2) as pool:                 # forked: the kernels are loaded
+        par, parallel = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=pool,
+                                                 progress=False))
     accuracy: dict[str, Any] = {"serial_seconds": serial, "two_workers_seconds": parallel,
-                                "two_dask_workers_seconds": dask_seconds}
-    if why:
-        accuracy["dask_note"] = why
+                                "processes_efficiency": efficiency(serial, parallel),
+                                "processes_identical_to_serial": _same(par, ser),
+                                **_dask(kappas, ser, serial)}
     return {"scenario": f"ch07 kappa diagram, {len(kappas)} runs of {ex.KAPPA_T:g} s at "
-                        f"h = {ex.KAPPA_H:g}: serial vs 2 worker processes (and 2 Dask "
-                        f"workers)",
+                        f"h = {ex.KAPPA_H:g}: serial vs 2 worker processes and 2 Dask "
+                        f"workers (parallel_efficiency: serial / (2 x Dask), chunked points)",
             "size": len(kappas), "ours_steps_per_s": None, "reference": "serial",
             "reference_steps_per_s": None, "ratio": serial / parallel,
             "accuracy": accuracy}

@@ -19,7 +19,8 @@ import json
 import shutil
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -87,3 +88,33 @@ def run_siconos(script: str, payload: dict[str, Any], *, timeout: float = 300
 
 def siconos_version() -> str:
     return "siconos-4.4"
+
+
+@contextmanager
+def dask_client(workers: int = 2) -> Iterator[Any]:
+    """A ``Client`` of a fresh ``LocalCluster`` of ``workers`` worker processes, one thread
+    each, their stack profiler off (it samples every 10 ms, about 15 % of these Python-heavy
+    tasks; see ``docs/sweep.md``); ``None`` when ``dask.distributed`` is not installed."""
+    try:
+        from dask import config as dask_config
+        from distributed import Client, LocalCluster
+    except ImportError:
+        yield None
+        return
+    with dask_config.set({"distributed.worker.profile.enabled": False}), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                         dashboard_address=None) as cluster, Client(cluster) as client:
+        yield client
+
+
+def warm_workers(client: Any, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+    """Run ``fn(*args, **kwargs)`` once on every worker of ``client`` (imports, compiled
+    kernels loaded from the cache), so that no timed task pays a worker's first call."""
+    workers = list(client.scheduler_info()["workers"])
+    client.gather([client.submit(fn, *args, workers=[w], pure=False,
+                                 allow_other_workers=False, **kwargs) for w in workers])
+
+
+def efficiency(serial: float, parallel: float, workers: int = 2) -> float:
+    """Parallel efficiency ``serial / (workers × parallel)`` (1: the workers never wait)."""
+    return serial / (workers * parallel)

@@ -17,6 +17,18 @@ not a lambda, a closure or a function defined in ``__main__`` of an interactive 
 A task that cannot be shipped is recorded as each point's :class:`PointError` with the rule in
 its message (Dask serialises at ``submit``, local pools in transit); it never aborts the sweep.
 
+Tasks
+-----
+Points travel to workers in *chunks*: one task runs several points one after the other, so
+that a task lasts about :data:`MIN_TASK_SECONDS` and a scheduler's fixed cost per task (about
+a millisecond on a local pool, several on Dask: see :data:`MIN_TASK_SECONDS`) stays small
+beside it. The first task on each worker is
+one point, timed in the worker; later chunks are sized from the measured time per point,
+and never so large that fewer than two chunks per worker remain (the last chunks shrink, so
+the workers finish together). Results do not depend on the chunking: each point is still
+``fn(point)``, recorded in grid order with its own error. ``chunk=1`` sends one point per
+task, ``chunk=n`` exactly ``n``.
+
 ``executor="auto"`` times the first point in this process and sends the rest to a local
 process pool only when that pays (see :data:`AUTO_PARALLEL_SECONDS`); it is the default of the
 frequency-response helpers of :mod:`nscontrol.analysis.periodic`.
@@ -25,6 +37,7 @@ frequency-response helpers of :mod:`nscontrol.analysis.periodic`.
 from __future__ import annotations
 
 import difflib
+import math
 import os
 import pickle
 import re
@@ -33,6 +46,7 @@ import signal
 import tempfile
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -40,11 +54,11 @@ from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
 
-from ._validation import check_bool, check_positive
+from ._validation import check_bool, check_integer, check_positive
 from .errors import ModelError, NscontrolError
 
 __all__ = ["run", "SweepResult", "PointError", "SweepError", "AUTO_PARALLEL_SECONDS",
-           "MAX_POOL_RESTARTS"]
+           "MAX_POOL_RESTARTS", "MIN_TASK_SECONDS"]
 
 
 class SweepError(NscontrolError, RuntimeError):
@@ -189,6 +203,44 @@ class _Pickled:
     data: bytes
 
 
+@dataclass(frozen=True)
+class _Batch:
+    """Picklable task running a chunk of ``(index, point)`` pairs through ``call`` in turn:
+    ``(((index, (ok, payload)), ...), seconds, interrupted)``.
+
+    ``seconds`` is the time the chunk took in the worker (what sizes the next chunks, free of
+    the scheduler's own delays). A ``KeyboardInterrupt`` in a point ends the chunk: the points
+    finished before it are returned with ``interrupted`` set, so the caller keeps them and
+    re-raises.
+    """
+
+    call: _Guarded
+
+    def __call__(self, chunk: tuple[tuple[int, Any], ...]
+                 ) -> tuple[tuple[tuple[int, Any], ...], float, bool]:
+        out: list[tuple[int, Any]] = []
+        start = time.perf_counter()
+        try:
+            for indexed in chunk:
+                out.append((indexed[0], self.call(indexed)))
+        except KeyboardInterrupt:
+            return tuple(out), time.perf_counter() - start, True
+        return tuple(out), time.perf_counter() - start, False
+
+
+#: Wall time (seconds) a task of automatically chunked points aims at (``run``'s default
+#: ``min_task_seconds``). Measured on the project's 2-core machine under load (load average
+#: 10-11), ``math.sqrt`` over 400 points one per task: ~1 ms per task on a 2-process local
+#: pool, 7-24 ms on a 2-worker Dask ``LocalCluster``; at 0.5 s per task such a cost is 0.2-5 %
+#: of the task, while a grid of a few seconds of work still makes several chunks per worker.
+MIN_TASK_SECONDS = 0.5
+
+#: Automatic chunks are never larger than ``remaining points / (this × workers)``: at least
+#: this many chunks per worker remain to be handed out, so the tail shrinks and the workers
+#: finish within about one small chunk of each other.
+_CHUNKS_PER_WORKER = 2
+
+
 #: ``executor="auto"`` goes parallel when the pilot point predicts more serial work than this
 #: (seconds) for the rest of the grid. Measured on the project's 2-core machine (fork start
 #: method, best of 3): a local pool starts, runs a task and shuts down in ~0.035 s; a
@@ -201,7 +253,8 @@ AUTO_PARALLEL_SECONDS = 0.15
 def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         executor: Executor | str | Any | None = None,
         progress: bool | None = None, desc: str = "sweep",
-        point_timeout: float | None = None) -> SweepResult:
+        point_timeout: float | None = None, chunk: int | None = None,
+        min_task_seconds: float = MIN_TASK_SECONDS) -> SweepResult:
     """Evaluate ``fn(point)`` for every point of ``grid``, in parallel.
 
     Parameters
@@ -235,6 +288,15 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         and a :class:`~concurrent.futures.ProcessPoolExecutor`, which the ended worker
         leaves broken for later use): a point running in this process, a thread or a Dask
         worker cannot be stopped, so those executors refuse the option.
+    chunk
+        Points per task on a parallel executor. ``None`` (default): automatic, the first
+        task of each worker one point, timed in the worker, then chunks lasting about
+        ``min_task_seconds`` each, shrinking at the end so the workers finish together (see
+        the module docstring). An integer ``n >= 1``: ``n`` points per task (``1``: one task
+        per point). Ignored by ``"serial"``. Values and errors are the same for any chunking.
+    min_task_seconds
+        Wall time an automatic chunk aims at, in seconds (default
+        :data:`MIN_TASK_SECONDS`); raise it when a scheduler's cost per task is high.
 
     Returns
     -------
@@ -258,7 +320,9 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
         ``fn`` is not callable, ``grid`` is not an iterable of points, or ``executor`` is of
         an unsupported type or a string that is neither ``"serial"``, ``"auto"`` nor a
         scheduler address (``tcp://host:port`` or ``host:port``); ``point_timeout`` is not a
-        positive number, or is given with an executor that cannot stop a running point.
+        positive number, or is given with an executor that cannot stop a running point;
+        ``chunk`` is not ``None`` or an integer >= 1; ``min_task_seconds`` is not a positive
+        number.
     KeyboardInterrupt
         Re-raised after the points that finished are kept: ``err.sweep_result`` holds the
         :class:`SweepResult` so far (unfinished points carry a ``KeyboardInterrupt`` error).
@@ -279,6 +343,9 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     points = _points(grid)
     _check_executor(executor)
     budget = _check_point_timeout(point_timeout, executor)
+    sizing = _Sizing(None if chunk is None else check_integer("chunk", chunk, minimum=1),
+                     check_positive("min_task_seconds", min_task_seconds,
+                                    hint="the seconds one task of chunked points aims at"))
     if not points:
         return SweepResult((), (), ())
     call = _Guarded(fn)
@@ -289,11 +356,11 @@ def run(fn: Callable[[Any], Any], grid: Iterable[Any], *,
     bar = _bar(len(points), check_bool("progress", progress, allow_none=True), desc)
     try:
         if isinstance(executor, str) and executor == "auto" and budget is None:
-            _run_auto(call, todo, values, errors, bar, done)
+            _run_auto(call, todo, values, errors, bar, done, sizing)
         else:                          # "auto" with a budget: every point in a local pool
             auto = isinstance(executor, str) and executor == "auto"
             with _executor_for(None if auto else executor, len(points)) as ex:
-                _dispatch(ex, call, todo, values, errors, bar, done, budget)
+                _dispatch(ex, call, todo, values, errors, bar, done, budget, sizing)
     except KeyboardInterrupt as exc:
         for i, finished in enumerate(done):
             if not finished:
@@ -375,8 +442,10 @@ def _check_point_timeout(point_timeout: Any, executor: Any) -> float | None:
 
 
 def _run_auto(call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
-              errors: list[PointError | None], bar: Any, done: list[bool]) -> None:
-    """``executor="auto"``: a timed pilot point here, then processes only if they pay."""
+              errors: list[PointError | None], bar: Any, done: list[bool],
+              sizing: _Sizing) -> None:
+    """``executor="auto"``: a timed pilot point here, then processes only if they pay (its
+    time sizes their first chunks)."""
     t = time.perf_counter()
     _gather(None, call, todo[:1], values, errors, bar, done)
     pilot = time.perf_counter() - t
@@ -384,41 +453,44 @@ def _run_auto(call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
     workers = min(os.cpu_count() or 1, len(rest))
     if (workers > 1 and pilot * len(rest) > AUTO_PARALLEL_SECONDS
             and not _pickling_problem(call, dask=False)):
+        sizing.observe(1, pilot)
         with _owned_pool(workers) as pool:
-            _dispatch(pool, call, rest, values, errors, bar, done)
+            _dispatch(pool, call, rest, values, errors, bar, done, None, sizing)
     else:
         _gather(None, call, rest, values, errors, bar, done)
 
 
 def _dispatch(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]],
               values: list[Any], errors: list[PointError | None], bar: Any,
-              done: list[bool], budget: float | None = None) -> None:
+              done: list[bool], budget: float | None = None,
+              sizing: _Sizing | None = None) -> None:
     """Local process pools get crash recovery and the per-point budget; other executors run
     as they are."""
     if isinstance(ex, ProcessPoolExecutor):
-        _gather_recovering(ex, call, todo, values, errors, bar, done, budget)
+        _gather_recovering(ex, call, todo, values, errors, bar, done, budget, sizing)
     else:
-        _gather(ex, call, todo, values, errors, bar, done)
+        _gather(ex, call, todo, values, errors, bar, done, budget, sizing)
 
 
 def _gather_recovering(pool: ProcessPoolExecutor, call: _Guarded, todo: list[tuple[int, Any]],
                        values: list[Any], errors: list[PointError | None], bar: Any,
-                       done: list[bool], budget: float | None = None) -> None:
+                       done: list[bool], budget: float | None = None,
+                       sizing: _Sizing | None = None) -> None:
     """:func:`_gather` on a local pool, re-running the points a dead worker took with it.
 
     After a crash the points whose marks remain (they were running) are re-run alone, each
-    in a fresh one-worker pool, so the culprit is identified; the points that never started
-    go to a fresh pool of the same size. When the pool broke because workers were ended for
-    the ``budget`` (their points settled), the culprits are known: every lost point goes to
-    the fresh pool. Each round settles at least one point; at most
-    :data:`MAX_POOL_RESTARTS` rounds follow a crash.
+    in a fresh one-worker pool, so the culprit is identified; the other points of the lost
+    tasks (those a chunk had finished or not reached) go to a fresh pool of the same size.
+    When the pool broke because workers were ended for the ``budget`` (their points
+    settled), the culprits are known: every lost point goes to the fresh pool. Each round
+    settles at least one point; at most :data:`MAX_POOL_RESTARTS` rounds follow a crash.
     """
     marks = tempfile.mkdtemp(prefix="nscontrol-sweep-")
     call = replace(call, marks=marks, ship=True)
     workers = getattr(pool, "_max_workers", None) or (os.cpu_count() or 1)
     context = getattr(pool, "_mp_context", None)
     try:
-        lost, ended = _gather(pool, call, todo, values, errors, bar, done, budget)
+        lost, ended = _gather(pool, call, todo, values, errors, bar, done, budget, sizing)
         restarts = 0
         while lost:
             running = {int(n) for n in os.listdir(marks)}
@@ -441,7 +513,8 @@ def _gather_recovering(pool: ProcessPoolExecutor, call: _Guarded, todo: list[tup
                 return
             if lost:
                 with _owned_pool(workers, context) as fresh:
-                    lost, ended = _gather(fresh, call, lost, values, errors, bar, done, budget)
+                    lost, ended = _gather(fresh, call, lost, values, errors, bar, done, budget,
+                                          sizing)
     finally:
         shutil.rmtree(marks, ignore_errors=True)
 
@@ -484,63 +557,206 @@ def _owned_pool(workers: int, context: Any = None) -> Iterator[ProcessPoolExecut
     pool.shutdown(wait=True)
 
 
+class _Sizing:
+    """How points are cut into tasks: ``chunk`` points each (``None``: automatic, aiming at
+    ``min_seconds`` per task), and the time per point measured so far in the workers (shared
+    by the rounds of one sweep, so a fresh pool after a crash starts from it)."""
+
+    def __init__(self, chunk: int | None = 1, min_seconds: float = MIN_TASK_SECONDS) -> None:
+        self.chunk = chunk
+        self.min_seconds = min_seconds
+        self.seconds = 0.0
+        self.points = 0
+
+    def observe(self, points: int, seconds: float) -> None:
+        """``points`` more points took ``seconds`` of a worker's wall time."""
+        self.points += points
+        self.seconds += seconds
+
+    def size(self, remaining: int, workers: int) -> int:
+        """Points in the next task, ``remaining`` points not yet handed out."""
+        if self.chunk is not None:
+            return min(self.chunk, remaining)
+        if not self.points:
+            return 1                           # the pilots: one point per worker, timed
+        per_point = self.seconds / self.points
+        target = (math.ceil(self.min_seconds / per_point) if per_point > 0.0 else remaining)
+        balance = math.ceil(remaining / (_CHUNKS_PER_WORKER * workers))
+        return max(1, min(target, balance, remaining))
+
+    def in_flight(self, workers: int) -> float:
+        """Tasks submitted and not finished that the sweep keeps at most: all of them with a
+        fixed chunk; one pilot per worker until a time is known; then two per worker (one
+        running, one queued, so no worker waits for the next chunk's round trip)."""
+        if self.chunk is not None:
+            return math.inf
+        return workers if not self.points else 2 * workers
+
+
+class _Chunker:
+    """The points of one round not yet handed out, cut into tasks in grid order; a task that
+    failed as a whole (a point that cannot travel, a lost Dask worker) comes back as single
+    points, so that only the culprit fails."""
+
+    def __init__(self, todo: list[tuple[int, Any]], workers: int, sizing: _Sizing) -> None:
+        self.queue = deque(todo)
+        self.singles: deque[tuple[int, Any]] = deque()
+        self.workers = max(1, workers)
+        self.sizing = sizing
+
+    def __bool__(self) -> bool:
+        return bool(self.queue or self.singles)
+
+    def may_submit(self, running: int) -> bool:
+        return bool(self) and running < self.sizing.in_flight(self.workers)
+
+    def take(self) -> tuple[tuple[int, Any], ...]:
+        if self.singles:
+            return (self.singles.popleft(),)
+        n = self.sizing.size(len(self.queue), self.workers)
+        return tuple(self.queue.popleft() for _ in range(n))
+
+    def split(self, chunk: Iterable[tuple[int, Any]]) -> None:
+        self.singles.extendleft(reversed(list(chunk)))
+
+    def rest(self) -> list[tuple[int, Any]]:
+        rest = [*self.singles, *self.queue]
+        self.singles.clear()
+        self.queue.clear()
+        return rest
+
+
+def _workers(ex: Executor) -> int:
+    """How many tasks ``ex`` runs at once: a pool's ``max_workers``, a Dask cluster's
+    threads (its workers at this moment), else the CPUs here."""
+    n = getattr(ex, "_max_workers", None)
+    client = getattr(ex, "_client", None)     # dask.distributed's ClientExecutor
+    if client is not None and hasattr(client, "nthreads"):
+        try:
+            n = sum(client.nthreads().values())
+        except Exception:                       # a cluster that cannot say: guess below
+            n = None
+    return max(1, int(n or os.cpu_count() or 1))
+
+
 def _gather(ex: Executor | None, call: _Guarded, todo: list[tuple[int, Any]], values: list[Any],
             errors: list[PointError | None], bar: Any, done: list[bool],
-            budget: float | None = None) -> tuple[list[tuple[int, Any]], int]:
-    """Run the ``(index, point)`` pairs of ``todo`` on ``ex`` (in this process when None) and
-    store values and errors by index. Returns the pairs lost to a broken local pool (not
-    stored: the caller re-runs them) and how many workers were ended because their point
-    ran over ``budget`` seconds (local pools with marks only)."""
+            budget: float | None = None, sizing: _Sizing | None = None
+            ) -> tuple[list[tuple[int, Any]], int]:
+    """Run the ``(index, point)`` pairs of ``todo`` on ``ex`` (in this process when None), in
+    tasks cut by ``sizing`` (default: one point each), and store values and errors by index.
+    Returns the pairs lost to a broken local pool (not stored: the caller re-runs them) and
+    how many workers were ended because their point ran over ``budget`` seconds (local pools
+    with marks only)."""
     if ex is None:
         for i, p in todo:
-            _store(i, _resolved(call, (i, p)), values, errors, "")
+            _store(i, call((i, p)), values, errors)
             _tick(i, bar, done)
         return [], 0
-    dask = type(ex).__module__.startswith("distributed")
-    futures: dict[Future, int] = {}
-    fn_problem = ""  # set once fn itself is known not to serialise: no more submits
-    for i, p in todo:
-        if not fn_problem:
+    return _Round(ex, call, todo, values, errors, bar, done,
+                  sizing or _Sizing()).run(budget)
+
+
+class _Round:
+    """The tasks of one :func:`_gather` on an executor: submitted as the chunker cuts them,
+    their points stored as they finish."""
+
+    def __init__(self, ex: Executor, call: _Guarded, todo: list[tuple[int, Any]],
+                 values: list[Any], errors: list[PointError | None], bar: Any,
+                 done: list[bool], sizing: _Sizing) -> None:
+        self.ex, self.call, self.batch = ex, call, _Batch(call)
+        self.values, self.errors, self.bar, self.done = values, errors, bar, done
+        self.plan = _Chunker(todo, _workers(ex), sizing)
+        self.sizing = sizing
+        self.dask = type(ex).__module__.startswith("distributed")
+        self.points = dict(todo)
+        self.futures: dict[Future, tuple[tuple[int, Any], ...]] = {}
+        self.lost: list[tuple[int, Any]] = []
+        self.broken = False
+        self.fn_problem = ""       # set once fn itself is known not to serialise: no submits
+        self.diagnosis: str | None = None
+
+    def run(self, budget: float | None) -> tuple[list[tuple[int, Any]], int]:
+        timed = budget is not None and self.call.marks is not None
+        poll = min(_POLL_SECONDS, budget / 4) if timed and budget is not None else None
+        ended = 0
+        self.submit()
+        while self.futures:
+            finished, _ = wait(set(self.futures), timeout=poll, return_when=FIRST_COMPLETED)
+            interrupted = False
+            for f in finished:
+                interrupted |= self.receive(f)
+            if interrupted:
+                raise KeyboardInterrupt
+            if timed and self.futures and budget is not None:
+                running = {i for chunk in self.futures.values() for i, _ in chunk}
+                ended += _end_overdue(self.ex, self.call, budget, running, self.values,
+                                      self.errors, self.bar, self.done)
+            self.submit()
+        self.lost += self.plan.rest()      # not handed out: the pool broke first
+        return sorted(self.lost, key=lambda ip: ip[0]), ended
+
+    def submit(self) -> None:
+        """Hand out tasks while the sizing allows (none once the pool is broken)."""
+        while not self.broken and self.plan.may_submit(len(self.futures)):
+            chunk = self.plan.take()
+            if self.fn_problem:
+                for i, _ in chunk:
+                    _settle(i, PointError(i, "PicklingError", self.fn_problem), self.values,
+                            self.errors, self.bar, self.done)
+                continue
             try:
-                futures[ex.submit(call, (i, p))] = i
-                continue
+                self.futures[self.ex.submit(self.batch, chunk)] = chunk
+            except BrokenProcessPool:
+                self.broken = True
+                self.lost += chunk
             except Exception as exc:  # Dask serialises at submit: record, go on
-                fn_problem = _pickling_problem(call, dask=dask)
-                errors[i] = PointError(
-                    i, type(exc).__name__, fn_problem or
-                    f"could not submit point {i} ({exc}); with process or cluster executors "
-                    f"every grid point must be picklable", traceback.format_exc())
-        else:
-            errors[i] = PointError(i, "PicklingError", fn_problem)
-        _tick(i, bar, done)
-    diagnosis: str | None = None
-    lost: list[tuple[int, Any]] = []
-    points = dict(todo)
-    timed = budget is not None and call.marks is not None
-    poll = min(_POLL_SECONDS, budget / 4) if timed and budget is not None else None
-    ended = 0
-    pending = set(futures)
-    while pending:
-        finished, pending = wait(pending, timeout=poll, return_when=FIRST_COMPLETED)
-        for f in finished:
-            i = futures[f]
-            if done[i]:          # its worker was ended for the budget: settled already
-                continue
-            failure = f.exception()
-            if isinstance(failure, BrokenProcessPool):
-                lost.append((i, points[i]))
-                continue
-            if isinstance(failure, KeyboardInterrupt):
-                raise failure
-            if diagnosis is None and failure is not None:
-                diagnosis = _pickling_problem(call, dask=dask) or _transit_problem(i,
-                                                                                  points[i])
-            _store(i, f, values, errors, diagnosis or "")
-            _tick(i, bar, done)
-        if timed and pending and budget is not None:
-            ended += _end_overdue(ex, call, budget, {futures[f] for f in pending}, values,
-                                  errors, bar, done)
-    return sorted(lost, key=lambda ip: ip[0]), ended
+                self.refused(chunk, exc)
+
+    def refused(self, chunk: tuple[tuple[int, Any], ...], exc: Exception) -> None:
+        """A task ``submit`` refused: fn cannot travel (every point says so), or one of its
+        points cannot (the chunk's points are sent again one by one to find which)."""
+        self.fn_problem = _pickling_problem(self.call, dask=self.dask)
+        if not self.fn_problem and len(chunk) > 1:
+            self.plan.split(chunk)
+            return
+        for i, _ in chunk:
+            _settle(i, PointError(
+                i, type(exc).__name__, self.fn_problem or
+                f"could not submit point {i} ({exc}); with process or cluster executors "
+                f"every grid point must be picklable", traceback.format_exc()),
+                self.values, self.errors, self.bar, self.done)
+
+    def receive(self, f: Future) -> bool:
+        """Store the points of a finished task; True when one of them was interrupted."""
+        chunk = self.futures.pop(f)
+        left = [ip for ip in chunk if not self.done[ip[0]]]  # not settled by the budget
+        failure = f.exception()
+        if isinstance(failure, BrokenProcessPool):
+            self.broken = True
+            self.lost += left
+            return False
+        if isinstance(failure, KeyboardInterrupt):
+            raise failure
+        if failure is not None and len(left) > 1:   # which point? each alone, once more
+            self.plan.split(left)
+            return False
+        if failure is not None:
+            for i, p in left:
+                if self.diagnosis is None:
+                    self.diagnosis = (_pickling_problem(self.call, dask=self.dask)
+                                      or _transit_problem(i, p))
+                _settle(i, PointError(i, type(failure).__name__, f"{failure}; "
+                                      f"{self.diagnosis}" if self.diagnosis else str(failure)),
+                        self.values, self.errors, self.bar, self.done)
+            return False
+        results, seconds, interrupted = f.result()
+        self.sizing.observe(len(results), seconds)
+        for i, outcome in results:
+            if not self.done[i]:
+                _store(i, outcome, self.values, self.errors)
+                _tick(i, self.bar, self.done)
+        return bool(interrupted)
 
 
 def _end_overdue(pool: Any, call: _Guarded, budget: float, pending: set[int],
@@ -607,16 +823,11 @@ def _pickling_problem(call: _Guarded, *, dask: bool) -> str:
     return ""
 
 
-def _store(index: int, future: Future, values: list[Any], errors: list[PointError | None],
-           diagnosis: str) -> None:
-    """Unpack one finished future; a lost worker or an unpicklable fn is that point's error
-    (``diagnosis`` says which picklability rule was broken, if any)."""
-    try:
-        ok, payload = future.result()
-    except Exception as exc:
-        errors[index] = PointError(index, type(exc).__name__,
-                                   f"{exc}; {diagnosis}" if diagnosis else str(exc))
-        return
+def _store(index: int, outcome: tuple[bool, Any], values: list[Any],
+           errors: list[PointError | None]) -> None:
+    """Unpack one point's ``(ok, payload)``: its value (unpickled when the worker shipped it
+    pickled) or its :class:`PointError`."""
+    ok, payload = outcome
     if ok and isinstance(payload, _Pickled):
         try:
             values[index] = pickle.loads(payload.data)
@@ -628,13 +839,6 @@ def _store(index: int, future: Future, values: list[Any], errors: list[PointErro
         values[index] = payload
     else:
         errors[index] = payload
-
-
-def _resolved(call: _Guarded, arg: tuple[int, Any]) -> Future:
-    """A finished future for the serial path (same unpacking as the parallel one)."""
-    fut: Future = Future()
-    fut.set_result(call(arg))
-    return fut
 
 
 def _bar(total: int, progress: bool | None, desc: str) -> Any:
