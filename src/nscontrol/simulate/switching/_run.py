@@ -323,7 +323,7 @@ def _budgeted_dop853() -> type:
             # span for t far from 0. Raised to a few floors (the rounding of t + h stays above
             # it), it is a start the error control accepts for a field smooth at that scale.
             floor = _FIRST_STEP_FLOORS * run.min_step
-            self.h_abs = min(max(self.h_abs, floor), abs(t_bound - t0))
+            self.h_abs: float = min(max(float(self.h_abs), floor), abs(t_bound - t0))
 
         def _step_impl(self) -> tuple[bool, str | None]:
             run = self.run
