@@ -132,3 +132,51 @@ def test_fields_that_differ_by_more_than_a_constant_stay_on_the_python_path():
                                         continuous=False)
     tr = simulate(FilippovSystem.from_pwa(pwa), [1.0, 0.0], (0.0, 1.0))
     assert tr.stats["propagation"] == "dop853"
+
+
+def test_two_sided_given_as_data_runs_the_compiled_loop():
+    # sp.relay_feedback's switched system is given as data: the same PWA as from_pwa's, the
+    # same run to the bit (the same compiled computation)
+    p = sp.relay_feedback(T=2.0)
+    tr = simulate(p.switched, p.x0, p.t_span)
+    assert tr.stats["propagation"] == "exact"
+    compiled, _ = _relay()
+    ref = simulate(compiled, p.x0, p.t_span)
+    np.testing.assert_array_equal(tr.t, ref.t)
+    np.testing.assert_array_equal(tr.x, ref.x)
+    assert p.switched.state_names == ("x1", "x2")
+
+
+def test_two_sided_data_with_different_state_matrices_is_the_python_path_of_its_callables():
+    A1, A2 = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0, 1.0], [-1.0, 0.0]])
+    bm, bp, c = np.array([0.0, 1.0]), np.array([0.0, -1.0]), np.ones(2)
+    data = FilippovSystem.two_sided((A1, bm), (A2, bp), c, 2)
+    python = FilippovSystem.two_sided(lambda t, x: A1 @ x + bm, lambda t, x: A2 @ x + bp,
+                                      lambda x: float(c @ x), 2, gradient=lambda x: c)
+    a = simulate(data, [1.0, 0.0], (0.0, 1.0))
+    b = simulate(python, [1.0, 0.0], (0.0, 1.0))
+    assert a.stats["propagation"] == b.stats["propagation"] == "dop853"
+    # the same DOP853 run but for the rounding of the fields' evaluation (a few eps |x|),
+    # carried by flows of growth <= e over the span: 100 eps
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=100 * EPS)
+
+
+@pytest.mark.parametrize("args, kw, error, message", [
+    ((lambda t, x: x, ([[0.0]], [1.0]), [1.0], 1), {}, "ModelError",
+     r"^f_minus, f_plus, h: expected three callables, or the data form"),
+    ((([[0.0]], [1.0]), ([[0.0]], [-1.0]), [1.0], 1), {"gradient": lambda x: np.ones(1)},
+     "ModelError", r"^gradient: the data form's gradient is the normal c"),
+    ((([[0.0, 1.0]], [1.0]), ([[0.0]], [-1.0]), [1.0], 1), {}, "DimensionError",
+     r"^f_minus\[0\] \(A\): expected a square matrix"),
+    ((([[0.0]], [1.0]), 3.0, [1.0], 1), {}, "DimensionError",
+     r"^f_plus: expected a callable \(t, x\) -> \(n,\) array or a pair \(A, b\)"),
+    ((([[0.0]], [1.0]), ([[0.0]], [-1.0]), [1.0, 0.0], 1), {}, "DimensionError",
+     r"^h: expected a vector of length 1"),
+    ((([[0.0]], [1.0]), ([[0.0]], [-1.0]), [0.0], 1), {}, "ModelError",
+     r"^h: expected a nonzero normal vector c"),
+])
+def test_two_sided_data_form_refuses_bad_data(args, kw, error, message):
+    from nscontrol import errors
+
+    with pytest.raises(getattr(errors, error), match=message):
+        FilippovSystem.two_sided(*args, **kw)

@@ -60,11 +60,17 @@ def test_switching_advances_one_piece_at_a_time(bars) -> None:
     (bar,) = bars
     assert bar.desc == "switching" and bar.times[-1] == 20.0
     assert len(traj.events_of("crossing")) > 3
-    # a Filippov system: one DOP853 piece per event (crossing, sliding start or exit)
+    # a Filippov system: one DOP853 piece per event (crossing, sliding start or exit); the
+    # relay example's fields as Python callables (given as data it runs in the compiled loop)
+    from nscontrol.systems.switched import FilippovSystem
     from nscontrol.testing.setvalued_problems import relay_feedback
 
     p = relay_feedback(T=2.0)
-    traj = simulate(p.switched, p.x0, p.t_span, method="switching")
+    A, g, c = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0]), np.ones(2)
+    f = FilippovSystem.two_sided(lambda t, x: A @ x + g, lambda t, x: A @ x - g,
+                                 lambda x: float(c @ x), 2, gradient=lambda x: c)
+    traj = simulate(f, p.x0, p.t_span, method="switching")
+    assert traj.stats["propagation"] == "dop853"
     bar = bars[-1]
     assert len(bar.times) == traj.stats["pieces"] and bar.times == sorted(bar.times)
     assert bar.times[-1] == p.t_span[1]

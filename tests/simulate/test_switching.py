@@ -13,9 +13,21 @@ from nscontrol.systems.switched import FilippovSystem, PWMController, SwitchedAf
 from nscontrol.testing import setvalued_problems as sp
 
 
-def test_relay_feedback_reaching_time_to_1e10_and_exact_sliding():
+def _relay(p, form):
+    """``sp.relay_feedback``'s Filippov system as given (data: the compiled loop) or with the
+    same fields as Python callables (the DOP853 path)."""
+    if form == "data":
+        return p.switched
+    A, g, c = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0]), np.ones(2)
+    return FilippovSystem.two_sided(lambda t, x: A @ x + g, lambda t, x: A @ x - g,
+                                    lambda x: float(c @ x), 2, gradient=lambda x: c)
+
+
+@pytest.mark.parametrize("form, path", [("data", "exact"), ("callables", "dop853")])
+def test_relay_feedback_reaching_time_to_1e10_and_exact_sliding(form, path):
     p = sp.relay_feedback()
-    tr = simulate(p.switched, p.x0, p.t_span)
+    tr = simulate(_relay(p, form), p.x0, p.t_span)
+    assert tr.stats["propagation"] == path
     (ev,) = tr.events
     assert ev.kind == "sliding_start" and ev.mode_from == 1 and ev.mode_to == 3
     assert abs(ev.time - p.facts["reaching_time"]) <= 1e-10
@@ -96,13 +108,15 @@ def test_monodromy_from_saltation_matches_finite_differences(continuous):
     assert bool(np.max(np.abs(S - np.eye(2))) > 0.01) is (not continuous)
 
 
-def test_filippov_sensitivity_through_sliding_matches_finite_differences():
+@pytest.mark.parametrize("form", ["data", "callables"])
+def test_filippov_sensitivity_through_sliding_matches_finite_differences(form):
     p = sp.relay_feedback(T=2.0)
+    system = _relay(p, form)
 
     def end(x0):
-        return simulate(p.switched, x0, p.t_span, n_samples=2).x[-1]
+        return simulate(system, x0, p.t_span, n_samples=2).x[-1]
 
-    tr = simulate(p.switched, p.x0, p.t_span, sensitivity=True, n_samples=2)
+    tr = simulate(system, p.x0, p.t_span, sensitivity=True, n_samples=2)
     fd = np.column_stack([(end(p.x0 + d) - end(p.x0 - d)) / 2e-6
                           for d in (np.array([1e-6, 0.0]), np.array([0.0, 1e-6]))])
     assert np.max(np.abs(tr.stats["state_transition"] - fd)) <= 1e-6

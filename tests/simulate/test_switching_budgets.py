@@ -12,8 +12,10 @@ import pytest
 from nscontrol import simulate
 from nscontrol.errors import BudgetExceededError, ModelError, SolverError
 from nscontrol.systems.nonlinear import NonlinearSystem
-from nscontrol.systems.switched import PWMController, SwitchedAffineSystem
+from nscontrol.systems.switched import FilippovSystem, PWMController, SwitchedAffineSystem
 from nscontrol.testing import setvalued_problems as sp
+
+EPS = np.finfo(float).eps
 
 
 def _prefix_of_full_run(part, full):
@@ -25,8 +27,13 @@ def _prefix_of_full_run(part, full):
 
 
 def _relay():
+    # sp.relay_feedback's fields as Python callables: the DOP853 path, whose steps are counted
+    # (the example itself, given as data, runs in the compiled loop)
     p = sp.relay_feedback(T=2.0)
-    return p.switched, p.x0, p.t_span
+    A, g, c = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0]), np.ones(2)
+    f = FilippovSystem.two_sided(lambda t, x: A @ x + g, lambda t, x: A @ x - g,
+                                 lambda x: float(c @ x), 2, gradient=lambda x: c)
+    return f, p.x0, p.t_span
 
 
 def _pwa_function_input():
@@ -103,6 +110,28 @@ def test_min_rel_step_stops_a_blow_up_before_the_steps_reach_rounding():
     with pytest.raises(BudgetExceededError) as coarse:
         simulate(f, [1.0], (0.0, 2.0), min_rel_step=1e-6)
     assert coarse.value.budget == "min_rel_step" and _stop_time(coarse.value) < stop
+
+
+@pytest.mark.parametrize("t0", [0.0, 0.5, 1000.0])
+def test_a_piece_starting_at_a_crossing_far_from_t_0_is_no_budget_failure(t0):
+    # x' = 2 below x = 0, 3.46 above, from x0 = -1e-3: the crossing at t_c = t0 + 5e-4, then
+    # x = 3.46 (t - t_c). The state located at the crossing carries a rounding of about
+    # eps |t| |F|; DOP853's own first step from it was 10 ulp(t), below min_rel_step of the
+    # span for t0 = 0.5 (the run stopped at t = 0.5005, bug of issue 31)
+    f = FilippovSystem.two_sided(lambda t, x: np.array([2.0]), lambda t, x: np.array([3.46]),
+                                 lambda x: float(x[0]), 1, gradient=lambda x: np.ones(1))
+    tr = simulate(f, [-1e-3], (t0, t0 + 0.15))
+    assert [e.kind for e in tr.events] == ["crossing"]
+    t_c = t0 + 1e-3 / 2.0
+    # a constant field: DOP853 and its dense output are exact up to rounding, the event's root
+    # is located to a few eps |t| by scipy's brentq; 100 eps (1 + |t|) covers both, and moves
+    # x by |F| = 3.46 times that
+    tol = 100.0 * EPS * (1.0 + abs(t0))
+    assert abs(tr.events[0].time - t_c) <= tol
+    after = tr.t > tr.events[0].time
+    np.testing.assert_allclose(tr.x[after, 0], 3.46 * (tr.t[after] - t_c), rtol=0,
+                               atol=3.46 * tol + 100.0 * EPS)
+    assert tr.t[-1] == t0 + 0.15
 
 
 def _stop_time(err):

@@ -238,31 +238,65 @@ class FilippovSystem:
             lambda xx: np.asarray(self.field(t, xx, signs), float), np.asarray(x, float))
 
     @classmethod
-    def two_sided(cls, f_minus: Callable[[float, FloatArray], FloatArray],
-                  f_plus: Callable[[float, FloatArray], FloatArray],
-                  h: Callable[[FloatArray], float], n_states: int, *,
+    def two_sided(cls, f_minus: Callable[[float, FloatArray], FloatArray] | tuple[Any, Any],
+                  f_plus: Callable[[float, FloatArray], FloatArray] | tuple[Any, Any],
+                  h: Callable[[FloatArray], float] | ArrayLike, n_states: int, *,
                   gradient: Callable[[FloatArray], FloatArray] | None = None,
                   state_names: tuple[str, ...] = ()) -> FilippovSystem:
         """One surface ``h(x) = 0`` with a smooth field on each side.
 
         Parameters
         ----------
-        f_minus, f_plus : callable ``(t, x) -> (n,) array``
-            The fields where ``h(x) < 0`` and ``h(x) > 0``.
-        h : callable ``x -> float``
-            The switching surface.
+        f_minus, f_plus : callable ``(t, x) -> (n,) array``, or pairs ``(A, b)``
+            The fields where ``h(x) < 0`` and ``h(x) > 0``; a pair ``(A, b)`` is the affine
+            field ``A x + b`` (give both fields so, with ``h`` a vector).
+        h : callable ``x -> float``, or (n,) array_like ``c``
+            The switching surface; a vector ``c`` is the hyperplane ``cᵀx = 0`` (fields given
+            as pairs).
         n_states : int
             State dimension.
         gradient : callable ``x -> (n,) array``, optional
-            ``∇h`` (default: central differences).
+            ``∇h`` (default: central differences; the data form's is ``c``).
         state_names : tuple of str, optional
 
         Returns
         -------
         FilippovSystem
+            Given as data, the system is :meth:`from_pwa` of the bimodal
+            :class:`~nscontrol.systems.pwa.PiecewiseAffineSystem` (exact gradient and
+            Jacobians); when the two fields differ by a constant (a relay on a linear plant)
+            ``method="switching"`` runs it in its compiled loop (``stats["propagation"]`` is
+            ``"exact"``).
+
+        Raises
+        ------
+        ModelError
+            Callables mixed with data, or a ``gradient`` given with the data form.
+        DimensionError
+            Data of the wrong shape.
+
+        Examples
+        --------
+        The relay ``x1' = x2``, ``x2' = -sign(x1 + x2)`` as data:
+
+        >>> A = [[0.0, 1.0], [0.0, 0.0]]
+        >>> f = FilippovSystem.two_sided((A, [0.0, 1.0]), (A, [0.0, -1.0]), [1.0, 1.0], 2)
+        >>> from nscontrol import simulate
+        >>> simulate(f, [1.0, 0.0], (0.0, 2.0)).stats["propagation"]
+        'exact'
         """
-        return cls(n_states, (h,), _TwoSided(f_minus, f_plus),
-                   gradients=None if gradient is None else (gradient,), state_names=state_names)
+        if callable(f_minus) and callable(f_plus) and callable(h):
+            return cls(n_states, (h,), _TwoSided(f_minus, f_plus),
+                       gradients=None if gradient is None else (gradient,),
+                       state_names=state_names)
+        if callable(f_minus) or callable(f_plus) or callable(h):
+            raise ModelError("f_minus, f_plus, h: expected three callables, or the data form "
+                             "(A, b) pairs and a normal vector c; got "
+                             f"{', '.join(type(v).__name__ for v in (f_minus, f_plus, h))}")
+        if gradient is not None:
+            raise ModelError("gradient: the data form's gradient is the normal c itself; "
+                             "leave gradient out")
+        return cls.from_pwa(_bimodal_of_data(f_minus, f_plus, h, n_states, state_names))
 
     @classmethod
     def from_pwa(cls, pwa: PiecewiseAffineSystem) -> FilippovSystem:
@@ -300,6 +334,30 @@ class FilippovSystem:
 
         return cls(pwa.n_states, (lambda x: float(c @ x) - d,), field,
                    gradients=(lambda x: c,), jacobian=jac, state_names=pwa.state_names)
+
+
+def _bimodal_of_data(f_minus: Any, f_plus: Any, c: Any, n_states: int,
+                     state_names: tuple[str, ...]) -> PiecewiseAffineSystem:
+    """The bimodal PWA of :meth:`FilippovSystem.two_sided`'s data form: ``A⁻x + b⁻`` on
+    ``cᵀx <= 0``, ``A⁺x + b⁺`` on ``cᵀx >= 0``."""
+    from .pwa import PiecewiseAffineSystem
+
+    n = check_integer("n_states", n_states, minimum=1, error=DimensionError)
+    pairs = []
+    for name, pair in (("f_minus", f_minus), ("f_plus", f_plus)):
+        try:
+            A, b = pair
+        except (TypeError, ValueError):
+            raise DimensionError(f"{name}: expected a callable (t, x) -> (n,) array or a pair "
+                                 f"(A, b) of the affine field A x + b") from None
+        pairs.append((as_square(f"{name}[0] (A)", A, n), as_vector(f"{name}[1] (b)", b, n)))
+    (Am, bm), (Ap, bp) = pairs
+    c = as_vector("h", c, n)
+    if not np.any(c):
+        raise ModelError("h: expected a nonzero normal vector c of the surface cᵀx = 0, got "
+                         "zeros")
+    return PiecewiseAffineSystem.bimodal(Am, Ap, c, b1=bm, b2=bp,
+                                         continuous=False, state_names=state_names)
 
 
 class _TwoSided:

@@ -155,8 +155,9 @@ def relay_feedback(T: float = 10.0) -> SetValuedProblem:
     -------
     SetValuedProblem
         ``system`` (LureSystem ``x' = Ax + Gw``, ``w ∈ -Sign(x1 + x2)``), ``switched``
-        (FilippovSystem) and the facts ``reaching_time``, ``exact`` and
-        ``equivalent_control`` (``w_eq = x1`` in sliding).
+        (FilippovSystem given as data, which ``method="switching"`` runs in its compiled
+        loop) and the facts ``reaching_time``, ``exact`` and ``equivalent_control``
+        (``w_eq = x1`` in sliding).
 
     Examples
     --------
@@ -172,9 +173,8 @@ def relay_feedback(T: float = 10.0) -> SetValuedProblem:
     G = np.array([[0.0], [1.0]])
     c = np.array([1.0, 1.0])
     lure = LureSystem(A, G, c[None, :], Relay(1.0), C=c[None, :], state_names=("x1", "x2"))
-    fil = FilippovSystem.two_sided(lambda t, x: A @ x + G[:, 0], lambda t, x: A @ x - G[:, 0],
-                                   lambda x: float(c @ x), 2, gradient=lambda x: c,
-                                   state_names=("x1", "x2"))
+    # as data (a relay on a linear plant): method="switching" runs it in its compiled loop
+    fil = FilippovSystem.two_sided((A, G[:, 0]), (A, -G[:, 0]), c, 2, state_names=("x1", "x2"))
     t_r = np.sqrt(3.0) - 1.0
     x1r = 1.0 - t_r**2 / 2.0
 

@@ -46,8 +46,8 @@ the surface: at a root where ``|h_k| <= 100 (atol + rtol |x|) |∇h_k|`` a ``gra
 recorded (the mode is kept).
 
 While sliding on ``h_j = 0`` the samples and the state at the end of every sliding piece are
-projected back onto the surface (Newton along ``∇h_j``), so the integration error of the
-Filippov field does not accumulate off a curved surface.
+projected back onto the surface (Newton along ``∇h_j``, a piece's samples in one call), so the
+integration error of the Filippov field does not accumulate off a curved surface.
 
 With ``sensitivity=True`` the variational equation ``Φ' = J Φ`` (``J`` from
 ``system.jacobian`` or central differences; for ``F_s`` always by differences) is integrated
@@ -382,7 +382,7 @@ def _piece(system: Any, fields: _Fields, run: Any, t: float, x: FloatArray,
     if ts.size and sol.sol is not None:
         X = sol.sol(ts)[:n].T
         if max(sliding, second) >= 0:
-            X = np.array([_project(system, max(sliding, second), xs) for xs in X])
+            X = _project_rows(system, max(sliding, second), X)
         run.rec.extend(ts, X)
     if sol.status < 0:
         raise run.piece_failure(sol, t_end, "the field may be singular or blow up there")
@@ -474,22 +474,32 @@ def _two_sliding_piece(system: Any, fields: _Fields, signs: tuple[int, ...], j: 
 
 
 def _project(system: Any, j: int, x: FloatArray) -> FloatArray:
-    """``x`` moved back onto ``h_j = 0`` by Newton steps along ``∇h_j`` (at most 4)."""
-    best = x
-    hb = abs(float(system.surfaces[j](x)))
+    """``x`` moved back onto ``h_j = 0`` (:func:`_project_rows` of the one state)."""
+    return _project_rows(system, j, x[None, :])[0]
+
+
+def _project_rows(system: Any, j: int, X: FloatArray) -> FloatArray:
+    """Every row of ``X`` moved back onto ``h_j = 0`` by Newton steps along ``∇h_j`` (at
+    most 4), a step kept while it lowers ``|h_j|``: the rows still moving step together, the
+    surface and its gradient called once per row and step (a sliding piece's samples are
+    projected in one call)."""
+    h = system.surfaces[j]
+    out = np.array(X, float)
+    hb = np.array([float(h(x)) for x in out])
+    rows = np.flatnonzero(hb != 0.0)
     for _ in range(4):
-        if hb == 0.0:
+        if rows.size == 0:
             break
-        g = system.gradient(j, best)
-        gg = float(g @ g)
-        if gg == 0.0:
-            break
-        cand = best - float(system.surfaces[j](best)) / gg * g
-        hc = abs(float(system.surfaces[j](cand)))
-        if not hc < hb:
-            break
-        best, hb = cand, hc
-    return best
+        G = np.array([system.gradient(j, out[i]) for i in rows]).reshape(rows.size, -1)
+        gg = np.einsum("ij,ij->i", G, G)
+        rows, G, gg = rows[gg != 0.0], G[gg != 0.0], gg[gg != 0.0]
+        cand = out[rows] - (hb[rows] / gg)[:, None] * G
+        hc = np.array([float(h(x)) for x in cand])
+        better = np.abs(hc) < np.abs(hb[rows])
+        rows, cand, hc = rows[better], cand[better], hc[better]
+        out[rows], hb[rows] = cand, hc
+        rows = rows[hc != 0.0]
+    return out
 
 
 def _record_grazings(system: Any, run: Any, sol: Any, kinds: list[tuple[str, int]],

@@ -301,6 +301,10 @@ class SwitchingStepper:
         return self.run.finish(status=stop.status, message=stop.message, extra=self.extra())
 
 
+#: A DOP853 piece's first step is at least this many ``min_rel_step`` floors of the span.
+_FIRST_STEP_FLOORS = 4.0
+
+
 @functools.cache
 def _budgeted_dop853() -> type:
     """scipy's DOP853 counting its accepted steps on a run's budget (built on first use:
@@ -312,6 +316,14 @@ def _budgeted_dop853() -> type:
                      run: SwitchingRun, **options: Any) -> None:
             self.run = run
             super().__init__(fun, t0, y0, t_bound, **options)
+            # scipy's first step, 1% of the state's scaled size over the field's, is about
+            # eps |t| / |F| for a state at rounding level (a piece starting at a crossing of a
+            # surface through 0: the event's state carries a rounding of eps |t| |F|), and
+            # the step is then cut to scipy's floor of 10 ulp(t), below min_rel_step of the
+            # span for t far from 0. Raised to a few floors (the rounding of t + h stays above
+            # it), it is a start the error control accepts for a field smooth at that scale.
+            floor = _FIRST_STEP_FLOORS * run.min_step
+            self.h_abs: float = min(max(float(self.h_abs), floor), abs(t_bound - t0))
 
         def _step_impl(self) -> tuple[bool, str | None]:
             run = self.run
