@@ -122,8 +122,9 @@ class ContactMPC:
         if np.any(~np.isfinite(W)) or np.any(W < 0):
             raise ModelError("state_weight: expected finite weights >= 0")
         self.state_weight = np.where(np.isnan(target), 0.0, W)
-        self.relaxation = Relaxation(sigma_min=1e-6, tol=1e-8) if self.relaxation is None \
-            else check_type("relaxation", self.relaxation, Relaxation)
+        self.relaxation = self._relaxation = Relaxation(sigma_min=1e-6, tol=1e-8) \
+            if self.relaxation is None else check_type("relaxation", self.relaxation, Relaxation)
+        self._period = float(self.period)
         check_integer("max_rounds", self.max_rounds, minimum=1)
         self._nlps: dict[bytes, _ParametricNLP] = {}
         self._guess: dict[str, Any] | None = None
@@ -226,7 +227,8 @@ class ContactMPC:
             nlp = self._nlp(active)
             if guess.get("lam_g") is not None and guess["lam_g"].size != nlp.ng:
                 guess = {**guess, "lam_g": None}
-            sigmas = self.relaxation.sigmas() if cold else [self.relaxation.sigma_min]
+            rel = self._relaxation
+            sigmas = rel.sigmas() if cold else [rel.sigma_min]
             for sigma in sigmas:
                 guess, its, status = nlp.solve(guess, x, sigma)
                 iterations += its
@@ -269,7 +271,7 @@ class ContactMPC:
             raise ModelError(f"traj: expected the 'xc' signal of a ContactMPC ({len(RECORD)} "
                              f"columns), got shape {xc.shape}")
         t = np.asarray(traj.t, float)
-        k = np.round((t[:-1] - t[0]) / float(self.period), 6)
+        k = np.round((t[:-1] - t[0]) / self._period, 6)
         first = np.flatnonzero(np.r_[True, np.diff(np.floor(k)) > 0])
         rows = xc[1:][first]
         return {"t": t[:-1][first], **{name: rows[:, i] for i, name in enumerate(RECORD)}}
@@ -285,7 +287,7 @@ class ContactMPC:
     def _shifted(self, x: FloatArray) -> dict[str, Any]:
         """The last plan moved one sample on (its last step repeated), from ``x``."""
         assert self._guess is not None
-        k = max(1, int(round(float(self.period) / self.h)))
+        k = max(1, int(round(self._period / self.h)))
         out = dict(self._guess)
         for name in ("X", "U", *CONTACT_VARS):
             if name in out and np.ndim(out[name]) == 2:
@@ -334,8 +336,7 @@ class _ParametricNLP:
         self.cost = ca.Function("cost", [opti.x, opti.p], [cost])
         self.nx, self.ng, self.np = opti.nx, opti.ng, opti.np
         nlp = {"x": opti.x, "p": opti.p, "f": opti.f, "g": opti.g}
-        rel = mpc.relaxation
-        assert rel is not None
+        rel = mpc._relaxation
         base = {"print_level": 0, "sb": "yes", "tol": rel.tol,
                 "acceptable_constr_viol_tol": rel.tol, "max_iter": int(rel.max_iter)}
         opts = {"print_time": False, "error_on_fail": False, "expand": True}
@@ -356,7 +357,7 @@ class _ParametricNLP:
         lam = guess.get("lam_g")
         warm = lam is not None and lam.size == self.ng
         solver = self.warm if warm else self.cold
-        args = {"x0": z, "p": p, "lbg": lbg, "ubg": ubg}
+        args: dict[str, Any] = {"x0": z, "p": p, "lbg": lbg, "ubg": ubg}
         if warm:
             args |= {"lam_g0": lam, "lam_x0": guess["lam_x"]}
         sol = solver(**args)
