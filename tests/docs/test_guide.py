@@ -14,7 +14,7 @@ GUIDE = Path(__file__).resolve().parents[2] / "docs" / "guide"
 # Pages whose code runs a Python-level sampled block for 10^4 steps or starts a Dask cluster.
 SLOW_PAGES = {"controllers", "sweeps"}
 # Pages whose code imports an optional extra: skipped when it is not installed.
-NEEDS = {"python_control": "control"}
+NEEDS = {"python_control": "control", "mpc": "casadi"}
 
 
 def _page_code(page: str) -> str:

@@ -20,8 +20,9 @@ require_casadi()
 
 from .contact import ContactProblem, Relaxation  # noqa: E402
 from .fesd import SwitchingPlan, SwitchingProblem  # noqa: E402
+from .mpc import ContactMPC  # noqa: E402
 from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
 from .problems import PushedBlock, SpeedUp  # noqa: E402
 
 __all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock",
-           "SwitchingProblem", "SwitchingPlan", "SpeedUp"]
+           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC"]

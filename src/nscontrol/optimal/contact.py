@@ -311,8 +311,9 @@ class _ContactNLP:
     """The NLP of a :class:`ContactProblem` with fixed active sets (a
     :class:`~nscontrol.optimal.homotopy.Builder`)."""
 
-    def __init__(self, problem: ContactProblem, active: np.ndarray) -> None:
+    def __init__(self, problem: ContactProblem, active: np.ndarray, x0: Any = None) -> None:
         self.problem, self.active = problem, np.asarray(active, bool)
+        self.x0 = problem.x0 if x0 is None else x0     # a CasADi parameter in MPC
         self.on = np.flatnonzero(self.active.ravel(order="F"))
         self.off = np.flatnonzero(~self.active.ravel(order="F"))
 
@@ -329,7 +330,7 @@ class _ContactNLP:
         """The Moreau–Jean steps, the end conditions, the bounds, no force on the inactive
         contacts."""
         ca = casadi()
-        _dynamics(opti, self.problem, var)
+        _dynamics(opti, self.problem, var, self.x0)
         _bounds(opti, self.problem, var)
         for name in CONTACT_VARS:
             if name in var and self.off.size:
@@ -364,8 +365,9 @@ class _ContactNLP:
         return [(ops.select(a, self.on), ops.select(b, self.on)) for a, b in out]
 
 
-def _dynamics(opti: Any, problem: ContactProblem, var: dict[str, Any]) -> None:
-    """The Moreau–Jean step between every two grid points and the end conditions."""
+def _dynamics(opti: Any, problem: ContactProblem, var: dict[str, Any], x0: Any) -> None:
+    """The Moreau–Jean step between every two grid points and the end conditions (the
+    initial state ``x0``: the problem's, or a parameter)."""
     ca = casadi()
     s, n, N, th, h = problem.system, problem.system.n_dof, problem.steps, problem.theta, var["h"]
     X, U = var["X"], var["U"]
@@ -385,7 +387,7 @@ def _dynamics(opti: Any, problem: ContactProblem, var: dict[str, Any]) -> None:
         f = f + ca.mtimes(ca.DM(np.asarray(s.tangent_matrix).T), var["BP"] - var["BM"])
     opti.subject_to(ca.vec(ca.mtimes(Mhat, Vn - Vk) - h * f) == 0)
     opti.subject_to(ca.vec(Qn - Qk - h * ((1 - th) * Vk + th * Vn)) == 0)
-    opti.subject_to(X[:, 0] == problem.x0)
+    opti.subject_to(X[:, 0] == x0)
     if problem.x_final is not None:
         idx = np.flatnonzero(~np.isnan(problem.x_final)).tolist()
         opti.subject_to(X[idx, N] == problem.x_final[idx])
