@@ -28,13 +28,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy import sparse
 
-from .._progress import TimeProgress
-from .._validation import FloatArray
-from ..errors import ModelError, SolverError
-from .trajectory import Recorder, Trajectory
+from ..._progress import TimeProgress
+from ..._validation import FloatArray
+from ...errors import ModelError, SolverError
+from ..trajectory import Recorder, Trajectory
 
 if TYPE_CHECKING:
-    from .moreau_jean._options import MoreauJeanOptions
+    from ._options import MoreauJeanOptions
 
 #: Signals this path records (those of plain Moreau–Jean, and the contact's).
 OFFERED = ("impulse", "gap", "energy", "friction_impulse", "contact_state", "friction_work",
@@ -99,7 +99,7 @@ def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float,
                          opts: MoreauJeanOptions) -> Trajectory:
     """The frictional step loop (``opts`` checked by :func:`moreau_jean.integrate`).
 
-    A compiled loop (:mod:`._frictional_mj_kernels`) when ``M̂`` is diagonal and no
+    A compiled loop (:mod:`._frictional_kernels`) when ``M̂`` is diagonal and no
     projection is asked; a step whose NSGS does not converge there, and every step otherwise,
     is taken here in Python with the checked solver.
     """
@@ -202,7 +202,7 @@ class _Run:
             self._prepare_kernel()
 
     def _prepare_kernel(self) -> None:
-        from ..numerics import _friction_kernels as fk
+        from ...numerics import _friction_kernels as fk
 
         c, s = self.c, self.system
         H = c.H
@@ -240,7 +240,7 @@ class _Run:
 
     def kernel_chunk(self, q: FloatArray, v: FloatArray, times: FloatArray
                      ) -> tuple[tuple[np.ndarray, ...], int]:
-        from ._frictional_mj_kernels import frictional_mj_kernel
+        from ._frictional_kernels import frictional_mj_kernel
 
         s, c = self.system, self.c
         size, n, m, dim = times.shape[0], s.n_dof, s.n_contacts, c.dim
@@ -268,7 +268,7 @@ class _Run:
     def _frictionless_guess(self, q: FloatArray, v: FloatArray) -> FloatArray:
         """Impulses of the first step without friction (one LCP): NSGS's start when no
         previous impulse exists (a loaded stack would need O(n²) sweeps from zero)."""
-        from ..numerics.friction_contact import frictionless_impulses
+        from ...numerics.friction_contact import frictionless_impulses
 
         c, s = self.c, self.system
         active = np.flatnonzero(self._closing(q, v))
@@ -285,8 +285,8 @@ class _Run:
     def python_step(self, q: FloatArray, v: FloatArray, t: float, step: float
                     ) -> tuple[np.ndarray, ...]:
         """One step in Python (any ``M̂``, projection, a short last step)."""
-        from ..numerics import _friction_kernels as fk
-        from ..numerics.friction_contact import solve_friction_contact
+        from ...numerics import _friction_kernels as fk
+        from ...numerics.friction_contact import solve_friction_contact
 
         s = self.system
         c = self.steps.get(step)
@@ -337,7 +337,7 @@ def _solve(fk: Any, W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
            r0: FloatArray | None, fallback: Any) -> Any:
     """NSGS from the previous step's impulses (compiled, no re-validation); the checked
     solver (planar LCP, or NSGS from the frictionless guess) when it does not converge."""
-    from ..numerics.friction_contact import FrictionContactResult
+    from ...numerics.friction_contact import FrictionContactResult
 
     if r0 is not None:
         r = r0.copy()
@@ -356,7 +356,7 @@ def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: Float
     """``q`` projected on ``{G q + g0 >= 0}`` in the metric of ``M`` (one LCP per round;
     a contact opened by none of the rounds' corrections is never touched), and ``v`` scaled
     to give back the potential energy the lift cost (the module docstring)."""
-    from ..numerics.lcp import solve_lcp
+    from ...numerics.lcp import solve_lcp
 
     proj["before"] = max(proj["before"], float(-np.min(gap)))
     proj["count"] += 1

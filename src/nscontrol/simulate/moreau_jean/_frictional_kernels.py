@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._friction_kernels import contact_error2, local_1d, local_2d, local_3d
+from ...numerics._friction_kernels import contact_error2, local_1d, local_2d, local_3d
 
 
 @njit(cache=True)
