@@ -11,6 +11,15 @@ contact problem a step, :func:`~nscontrol.numerics.friction_contact.solve_fricti
 With ``θ = ½`` the discrete energy balance is exact: ``E_{k+1} - E_k = r · (u_k + u_{k+1})/2``
 (with ``u = H v``), split into the normal and the friction work, both recorded.
 
+Every step is the one compiled step of :mod:`._frictional_kernels`, whatever ``M̂`` (diagonal
+or not), the step's length (the shortened last step has its own constants) and the
+projection. Its sweeps start from the previous step's impulses (``warm_start``); a run that
+starts loaded starts from the frictionless impulses (one LCP). A step whose sweeps do not
+reach the tolerance within :data:`MAX_SWEEPS` gets its impulses from the checked solver
+(:func:`~nscontrol.numerics.friction_contact.solve_friction_contact`, from the last step's
+impulses) and is then taken by the compiled step with them as given: the step itself is
+written once.
+
 ``projection=True`` adds a position correction after each step: ``q`` is replaced by its
 projection on ``{g(q) >= 0}`` in the kinetic metric, ``min ½ (q' - q)ᵀ M (q' - q)``, i.e.
 ``q' = q + M⁻¹ Gᵀ λ`` with ``0 <= λ ⟂ G M⁻¹ Gᵀ λ + g(q) >= 0`` (one LCP by
@@ -23,31 +32,38 @@ landing and later impacts drift by a step per bounce.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from scipy import sparse
 
-from ..._progress import TimeProgress
 from ..._validation import FloatArray
 from ...errors import ModelError, SolverError
+from ..loop import END, Stop, drive
 from ..trajectory import Recorder, Trajectory
+from ._options import input_matrix
+from ._run import _CHUNK_FLOATS, Grid, _chunk_force
 
 if TYPE_CHECKING:
+    from ._frictional_kernels import FrictionalStep
     from ._options import MoreauJeanOptions
 
+#: Budget of sweeps of one step's contact problem (then the checked solver takes the step).
+MAX_SWEEPS = 1000
 #: Signals this path records (those of plain Moreau–Jean, and the contact's).
 OFFERED = ("impulse", "gap", "energy", "friction_impulse", "contact_state", "friction_work",
            "normal_work", "projection_energy", "residual")
 
 
 class _Contacts:
-    """``H``, ``M̂⁻¹`` and the Delassus matrices of the active sets met so far."""
+    """``H``, ``M̂⁻¹``, the compiled step of one step length and the Delassus matrices of the
+    active sets met so far (for the cold start and the checked fallback)."""
 
-    def __init__(self, system: Any, h: float, theta: float) -> None:
-        m = system.n_contacts
+    def __init__(self, system: Any, h: float, opts: MoreauJeanOptions) -> None:
+        m, theta = system.n_contacts, opts.theta
         self.d = system.friction_dim
         self.dim = 1 + self.d
+        self.r_size = m * self.dim
         self.mu = np.zeros(m) if system.friction is None else np.asarray(system.friction)
         G = sparse.csr_matrix(system.gap_matrix, dtype=np.float64)
         if self.d:
@@ -60,28 +76,50 @@ class _Contacts:
         else:
             self.H = G
         self.G = G
-        self.K = None if system.stiffness is None else np.asarray(system.stiffness)
-        self.D = None if system.damping is None else np.asarray(system.damping)
+        K = None if system.stiffness is None else np.asarray(system.stiffness)
+        D = None if system.damping is None else np.asarray(system.damping)
         M = system.mass_matrix()
-        Mhat = M + (0 if self.D is None else h * theta * self.D) \
-            + (0 if self.K is None else (h * theta) ** 2 * self.K)
+        Mhat = M + (0 if D is None else h * theta * D) \
+            + (0 if K is None else (h * theta) ** 2 * K)
         diag = np.diag(Mhat)
         self.diagonal = bool(np.array_equal(Mhat, np.diag(diag)))
         self.minv: Any = sparse.diags(1.0 / diag) if self.diagonal else np.linalg.inv(Mhat)
         mdiag = np.diag(M)
         self.mass_inv: Any = (sparse.diags(1.0 / mdiag) if np.array_equal(M, np.diag(mdiag))
                               else np.linalg.inv(M))
-        self.cache: dict[bytes, tuple[Any, Any, np.ndarray, Any]] = {}
+        self.cache: dict[bytes, tuple[Any, np.ndarray]] = {}
+        self.step = self._step(system, h, opts, K, D)
 
-    def rows(self, active: np.ndarray) -> np.ndarray:
-        return (active[:, None] * self.dim + np.arange(self.dim)).ravel()
+    def _step(self, system: Any, h: float, opts: MoreauJeanOptions, K: Any, D: Any
+              ) -> FrictionalStep:
+        """The compiled step's constants (:class:`FrictionalStep`)."""
+        from ...numerics import _friction_kernels as fk
+        from ._frictional_kernels import FrictionalStep
 
-    def delassus(self, active: np.ndarray) -> tuple[Any, Any, np.ndarray, Any]:
-        """``(W_A as sorted CSR, M̂⁻¹ H_Aᵀ, rows, H_A)`` for the active set ``A`` (cached)."""
+        n, H = system.n_dof, self.H
+        if self.diagonal:   # B = H M̂⁻¹ keeps H's pattern; h M̂⁻¹ entry by entry
+            B = sparse.csr_matrix(H.multiply(self.minv.diagonal()[None, :]))
+            hminv = sparse.diags(h * self.minv.diagonal())
+        else:
+            B, hminv = H @ self.minv, h * self.minv
+        W = sparse.csr_matrix(H @ self.minv @ H.T)
+        W.sort_indices()
+        blocks = fk.diagonal_blocks(W.indptr.astype(np.int64), W.indices.astype(np.int64),
+                                    W.data, system.n_contacts, self.dim)
+        return FrictionalStep(
+            *_csr(H), *_csr(B), *_csr(hminv), *_csr(K, n), *_csr(D, n),
+            np.ascontiguousarray(system.constant_force, dtype=float),
+            np.ascontiguousarray(system.gap_offset, dtype=float),
+            np.ascontiguousarray(system.restitution, dtype=float),
+            np.ascontiguousarray(self.mu, dtype=float), blocks, _inverses(blocks, self.dim),
+            self.dim, h, opts.theta, opts.gamma, opts.activation)
+
+    def delassus(self, active: np.ndarray) -> tuple[Any, np.ndarray]:
+        """``(W_A as sorted CSR, its rows)`` for the active set ``A`` (cached)."""
         key = active.tobytes()
         hit = self.cache.get(key)
         if hit is None:
-            rows = self.rows(active)
+            rows = (active[:, None] * self.dim + np.arange(self.dim)).ravel()
             HA = self.H[rows]
             MinvHt = self.minv @ HA.T
             MinvHt = sparse.csr_matrix(MinvHt) if self.diagonal else np.asarray(MinvHt)
@@ -90,265 +128,232 @@ class _Contacts:
             W.sort_indices()
             if len(self.cache) > 64:
                 self.cache.clear()
-            hit = (W, MinvHt, rows, HA)
+            hit = (W, rows)
             self.cache[key] = hit
         return hit
 
 
-def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float,
-                         opts: MoreauJeanOptions) -> Trajectory:
-    """The frictional step loop (``opts`` checked by :func:`moreau_jean.integrate`).
+def _csr(A: Any, n: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(indptr, indices, data)`` of ``A`` as int64, int64, float64 (``n`` empty rows for
+    ``None``)."""
+    if A is None:
+        return np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    A = sparse.csr_matrix(A, dtype=np.float64)
+    A.sort_indices()
+    return A.indptr.astype(np.int64), A.indices.astype(np.int64), A.data.astype(np.float64)
 
-    A compiled loop (:mod:`._frictional_kernels`) when ``M̂`` is diagonal and no
-    projection is asked; a step whose NSGS does not converge there, and every step otherwise,
-    is taken here in Python with the checked solver.
+
+def _inverses(blocks: np.ndarray, dim: int) -> np.ndarray:
+    """The inverses of the spatial blocks ``W_ii`` the local solver's stick test uses; a NaN
+    in place of one that is singular or ill-conditioned (slip then decides)."""
+    inverses = np.zeros_like(blocks)
+    if dim != 3:
+        return inverses
+    for j in range(blocks.shape[0]):
+        try:
+            inverses[j] = np.linalg.inv(blocks[j])
+        except np.linalg.LinAlgError:
+            inverses[j, 0, 0] = np.nan
+        if not np.all(np.isfinite(inverses[j])) or np.linalg.cond(
+                blocks[j]) > 1.0 / (1e3 * float(np.finfo(float).eps)):
+            inverses[j] = 0.0
+            inverses[j, 0, 0] = np.nan
+    return inverses
+
+
+def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float,
+                         opts: MoreauJeanOptions, *, warm_start: bool = True) -> Trajectory:
+    """The frictional run (``opts`` checked by :func:`moreau_jean.integrate`) through
+    :func:`~nscontrol.simulate.loop.drive`; ``warm_start=False`` starts every step's sweeps
+    from zero impulses instead of the previous step's (to measure what the warm start saves).
     """
     if not system.is_linear:
         raise ModelError("friction: Moreau-Jean with friction or projection needs a constant "
                          "mass, linear forces (f0, K, D) and affine gaps; linearise the model "
                          "about its working configuration")
-    h = opts.h
-    n_full = int(np.floor((tf - t0) / h + 1e-9))
-    h_last = (tf - t0) - n_full * h
-    n_steps = n_full + (1 if h_last > 1e-9 * h else 0)
-    rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
-                   offered=OFFERED, capacity=Recorder.capacity_for(n_steps + 2,
-                                                                   opts.record_every))
-    run = _Run(system, opts)
-    rec.extend(np.array([t0]), x0[None], **_rows(
-        system, run.c, x0[None, :system.n_dof], x0[None, system.n_dof:], run.r[None],
-        np.zeros((1, system.n_contacts)), np.zeros((1, 2)), np.zeros(1), 0.0, rec))
-    state = (x0[:system.n_dof].copy(), x0[system.n_dof:].copy())
-    k, status, message = 0, 0, None
-    with TimeProgress(t0, tf, desc="moreau_jean", enable=opts.progress) as bar:
-        while k < n_steps:
-            try:
-                k, state = _chunk(run, rec, state, k, t0, n_full, h_last)
-            except SolverError as err:
-                status, message = -1, (f"moreau_jean: the contact problem of step {k} "
-                                       f"(t = {t0 + h * k:.6g}) failed: {err}")
-                break
-            bar.update(t0 + h * k)
-    return _finish(run, rec, k, status, message)
+    return drive(FrictionalRun(system, x0, (t0, tf), opts, warm_start), (t0, tf),
+                 desc="moreau_jean", progress=opts.progress)
 
 
-def _chunk(run: _Run, rec: Recorder, state: tuple[FloatArray, FloatArray], k: int,
-           t0: float, n_full: int, h_last: float) -> tuple[int, tuple[FloatArray, FloatArray]]:
-    """Run and record the steps from step ``k``: a compiled chunk, or one Python step when
-    the compiled loop does not apply or its NSGS did not converge."""
-    q, v = state
-    h = run.h
-    step = h if k < n_full else h_last
-    compiled = run.compiled and step == h
-    size = max(1, min(n_full - k, 2000)) if compiled else 1
-    times: FloatArray = t0 + h * np.arange(k, k + size, dtype=np.float64)
-    q_pre, v_pre, r_pre = q.copy(), v.copy(), run.r.copy()
-    done = 0
-    if compiled:
-        out, done = run.kernel_chunk(q, v, times)
-    if not done:   # the Python step: one step, the checked solver
-        out = run.python_step(q, v, times[0], step)
-        done = 1
-    q_out, v_out = out[0][:done], out[1][:done]
-    _record(rec, run.system, run.c, times[:done] + step, q_out, v_out, out[2][:done],
-            out[3][:done], out[4][:done], out[5][:done], run.proj["energy"], q_pre, v_pre,
-            r_pre, step)
-    return k + done, (q_out[-1].copy(), v_out[-1].copy())
+class FrictionalRun:
+    """One frictional run as a stepper of :func:`~nscontrol.simulate.loop.drive`: each
+    :meth:`advance` runs and records a chunk of compiled steps (:mod:`._frictional_kernels`),
+    projects a step that penetrates, and takes a step whose sweeps did not converge with the
+    checked solver."""
 
-
-def _finish(run: _Run, rec: Recorder, k: int, status: int, message: str | None
-            ) -> Trajectory:
-    """The trajectory with the run's stats (a ``SolverError`` carrying it on a failure)."""
-    system = run.system
-    traj = rec.finish(status=status, message=message, method="moreau_jean", stats={
-        "steps": k, "path": ("frictional" if system.friction_dim else "projection")
-        + ("+compiled" if run.compiled else ""),
-        "h": run.h, "theta": run.theta, "friction_dim": system.friction_dim,
-        "contact_sweeps": run.sweeps, "contact_python_steps": run.python_steps,
-        "max_contact_residual": run.max_residual, "projection": bool(run.projection),
-        "projections": run.proj["count"], "projection_energy": run.proj["energy"],
-        "projection_lift_energy": run.proj["lift_energy"],
-        "max_penetration_before_projection": run.proj["before"]},
-        state_names=system.state_names)
-    if "gap" in traj.signals and traj.signals["gap"].size:
-        traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
-    if status < 0:
-        raise SolverError(str(message), status="contact", trajectory=traj)
-    return traj
-
-
-class _Run:
-    """The state carried between steps (previous impulses, cumulative work) and the two
-    step implementations."""
-
-    def __init__(self, system: Any, opts: MoreauJeanOptions) -> None:
-        h, theta, u, projection = opts.h, opts.theta, opts.u, opts.projection
-        self.system, self.h, self.theta, self.gamma = system, h, theta, opts.gamma
-        self.activation, self.tol, self.projection = opts.activation, opts.contact_tol, projection
-        self.c = _Contacts(system, h, theta)
-        self.steps: dict[float, _Contacts] = {h: self.c}
+    def __init__(self, system: Any, x0: FloatArray, t_span: tuple[float, float],
+                 opts: MoreauJeanOptions, warm_start: bool) -> None:
+        self.system, self.opts, self.warm = system, opts, warm_start
+        self.grid = Grid(t_span[0], t_span[1], opts.h)
+        self.steps: dict[float, _Contacts] = {}
+        c = self.contacts(opts.h)
         m, n = system.n_contacts, system.n_dof
-        self.r = np.zeros(m * self.c.dim)
-        self.work = np.zeros(2)
-        self.u = u
-        self.S = None if u is None else (np.eye(n) if system.actuation is None
-                                         else np.asarray(system.actuation, float))
+        self.rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
+                            offered=OFFERED, capacity=Recorder.capacity_for(
+                                self.grid.n_steps + 2, opts.record_every))
+        self.rec.extend(np.array([t_span[0]]), x0[None], **_rows(
+            system, c, x0[None, :n], x0[None, n:], np.zeros((1, m * c.dim)),
+            np.zeros((1, m)), np.zeros((1, 2)), np.zeros(1), np.zeros(1), self.rec))
+        self.q, self.v = x0[:n].copy(), x0[n:].copy()
+        self.r, self.work, self.states = np.zeros(m * c.dim), np.zeros(2), np.zeros(m, np.int64)
+        self.S = input_matrix(system, opts.u is not None)   # read by _chunk_force
         self.proj = {"energy": 0.0, "lift_energy": 0.0, "before": 0.0, "count": 0}
-        self.sweeps, self.python_steps, self.max_residual = 0, 0, 0.0
-        diag_forces = all(X is None or np.array_equal(X, np.diag(np.diag(X)))
-                          for X in (self.c.K, self.c.D))
-        self.compiled = self.c.diagonal and diag_forces and not projection
-        if self.compiled:
-            self._prepare_kernel()
+        self.k, self.sweeps, self.fallback_steps, self.max_residual = 0, 0, 0, 0.0
+        self.redo = False   # the next step's sweeps failed: take it with the checked solver
 
-    def _prepare_kernel(self) -> None:
-        from ...numerics import _friction_kernels as fk
+    def contacts(self, h: float) -> _Contacts:
+        """The contact data and compiled step of the step length ``h`` (built once)."""
+        c = self.steps.get(h)
+        if c is None:
+            c = self.steps[h] = _Contacts(self.system, h, self.opts)
+        return c
 
-        c, s = self.c, self.system
-        H = c.H
-        self.csr = (H.indptr.astype(np.int64), H.indices.astype(np.int64),
-                    H.data.astype(np.float64))
-        self.minv_diag = np.asarray(c.minv.diagonal(), float)
-        n = s.n_dof
-        self.kdiag = np.zeros(n) if c.K is None else np.diag(c.K).copy()
-        self.ddiag = np.zeros(n) if c.D is None else np.diag(c.D).copy()
-        W = sparse.csr_matrix(H @ c.minv @ H.T)
-        W.sort_indices()
-        m, dim = s.n_contacts, c.dim
-        self.blocks = fk.diagonal_blocks(W.indptr.astype(np.int64), W.indices.astype(np.int64),
-                                         W.data, m, dim)
-        self.inverses = np.zeros_like(self.blocks)
-        for j in range(m):
-            if dim == 3:
-                try:
-                    self.inverses[j] = np.linalg.inv(self.blocks[j])
-                except np.linalg.LinAlgError:
-                    self.inverses[j, 0, 0] = np.nan   # no stick impulse: slip decides
-                if not np.all(np.isfinite(self.inverses[j])) or np.linalg.cond(
-                        self.blocks[j]) > 1.0 / (1e3 * float(np.finfo(float).eps)):
-                    self.inverses[j] = 0.0
-                    self.inverses[j, 0, 0] = np.nan
+    def advance(self) -> float | Stop:
+        """Run and record the next chunk of steps; the time reached, or the run's stop."""
+        g = self.grid
+        if self.k >= g.n_steps:
+            return END
+        try:
+            self._chunk()
+        except SolverError as err:
+            return Stop(-1, f"moreau_jean: the contact problem of step {self.k} "
+                            f"(t = {g.t0 + g.h * self.k:.6g}) failed: {err}", "contact")
+        return g.t0 + g.h * self.k
 
-    def force_rows(self, times: FloatArray) -> FloatArray:
-        """``S u(t_k)`` per step (one zero row without input)."""
-        n = self.system.n_dof
-        if self.S is None:
-            return np.zeros((1, n))
-        u = self.u
-        vals = u.u(times) if hasattr(u, "u") else np.array([np.atleast_1d(u(t)) for t in times])
-        return np.asarray(vals, float).reshape(times.shape[0], -1) @ self.S.T
+    def _chunk(self) -> None:
+        """Run and record the steps from step ``k``: compiled, and the checked solver for a
+        step whose sweeps did not converge."""
+        from ._frictional_kernels import NOT_CONVERGED, PENETRATED
 
-    def kernel_chunk(self, q: FloatArray, v: FloatArray, times: FloatArray
-                     ) -> tuple[tuple[np.ndarray, ...], int]:
-        from ._frictional_kernels import frictional_mj_kernel
+        g, k, system = self.grid, self.k, self.system
+        step = g.h if k < g.n_full else g.h_last
+        c = self.contacts(step)
+        size = max(1, min(g.n_full - k, 20_000,
+                          _CHUNK_FLOATS // (2 * system.n_dof + 2 * c.r_size)))
+        times: FloatArray = g.t0 + g.h * np.arange(k, k + size, dtype=np.float64)
+        # u(t) of the chunk; when it raises, the steps before its first failing time
+        fext, failed = _chunk_force(cast(Any, self), times)   # reads system, S, opts.u
+        if failed is not None:
+            if fext.shape[0] == 0:
+                raise failed
+            times = times[:fext.shape[0]]
+        pre = (self.q.copy(), self.v.copy(), self.r.copy(), self.proj["energy"])
+        if self.redo:
+            out, done, code = self._checked_step(c, fext[:1])
+        else:
+            if self.warm and not np.any(self.r):
+                self._cold_start(c, fext[0])
+            out, done, code = self._compiled(c, times.shape[0], fext, given=False)
+        if code == NOT_CONVERGED:   # r was spoiled by the sweeps: the last step's
+            self.redo = True
+            self.r = out[2][done - 1].copy() if done else pre[2]
+        if code == PENETRATED:
+            try:
+                self._project(c, out, done - 1)
+            except SolverError:
+                self._keep(c, out, times[:done - 1] + step, pre, step)   # the steps before
+                raise
+        self._keep(c, out, times[:done] + step, pre, step)
+        if failed is not None and done == times.shape[0]:
+            raise failed
 
-        s, c = self.system, self.c
-        size, n, m, dim = times.shape[0], s.n_dof, s.n_contacts, c.dim
-        if not np.any(self.r) and self._closing(q, v).any():
-            self.r = self._frictionless_guess(q, v)   # a cold start of a loaded set
-        out = (np.empty((size, n)), np.empty((size, n)), np.empty((size, m * dim)),
+    def _keep(self, c: _Contacts, out: tuple[np.ndarray, ...], times: FloatArray,
+              pre: tuple[Any, ...], step: float) -> None:
+        """Record the chunk's first ``len(times)`` steps (taken from ``pre``: ``q, v, r``
+        and the projection energy before them) and count them."""
+        done = times.shape[0]
+        if not done:
+            return
+        proj = np.full(done, pre[3])
+        proj[-1] = self.proj["energy"]
+        _record(self.rec, self.system, c, times, out[0][:done], out[1][:done], out[2][:done],
+                out[3][:done], out[4][:done], out[5][:done], proj, pre[0], pre[1], pre[2],
+                step)
+        self.k += done
+
+    def _compiled(self, c: _Contacts, size: int, fext: FloatArray, given: bool
+                  ) -> tuple[tuple[np.ndarray, ...], int, int]:
+        """Up to ``size`` compiled steps under the input forces ``fext`` (a row per step, or
+        one row for all): ``(outputs, steps done, code)``."""
+        from ._frictional_kernels import NOT_CONVERGED, frictional_mj_kernel
+
+        n, m = self.system.n_dof, self.system.n_contacts
+        out = (np.empty((size, n)), np.empty((size, n)), np.empty((size, c.r_size)),
                np.empty((size, m), np.int64), np.empty((size, 2)), np.empty(size),
                np.empty(size, np.int64))
-        done, _ = frictional_mj_kernel(
-            q, v, self.minv_diag, self.kdiag, self.ddiag, s.constant_force,
-            np.ascontiguousarray(self.force_rows(times)), *self.csr, s.gap_offset,
-            s.restitution, np.ascontiguousarray(c.mu), self.blocks, self.inverses, dim,
-            self.h, self.theta, self.gamma, self.activation, self.tol, 1000, self.r,
-            self.work, *out)
-        self.sweeps += int(out[6][:done].sum())
+        done, code = frictional_mj_kernel(
+            c.step, self.q, self.v, np.ascontiguousarray(fext), self.r, self.work, self.states,
+            self.warm, given, self.opts.projection, self.opts.contact_tol, MAX_SWEEPS, *out)
+        self.sweeps += int(out[6][:done + (code == NOT_CONVERGED)].sum())
         if done:
             self.max_residual = max(self.max_residual, float(out[5][:done].max()))
-        return out, done
+        return out, int(done), int(code)
 
-    def _closing(self, q: FloatArray, v: FloatArray) -> np.ndarray:
-        s = self.system
-        un = np.asarray(self.c.G @ v).ravel()
-        return s.gaps(q) + self.gamma * self.h * un <= self.activation
+    def _problem(self, c: _Contacts, fe: FloatArray) -> tuple[np.ndarray, FloatArray]:
+        """The active contacts of the next step (input force ``fe``) and their free local
+        velocities."""
+        from ._frictional_kernels import step_problem
 
-    def _frictionless_guess(self, q: FloatArray, v: FloatArray) -> FloatArray:
-        """Impulses of the first step without friction (one LCP): NSGS's start when no
-        previous impulse exists (a loaded stack would need O(n²) sweeps from zero)."""
+        m = self.system.n_contacts
+        active, qfree = np.zeros(m, np.bool_), np.zeros(c.r_size)
+        step_problem(c.step, self.q, self.v, np.ascontiguousarray(fe), qfree, active)
+        return np.flatnonzero(active), qfree
+
+    def _cold_start(self, c: _Contacts, fe: FloatArray) -> None:
+        """Without previous impulses, start a loaded set of contacts from the impulses of
+        the problem without friction (one LCP; from zero a stack needs O(n²) sweeps)."""
         from ...numerics.friction_contact import frictionless_impulses
 
-        c, s = self.c, self.system
-        active = np.flatnonzero(self._closing(q, v))
-        W, _, rows, HA = c.delassus(active)
-        f = s.constant_force - (0 if c.K is None else c.K @ (q + self.h * self.theta * v)) \
-            - (0 if c.D is None else c.D @ v)
-        v_free = v + self.h * np.asarray(c.minv @ f).ravel()
-        qloc = np.asarray(HA @ v_free).ravel()
-        qloc[0::c.dim] += s.restitution[active] * np.asarray(c.G[active] @ v).ravel()
-        r = np.zeros_like(self.r)
-        r[rows] = frictionless_impulses(W, qloc, c.dim)
-        return r
+        active, qfree = self._problem(c, fe)
+        if active.size:
+            W, rows = c.delassus(active)
+            self.r[rows] = frictionless_impulses(W, qfree[rows], c.dim)
 
-    def python_step(self, q: FloatArray, v: FloatArray, t: float, step: float
-                    ) -> tuple[np.ndarray, ...]:
-        """One step in Python (any ``M̂``, projection, a short last step)."""
-        from ...numerics import _friction_kernels as fk
+    def _checked_step(self, c: _Contacts, fext: FloatArray
+                      ) -> tuple[tuple[np.ndarray, ...], int, int]:
+        """The step whose sweeps did not converge: its impulses by the checked solver
+        (from the last step's), then the compiled step with them as given."""
         from ...numerics.friction_contact import solve_friction_contact
 
-        s = self.system
-        c = self.steps.get(step)
-        if c is None:
-            c = self.steps[step] = _Contacts(s, step, self.theta)
-        m, dim = s.n_contacts, c.dim
-        f = s.constant_force.copy()
-        if c.K is not None:
-            f -= c.K @ (q + step * self.theta * v)
-        if c.D is not None:
-            f -= c.D @ v
-        f += self.force_rows(np.array([t]))[0]
-        v_free = v + step * np.asarray(c.minv @ f).ravel()
-        un = np.asarray(c.G @ v).ravel()
-        active = np.flatnonzero(s.gaps(q) + self.gamma * step * un <= self.activation)
-        r_full = np.zeros(m * dim)
-        states = np.zeros(m, np.int64)
-        residual = 0.0
-        v_new = v_free
+        active, qfree = self._problem(c, fext[0])
+        r = np.zeros_like(self.r)
+        self.states[:] = 0
         if active.size:
-            W, MinvHt, rows, HA = c.delassus(active)
-            qloc = np.asarray(HA @ v_free).ravel()
-            qloc[0::dim] += s.restitution[active] * un[active]
-            mu = np.ascontiguousarray(c.mu[active])
-            r0 = self.r[rows].copy() if np.any(self.r[rows]) else None
-            res = _solve(fk, W, qloc, mu, dim, self.tol, r0, solve_friction_contact)
+            W, rows = c.delassus(active)
+            r0 = self.r[rows] if np.any(self.r[rows]) else None
+            res = solve_friction_contact(W, qfree[rows], np.ascontiguousarray(c.mu[active]),
+                                         dim=c.dim, tol=self.opts.contact_tol, r0=r0)
             self.sweeps += res.iterations if res.method == "nsgs" else 0
-            residual = res.residual
-            self.max_residual = max(self.max_residual, residual)
-            r_full[rows] = res.r
-            states[active] = res.states
-            v_new = v_free + np.asarray(MinvHt @ res.r).ravel()
-        self.python_steps += 1
-        q_new = q + step * ((1 - self.theta) * v + self.theta * v_new)
-        # θ = ½: E_{k+1} - E_k = r · (H v_k + H v_{k+1}) / 2, normal and tangent parts
-        prod = r_full * (0.5 * np.asarray(c.H @ (v + v_new)).ravel())
-        self.work[0] += prod[0::dim].sum()
-        self.work[1] += prod.sum() - prod[0::dim].sum()
-        gap_new = s.gaps(q_new)
-        if self.projection and np.min(gap_new, initial=0.0) < 0.0:
-            q_new, v_new = _project(s, c, q_new, v_new, gap_new, self.proj)
-        self.r = r_full
-        return (q_new[None], v_new[None], r_full[None], states[None], self.work[None].copy(),
-                np.array([residual]))
+            r[rows] = res.r
+            self.states[active] = res.states
+        self.r, self.redo = r, False
+        self.fallback_steps += 1
+        return self._compiled(c, 1, fext, given=True)
 
+    def _project(self, c: _Contacts, out: tuple[np.ndarray, ...], k: int) -> None:
+        """Project step ``k`` of the chunk ``out`` (in place) and the state."""
+        q, v = _project(self.system, c, out[0][k], out[1][k], self.system.gaps(out[0][k]),
+                        self.proj)
+        out[0][k], out[1][k] = q, v
+        self.q[:], self.v[:] = q, v
 
-def _solve(fk: Any, W: Any, q: FloatArray, mu: FloatArray, dim: int, tol: float,
-           r0: FloatArray | None, fallback: Any) -> Any:
-    """NSGS from the previous step's impulses (compiled, no re-validation); the checked
-    solver (planar LCP, or NSGS from the frictionless guess) when it does not converge."""
-    from ...numerics.friction_contact import FrictionContactResult
-
-    if r0 is not None:
-        r = r0.copy()
-        u = np.empty_like(q)
-        states = np.zeros(mu.shape[0], np.int64)
-        code, sweeps, err = fk.nsgs_kernel(W.indptr, W.indices, W.data, q, mu, dim, r, u,
-                                           states, tol, 1000)
-        if code == 0:
-            return FrictionContactResult(r, u, states, float(err), int(sweeps), "nsgs",
-                                         "solved")
-    return fallback(W, q, mu, dim=dim, tol=tol)
+    def finish(self, stop: Stop) -> Trajectory:
+        """The trajectory with the run's stats."""
+        system, opts, proj = self.system, self.opts, self.proj
+        traj = self.rec.finish(status=stop.status, message=stop.message, method="moreau_jean",
+                               stats={
+            "steps": self.k, "path": "frictional" if system.friction_dim else "projection",
+            "h": opts.h, "theta": opts.theta, "friction_dim": system.friction_dim,
+            "warm_start": self.warm, "contact_sweeps": self.sweeps,
+            "contact_fallback_steps": self.fallback_steps,
+            "max_contact_residual": self.max_residual, "projection": bool(opts.projection),
+            "projections": proj["count"], "projection_energy": proj["energy"],
+            "projection_lift_energy": proj["lift_energy"],
+            "max_penetration_before_projection": proj["before"]},
+            state_names=system.state_names)
+        if "gap" in traj.signals and traj.signals["gap"].size:
+            traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
+        return traj
 
 
 def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: FloatArray,
@@ -389,8 +394,8 @@ def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: Float
 
 def _record(rec: Recorder, system: Any, c: _Contacts, times: FloatArray, q: FloatArray,
             v: FloatArray, r: FloatArray, states: np.ndarray, work: FloatArray,
-            residual: FloatArray, proj_energy: float, q_pre: FloatArray, v_pre: FloatArray,
-            r_pre: FloatArray, h: float) -> None:
+            residual: FloatArray, proj_energy: FloatArray, q_pre: FloatArray,
+            v_pre: FloatArray, r_pre: FloatArray, h: float) -> None:
     """Write a chunk of steps, and an ``"impact"`` event for every contact whose normal
     impulse becomes positive while it approaches (its time where the gap extrapolated from
     the step's start reaches zero, as plain Moreau–Jean)."""
@@ -411,7 +416,7 @@ def _record(rec: Recorder, system: Any, c: _Contacts, times: FloatArray, q: Floa
 
 
 def _rows(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, r: FloatArray,
-          states: np.ndarray, work: FloatArray, residual: FloatArray, proj_energy: float,
+          states: np.ndarray, work: FloatArray, residual: FloatArray, proj_energy: FloatArray,
           rec: Recorder) -> dict[str, Any]:
     """The signals of a block of steps (only those the recorder keeps are computed)."""
     dim, k = c.dim, q.shape[0]
@@ -426,5 +431,5 @@ def _rows(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, r: FloatArray
         rows["friction_impulse"] = r.reshape(k, -1, dim)[:, :, 1:].reshape(k, -1)
     rows.update(contact_state=np.asarray(states, float), normal_work=work[:, 0],
                 friction_work=work[:, 1], residual=residual,
-                projection_energy=np.full(k, proj_energy))
+                projection_energy=proj_energy)
     return rows
