@@ -19,7 +19,9 @@ Scenarios (each side measured in the same run):
 * stacks of 10, 100 and 1000 bricks at rest (two corner contacts per interface, μ = 0.5,
   h = 1e-3): our frictional Moreau-Jean (NSGS at 1e-12) against Siconos' MoreauJeanOSI +
   FrictionContact(2) with NSGS at 1e-8 (its sweep cap 10 000, 1000 for 1000 bricks):
-  steps/s, largest residual, sweeps per step, drift.
+  steps/s, largest residual, sweeps per step, drift; and ours again with the warm start
+  switched off (every step's sweeps from zero instead of the previous step's impulses; fewer
+  steps): ``cold_*`` and ``warm_start_speedup`` (warm steps/s over cold).
 
 Residuals are the natural map of De Saxcé's form over ``max(‖q‖, ‖r‖, ‖u‖)`` on both sides.
 Run: ``nscontrol bench contacts --json`` (``--quick``: fewer steps, five files).
@@ -231,7 +233,9 @@ def _stack(n: int, quick: bool) -> dict[str, Any]:
         "reference_steps_per_s": None, "ratio": None,
         "accuracy": {"ours_max_residual": traj.stats["max_contact_residual"],
                      "ours_sweeps_per_step": traj.stats["contact_sweeps"] / steps,
+                     "ours_fallback_steps": traj.stats["contact_fallback_steps"],
                      "ours_drift": float(np.max(np.abs(traj.x[-1] - x0)))}}
+    record["accuracy"].update(_cold(system, x0, n, quick, record["ours_steps_per_s"]))
     ok, why = siconos_available()
     if not ok:
         record["note"] = why
@@ -250,6 +254,29 @@ def _stack(n: int, quick: bool) -> dict[str, Any]:
                               siconos_sweeps_per_step=out["mean_iterations"],
                               siconos_drift=out["drift"], siconos_steps=out["steps"])
     return record
+
+
+def _cold(system: Any, x0: np.ndarray, n: int, quick: bool, warm_steps_per_s: float
+          ) -> dict[str, Any]:
+    """The same stack with every step's sweeps started from zero instead of the last step's
+    impulses (our warm start switched off), fewer steps: what the warm start saves."""
+    from nscontrol.simulate.moreau_jean._frictional_run import integrate_frictional
+    from nscontrol.simulate.moreau_jean._options import MoreauJeanOptions
+
+    if n > 100:   # from zero each step takes the checked fallback: minutes a step
+        return {"cold_note": "not run above 100 bricks"}
+    steps = {10: 50 if quick else 300, 100: 3 if quick else 10}[n]
+    opts = MoreauJeanOptions.checked(
+        system, x0, h=H, theta=0.5, gamma=1.0, activation=None, u=None, forces="implicit",
+        mass_at="start", projection=False, contact_tol=1e-12, record_every=1,
+        signals=["impulse"], progress=False)
+    start = time.perf_counter()
+    traj = integrate_frictional(system, x0, 0.0, steps * H, opts, warm_start=False)
+    seconds = time.perf_counter() - start
+    return {"cold_steps": steps, "cold_steps_per_s": steps / seconds,
+            "cold_sweeps_per_step": traj.stats["contact_sweeps"] / steps,
+            "cold_fallback_steps": traj.stats["contact_fallback_steps"],
+            "warm_start_speedup": warm_steps_per_s * seconds / steps}
 
 
 def _read_dat(path: Path) -> tuple[int, Any, np.ndarray, np.ndarray]:

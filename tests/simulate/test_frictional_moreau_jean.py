@@ -172,3 +172,159 @@ def test_friction_refuses_a_controller_and_nonlinear_models():
     with pytest.raises(ModelError, match="projection"):
         nsc.simulate(arm, [0.5, 0.0, 0.0, 0.0], (0.0, 0.01), method="moreau_jean", h=H,
                      projection=True)
+
+
+# -- the one compiled step: every configuration, the warm start, the checked fallback --------
+def _chain(T_span=1.0):
+    """Two blocks on the ground joined by a spring (``K`` not diagonal, so neither is ``M̂``),
+    thrown apart: they slide, stick and oscillate."""
+    k = 50.0
+    K = np.array([[k, -k, 0, 0], [-k, k, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0.0]])
+    system = LagrangianSystem(np.array([1.0, 2.0, 1.0, 2.0]), stiffness=K,
+                              constant_force=[0, 0, -G, -2 * G],
+                              gap_matrix=[[0, 0, 1, 0], [0, 0, 0, 1.0]], friction=[0.3, 0.3],
+                              tangent_matrix=[[1, 0, 0, 0], [0, 1, 0, 0.0]])
+    return system, [0.1, -0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("tf", [1.0, 1.0 - H / 2])   # the second ends on a shortened step
+def test_energy_balance_holds_with_a_coupling_stiffness_and_a_short_last_step(tf):
+    system, x0 = _chain()
+    traj = _run(system, x0, tf)
+    assert traj.t[-1] == tf and traj.stats["contact_fallback_steps"] == 0
+    assert set(np.unique(traj.signals["contact_state"][1:])) >= {1.0, 2.0}   # stick, slip
+    E = traj.signals["energy"]
+    work = traj.signals["friction_work"] + traj.signals["normal_work"]
+    # θ = ½, linear forces: exact balance up to round-off (n steps, energies of size max|E|)
+    assert np.max(np.abs(E - E[0] - work)) <= 4 * (E.size - 1) * EPS * np.max(np.abs(E))
+    assert traj.signals["friction_work"][-1] < -0.1
+
+
+def test_a_change_of_coordinates_gives_the_same_motion():
+    """The disk of the closed-form test in coordinates ``q = P z`` (mass ``Pᵀ M P``, not
+    diagonal): the same discrete motion, mapped back by ``P``."""
+    mu, R, v0, w0 = 0.2, 0.1, 1.0, 5.0
+    disk = rolling_disk(mu, radius=R)
+    x0 = np.array([0.0, R, 0.0, v0, 0.0, w0])
+    P = np.array([[1.0, 0.3, 0.0], [0.0, 1.0, 0.2], [0.1, 0.0, 1.0]])
+    tangent = np.asarray(disk.tangent_matrix.todense() if hasattr(disk.tangent_matrix, "todense")
+                         else disk.tangent_matrix)
+    moved = LagrangianSystem(P.T @ disk.mass_matrix() @ P,
+                             constant_force=P.T @ disk.constant_force,
+                             gap_matrix=disk.dense_gap_matrix() @ P, gap_offset=disk.gap_offset,
+                             friction=disk.friction, tangent_matrix=tangent @ P)
+    plain = _run(disk, x0, 0.5)
+    z = _run(moved, np.concatenate([np.linalg.solve(P, x0[:3]), np.linalg.solve(P, x0[3:])]),
+             0.5)
+    n = plain.t.size - 1
+    # per step: round-off of the transformation (cond P ε |v|, a factor 4) and the two
+    # contact solves at relative tolerance 1e-12 on impulses of size |r| (a factor 10)
+    r = np.max(np.abs(plain.signals["impulse"])) + np.max(np.abs(
+        plain.signals["friction_impulse"]))
+    bound = n * (4 * np.linalg.cond(P) * EPS * max(v0, R * w0, w0) + 10 * 1e-12 * r)
+    assert np.max(np.abs(z.x[:, 3:] @ P.T - plain.x[:, 3:])) <= bound
+    assert np.max(np.abs(z.x[:, :3] @ P.T - plain.x[:, :3])) <= bound * 0.5
+    slip = plain.x[:, 3] + R * plain.x[:, 5]
+    k = int(np.argmax(np.abs(slip) <= 1e-12))
+    assert np.all(z.signals["contact_state"][1:k] == 2)
+
+
+def _frictional(system, x0, tf, **kw):
+    """The frictional run itself (its warm-start switch is not a ``simulate`` option)."""
+    from nscontrol.simulate.moreau_jean._frictional_run import integrate_frictional
+    from nscontrol.simulate.moreau_jean._options import MoreauJeanOptions
+
+    warm = kw.pop("warm_start", True)
+    x0 = system.check_state(x0)
+    opts = MoreauJeanOptions.checked(
+        system, x0, h=H, theta=0.5, gamma=1.0, activation=None, u=None, forces="implicit",
+        mass_at="start", projection=False, contact_tol=1e-12, record_every=1, signals=None,
+        progress=False)
+    return integrate_frictional(system, x0, 0.0, tf, opts, warm_start=warm)
+
+
+def _agreement_bound(system, a, steps):
+    """Two runs that each stick at every contact and solve each step to the relative
+    natural-map error ``tol = 1e-12``: at a stuck contact that error bounds ``|u|``, scaled
+    by ``max(|q|, |r|, |u|) <= max(1, |W|) |r|`` (``q = u - W r``); the velocities are
+    ``v = H⁺ u`` (``H`` of full column rank), so each run's ``v`` is within
+    ``tol max(1, |W|) |r| / σ_min(H)`` of rest at every step (a factor 4 for the per-contact
+    sums), and the positions gather ``h`` times that per step."""
+    T = system.tangent_matrix
+    Hm = np.vstack([system.dense_gap_matrix(),
+                    np.asarray(T.todense() if hasattr(T, "todense") else T)])
+    W = Hm @ np.linalg.solve(system.mass_matrix(), Hm.T)
+    r = np.max(np.linalg.norm(np.hstack([a.signals["impulse"], a.signals["friction_impulse"]]),
+                              axis=1))
+    dv = 2 * 4 * 1e-12 * max(1.0, np.linalg.norm(W, 2)) * r / np.linalg.svd(
+        Hm, compute_uv=False).min()
+    return dv, steps * H * dv
+
+
+def test_the_warm_start_saves_sweeps_on_a_resting_stack_and_keeps_the_answer():
+    n, steps = 3, 200
+    system, x0 = brick_stack(n, 0.5, angle=0.1), brick_stack_rest_state(n)
+    warm = _frictional(system, x0, steps * H)
+    cold = _frictional(system, x0, steps * H, warm_start=False)
+    assert warm.stats["warm_start"] and not cold.stats["warm_start"]
+    assert warm.stats["contact_fallback_steps"] == cold.stats["contact_fallback_steps"] == 0
+    # from the last step's impulses a resting stack needs a few sweeps a step; from zero,
+    # NSGS spreads the load through the stack again every step (hundreds)
+    assert warm.stats["contact_sweeps"] <= 5 * steps
+    assert cold.stats["contact_sweeps"] >= 20 * warm.stats["contact_sweeps"]
+    for traj in (warm, cold):
+        assert np.all(traj.signals["contact_state"][1:] == 1)   # both stick everywhere
+        assert traj.stats["max_contact_residual"] <= 1e-12
+    dv, dq = _agreement_bound(system, warm, steps)
+    nd = system.n_dof
+    assert np.max(np.abs(warm.x[:, nd:] - cold.x[:, nd:])) <= dv
+    assert np.max(np.abs(warm.x[:, :nd] - cold.x[:, :nd])) <= dq
+
+
+def test_a_step_the_sweeps_cannot_finish_is_taken_with_the_checked_solvers_impulses(
+        monkeypatch):
+    from nscontrol.simulate.moreau_jean import _frictional_run
+
+    n, steps = 3, 50
+    system, x0 = brick_stack(n, 0.5, angle=0.1), brick_stack_rest_state(n)
+    ref = _frictional(system, x0, steps * H)
+    monkeypatch.setattr(_frictional_run, "MAX_SWEEPS", 5)   # from zero, no step converges
+    fallback = _frictional(system, x0, steps * H, warm_start=False)
+    assert fallback.stats["contact_fallback_steps"] == steps
+    assert np.all(fallback.signals["contact_state"][1:] == 1)
+    assert fallback.stats["max_contact_residual"] <= 1e-12   # recomputed by the kernel
+    dv, dq = _agreement_bound(system, ref, steps)
+    nd = system.n_dof
+    assert np.max(np.abs(fallback.x[:, nd:] - ref.x[:, nd:])) <= dv
+    assert np.max(np.abs(fallback.x[:, :nd] - ref.x[:, :nd])) <= dq
+
+
+class SensorFault(RuntimeError):
+    """The user's own exception type."""
+
+
+def test_an_input_that_raises_keeps_every_step_before_it():
+    """A block pushed along the ground by ``u(t) = 20 sin t`` that fails from t = 0.5 on: the
+    run ends at the last step before, with the samples of a run stopped there."""
+    t_fail = 0.5
+
+    def u(t):
+        t = np.atleast_1d(np.asarray(t, float))
+        if np.any(t >= t_fail - 0.5 * H):
+            raise SensorFault("u: sensor unplugged")
+        return 20 * np.sin(t)[:, None]
+
+    block = LagrangianSystem(np.ones(2), constant_force=[0.0, -G], gap_matrix=[[0.0, 1.0]],
+                             friction=0.3, tangent_matrix=[[1.0, 0.0]],
+                             actuation=[[1.0], [0.0]])
+    with pytest.raises(SensorFault) as info:
+        _run(block, [0.0] * 4, 1.0, u=u)
+    partial = info.value.trajectory
+    assert partial.status == -1
+    # u is read at a step's start: the last step taken is the one starting before t_fail
+    assert t_fail - 1e-12 <= partial.t[-1] <= t_fail + 1e-12
+    reference = _run(block, [0.0] * 4, float(partial.t[-1]), u=u)
+    assert set(np.unique(reference.signals["contact_state"][1:])) >= {1.0, 2.0}
+    # the same steps on the same grid, bit for bit
+    np.testing.assert_array_equal(partial.t, reference.t)
+    np.testing.assert_array_equal(partial.x, reference.x)

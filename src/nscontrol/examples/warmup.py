@@ -192,7 +192,7 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "simulate.switching._pwa_kernels", "simulate.switching._filippov_kernels"),
     "ZAD-controlled buck converter": ("design._zad_kernels",),
     "frictional contacts": ("numerics._friction_kernels", "numerics._lcp_kernels",
-                            "simulate._frictional_mj_kernels"),
+                            "simulate.moreau_jean._frictional_kernels"),
     "sampled sliding-mode control": ("design._sliding_mode_kernels",
                                      "simulate.sampled_zoh._zoh_kernels", "simulate._block_kernels",
                                      "systems._feedback_kernels"),

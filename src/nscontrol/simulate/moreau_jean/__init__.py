@@ -248,7 +248,7 @@ def _frictional(system: LagrangianSystem, x0: Any, t_span: tuple[float, float], 
                 feedback: Any) -> Trajectory:
     """The run of a system with friction or the position projection (its own loop, without
     blocks or listeners yet)."""
-    from .._frictional_moreau_jean import integrate_frictional
+    from ._frictional_run import integrate_frictional
 
     if feedback.blocks is not None:
         raise ModelError("controller: a closed loop's Python blocks are not supported yet "
