@@ -35,7 +35,7 @@ The schedule of sampled blocks is integer: tick ``k`` falls at :func:`tick_time`
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -97,8 +97,8 @@ class Recording:
 
     n_states: int
     every: int = 1
-    signals: Sequence[str] | None = None
-    offered: Sequence[str] | None = None
+    signals: Iterable[str] | None = None
+    offered: Iterable[str] | None = None
     capacity: int = 1024
     state_names: Sequence[str] = ()
 
