@@ -76,11 +76,15 @@ def _block_functions(typingctx, addresses, first):
     return pair(addresses, first), codegen
 
 
+#: numba's option that compiles a kernel without reference counting (see the module docstring;
+#: a private option of ``njit``, which its type stubs do not list).
+NO_REFCOUNT: dict[str, Any] = {"_nrt": False}
+
 #: ``block_functions(addresses, first)`` as kernels call it (numba passes the typing context).
 block_functions: Any = _block_functions
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, **NO_REFCOUNT)
 def keep(k, every, force, t, X, c, u, xc, out_t, out_x, out_s, out_u, out_xc, count):
     """Keep the sample of tick ``k`` when ``k`` is a multiple of ``every`` (or ``force``):
     the time, the plant part of ``X``, its sliding variable ``c x``, the held input ``u`` and
@@ -101,7 +105,7 @@ def keep(k, every, force, t, X, c, u, xc, out_t, out_x, out_s, out_u, out_xc, co
     count[1] = r + 1
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, **NO_REFCOUNT)
 def zoh_step(Phi, Gam, X, u, Xn):
     """``Xn = Γ u + Φ X``, summed in that order (``Γ`` of shape ``(N, m)``)."""
     N = X.shape[0]
@@ -114,7 +118,7 @@ def zoh_step(Phi, Gam, X, u, Xn):
         Xn[i] = acc
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, **NO_REFCOUNT)
 def tick(k, t, every, Phi, Gam, X, Xn, c, u, xc, out_t, out_x, out_s, out_u, out_xc,
          count):
     """After the blocks ran at tick ``k`` (time ``t``): keep the sample, step ``X`` over one
