@@ -54,3 +54,20 @@ def test_the_driver_serves_the_user_integrator(scope):
     assert traj.method == "heun"
     with pytest.raises(ModelError, match="unknown option"):
         nsc.simulate(decay, [1.0], (0.0, 1.0), method="heun", h=0.1, rtol=1e-6)
+
+
+def test_a_failing_user_integrator_keeps_its_samples(scope):
+    # the loop holds the stepper's record: an error of the model mid-run leaves with every
+    # step computed before it (h = 0.01: a step evaluates f at t_k and t_k + h; f raises past
+    # t = 0.5, so the step from 0.5 fails and the samples t = 0, 0.01, ..., 0.5 are kept)
+    def rhs(t, x):
+        if t > 0.5 + 1e-9:
+            raise ArithmeticError("model failed")
+        return -x
+
+    failing = nsc.systems.NonlinearSystem(1, rhs)
+    with pytest.raises(ArithmeticError) as info:
+        nsc.simulate(failing, [1.0], (0.0, 1.0), method="heun", h=0.01)
+    traj = info.value.trajectory
+    assert traj.status == -1 and traj.method == "heun"
+    np.testing.assert_allclose(traj.t, 0.01 * np.arange(51), rtol=0, atol=1e-15)

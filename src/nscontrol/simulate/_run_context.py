@@ -13,7 +13,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-__all__ = ["RunContext", "current_run", "run_context", "register_recorder"]
+__all__ = ["RunContext", "current_run", "run_context", "register_recorder",
+           "attach_partial"]
 
 
 class PartialRecord(Protocol):
@@ -83,3 +84,16 @@ def register_recorder(rec: PartialRecord) -> None:
     ctx = _CURRENT.get()
     if ctx is not None:
         ctx.recorders.append(rec)
+
+
+def attach_partial(err: BaseException, traj: Any, *, note: bool) -> None:
+    """Attach the partial trajectory ``traj`` to ``err`` as ``err.trajectory``; with
+    ``note``, also a note saying so (an exception that is not the library's, whose message
+    does not mention it)."""
+    try:
+        err.trajectory = traj  # type: ignore[attr-defined]  # on any exception
+        if note:
+            err.add_note(f"nscontrol: the run so far ({len(traj.t)} samples up to "
+                         f"t = {traj.t[-1]:.6g}) is in err.trajectory")
+    except (AttributeError, TypeError):  # pragma: no cover - exotic exceptions
+        pass

@@ -53,7 +53,7 @@ import numpy as np
 
 from .._validation import check_bool
 from ..errors import ModelError, NscontrolError, NscontrolWarning, SolverError, ZenoError
-from ._run_context import RunContext, current_run, run_context
+from ._run_context import RunContext, attach_partial, current_run, run_context
 from .lowering.base import Lowered, invert_all, lower, lowers
 from .trajectory import Trajectory
 
@@ -384,12 +384,7 @@ def _run_guarded(cls: type[Integrator], ctx: RunContext, system: Any, x0: Any,
             partial = ctx.partial(f"interrupted by {type(err).__name__}: {err}")
             if partial is None:  # pragma: no cover - has_samples() implies a recorder
                 raise
-            try:
-                err.trajectory = partial  # type: ignore[attr-defined]  # on any exception
-                err.add_note(f"nscontrol: the run so far ({len(partial.t)} samples up to "
-                             f"t = {partial.t[-1]:.6g}) is in err.trajectory")
-            except (AttributeError, TypeError):  # pragma: no cover - exotic exceptions
-                pass
+            attach_partial(err, partial, note=True)
         raise
     traj = _stop_at_non_finite(traj, on_failure, system)
     return _post_process(cls, traj, common)

@@ -1,5 +1,7 @@
-"""What a run records: samples thinned by ``record_every``, the signals derived at the end,
-the partial trajectory of a failed run, and the reordering of states for another convention."""
+"""What a run records: one buffer of samples in front of the run's record (the loop's
+:class:`~nscontrol.simulate.trajectory.Recorder`), the signals derived as it is handed over,
+the errors that end a run (the loop attaches the partial trajectory), and the reordering of
+states for another convention."""
 
 from __future__ import annotations
 
@@ -10,14 +12,23 @@ from typing import Any, NoReturn
 import numpy as np
 
 from ..._validation import FloatArray
-from ...errors import BudgetExceededError, NscontrolError, ZenoError
-from ..loop import drive
+from ...errors import BudgetExceededError, ZenoError
+from ..loop import Recording, drive
 from ..trajectory import Event, Recorder, Trajectory
 from ._options import _Options
 
 
+def recording(opts: _Options, n: int, offered: Sequence[str], state_names: Sequence[str]
+              ) -> Recording:
+    """What an event-driven run records: ``n`` states, the ``offered`` signals, as the
+    options ask."""
+    return Recording(n, every=opts.every, signals=opts.signals, offered=tuple(offered),
+                     state_names=tuple(state_names))
+
+
 class _Samples:
-    """The run's :class:`Recorder` (``record_every``, selected signals) behind one buffer.
+    """One buffer in front of the run's :class:`Recorder` (``record_every``, selected
+    signals).
 
     The compiled loop writes its samples straight into the free part of the buffer
     (:meth:`free`, :meth:`wrote`); Python adds samples with :meth:`add` and :meth:`extend`.
@@ -35,11 +46,11 @@ class _Samples:
 
     CAPACITY = 4096
 
-    def __init__(self, n: int, opts: _Options, offered: Sequence[str],
-                 derive: Callable[[FloatArray], dict[str, FloatArray]],
+    def __init__(self, rec: Recorder, derive: Callable[[FloatArray], dict[str, FloatArray]],
                  buffer: tuple[FloatArray, FloatArray] | None = None) -> None:
-        self.rec = Recorder(n, every=opts.every, signals=opts.signals, offered=offered)
-        self.wanted = [k for k in offered if self.rec.wants(k)]
+        self.rec = rec
+        n = rec.n_states
+        self.wanted = [k for k in rec.offered or () if rec.wants(k)]
         self.derive = derive
         self.n = n
         self.t, self.x = ((np.empty(self.CAPACITY), np.empty((self.CAPACITY, n)))
@@ -91,13 +102,14 @@ class _Samples:
         signals = self.derive(X)
         return {k: signals[k] for k in self.wanted}
 
-    def finish(self, **kw: Any) -> Trajectory:
+    def settle(self) -> None:
+        """Hand the buffered rows to the recorder, the last one kept whatever
+        ``record_every`` drops."""
         self.flush()
         if self.last is not None and self.rec.last_time < self.last[0]:
             t, x = self.last
             self.rec.sample(t, x, force=True,
                             **{k: v[0] for k, v in self._signals(x[None]).items()})
-        return self.rec.finish(**kw)
 
 
 def append_events(rec: Recorder, times: FloatArray, kind: str, indices: np.ndarray,
@@ -139,43 +151,26 @@ def reorder_states(traj: Trajectory, order: np.ndarray, names: Sequence[str]) ->
     return replace(traj, x=traj.x[:, order], events=events, state_names=tuple(names))
 
 
-def _fail_zeno(opts: _Options, rec: _Samples, message: str, t: float, **finish: Any
-               ) -> NoReturn:
-    traj = rec.finish(status=-1, message=message, **finish)
+def _fail_zeno(message: str, t: float) -> NoReturn:
+    """An accumulation the run cannot resolve (the loop attaches the part computed)."""
     raise ZenoError(message + "; pass on_failure='return' (or 'warn') to keep the partial "
                     "trajectory, or use method='moreau_jean' which passes through "
-                    "accumulations", time=t, trajectory=traj)
+                    "accumulations", time=t)
 
 
-def _fail_budget(opts: _Options, rec: _Samples, t: float, used: int, **finish: Any
-                 ) -> NoReturn:
-    """The run spent its event budget ``max_events``: raise with the part computed."""
-    message = (f"max_events: the run spent its budget of {opts.max_events} events by t = "
-               f"{t:.12g} ({used} events); raise max_events for a long run (one event per "
-               f"impact or switching), or look for an accumulation of events (Zeno). The "
-               f"computed part is in err.trajectory (on_failure='return' returns it)")
-    traj = rec.finish(status=-1, message=message, **finish)
-    raise BudgetExceededError(message, budget="max_events", limit=opts.max_events,
-                              used=used, trajectory=traj)
+def _fail_budget(opts: _Options, t: float, used: int) -> NoReturn:
+    """The run spent its event budget ``max_events`` (the loop attaches the part
+    computed)."""
+    raise BudgetExceededError(
+        f"max_events: the run spent its budget of {opts.max_events} events by t = {t:.12g} "
+        f"({used} events); raise max_events for a long run (one event per impact or "
+        f"switching), or look for an accumulation of events (Zeno). The computed part is in "
+        f"err.trajectory (on_failure='return' returns it)", budget="max_events",
+        limit=opts.max_events, used=used)
 
 
 def _guarded(run: Any) -> Trajectory:
-    """Drive the run's stepper (:func:`~nscontrol.simulate.loop.drive`: its progress bar,
-    one flight and its event per step); an error raised mid-run carries the trajectory
-    computed so far. Any other exception (a listener's own error, an interrupt) leaves
-    every sample computed in the recorder, where a caller holding it (the run's driver)
-    finds them."""
-    try:
-        return drive(run, (run.t0, run.tf), desc="event_driven", progress=run.opts.progress)
-    except NscontrolError as err:
-        if err.trajectory is None:
-            err.trajectory = run.samples.finish(status=-1, message=str(err),
-                                                method="event_driven",
-                                                state_names=run.s.state_names)
-        raise
-    except BaseException:
-        try:
-            run.samples.flush()
-        except Exception:  # noqa: BLE001 - the original exception is the one to report
-            pass
-        raise
+    """Drive the run's stepper (:func:`~nscontrol.simulate.loop.drive`: the run's record,
+    its progress bar, one flight and its event per step, the part computed attached to any
+    exception that ends it)."""
+    return drive(run, (run.t0, run.tf), desc="event_driven", progress=run.opts.progress)

@@ -24,9 +24,10 @@ from ..._validation import FloatArray
 from ...errors import BudgetExceededError, ModelError, ZenoError
 from ...numerics.lti import LTIFlow, first_event, project_restart
 from ..loop import END, Stop
-from ..trajectory import Recorder, Trajectory
+from ..trajectory import Recorder
 from ._flight import projection_stats
 from ._options import _Options
+from ._recording import recording
 from .linear_mechanics import _LinearModel
 
 #: Mode codes (``Event.mode_from`` / ``mode_to``): stick, slip forward (``u_T > 0``),
@@ -58,7 +59,10 @@ def check_frictional_system(system: Any, blocks: Any, listeners: Any) -> None:
 
 class FrictionalContactRun:
     """Exact simulation of a linear Lagrangian system resting on its one frictional contact
-    (gap and normal velocity zero throughout)."""
+    (gap and normal velocity zero throughout); a :class:`~nscontrol.simulate.loop.Stepper`
+    that appends every piece to the run's record at once."""
+
+    rec: Recorder
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
                  opts: _Options) -> None:
@@ -74,11 +78,9 @@ class FrictionalContactRun:
         z[:2 * self.n], z[2 * self.n] = x0, 1.0
         if u is not None:
             z[2 * self.n + 1:] = u.w(t0)
-        self.rec = Recorder(system.n_states, every=opts.every, signals=opts.signals,
-                            offered=OFFERED)
+        self.recording = recording(opts, system.n_states, OFFERED, system.state_names)
         self.flows: dict[int, tuple[LTIFlow, FloatArray, FloatArray]] = {}
         self.n_events = 0
-        self.samples = self  # what ``_guarded`` finishes when the run fails
         self._check_closed(x0)
         self.t = t0
         self.mode = self._initial_mode(z)
@@ -86,13 +88,17 @@ class FrictionalContactRun:
         if float(L[0] @ z) <= 0.0:
             self._fail(f"x0: the normal force would be {float(L[0] @ z):.3g} <= 0 (the body "
                        f"leaves the contact); {_USE_MJ}", t0)
-        self._record(np.array([t0]), z[None], self.mode, L)
         self.proj = np.zeros(5)  # round-off projections at restarts (lti.project_restart)
         self.restart = False     # the first piece starts from the user's x0
         self.ended = False
 
-    def flush(self) -> None:
-        """Nothing is buffered: every sample goes to the recorder at once."""
+    def start(self, rec: Recorder) -> None:
+        """The first sample into ``rec``, the run's record."""
+        self.rec = rec
+        self._record(np.array([self.t0]), self.z[None], self.mode, self._mode(self.mode)[2])
+
+    def settle(self) -> None:
+        """Nothing is held back: every sample goes to the record at once."""
 
     def _check_closed(self, x0: FloatArray) -> None:
         """The contact must start closed with zero normal velocity."""
@@ -178,14 +184,13 @@ class FrictionalContactRun:
 
     def _fail(self, message: str, t: float, error: type[Exception] = ModelError
               ) -> NoReturn:
-        traj = self.rec.finish(status=-1, message=message, method="event_driven",
-                               state_names=self.s.state_names)
+        """Raise ``error`` (the loop attaches the part computed)."""
         if error is BudgetExceededError:
             raise BudgetExceededError(message, budget="max_events", limit=self.opts.max_events,
-                                      used=self.n_events, trajectory=traj)
+                                      used=self.n_events)
         if error is ZenoError:
-            raise ZenoError(message, time=t, trajectory=traj)
-        raise ModelError(message, trajectory=traj)
+            raise ZenoError(message, time=t)
+        raise ModelError(message)
 
     # -- the stepper (driven by nscontrol.simulate.loop.drive) ----------------------------
     def advance(self) -> float | Stop:
@@ -238,12 +243,7 @@ class FrictionalContactRun:
         self.mode = new
         self._record(np.array([t]), z[None], new, self._mode(new)[2])
 
-    def finish(self, stop: Stop | None = None, **kw: Any) -> Trajectory:
-        """The trajectory: at the run's end (``stop``), or so far (a failing run's, ``kw``
-        as :meth:`Recorder.finish`'s)."""
-        if stop is None:
-            return self.rec.finish(**kw)
-        stats = {"events": self.n_events, "impacts": 0,
-                 "impulses": np.zeros((0, self.s.n_contacts)), **projection_stats(self.proj)}
-        return self.rec.finish(status=stop.status, stats=stats, method="event_driven",
-                               state_names=self.s.state_names)
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics."""
+        return {"events": self.n_events, "impacts": 0,
+                "impulses": np.zeros((0, self.s.n_contacts)), **projection_stats(self.proj)}

@@ -10,15 +10,19 @@ import numpy as np
 from ..._validation import FloatArray
 from ...numerics.lti import LTIFlow
 from ..loop import END, Stop
-from ..trajectory import Trajectory
+from ..trajectory import Recorder
 from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
-from ._recording import _fail_budget, _fail_zeno, _Samples, append_events
+from ._recording import _fail_budget, _fail_zeno, _Samples, append_events, recording
 from ._zeno import _Zeno
 
 
 class HybridRun:
-    """Exact simulation of a :class:`~nscontrol.systems.hybrid.LinearHybridSystem`."""
+    """Exact simulation of a :class:`~nscontrol.systems.hybrid.LinearHybridSystem` (a
+    :class:`~nscontrol.simulate.loop.Stepper`)."""
+
+    samples: _Samples
+    rec: Recorder
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float,
                  opts: _Options) -> None:
@@ -28,16 +32,21 @@ class HybridRun:
         J = system.jump_matrices
         self.flight = _Flight(self.flow, system.G, system.g0, J,
                               np.full(p, J is not None), np.arange(p))
-        self.ws = ws = _Workspace(system.n_states, p, p)
-        self.samples = _Samples(system.n_states, opts, tuple(system.outputs), lambda X: {
-            k: X @ C.T for k, C in system.outputs.items()}, buffer=(ws.s_t, ws.s_x))
-        self.rec = self.samples.rec
-        self.zeno = _Zeno(opts, p, ws.zeno)
-        self.finish_kw = dict(method="event_driven", state_names=system.state_names)
+        self.ws = _Workspace(system.n_states, p, p)
+        self.recording = recording(opts, system.n_states, tuple(system.outputs),
+                                   system.state_names)
+        self.zeno = _Zeno(opts, p, self.ws.zeno)
         self.t = t0
-        self.samples.add(t0, self.x)
         self.restart = False  # the first flight starts from the user's x0
         self.ended = False
+
+    def start(self, rec: Recorder) -> None:
+        """The first sample into ``rec``, the run's record (behind the sample buffer)."""
+        outputs, ws = self.s.outputs, self.ws
+        self.rec = rec
+        self.samples = _Samples(rec, lambda X: {k: X @ C.T for k, C in outputs.items()},
+                                buffer=(ws.s_t, ws.s_x))
+        self.samples.add(self.t0, self.x)
 
     def _jumped(self, times: FloatArray, idx: np.ndarray, pre: FloatArray,
                 post: FloatArray) -> None:
@@ -63,15 +72,15 @@ class HybridRun:
             return t
         self.zeno.n_events += 1   # every event spends the budget, a touch too
         if self.zeno.n_events > opts.max_events:
-            _fail_budget(opts, self.samples, t, self.zeno.n_events, **self.finish_kw)
+            _fail_budget(opts, t, self.zeno.n_events)
         if ev.grazing:
             for i in ev.indices:
                 self.rec.event(t, "grazing", i, x, x)
             return t
         idx = np.asarray(ev.indices, dtype=np.int64)
         if any(self.zeno.too_close(int(i), t) for i in idx):
-            _fail_zeno(opts, self.samples, f"event_driven: accumulation of events of guards "
-                       f"{idx.tolist()} near t = {t:.12g}", t, **self.finish_kw)
+            _fail_zeno(f"event_driven: accumulation of events of guards {idx.tolist()} near "
+                       f"t = {t:.12g}", t)
         for i in idx:
             self.zeno.push(int(i), t)
         x_plus = np.asarray(s.apply_jump(t, x, idx), float)
@@ -83,6 +92,10 @@ class HybridRun:
         self.samples.add(t, x_plus)
         return t
 
-    def finish(self, stop: Stop) -> Trajectory:
-        return self.samples.finish(status=stop.status, stats={
-            "events": self.zeno.n_events, **projection_stats(self.ws.proj)}, **self.finish_kw)
+    def settle(self) -> None:
+        """The buffered samples to the record."""
+        self.samples.settle()
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics."""
+        return {"events": self.zeno.n_events, **projection_stats(self.ws.proj)}

@@ -16,10 +16,10 @@ from ...numerics.lcp import solve_lcp
 from ...numerics.lti import LTIFlow
 from .._event_kernels import bounce_impulses, contact_state, open_and_finite
 from ..loop import END, Stop
-from ..trajectory import Trajectory
+from ..trajectory import Recorder
 from ._flight import _Flight, _Workspace, projection_stats
 from ._options import _Options
-from ._recording import _fail_budget, _fail_zeno, _Samples, append_events
+from ._recording import _fail_budget, _fail_zeno, _Samples, append_events, recording
 from ._zeno import _Zeno
 
 
@@ -68,7 +68,6 @@ class _LinearModel:
         self.flows: dict[frozenset[int], tuple[_Flight, np.ndarray]] = {}
         self.workspaces: list[_Workspace] = []  # lent to one run at a time
         self.system = s
-        self.finish_kw = {"method": "event_driven", "state_names": s.state_names}
 
     def signals(self, X: FloatArray) -> dict[str, FloatArray]:
         """The recorded signals of states ``X = [q; v]`` (rows): ``gap`` and ``energy``."""
@@ -77,7 +76,11 @@ class _LinearModel:
 
 
 class LinearMechanicsRun:
-    """Exact simulation of a Lagrangian system that is linear between events."""
+    """Exact simulation of a Lagrangian system that is linear between events (a
+    :class:`~nscontrol.simulate.loop.Stepper`)."""
+
+    samples: _Samples
+    rec: Recorder
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
                  opts: _Options) -> None:
@@ -93,20 +96,24 @@ class LinearMechanicsRun:
         z[:2 * self.n], z[2 * self.n] = x0, 1.0
         if u is not None:
             z[2 * self.n + 1:] = u.w(t0)
-        self.ws = ws = _Workspace.lend(model.workspaces, self.N, s.n_contacts, s.n_contacts)
-        self.samples = _Samples(2 * self.n, opts, ("gap", "energy"), model.signals,
-                                buffer=(ws.s_t, ws.s_x))
-        self.rec = self.samples.rec
-        self.zeno = _Zeno(opts, s.n_contacts, ws.zeno)
+        self.ws = _Workspace.lend(model.workspaces, self.N, s.n_contacts, s.n_contacts)
+        self.recording = recording(opts, 2 * self.n, ("gap", "energy"), s.state_names)
+        self.zeno = _Zeno(opts, s.n_contacts, self.ws.zeno)
         self.contact: set[int] = set()
         self.n_impacts = 0
         self.impulses: list[FloatArray] = []  # blocks of rows, one row per "impact" event
-        self.finish_kw = model.finish_kw
         self.t = t0
-        self.samples.add(t0, z)
-        self._set_mode(t0, z, self._persistent(z, self._resting(z, self._contacts(z)[0])))
         self.restart = False  # the first flight starts from the user's x0
         self.ended = False
+
+    def start(self, rec: Recorder) -> None:
+        """The first sample into ``rec``, the run's record (behind the sample buffer), and
+        the contacts in persistent contact at ``x0``."""
+        ws, z, t0 = self.ws, self.z, self.t0
+        self.rec = rec
+        self.samples = _Samples(rec, self.model.signals, buffer=(ws.s_t, ws.s_x))
+        self.samples.add(t0, z)
+        self._set_mode(t0, z, self._persistent(z, self._resting(z, self._contacts(z)[0])))
 
     # -- modes ---------------------------------------------------------------------------
     def _mode(self, C: frozenset[int]) -> tuple[_Flight, np.ndarray]:
@@ -196,7 +203,7 @@ class LinearMechanicsRun:
         self.contact = new
 
     def _fail(self, message: str, t: float) -> NoReturn:
-        _fail_zeno(self.opts, self.samples, message, t, **self.finish_kw)
+        _fail_zeno(message, t)
 
     # -- contact state -------------------------------------------------------------------
     def _persistent(self, z: FloatArray, candidates: Sequence[int]) -> set[int]:
@@ -242,14 +249,18 @@ class LinearMechanicsRun:
         self.t, self.z = self._event(t, z, [int(ids[i]) for i in ev.indices], ev.grazing)
         return self.t
 
-    def finish(self, stop: Stop) -> Trajectory:
+    def settle(self) -> None:
+        """The buffered samples to the record."""
+        self.samples.settle()
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics; the workspace goes back to the model for the next run."""
         stats = {"events": self.zeno.n_events, "impacts": self.n_impacts,
                  "impulses": (np.concatenate(self.impulses) if self.impulses
                               else np.zeros((0, self.s.n_contacts))),
                  **projection_stats(self.ws.proj)}
-        traj = self.samples.finish(status=stop.status, stats=stats, **self.finish_kw)
         self.ws.give_back(self.model.workspaces)
-        return traj
+        return stats
 
     def _fly(self, flight: _Flight, ids: np.ndarray, z: FloatArray, t: float, t_end: float,
              restart: bool = True) -> tuple[float, FloatArray, Any]:
@@ -262,8 +273,7 @@ class LinearMechanicsRun:
         ``(t, z)`` to go on from; a spent budget or an accumulation raises."""
         self.zeno.n_events += 1   # every event spends the budget, a touch too
         if self.zeno.n_events > self.opts.max_events:
-            _fail_budget(self.opts, self.samples, t, self.zeno.n_events,
-                                **self.finish_kw)
+            _fail_budget(self.opts, t, self.zeno.n_events)
         if grazing:  # a gap or a contact force touching zero: nothing changes
             for j in hit:
                 self.rec.event(t, "grazing", j if j >= 0 else -1 - j,

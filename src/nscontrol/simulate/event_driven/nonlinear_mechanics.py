@@ -16,16 +16,20 @@ import numpy as np
 from ..._validation import FloatArray
 from ...errors import ModelError, SolverError
 from ..loop import END, Stop
-from ..trajectory import Trajectory
+from ..trajectory import Recorder
 from ._flight import _sample_times
 from ._options import _Options
-from ._recording import _fail_budget, _fail_zeno, _Samples
+from ._recording import _fail_budget, _fail_zeno, _Samples, recording
 from ._variational import Variational
 from ._zeno import _Zeno
 
 
 class NonlinearMechanicsRun:
-    """DOP853 with event location for ``M(q)``, nonlinear forces or gaps."""
+    """DOP853 with event location for ``M(q)``, nonlinear forces or gaps (a
+    :class:`~nscontrol.simulate.loop.Stepper`)."""
+
+    samples: _Samples
+    rec: Recorder
 
     def __init__(self, system: Any, x0: FloatArray, t0: float, tf: float, u: Any,
                  opts: _Options, controller: Callable[..., Any] | None = None,
@@ -35,18 +39,14 @@ class NonlinearMechanicsRun:
         self.s, self.x, self.t0, self.tf, self.u, self.opts = system, x0, t0, tf, u, opts
         self.controller = controller   # a closed loop's law (t, q, v) -> u, or None
         self.law = NewtonImpactLaw(system.restitution)
-        n = system.n_dof
-        self.samples = _Samples(system.n_states, opts, ("gap", "energy"), lambda X: {
-            "gap": np.array([system.gaps(x[:n]) for x in X]).reshape(len(X), -1),
-            "energy": system.energy(X)})
-        self.rec = self.samples.rec
+        self.recording = recording(opts, system.n_states, ("gap", "energy"),
+                                   system.state_names)
         self.zeno = _Zeno(opts, system.n_contacts)
         self.impulses: list[FloatArray] = []
         self.var = Variational(system, self._rhs, controller is not None) if sensitivity \
             else None
         self.saltations: list[FloatArray] = []
         self.closed: list[int] = []   # the contacts of the last impact
-        self._start()
 
     def _input(self, t: float, q: FloatArray, v: FloatArray) -> FloatArray | None:
         """The input at ``(t, q, v)``: the exosystem's, plus the law's (the block runner
@@ -72,11 +72,16 @@ class NonlinearMechanicsRun:
     def _sample(self, times: FloatArray, X: FloatArray) -> None:
         self.samples.extend(times, X)
 
-    def _start(self) -> None:
-        """The first sample, the gap events and the integrated vector (with sensitivity
-        ``[x; vec Φ]``, whose first ``n`` entries the events read)."""
+    def start(self, rec: Recorder) -> None:
+        """The first sample into ``rec``, the run's record (behind the sample buffer), the
+        gap events and the integrated vector (with sensitivity ``[x; vec Φ]``, whose first
+        ``n`` entries the events read)."""
         s, t, x = self.s, self.t0, self.x.copy()
-        self.finish_kw = dict(method="event_driven", state_names=s.state_names)
+        n = s.n_dof
+        self.rec = rec
+        self.samples = _Samples(rec, lambda X: {
+            "gap": np.array([s.gaps(x[:n]) for x in X]).reshape(len(X), -1),
+            "energy": s.energy(X)})
         self._sample(np.array([t]), x[None])
         self.events = [self._gap_event(j) for j in range(s.n_contacts)]
         self.z = x if self.var is None else self.var.augment(x, np.eye(s.n_states))
@@ -117,15 +122,20 @@ class NonlinearMechanicsRun:
                                                                         xp, z)
         return t_end
 
-    def finish(self, stop: Stop) -> Trajectory:
+    def settle(self) -> None:
+        """The buffered samples to the record."""
+        self.samples.settle()
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics (with the state transition when asked)."""
         s, N = self.s, self.s.n_states
-        stats = {"events": self.zeno.n_events,
+        stats: dict[str, Any] = {"events": self.zeno.n_events,
                  "impacts": sum(e.kind == "impact" for e in self.rec.events),
                  "impulses": np.array(self.impulses).reshape(-1, s.n_contacts)}
         if self.var is not None:
             stats["state_transition"] = self.var.transition(self.z).copy()
             stats["saltation_matrices"] = np.array(self.saltations).reshape(-1, N, N)
-        return self.samples.finish(status=stop.status, stats=stats, **self.finish_kw)
+        return stats
 
     def _carry_transition(self, var: Variational, t: float, x_minus: FloatArray,
                           x_plus: FloatArray, z: FloatArray) -> FloatArray:
@@ -145,7 +155,6 @@ class NonlinearMechanicsRun:
 
     def _impact(self, t: float, x: FloatArray) -> FloatArray:
         s, n = self.s, self.s.n_dof
-        finish = self.finish_kw
         q, v = x[:n], x[n:]
         g = s.gaps(q)
         closed = np.flatnonzero(np.abs(g) <= 1e-9 * (1.0 + np.max(np.abs(q))))
@@ -154,17 +163,16 @@ class NonlinearMechanicsRun:
         J = s.gap_jacobian(q)
         hitting = [int(j) for j in closed if J[j] @ v < 0]
         if not hitting:
-            _fail_zeno(self.opts, self.samples, f"event_driven: contacts {closed.tolist()} "
-                              f"are closed at t = {t:.12g} with zero normal velocity and pushed "
-                              "inwards (persistent contact), which is supported for linear "
-                              "systems only", t, **finish)
+            _fail_zeno(f"event_driven: contacts {closed.tolist()} are closed at t = {t:.12g} "
+                       "with zero normal velocity and pushed inwards (persistent contact), "
+                       "which is supported for linear systems only", t)
         if self.zeno.n_events > self.opts.max_events:
-            _fail_budget(self.opts, self.samples, t, self.zeno.n_events, **finish)
+            _fail_budget(self.opts, t, self.zeno.n_events)
         if any(
                 self.zeno.too_close(j, t) or self.zeno.add(j, t) is not None for j in hitting):
-            _fail_zeno(self.opts, self.samples, f"event_driven: impacts of contacts "
-                              f"{hitting} accumulate near t = {t:.12g}; persistent contact "
-                              "is supported for linear systems only", t, **finish)
+            _fail_zeno(f"event_driven: impacts of contacts {hitting} accumulate near "
+                       f"t = {t:.12g}; persistent contact is supported for linear systems "
+                       "only", t)
         res = self.law.apply(s.mass_matrix(q), J.T, v, closed)
         xp = np.concatenate([q, res.v_plus])
         for j in hitting:

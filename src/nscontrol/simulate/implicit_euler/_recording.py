@@ -49,4 +49,4 @@ def warn_degenerate(jac: Any) -> None:
                   f"law's graph (first at t = {jac.first_degenerate_time:.6g}), where the "
                   f"discrete map is not differentiable; stats['state_transition'] uses the "
                   f"constraint-active one-sided derivative there", NscontrolWarning,
-                  stacklevel=4)
+                  stacklevel=5)   # integrate (under end, _recorded_run, drive)

@@ -1,6 +1,6 @@
 """A run of implicit Euler as the stepper :func:`~nscontrol.simulate.loop.drive` advances: the
-initial sample, then one chunk of steps per :meth:`Run.advance` (recorded at once), then the
-trajectory at :meth:`Run.finish`.
+initial sample into the run's record (:meth:`Run.start`), then one chunk of steps per
+:meth:`Run.advance` (appended at once), then the statistics at :meth:`Run.end`.
 
 A chunk is ``2**16`` steps of the plant alone (a few milliseconds of compiled work) and
 ``2**13`` with a closed loop's blocks (a block call per step), so an interrupt is seen well
@@ -20,8 +20,8 @@ import numpy as np
 from ..._validation import FloatArray
 from ...errors import SolverError
 from .._block_runner import CompiledBlocks
-from ..loop import END, Stop
-from ..trajectory import Recorder, Trajectory
+from ..loop import END, Recording, Stop
+from ..trajectory import Recorder
 from ._inclusion import initial_multiplier
 from ._law_data import law_parts
 from ._options import SIGNALS, ImplicitEulerOptions
@@ -36,7 +36,8 @@ _BLOCK_CHUNK = 1 << 13
 
 
 class Run:
-    """One run: the recorder, the chunk solver, the loop's blocks, the optional sensitivity.
+    """One run: the chunk solver, the loop's blocks, the optional sensitivity (a
+    :class:`~nscontrol.simulate.loop.Stepper`: the loop holds its record).
 
     Parameters
     ----------
@@ -49,18 +50,21 @@ class Run:
     n_steps : int
         The number of steps of the span.
     x0 : ndarray
-        The initial state (recorded at once, with its multiplier).
+        The initial state (recorded first, with its multiplier).
     t0 : float
         The initial time.
     """
+
+    rec: Recorder
 
     def __init__(self, system: Any, setup: Setup, opts: ImplicitEulerOptions, n_steps: int,
                  x0: FloatArray, t0: float) -> None:
         self.system, self.opts, self.n_steps, self.t0 = system, opts, n_steps, t0
         self.plan, self.h = setup.plan, setup.mats.h
-        self.rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
-                            offered=SIGNALS,
-                            capacity=Recorder.capacity_for(n_steps + 2, opts.record_every))
+        self.recording = Recording(
+            system.n_states, every=opts.record_every, signals=opts.signals, offered=SIGNALS,
+            capacity=Recorder.capacity_for(n_steps + 2, opts.record_every),
+            state_names=system.state_names)
         self.steps = Steps(system, setup)
         # the loop's blocks: compiled in the closed form's loop when they can be
         self.runner, self.compiled = opts.blocks, None
@@ -72,9 +76,13 @@ class Run:
             from ._lure_sensitivity import StepJacobians
 
             self.jac = StepJacobians(system, setup.mats, self.plan.D, law_parts(system.law))
-        z0, w0 = initial_multiplier(system, x0, t0)
-        self.rec.sample(t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
         self.x, self.done = x0, 0
+
+    def start(self, rec: Recorder) -> None:
+        """Record the initial state with its multiplier into ``rec``, the run's record."""
+        self.rec, system, x0 = rec, self.system, self.x
+        z0, w0 = initial_multiplier(system, x0, self.t0)
+        rec.sample(self.t0, x0, force=True, z=z0, w=w0, y=system.C @ x0)
 
     def advance(self) -> float | Stop:
         """Run and record the next chunk of steps; the time reached, or a :class:`Stop`."""
@@ -117,13 +125,15 @@ class Run:
         self.done += k
         return Stop(status=-1, message=str(exc), error_status=exc.status)
 
-    def finish(self, stop: Stop) -> Trajectory:
-        """The trajectory of the run that ended with ``stop``."""
+    def settle(self) -> None:
+        """Nothing is held back: each chunk is recorded as it ends, its last step kept."""
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The statistics of the run that ended with ``stop`` (and the warning about steps at
+        a corner of the law's graph)."""
         if stop.status >= 0 and self.jac is not None and self.jac.degenerate_steps:
             warn_degenerate(self.jac)
-        return self.rec.finish(status=stop.status, message=stop.message,
-                               method="implicit_euler", stats=self.stats(),
-                               state_names=self.system.state_names)
+        return self.stats()
 
     def stats(self) -> dict[str, Any]:
         """``traj.stats`` of the run so far (see :func:`~.integrate`)."""

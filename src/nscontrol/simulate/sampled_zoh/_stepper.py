@@ -19,8 +19,8 @@ from numpy.typing import ArrayLike
 from ..._validation import FloatArray, as_vector
 from ...errors import DimensionError, ModelError
 from .._block_runner import BlockRunner, CompiledBlocks
-from ..loop import END, Stop, tick_count
-from ..trajectory import Recorder, Trajectory
+from ..loop import END, Recording, Stop, tick_count
+from ..trajectory import Recorder
 
 __all__ = ["ZOHStepper", "check_loop", "zoh_setup", "CHUNK", "SIGNALS", "MAX_TICKS"]
 
@@ -111,7 +111,10 @@ def _ticks(t0: float, tf: float, T: float) -> int:
 
 class ZOHStepper:
     """One run: the exact step, the blocks (compiled or Python), the kept rows; a chunk of
-    ticks per :meth:`advance`."""
+    ticks per :meth:`advance`, appended to the run's record (a
+    :class:`~nscontrol.simulate.loop.Stepper`)."""
+
+    rec: Recorder
 
     def __init__(self, loop: Any, x0: ArrayLike, t_span: tuple[float, float], every: int,
                  signals: tuple[str, ...] | None) -> None:
@@ -131,12 +134,18 @@ class ZOHStepper:
         self.out = (np.empty(rows), np.empty((rows, self.n)), np.empty(rows),
                     np.empty((rows, self.runner.n_inputs)), np.empty((rows, n_xc)))
         self.count = np.zeros(2, dtype=np.int64)  # [ticks done, rows kept in this chunk]
-        self.rec = Recorder(self.n, signals=signals, offered=SIGNALS if n_xc else SIGNALS[:2],
-                            capacity=Recorder.capacity_for(self.n_ticks + 1, self.every))
+        self.recording = Recording(   # every=1: the kernel keeps one tick in ``every``
+            self.n, signals=signals, offered=SIGNALS if n_xc else SIGNALS[:2],
+            capacity=Recorder.capacity_for(self.n_ticks + 1, every),
+            state_names=tuple(plant.state_names))
         if self.blocks is not None:
             ks = self.blocks.kernel_state()
             self.addresses = np.array([f.__wrapper_address__() for f in (*ks[1], *ks[7])],
                                       dtype=np.int64)
+
+    def start(self, rec: Recorder) -> None:
+        """Keep the run's record (the first tick is the first chunk's first row)."""
+        self.rec = rec
 
     def advance(self) -> float | Stop:
         """The next chunk of ticks, recorded (the last chunk adds the sample at the last
@@ -211,9 +220,10 @@ class ZOHStepper:
         else:
             self.rec.extend(t, x, s=s, u=u)
 
-    def finish(self, stop: Stop) -> Trajectory:
-        """The trajectory of the run (``stop``: the end of the span)."""
-        stats = {"steps": self.n_ticks, "period": self.T,
-                 "controller": "python" if self.blocks is None else "compiled"}
-        return self.rec.finish(status=stop.status, message=stop.message, method="sampled_zoh",
-                               stats=stats, state_names=self.plant.state_names)
+    def settle(self) -> None:
+        """Nothing is held back: each chunk's rows are recorded as it ends."""
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics (``stop``: the end of the span)."""
+        return {"steps": self.n_ticks, "period": self.T,
+                "controller": "python" if self.blocks is None else "compiled"}
