@@ -23,7 +23,7 @@ is the same for every method:
   :meth:`~nscontrol.simulate.trajectory.Recorder.chunk`), and keeps a piece short enough (a
   few milliseconds of compiled work) that an interrupt is seen well within 0.2 s.
 
-A stepper without a ``recording`` attribute (``moreau_jean`` and ``switching`` for now) still
+A stepper without a ``recording`` attribute (``moreau_jean``, for now) still
 builds its own recorder and freezes it in its ``finish(stop)``; :func:`drive` runs it the same
 way, the driver's run context keeping its partial samples.
 
@@ -112,7 +112,8 @@ class Recording:
 class Stepper(Protocol):
     """What a method gives :func:`drive`: the recording it declares and four calls, in this
     order: :meth:`start` once, :meth:`advance` until it stops, then :meth:`settle` and
-    :meth:`end` (:meth:`settle` alone when the run ends by an exception)."""
+    :meth:`end` (also when an exception ends the run: :meth:`end` then gets a stop with
+    status -1 and its statistics go with the partial trajectory)."""
 
     recording: Recording
 
@@ -134,12 +135,13 @@ class Stepper(Protocol):
 
     def end(self, stop: Stop) -> Mapping[str, Any]:
         """The run ended with ``stop``: its statistics (``traj.stats``); release what the
-        run borrowed."""
+        run borrowed. After an exception (``stop.status == -1``) it may be called mid-piece:
+        if it cannot say, it raises and the partial trajectory has no statistics."""
         ...
 
 
 class LegacyStepper(Protocol):
-    """A stepper that records by itself (``moreau_jean``, ``switching``, until they are
+    """A stepper that records by itself (``moreau_jean``, until it is
     ported to :class:`Stepper`): it builds its own recorder and freezes it."""
 
     def advance(self) -> float | Stop:
@@ -237,8 +239,12 @@ def _keep_partial(err: BaseException, stepper: Any, rec: Recorder, recording: Re
         return
     library = isinstance(err, NscontrolError)
     message = str(err) if library else f"interrupted by {type(err).__name__}: {err}"
+    try:        # the statistics of the part run (steps spent, events...), when it can say
+        stats = dict(stepper.end(Stop(-1, message)))
+    except Exception:  # noqa: BLE001 - a stepper stopped mid-piece may hold no statistics
+        stats = {}
     traj = rec.snapshot(status=-1, message=message, method=desc,
-                        state_names=recording.state_names)
+                        state_names=recording.state_names, stats=stats)
     attach_partial(err, traj, note=not library)
 
 

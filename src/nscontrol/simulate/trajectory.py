@@ -701,10 +701,11 @@ class Recorder:
         return self._n
 
     def snapshot(self, *, status: int = -1, message: str | None = None,
-                 method: str = "", state_names: Sequence[str] = ()) -> Trajectory:
+                 method: str = "", state_names: Sequence[str] = (),
+                 stats: Mapping[str, Any] | None = None) -> Trajectory:
         """The samples and events recorded so far as a :class:`Trajectory` (the recorder goes
         on; used for the partial trajectory of a run that fails)."""
-        return self._freeze(status, message, method, {}, state_names)
+        return self._freeze(status, message, method, dict(stats or {}), state_names)
 
     @contextmanager
     def chunk(self, record: Callable[[ChunkProgress], None]) -> Iterator[ChunkProgress]:

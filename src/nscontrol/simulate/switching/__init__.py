@@ -72,10 +72,10 @@ from typing import TYPE_CHECKING, Any
 from numpy.typing import ArrayLike
 
 from ..._validation import as_vector
-from ...errors import ModelError, NscontrolError
+from ...errors import ModelError
 from ..loop import drive
 from ..trajectory import Trajectory
-from ._run import SwitchingOptions, SwitchingRun, saltation_matrix
+from ._run import SwitchingDrive, SwitchingOptions, SwitchingRun, saltation_matrix
 
 if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
     from ...systems.nonlinear import NonlinearSystem
@@ -133,17 +133,12 @@ def integrate(system: PiecewiseAffineSystem | FilippovSystem | SwitchedAffineSys
     >>> [e.kind for e in tr.events], tr.stats["saltation_matrices"].shape
     (['sliding_start'], (1, 2, 2))
     """
-    stepper_for = _stepper_for(system)
+    stepper_for = _stepper_for(system)   # an unsupported system is refused first
     opts = SwitchingOptions.parse(options)
     x0 = as_vector("x0", x0, system.n_states)
     run = SwitchingRun(system, x0, t_span, opts)
-    try:
-        return drive(stepper_for(system, x0, run), t_span, desc="switching",
-                     progress=opts.progress)
-    except NscontrolError as exc:
-        if exc.trajectory is None:
-            exc.trajectory = run.finish(status=-1, message=str(exc))
-        raise
+    return drive(SwitchingDrive(stepper_for, system, x0, run), t_span, desc="switching",
+                 progress=opts.progress)
 
 
 def _stepper_for(system: Any) -> Any:

@@ -27,8 +27,8 @@ from ..._validation import (
 )
 from ...errors import BudgetExceededError, ModelError, SolverError, ZenoError
 from ...numerics.saltation import saltation_matrix as _saltation
-from ..loop import Stop
-from ..trajectory import Recorder, Trajectory
+from ..loop import Recording, Stop
+from ..trajectory import Recorder
 
 __all__ = ["SwitchingOptions", "SwitchingRun", "SwitchingStepper", "saltation_matrix"]
 
@@ -161,7 +161,7 @@ class SwitchingRun:
         self.spent: str | None = None      # the budget a DOP853 piece stopped on
         self.status: int = 0
         self.message: str | None = None
-        self.rec = Recorder(self.n, offered=())   # states and events only, no signals
+        self.rec: Recorder       # the run's record, given by drive (SwitchingDrive.start)
         self.Phi = np.eye(self.n)
         self.saltations: list[FloatArray] = []
         self.counts: dict[str, int] = {}
@@ -251,17 +251,44 @@ class SwitchingRun:
             raise ZenoError(f"switching: 50 consecutive events at t = {t:.12g} without "
                             f"progress (Zeno point or an undecidable mode)", time=t)
 
-    def finish(self, status: int = 0, message: str | None = None,
-               extra: dict[str, Any] | None = None) -> Trajectory:
+    def stats(self, extra: dict[str, Any]) -> dict[str, Any]:
+        """The run's statistics (``traj.stats``), with the runner's own ``extra``."""
         stats: dict[str, Any] = {"events": self.n_events, "steps": self.steps,
                                  **{f"n_{k}": v for k, v in self.counts.items()}}
-        stats.update(extra or {})
+        stats.update(extra)
         if self.sensitivity:
             stats["state_transition"] = self.Phi.copy()
             stats["saltation_matrices"] = (np.array(self.saltations) if self.saltations
                                            else np.zeros((0, self.n, self.n)))
-        return self.rec.finish(status=status, message=message, method="switching", stats=stats,
-                               state_names=getattr(self.system, "state_names", ()))
+        return stats
+
+
+class SwitchingDrive:
+    """A switching run as :func:`~nscontrol.simulate.loop.drive`'s stepper: it records
+    states and events (no signals) into the record ``drive`` holds, the runner (built by
+    ``make(system, x0, run)`` at :meth:`start`, when it records its first sample) running
+    the pieces."""
+
+    def __init__(self, make: Any, system: Any, x0: FloatArray, run: SwitchingRun) -> None:
+        self.make, self.system, self.x0, self.run = make, system, x0, run
+        self.recording = Recording(run.n, offered=(),
+                                   state_names=tuple(getattr(system, "state_names", ())))
+        self.runner: SwitchingStepper | None = None
+
+    def start(self, rec: Recorder) -> None:
+        self.run.rec = rec
+        self.runner = self.make(self.system, self.x0, self.run)
+
+    def advance(self) -> float | Stop:
+        assert self.runner is not None
+        return self.runner.advance()
+
+    def settle(self) -> None:
+        """Nothing held back: a runner records each piece as it ends."""
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        assert self.runner is not None
+        return self.run.stats(self.runner.extra())
 
 
 class SwitchingStepper:
@@ -296,9 +323,6 @@ class SwitchingStepper:
         if run.rec.last_time < run.tf and run.status == 0:
             run.rec.sample(run.tf, self.state(), force=True)
         return Stop(run.status, run.message)
-
-    def finish(self, stop: Stop) -> Trajectory:
-        return self.run.finish(status=stop.status, message=stop.message, extra=self.extra())
 
 
 #: A DOP853 piece's first step is at least this many ``min_rel_step`` floors of the span.
