@@ -1,6 +1,6 @@
 """Moreau–Jean on a Lagrangian system with a compiled model (``system.compiled``): the
-runner of the compiled loop :func:`~nscontrol.simulate._mj_compiled_kernels.mj_model_steps`,
-whose step is the Python path's (:func:`~nscontrol.simulate._moreau_jean_kernels.mj_step`),
+runner of the compiled loop :func:`~nscontrol.simulate.moreau_jean._model_kernels.mj_model_steps`,
+whose step is the Python path's (:func:`~nscontrol.simulate.moreau_jean._step_kernels.mj_step`),
 optionally with the compiled blocks of a closed loop (``CompiledBlocks.of`` the loop's block
 runner). The run of :func:`nscontrol.simulate.moreau_jean.integrate` drives it as any other
 runner.
@@ -54,7 +54,7 @@ class ModelRunner(Runner):
 
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
         from ...systems._feedback_kernels import calling_blocks
-        from .._mj_compiled_kernels import mj_model_steps
+        from ._model_kernels import mj_model_steps
 
         s, o, size = self.system, self.opts, times.size
         n, m = s.n_dof, s.n_contacts
@@ -78,7 +78,7 @@ class ModelRunner(Runner):
 
     def failure(self, code: int, t: float, state: RunState) -> str:
         """A block's failure is raised (the run context attaches the steps so far)."""
-        from .._mj_compiled_kernels import BLOCKS, MODEL_ERROR, SINGULAR
+        from ._model_kernels import BLOCKS, MODEL_ERROR, SINGULAR
 
         if code >= BLOCKS:
             self.blocks.raise_status(int(code - BLOCKS), t)
@@ -106,7 +106,7 @@ class ModelRunner(Runner):
 
 def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
                      ) -> dict[str, Any]:
-    from .._mj_compiled_kernels import gap_rows, kinetic_energy_rows, potential_rows
+    from ._model_kernels import gap_rows, kinetic_energy_rows, potential_rows
 
     out: dict[str, Any] = {}
     if rec.wants("impulse"):

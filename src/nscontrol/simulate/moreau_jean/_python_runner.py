@@ -1,6 +1,6 @@
 """The Python path of Moreau–Jean: ``M(q)``, a ``force`` callable or nonlinear gaps evaluated
 in Python at every step, the step itself by the compiled
-:func:`~nscontrol.simulate._moreau_jean_kernels.mj_step` (the compiled-model loop's own).
+:func:`~nscontrol.simulate.moreau_jean._step_kernels.mj_step` (the compiled-model loop's own).
 """
 
 from __future__ import annotations
@@ -58,8 +58,8 @@ class PythonRunner(Runner):
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The contacts predicted to close, ``g + γ h G v <= activation`` (the step's
-        own test, :func:`~._moreau_jean_kernels.active_set`)."""
-        from .._moreau_jean_kernels import active_set
+        own test, :func:`~._step_kernels.active_set`)."""
+        from ._step_kernels import active_set
 
         o = self.opts
         na = active_set(self.gap_jacobian(q), self.gaps(q), v, o.gamma, o.h, o.activation,
@@ -69,7 +69,7 @@ class PythonRunner(Runner):
     def step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
              outs: tuple[FloatArray, FloatArray, FloatArray], k: int) -> int:
         """One step from ``(q, v)`` at ``t`` into row ``k``; returns the LCP's status."""
-        from .._moreau_jean_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
+        from ._step_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
 
         s, o = self.system, self.opts
         h, th = o.h, o.theta
@@ -123,6 +123,6 @@ def _checked_force(system: Any, t: float, q: FloatArray, v: FloatArray) -> Float
 
 
 def _model_error() -> int:
-    from .._moreau_jean_kernels import MODEL_ERROR
+    from ._step_kernels import MODEL_ERROR
 
     return int(MODEL_ERROR)

@@ -130,7 +130,7 @@ class Run:
 
     def _failure(self, code: int, t_fail: float) -> str:
         """The message of a run stopped by ``code``; a model error is raised here."""
-        from .._moreau_jean_kernels import MODEL_ERROR
+        from ._step_kernels import MODEL_ERROR
 
         message = self.runner.failure(code, t_fail, self.state)
         if code == MODEL_ERROR:

@@ -4,7 +4,7 @@ gaps), optionally closed by compiled blocks (:func:`~nscontrol.simulate._block_k
 step_blocks`).
 
 Each step evaluates the model's functions and takes the one step of the Python path,
-:func:`~nscontrol.simulate._moreau_jean_kernels.mj_step` (implicit linearised forces, ``M``
+:func:`~nscontrol.simulate.moreau_jean._step_kernels.mj_step` (implicit linearised forces, ``M``
 at ``q_k`` or at the predicted ``q_k + θ h v_k``, the active set ``g + γ h G v <=
 activation``, one contact in closed form, more by Lemke). With blocks, at every step start
 they read ``y = C x``, ``λ̂ = P_{k-1} / h`` and their input ``u`` enters as ``S u``; after a
@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._block_kernels import reset_blocks, step_blocks
-from ._moreau_jean_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
+from .._block_kernels import reset_blocks, step_blocks
+from ._step_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
 
 __all__ = ["BLOCKS", "MODEL_ERROR", "SINGULAR", "mj_model_steps"]
 

@@ -19,7 +19,7 @@ Three kernels take this step:
   docstring of :mod:`nscontrol.simulate.moreau_jean`): ``M``, ``f``, ``∂f/∂q``, ``∂f/∂v``,
   ``G`` and ``g`` evaluated by the caller at the step's start. The one source of the step of
   both the Python path (user callables, one call a step) and the compiled-model loop
-  (:func:`~nscontrol.simulate._mj_compiled_kernels.mj_model_steps`).
+  (:func:`~nscontrol.simulate.moreau_jean._model_kernels.mj_model_steps`).
 
 The first two write every step of a chunk into caller-provided arrays and return
 ``(steps_done, status_code)`` (status as the LCP kernels; 0 = all steps done). The active
@@ -32,8 +32,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lcp_kernels import lemke_kernel, tridiagonal_lcp_kernel
-from ._mj_linearised_kernel import mj_linearised_kernel
+from ...numerics._lcp_kernels import lemke_kernel, tridiagonal_lcp_kernel
+from ._linearised_kernels import mj_linearised_kernel
 
 #: Status of a step stopped by the model (``M(q)`` not positive definite).
 MODEL_ERROR = -2
