@@ -200,8 +200,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
         "systems._two_link_kernels", "design._friction_compensation_kernels",
         "simulate._block_kernels", "simulate.implicit_euler._lure_kernels",
-        "simulate.moreau_jean._model_kernels",
-        "simulate.moreau_jean._step_kernels", "simulate.moreau_jean._linearised_kernels", "numerics._lcp_kernels",
+        "simulate.moreau_jean._model_kernels", "simulate.moreau_jean._step_kernels",
+        "simulate.moreau_jean._linearised_kernels", "numerics._lcp_kernels",
         "design._complementarity_tracking_kernels"),
 }
 
