@@ -39,6 +39,9 @@ class ModelRunner(Runner):
         self.block_args = (True, blocks.Cy, *_with_resets(blocks)) if blocks is not None \
             else _no_blocks(system, self.Su.shape[1])
         self.info = np.zeros(2)
+        #: what the system's structure makes constant over a run (the kernel's docstring)
+        self.structure = (bool(system.constant_mass), system.force is not None,
+                          system.gap_matrix is not None)
 
     def for_step(self, h: float) -> Runner:
         runner = ModelRunner.__new__(ModelRunner)
@@ -65,8 +68,9 @@ class ModelRunner(Runner):
             done, code = mj_model_steps(  # type: ignore[call-arg]  # numba's stub
                 self.model, self.cm.params, self.K, self.D, s.constant_force, self.Su,
                 s.restitution, o.h, o.theta, o.gamma, o.activation, o.mass_at == "predicted",
-                times, state.q, state.v, state.p_prev.copy(), np.ascontiguousarray(fext),
-                *self.block_args, XO, XC, U, q_out, v_out, p_out, self.info)
+                self.structure, times, state.q, state.v, state.p_prev.copy(),
+                np.ascontiguousarray(fext), *self.block_args, XO, XC, U, q_out, v_out, p_out,
+                self.info)
         if self.blocks is not None:
             self.blocks.log(times[:done], XO[:done], XC[:done], U[:done])
         if done:

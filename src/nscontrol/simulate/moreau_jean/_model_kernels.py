@@ -10,9 +10,16 @@ activation``, one contact in closed form, more by Lemke). With blocks, at every 
 they read ``y = C x``, ``λ̂ = P_{k-1} / h`` and their input ``u`` enters as ``S u``; after a
 step whose impulse rises on an approaching contact they are reset.
 
+What the system's structure makes constant is evaluated once per call, at its first step
+(``structure = (constant_mass, with_force, affine_gaps)``, from the system): a constant
+mass (evaluated and checked positive definite once), the gaps' Jacobian of affine gaps,
+and, for a constant mass without a nonlinear force, ``M̂`` itself (inverted once). The
+values are those every step would compute again: the run is the same to the last bit.
+
 Return codes: 0, the LCP kernel's status (1-3), ``MODEL_ERROR`` (``M(q)`` not positive
-definite, a non-finite force or Jacobian: ``info = [t]``), ``SINGULAR`` (``rcond`` in
-``info[1]``), ``BLOCKS + status`` (a block's status, :mod:`._block_kernels`).
+definite, a non-finite force or Jacobian, a model value of the wrong size: ``info = [t]``),
+``SINGULAR`` (``rcond`` in ``info[1]``), ``BLOCKS + status`` (a block's status,
+:mod:`._block_kernels`).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from .._block_kernels import reset_blocks, step_blocks
-from ._step_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
+from ._step_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite, step_workspace
 
 __all__ = ["BLOCKS", "MODEL_ERROR", "SINGULAR", "mj_model_steps"]
 
@@ -37,9 +44,20 @@ def _finite(a):
 
 
 @njit(cache=True, inline="always")
-def _model_forces(model, params, K, D, f0, t, q, v, f, Jq, Jv):
-    """``f = f0 - K q - D v + force(t, q, v)`` and its Jacobians ``Jq``, ``Jv`` (the model's
-    ``force_jacobian`` minus ``K``, ``D``); False when a value is not finite."""
+def _copy_into(out, value):
+    """``out[...] = value`` when the shapes agree (False otherwise: a model function that
+    raised returns an empty array, whose error the caller raises once the loop returns)."""
+    if value.shape != out.shape:
+        return False
+    out[:, :] = value
+    return True
+
+
+@njit(cache=True, inline="always")
+def _model_forces(model, params, K, D, f0, t, q, v, with_force, f, Jq, Jv):
+    """``f = f0 - K q - D v + force(t, q, v)`` and, with a nonlinear force, its Jacobians
+    ``Jq``, ``Jv`` (the model's ``force_jacobian`` minus ``K``, ``D``; without one they are
+    ``-K``, ``-D``, set once by the caller); False when a value is not finite."""
     n = q.shape[0]
     for i in range(n):
         f[i] = f0[i]
@@ -53,10 +71,14 @@ def _model_forces(model, params, K, D, f0, t, q, v, f, Jq, Jv):
         for j in range(n):
             s += D[i, j] * v[j]
         f[i] -= s
+    if not with_force:
+        return _finite(f)
     fn = model[1][0](t, q, v, params)
+    J = model[2][0](t, q, v, params)
+    if fn.size != n or J.shape != (2 * n, n):
+        return False
     for i in range(n):
         f[i] += fn[i]
-    J = model[2][0](t, q, v, params)
     if not (_finite(f) and _finite(J)):
         return False
     for i in range(n):
@@ -67,20 +89,47 @@ def _model_forces(model, params, K, D, f0, t, q, v, f, Jq, Jv):
 
 
 @njit(cache=True)
-def _blocks_input(k, t, q, v, h, p_prev, S, f_in, Cy, has_obs, obs_fns, obs_params,
-                  obs_period, xo, xhat, has_ctrl, ctrl_fns, ctrl_params, ctrl_period, xc, u,
-                  prev_y, prev_x, prev_xhat, prev_lam, sched, XO, XC, U):
-    """Step the blocks at ``t`` (they read ``y = C x`` and ``λ̂ = P_{k-1} / h``), log them
-    in row ``k`` and add ``S u`` to ``f_in``; returns the blocks' status."""
+def _evaluate_model(model, params, K, D, f0, t, h, theta, q, v, predicted, structure, first,
+                    M, G, f, Jq, Jv, qm, L):
+    """The model's terms at the step start ``t``, into ``M`` (at ``q`` or at the predicted
+    ``q + θ h v``), ``G``, ``f``, ``Jq`` and ``Jv``; what ``structure`` makes constant only
+    at the ``first`` step. False when ``M`` is not positive definite or a value is not
+    finite or of the wrong size."""
+    constant_mass, with_force, affine_gaps = structure
+    if first or not constant_mass:
+        for i in range(q.shape[0]):
+            qm[i] = q[i] + h * theta * v[i] if predicted else q[i]
+        if not (_copy_into(M, model[0][0](qm, params)) and positive_definite(M, L)):
+            return False
+    if first or not affine_gaps:
+        if not _copy_into(G, model[4][0](q, params)):
+            return False
+    if first and not with_force:       # linear forces: constant Jacobians
+        for i in range(q.shape[0]):
+            for j in range(q.shape[0]):
+                Jq[i, j] = 0.0 - K[i, j]
+                Jv[i, j] = 0.0 - D[i, j]
+    return _model_forces(model, params, K, D, f0, t + h * theta, q, v, with_force, f, Jq, Jv)
+
+
+@njit(cache=True)
+def _blocks_input(k, t, q, v, h, p_prev, S, f_in, Cy, x, y, lam, has_obs, obs_fns,
+                  obs_params, obs_period, xo, xhat, has_ctrl, ctrl_fns, ctrl_params,
+                  ctrl_period, xc, u, prev_y, prev_x, prev_xhat, prev_lam, sched, XO, XC, U):
+    """Step the blocks at ``t`` (they read ``y = C x`` and ``λ̂ = P_{k-1} / h``, formed in
+    the workspaces ``x``, ``y``, ``lam``), log them in row ``k`` and add ``S u`` to
+    ``f_in``; returns the blocks' status."""
     n = q.shape[0]
-    x = np.concatenate((q, v))
-    y = np.empty(Cy.shape[0])
+    for i in range(n):
+        x[i] = q[i]
+        x[n + i] = v[i]
     for i in range(Cy.shape[0]):
         s = 0.0
         for j in range(2 * n):
             s += Cy[i, j] * x[j]
         y[i] = s
-    lam = p_prev / h
+    for j in range(p_prev.shape[0]):
+        lam[j] = p_prev[j] / h
     status = step_blocks(t, x, y, lam, has_obs, obs_fns, obs_params, obs_period, xo, xhat,
                          has_ctrl, ctrl_fns, ctrl_params, ctrl_period, xc, u, prev_y, prev_x,
                          prev_xhat, prev_lam, sched)
@@ -109,52 +158,44 @@ def _approaching(p_out, k, p_prev, un):
 
 @njit(cache=True)
 def mj_model_steps(model, params, K, D, f0, S, e, h, theta, gamma, activation, predicted,
-                   times, q0, v0, p_prev, fext, has_blocks, Cy, has_obs, obs_fns, obs_reset,
-                   obs_params, obs_period, xo, xhat, has_ctrl, ctrl_fns, ctrl_reset,
+                   structure, times, q0, v0, p_prev, fext, has_blocks, Cy, has_obs, obs_fns,
+                   obs_reset, obs_params, obs_period, xo, xhat, has_ctrl, ctrl_fns, ctrl_reset,
                    ctrl_params, ctrl_period, xc, u, prev_y, prev_x, prev_xhat, prev_lam,
                    sched, XO, XC, U, q_out, v_out, p_out, info):
     """Steps from ``(q0, v0)`` at ``times`` (step starts); ``model = ((mass,), (force,),
-    (force_jacobian,), (gaps,), (gap_jacobian,))`` first-class functions; ``fext`` rows
-    ``S u(t_k)`` of an open-loop input (one row: held). Writes ``q_out``, ``v_out``,
-    ``p_out`` (and the blocks' logs); ``p_prev`` holds the last impulses on return.
-    Returns ``(steps done, code)``."""
-    n = q0.size
-    m = e.size
-    q = q0.copy()
-    v = v0.copy()
-    f_in = np.empty(n)
-    minv = np.empty((n, n))
-    f = np.empty(n)
-    Jq = np.empty((n, n))
-    Jv = np.empty((n, n))
-    un = np.empty(m)
-    act = np.empty(m, np.int64)
-    qm = np.empty(n)
-    dv = np.empty(n)
-    mgt = np.empty((n, m))
+    (force_jacobian,), (gaps,), (gap_jacobian,))`` first-class functions, ``structure``
+    (module docstring); ``fext`` rows ``S u(t_k)`` of an open-loop input (one row: held).
+    Writes ``q_out``, ``v_out``, ``p_out`` (and the blocks' logs); ``p_prev`` holds the
+    last impulses on return. Returns ``(steps done, code)``."""
+    n, m = q0.size, e.size
+    q, v = q0.copy(), v0.copy()
+    f_in, f, qm, dv, x = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(2 * n)
+    M, L, minv = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    Jq, Jv, G, mgt = np.empty((n, n)), np.empty((n, n)), np.empty((m, n)), np.empty((n, m))
+    un, lam, act = np.empty(m), np.empty(m), np.empty(m, np.int64)
+    y, work = np.empty(Cy.shape[0]), step_workspace(n, m)
+    constant_hat = structure[0] and not structure[1]     # M̂ inverted once
+    rcond = -1.0
     for k in range(times.size):
         t = times[k]
         row = k if k < fext.shape[0] else fext.shape[0] - 1
         for i in range(n):
             f_in[i] = fext[row, i]
         if has_blocks:
-            status = _blocks_input(k, t, q, v, h, p_prev, S, f_in, Cy, has_obs, obs_fns,
-                                   obs_params, obs_period, xo, xhat, has_ctrl, ctrl_fns,
-                                   ctrl_params, ctrl_period, xc, u, prev_y, prev_x, prev_xhat,
-                                   prev_lam, sched, XO, XC, U)
+            status = _blocks_input(k, t, q, v, h, p_prev, S, f_in, Cy, x, y, lam, has_obs,
+                                   obs_fns, obs_params, obs_period, xo, xhat, has_ctrl,
+                                   ctrl_fns, ctrl_params, ctrl_period, xc, u, prev_y, prev_x,
+                                   prev_xhat, prev_lam, sched, XO, XC, U)
             if status != 0:
                 return k, BLOCKS + status
-        for i in range(n):
-            qm[i] = q[i] + h * theta * v[i] if predicted else q[i]
-        M = model[0][0](qm, params)
         info[0] = t
-        if not positive_definite(M):
+        if not _evaluate_model(model, params, K, D, f0, t, h, theta, q, v, predicted,
+                               structure, k == 0, M, G, f, Jq, Jv, qm, L):
             return k, MODEL_ERROR
-        if not _model_forces(model, params, K, D, f0, t + h * theta, q, v, f, Jq, Jv):
-            return k, MODEL_ERROR
-        code, rcond, _ = mj_step(M, f, Jq, Jv, f_in, model[4][0](q, params),
-                                 model[3][0](q, params), q, v, e, h, theta, gamma, activation,
-                                 minv, dv, un, act, mgt, p_out, q_out, v_out, k)
+        code, rcond, _ = mj_step(M, f, Jq, Jv, f_in, G, model[3][0](q, params), q, v, e, h,
+                                 theta, gamma, activation, minv,
+                                 rcond if constant_hat and k > 0 else -1.0, dv, un, act, mgt,
+                                 work, p_out, q_out, v_out, k)
         if code:
             info[1] = rcond
             return k, code
