@@ -161,7 +161,7 @@ class Run:
         traj = rec.finish(status=stop.status, message=stop.message, method="moreau_jean",
                           stats=stats, state_names=system.state_names)
         if "gap" in traj.signals and traj.signals["gap"].size:
-            traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
+            traj.stats["max_penetration"] = float(max(0.0, -traj.signals["gap"].min()))
         return traj
 
 
