@@ -28,7 +28,7 @@ def _kernel_modules_on_disk():
 
 def test_there_are_kernel_modules():
     assert {"numerics._lcp_kernels", "simulate.implicit_euler._lure_lcp_kernels",
-            "simulate._mj_linearised_kernel"} <= _kernel_modules_on_disk()
+            "simulate.moreau_jean._linearised_kernels"} <= _kernel_modules_on_disk()
 
 
 def test_warmup_declares_every_kernel_module():
@@ -79,7 +79,8 @@ print(json.dumps({"gained": gained, "failed": failed, "final": before}))
 @pytest.mark.slow
 def test_warmup_compiles_every_kernel_module(tmp_path):
     # a cold cache of its own: loading a caller from a warm cache does not load the kernels it
-    # calls (a module reached only that way, e.g. _mj_linearised_kernel, showed 0 signatures)
+    # calls (a module reached only that way, e.g. moreau_jean._linearised_kernels, showed 0
+    # signatures)
     modules = sorted(_kernel_modules_on_disk())
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     env.pop("NUMBA_DISABLE_JIT", None)

@@ -329,7 +329,7 @@ def test_forces_and_mass_at_options_are_validated() -> None:
 
 
 def test_linearised_kernel_inverts_and_measures_like_numpy(rng) -> None:
-    from nscontrol.simulate._mj_linearised_kernel import mj_linearised_kernel
+    from nscontrol.simulate.moreau_jean._linearised_kernels import mj_linearised_kernel
 
     for n in (1, 2, 6):
         A = rng.standard_normal((n, n))

@@ -183,8 +183,8 @@ STEPS: list[tuple[str, Callable[[], Any]]] = [
 COMPILES: dict[str, tuple[str, ...]] = {
     "LCP solvers": ("numerics._lcp_kernels", "numerics._lcp_dispatch_kernels"),
     "event-driven and Moreau-Jean mechanics": (
-        "numerics._lti_kernels", "simulate._event_kernels", "simulate._moreau_jean_kernels",
-        "simulate._mj_linearised_kernel"),
+        "numerics._lti_kernels", "simulate._event_kernels", "simulate.moreau_jean._step_kernels",
+        "simulate.moreau_jean._linearised_kernels"),
     "impacting bodies with an observer": ("numerics._lti_kernels", "simulate._event_kernels"),
     "Lur'e systems (implicit Euler) and switching": (
         "simulate.implicit_euler._lure_kernels", "simulate.implicit_euler._lure_lcp_kernels",
@@ -200,8 +200,8 @@ COMPILES: dict[str, tuple[str, ...]] = {
         "systems._feedback_kernels", "systems._lagrangian_kernels", "systems._foot_body_kernels",
         "systems._two_link_kernels", "design._friction_compensation_kernels",
         "simulate._block_kernels", "simulate.implicit_euler._lure_kernels",
-        "simulate._mj_compiled_kernels",
-        "simulate._moreau_jean_kernels", "simulate._mj_linearised_kernel", "numerics._lcp_kernels",
+        "simulate.moreau_jean._model_kernels", "simulate.moreau_jean._step_kernels",
+        "simulate.moreau_jean._linearised_kernels", "numerics._lcp_kernels",
         "design._complementarity_tracking_kernels"),
 }
 

@@ -41,7 +41,7 @@ Paths, chosen automatically:
 * any other constant ``M`` with affine gaps: a compiled loop with dense ``M̂⁻¹`` and Lemke;
 * configuration-dependent ``M(q)``, nonlinear forces or gaps (or ``forces="explicit"``): a
   Python loop evaluating the model's callables, the step by the compiled
-  :func:`~nscontrol.simulate._moreau_jean_kernels.mj_step` (``M̂`` assembled at every step);
+  :func:`~nscontrol.simulate.moreau_jean._step_kernels.mj_step` (``M̂`` assembled at every step);
 * a model with a compiled form (``system.compiled``), alone or under compiled blocks: one
   compiled loop around the same ``mj_step``.
 

@@ -1,6 +1,6 @@
 """Moreau–Jean on a Lagrangian system with a compiled model (``system.compiled``): the
-runner of the compiled loop :func:`~nscontrol.simulate._mj_compiled_kernels.mj_model_steps`,
-whose step is the Python path's (:func:`~nscontrol.simulate._moreau_jean_kernels.mj_step`),
+runner of the compiled loop :func:`~nscontrol.simulate.moreau_jean._model_kernels.mj_model_steps`,
+whose step is the Python path's (:func:`~nscontrol.simulate.moreau_jean._step_kernels.mj_step`),
 optionally with the compiled blocks of a closed loop (``CompiledBlocks.of`` the loop's block
 runner). The run of :func:`nscontrol.simulate.moreau_jean.integrate` drives it as any other
 runner.
@@ -39,6 +39,9 @@ class ModelRunner(Runner):
         self.block_args = (True, blocks.Cy, *_with_resets(blocks)) if blocks is not None \
             else _no_blocks(system, self.Su.shape[1])
         self.info = np.zeros(2)
+        #: what the system's structure makes constant over a run (the kernel's docstring)
+        self.structure = (bool(system.constant_mass), system.force is not None,
+                          system.gap_matrix is not None)
 
     def for_step(self, h: float) -> Runner:
         runner = ModelRunner.__new__(ModelRunner)
@@ -54,7 +57,7 @@ class ModelRunner(Runner):
 
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
         from ...systems._feedback_kernels import calling_blocks
-        from .._mj_compiled_kernels import mj_model_steps
+        from ._model_kernels import mj_model_steps
 
         s, o, size = self.system, self.opts, times.size
         n, m = s.n_dof, s.n_contacts
@@ -65,8 +68,9 @@ class ModelRunner(Runner):
             done, code = mj_model_steps(  # type: ignore[call-arg]  # numba's stub
                 self.model, self.cm.params, self.K, self.D, s.constant_force, self.Su,
                 s.restitution, o.h, o.theta, o.gamma, o.activation, o.mass_at == "predicted",
-                times, state.q, state.v, state.p_prev.copy(), np.ascontiguousarray(fext),
-                *self.block_args, XO, XC, U, q_out, v_out, p_out, self.info)
+                self.structure, times, state.q, state.v, state.p_prev.copy(),
+                np.ascontiguousarray(fext), *self.block_args, XO, XC, U, q_out, v_out, p_out,
+                self.info)
         if self.blocks is not None:
             self.blocks.log(times[:done], XO[:done], XC[:done], U[:done])
         if done:
@@ -78,7 +82,7 @@ class ModelRunner(Runner):
 
     def failure(self, code: int, t: float, state: RunState) -> str:
         """A block's failure is raised (the run context attaches the steps so far)."""
-        from .._mj_compiled_kernels import BLOCKS, MODEL_ERROR, SINGULAR
+        from ._model_kernels import BLOCKS, MODEL_ERROR, SINGULAR
 
         if code >= BLOCKS:
             self.blocks.raise_status(int(code - BLOCKS), t)
@@ -106,7 +110,7 @@ class ModelRunner(Runner):
 
 def _signals_of_rows(system: Any, cm: Any, q: Any, v: Any, p: Any, rec: Recorder
                      ) -> dict[str, Any]:
-    from .._mj_compiled_kernels import gap_rows, kinetic_energy_rows, potential_rows
+    from ._model_kernels import gap_rows, kinetic_energy_rows, potential_rows
 
     out: dict[str, Any] = {}
     if rec.wants("impulse"):

@@ -83,7 +83,7 @@ class MoreauJeanOptions:
             raise ModelError(f"mass_at: expected 'start' or 'predicted', got {mass_at!r}")
         check_input(system, u)
         if activation is None:
-            activation = 1e-12 * (1.0 + float(np.max(np.abs(x0[: system.n_dof]), initial=0.0)))
+            activation = 1e-12 * (1.0 + float(np.abs(x0[: system.n_dof]).max(initial=0.0)))
         return cls(h=h, theta=theta, gamma=gamma,
                    activation=check_positive("activation", activation, allow_zero=True),
                    u=u, forces=forces, mass_at=mass_at,

@@ -1,6 +1,6 @@
 """The Python path of Moreau–Jean: ``M(q)``, a ``force`` callable or nonlinear gaps evaluated
 in Python at every step, the step itself by the compiled
-:func:`~nscontrol.simulate._moreau_jean_kernels.mj_step` (the compiled-model loop's own).
+:func:`~nscontrol.simulate.moreau_jean._step_kernels.mj_step` (the compiled-model loop's own).
 """
 
 from __future__ import annotations
@@ -24,13 +24,16 @@ class PythonRunner(Runner):
     path = "python"
 
     def __init__(self, system: Any, opts: MoreauJeanOptions, S: FloatArray | None) -> None:
+        from ._step_kernels import step_workspace
+
         super().__init__(system, opts, S)
         n, m = system.n_dof, system.n_contacts
         self.analytic = system.force is None or system.force_jacobian is not None
         self.zeros = np.zeros((n, n))  # the Jacobians of explicit forces
         self.minv, self.dv, self.un = np.empty((n, n)), np.empty(n), np.empty(m)
         self.act = np.empty(m, np.int64)
-        self.mgt = np.empty((n, m))
+        self.mgt, self.L = np.empty((n, m)), np.empty((n, n))
+        self.work = step_workspace(n, m)
         # affine gaps (possibly scipy.sparse): one dense matrix for the whole run
         self.G = (None if system.gap_matrix is None
                   else np.ascontiguousarray(system.dense_gap_matrix(), dtype=float))
@@ -58,8 +61,8 @@ class PythonRunner(Runner):
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The contacts predicted to close, ``g + γ h G v <= activation`` (the step's
-        own test, :func:`~._moreau_jean_kernels.active_set`)."""
-        from .._moreau_jean_kernels import active_set
+        own test, :func:`~._step_kernels.active_set`)."""
+        from ._step_kernels import active_set
 
         o = self.opts
         na = active_set(self.gap_jacobian(q), self.gaps(q), v, o.gamma, o.h, o.activation,
@@ -69,13 +72,13 @@ class PythonRunner(Runner):
     def step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
              outs: tuple[FloatArray, FloatArray, FloatArray], k: int) -> int:
         """One step from ``(q, v)`` at ``t`` into row ``k``; returns the LCP's status."""
-        from .._moreau_jean_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
+        from ._step_kernels import MODEL_ERROR, SINGULAR, mj_step, positive_definite
 
         s, o = self.system, self.opts
         h, th = o.h, o.theta
         qm = q + th * h * v if o.mass_at == "predicted" and not s.constant_mass else q
         M = np.ascontiguousarray(s.mass_matrix(qm))
-        if not s.constant_mass and not positive_definite(M):  # M(q) must stay definite
+        if not s.constant_mass and not positive_definite(M, self.L):  # M(q) must stay definite
             raise StepFailure(MODEL_ERROR, f"mass: M(q) is not positive definite at "
                               f"t = {t:.6g}, q = {qm!r}; the model is only valid where the "
                               "mass matrix is")
@@ -87,8 +90,9 @@ class PythonRunner(Runner):
             f, Jq, Jv = _checked_force(s, t, q, v), self.zeros, self.zeros
         code, rcond, na = mj_step(M, f, Jq, Jv, np.ascontiguousarray(fext, dtype=float),
                                   self.gap_jacobian(q), self.gaps(q), q, v, s.restitution, h,
-                                  th, o.gamma, o.activation, self.minv, self.dv, self.un,
-                                  self.act, self.mgt, outs[2], outs[0], outs[1], k)
+                                  th, o.gamma, o.activation, self.minv, -1.0, self.dv,
+                                  self.un, self.act, self.mgt, self.work, outs[2], outs[0],
+                                  outs[1], k)
         if code == SINGULAR:
             raise StepFailure(SINGULAR, singular_message(rcond, t, o.forces))
         self.active_prev = self.act[:na].copy()
@@ -123,6 +127,6 @@ def _checked_force(system: Any, t: float, q: FloatArray, v: FloatArray) -> Float
 
 
 def _model_error() -> int:
-    from .._moreau_jean_kernels import MODEL_ERROR
+    from ._step_kernels import MODEL_ERROR
 
     return int(MODEL_ERROR)

@@ -26,7 +26,7 @@ def signals_of(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
         out["gap"] = np.array([system.gaps(qi) for qi in q]) if system.gap is not None \
             else np.asarray((system.gap_matrix @ q.T).T) + system.gap_offset
     if rec.wants("energy"):
-        out["energy"] = system.energy(np.hstack([q, v]))
+        out["energy"] = system.energy(np.concatenate((q, v), axis=1))
     return out
 
 

@@ -130,7 +130,7 @@ class Run:
 
     def _failure(self, code: int, t_fail: float) -> str:
         """The message of a run stopped by ``code``; a model error is raised here."""
-        from .._moreau_jean_kernels import MODEL_ERROR
+        from ._step_kernels import MODEL_ERROR
 
         message = self.runner.failure(code, t_fail, self.state)
         if code == MODEL_ERROR:
@@ -161,7 +161,7 @@ class Run:
         traj = rec.finish(status=stop.status, message=stop.message, method="moreau_jean",
                           stats=stats, state_names=system.state_names)
         if "gap" in traj.signals and traj.signals["gap"].size:
-            traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
+            traj.stats["max_penetration"] = float(max(0.0, -traj.signals["gap"].min()))
         return traj
 
 

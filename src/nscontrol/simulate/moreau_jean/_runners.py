@@ -4,7 +4,7 @@
 A runner takes a chunk of steps: ``runner(state, fext, times)`` returns ``(done, code, q_out,
 v_out, p_out)`` (``code`` 0, the LCP's status, ``MODEL_ERROR`` or ``SINGULAR`` with the
 message in ``state.failure``) and leaves the state after the last step done in ``state``.
-Every step is a compiled kernel of :mod:`nscontrol.simulate._moreau_jean_kernels`: the O(n)
+Every step is a compiled kernel of :mod:`nscontrol.simulate.moreau_jean._step_kernels`: the O(n)
 pairwise loop, the dense loop, or (any ``M(q)``, force or gap) ``mj_step`` called once a step
 with the user's callables evaluated in Python (:mod:`._python_runner`); the compiled-model
 loop runs the same ``mj_step`` (:mod:`._compiled`).
@@ -134,7 +134,7 @@ class Runner:
 
     def failure(self, code: int, t: float, state: RunState) -> str:
         """The message of a run stopped by ``code`` at ``t`` (may raise instead)."""
-        from .._moreau_jean_kernels import MODEL_ERROR, SINGULAR
+        from ._step_kernels import MODEL_ERROR, SINGULAR
 
         if code in (MODEL_ERROR, SINGULAR):
             return state.failure
@@ -221,7 +221,7 @@ class PairwiseRunner(_KernelRunner):
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The kernel's active set at ``(q, v)`` (by the kernel's own function)."""
-        from .._moreau_jean_kernels import pairwise_active_set
+        from ._step_kernels import pairwise_active_set
 
         o, (ia, ib, ca, cb) = self.opts, self.pairs
         act = np.empty(self.system.n_contacts, np.int64)
@@ -232,7 +232,7 @@ class PairwiseRunner(_KernelRunner):
     def _kernel(self, q: FloatArray, v: FloatArray, fext: FloatArray, q_out: FloatArray,
                 v_out: FloatArray, p_out: FloatArray) -> tuple[int, int]:
         """The compiled loop over the rows of ``q_out``, in place on ``q``, ``v``."""
-        from .._moreau_jean_kernels import mj_pairwise_kernel
+        from ._step_kernels import mj_pairwise_kernel
 
         s, o, (ia, ib, ca, cb) = self.system, self.opts, self.pairs
         done, code = mj_pairwise_kernel(q, v, self.minv, self.kdiag, self.ddiag,
@@ -268,7 +268,7 @@ class DenseRunner(_KernelRunner):
 
     def active_set(self, q: FloatArray, v: FloatArray) -> np.ndarray:
         """The kernel's active set at ``(q, v)`` (by the kernel's own functions)."""
-        from .._moreau_jean_kernels import active_set, affine_gaps
+        from ._step_kernels import active_set, affine_gaps
 
         o, m = self.opts, self.system.n_contacts
         act = np.empty(m, np.int64)
@@ -279,7 +279,7 @@ class DenseRunner(_KernelRunner):
     def _kernel(self, q: FloatArray, v: FloatArray, fext: FloatArray, q_out: FloatArray,
                 v_out: FloatArray, p_out: FloatArray) -> tuple[int, int]:
         """The compiled loop over the rows of ``q_out``, in place on ``q``, ``v``."""
-        from .._moreau_jean_kernels import mj_dense_kernel
+        from ._step_kernels import mj_dense_kernel
 
         s, o = self.system, self.opts
         done, code = mj_dense_kernel(q, v, self.minv, self.K, self.D,

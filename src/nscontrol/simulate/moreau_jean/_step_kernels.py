@@ -19,7 +19,7 @@ Three kernels take this step:
   docstring of :mod:`nscontrol.simulate.moreau_jean`): ``M``, ``f``, ``∂f/∂q``, ``∂f/∂v``,
   ``G`` and ``g`` evaluated by the caller at the step's start. The one source of the step of
   both the Python path (user callables, one call a step) and the compiled-model loop
-  (:func:`~nscontrol.simulate._mj_compiled_kernels.mj_model_steps`).
+  (:func:`~nscontrol.simulate.moreau_jean._model_kernels.mj_model_steps`).
 
 The first two write every step of a chunk into caller-provided arrays and return
 ``(steps_done, status_code)`` (status as the LCP kernels; 0 = all steps done). The active
@@ -32,8 +32,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numerics._lcp_kernels import lemke_kernel, tridiagonal_lcp_kernel
-from ._mj_linearised_kernel import mj_linearised_kernel
+from ...numerics._lcp_kernels import lemke_kernel, tridiagonal_lcp_kernel
+from ._linearised_kernels import free_velocity, iteration_matrix
 
 #: Status of a step stopped by the model (``M(q)`` not positive definite).
 MODEL_ERROR = -2
@@ -251,10 +251,10 @@ def _solve_active(W, qa, z):
 
 
 @njit(cache=True)
-def positive_definite(M):
-    """Cholesky succeeds (``numpy.linalg.cholesky``'s test)."""
+def positive_definite(M, L):
+    """Cholesky succeeds (``numpy.linalg.cholesky``'s test); ``L``: an ``(n, n)``
+    workspace."""
     n = M.shape[0]
-    L = np.zeros((n, n))
     for j in range(n):
         s = M[j, j]
         for k in range(j):
@@ -270,31 +270,44 @@ def positive_definite(M):
     return True
 
 
+@njit(cache=True)
+def step_workspace(n, m):
+    """The float workspace :func:`mj_step` takes for ``n`` coordinates and ``m`` contacts:
+    ``h f̃`` (``n``), then the active contacts' ``W`` (up to ``m²``), ``q`` and ``z`` (``m``
+    each)."""
+    return np.empty(n + m * m + 2 * m)
+
+
 @njit(cache=True, inline="always")
-def mj_step(M, f, Jq, Jv, f_in, G, gq, q, v, e, h, theta, gamma, activation, minv, dv, un,
-            act, mgt, p_out, q_out, v_out, k):
+def mj_step(M, f, Jq, Jv, f_in, G, gq, q, v, e, h, theta, gamma, activation, minv, rcond,
+            dv, un, act, mgt, work, p_out, q_out, v_out, k):
     """One step from ``(q, v)`` of the θ-method with linearised forces; returns
     ``(code, rcond, na)``.
 
     ``M`` the mass matrix (at ``q_k`` or the predicted configuration), ``f`` the smooth force
     and ``Jq, Jv`` its Jacobians (zeros: explicit forces), ``f_in`` the input's force
-    ``S u_k``, ``G``, ``gq`` the gaps' Jacobian and values at ``q_k``. Writes the impulses,
-    ``q_{k+1}`` and ``v_{k+1}`` into row ``k`` of ``p_out``, ``q_out``, ``v_out``; ``M̂⁻¹``
-    into ``minv``, ``M̂⁻¹ h f̃`` into ``dv``, ``G v_k`` into ``un``, the active contacts
-    into ``act[:na]`` and ``M̂⁻¹ G_Aᵀ`` into ``mgt[:, :na]`` (``mgt`` of shape ``(n, m)``).
-    ``code``: 0, ``SINGULAR`` (``rcond < n ε``, the rows not written) or the LCP's status.
+    ``S u_k``, ``G``, ``gq`` the gaps' Jacobian and values at ``q_k``. ``rcond``: ``M̂``'s
+    when ``minv`` already holds ``M̂⁻¹`` (a constant ``M̂``, inverted once by the caller with
+    :func:`~._linearised_kernels.iteration_matrix`), negative to assemble and invert it here.
+    Writes the impulses, ``q_{k+1}`` and ``v_{k+1}`` into row ``k`` of ``p_out``, ``q_out``,
+    ``v_out``; ``M̂⁻¹`` into ``minv``, ``M̂⁻¹ h f̃`` into ``dv``, ``G v_k`` into ``un``, the
+    active contacts into ``act[:na]`` and ``M̂⁻¹ G_Aᵀ`` into ``mgt[:, :na]`` (``mgt`` of shape
+    ``(n, m)``); ``work`` is :func:`step_workspace`'s. ``code``: 0, ``SINGULAR``
+    (``rcond < n ε``, the rows not written) or the LCP's status.
     """
     n = q.shape[0]
-    rcond = mj_linearised_kernel(M, Jq, Jv, f, f_in, v, h, theta, minv, dv)
+    if rcond < 0.0:
+        rcond = iteration_matrix(M, Jq, Jv, h, theta, minv)
     if not rcond >= n * _EPS:   # also catches NaN
         return SINGULAR, rcond, 0
+    free_velocity(minv, Jq, f, f_in, v, h, theta, work[:n], dv)
     for i in range(n):
         v_out[k, i] = v[i] + dv[i]          # v_free = v_k + M̂⁻¹ h f̃
     na = active_set(G, gq, v, gamma, h, activation, un, act)
     for j in range(gq.shape[0]):
         p_out[k, j] = 0.0
     if na > 0:
-        code = _contact_impulses(G, minv, e, un, act, na, mgt, v_out, p_out, k)
+        code = _contact_impulses(G, minv, e, un, act, na, mgt, work[n:], v_out, p_out, k)
         if code:
             return code, rcond, na
     for i in range(n):    # q + h((1 - θ) v + θ v_new), element by element
@@ -303,11 +316,11 @@ def mj_step(M, f, Jq, Jv, f_in, G, gq, q, v, e, h, theta, gamma, activation, min
 
 
 @njit(cache=True, inline="always")
-def _contact_impulses(G, minv, e, un, act, na, MinvGt, v_out, p_out, k):
+def _contact_impulses(G, minv, e, un, act, na, MinvGt, work, v_out, p_out, k):
     """Newton's law on the active contacts ``act[:na]``: ``W = G_A M̂⁻¹ G_Aᵀ``,
     ``0 <= P ⟂ W P + G_A v_free + e u_A >= 0``; row ``k`` of ``v_out`` (``v_free`` on entry)
-    becomes ``v_free + M̂⁻¹ G_Aᵀ P``, ``P`` goes to ``p_out[k, act]``. Returns the LCP's
-    status."""
+    becomes ``v_free + M̂⁻¹ G_Aᵀ P``, ``P`` goes to ``p_out[k, act]``. ``work`` holds ``W``,
+    ``q`` and ``z`` (``na² + 2 na`` floats at least). Returns the LCP's status."""
     n = v_out.shape[1]
     for i in range(n):
         for c in range(na):
@@ -315,8 +328,9 @@ def _contact_impulses(G, minv, e, un, act, na, MinvGt, v_out, p_out, k):
             for l2 in range(n):
                 s += minv[i, l2] * G[act[c], l2]
             MinvGt[i, c] = s
-    W = np.empty((na, na))
-    qa = np.empty(na)
+    W = work[:na * na].reshape((na, na))
+    qa = work[na * na:na * na + na]
+    z = work[na * na + na:na * na + 2 * na]
     for r in range(na):
         for c in range(na):
             s = 0.0
@@ -327,7 +341,6 @@ def _contact_impulses(G, minv, e, un, act, na, MinvGt, v_out, p_out, k):
         for l2 in range(n):
             s += G[act[r], l2] * v_out[k, l2]
         qa[r] = s + e[act[r]] * un[act[r]]
-    z = np.empty(na)
     code = _solve_active(W, qa, z)
     if code:
         return code
