@@ -15,10 +15,14 @@ from nscontrol.simulate.trajectory import Recorder
 class _Decay:
     """Explicit Euler on x' = -x, one chunk of ten steps per advance; fails at ``t_fail``."""
 
+    recording = Recording(1)
+
     def __init__(self, h: float, n: int, t_fail: float = math.inf) -> None:
         self.h, self.n, self.k, self.x, self.t_fail = h, n, 0, 1.0, t_fail
-        self.rec = Recorder(1)
-        self.rec.sample(0.0, np.array([1.0]), force=True)
+
+    def start(self, rec: Recorder) -> None:
+        self.rec = rec
+        rec.sample(0.0, np.array([1.0]), force=True)
 
     def advance(self) -> float | Stop:
         if self.k == self.n:
@@ -31,13 +35,16 @@ class _Decay:
             self.rec.sample(self.k * self.h, np.array([self.x]))
         return self.k * self.h
 
-    def finish(self, stop: Stop) -> object:
-        return self.rec.finish(status=stop.status, message=stop.message, method="decay")
+    def settle(self) -> None:
+        """Every step is recorded as it is taken."""
+
+    def end(self, stop: Stop) -> dict[str, int]:
+        return {"steps": self.k}
 
 
 def test_drive_runs_every_piece_and_returns_the_record() -> None:
     traj = drive(_Decay(0.01, 95), (0.0, 0.95), desc="decay", progress=False)
-    assert traj.t.shape == (96,) and traj.status == 0
+    assert traj.t.shape == (96,) and traj.status == 0 and traj.stats["steps"] == 95
     # explicit Euler: x_k = (1 - h)^k exactly up to k roundings (k * eps relative)
     assert abs(traj.x[-1, 0] - 0.99 ** 95) <= 95 * np.finfo(float).eps
 
@@ -48,6 +55,7 @@ def test_a_failing_stop_raises_with_the_run_so_far() -> None:
     traj = info.value.trajectory
     assert info.value.status == "test" and traj.status == -1
     assert traj.t[-1] == pytest.approx(0.30, abs=1e-12)   # 30 steps recorded, none lost
+    assert traj.stats["steps"] == 30                      # the part run's statistics
 
 
 class _Held:

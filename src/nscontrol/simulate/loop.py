@@ -23,10 +23,6 @@ is the same for every method:
   :meth:`~nscontrol.simulate.trajectory.Recorder.chunk`), and keeps a piece short enough (a
   few milliseconds of compiled work) that an interrupt is seen well within 0.2 s.
 
-A stepper without a ``recording`` attribute (``moreau_jean``, for now) still
-builds its own recorder and freezes it in its ``finish(stop)``; :func:`drive` runs it the same
-way, the driver's run context keeping its partial samples.
-
 The schedule of sampled blocks is integer: tick ``k`` falls at :func:`tick_time` ``(t0, k, T)``
 ``= t0 + k T`` and :func:`tick_count` counts the ticks of a span — never a time accumulated by
 ``t += T`` (round-off would skip or double a tick after ~10^4 ticks).
@@ -44,7 +40,7 @@ from ..errors import NscontrolError, SolverError
 from ._run_context import attach_partial
 from .trajectory import Recorder, Trajectory
 
-__all__ = ["Stop", "Recording", "Stepper", "LegacyStepper", "drive", "tick_time",
+__all__ = ["Stop", "Recording", "Stepper", "drive", "tick_time",
            "tick_count"]
 
 
@@ -140,20 +136,7 @@ class Stepper(Protocol):
         ...
 
 
-class LegacyStepper(Protocol):
-    """A stepper that records by itself (``moreau_jean``, until it is
-    ported to :class:`Stepper`): it builds its own recorder and freezes it."""
-
-    def advance(self) -> float | Stop:
-        """As :meth:`Stepper.advance`."""
-        ...
-
-    def finish(self, stop: Stop) -> Trajectory:
-        """The trajectory of the run that ended with ``stop`` (its final sample kept)."""
-        ...
-
-
-def drive(stepper: Stepper | LegacyStepper, t_span: tuple[float, float], *, desc: str,
+def drive(stepper: Stepper, t_span: tuple[float, float], *, desc: str,
           progress: bool | None) -> Trajectory:
     """Record and advance ``stepper`` until it stops, with the progress bar, and return its
     trajectory.
@@ -161,7 +144,7 @@ def drive(stepper: Stepper | LegacyStepper, t_span: tuple[float, float], *, desc
     Parameters
     ----------
     stepper : Stepper
-        The method's run in progress (or a :class:`LegacyStepper`).
+        The method's run in progress.
     t_span : (float, float)
         The span, for the progress bar.
     desc : str
@@ -182,21 +165,16 @@ def drive(stepper: Stepper | LegacyStepper, t_span: tuple[float, float], *, desc
     BaseException
         Whatever ends the run (a library error, a user callback's error,
         ``KeyboardInterrupt``), with ``err.trajectory`` holding every sample recorded
-        before it (a :class:`Stepper`'s; unless the error carries a trajectory of its own).
+        before it (unless the error carries a trajectory of its own).
     """
-    recording = getattr(stepper, "recording", None)
-    if recording is None:
-        reached = _advance_all(stepper, t_span, desc, progress)
-        traj = stepper.finish(reached)  # type: ignore[union-attr]  # a LegacyStepper
-    else:
-        traj, reached = _recorded_run(stepper, recording, t_span, desc, progress)
+    traj, reached = _recorded_run(stepper, stepper.recording, t_span, desc, progress)
     if reached.status < 0:
         raise SolverError(str(reached.message), status=reached.error_status,
                           trajectory=traj)
     return traj
 
 
-def _advance_all(stepper: Stepper | LegacyStepper, t_span: tuple[float, float], desc: str,
+def _advance_all(stepper: Stepper, t_span: tuple[float, float], desc: str,
                  progress: bool | None) -> Stop:
     """Advance ``stepper`` piece by piece under the progress bar; the :class:`Stop`."""
     with TimeProgress(t_span[0], t_span[1], desc=desc, enable=progress) as bar:

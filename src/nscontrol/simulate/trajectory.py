@@ -826,6 +826,13 @@ class Recorder:
             np.asarray(times, dtype=np.float64).tolist(),
             np.asarray(indices, dtype=np.int64).tolist(), pre, post, strict=True))
 
+    def signal_min(self, name: str) -> float | None:
+        """The smallest value of signal ``name`` recorded so far (``None``: none recorded)."""
+        values = self._sig.get(name)
+        if values is None or not self._n:
+            return None
+        return float(values[:self._n].min())
+
     @property
     def last_time(self) -> float:
         """Time of the last recorded sample (``-inf`` before the first one)."""

@@ -39,10 +39,10 @@ from scipy import sparse
 
 from ..._validation import FloatArray
 from ...errors import ModelError, SolverError
-from ..loop import END, Stop, drive
+from ..loop import END, Recording, Stop, drive
 from ..trajectory import Recorder, Trajectory
 from ._options import input_matrix
-from ._run import _CHUNK_FLOATS, Grid, _chunk_force
+from ._run import _CHUNK_FLOATS, Grid, _chunk_force, _with_penetration
 
 if TYPE_CHECKING:
     from ._frictional_kernels import FrictionalStep
@@ -188,18 +188,26 @@ class FrictionalRun:
         self.steps: dict[float, _Contacts] = {}
         c = self.contacts(opts.h)
         m, n = system.n_contacts, system.n_dof
-        self.rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
-                            offered=OFFERED, capacity=Recorder.capacity_for(
-                                self.grid.n_steps + 2, opts.record_every))
-        self.rec.extend(np.array([t_span[0]]), x0[None], **_rows(
-            system, c, x0[None, :n], x0[None, n:], np.zeros((1, m * c.dim)),
-            np.zeros((1, m)), np.zeros((1, 2)), np.zeros(1), np.zeros(1), self.rec))
+        self.recording = Recording(
+            system.n_states, every=opts.record_every, signals=opts.signals, offered=OFFERED,
+            state_names=system.state_names,
+            capacity=Recorder.capacity_for(self.grid.n_steps + 2, opts.record_every))
+        self.x0 = x0
         self.q, self.v = x0[:n].copy(), x0[n:].copy()
         self.r, self.work, self.states = np.zeros(m * c.dim), np.zeros(2), np.zeros(m, np.int64)
         self.S = input_matrix(system, opts.u is not None)   # read by _chunk_force
         self.proj = {"energy": 0.0, "lift_energy": 0.0, "before": 0.0, "count": 0}
         self.k, self.sweeps, self.fallback_steps, self.max_residual = 0, 0, 0, 0.0
         self.redo = False   # the next step's sweeps failed: take it with the checked solver
+
+    def start(self, rec: Recorder) -> None:
+        """Record the initial state and its signals into the run's record."""
+        system, x0, c = self.system, self.x0, self.contacts(self.opts.h)
+        m, n = system.n_contacts, system.n_dof
+        self.rec = rec
+        rec.extend(np.array([self.grid.t0]), x0[None], **_rows(
+            system, c, x0[None, :n], x0[None, n:], np.zeros((1, m * c.dim)),
+            np.zeros((1, m)), np.zeros((1, 2)), np.zeros(1), np.zeros(1), rec))
 
     def contacts(self, h: float) -> _Contacts:
         """The contact data and compiled step of the step length ``h`` (built once)."""
@@ -337,11 +345,13 @@ class FrictionalRun:
         out[0][k], out[1][k] = q, v
         self.q[:], self.v[:] = q, v
 
-    def finish(self, stop: Stop) -> Trajectory:
-        """The trajectory with the run's stats."""
+    def settle(self) -> None:
+        """Nothing held back: each chunk is recorded whole, its last step included."""
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics."""
         system, opts, proj = self.system, self.opts, self.proj
-        traj = self.rec.finish(status=stop.status, message=stop.message, method="moreau_jean",
-                               stats={
+        return _with_penetration({
             "steps": self.k, "path": "frictional" if system.friction_dim else "projection",
             "h": opts.h, "theta": opts.theta, "friction_dim": system.friction_dim,
             "warm_start": self.warm, "contact_sweeps": self.sweeps,
@@ -349,11 +359,7 @@ class FrictionalRun:
             "max_contact_residual": self.max_residual, "projection": bool(opts.projection),
             "projections": proj["count"], "projection_energy": proj["energy"],
             "projection_lift_energy": proj["lift_energy"],
-            "max_penetration_before_projection": proj["before"]},
-            state_names=system.state_names)
-        if "gap" in traj.signals and traj.signals["gap"].size:
-            traj.stats["max_penetration"] = float(max(0.0, -np.min(traj.signals["gap"])))
-        return traj
+            "max_penetration_before_projection": proj["before"]}, self.rec)
 
 
 def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: FloatArray,

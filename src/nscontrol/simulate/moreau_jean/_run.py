@@ -1,7 +1,7 @@
 """One Moreau–Jean run as a stepper of :func:`nscontrol.simulate.loop.drive`: whichever
 runner steps (:mod:`._runners`, :mod:`._python_runner`, :mod:`._compiled`), :class:`Run`
-advances it a chunk of steps at a time, records the chunk, calls the listeners and, at the
-end, freezes the trajectory."""
+advances it a chunk of steps at a time, records the chunk into the record ``drive`` holds
+and calls the listeners; ``drive`` freezes the trajectory."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import numpy as np
 
 from ..._validation import FloatArray
 from ...errors import ModelError
-from ..loop import END, Stop
-from ..trajectory import Recorder, Trajectory, evaluable_prefix
+from ..loop import END, Recording, Stop
+from ..trajectory import Recorder, evaluable_prefix
 from ._options import Feedback, MoreauJeanOptions, input_matrix
 from ._paths import choose_runner
 from ._recording import jump_listener, record_chunk, record_finished, sample_initial, signals_of
@@ -61,11 +61,11 @@ class Run:
         n, m = system.n_dof, system.n_contacts
         self.system, self.opts, self.fb = system, opts, feedback
         self.grid = Grid(t_span[0], t_span[1], opts.h)
-        self.rec = Recorder(system.n_states, every=opts.record_every, signals=opts.signals,
-                            offered=("impulse", "gap", "energy"),
-                            capacity=Recorder.capacity_for(self.grid.n_steps + 2,
-                                                           opts.record_every))
-        sample_initial(self.rec, system, t_span[0], x0)
+        self.recording = Recording(
+            system.n_states, every=opts.record_every, signals=opts.signals,
+            offered=("impulse", "gap", "energy"), state_names=system.state_names,
+            capacity=Recorder.capacity_for(self.grid.n_steps + 2, opts.record_every))
+        self.x0 = x0
         self.S = input_matrix(system, opts.u is not None or feedback.blocks is not None)
         self.runner = first_runner(system, opts, feedback, self.S)
         self.path = self.runner.path
@@ -76,6 +76,11 @@ class Run:
             assert self.S is not None   # blocks always set the input matrix
             self.state.inline = blocks_input(feedback.blocks, self.S, opts.h)
             self.state.after_step = jump_listener(system, feedback.listeners)
+
+    def start(self, rec: Recorder) -> None:
+        """Record the initial state (and its signals) into the run's record."""
+        self.rec = rec
+        sample_initial(rec, self.system, self.grid.t0, self.x0)
 
     def advance(self) -> float | Stop:
         """Run and record the next chunk; the time reached, or the run's :class:`Stop`."""
@@ -134,35 +139,37 @@ class Run:
 
         message = self.runner.failure(code, t_fail, self.state)
         if code == MODEL_ERROR:
-            raise ModelError(message, trajectory=self.rec.finish(
-                status=-1, message=message, method="moreau_jean",
-                state_names=self.system.state_names))
+            raise ModelError(message)   # drive attaches the steps before it
         return message
 
     def _end_at_input_failure(self, failed: Exception) -> NoReturn:
         """Raise the error of an input that failed, once the steps before it are recorded
-        (a library error carries them; the driver attaches them to any other)."""
-        if isinstance(failed, ModelError):
-            failed.trajectory = self.rec.finish(status=-1, message=str(failed),
-                                                method="moreau_jean",
-                                                state_names=self.system.state_names)
+        (drive attaches them to it)."""
         raise failed
 
-    def finish(self, stop: Stop) -> Trajectory:
-        """The trajectory, its final state always kept."""
+    def settle(self) -> None:
+        """Record the last state when ``record_every`` dropped it."""
         rec, system, st = self.rec, self.system, self.state
         if st.last is not None and rec.last_time < st.last[0]:
             t_last, q_l, v_l, p_l = st.last
             sig = signals_of(system, q_l[None], v_l[None], p_l[None], rec)
             rec.sample(t_last, np.concatenate([q_l, v_l]), force=True,
                        **{key: val[0] for key, val in sig.items()})
-        stats = {"steps": int(st.k), "path": self.path, "h": self.opts.h,
+
+    def end(self, stop: Stop) -> dict[str, Any]:
+        """The run's statistics."""
+        stats = {"steps": int(self.state.k), "path": self.path, "h": self.opts.h,
                  "theta": self.opts.theta, **self.runner.stats()}
-        traj = rec.finish(status=stop.status, message=stop.message, method="moreau_jean",
-                          stats=stats, state_names=system.state_names)
-        if "gap" in traj.signals and traj.signals["gap"].size:
-            traj.stats["max_penetration"] = float(max(0.0, -traj.signals["gap"].min()))
-        return traj
+        return _with_penetration(stats, self.rec)
+
+
+def _with_penetration(stats: dict[str, Any], rec: Recorder) -> dict[str, Any]:
+    """``stats`` with ``max_penetration``, the deepest recorded gap below 0, when the gaps
+    are recorded."""
+    lowest = rec.signal_min("gap")
+    if lowest is not None:
+        stats["max_penetration"] = max(0.0, -lowest)
+    return stats
 
 
 def first_runner(system: Any, opts: MoreauJeanOptions, feedback: Feedback,
