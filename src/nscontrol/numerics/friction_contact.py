@@ -424,8 +424,9 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     >>> slip.r.round(12).tolist(), slip.u.round(12).tolist(), slip.states.tolist()
     ([1.0, -0.5, -0.0], [0.0, 0.5, 0.0], [2])
     """
-    if type(W) is np.ndarray and type(q) is np.ndarray and method != "lcp":
-        once = _dense_once(W, q, mu, dim, method, tol, max_sweeps, r0, max_local_iter)
+    if (type(q) is np.ndarray and method != "lcp"
+            and (type(W) is np.ndarray or type(W) in _SPARSE_ONCE)):
+        once = _once(W, q, mu, dim, method, tol, max_sweeps, r0, max_local_iter)
         if once is not None:
             return once
     dim = _check_dim(dim)
@@ -487,15 +488,20 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
                       "definite", status=result.status)
 
 
-def _dense_once(W: np.ndarray, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
-                max_sweeps: Any, r0: Any, max_local_iter: Any) -> FrictionContactResult | None:
-    """The short path of :func:`solve_friction_contact`: NSGS on a dense problem given as
-    float64 arrays, started from ``r0`` or, up to :data:`AUTO_LCP_MAX_CONTACTS` contacts,
-    from zero (beyond, the general path starts from the frictionless impulses), in one
-    compiled call
-    (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once`, which checks the
-    values). None when the arguments are of another kind, refused, or the solve does not
-    reach ``tol``: the general path then runs, and raises what it must."""
+#: The sparse types of ``W`` that :func:`_once` takes (their ``indptr, indices, data``).
+_SPARSE_ONCE = frozenset((sparse.csr_matrix, sparse.csc_matrix, sparse.csr_array,
+                          sparse.csc_array))
+
+
+def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
+          max_sweeps: Any, r0: Any, max_local_iter: Any) -> FrictionContactResult | None:
+    """The short path of :func:`solve_friction_contact`: NSGS on a problem given as float64
+    arrays (``W`` dense, or scipy CSR or CSC), started from ``r0`` or, up to
+    :data:`AUTO_LCP_MAX_CONTACTS` contacts, from zero (beyond, the general path starts from
+    the frictionless impulses), in one compiled call
+    (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once` or ``solve_sparse_once``,
+    which check the values). None when the arguments are of another kind, refused, or the
+    solve does not reach ``tol``: the general path then runs, and raises what it must."""
     n = q.shape[0]
     if not (type(dim) is int and 1 <= dim <= 3 and q.ndim == 1 and n and n % dim == 0
             and (method == "nsgs" or (method == "auto" and dim != 2))
@@ -505,7 +511,8 @@ def _dense_once(W: np.ndarray, q: np.ndarray, mu: Any, dim: Any, method: str, to
             and type(max_sweeps) is int and max_sweeps >= 1
             and type(max_local_iter) is int and max_local_iter >= 1):
         return None
-    if not (W.flags.c_contiguous and W.flags.writeable):
+    dense = type(W) is np.ndarray
+    if dense and not (W.flags.c_contiguous and W.flags.writeable):
         W = np.array(W, order="C")       # a copy costs less than a second compile
     if not (q.flags.c_contiguous and q.flags.writeable):
         q = q.copy()
@@ -525,8 +532,17 @@ def _dense_once(W: np.ndarray, q: np.ndarray, mu: Any, dim: Any, method: str, to
         return None
     u = np.empty(n)
     states = np.empty(m, np.int64)
-    code, sweeps, err, tolerance, ok = kernels.solve_dense_once(
-        W, q, muv, r, u, states, tol, max_sweeps, max_local_iter)
+    if dense:
+        code, sweeps, err, tolerance, ok = kernels.solve_dense_once(
+            W, q, muv, r, u, states, tol, max_sweeps, max_local_iter)
+    else:
+        indptr, indices, data = W.indptr, W.indices, W.data
+        if not (indptr.dtype == indices.dtype == _INDEX and data.flags.c_contiguous
+                and data.flags.writeable):
+            return None
+        code, sweeps, err, tolerance, ok = kernels.solve_sparse_once(
+            indptr, indices, data, W.format == "csr", q, muv, r, u, states, tol, max_sweeps,
+            max_local_iter)
     if not ok:
         return None
     return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved", tolerance,
@@ -696,6 +712,8 @@ def _delassus(W: Any, n: int | None, finite: bool = True) -> Any:
 
 
 _NO_DENSE = np.zeros((0, 0))
+#: The index type of the scipy arrays that the short path passes on (one compiled form).
+_INDEX = np.dtype(np.int32)
 _NO_BLOCKS = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)))
 
 
