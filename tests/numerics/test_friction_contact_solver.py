@@ -291,3 +291,21 @@ def test_the_short_path_of_a_sparse_w_refuses_what_the_checked_path_refuses():
         solve_friction_contact(sp.csc_matrix(np.diag([0.0, 1.0, 1.0])), q, 0.5, dim=3)
     with pytest.raises(DimensionError, match="^W: expected shape"):
         solve_friction_contact(sp.csr_matrix(np.eye(6)), q, 0.5, dim=3)
+
+
+def test_the_short_path_hands_other_kinds_of_arrays_to_the_general_path():
+    # the short path's compiled entry takes writeable C-contiguous float64 arrays only (its
+    # signature raises TypeError for others); a Fortran-ordered W, a read-only q or μ, an
+    # integer start go through the general path, to the same sweeps and the same r
+    rng = np.random.default_rng(11)
+    W, q = _spd(rng, 9), rng.standard_normal(9)
+    mu = np.array([0.3, 0.5, 0.8])
+    ref = solve_friction_contact(W, q, mu, dim=3, tol=1e-12)
+    assert ref.success and friction_residual(W, q, mu, ref.r, 3) <= ref.tolerance
+    q_ro, mu_ro = q.copy(), mu.copy()
+    q_ro.setflags(write=False)
+    mu_ro.setflags(write=False)
+    for args in ((np.asfortranarray(W), q, mu), (W, q_ro, mu), (W, q, mu_ro)):
+        np.testing.assert_array_equal(solve_friction_contact(*args, dim=3, tol=1e-12).r, ref.r)
+    zero_start = solve_friction_contact(W, q, mu, dim=3, tol=1e-12, r0=np.zeros(9, int))
+    np.testing.assert_array_equal(zero_start.r, ref.r)

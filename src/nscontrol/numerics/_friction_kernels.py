@@ -11,7 +11,7 @@ scalar function of the slip angle, bracketed on a grid and bisected to machine p
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from ._lcp_kernels import MAX_CANCELLATION, ROUNDOFF_FACTOR
 
@@ -703,6 +703,19 @@ def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray
         W, np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
         inverses, 0, q, mu, r, u, states, tol, max_sweeps, max_local_iter)
     return code, sweeps, err, tolerance, ok
+
+
+_F64_1D = types.Array(types.float64, 1, "C")
+_I32_1D = types.Array(types.int32, 1, "C")
+#: The one signature of :func:`solve_dense_once` on the short path of
+#: :func:`~nscontrol.numerics.friction_contact.solve_friction_contact`.
+SOLVE_DENSE_ONCE_SIGNATURE = (types.Array(types.float64, 2, "C"), _F64_1D, _F64_1D, _F64_1D,
+                              _F64_1D, types.Array(types.int64, 1, "C"), types.float64,
+                              types.int64, types.int64)
+#: The one signature of :func:`solve_sparse_once` there (scipy's int32 indices).
+SOLVE_SPARSE_ONCE_SIGNATURE = (_I32_1D, _I32_1D, _F64_1D, types.boolean, _F64_1D, _F64_1D,
+                               _F64_1D, _F64_1D, types.Array(types.int64, 1, "C"),
+                               types.float64, types.int64, types.int64)
 
 
 @njit(cache=True)
