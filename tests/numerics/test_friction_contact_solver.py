@@ -257,3 +257,55 @@ def test_the_short_path_refuses_what_the_checked_path_refuses():
         solve_friction_contact(W, q, 0.5, dim=3, r0=np.array([np.nan, 0.0, 0.0]))
     with pytest.raises(ModelError, match="^W: the normal diagonal entry of contact 0"):
         solve_friction_contact(np.diag([0.0, 1.0, 1.0]), q, 0.5, dim=3)
+
+
+@pytest.mark.parametrize("kind", [sp.csr_matrix, sp.csc_matrix, sp.csr_array, sp.csc_array])
+def test_the_short_path_of_a_sparse_w_gives_the_checked_solvers_answer(kind):
+    # solve_friction_contact runs a CSR or CSC W with int32 indices in one compiled call
+    # (its blocks built there); the reusable solver builds the same blocks and runs the same
+    # sweep: the same r bit for bit, verified to its tolerance (recomputed here), and
+    # int64 indices (the general path) give it too
+    rng = np.random.default_rng(7)
+    W, q = _chain(rng, 6, 3)
+    Ws = kind(W)
+    assert Ws.indices.dtype == np.int32
+    res = solve_friction_contact(Ws, q, 0.5, dim=3, tol=1e-12)
+    ref = FrictionContactSolver(Ws, 0.5, dim=3).solve(q, tol=1e-12)
+    assert res.success and ref.success
+    np.testing.assert_array_equal(res.r, ref.r)
+    np.testing.assert_array_equal(res.u, ref.u)
+    assert friction_residual(W, q, 0.5, res.r, 3) <= res.tolerance
+    wide = kind(W)
+    wide.indices = wide.indices.astype(np.int64)
+    wide.indptr = wide.indptr.astype(np.int64)
+    np.testing.assert_array_equal(solve_friction_contact(wide, q, 0.5, dim=3, tol=1e-12).r,
+                                  res.r)
+
+
+def test_the_short_path_of_a_sparse_w_refuses_what_the_checked_path_refuses():
+    q = np.array([-1.0, 0.2, 0.0])
+    bad = sp.csr_matrix(np.diag([1.0, np.nan, 1.0]))
+    with pytest.raises(ModelError, match="^W: expected finite"):
+        solve_friction_contact(bad, q, 0.5, dim=3)
+    with pytest.raises(ModelError, match="^W: the normal diagonal entry of contact 0"):
+        solve_friction_contact(sp.csc_matrix(np.diag([0.0, 1.0, 1.0])), q, 0.5, dim=3)
+    with pytest.raises(DimensionError, match="^W: expected shape"):
+        solve_friction_contact(sp.csr_matrix(np.eye(6)), q, 0.5, dim=3)
+
+
+def test_the_short_path_hands_other_kinds_of_arrays_to_the_general_path():
+    # the short path's compiled entry takes writeable C-contiguous float64 arrays only (its
+    # signature raises TypeError for others); a Fortran-ordered W, a read-only q or μ, an
+    # integer start go through the general path, to the same sweeps and the same r
+    rng = np.random.default_rng(11)
+    W, q = _spd(rng, 9), rng.standard_normal(9)
+    mu = np.array([0.3, 0.5, 0.8])
+    ref = solve_friction_contact(W, q, mu, dim=3, tol=1e-12)
+    assert ref.success and friction_residual(W, q, mu, ref.r, 3) <= ref.tolerance
+    q_ro, mu_ro = q.copy(), mu.copy()
+    q_ro.setflags(write=False)
+    mu_ro.setflags(write=False)
+    for args in ((np.asfortranarray(W), q, mu), (W, q_ro, mu), (W, q, mu_ro)):
+        np.testing.assert_array_equal(solve_friction_contact(*args, dim=3, tol=1e-12).r, ref.r)
+    zero_start = solve_friction_contact(W, q, mu, dim=3, tol=1e-12, r0=np.zeros(9, int))
+    np.testing.assert_array_equal(zero_start.r, ref.r)

@@ -171,3 +171,72 @@ def test_bad_input_is_refused_naming_the_argument(entry, M, q, error, start):
             solve_lcp(M, q)
         else:
             LCPSolver(M).solve(q)
+
+
+# ----------------------------------------------------------------------------- per-call path
+# solve_lcp and LCPSolver.solve leave the type checks of their per-call path to a compiled
+# entry of one exact signature (numba's dispatcher raises TypeError for any other kind of
+# argument, which sends it to the general path) and the shapes and options to its first
+# line. Whatever kind of array the same numbers come in, the answer is the same, bit for bit.
+
+
+def _kinds(a):
+    """The same numbers as a clean array, a Fortran-ordered one, a read-only one, a
+    non-contiguous view and a list."""
+    ro = a.copy()
+    ro.setflags(write=False)
+    strided = np.empty((2,) + a.shape)[0] if a.ndim == 1 else np.empty(
+        (a.shape[0], 2 * a.shape[1]))[:, ::2]
+    strided[...] = a
+    return [a.copy(), np.asfortranarray(a), ro, strided, a.tolist()]
+
+
+@pytest.mark.parametrize("n", [2, 5, 12])
+def test_every_kind_of_array_gets_the_answer_of_the_clean_one(n):
+    rng = np.random.default_rng(300 + n)
+    M, q = random_p_matrix(n, rng), rng.standard_normal(n)
+    ref = solve_lcp(M, q)
+    assert ref.success
+    solver = LCPSolver(M)
+    for Mk in _kinds(M):
+        assert_same(solve_lcp(Mk, q), ref)
+    for qk in _kinds(q):
+        assert_same(solve_lcp(M, qk), ref)
+        assert_same(solver.solve(qk), ref)
+    # a Fortran-ordered matrix kept by a solver (copied to C order once) gives it too
+    assert_same(LCPSolver(np.asfortranarray(M)).solve(q), ref)
+
+
+@pytest.mark.parametrize("entry", ["solve_lcp", "LCPSolver"])
+@pytest.mark.parametrize(("kwargs", "start"), [
+    ({"max_iter": 0}, "max_iter: "), ({"max_iter": 2.5}, "max_iter: "),
+    ({"tol": 0.0}, "tol: "), ({"tol": float("nan")}, "tol: "), ({"tol": -1e-9}, "tol: "),
+    ({"omega": 2.0}, "omega: "), ({"omega": 0.0}, "omega: "), ({"method": "simplex"}, "method: "),
+    ({"strict": "no"}, "strict: "),
+])
+def test_options_the_compiled_entry_does_not_take_are_refused_by_name(entry, kwargs, start):
+    M, q = np.array([[2.0, 1.0], [1.0, 2.0]]), np.array([-5.0, -6.0])
+    with pytest.raises(ModelError, match=f"^{start}"):
+        if entry == "solve_lcp":
+            solve_lcp(M, q, **kwargs)
+        else:
+            LCPSolver(M, **kwargs).solve(q)
+
+
+@pytest.mark.parametrize("n", [47, 48, 49, 50])
+def test_lemke_on_the_full_tableau_and_on_the_basis_inverse_solves_to_round_off(n):
+    # up to n = 48 Lemke pivots the full tableau B^-1 [I, -M, -1], above it B^-1 alone; both
+    # end on a solution whose residual, recomputed here, is within the round-off bound of
+    # evaluating M z + q (independent_residual), and ties are broken the same way: the
+    # degenerate q = 0 rows (lexicographic rule) do not cycle
+    rng = np.random.default_rng(500 + n)
+    M = random_p_matrix(n, rng)
+    q = rng.standard_normal(n)
+    q[: n // 4] = 0.0
+    z, w = np.empty(n), np.empty(n)
+    from nscontrol.numerics import _lcp_kernels as kernels
+    code, pivots = kernels.lemke_kernel(M, q, z, w, 0)
+    assert code == kernels.SOLVED and pivots >= 1
+    res, bound = independent_residual(M, q, z)
+    assert res <= bound and np.all(z >= 0.0)
+    assert_same(solve_lcp(M, q, method="lemke"), LCPSolver(M, "lemke").solve(q))

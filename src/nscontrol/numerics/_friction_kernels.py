@@ -11,7 +11,7 @@ scalar function of the slip angle, bracketed on a grid and bisected to machine p
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from ._lcp_kernels import MAX_CANCELLATION, ROUNDOFF_FACTOR
 
@@ -652,7 +652,7 @@ def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
     return err, tolerance, bool(err <= tolerance)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                   blocks: np.ndarray, inverses: np.ndarray, terms: int, q: np.ndarray,
                   mu: np.ndarray, r: np.ndarray, u: np.ndarray, states: np.ndarray,
@@ -702,6 +702,41 @@ def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray
     code, sweeps, err, tolerance, ok, _ = solve_columns(
         W, np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
         inverses, 0, q, mu, r, u, states, tol, max_sweeps, max_local_iter)
+    return code, sweeps, err, tolerance, ok
+
+
+_F64_1D = types.Array(types.float64, 1, "C")
+_I32_1D = types.Array(types.int32, 1, "C")
+#: The one signature of :func:`solve_dense_once` on the short path of
+#: :func:`~nscontrol.numerics.friction_contact.solve_friction_contact`.
+SOLVE_DENSE_ONCE_SIGNATURE = (types.Array(types.float64, 2, "C"), _F64_1D, _F64_1D, _F64_1D,
+                              _F64_1D, types.Array(types.int64, 1, "C"), types.float64,
+                              types.int64, types.int64)
+#: The one signature of :func:`solve_sparse_once` there (scipy's int32 indices).
+SOLVE_SPARSE_ONCE_SIGNATURE = (_I32_1D, _I32_1D, _F64_1D, types.boolean, _F64_1D, _F64_1D,
+                               _F64_1D, _F64_1D, types.Array(types.int64, 1, "C"),
+                               types.float64, types.int64, types.int64)
+
+
+@njit(cache=True)
+def solve_sparse_once(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, csr: bool,
+                      q: np.ndarray, mu: np.ndarray, r: np.ndarray, u: np.ndarray,
+                      states: np.ndarray, tol: float, max_sweeps: int, max_local_iter: int
+                      ) -> tuple[int, int, float, float, bool]:
+    """:func:`solve_dense_once` for a sparse ``W`` given by its CSR (``csr``) or CSC arrays:
+    its block columns (:func:`csr_to_blocks`, :func:`csc_to_blocks`) built in this call."""
+    m = states.shape[0]
+    n = q.shape[0]
+    dim = n // m
+    if csr:
+        bptr, brow, bdata = csr_to_blocks(indptr, indices, data, n, dim)
+    else:
+        bptr, brow, bdata = csc_to_blocks(indptr, indices, data, n, dim)
+    blocks = np.empty((m, dim, dim))
+    inverses = np.empty((m, dim, dim))
+    code, sweeps, err, tolerance, ok, _ = solve_columns(
+        np.zeros((0, 0)), bptr, brow, bdata, blocks, inverses, 0, q, mu, r, u, states, tol,
+        max_sweeps, max_local_iter)
     return code, sweeps, err, tolerance, ok
 
 

@@ -23,7 +23,7 @@ certificate of infeasibility when every method fails).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from ._lcp_kernels import (
     MAX_ITER,
@@ -76,7 +76,7 @@ LOG_ROWS = 4
 LOG_WIDTH = 6
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def family(run):
     """The family of a run (1 Lemke, 2 PGS, 4 banded): ``auto`` runs each at most once."""
     if run == LEMKE:
@@ -86,7 +86,7 @@ def family(run):
     return 2
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def first_run(method, structured, large_symmetric):
     """The first run of ``method``: an explicit method is its own run; ``auto`` picks
     ``banded`` for structured ``M`` (tridiagonal, sparse or narrow-band, ``n > 2``), the PGS
@@ -100,7 +100,7 @@ def first_run(method, structured, large_symmetric):
     return LEMKE
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def next_run(method, tried, n, structured, large_symmetric, positive_diagonal):
     """``auto``'s next run after the families in the bit set ``tried`` failed, or
     :data:`NO_RUN` (always for an explicit method). The one place the order is decided:
@@ -119,7 +119,7 @@ def next_run(method, tried, n, structured, large_symmetric, positive_diagonal):
     return NO_RUN
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def run_limit(run, n, max_iter):
     """The budget of one run: ``max_iter`` when positive, else the run's default (Lemke
     ``50 (n + 1)`` pivots, banded ``n + 2`` iterations, PGS ``10^4`` sweeps, ``auto``'s PGS
@@ -136,7 +136,7 @@ def run_limit(run, n, max_iter):
 
 
 # --------------------------------------------------------------------------------- analysis
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def analyse_dense(M):
     """One look at a dense square ``M`` (done once per matrix): ``(finite, tridiagonal,
     banded, large_symmetric, positive_diagonal)``. ``banded``: ``n >= 64`` and half-bandwidth
@@ -275,14 +275,14 @@ def dense_howard(M, q, z, w, limit):
 
 
 # --------------------------------------------------------------------------------- the chain
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _start(z, z0, warm):
     """``z`` set to the warm start ``z0`` (copied), or to zero."""
     for i in range(z.shape[0]):
         z[i] = z0[i] if warm else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def run_one(run, M, lower, diag, upper, has_bands, q, z, w, z0, warm, limit, tol, omega):
     """One verified run that needs no Python: ``(status_code, iterations, residual,
     tolerance)``, the status reconciled with the residual test (``certify``)."""
@@ -301,7 +301,7 @@ def run_one(run, M, lower, diag, upper, has_bands, q, z, w, z0, warm, limit, tol
     return pgs_verified(M, q, z, w, tol, limit, omega, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def needs_python(run, has_dense, has_bands, sparse_lu):
     """Whether a run must go through Python: ``auto``'s PGS probe (its definiteness test),
     Howard's iteration with sparse LU (``sparse_lu``: scipy.sparse or narrow-band ``M``
@@ -313,7 +313,7 @@ def needs_python(run, has_dense, has_bands, sparse_lu):
     return not has_dense
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z, w, z0, warm,
               method, run, tried, structured, large_symmetric, positive_diagonal, tol,
               max_iter, omega, work, nlog, skip_python):
@@ -414,6 +414,65 @@ def solve_dense_into(M, q, buf, method, tol, max_iter, omega):
     n = q.shape[0]
     return solve_dense(M, q, buf[:n], buf[n:2 * n], buf[2 * n:], method, tol, max_iter,
                        omega, False)
+
+
+#: Status of the checked entries below when an argument fails a check that the caller in
+#: Python then makes again, with the error it raises.
+UNCHECKED = -4
+
+
+@njit(cache=True)
+def _options_ok(tol, max_iter, omega):
+    """``0 < tol < inf``, ``max_iter >= 0`` (0: the defaults), ``0 < omega < 2``."""
+    return 0.0 < tol < np.inf and max_iter >= 0 and 0.0 < omega < 2.0
+
+
+@njit(cache=True)
+def solve_dense_checked(M, q, buf, method, tol, max_iter, omega):
+    """:func:`solve_dense_into` for a caller in Python that has checked only the types
+    (the compiled signature does, :func:`exact_entry`): the shapes and the options are
+    checked here, :data:`UNCHECKED` (``nlog = -1``) when one fails."""
+    n = q.shape[0]
+    if not (M.shape[0] == n and M.shape[1] == n and buf.shape[0] == 4 * n + LOG_ROWS * LOG_WIDTH
+            and 0 <= method <= AUTO and method != PGS_AUTO and method != PGS_FALLBACK
+            and _options_ok(tol, max_iter, omega)):
+        return UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1
+    return solve_dense_into(M, q, buf, method, tol, max_iter, omega)
+
+
+@njit(cache=True)
+def solve_packed_checked(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega):
+    """:func:`solve_packed` with the length of ``q`` checked against the buffer's (``4 n +
+    24``): :data:`UNCHECKED` when it differs."""
+    if buf.shape[0] != 4 * q.shape[0] + LOG_ROWS * LOG_WIDTH:
+        return UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1
+    return solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega)
+
+
+_F64_2D = types.Array(types.float64, 2, "C")
+_F64_1D = types.Array(types.float64, 1, "C")
+#: The argument types of :func:`solve_dense_checked` for :func:`exact_entry`: writeable
+#: C-contiguous float64 arrays and the options as Python ints and floats.
+SOLVE_DENSE_SIGNATURE = (_F64_2D, _F64_1D, _F64_1D, types.int64, types.float64, types.int64,
+                         types.float64)
+#: The argument types of :func:`solve_packed_checked` for :func:`exact_entry`.
+SOLVE_PACKED_SIGNATURE = (_F64_2D, _F64_1D, _F64_1D, _F64_1D, _F64_1D, _F64_1D, types.int64,
+                          types.float64, types.int64, types.float64)
+
+
+def exact_entry(kernel, signature):
+    """``kernel`` compiled for ``signature`` alone, with compilation disabled: a call with
+    arguments of any other type (a read-only, non-contiguous or integer array, a list)
+    raises ``TypeError`` at once instead of compiling another specialisation, so a caller
+    in Python can leave the type checks of its fast path to numba's dispatcher (in C) and
+    take its general path on ``TypeError``. Loaded from numba's cache like ``kernel``; None
+    when numba's JIT is disabled (no type is checked then: the caller has no fast path)."""
+    py_func = getattr(kernel, "py_func", None)
+    if py_func is None:                      # NUMBA_DISABLE_JIT
+        return None
+    entry = njit([signature], cache=True)(py_func)
+    entry.disable_compile()
+    return entry
 
 
 @njit(cache=True)

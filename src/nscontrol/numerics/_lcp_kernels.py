@@ -44,7 +44,7 @@ _TIE_TOL = 1e-12
 _EPS = np.finfo(np.float64).eps
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def natural_residual(z, w, q):
     """``max_i |min(z_i, w_i)| / (1 + max|q|)``: zero exactly at solutions of the LCP.
 
@@ -78,7 +78,7 @@ ROUNDOFF_FACTOR = 2.0
 MAX_CANCELLATION = 1.0 / np.sqrt(_EPS)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def certify(z, w, q, mz_abs_max, terms, tol):
     """The one acceptance test of every LCP path: ``(residual, tolerance, certified)``.
 
@@ -103,7 +103,7 @@ def certify(z, w, q, mz_abs_max, terms, tol):
     return res, tolerance, bool(res <= tolerance)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def verified_status(code, certified):
     """A kernel's status reconciled with the residual test: solved exactly when certified
     (also after an iteration limit or a ray, if the point passes); a kernel's "solved" that
@@ -182,11 +182,22 @@ def _matvec_plus_abs(M, z, q, w_out):
 
 
 # --------------------------------------------------------------------------------- Lemke
+#: Up to this size Lemke pivots the full tableau ``B^{-1} [I, -M, -1]`` (``2 n + 1``
+#: columns): an entering column is read off it, and a pivot is one rank-one update of long
+#: contiguous rows; above it (memory), only ``B^{-1}`` is kept and an entering column
+#: ``-B^{-1} M[:, j]`` is computed when it enters (the same pivots, at O(n^2) each either way).
+LEMKE_FULL_TABLEAU_MAX_SIZE = 48
 @njit(cache=True)
 def _lemke_entering_column(M, binv, var, n, col, mcol):
     """Column of the current tableau for variable ``var`` (w_j: j, z_j: n + j, z0: 2n);
-    ``mcol`` is scratch of length n (a contiguous copy of ``M[:, j]``, for BLAS gemv)."""
-    if var < n:
+    ``mcol`` is scratch of length n (a contiguous copy of ``M[:, j]``, for BLAS gemv).
+    ``binv`` is ``B^{-1}`` (``n`` columns), or the full tableau ``B^{-1} [I, -M, -1]``
+    (``2 n + 1`` columns, :data:`LEMKE_FULL_TABLEAU_MAX_SIZE`) whose column ``var`` is the
+    one asked for."""
+    if binv.shape[1] > n:
+        for i in range(n):
+            col[i] = binv[i, var]
+    elif var < n:
         for i in range(n):
             col[i] = binv[i, var]
     elif var < 2 * n:
@@ -212,8 +223,9 @@ def _lemke_entering_column(M, binv, var, n, col, mcol):
 
 
 @njit(cache=True)
-def _lemke_ratio_test(binv, rhs, col, basis, n, cand):
+def _lemke_ratio_test(binv, rhs, col, basis, n, cand, ratio):
     """Lexicographic minimum-ratio row, or -1 when the column has no positive entry (ray).
+    ``ratio`` is scratch of length n (each ratio computed once).
 
     The rows compared are ``(rhs_i, Binv[i, :]) / col_i``: the lexicographic order of the
     perturbed right-hand side ``q + (eps, eps^2, ...)`` which makes every basis
@@ -226,16 +238,17 @@ def _lemke_ratio_test(binv, rhs, col, basis, n, cand):
         return -1
     ncand = 0
     best = np.inf
+    threshold = _PIVOT_TOL * scale
     for i in range(n):
-        if col[i] > _PIVOT_TOL * scale:
-            r = rhs[i] / col[i]
-            if r < best:
-                best = r
+        r = rhs[i] / col[i] if col[i] > threshold else np.inf
+        ratio[i] = r
+        if r < best:
+            best = r
     if best == np.inf:
         return -1
     tie = _TIE_TOL * (1.0 + abs(best))
     for i in range(n):
-        if col[i] > _PIVOT_TOL * scale and rhs[i] / col[i] <= best + tie:
+        if ratio[i] <= best + tie:
             cand[ncand] = i
             ncand += 1
     # z0 leaving ends the path: prefer it among ties.
@@ -264,13 +277,15 @@ def _lemke_ratio_test(binv, rhs, col, basis, n, cand):
 
 @njit(cache=True)
 def _lemke_pivot(binv, rhs, col, r, n, prow):
-    """Gauss–Jordan pivot on row ``r`` of ``[B^{-1} | B^{-1} q]`` with column ``col``.
+    """Gauss–Jordan pivot on row ``r`` of ``[B^{-1} | B^{-1} q]`` (or of the full tableau:
+    every column of ``binv``) with column ``col``.
 
     The pivot row is copied to ``prow`` first, so the row updates provably do not alias and
     compile to SIMD loops (this halves the cost of a pivot).
     """
+    width = binv.shape[1]
     inv = 1.0 / col[r]
-    for k in range(n):
+    for k in range(width):
         prow[k] = binv[r, k] * inv
     prhs = rhs[r] * inv
     for i in range(n):
@@ -278,10 +293,10 @@ def _lemke_pivot(binv, rhs, col, r, n, prow):
         if i == r or f == 0.0:
             continue
         row = binv[i]
-        for k in range(n):
+        for k in range(width):
             row[k] -= f * prow[k]
         rhs[i] -= f * prhs
-    for k in range(n):
+    for k in range(width):
         binv[r, k] = prow[k]
     rhs[r] = prhs
 
@@ -338,7 +353,9 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
     Notes
     -----
     The tableau is kept as the basis inverse ``B^{-1}`` (n x n) and ``B^{-1} q``; entering
-    columns are computed on demand, so a pivot costs O(n^2) and memory is n^2 floats.
+    columns are computed on demand, so a pivot costs O(n^2) and memory is n^2 floats. Up to
+    :data:`LEMKE_FULL_TABLEAU_MAX_SIZE` the whole tableau ``B^{-1} [I, -M, -1]`` is pivoted
+    instead (entering columns read off it, 2n^2 floats).
     Ties in the ratio test are broken lexicographically on ``B^{-1}[q, I]``, which guarantees
     termination on degenerate problems. For P-matrices the path ends with a solution; for
     copositive-plus ``M`` a ray certifies that the LCP has no solution. The final basis is
@@ -361,18 +378,25 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
         return SOLVED, 0
 
     # one float and one integer allocation (on small problems the allocations cost more
-    # than the pivots): B^-1, B^-1 q, the entering column, the pivot row, M[:, j], scratch
-    work = np.empty(n * n + 5 * n)
-    binv = work[:n * n].reshape((n, n))
-    rhs = work[n * n:n * n + n]
-    col = work[n * n + n:n * n + 2 * n]
-    prow = work[n * n + 2 * n:n * n + 3 * n]
-    mcol = work[n * n + 3 * n:n * n + 4 * n]
-    scratch = work[n * n + 4 * n:]
+    # than the pivots): B^-1 (or the full tableau), B^-1 q, the entering column, the pivot
+    # row, M[:, j], scratch
+    width = 2 * n + 1 if n <= LEMKE_FULL_TABLEAU_MAX_SIZE else n
+    size = n * width
+    work = np.empty(size + 4 * n + width)
+    binv = work[:size].reshape((n, width))
+    rhs = work[size:size + n]
+    col = work[size + n:size + 2 * n]
+    mcol = work[size + 2 * n:size + 3 * n]
+    scratch = work[size + 3 * n:size + 4 * n]
+    prow = work[size + 4 * n:]
     for i in range(n):
         rhs[i] = q[i]
         for j in range(n):
             binv[i, j] = 1.0 if i == j else 0.0
+        if width > n:
+            for j in range(n):
+                binv[i, n + j] = -M[i, j]
+            binv[i, 2 * n] = -1.0
     iwork = np.empty(2 * n, dtype=np.int64)
     basis = iwork[:n]  # row i holds variable basis[i]; w_i = i, z_i = n + i, z0 = 2n
     cand = iwork[n:]
@@ -396,7 +420,7 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
     while it < max_iter:
         entering = leaving + n if leaving < n else leaving - n
         _lemke_entering_column(M, binv, entering, n, col, mcol)
-        r = _lemke_ratio_test(binv, rhs, col, basis, n, cand)
+        r = _lemke_ratio_test(binv, rhs, col, basis, n, cand, scratch)
         if r < 0:
             status = RAY_TERMINATION
             break
@@ -770,7 +794,7 @@ def csr_tridiagonal_bands(indptr, indices, data, lower, diag, upper):
 # --------------------------------------------------------------------------------- verification
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def verify_dense(M, q, z, w_out, tol):
     """``w_out = M z + q`` recomputed from ``z``, then :func:`certify`: returns
     ``(residual, tolerance, certified)``."""
@@ -795,7 +819,7 @@ def verify_tridiagonal(lower, diag, upper, q, z, w_out, tol):
     return certify(z, w_out, q, mz, 4, tol)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def all_finite(a):
     """True when every entry of the 1-d array ``a`` is finite (no temporaries)."""
     for i in range(a.shape[0]):
@@ -810,7 +834,7 @@ def all_finite(a):
 Q_NOT_FINITE = -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def lemke_verified(M, q, z_out, w_out, max_iter, tol):
     """:func:`lemke_kernel` and its verification in one compiled call (a reusable solver's
     per-call path: one dispatch instead of three).

@@ -59,6 +59,8 @@ __all__ = ["FrictionContactResult", "FrictionContactSolver", "solve_friction_con
            "friction_residual",
            "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
+_new = object.__new__
+_setattr = object.__setattr__
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
 CONTACT_STATES = ("open", "stick", "slip")
 #: ``auto`` solves planar problems up to this many contacts by the LCP (Lemke: O(m³)).
@@ -110,10 +112,11 @@ class FrictionContactResult:
               ) -> FrictionContactResult:
         """A result of fields already of their types, built without the frozen
         ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve)."""
-        result = object.__new__(cls)
-        result.__dict__.update(r=r, u=u, states=states, residual=residual,
-                               iterations=iterations, method=method, status=status,
-                               tolerance=tolerance, message=message)
+        result = _new(cls)
+        _setattr(result, "__dict__", {"r": r, "u": u, "states": states, "residual": residual,
+                                      "iterations": iterations, "method": method,
+                                      "status": status, "tolerance": tolerance,
+                                      "message": message})
         return result
 
     @property
@@ -424,8 +427,9 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     >>> slip.r.round(12).tolist(), slip.u.round(12).tolist(), slip.states.tolist()
     ([1.0, -0.5, -0.0], [0.0, 0.5, 0.0], [2])
     """
-    if type(W) is np.ndarray and type(q) is np.ndarray and method != "lcp":
-        once = _dense_once(W, q, mu, dim, method, tol, max_sweeps, r0, max_local_iter)
+    if (type(q) is np.ndarray and method != "lcp"
+            and (type(W) is np.ndarray or type(W) in _SPARSE_ONCE)):
+        once = _once(W, q, mu, dim, method, tol, max_sweeps, r0, max_local_iter)
         if once is not None:
             return once
     dim = _check_dim(dim)
@@ -487,50 +491,80 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
                       "definite", status=result.status)
 
 
-def _dense_once(W: np.ndarray, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
-                max_sweeps: Any, r0: Any, max_local_iter: Any) -> FrictionContactResult | None:
-    """The short path of :func:`solve_friction_contact`: NSGS on a dense problem given as
-    float64 arrays, started from ``r0`` or, up to :data:`AUTO_LCP_MAX_CONTACTS` contacts,
-    from zero (beyond, the general path starts from the frictionless impulses), in one
-    compiled call
-    (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once`, which checks the
-    values). None when the arguments are of another kind, refused, or the solve does not
-    reach ``tol``: the general path then runs, and raises what it must."""
-    n = q.shape[0]
-    if not (type(dim) is int and 1 <= dim <= 3 and q.ndim == 1 and n and n % dim == 0
+#: The sparse types of ``W`` that :func:`_once` takes (their ``indptr, indices, data``).
+_SPARSE_ONCE = frozenset((sparse.csr_matrix, sparse.csc_matrix, sparse.csr_array,
+                          sparse.csc_array))
+
+
+def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
+          max_sweeps: Any, r0: Any, max_local_iter: Any) -> FrictionContactResult | None:
+    """The short path of :func:`solve_friction_contact`: NSGS on a problem given as float64
+    arrays (``W`` dense, or scipy CSR or CSC), started from ``r0`` or, up to
+    :data:`AUTO_LCP_MAX_CONTACTS` contacts, from zero (beyond, the general path starts from
+    the frictionless impulses), in one compiled call
+    (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once` or ``solve_sparse_once``,
+    which check the values). None when the arguments are of another kind, refused, or the
+    solve does not reach ``tol``: the general path then runs, and raises what it must."""
+    n = q.shape[0] if q.ndim == 1 else 0
+    if not (type(dim) is int and 1 <= dim <= 3 and n and n % dim == 0
             and (method == "nsgs" or (method == "auto" and dim != 2))
             and (r0 is not None or n <= dim * AUTO_LCP_MAX_CONTACTS) and W.shape == (n, n)
-            and W.dtype == np.float64 and q.dtype == np.float64
             and type(tol) is float and 0.0 < tol < math.inf
             and type(max_sweeps) is int and max_sweeps >= 1
             and type(max_local_iter) is int and max_local_iter >= 1):
         return None
-    if not (W.flags.c_contiguous and W.flags.writeable):
-        W = np.array(W, order="C")       # a copy costs less than a second compile
-    if not (q.flags.c_contiguous and q.flags.writeable):
-        q = q.copy()
     m = n // dim
     if type(mu) is float:
         muv = np.full(m, mu)
-    elif (type(mu) is np.ndarray and mu.dtype == np.float64 and mu.shape == (m,)
-          and mu.flags.c_contiguous and mu.flags.writeable):
+    elif type(mu) is np.ndarray and mu.shape == (m,):
         muv = mu
     else:
         return None
     if r0 is None:
         r = np.zeros(n)
-    elif (type(r0) is np.ndarray and r0.dtype == np.float64 and r0.shape == (n,)):
+    elif type(r0) is np.ndarray and r0.shape == (n,):
         r = r0.copy()
     else:
         return None
     u = np.empty(n)
     states = np.empty(m, np.int64)
-    code, sweeps, err, tolerance, ok = kernels.solve_dense_once(
-        W, q, muv, r, u, states, tol, max_sweeps, max_local_iter)
+    dense = type(W) is np.ndarray
+    entry = _ONCE_ENTRIES[0 if dense else 1] if _ONCE_ENTRIES else _load_once_entries(dense)
+    # the entries' signatures check the types (float64 C-contiguous writeable arrays, int32
+    # indices); any other kind raises TypeError and takes the general path
+    try:
+        if dense:
+            code, sweeps, err, tolerance, ok = entry(W, q, muv, r, u, states, tol, max_sweeps,
+                                                     max_local_iter)
+        else:
+            code, sweeps, err, tolerance, ok = entry(
+                W.indptr, W.indices, W.data, W.format == "csr", q, muv, r, u, states, tol,
+                max_sweeps, max_local_iter)
+    except TypeError:
+        return None
     if not ok:
         return None
     return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved", tolerance,
                                        "")
+
+
+#: The compiled entries of :func:`_once` (dense, sparse), made on first use.
+_ONCE_ENTRIES: list[Any] = []
+
+
+def _load_once_entries(dense: bool) -> Any:
+    """:func:`_once`'s entries: ``solve_dense_once`` and ``solve_sparse_once`` compiled for
+    their one signature, compilation disabled
+    (:func:`~nscontrol.numerics._lcp_dispatch_kernels.exact_entry`); the plain kernels when
+    numba's JIT is disabled."""
+    from ._lcp_dispatch_kernels import exact_entry
+
+    entries = [exact_entry(kernels.solve_dense_once, kernels.SOLVE_DENSE_ONCE_SIGNATURE),
+               exact_entry(kernels.solve_sparse_once, kernels.SOLVE_SPARSE_ONCE_SIGNATURE)]
+    if entries[0] is None:
+        entries = [kernels.solve_dense_once, kernels.solve_sparse_once]
+    _ONCE_ENTRIES[:] = entries
+    return entries[0 if dense else 1]
 
 
 def planar_friction_lcp(W: Any, q: Any, mu: Any) -> tuple[FloatArray, FloatArray]:

@@ -280,25 +280,29 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
-    if (z0 is None and type(M) is np.ndarray and type(q) is np.ndarray and M.dtype == _F64
-            and q.dtype == _F64 and M.ndim == 2 and q.ndim == 1
-            and M.shape[0] == M.shape[1] == q.shape[0] and type(tol) is float
-            and 0.0 < tol < math.inf and type(omega) is float and 0.0 < omega < 2.0
-            and (max_iter is None or (type(max_iter) is int and max_iter >= 1))
-            and (strict is False or strict is True) and type(method) is str
-            and method in dispatch.METHOD_CODES):
-        mflags, qflags = M.flags, q.flags
-        if mflags.c_contiguous and mflags.writeable and qflags.c_contiguous and qflags.writeable:
-            # the per-call path: LCPSolver's analysis and chain, in one compiled call
-            n = q.shape[0]
+    if (z0 is None and type(M) is np.ndarray and type(q) is np.ndarray and type(tol) is float
+            and type(omega) is float and (strict is False or strict is True)
+            and type(method) is str):
+        # the per-call path: LCPSolver's analysis and chain, in one compiled call whose
+        # signature checks the types (a TypeError sends other kinds to the general path)
+        # and whose first lines check the shapes and the options
+        entry = _DENSE_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_dense()
+        code = dispatch.METHOD_CODES.get(method, -1)
+        limit = (0 if max_iter is None else max_iter
+                 if type(max_iter) is int and max_iter >= 1 else -1)
+        if entry is not None and code >= 0 and limit != -1:
+            n = q.size
             buf = np.empty(4 * n + _LOG_SIZE)
-            code, run, its, res, tolerance, tried, nlog = dispatch.solve_dense_into(
-                M, q, buf, dispatch.METHOD_CODES[method], tol, max_iter or 0, omega)
+            try:
+                code, run, its, res, tolerance, tried, nlog = entry(M, q, buf, code, tol,
+                                                                     limit, omega)
+            except TypeError:
+                nlog = -1
             if code == 0 and nlog == 1:
                 buf.setflags(write=False)          # z and w, its views, are read-only
                 return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
                                False)
-            if code == 0:
+            if code == 0 and nlog > 0:
                 # verified after fallbacks: the log has every run, nothing is left to do
                 return _choose(_logged_runs(buf[2 * n:], n, 0, nlog, buf[:n],
                                             buf[n:2 * n]))[0]
@@ -310,6 +314,40 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
                                       (code, run, tried, nlog))
     solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict, omega=omega)
     return solver.solve(q, z0=z0)
+
+
+class _Entries:
+    """The compiled entries of the per-call paths (:func:`dispatch.exact_entry`), made on
+    first use (loaded from numba's cache, not at import): ``dense`` for :func:`solve_lcp`,
+    ``packed`` for :meth:`LCPSolver.solve`; None with numba's JIT disabled."""
+
+    loaded = False
+    dense: Any = None
+    packed: Any = None
+
+    @classmethod
+    def load(cls) -> type[_Entries]:
+        cls.dense = dispatch.exact_entry(dispatch.solve_dense_checked,
+                                         dispatch.SOLVE_DENSE_SIGNATURE)
+        cls.packed = dispatch.exact_entry(dispatch.solve_packed_checked,
+                                          dispatch.SOLVE_PACKED_SIGNATURE)
+        cls.loaded = True
+        _DENSE_ENTRY[0] = cls.dense
+        return cls
+
+    @classmethod
+    def load_dense(cls) -> Any:
+        return cls.load().dense
+
+
+#: ``_Entries.dense`` (read from a list: a class attribute holding a dispatcher is a
+#: descriptor, bound on every read)
+_DENSE_ENTRY: list[Any] = [None]
+
+
+_ENTRIES = _Entries
+#: What a checked entry returns when an argument fails its checks.
+_UNCHECKED = (dispatch.UNCHECKED, dispatch.NO_RUN, 0, math.nan, math.nan, 0, -1)
 
 
 # ----------------------------------------------------------------------------- the solver
@@ -423,6 +461,8 @@ class LCPSolver:
                                                       large_symmetric))
         self.first_method: str = dispatch.RUN_NAMES[self._first_run]
         self._rescaled_solvers: dict[int, LCPSolver] = {}
+        self._max_iter0: int = self.max_iter or 0
+        self._entry = (_ENTRIES if _ENTRIES.loaded else _ENTRIES.load()).__dict__["packed"]
         # the per-call arguments of dispatch.solve_packed, fixed once
         flags = self._flags or (False, False)
         self._packed = (
@@ -462,17 +502,24 @@ class LCPSolver:
         SolverError
             With ``strict=True``, when no method reached a verified solution.
         """
-        if not (type(q) is np.ndarray and q.dtype == _F64 and q.ndim == 1
-                and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == self.n):
-            q = self._check_q(q)
         n = self.n
         if z0 is None:
             # the per-call path of a reusable solver: one compiled call, whose status is
-            # already reconciled with the residual test (kernels.certify)
+            # already reconciled with the residual test (kernels.certify); its signature
+            # checks the type of q (TypeError otherwise) and its first line q's length
             M, lower, diag, upper, bits = self._packed
             buf = np.empty(4 * n + _LOG_SIZE)
-            code, run, its, res, tolerance, tried, nlog = dispatch.solve_packed(
-                M, lower, diag, upper, q, buf, bits, self.tol, self.max_iter or 0, self.omega)
+            entry = self._entry
+            try:
+                out = (entry(M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
+                             self.omega) if entry is not None else _UNCHECKED)
+            except TypeError:
+                out = _UNCHECKED
+            if out[0] == dispatch.UNCHECKED:
+                q = self._check_q(q)               # raises, or a clean copy of q
+                out = dispatch.solve_packed(M, lower, diag, upper, q, buf, bits, self.tol,
+                                            self._max_iter0, self.omega)
+            code, run, its, res, tolerance, tried, nlog = out
             if code == 0 and nlog == 1:
                 buf.setflags(write=False)          # z and w, its views, are read-only
                 return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
@@ -480,6 +527,9 @@ class LCPSolver:
             z, w, work = buf[:n], buf[n:2 * n], buf[2 * n:]
             z0v = None
         else:
+            if not (type(q) is np.ndarray and q.dtype == _F64 and q.ndim == 1
+                    and q.flags.c_contiguous and q.flags.writeable and q.shape[0] == n):
+                q = self._check_q(q)
             z, w = np.empty(n), np.empty(n)
             work = np.empty(2 * n + _LOG_SIZE)
             z0v = as_vector("z0", z0, size=n)
@@ -814,17 +864,15 @@ def _solved(z: NDArray[np.float64], w: NDArray[np.float64], iterations: int, res
         if len(_SOLVED_MESSAGES) > 4096:
             _SOLVED_MESSAGES.clear()
         message = _SOLVED_MESSAGES[key] = f"{method}: solved (residual {res:.3g})"
-    result = object.__new__(LCPResult)
-    fields = result.__dict__
-    fields["z"] = z
-    fields["w"] = w
-    fields["status"] = "solved"
-    fields["iterations"] = iterations
-    fields["residual"] = res
-    fields["method"] = method
-    fields["message"] = message
-    fields["tolerance"] = tolerance
+    result = _new(LCPResult)
+    _setattr(result, "__dict__", {"z": z, "w": w, "status": "solved", "iterations": iterations,
+                                  "residual": res, "method": method, "message": message,
+                                  "tolerance": tolerance})
     return result
+
+
+_new = object.__new__
+_setattr = object.__setattr__
 
 
 #: The messages of verified first runs, by (method, residual): formatting a float costs
