@@ -228,7 +228,7 @@ def _locator_class() -> Any:
     """numba's locator base, subclassed (imported only once numba is)."""
     from numba.core import caching
 
-    class UserCacheLocator(caching._CacheLocator):  # type: ignore[misc, name-defined]
+    class UserCacheLocator(caching._CacheLocator):
         """numba cache locator of the kernel modules: the per-user folder keyed by the
         sources (see the module docstring). numba stamps the index with
         :meth:`get_source_stamp` (the same digest: a file's time is never looked at)."""
@@ -248,9 +248,7 @@ def _locator_class() -> Any:
 
         @classmethod
         def from_function(cls, py_func: Any, py_file: str) -> Any:
-            from numba.core import config
-
-            if config.CACHE_DIR:      # an explicit NUMBA_CACHE_DIR: numba's own locator
+            if os.environ.get("NUMBA_CACHE_DIR"):  # explicit: numba's own locator
                 return None
             try:
                 module = Path(py_file).resolve()
@@ -269,7 +267,7 @@ def _locator_class() -> Any:
 def _register_locator() -> None:
     from numba.core import caching
 
-    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # numba < 0.62
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # type: ignore[attr-defined]
     classes = impl._locator_classes
     if not any(c.__name__ == "UserCacheLocator" for c in classes):
         classes.insert(1, _locator_class())   # after numba's NUMBA_CACHE_DIR locator
