@@ -11,7 +11,8 @@ OUT    ?= out
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,cluster,control,scs]"
+	@echo "installing nscontrol and its dependencies (pip's own lines follow; about a minute)"
+	$(PY) -m pip install --progress-bar on -e ".[dev,cluster,control,scs]"
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -87,32 +87,79 @@ NUMBA_PACKAGE = {
 }
 
 
-def run_g(root: Path, env: dict[str, str], refresh: bool) -> float:
+def run_g(root: Path, env: dict[str, str], refresh: bool, user_cache: bool = False,
+          package: str = "pkg") -> tuple[float, int]:
     """Import the package in a fresh process (refreshing its caches first, as
-    ``import nscontrol`` does for its own kernels) and call the compiled ``g``."""
+    ``import nscontrol`` does for its own kernels; with ``user_cache``, caching its kernel
+    modules in the per-user folder as ``import nscontrol`` does) and call the compiled
+    ``g``; returns its value and how many of ``g``'s signatures were loaded from a cache."""
     code = textwrap.dedent(f"""
         import sys; sys.path.insert(0, {str(root)!r})
         from pathlib import Path
+        from nscontrol import _kernel_cache
+        if {user_cache}:
+            _kernel_cache.install(Path({str(root / package)!r}))
         if {refresh}:
-            from nscontrol import _kernel_cache
-            _kernel_cache.refresh(Path({str(root / 'pkg')!r}))
-        import pkg.sub._x_kernels as m
-        print(m.g())
+            _kernel_cache.refresh(Path({str(root / package)!r}))
+        import {package}.sub._x_kernels as m
+        print(m.g(), sum(m.g.stats.cache_hits.values()))
         """)
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, timeout=300, check=True)
-    return float(out.stdout.split()[-1])
+    value, hits = out.stdout.split()[-2:]
+    return float(value), int(hits)
 
 
-@pytest.mark.parametrize("cache_dir", [False, True], ids=["in-tree", "NUMBA_CACHE_DIR"])
-def test_a_changed_callee_is_recompiled_into_its_caller(tmp_path, cache_dir):
+def write_package(root: Path, value: float) -> None:
+    for name, text in NUMBA_PACKAGE.items():
+        write(root / name, text.format(value=value))
+
+
+@pytest.mark.parametrize("where", ["in-tree", "NUMBA_CACHE_DIR", "per-user"])
+def test_a_changed_callee_is_recompiled_into_its_caller(tmp_path, where):
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR",
                                                              "NUMBA_DISABLE_JIT")}
-    if cache_dir:
+    env["NSCONTROL_CACHE_DIR"] = str(tmp_path / "user")
+    if where == "NUMBA_CACHE_DIR":
         env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    user = where == "per-user"
     for value in (1.0, 10.0):
-        for name, text in NUMBA_PACKAGE.items():
-            write(tmp_path / "pkg" / name, text.format(value=value))
+        write_package(tmp_path / "pkg", value)
         # g = f + 1: 2.0 first, then 11.0 (exact in binary: no tolerance to choose)
-        assert run_g(tmp_path, env, refresh=True) == value + 1.0
-    assert run_g(tmp_path, env, refresh=True) == 11.0           # and loaded from the cache
+        # per-user: no refresh needed, a changed callee changes the folder
+        assert run_g(tmp_path, env, refresh=not user, user_cache=user) == (value + 1.0, 0)
+    # and loaded from the cache
+    assert run_g(tmp_path, env, refresh=not user, user_cache=user) == (11.0, 1)
+    if user:   # in the per-user folder, by content: nothing beside the sources
+        assert not list((tmp_path / "pkg").rglob("*.nb?"))
+        assert len(list((tmp_path / "user").rglob("_x_kernels.g-*.nbi"))) == 2
+
+
+def test_the_per_user_cache_survives_a_new_environment(tmp_path):
+    """The same sources at another path (a new virtual environment) load the kernels the
+    first copy compiled; numba's path-keyed ``__pycache__`` would compile them again."""
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR",
+                                                             "NUMBA_DISABLE_JIT")}
+    env["NSCONTROL_CACHE_DIR"] = str(tmp_path / "user")
+    write_package(tmp_path / "one" / "pkg", 1.0)
+    write_package(tmp_path / "two" / "pkg", 1.0)
+    assert run_g(tmp_path / "one", env, refresh=True, user_cache=True) == (2.0, 0)
+    assert run_g(tmp_path / "two", env, refresh=True, user_cache=True) == (2.0, 1)
+    # without the per-user cache the second copy compiles (the test can fail)
+    env["NSCONTROL_CACHE_DIR"] = ""
+    write_package(tmp_path / "three" / "pkg", 1.0)
+    write_package(tmp_path / "four" / "pkg", 1.0)
+    assert run_g(tmp_path / "three", env, refresh=True, user_cache=True) == (2.0, 0)
+    assert run_g(tmp_path / "four", env, refresh=True, user_cache=True) == (2.0, 0)
+
+
+def test_the_per_user_folder_follows_the_environment(monkeypatch, tmp_path):
+    monkeypatch.delenv("NSCONTROL_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert kc.user_cache_root() == tmp_path / "nscontrol" / "numba"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    assert kc.user_cache_root() == Path.home() / ".cache" / "nscontrol" / "numba"
+    monkeypatch.setenv("NSCONTROL_CACHE_DIR", str(tmp_path / "x"))
+    assert kc.user_cache_root() == tmp_path / "x"
+    monkeypatch.setenv("NSCONTROL_CACHE_DIR", "")
+    assert kc.user_cache_root() is None

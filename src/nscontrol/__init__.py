@@ -30,8 +30,10 @@ from .errors import (
 )
 from .simulate import Trajectory, simulate  # noqa: E402  (the verb shadows its subpackage)
 
-# numba stamps a cached kernel with its own file only: drop the caches of kernels whose
-# imported kernels changed since (an edit, an upgrade) before any kernel module loads
+# the kernels are cached per user, by content (a new virtual environment finds them); numba
+# stamps a cached kernel with its own file only: drop the caches of kernels whose imported
+# kernels changed since (an edit, an upgrade) before any kernel module loads
+_kernel_cache.install()
 _kernel_cache.refresh()
 
 # what a lower layer calls in a higher one (imported at the first call): a corner design's

@@ -10,22 +10,41 @@ beside numba's index (``__pycache__/<module>.nscontrol-deps``) and, when the dig
 (or was never written), deletes the module's cached kernels so numba compiles them again.
 
 It runs once per process, on ``import nscontrol``: it reads the kernel modules' sources (a few
-hundred kB, about a millisecond) and imports nothing. The cache folders are numba's own: the
-module's ``__pycache__``, or the folder under ``NUMBA_CACHE_DIR`` that numba derives from the
-module's directory. A folder that cannot be written is left alone (numba then caches
-elsewhere, or not at all).
+hundred kB, about a millisecond) and imports nothing. A folder that cannot be written is left
+alone (numba then caches elsewhere, or not at all).
+
+Where the kernels are cached
+----------------------------
+numba keys its cache folder by the source file's *path* (the module's ``__pycache__``, or a
+folder under ``NUMBA_CACHE_DIR`` derived from the module's directory), so a new virtual
+environment or a reinstall elsewhere compiled every kernel again (minutes). :func:`install`
+registers with numba a locator of our own (:class:`UserCacheLocator`) for the kernel modules:
+they are cached in a per-user folder (:func:`user_cache_root`: ``$NSCONTROL_CACHE_DIR``, else
+``$XDG_CACHE_HOME/nscontrol/numba``, else ``~/.cache/nscontrol/numba``) under a name made of
+the numba version and a digest of the module's source *and* of every kernel module it reaches
+(:func:`module_digests`). Any environment with the same sources and numba finds the same
+folder; a changed callee changes its callers' folders, so a stale caller can never be loaded
+from there (the guarantee :func:`refresh` gives the path-keyed folders). numba itself keys each
+entry by the CPU and the Python version. An explicit ``NUMBA_CACHE_DIR`` is honoured (numba's
+own locator comes first); an unwritable per-user folder falls back to numba's locators.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import re
+import sys
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 __all__ = ["KERNEL_GLOBS", "kernel_modules", "reached_kernels", "dependency_digests", "refresh",
-           "cache_folder"]
+           "cache_folder", "user_cache_root", "module_digests", "install"]
+
+#: The package folder of nscontrol's kernel modules.
+PACKAGE_ROOT = Path(__file__).resolve().parent
 
 #: The compiled-kernel modules (numba, ``cache=True``), relative to the package folder, at any
 #: depth (a method's package keeps its kernels inside: ``simulate/<method>/_x_kernels.py``).
@@ -98,12 +117,64 @@ def dependency_digests(modules: Iterable[Path]) -> dict[Path, str]:
     return digests
 
 
+def user_cache_root() -> Path | None:
+    """The per-user folder of the compiled kernels: ``$NSCONTROL_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/nscontrol/numba``, else ``~/.cache/nscontrol/numba``; None when
+    ``NSCONTROL_CACHE_DIR`` is set empty (numba's own folders are then used)."""
+    explicit = os.environ.get("NSCONTROL_CACHE_DIR")
+    if explicit is not None:
+        return Path(explicit).expanduser() if explicit else None
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "nscontrol" / "numba"
+
+
+@functools.lru_cache(maxsize=8)
+def module_digests(root: Path) -> dict[Path, str]:
+    """For each kernel module under the package folder ``root`` (resolved), a digest of its
+    own source and of every kernel module it reaches: the name of its per-user cache folder
+    (computed once per process; the sources do not change under a running process)."""
+    deps = dependency_digests(kernel_modules(root))
+    return {p: hashlib.sha256(p.read_bytes() + b"\0" + d.encode()).hexdigest()[:20]
+            for p, d in deps.items()}
+
+
+@functools.lru_cache(maxsize=1)
+def _numba_version() -> str:
+    """numba's version, read without importing it (an import costs about a second)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("numba")
+    except PackageNotFoundError:     # pragma: no cover - numba is a dependency
+        return "unknown"
+
+
+#: Package folders whose kernel modules go to the per-user cache (:func:`install`).
+_ROOTS: set[Path] = set()
+
+
+def _user_folder(module: Path) -> Path | None:
+    """The per-user cache folder of ``module`` (a resolved path), or None when it is not a
+    kernel module of an installed root or there is no per-user folder."""
+    base = user_cache_root()
+    if base is None:
+        return None
+    for root in _ROOTS:
+        if module.is_relative_to(root):
+            digest = module_digests(root).get(module)
+            if digest is None:
+                return None
+            return base / f"numba-{_numba_version()}" / f"{module.stem}-{digest}"
+    return None
+
+
 def cache_folder(module: Path) -> Path:
-    """Where numba caches the kernels of ``module`` (its ``__pycache__``, or the folder it
-    derives under ``NUMBA_CACHE_DIR``)."""
+    """Where numba caches the kernels of ``module``: the folder under ``NUMBA_CACHE_DIR`` it
+    derives, else the per-user folder (:func:`install`), else the module's ``__pycache__``."""
     cache_dir = os.environ.get("NUMBA_CACHE_DIR")
     if not cache_dir:
-        return module.parent / "__pycache__"
+        user = _user_folder(module.resolve()) if _ROOTS else None
+        return module.parent / "__pycache__" if user is None else user
     folder = str(module.resolve().parent)
     hashed = hashlib.sha1(folder.encode()).hexdigest()
     return Path(cache_dir) / f"{os.path.basename(folder)}_{hashed}"
@@ -151,3 +222,94 @@ def _write_atomically(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
+
+
+def _locator_class() -> Any:
+    """numba's locator base, subclassed (imported only once numba is)."""
+    from numba.core import caching
+
+    class UserCacheLocator(caching._CacheLocator):
+        """numba cache locator of the kernel modules: the per-user folder keyed by the
+        sources (see the module docstring). numba stamps the index with
+        :meth:`get_source_stamp` (the same digest: a file's time is never looked at)."""
+
+        def __init__(self, py_func: Any, folder: Path, digest: str) -> None:
+            self._lineno = py_func.__code__.co_firstlineno
+            self._folder, self._digest = folder, digest
+
+        def get_cache_path(self) -> str:
+            return str(self._folder)
+
+        def get_source_stamp(self) -> str:
+            return self._digest
+
+        def get_disambiguator(self) -> str:
+            return str(self._lineno)
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> Any:
+            if os.environ.get("NUMBA_CACHE_DIR"):  # explicit: numba's own locator
+                return None
+            try:
+                module = Path(py_file).resolve()
+                folder = _user_folder(module)
+                if folder is None:
+                    return None
+                self = cls(py_func, folder, folder.name)
+                self.ensure_cache_path()
+            except OSError:           # not writable: numba's next locator
+                return None
+            return self
+
+    return UserCacheLocator
+
+
+def _register_locator() -> None:
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # type: ignore[attr-defined]
+    classes = impl._locator_classes
+    if not any(c.__name__ == "UserCacheLocator" for c in classes):
+        classes.insert(1, _locator_class())   # after numba's NUMBA_CACHE_DIR locator
+
+
+class _AfterImport:
+    """A finder that registers the locator once ``numba.core.caching`` has been imported
+    (``import nscontrol`` must not import numba: it costs a second)."""
+
+    NAME = "numba.core.caching"
+
+    def find_spec(self, name: str, path: Any, target: Any = None) -> Any:
+        if name != self.NAME:
+            return None
+        from importlib.machinery import PathFinder
+
+        spec = PathFinder.find_spec(name, path)
+        if spec is None or spec.loader is None:
+            return None
+        loader = spec.loader
+        exec_module = loader.exec_module
+
+        def exec_then_register(module: Any) -> None:
+            exec_module(module)
+            try:
+                sys.meta_path.remove(self)
+            except ValueError:
+                pass
+            _register_locator()
+
+        loader.exec_module = exec_then_register  # type: ignore[method-assign]
+        return spec
+
+
+def install(root: Path | None = None) -> None:
+    """Cache the kernel modules under the package folder ``root`` (default: nscontrol's)
+    in the per-user folder (:func:`user_cache_root`), by content. Registers the locator
+    with numba now if numba is imported, else when it is."""
+    if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
+        return
+    _ROOTS.add(PACKAGE_ROOT if root is None else root.resolve())
+    if "numba.core.caching" in sys.modules:
+        _register_locator()
+    elif not any(isinstance(f, _AfterImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _AfterImport())

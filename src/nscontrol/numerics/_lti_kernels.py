@@ -30,7 +30,25 @@ _STACK = 96          # subdivision stack (depth <= 45 at width 1e-13)
 _MIN_WIDTH = 1e-13   # below this a cluster of critical points counts as one
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def copy_into(dst, src):  # pragma: no cover - compiled
+    """``dst[:] = src`` for vectors of one length, as a loop: numba's slice assignment
+    compiles a shape-checked broadcast whose error message alone costs about 3 s of the
+    first compile (string formatting kernels), for no check these callers need."""
+    for j in range(dst.shape[0]):
+        dst[j] = src[j]
+
+
+@njit(cache=True, inline="always")
+def sum_squares(y):  # pragma: no cover - compiled
+    """``np.sum(y * y)`` (the same sequential sum) without the temporary array."""
+    s = 0.0
+    for j in range(y.shape[0]):
+        s += y[j] * y[j]
+    return s
+
+
+@njit(cache=True, inline="always")
 def _horner2(a, m, x):  # pragma: no cover - compiled
     """Value and derivative at ``x`` of ``Σ_{j<m} a[j] x^j``."""
     r = 0.0
@@ -41,7 +59,7 @@ def _horner2(a, m, x):  # pragma: no cover - compiled
     return r, d
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _horner(a, m, x):  # pragma: no cover - compiled
     r = 0.0
     for j in range(m - 1, -1, -1):
@@ -62,7 +80,7 @@ ROOT_BUDGET = 160
 _ROOT_FLOOR = 2.0 ** -20
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _root(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
     """Root of the monotone polynomial on [lo, hi] with P(lo) > 0 >= P(hi): safeguarded Newton
     from the secant point (bisection whenever Newton leaves the bracket or did not halve it
@@ -70,7 +88,7 @@ def _root(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
     return root_iterations(a, m, lo, hi, f_lo, f_hi)[0]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def root_iterations(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
     """:func:`_root` and the number of iterations it took (at most :data:`ROOT_BUDGET`)."""
     x = lo + (hi - lo) * f_lo / (f_lo - f_hi) if f_lo > f_hi else 0.5 * (lo + hi)
@@ -99,7 +117,7 @@ def root_iterations(a, m, lo, hi, f_lo, f_hi):  # pragma: no cover - compiled
     return x, ROOT_BUDGET
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _signed_root(a, m, lo, hi, sign, work):  # pragma: no cover - compiled
     """Root of ``sign · P`` (``P`` monotone, changing sign on [lo, hi])."""
     for j in range(m):
@@ -113,7 +131,7 @@ def _signed_root(a, m, lo, hi, sign, work):  # pragma: no cover - compiled
     return _root(work, m, lo, hi, f_lo, f_hi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def polish(a, s, grazing):  # pragma: no cover - compiled
     """Newton polish of a root of ``P = Σ a_j σ^j`` (of ``P'`` when ``grazing``) near ``s``;
     ``s`` is kept when the exact polynomial disagrees (a step above 1e-6)."""
@@ -124,7 +142,7 @@ def polish(a, s, grazing):  # pragma: no cover - compiled
             c[j] = (j + 1) * a[j + 1]
         m -= 1
     else:
-        c[:] = a
+        copy_into(c, a)
     x = s
     for _ in range(4):
         f, d = _horner2(c, m, x)
@@ -139,7 +157,7 @@ def polish(a, s, grazing):  # pragma: no cover - compiled
     return x
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bernstein(B, a, m, out):  # pragma: no cover - compiled
     """Bernstein coefficients on [0, 1] of ``Σ_{j<m} a_j σ^j`` (``B`` of degree m - 1)."""
     for r in range(m):
@@ -149,7 +167,7 @@ def _bernstein(B, a, m, out):  # pragma: no cover - compiled
         out[r] = s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sign_changes(b, m):  # pragma: no cover - compiled
     """Sign variations of ``b`` (zeros skipped): an upper bound on the number of roots in the
     open interval, with the same parity (Descartes' rule for the Bernstein basis)."""
@@ -221,7 +239,7 @@ def _critical_points(da, m, bern_d, s_end, out, stack_b, stack_lo, stack_hi, wor
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _touches_at_end(a, K1, v, tol):  # pragma: no cover - compiled
     """Whether ``P`` (decreasing to ``|P(1)| <= tol`` at the cell's end) only touches zero
     there: the minimum of its quadratic expansion at ``σ = 1`` stays within ``tol`` (the
@@ -272,7 +290,7 @@ def _walk(a, K1, s_end, tol, skip_start, bern, crit, stack_b, stack_lo, stack_hi
     return False, 0.0, False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def guard_taylor_coefficients(W, g0, i, y, a):  # pragma: no cover - compiled
     """Taylor coefficients on a cell of guard ``i`` from the cell-start state ``y``."""
     K1, _, n = W.shape
@@ -307,7 +325,7 @@ def taylor_tables(M, T, phi):  # pragma: no cover - compiled
             phi[r, c] = s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def matmul_into(A, B, out):  # pragma: no cover - compiled
     """``out = A @ B`` for square matrices (loops: no BLAS threads for these small sizes)."""
     n = out.shape[0]
@@ -319,7 +337,7 @@ def matmul_into(A, B, out):  # pragma: no cover - compiled
             out[r, c] = s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _matvec(M, x, out):  # pragma: no cover - compiled
     n = M.shape[0]
     for r in range(n):
@@ -333,21 +351,24 @@ def _matvec(M, x, out):  # pragma: no cover - compiled
 def _power_apply(phi, k, y, out):  # pragma: no cover - compiled
     """``out = Φ^k y`` by binary powering (``log2 k`` squarings)."""
     n = y.shape[0]
-    out[:] = y
+    copy_into(out, y)
     if k <= 0:
         return
-    P = phi.copy()
-    P2 = np.empty_like(phi)
+    P = np.empty((n, n))
+    P2 = np.empty((n, n))
+    for r in range(n):
+        copy_into(P[r], phi[r])
     tmp = np.empty(n)
     while True:
         if k & 1:
             _matvec(P, out, tmp)
-            out[:] = tmp
+            copy_into(out, tmp)
         k >>= 1
         if k == 0:
             break
         matmul_into(P, P, P2)  # P <- P @ P
-        P[:, :] = P2
+        for r in range(n):
+            copy_into(P[r], P2[r])
 
 
 @njit(cache=True)
@@ -394,7 +415,7 @@ def propagate(kind, lam, V, Vinv, phi, T, d, h, x, t, out):  # pragma: no cover 
         out[j] = acc[j] * d[j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clock_advance(t, lo, dur):  # pragma: no cover - compiled
     """The time label after a piece of duration ``dur`` from the clock ``t + lo``: returns
     ``(t', lo')`` with ``t' + lo' = t + lo + dur`` exactly (Knuth's two-sum; ``lo`` carries
@@ -409,7 +430,7 @@ def clock_advance(t, lo, dur):  # pragma: no cover - compiled
     return t_new, lo - (t_new - s)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def flight_end(event, tau, t, lo, tf):  # pragma: no cover - compiled
     """The duration of a flight (or piece) from the clock ``t + lo`` and the clock at its
     end, ``(dur, t', lo')``: with an event, its own offset ``τ`` (never a difference of
@@ -423,7 +444,7 @@ def flight_end(event, tau, t, lo, tf):  # pragma: no cover - compiled
     return (tf - t) - lo, tf, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def restart_tolerance(W, i, kappa, ynorm, g0_i, a1, h, t):  # pragma: no cover - compiled
     """Bound on the round-off error of guard ``i`` at a state the integrator computed itself
     (after an event, at the restart of a chunk), with ``a1 = h ġ_i`` its first Taylor
@@ -475,7 +496,7 @@ def project_restart(W, g0, kappa, h, t, n_free, y, a, proj):  # pragma: no cover
         guard_taylor_coefficients(W, g0, i, y, a)
         if a[0] >= 0.0:
             continue
-        ynorm = np.sqrt(np.sum(y * y))
+        ynorm = np.sqrt(sum_squares(y))
         tol = restart_tolerance(W, i, kappa, ynorm, g0[i], a[1], h, t)
         w2 = 0.0
         for c in range(n_free):
@@ -520,7 +541,7 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
         hit_out[i] = 0
         graze_out[i] = 0
     # -- guards at zero at t = 0 ------------------------------------------------------
-    ynorm = np.sqrt(np.sum(y0 * y0))
+    ynorm = np.sqrt(sum_squares(y0))
     falling = False
     for i in range(p):
         guard_taylor_coefficients(W, g0, i, y0, a)
@@ -545,14 +566,15 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
         return EVENT, 0.0, -1
     # -- cell scan ---------------------------------------------------------------------
     n_cells = max(1, int(np.ceil(t_max / h)))
-    y = y0.copy()
+    y = np.empty(n)
+    copy_into(y, y0)
     y_next = np.empty(n)
     k_hit = -1
     for k in range(n_cells):
         sigma_end = min(1.0, (t_max - k * h) / h)
         if sigma_end <= 0.0:
             break
-        ynorm = np.sqrt(np.sum(y * y))
+        ynorm = np.sqrt(sum_squares(y))
         for i in range(p):
             if not active[i]:
                 continue
@@ -578,7 +600,7 @@ def search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, y0, h, t_m
         if k_hit >= 0:
             break
         _matvec(phi, y, y_next)
-        y[:] = y_next
+        copy_into(y, y_next)
     if k_hit < 0:
         return NO_EVENT, 0.0, -1
     # -- re-polish on the exact start state of the cell, simultaneous guards -------------

@@ -17,6 +17,27 @@ back to Python every event it does not settle unambiguously:
 
 Python then runs its general code for that event exactly as without this loop, so the loop is an
 acceleration, never a change of semantics.
+
+The loop (:func:`run_linear_jumps`)
+-----------------------------------
+Every flight from a state the integrator computed — after a settled jump, and the first one
+too when ``restart`` (``x`` comes from an earlier call, not from the user) — starts with the
+round-off projection :func:`nscontrol.numerics._lti_kernels.project_restart` (counts in
+``proj``); ``INADMISSIBLE``: a guard negative at the start, beyond that tolerance
+(``proj[3:5]``) or, for the user's state, beyond the search's. A flight's end state is
+propagated by the event's own offset ``τ`` from the flight's start, never by a difference of
+absolute times (whose rounding, ``eps·t``, would carry the state past its event); the time
+labels carry their rounding in ``clock = [t, lo]``
+(:func:`nscontrol.numerics._lti_kernels.clock_advance`). Samples written: grid points
+``t_grid0 + k dt`` strictly inside each flight, the pre-event state when ``sample_pre``, the
+post-jump state of every settled event and the final state at ``tf``. ``FULL``: a buffer is
+full, resume from the returned ``(t, x)``: the start of the flight whose samples did not fit
+(the run is then the same as with a larger buffer), or, when even an empty buffer is too
+small for one flight, the last grid point written.
+
+The loop is one compiled function and its parts are inlined (``inline="always"``): numba
+links every callee's machine code into its caller and optimises it again there, so each
+extra level of calls would cost another optimisation of everything below it on a cold cache.
 """
 
 from __future__ import annotations
@@ -27,11 +48,13 @@ from numba import njit
 from ..numerics._lti_kernels import (
     EVENT,
     NEGATIVE,
+    copy_into,
     flight_end,
     guard_taylor_coefficients,
     project_restart,
     propagate,
     search,
+    sum_squares,
 )
 
 #: Return codes of :func:`run_linear_jumps`.
@@ -86,7 +109,7 @@ def zeno_status(hist, count, first, slot, t, geometric, ratio_tol, horizon, rel,
     return ZENO_NONE, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def zeno_push(hist, count, first, slot, t):  # pragma: no cover - compiled
     """Append ``t`` to history row ``slot`` (the last six times are kept; ``first[slot]`` is
     the first time since the row was last emptied)."""
@@ -102,7 +125,7 @@ def zeno_push(hist, count, first, slot, t):  # pragma: no cover - compiled
         count[slot] = m + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _grid_count(t, t_next, t_grid0, dt, k):  # pragma: no cover - compiled
     """Number of grid points ``t_grid0 + j dt`` (``j >= k``) strictly inside ``(t, t_next)``."""
     count = 0
@@ -130,10 +153,10 @@ def _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, lo, t_next, t_grid0, dt
             full = n_s + 3 > cap_s
             propagate(kind, lam, V, Vinv, phi, T, d, h, x, (tg - t) - lo, xn)
             s_t[n_s] = tg
-            s_x[n_s] = xn
+            copy_into(s_x[n_s], xn)
             n_s += 1
             if full:
-                x[:] = xn
+                copy_into(x, xn)
                 return n_s, True, tg
         k += 1
 
@@ -157,7 +180,7 @@ def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, 
         return -1
     for j in range(n):
         y[j] = x[j] / d[j]
-    ynorm = np.sqrt(np.sum(y * y))
+    ynorm = np.sqrt(sum_squares(y))
     for j in range(p):
         if j != i:
             guard_taylor_coefficients(W, g0, j, y, a)
@@ -175,9 +198,54 @@ def _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first, 
     for j in range(n):
         y[j] = xn[j] / d[j]
     guard_taylor_coefficients(W, g0, i, y, a)
-    if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(np.sum(y * y)) + abs(g0[i])):
+    if a[1] <= _CLOSED_TOL * (row_norm[i] * np.sqrt(sum_squares(y)) + abs(g0[i])):
         return -1  # it would not leave its surface (rest, persistent contact)
     return i
+
+
+@njit(cache=True, inline="always")
+def _restart_inadmissible(W, g0, kappa, h, t, n_free, d, x, y, a, proj, project
+                          ):  # pragma: no cover - compiled
+    """Set the balanced state ``y = x / d`` of a flight's start; when ``project`` (a state
+    the integrator computed), first apply the round-off projection
+    :func:`nscontrol.numerics._lti_kernels.project_restart` to it (and to ``x``). Returns
+    whether a guard is negative beyond that tolerance."""
+    n = x.shape[0]
+    for j in range(n):
+        y[j] = x[j] / d[j]
+    if not project:
+        return False
+    done = proj[0]
+    if project_restart(W, g0, kappa, h, t, n_free, y, a, proj) >= 0:
+        return True
+    if proj[0] > done:  # projected: the state is the balanced one moved
+        for j in range(n):
+            x[j] = y[j] * d[j]
+    return False
+
+
+@njit(cache=True, inline="always")
+def _add_sample(s_t, s_x, n_s, t, x):  # pragma: no cover - compiled
+    """Write the sample ``(t, x)`` at row ``n_s``; returns the new count."""
+    s_t[n_s] = t
+    copy_into(s_x[n_s], x)
+    return n_s + 1
+
+
+@njit(cache=True, inline="always")
+def _add_event(e_t, e_i, e_pre, e_post, n_e, t, i, pre, post):  # pragma: no cover - compiled
+    """Write the settled event of guard ``i`` at ``t`` at row ``n_e``; returns the new count."""
+    e_t[n_e] = t
+    e_i[n_e] = i
+    copy_into(e_pre[n_e], pre)
+    copy_into(e_post[n_e], post)
+    return n_e + 1
+
+
+@njit(cache=True, inline="always")
+def _set_clock(clock, t, lo):  # pragma: no cover - compiled
+    clock[0] = t
+    clock[1] = lo
 
 
 @njit(cache=True)
@@ -191,65 +259,21 @@ def run_linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
 
     Returns ``(code, t, n_samples, n_events)``; ``x`` is overwritten with the state at the
     returned ``t`` (pre-event state for ``HANDOFF``, with ``hit``/``graze`` describing the
-    event). Every flight from a state the integrator computed — after a settled jump, and
-    the first one too when ``restart`` (``x`` comes from an earlier call, not from the
-    user) — starts with the round-off projection
-    :func:`nscontrol.numerics._lti_kernels.project_restart` (counts in ``proj``);
-    ``INADMISSIBLE``: a guard negative at the start, beyond that tolerance (``proj[3:5]``)
-    or, for the user's state, beyond the search's. A flight's end state is propagated by
-    the event's own offset ``τ`` from the flight's start, never by a difference of absolute
-    times (whose rounding, ``eps·t``, would carry the state past its event); the time
-    labels carry their rounding in ``clock = [t, lo]``
-    (:func:`nscontrol.numerics._lti_kernels.clock_advance`), read when ``clock[0]`` is the
-    ``t`` passed and written at the return. Samples written: grid points
-    ``t_grid0 + k dt`` strictly inside each flight, the pre-event state when
-    ``sample_pre``, the post-jump state of every settled event and the final state at
-    ``tf``. ``FULL``: a buffer is full, resume from the returned ``(t, x)``:
-    the start of the flight whose samples did not fit (the run is then the same as with a
-    larger buffer), or, when even an empty buffer is too small for one flight, the last grid
-    point written.
+    event). The time labels carry their rounding in ``clock = [t, lo]``, read when
+    ``clock[0]`` is the ``t`` passed and kept equal to the returned ``(t, lo)``. Restarts,
+    samples and ``FULL``: see "The loop" in the module docstring.
     """
-    n = x.shape[0]
-    p = g0.shape[0]
-    n_s = 0
-    n_e = 0
-    xn = np.empty(n)
-    y = np.empty(n)
-    a = np.empty(W.shape[0])
-    cap_s = s_t.shape[0]
-    cap_e = e_t.shape[0]
+    n, p = x.shape[0], g0.shape[0]
+    n_s = n_e = 0
+    xn, y, a = np.empty(n), np.empty(n), np.empty(W.shape[0])
     lo = clock[1] if clock[0] == t else 0.0
-    code, t, n_s, n_e, lo = _linear_jumps(
-        W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, kind, lam, V, Vinv, T, d,
-        h, kappa, n_free, J, jump_ok, zeno_slot, hist, count, first, geometric, ratio_tol,
-        horizon, rel, min_interval, budget, x, t, lo, tf, dt, t_grid0, sample_pre, restart,
-        proj, s_t, s_x, e_t, e_i, e_pre, e_post, hit, graze, n, p, n_s, n_e, xn, y, a, cap_s,
-        cap_e)
-    clock[0] = t
-    clock[1] = lo
-    return code, t, n_s, n_e
-
-
-@njit(cache=True)
-def _linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, kind, lam, V,
-                  Vinv, T, d, h, kappa, n_free, J, jump_ok, zeno_slot, hist, count, first,
-                  geometric, ratio_tol, horizon, rel, min_interval, budget, x, t, lo, tf, dt,
-                  t_grid0, sample_pre, restart, proj, s_t, s_x, e_t, e_i, e_pre, e_post, hit,
-                  graze, n, p, n_s, n_e, xn, y, a, cap_s, cap_e):  # pragma: no cover
-    """The loop of :func:`run_linear_jumps` on the clock ``t + lo``; returns
-    ``(code, t, n_samples, n_events, lo)``."""
+    _set_clock(clock, t, lo)
     while t < tf:
-        if n_s + 4 > cap_s or n_e + 1 > cap_e:
-            return FULL, t, n_s, n_e, lo
-        for j in range(n):
-            y[j] = x[j] / d[j]
-        if p and restart:
-            done = proj[0]
-            if project_restart(W, g0, kappa, h, t, n_free, y, a, proj) >= 0:
-                return INADMISSIBLE, t, n_s, n_e, lo
-            if proj[0] > done:  # projected: the state is the balanced one moved
-                for j in range(n):
-                    x[j] = y[j] * d[j]
+        if n_s + 4 > s_t.shape[0] or n_e + 1 > e_t.shape[0]:
+            return FULL, t, n_s, n_e
+        if _restart_inadmissible(W, g0, kappa, h, t, n_free, d, x, y, a, proj,
+                                 p > 0 and restart):
+            return INADMISSIBLE, t, n_s, n_e
         restart = True
         if p:
             code, tau, _ = search(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern,
@@ -257,49 +281,40 @@ def _linear_jumps(W, g0, row_norm, graze_tol, sim_tol, remainder, phi, bern, kin
         else:
             code, tau = 0, 0.0
         if code == NEGATIVE:
-            return INADMISSIBLE, t, n_s, n_e, lo
+            return INADMISSIBLE, t, n_s, n_e
         dur, t_next, lo_next = flight_end(code == EVENT, tau, t, lo, tf)
         # grid samples strictly inside (t, t_next)
         k = int(np.floor((t - t_grid0) / dt)) + 1
-        if n_s and n_s + _grid_count(t, t_next, t_grid0, dt, k) + 3 > cap_s:
+        if n_s and n_s + _grid_count(t, t_next, t_grid0, dt, k) + 3 > s_t.shape[0]:
             # this flight's samples do not fit: hand the buffer back first and redo the flight
             # from the same state, so that emptying the buffer changes nothing
-            return FULL, t, n_s, n_e, lo
+            return FULL, t, n_s, n_e
         n_s, full, t_full = _sample_grid(kind, lam, V, Vinv, phi, T, d, h, x, t, lo, t_next,
                                          t_grid0, dt, k, s_t, s_x, n_s, xn)
         if full:  # resume from the last grid point written: its exact state is in x
-            return FULL, t_full, n_s, n_e, 0.0
+            _set_clock(clock, t_full, 0.0)
+            return FULL, t_full, n_s, n_e
         if dur > 0.0:
             propagate(kind, lam, V, Vinv, phi, T, d, h, x, dur, xn)
-            x[:] = xn
+            copy_into(x, xn)
         t, lo = t_next, lo_next
+        _set_clock(clock, t, lo)
         if code != EVENT:
-            s_t[n_s] = t
-            s_x[n_s] = x
-            n_s += 1
-            return DONE, t, n_s, n_e, lo
+            return DONE, t, _add_sample(s_t, s_x, n_s, t, x), n_e
         if sample_pre:
-            s_t[n_s] = t
-            s_x[n_s] = x
-            n_s += 1
+            n_s = _add_sample(s_t, s_x, n_s, t, x)
         if budget <= n_e:
-            return HANDOFF, t, n_s, n_e, lo
+            return HANDOFF, t, n_s, n_e
         i = _simple_jump(W, g0, row_norm, d, J, jump_ok, zeno_slot, hist, count, first,
                          geometric, ratio_tol, horizon, rel, min_interval, x, t, hit, graze,
                          xn, y, a)
         if i < 0:
-            return HANDOFF, t, n_s, n_e, lo
+            return HANDOFF, t, n_s, n_e
         zeno_push(hist, count, first, zeno_slot[i], t)
-        e_t[n_e] = t
-        e_i[n_e] = i
-        e_pre[n_e] = x
-        e_post[n_e] = xn
-        n_e += 1
-        x[:] = xn
-        s_t[n_s] = t
-        s_x[n_s] = x
-        n_s += 1
-    return DONE, t, n_s, n_e, lo
+        n_e = _add_event(e_t, e_i, e_pre, e_post, n_e, t, i, x, xn)
+        copy_into(x, xn)
+        n_s = _add_sample(s_t, s_x, n_s, t, x)
+    return DONE, t, n_s, n_e
 
 
 @njit(cache=True)
