@@ -2,8 +2,8 @@
 ``û_i = u_i + μ_i |u_{T,i}| e_N ∈ K*_{μ_i}``, ``r_i ⟂ û_i`` (De Saxcé's form of Coulomb's law).
 
 Unknowns are ordered per contact (normal, then ``dim - 1`` tangents). The solver reads ``W``
-by columns, dense or CSC (:func:`add_columns`); the integrator's one-step path hands it a
-CSR matrix (:func:`nsgs_kernel`). The exact local solvers enumerate the three cases of one
+by columns, dense or CSC (:func:`add_columns`); a CSR matrix is turned into blocks in the
+compiled call (:func:`csr_to_blocks`). The exact local solvers enumerate the three cases of one
 contact (take-off, stick, slip); the slip direction of a spatial contact is the root of a
 scalar function of the slip angle, bracketed on a grid and bisected to machine precision.
 """
@@ -770,33 +770,3 @@ def csr_to_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, n: 
     return csc_to_blocks(colptr, rowidx, cdata, n, dim)
 
 
-@njit(cache=True)
-def nsgs_kernel(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
-                mu: np.ndarray, dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray,
-                tol: float, max_sweeps: int, max_local_iter: int = MAX_LOCAL_ITER
-                ) -> tuple[int, int, float]:
-    """:func:`nsgs_columns` on a CSR ``W`` (the integrator's one-step path), its convergence
-    confirmed on an exact ``u = W r + q``: returns ``(code, sweeps, error)``, code 0
-    converged, 2 sweep limit, 3 a contact whose normal diagonal entry is not positive."""
-    n = q.shape[0]
-    bptr, brow, bdata = csr_to_blocks(indptr, indices, data, n, dim)
-    WT = np.empty((0, 0))
-    blocks = np.empty((n // dim, dim, dim))
-    inverses = np.empty_like(blocks)
-    code, _ = prepare_columns(WT, bptr, brow, bdata, dim, blocks, inverses)
-    if code != 0:
-        return 3, 0, np.inf
-    done = 0
-    while True:
-        code, sweeps, err = nsgs_columns(WT, bptr, brow, bdata, blocks, inverses, q, mu,
-                                         dim, r, u, states, tol, max_sweeps - done,
-                                         max_local_iter)
-        done += sweeps
-        if code != CONVERGED:
-            return code, done, err
-        column_product(WT, bptr, brow, bdata, q, r, dim, u)   # confirm on the exact u
-        err = relative_error(q, r, u, mu, dim)
-        if err <= tol:
-            return CONVERGED, done, err
-        if done >= max_sweeps:
-            return SWEEP_LIMIT, done, err
