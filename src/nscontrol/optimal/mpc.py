@@ -381,10 +381,7 @@ class _ParametricNLP:
         opts = {"print_time": False, "error_on_fail": False, "expand": True}
         self.cold = ca.nlpsol("mpc_cold", "ipopt", nlp, {**opts, "ipopt": base})
         self.warm = ca.nlpsol("mpc_warm", "ipopt", nlp, {**opts, "ipopt": {
-            **base, "warm_start_init_point": "yes", "mu_init": 1e-6,
-            "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9,
-            "warm_start_slack_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
-            "warm_start_slack_bound_frac": 1e-9}})
+            **base, "warm_start_init_point": "yes", "mu_init": 1e-6}})
 
     def _parameters(self, x0: FloatArray, sigma: float) -> FloatArray:
         p = np.zeros(self.np)
