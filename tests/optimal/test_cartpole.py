@@ -47,7 +47,8 @@ def test_step_matrices_are_the_integrators_wall_free_step():
 def test_lqr_solves_its_riccati_equation():
     A, B = CART.step_matrices(H)
     K, P = CART.lqr(H, W, EFFORT)
-    Q, R, N = H * A.T @ np.diag(W) @ A, H * (B.T @ np.diag(W) @ B + EFFORT), H * A.T @ np.diag(W) @ B
+    Wd = np.diag(W)
+    Q, R, N = H * A.T @ Wd @ A, H * (B.T @ Wd @ B + EFFORT), H * A.T @ Wd @ B
     rhs = Q + A.T @ P @ A - (A.T @ P @ B + N) @ np.linalg.solve(R + B.T @ P @ B,
                                                                 B.T @ P @ A + N.T)
     # scipy's Schur solver: backward stable, residual ~ cond × eps × |P|; cond of the
