@@ -44,6 +44,39 @@ def test_step_matrices_are_the_integrators_wall_free_step():
         assert np.abs(traj.x[-1] - (A @ x + B @ u)).max() <= 100 * _mhat_condition() * EPS * scale
 
 
+def test_nonlinear_cart_pole_linearises_to_the_model():
+    """At the upright pole the nonlinear model's mass, force Jacobian and gaps are the
+    linear model's (exactly: cos 0 = 1, sin 0 = 0); and its force is the Lagrangian's: a free
+    swing from 1 rad, integrated by scipy's DOP853 at rtol 1e-11 from the model's own mass
+    and force, keeps ½ vᵀM(q)v + m_p g l cos θ to 1e-8 relative (a wrong sign or factor in
+    the centrifugal or gravity term changes the energy by O(1))."""
+    from scipy.integrate import solve_ivp
+    lin, nl = CART.system(), CART.nonlinear_system()
+    z = np.zeros(2)
+    np.testing.assert_array_equal(nl.mass(z), lin.mass_matrix())
+    Jq, Jv = nl.force_jacobian(0.0, z, z)
+    np.testing.assert_array_equal(Jq, -lin.stiffness)
+    np.testing.assert_array_equal(Jv, np.zeros((2, 2)))
+    np.testing.assert_array_equal(nl.gap(z), lin.gap_offset)
+    np.testing.assert_array_equal(nl.jacobian(z), lin.dense_gap_matrix())
+    mp, l, g = CART.pole_mass, CART.length, CART.g
+
+    def rhs(_t, x):
+        return np.r_[x[2:], np.linalg.solve(nl.mass(x[:2]), nl.force(0.0, x[:2], x[2:]))]
+
+    def energy(x):
+        return 0.5 * x[2:] @ nl.mass(x[:2]) @ x[2:] + mp * g * l * np.cos(x[1])
+
+    x0 = np.array([0.0, 1.0, 0.3, -0.5])
+    sol = solve_ivp(rhs, (0.0, 3.0), x0, method="DOP853", rtol=1e-11, atol=1e-12)
+    E = np.array([energy(x) for x in sol.y.T])
+    assert np.abs(E - E[0]).max() <= 1e-8 * abs(E[0])
+    assert np.abs(sol.y[1]).max() > 2.0                   # it swings far: a real test
+    # the small-angle error: sin θ - θ = O(θ³) in the tip's position
+    x = np.array([0.01, 0.1, 0.0, 0.0])
+    assert abs(CART.tip(x, linear=False) - CART.tip(x)) <= CART.length * 0.1 ** 3 / 6
+
+
 def test_lqr_solves_its_riccati_equation():
     A, B = CART.step_matrices(H)
     K, P = CART.lqr(H, W, EFFORT)
@@ -96,6 +129,18 @@ def test_a_plan_through_an_impact_replays_through_simulate():
     assert np.abs(replay.x - plan["X"].T).max() <= bound
 
 
+def test_a_sample_that_closes_no_contact_solves():
+    """Far from the walls the plan closes no contact, so it has no complementarity pair and
+    σ appears nowhere in the NLP (once a CasADi error on the unused parameter); its plan
+    must still start at the measured state."""
+    mpc = ContactMPC(CART.system(), np.zeros(4), 10, H, u_min=-5.0, u_max=5.0,
+                     terminal=False)
+    x0 = np.array([0.0, 0.0, 0.0, 0.1])
+    record = mpc.solve(x0)
+    assert record[1] >= 1 and record[2] == 0.0
+    np.testing.assert_allclose(mpc.plan["X"][:, 0], x0, atol=1e-8)
+
+
 def test_terminal_weight_refusals_name_the_argument():
     with pytest.raises(DimensionError, match="terminal_weight"):
         ContactMPC(CART.system(), np.zeros(4), 5, H, terminal_weight=np.eye(3))
@@ -118,6 +163,7 @@ def test_contact_implicit_mpc_settles_where_linear_mpc_loses_the_pole():
     assert np.abs(traj.x[late]).max() <= PARAMETERS["settle_bound"]
     assert np.count_nonzero(np.abs(traj.signals["impulse"]).sum(axis=1)) >= 1
     assert np.abs(lin.x[:, 1]).max() >= PARAMETERS["fallen_angle"]
+    assert PARAMETERS["fallen_angle"] >= np.pi / 2           # past the horizontal
     sig = mpc.signals(traj)
     assert sig["t"].size == round(PARAMETERS["T"] / PARAMETERS["h"])
     assert np.all(sig["cpu_time"] > 0) and np.all(sig["iterations"] >= 1)

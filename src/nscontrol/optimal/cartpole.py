@@ -19,6 +19,13 @@ the same kind of idealisation, this is the linear complementarity model of the p
 cart-pole-with-walls benchmarks of contact-implicit MPC, with rigid walls and impacts in
 place of their soft walls.
 
+:meth:`CartPole.nonlinear_system` is the same cart-pole without the small-angle
+approximation: ``M(θ) = [[m_c + m_p, m_p l cos θ], [m_p l cos θ, m_p l²]]``, the force
+``(m_p l sin θ θ̇², m_p g l sin θ)`` (centrifugal and gravity) and the gaps
+``d ∓ (x + l sin θ)``, the walls being vertical planes that the tip (and only the tip) meets.
+It is the plant on which the example checks that a controller planned on the linear model
+still works.
+
 The wall-free model (:meth:`CartPole.free_system`) is what a linear MPC ignoring the contacts
 plans with; its Moreau–Jean step without contacts is the linear map
 ``x_{k+1} = A x_k + B u_k`` of :meth:`CartPole.step_matrices`, and :meth:`CartPole.lqr` the
@@ -92,10 +99,43 @@ class CartPole:
         return LagrangianSystem(M, stiffness=K, gap_matrix=np.zeros((0, 2)),
                                 actuation=[[1.0], [0.0]], names=("x", "theta"))
 
-    def tip(self, x: FloatArray) -> FloatArray:
-        """Horizontal position of the tip, ``x + l θ``, of states ``(..., 4)``."""
+    def nonlinear_system(self) -> LagrangianSystem:
+        """The cart-pole with the walls, without the small-angle approximation (the module
+        docstring): configuration-dependent mass, nonlinear force and gaps, with their
+        analytic Jacobians."""
+        mc, mp, l, g, d = self.cart_mass, self.pole_mass, self.length, self.g, self.wall
+
+        def mass(q: FloatArray) -> FloatArray:
+            c = np.cos(q[1])
+            return np.array([[mc + mp, mp * l * c], [mp * l * c, mp * l * l]])
+
+        def force(t: float, q: FloatArray, v: FloatArray) -> FloatArray:
+            s = np.sin(q[1])
+            return np.array([mp * l * s * v[1] ** 2, mp * g * l * s])
+
+        def force_jacobian(t: float, q: FloatArray, v: FloatArray
+                           ) -> tuple[FloatArray, FloatArray]:
+            s, c = np.sin(q[1]), np.cos(q[1])
+            return (np.array([[0.0, mp * l * c * v[1] ** 2], [0.0, mp * g * l * c]]),
+                    np.array([[0.0, 2.0 * mp * l * s * v[1]], [0.0, 0.0]]))
+
+        def gap(q: FloatArray) -> FloatArray:
+            tip = q[0] + l * np.sin(q[1])
+            return np.array([d - tip, d + tip])
+
+        def jacobian(q: FloatArray) -> FloatArray:
+            c = np.cos(q[1])
+            return np.array([[-1.0, -l * c], [1.0, l * c]])
+
+        return LagrangianSystem(mass, force=force, force_jacobian=force_jacobian, gap=gap,
+                                jacobian=jacobian, restitution=self.restitution,
+                                actuation=[[1.0], [0.0]], names=("x", "theta"))
+
+    def tip(self, x: FloatArray, linear: bool = True) -> FloatArray:
+        """Horizontal position of the tip, ``x + l θ`` (``x + l sin θ`` when not
+        ``linear``), of states ``(..., 4)``."""
         x = np.asarray(x, float)
-        return x[..., 0] + self.length * x[..., 1]
+        return x[..., 0] + self.length * (x[..., 1] if linear else np.sin(x[..., 1]))
 
     def step_matrices(self, h: float, theta: float = 0.5) -> tuple[FloatArray, FloatArray]:
         """``A, B`` of the wall-free Moreau–Jean step ``x_{k+1} = A x_k + B u_k``
