@@ -15,8 +15,7 @@ the block's :class:`~nscontrol.optimal.Relaxation` from a cold start; each later
 **one** relaxed problem at ``σ = relaxation.sigma_min``, warm-started from the shifted plan
 (primal and dual), and no polish. The block's internal state is the record of its last
 solve — wall and CPU time, IPOPT iterations, complementarity residual, active-set rounds,
-cost — so that a
-closed-loop run keeps it per sample in the trajectory's signal ``xc``
+cost — so that a closed-loop run keeps it per sample in the trajectory's signal ``xc``
 (:meth:`ContactMPC.signals` names its columns).
 """
 
