@@ -61,7 +61,7 @@ def frictionless_run():
 def test_is_a_sampled_controller():
     mpc = ContactMPC(BLOCK.system(), BLOCK.x_final, STEPS, H, u_min=-U, u_max=U)
     assert isinstance(mpc, Controller)
-    assert mpc.period == H and mpc.n_outputs == 1 and mpc.n_states == 5
+    assert mpc.period == H and mpc.n_outputs == 1 and mpc.n_states == 6
 
 
 def test_first_plan_is_the_least_effort_push_of_the_closed_form():

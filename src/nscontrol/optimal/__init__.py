@@ -18,6 +18,7 @@ from ._casadi import require_casadi
 
 require_casadi()
 
+from .cartpole import CartPole  # noqa: E402
 from .contact import ContactProblem, Relaxation  # noqa: E402
 from .fesd import SwitchingPlan, SwitchingProblem  # noqa: E402
 from .mpc import ContactMPC  # noqa: E402
@@ -25,4 +26,4 @@ from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
 from .problems import PushedBlock, SpeedUp  # noqa: E402
 
 __all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock",
-           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC"]
+           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC", "CartPole"]

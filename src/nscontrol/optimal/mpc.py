@@ -6,14 +6,16 @@ sampling instant it reads the plant's state, solves the contact transcription of
 Moreau–Jean steps, the same complementarity pairs), applies the first planned input (held
 over the sample) and keeps the plan, shifted by one step, as the next sample's initial guess.
 
-The NLP is built once per active set (the contacts each step closes), with the initial state
-and the relaxation ``σ`` as CasADi parameters, and solved by IPOPT through ``nlpsol``: a
-sample costs the IPOPT iterations alone. The first sample runs the whole Scholtes homotopy of
+The NLP is built once, with every contact of every step in it: the initial state and the
+relaxation ``σ`` are CasADi parameters and the active sets (the contacts each step closes)
+are constraint bounds — on an inactive entry the forces are fixed at zero and the velocity
+condition is free, Moreau–Jean's ``λ = 0`` — so that a sample costs the IPOPT iterations
+alone, whatever contacts it closes. The first sample runs the whole Scholtes homotopy of
 the block's :class:`~nscontrol.optimal.Relaxation` from a cold start; each later sample solves
 **one** relaxed problem at ``σ = relaxation.sigma_min``, warm-started from the shifted plan
 (primal and dual), and no polish. The block's internal state is the record of its last
-solve — wall time, IPOPT iterations, complementarity residual, active-set rounds — so that a
-closed-loop run keeps it per sample in the trajectory's signal ``xc``
+solve — wall and CPU time, IPOPT iterations, complementarity residual, active-set rounds,
+cost — so that a closed-loop run keeps it per sample in the trajectory's signal ``xc``
 (:meth:`ContactMPC.signals` names its columns).
 """
 
@@ -26,7 +28,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, as_vector, check_integer, check_positive, check_type
+from .._validation import (
+    FloatArray,
+    as_matrix,
+    as_vector,
+    check_integer,
+    check_positive,
+    check_type,
+)
 from ..errors import DimensionError, ModelError, SolverError
 from ..systems.feedback import Jump, Measurement
 from ..systems.lagrangian import LagrangianSystem
@@ -37,7 +46,7 @@ from .homotopy import SOLVED, _pair_constraints, casadi_ops, pair_keys, residual
 __all__ = ["ContactMPC"]
 
 #: The columns of the block's internal state (one record per sample).
-RECORD = ("solve_time", "iterations", "residual", "rounds", "cost")
+RECORD = ("solve_time", "iterations", "residual", "rounds", "cost", "cpu_time")
 
 
 @dataclass(eq=False)
@@ -47,8 +56,9 @@ class ContactMPC:
     At each sample ``t_k`` it minimises, over ``steps`` Moreau–Jean steps of length ``h``
     from the measured state ``x``,
 
-    ``h Σ_k [(x_{k+1} - x*)ᵀ W (x_{k+1} - x*) + effort |u_k|²]``, with ``x_N = x*``
-    where ``terminal`` is true (the NaN components of ``target`` free and unweighted),
+    ``h Σ_k [(x_{k+1} - x*)ᵀ W (x_{k+1} - x*) + effort |u_k|²] + (x_N - x*)ᵀ P (x_N - x*)``,
+    with ``x_N = x*`` where ``terminal`` is true (the NaN components of ``target`` free and
+    unweighted),
 
     subject to the contact law of :class:`ContactProblem` and the input bounds, and returns
     the first input.
@@ -71,6 +81,9 @@ class ContactMPC:
         Weight of ``|u|²``, ``>= 0``.
     terminal : bool
         Constrain ``x_N = x*`` (the classical stabilising terminal constraint).
+    terminal_weight : array_like (2 n, 2 n), optional
+        ``P``, a symmetric positive semidefinite terminal cost (e.g. the cost-to-go of an LQR
+        design, the classical alternative to the terminal constraint); default none.
     u_min, u_max : float or array_like (p,), optional
         Input bounds.
     relaxation : Relaxation, optional
@@ -96,6 +109,7 @@ class ContactMPC:
     state_weight: Any = 1.0
     effort: float = 1e-3
     terminal: bool = True
+    terminal_weight: Any = None
     u_min: Any = None
     u_max: Any = None
     relaxation: Relaxation | None = None
@@ -122,11 +136,22 @@ class ContactMPC:
         if np.any(~np.isfinite(W)) or np.any(W < 0):
             raise ModelError("state_weight: expected finite weights >= 0")
         self.state_weight = np.where(np.isnan(target), 0.0, W)
+        if self.terminal_weight is not None:
+            P = as_matrix("terminal_weight", self.terminal_weight, rows=s.n_states,
+                          cols=s.n_states)
+            if not np.allclose(P, P.T, rtol=0.0, atol=1e-12 * (1.0 + np.abs(P).max())) or \
+                    np.linalg.eigvalsh(0.5 * (P + P.T)).min() < -1e-12 * np.abs(P).max():
+                raise ModelError("terminal_weight: expected a symmetric positive "
+                                 "semidefinite matrix")
+            free = np.isnan(target)
+            if np.any(P[free]) or np.any(P[:, free]):
+                raise ModelError("terminal_weight: weighs a free (NaN) component of target")
+            self.terminal_weight = 0.5 * (P + P.T)
         self.relaxation = self._relaxation = Relaxation(sigma_min=1e-6, tol=1e-8) \
             if self.relaxation is None else check_type("relaxation", self.relaxation, Relaxation)
         self._period = float(self.period)
         check_integer("max_rounds", self.max_rounds, minimum=1)
-        self._nlps: dict[bytes, _ParametricNLP] = {}
+        self._nlp_built: _ParametricNLP | None = None
         self._guess: dict[str, Any] | None = None
         self._record = np.zeros(len(RECORD))
         self._at: float | None = None
@@ -214,23 +239,21 @@ class ContactMPC:
         -------
         ndarray
             The record (:data:`RECORD`): wall time [s], IPOPT iterations, complementarity
-            residual, active-set rounds, cost.
+            residual, active-set rounds, cost, the process's CPU time [s] (on a loaded
+            machine the wall time counts the waits for a core; the CPU time does not).
         """
         x = as_vector("x", x, self.system.n_states)   # a measured state may penetrate by roundoff
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         cold = self._guess is None
         guess = self._cold_guess(x) if cold else self._shifted(x)
         active = active_sets(self.problem, guess["X"], self.h)
+        nlp = self._nlp()
+        rel = self._relaxation
         iterations, rounds = 0, 0
         while True:
             rounds += 1
-            nlp = self._nlp(active)
-            if guess.get("lam_g") is not None and guess["lam_g"].size != nlp.ng:
-                guess = {**guess, "lam_g": None}
-            rel = self._relaxation
-            sigmas = rel.sigmas() if cold else [rel.sigma_min]
-            for sigma in sigmas:
-                guess, its, status = nlp.solve(guess, x, sigma)
+            for sigma in rel.sigmas() if cold else [rel.sigma_min]:
+                guess, its, status = nlp.solve(guess, x, sigma, active)
                 iterations += its
                 if status not in SOLVED:
                     raise SolverError(f"ContactMPC: IPOPT failed at t = {t:.6g} (σ = "
@@ -241,9 +264,9 @@ class ContactMPC:
                 break
             active = new
         self._guess = guess
-        res = nlp.residual(guess)
+        res = nlp.residual(guess, active)
         return np.array([time.perf_counter() - start, iterations, res, rounds,
-                         guess["cost"]], dtype=float)
+                         guess["cost"], time.process_time() - cpu], dtype=float)
 
     @property
     def plan(self) -> dict[str, Any] | None:
@@ -298,62 +321,105 @@ class ContactMPC:
         out["X"][:, 0] = x
         return out
 
-    def _nlp(self, active: np.ndarray) -> _ParametricNLP:
-        key = np.asarray(active, bool).tobytes()
-        if key not in self._nlps:
-            self._nlps[key] = _ParametricNLP(self, active)
-        return self._nlps[key]
+    def _nlp(self) -> _ParametricNLP:
+        if self._nlp_built is None:
+            self._nlp_built = _ParametricNLP(self)
+        return self._nlp_built
 
 
 class _ParametricNLP:
-    """The relaxed NLP of one active set, built once, with the initial state and ``σ`` as
-    parameters, solved by IPOPT through ``nlpsol`` (cold and warm-started solvers)."""
+    """The relaxed NLP with **every** contact of every step in it, built once: the initial
+    state and ``σ`` are CasADi parameters, and the active sets are constraint bounds (an
+    inactive entry's forces are fixed to zero and its velocity condition left free, the
+    ``λ = 0`` of the Moreau–Jean step), so a change of active set costs no rebuild; solved
+    by IPOPT through ``nlpsol`` (cold and warm-started solvers)."""
 
-    def __init__(self, mpc: ContactMPC, active: np.ndarray) -> None:
+    def __init__(self, mpc: ContactMPC) -> None:
         ca = require_casadi()
         opti = ca.Opti()
-        p_x0 = opti.parameter(mpc.system.n_states)
-        self.sigma = opti.parameter()
-        builder = _TrackingNLP(mpc, active, p_x0)
+        s, N = mpc.system, mpc.steps
+        p_x0 = opti.parameter(s.n_states)
+        builder = _TrackingNLP(mpc, np.ones((s.n_contacts, N), bool), p_x0)
         self.builder = builder
         var = builder.variables(opti)
         builder.constraints(opti, var)
         pairs = builder.pairs(var, casadi_ops())
-        _pair_constraints(opti, pairs, self.sigma, None, pair_keys(builder, pairs))
+        keys = pair_keys(builder, pairs)
+        has_pairs = any(a.numel() for a, _ in pairs)
+        sigma = opti.parameter() if has_pairs else None
+        # each pair adds the rows a >= 0, b >= 0, a b <= σ (one per entry, in this order)
+        self.pair_rows: list[tuple[int, int]] = []
+        for pair, key in zip(pairs, keys[:len(pairs)], strict=True):
+            first = opti.ng
+            _pair_constraints(opti, [pair], sigma, None, [key])
+            self.pair_rows.append((first, pair[0].numel()))
         cost = builder.cost(var)
         opti.minimize(cost)
         self.names = [name for name, sym in var.items() if isinstance(sym, ca.MX)]
         syms = [var[name] for name in self.names]
         # where each unknown's entries sit in opti.x, and the parameters in opti.p
-        where = ca.Function("where", [opti.x], [ca.vec(s) for s in syms])
+        where = ca.Function("where", [opti.x], [ca.vec(sym) for sym in syms])
         self.index = [np.asarray(a, float).astype(int).ravel()
                       for a in where(np.arange(opti.nx, dtype=float))]
-        self.shapes = [s.shape for s in syms]
-        pw = ca.Function("pwhere", [opti.p], [p_x0, self.sigma])
+        self.shapes = [sym.shape for sym in syms]
+        params = [p_x0] if sigma is None else [p_x0, sigma]
+        pw = ca.Function("pwhere", [opti.p], params)
+        found = pw(np.arange(opti.np, dtype=float))
         self.p_index = [np.asarray(a, float).astype(int).ravel()
-                        for a in pw(np.arange(opti.np, dtype=float))]
+                        for a in (found if isinstance(found, (list, tuple)) else [found])]
         self.bounds = ca.Function("bounds", [opti.p], [opti.lbg, opti.ubg])
-        self.cost = ca.Function("cost", [opti.x, opti.p], [cost])
         self.nx, self.ng, self.np = opti.nx, opti.ng, opti.np
+        self._rows: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         nlp = {"x": opti.x, "p": opti.p, "f": opti.f, "g": opti.g}
         rel = mpc._relaxation
+        # MUMPS with the AMD ordering and no scaling: the KKT systems are small, and their
+        # analysis is paid at every IPOPT call (15 % less CPU per sample on the cart-pole)
         base = {"print_level": 0, "sb": "yes", "tol": rel.tol,
-                "acceptable_constr_viol_tol": rel.tol, "max_iter": int(rel.max_iter)}
+                "acceptable_constr_viol_tol": rel.tol, "max_iter": int(rel.max_iter),
+                "mumps_pivot_order": 0, "mumps_permuting_scaling": 0, "mumps_scaling": 0}
         opts = {"print_time": False, "error_on_fail": False, "expand": True}
         self.cold = ca.nlpsol("mpc_cold", "ipopt", nlp, {**opts, "ipopt": base})
         self.warm = ca.nlpsol("mpc_warm", "ipopt", nlp, {**opts, "ipopt": {
             **base, "warm_start_init_point": "yes", "mu_init": 1e-6}})
 
-    def solve(self, guess: dict[str, Any], x0: FloatArray, sigma: float
+    def _parameters(self, x0: FloatArray, sigma: float) -> FloatArray:
+        p = np.zeros(self.np)
+        p[self.p_index[0]] = x0
+        if len(self.p_index) > 1:
+            p[self.p_index[1]] = sigma
+        return p
+
+    def constraint_bounds(self, p: FloatArray, active: np.ndarray
+                          ) -> tuple[FloatArray, FloatArray]:
+        """``lbg, ubg`` at the parameters ``p`` (Opti writes a parameter's equality, as
+        ``X[:, 0] = x0``, into the bounds) and the active sets ``(m, N)``: on an inactive
+        entry the first factor of each pair (a force, or the slip speed) is fixed at zero
+        and the second (a velocity condition) is free."""
+        lbg, ubg = (np.asarray(b, float).ravel() for b in self.bounds(p))
+        key = np.asarray(active, bool).tobytes()
+        if key not in self._rows:
+            off = np.flatnonzero(~np.asarray(active, bool).ravel(order="F"))
+            a_rows = np.concatenate([first + off for first, _ in self.pair_rows] or [off])
+            b_rows = np.concatenate([first + k + off for first, k in self.pair_rows] or [off])
+            if len(self._rows) > 256:
+                self._rows.clear()
+            self._rows[key] = (a_rows, b_rows)
+        a_rows, b_rows = self._rows[key]
+        finite = np.isfinite(lbg[a_rows])
+        ubg[a_rows[finite]] = lbg[a_rows[finite]]
+        lbg[a_rows[~finite]] = ubg[a_rows[~finite]]
+        lbg[b_rows], ubg[b_rows] = -np.inf, np.inf
+        return lbg, ubg
+
+    def solve(self, guess: dict[str, Any], x0: FloatArray, sigma: float, active: np.ndarray
               ) -> tuple[dict[str, Any], int, str]:
-        """One IPOPT solve from ``guess``; the solution, its iterations and status."""
+        """One IPOPT solve from ``guess`` with the active sets ``active``; the solution, its
+        iterations and status."""
         z = np.zeros(self.nx)
         for name, idx in zip(self.names, self.index, strict=True):
             z[idx] = np.asarray(guess[name], float).ravel(order="F")
-        p = np.zeros(self.np)
-        p[self.p_index[0]] = x0
-        p[self.p_index[1]] = sigma
-        lbg, ubg = (np.asarray(b, float).ravel() for b in self.bounds(p))
+        p = self._parameters(x0, sigma)
+        lbg, ubg = self.constraint_bounds(p, active)
         lam = guess.get("lam_g")
         warm = lam is not None and lam.size == self.ng
         solver = self.warm if warm else self.cold
@@ -371,9 +437,9 @@ class _ParametricNLP:
         out["lam_x"] = np.asarray(sol["lam_x"], float).ravel()
         return out, int(stats.get("iter_count", 0)), str(stats.get("return_status", ""))
 
-    def residual(self, sol: dict[str, Any]) -> float:
+    def residual(self, sol: dict[str, Any], active: np.ndarray) -> float:
         """The largest ``|min(a, b)|`` over the active pairs."""
-        return residual(self.builder, sol)
+        return residual(_ContactNLP(self.builder.problem, active), sol)
 
 
 class _TrackingNLP(_ContactNLP):
@@ -389,5 +455,9 @@ class _TrackingNLP(_ContactNLP):
         W = np.asarray(mpc.state_weight, float)
         ref = np.where(np.isnan(mpc.target), 0.0, mpc.target)
         err = var["X"][:, 1:] - ca.DM(np.tile(ref[:, None], (1, mpc.steps)))
-        return J + mpc.h * ca.sum1(ca.sum2(ca.DM(np.tile(W[:, None], (1, mpc.steps)))
-                                            * err * err))
+        J = J + mpc.h * ca.sum1(ca.sum2(ca.DM(np.tile(W[:, None], (1, mpc.steps)))
+                                         * err * err))
+        if mpc.terminal_weight is not None:
+            e_N = err[:, -1]
+            J = J + ca.mtimes(e_N.T, ca.mtimes(ca.DM(mpc.terminal_weight), e_N))
+        return J
