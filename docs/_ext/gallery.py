@@ -15,8 +15,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-CHAPTER_PAGES = {"ch02": "ch02", "ch08": "ch08", "ch11": "ch11", "mechanics": "mechanics",
-                 "set-valued": "setvalued", "foundation": "lcp",
+# A chapter whose page is not named after it; the others use ``<chapter>.md`` when it exists.
+CHAPTER_PAGES = {"set-valued": "setvalued", "foundation": "lcp",
                  "contacts": "frictional_contacts"}
 FIGURE_DIR = "_gallery"          # under the docs source folder, ignored by git
 
@@ -41,9 +41,15 @@ def _copy_figures(report: Path, name: str, dest: Path) -> list[Path]:
     return [Path(FIGURE_DIR) / name / fig.name for fig in figures]
 
 
-def _section(example: Any, row: dict[str, Any] | None, figures: list[Path]) -> list[str]:
+def _chapter_page(chapter: str, srcdir: Path) -> str | None:
+    page = CHAPTER_PAGES.get(chapter, chapter.replace("-", "_"))
+    return page if (srcdir / f"{page}.md").is_file() else None
+
+
+def _section(example: Any, row: dict[str, Any] | None, figures: list[Path],
+             srcdir: Path) -> list[str]:
     lines = [f"## {example.name}", "", example.title + ".", ""]
-    page = CHAPTER_PAGES.get(example.chapter)
+    page = _chapter_page(example.chapter, srcdir)
     if page:
         lines += [f"Chapter page: [{page}]({page}.md).", ""]
     lines += ["```bash", f"nscontrol run {example.name} --out out/{example.name}", "```", ""]
@@ -79,7 +85,7 @@ def write_gallery(app: Any) -> None:
                   "example.", ""]
     for example in all_examples():
         figures = _copy_figures(report, example.name, dest) if report else []
-        lines += _section(example, rows.get(example.name), figures)
+        lines += _section(example, rows.get(example.name), figures, srcdir)
     (srcdir / "gallery.md").write_text("\n".join(lines))
 
 
