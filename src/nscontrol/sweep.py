@@ -25,9 +25,10 @@ a millisecond on a local pool, several on Dask: see :data:`MIN_TASK_SECONDS`) st
 beside it. The first task on each worker is
 one point, timed in the worker; later chunks are sized from the measured time per point,
 and never so large that fewer than two chunks per worker remain (the last chunks shrink, so
-the workers finish together). Results do not depend on the chunking: each point is still
-``fn(point)``, recorded in grid order with its own error. ``chunk=1`` sends one point per
-task, ``chunk=n`` exactly ``n``.
+the workers finish together). A point that alone lasts a task is handed out only to a free
+worker, so none waits queued behind a long one. Results do not depend on the chunking: each
+point is still ``fn(point)``, recorded in grid order with its own error. ``chunk=1`` sends
+one point per task, ``chunk=n`` exactly ``n``.
 
 ``executor="auto"`` times the first point in this process and sends the rest to a local
 process pool only when that pays (see :data:`AUTO_PARALLEL_SECONDS`); it is the default of the
