@@ -67,8 +67,8 @@ def _same_diagram(a: Any, b: Any) -> bool:
 
 def _dask(targets: list[Any], mus: list[float], fam: CornerFamily, ser: Any, dia: Any,
           rounds: int) -> dict[str, Any]:
-    """Both sweeps on a 2-worker Dask ``LocalCluster`` (both workers warm as this process is:
-    one design and one diagram point), in ``rounds`` paired rounds of (serial designs, serial
+    """Both sweeps on a 2-worker Dask ``LocalCluster`` (each worker as warm as this process:
+    every point run once), in ``rounds`` paired rounds of (serial designs, serial
     diagram, Dask designs, Dask diagram); each round's efficiency from its own serial times
     (the machine's speed drifts between rounds), medians and ranges reported."""
     import os
@@ -79,8 +79,11 @@ def _dask(targets: list[Any], mus: list[float], fam: CornerFamily, ser: Any, dia
             return {"scenario": "ch12_dask", "size": len(mus), "ours_s_per_solve": None,
                     "reference": None, "reference_s_per_solve": None, "ratio": None,
                     "accuracy": {}, "note": "dask[distributed] not installed"}
-        warm_workers(client, ex.design_point, targets[0])
-        warm_workers(client, corner_diagram, fam, mus[:1])
+        # as warm as this process, which has run every point before (the serial and
+        # process-pool scenarios): each worker runs both sweeps once, serially
+        warm_workers(client, sweep.run, ex.design_point, targets, executor="serial",
+                     progress=False)
+        warm_workers(client, corner_diagram, fam, mus)
         times, same_des, same_dia = [], True, True
         for _ in range(rounds):
             _, t_ser = _design_loop(targets, "serial")
