@@ -8,7 +8,9 @@ Scenarios:
   thread each, their stack profiler off), parallel efficiency ``t_serial / (2 t_dask)``,
   medians of three paired rounds; then the same with the servo-damping baseline as a third
   loop (all the example's sweeps). Each loop's direction is one task (a sweep follows its
-  attractor), so the longest one, the open loop's sweep down, bounds what two workers gain;
+  attractor), handed out longest first and only to a free worker (``sweep.run`` never
+  queues a point that lasts a task behind another), so the longest one, the open loop's
+  sweep down, bounds what two workers gain;
 * the open-loop sweep up against SciPy ``solve_ivp`` (DOP853, one terminal event on the
   support facet, restarted in the other mode after each crossing), brute force with the same
   protocol on a coarser grid: time per frequency of both and ``max |P_ours/P_scipy - 1|`` over

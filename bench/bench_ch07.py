@@ -17,7 +17,9 @@ Scenarios:
   one thread each, both warm, when ``dask.distributed`` is installed), all through
   ``nscontrol.sweep``; ``parallel_efficiency`` is ``t_serial / (2 t_dask)`` with the points
   chunked as ``sweep.run`` chooses, beside the same with one point per task (``chunk=1``),
-  and the values of every run compared bit for bit with the serial ones;
+  and the values of every run compared bit for bit with the serial ones; three paired
+  rounds (serial, processes, Dask), each round's efficiency from its own serial time,
+  medians and ranges reported with the load average;
 * the chapter 7 example end to end (``nscontrol run ch07``, without figures; not with
   ``--quick``): its wall time.
 
@@ -122,39 +124,69 @@ def _same(a: Any, b: Any) -> bool:
                                equal_nan=True))
 
 
-def _dask(kappas: list[float], serial: Any, t_serial: float) -> dict[str, Any]:
-    """The diagram on a 2-worker Dask ``LocalCluster`` (both workers warm, the cluster's
-    start-up excluded): chunked as ``sweep.run`` chooses, and one point per task."""
-    with dask_client() as client:
-        if client is None:
-            return {"dask_note": "dask.distributed not installed (the 'cluster' extra)"}
-        warm_workers(client, ex.kappa_point, 1.0)
-        chunked, t_dask = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=client,
+def _rounds(kappas: list[float], pool: Any, client: Any, rounds: int
+            ) -> tuple[list[tuple[float, float, float]], Any, bool]:
+    """``rounds`` paired rounds of (serial, 2 processes, 2 Dask workers) on warm workers:
+    the times of each, the serial values and whether every run gave them bit for bit."""
+    times, same, ser = [], True, None
+    for _ in range(rounds):
+        ser, t_ser = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor="serial",
+                                              progress=False))
+        par, t_par = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=pool,
+                                              progress=False))
+        same &= _same(par, ser)
+        t_dask = float("nan")
+        if client is not None:
+            dsk, t_dask = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=client,
                                                    progress=False))
-        single, t_single = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=client,
-                                                    chunk=1, progress=False))
-    return {"two_dask_workers_seconds": t_dask,
-            "parallel_efficiency": efficiency(t_serial, t_dask),
-            "dask_identical_to_serial": _same(chunked, serial) and _same(single, serial),
-            "dask_one_point_per_task_seconds": t_single,
-            "parallel_efficiency_one_point_per_task": efficiency(t_serial, t_single)}
+            same &= _same(dsk, ser)
+        times.append((t_ser, t_par, t_dask))
+    return times, ser, same
 
 
 def _diagram(quick: bool) -> dict[str, Any]:
+    """Serial, 2 processes and 2 Dask workers in paired rounds (each round's efficiency from
+    its own serial time: the machine's speed drifts between rounds), medians reported."""
+    import os
+    import statistics
+
     kappas = list(np.linspace(0.0, 1.5, 21 if quick else ex.KAPPA_POINTS))
     ex.kappa_point(1.0)                                  # warm-up (compiled kernels)
-    ser, serial = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor="serial",
-                                           progress=False))
-    with ProcessPoolExecutor(2) as pool:                 # forked: the kernels are loaded
-        par, parallel = _timed(lambda: sweep.run(ex.kappa_point, kappas, executor=pool,
-                                                 progress=False))
-    accuracy: dict[str, Any] = {"serial_seconds": serial, "two_workers_seconds": parallel,
-                                "processes_efficiency": efficiency(serial, parallel),
-                                "processes_identical_to_serial": _same(par, ser),
-                                **_dask(kappas, ser, serial)}
+    with ProcessPoolExecutor(2) as pool, dask_client() as client:
+        list(pool.map(ex.kappa_point, [1.0, 1.0]))       # the same warm-up in each worker
+        if client is not None:
+            warm_workers(client, ex.kappa_point, 1.0)
+        times, ser, same = _rounds(kappas, pool, client, 1 if quick else 3)
+        single = None
+        if client is not None:
+            single, t_single = _timed(lambda: sweep.run(ex.kappa_point, kappas,
+                                                        executor=client, chunk=1,
+                                                        progress=False))
+    serial = statistics.median(t for t, _, _ in times)
+    parallel = statistics.median(t for _, t, _ in times)
+    procs = [efficiency(s, p) for s, p, _ in times]
+    accuracy: dict[str, Any] = {
+        "serial_seconds": serial, "two_workers_seconds": parallel,
+        "processes_efficiency": statistics.median(procs),
+        "processes_efficiency_range": [min(procs), max(procs)],
+        "serial_seconds_all": [t for t, _, _ in times],
+        "processes_identical_to_serial": same, "load_average": os.getloadavg()[0]}
+    if single is None:
+        accuracy["dask_note"] = "dask.distributed not installed (the 'cluster' extra)"
+    else:
+        dask = [efficiency(s, d) for s, _, d in times]
+        accuracy.update({
+            "two_dask_workers_seconds": statistics.median(d for _, _, d in times),
+            "parallel_efficiency": statistics.median(dask),
+            "parallel_efficiency_range": [min(dask), max(dask)],
+            "dask_seconds_all": [d for _, _, d in times],
+            "dask_identical_to_serial": same and _same(single, ser),
+            "dask_one_point_per_task_seconds": t_single,
+            "parallel_efficiency_one_point_per_task": efficiency(serial, t_single)})
     return {"scenario": f"ch07 kappa diagram, {len(kappas)} runs of {ex.KAPPA_T:g} s at "
                         f"h = {ex.KAPPA_H:g}: serial vs 2 worker processes and 2 Dask "
-                        f"workers (parallel_efficiency: serial / (2 x Dask), chunked points)",
+                        f"workers (parallel_efficiency: serial / (2 x Dask), chunked points, "
+                        f"median of {len(times)} paired rounds)",
             "size": len(kappas), "ours_steps_per_s": None, "reference": "serial",
             "reference_steps_per_s": None, "ratio": serial / parallel,
             "accuracy": accuracy}

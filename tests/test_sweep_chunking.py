@@ -242,11 +242,80 @@ def test_sizing_rule_directly():
     assert sizing.size(100, 2) == 1 and sizing.in_flight(2) == 2      # pilots
     sizing.observe(2, 0.2)                                           # 0.1 s per point
     assert sizing.size(100, 2) == 5 and sizing.in_flight(2) == 4     # 5 x 0.1 s = 0.5 s
+    long = sweep_mod._Sizing(None, 0.5)
+    long.observe(2, 1.2)                     # 0.6 s per point: a point fills a task alone
+    assert long.size(100, 2) == 1 and long.in_flight(2) == 2          # none queued
     assert sizing.size(12, 2) == 3                                   # 12 / (2 x 2)
     assert sizing.size(1, 2) == 1
     fixed = sweep_mod._Sizing(7)
     assert fixed.size(100, 2) == 7 and fixed.size(3, 2) == 3
     assert fixed.in_flight(2) == math.inf
+
+
+class _InFlightExecutor(Executor):
+    """Wraps an executor, recording the most tasks ever submitted and not yet finished."""
+
+    def __init__(self, inner, client=None):
+        self.inner, self.running, self.most, self.lock = inner, 0, 0, threading.Lock()
+        if client is not None:
+            self._client = client
+
+    def _finished(self, _):
+        with self.lock:
+            self.running -= 1
+
+    def submit(self, fn, /, *args, **kwargs):
+        with self.lock:
+            self.running += 1
+            self.most = max(self.most, self.running)
+        future = self.inner.submit(fn, *args, **kwargs)
+        future.add_done_callback(self._finished)
+        return future
+
+
+def _slow(p):
+    """A point lasting 20 ms or more (sleeps): longer than ``min_task_seconds=0.005``."""
+    import time
+
+    time.sleep(0.02)
+    return _orbit(p)
+
+
+def test_long_points_are_handed_to_free_workers_only():
+    # a queued task waits in the queue of the worker the executor chose: behind a long point
+    # it would wait while the other worker idles, so long points are never queued (the old
+    # rule kept two per worker in flight: 4 here)
+    serial = sweep.run(_orbit, range(12), executor="serial", progress=False)
+    with ThreadPoolExecutor(2) as pool:
+        ex = _InFlightExecutor(pool)
+        res = sweep.run(_slow, range(12), executor=ex, min_task_seconds=0.005, progress=False)
+    assert _bits(res) == _bits(serial)
+    assert ex.most == 2
+    # short points still keep one queued per worker
+    with ThreadPoolExecutor(2) as pool:
+        ex = _InFlightExecutor(pool)
+        sweep.run(_slow, range(12), executor=ex, min_task_seconds=10.0, progress=False)
+    assert ex.most == 4
+
+
+@pytest.mark.cluster
+def test_dask_long_points_one_per_worker_and_a_failure_costs_only_its_point():
+    distributed = pytest.importorskip("dask.distributed")
+    serial = sweep.run(_fails_at_5_and_17, range(24), executor="serial", progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        assert sweep_mod._workers(client.get_executor()) == 2
+        ex = _InFlightExecutor(client.get_executor(), client)
+        res = sweep.run(_slow_or_fails, range(24), executor=ex, min_task_seconds=0.005,
+                        progress=False)
+    assert _bits(res) == _bits(serial) and ex.most == 2
+    assert [e.index for e in res.failed] == [5, 17]
+
+
+def _slow_or_fails(p):
+    _slow(p)
+    return _fails_at_5_and_17(p)
 
 
 @pytest.mark.parametrize(("kw", "name"), [({"chunk": 0}, "chunk"), ({"chunk": 2.5}, "chunk"),
