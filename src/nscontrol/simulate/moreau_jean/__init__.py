@@ -246,15 +246,8 @@ mass_at, projection, contact_tol
 
 def _frictional(system: LagrangianSystem, x0: Any, t_span: tuple[float, float], opts: Any,
                 feedback: Any) -> Trajectory:
-    """The run of a system with friction or the position projection (its own loop, without
-    blocks or listeners yet)."""
+    """The run of a system with friction or the position projection (the blocks of a closed
+    loop stepped before each step, the listeners called after a step with an impact)."""
     from ._frictional_run import integrate_frictional
 
-    if feedback.blocks is not None:
-        raise ModelError("controller: a closed loop's Python blocks are not supported yet "
-                         "with friction or projection=True; give the feedback as a "
-                         "StateFeedback gain, or simulate the plant alone")
-    if feedback.listeners:
-        raise ModelError("listeners: not supported yet with friction or projection=True; "
-                         "simulate without them")
-    return integrate_frictional(system, x0, t_span[0], t_span[1], opts)
+    return integrate_frictional(system, x0, t_span[0], t_span[1], opts, feedback=feedback)

@@ -13,7 +13,8 @@ from ..._validation import FloatArray
 from ..trajectory import ChunkProgress, Recorder
 from ._runners import RunState
 
-__all__ = ["signals_of", "sample_initial", "record_chunk", "record_finished", "impact"]
+__all__ = ["signals_of", "sample_initial", "record_chunk", "record_finished", "impact",
+           "record_impacts"]
 
 
 def signals_of(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
@@ -85,11 +86,22 @@ def record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
     the chunk's signals when the caller computed them (the compiled path)."""
     rec.extend(times, (q, v), **(signals_of(system, q, v, p, rec) if signals is None
                                  else signals))
+    record_impacts(rec, system, times, q, v, p, state.p_prev, q_pre, v_pre, listeners, h)
+    state.p_prev = p[-1].copy()
+
+
+def record_impacts(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
+                   v: FloatArray, p: FloatArray, p_before: FloatArray, q_pre: FloatArray,
+                   v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                   h: float) -> None:
+    """The ``"impact"`` events of a chunk of steps ending at ``times`` (states ``q``, ``v``
+    and normal impulses ``p`` per step, from ``q_pre``, ``v_pre`` and ``p_before`` before
+    it): a contact whose impulse becomes positive while it approaches; the jump listeners
+    called for each step that has one (plain and frictional Moreau–Jean alike)."""
     positive = p > 0.0
     if not positive.any():   # no impulse, no impact (most chunks of a flight)
-        state.p_prev = p[-1].copy()
         return
-    prev = np.vstack([state.p_prev[None, :], p[:-1]])
+    prev = np.vstack([p_before[None, :], p[:-1]])
     rising = positive & (prev == 0.0)
     for k in np.flatnonzero(rising.any(axis=1)):
         qb = q_pre if k == 0 else q[k - 1]
@@ -106,4 +118,3 @@ def record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
             rec.event(times[k] - h + tj, "impact", int(j), x_minus, x_plus)
         for listener in listeners:
             listener(float(times[k]), x_minus, x_plus, contacts, p[k].copy())
-    state.p_prev = p[-1].copy()
