@@ -163,9 +163,12 @@ from typing import TYPE_CHECKING, Any
 from numpy.typing import ArrayLike
 
 from ...errors import ModelError
+from ...systems.lagrangian import LagrangianSystem
+from ..loop import drive
+from ._options import Feedback, MoreauJeanOptions
+from ._run import Run
 
-if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
-    from ...systems.lagrangian import LagrangianSystem
+if TYPE_CHECKING:
     from ...systems.protocols import InputSignal
     from ..callbacks import Listener
     from ..trajectory import Trajectory
@@ -220,11 +223,6 @@ mass_at, projection, contact_tol
         An LCP failed, or the iteration matrix ``M̂`` is singular (``rcond(M̂) < n ε``).
 
     """
-    from ...systems.lagrangian import LagrangianSystem
-    from ..loop import drive
-    from ._options import Feedback, MoreauJeanOptions
-    from ._run import Run
-
     if h is None:
         raise ModelError("h: Moreau-Jean time-stepping needs a step, e.g. h=1e-3 (impacts are "
                          "captured to O(h), penetration <= h |u-|)")
