@@ -214,3 +214,17 @@ def test_contact_mpc_pushes_the_block_on_a_frictional_floor_through_simulate():
     # the floor holds: no penetration beyond round-off, the block slid and stopped
     assert traj.stats["max_penetration"] <= 1e-12
     assert np.any(traj.signals["contact_state"][1:, 0] == 2)
+
+
+def test_listeners_observe_the_frictional_landing():
+    """Without blocks, the listeners observe: called once for the landing step (after its
+    chunk), with the step's start and end states and the floor's impulse."""
+    calls = []
+    h = 1e-3
+    plant = floor_block(1.0, 0.5)
+    traj = nsc.simulate(plant, [0.0, 0.01, 0.5, 0.0], (0.0, 0.2), method="moreau_jean", h=h,
+                        progress=False, listeners=[lambda *args: calls.append(args)])
+    (t, x_minus, x_plus, contacts, impulse), = calls
+    t_impact = traj.event_times("impact")[0]
+    assert t_impact <= t <= t_impact + h and contacts.tolist() == [0]
+    assert x_minus[3] < 0.0 and x_plus[3] >= 0.0 and impulse[0] > 0.0

@@ -210,7 +210,8 @@ class FrictionalRun:
         blocks, self.listeners = feedback.blocks, feedback.listeners
         # the input matrix, read by _chunk_force and the blocks' input
         self.S = input_matrix(system, opts.u is not None or blocks is not None)
-        self.inline = None if blocks is None else blocks_input(blocks, self.S, opts.h)
+        self.inline = None if blocks is None or self.S is None else blocks_input(
+            blocks, self.S, opts.h)   # (blocks always set S)
         #: the blocks' force of step ``k`` (a step taken again keeps it), the active set of
         #: the last step taken (what the blocks read)
         self.held: tuple[int, FloatArray] | None = None
@@ -292,10 +293,11 @@ class FrictionalRun:
                      ) -> tuple[FloatArray, np.ndarray]:
         """The input force of step ``k`` with the blocks' (run once per step: a step taken
         again by the checked solver keeps it) and the step's active set."""
-        k, dim = self.k, c.dim
+        k, dim, inline = self.k, c.dim, self.inline
+        assert inline is not None   # called under blocks only
         if self.held is None or self.held[0] != k:
-            self.held = (k, self.inline(t, self.q, self.v, self.r[0::dim],  # type: ignore
-                                        self.active_prev))
+            self.held = (k, inline(t, self.q, self.v, self.r[0::dim],
+                                   self.active_prev))
         fe = fext + self.held[1]
         return fe, self._problem(c, fe[0])[0]
 
