@@ -115,7 +115,8 @@ class Stepper(Protocol):
 
     def start(self, rec: Recorder) -> None:
         """Record the first sample(s) into ``rec``, the run's record, and keep it: every
-        later piece is appended to it."""
+        later piece is appended to it (a stepper may hold the first sample back to write it
+        with its first piece; :meth:`settle` then hands it over if no piece did)."""
         ...
 
     def advance(self) -> float | Stop:

@@ -163,9 +163,12 @@ from typing import TYPE_CHECKING, Any
 from numpy.typing import ArrayLike
 
 from ...errors import ModelError
+from ...systems.lagrangian import LagrangianSystem
+from ..loop import drive
+from ._options import Feedback, MoreauJeanOptions
+from ._run import Run
 
-if TYPE_CHECKING:   # imported where used at run time (import nscontrol stays light)
-    from ...systems.lagrangian import LagrangianSystem
+if TYPE_CHECKING:
     from ...systems.protocols import InputSignal
     from ..callbacks import Listener
     from ..trajectory import Trajectory
@@ -220,11 +223,6 @@ mass_at, projection, contact_tol
         An LCP failed, or the iteration matrix ``M̂`` is singular (``rcond(M̂) < n ε``).
 
     """
-    from ...systems.lagrangian import LagrangianSystem
-    from ..loop import drive
-    from ._options import Feedback, MoreauJeanOptions
-    from ._run import Run
-
     if h is None:
         raise ModelError("h: Moreau-Jean time-stepping needs a step, e.g. h=1e-3 (impacts are "
                          "captured to O(h), penetration <= h |u-|)")
@@ -246,15 +244,8 @@ mass_at, projection, contact_tol
 
 def _frictional(system: LagrangianSystem, x0: Any, t_span: tuple[float, float], opts: Any,
                 feedback: Any) -> Trajectory:
-    """The run of a system with friction or the position projection (its own loop, without
-    blocks or listeners yet)."""
+    """The run of a system with friction or the position projection (the blocks of a closed
+    loop stepped before each step, the listeners called after a step with an impact)."""
     from ._frictional_run import integrate_frictional
 
-    if feedback.blocks is not None:
-        raise ModelError("controller: a closed loop's Python blocks are not supported yet "
-                         "with friction or projection=True; give the feedback as a "
-                         "StateFeedback gain, or simulate the plant alone")
-    if feedback.listeners:
-        raise ModelError("listeners: not supported yet with friction or projection=True; "
-                         "simulate without them")
-    return integrate_frictional(system, x0, t_span[0], t_span[1], opts)
+    return integrate_frictional(system, x0, t_span[0], t_span[1], opts, feedback=feedback)

@@ -55,6 +55,9 @@ class ModelRunner(Runner):
         return [fn for fn in listeners
                 if runner is None or getattr(fn, "__self__", None) is not runner]
 
+    def python_steps(self, state: RunState) -> bool:
+        return False
+
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
         from ...systems._feedback_kernels import calling_blocks
         from ._model_kernels import mj_model_steps

@@ -32,6 +32,7 @@ landing and later impacts drift by a step per bounce.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -41,8 +42,9 @@ from ..._validation import FloatArray
 from ...errors import ModelError, SolverError
 from ..loop import END, Recording, Stop, drive
 from ..trajectory import Recorder, Trajectory
-from ._options import input_matrix
-from ._run import _CHUNK_FLOATS, Grid, _chunk_force, _with_penetration
+from ._options import Feedback, input_matrix
+from ._recording import record_impacts
+from ._run import _CHUNK_FLOATS, Grid, _chunk_force, _with_penetration, blocks_input
 
 if TYPE_CHECKING:
     from ._frictional_kernels import FrictionalStep
@@ -162,27 +164,37 @@ def _inverses(blocks: np.ndarray, dim: int) -> np.ndarray:
 
 
 def integrate_frictional(system: Any, x0: FloatArray, t0: float, tf: float,
-                         opts: MoreauJeanOptions, *, warm_start: bool = True) -> Trajectory:
+                         opts: MoreauJeanOptions, *, warm_start: bool = True,
+                         feedback: Feedback | None = None) -> Trajectory:
     """The frictional run (``opts`` checked by :func:`moreau_jean.integrate`) through
     :func:`~nscontrol.simulate.loop.drive`; ``warm_start=False`` starts every step's sweeps
     from zero impulses instead of the previous step's (to measure what the warm start saves).
+    ``feedback``: a closed loop's Python blocks (stepped before each step) and the jump
+    listeners (called after each step with an impact).
     """
     if not system.is_linear:
         raise ModelError("friction: Moreau-Jean with friction or projection needs a constant "
                          "mass, linear forces (f0, K, D) and affine gaps; linearise the model "
                          "about its working configuration")
-    return drive(FrictionalRun(system, x0, (t0, tf), opts, warm_start), (t0, tf),
-                 desc="moreau_jean", progress=opts.progress)
+    run = FrictionalRun(system, x0, (t0, tf), opts, warm_start,
+                        Feedback() if feedback is None else feedback)
+    return drive(run, (t0, tf), desc="moreau_jean", progress=opts.progress)
 
 
 class FrictionalRun:
     """One frictional run as a stepper of :func:`~nscontrol.simulate.loop.drive`: each
     :meth:`advance` runs and records a chunk of compiled steps (:mod:`._frictional_kernels`),
     projects a step that penetrates, and takes a step whose sweeps did not converge with the
-    checked solver."""
+    checked solver.
+
+    Under a closed loop's Python blocks a chunk is one step: the blocks run before it (on
+    the loop's integer tick schedule, the step starts ``t0 + k h``), reading the state, the
+    last step's normal impulses over ``h`` and its active set, as in plain Moreau–Jean; the
+    listeners (the blocks' reset among them) are called after a step with an impact, so
+    before the next step's blocks."""
 
     def __init__(self, system: Any, x0: FloatArray, t_span: tuple[float, float],
-                 opts: MoreauJeanOptions, warm_start: bool) -> None:
+                 opts: MoreauJeanOptions, warm_start: bool, feedback: Feedback) -> None:
         self.system, self.opts, self.warm = system, opts, warm_start
         self.grid = Grid(t_span[0], t_span[1], opts.h)
         self.steps: dict[float, _Contacts] = {}
@@ -195,7 +207,15 @@ class FrictionalRun:
         self.x0 = x0
         self.q, self.v = x0[:n].copy(), x0[n:].copy()
         self.r, self.work, self.states = np.zeros(m * c.dim), np.zeros(2), np.zeros(m, np.int64)
-        self.S = input_matrix(system, opts.u is not None)   # read by _chunk_force
+        blocks, self.listeners = feedback.blocks, feedback.listeners
+        # the input matrix, read by _chunk_force and the blocks' input
+        self.S = input_matrix(system, opts.u is not None or blocks is not None)
+        self.inline = None if blocks is None or self.S is None else blocks_input(
+            blocks, self.S, opts.h)   # (blocks always set S)
+        #: the blocks' force of step ``k`` (a step taken again keeps it), the active set of
+        #: the last step taken (what the blocks read)
+        self.held: tuple[int, FloatArray] | None = None
+        self.active_prev = np.zeros(0, np.int64)
         self.proj = {"energy": 0.0, "lift_energy": 0.0, "before": 0.0, "count": 0}
         self.k, self.sweeps, self.fallback_steps, self.max_residual = 0, 0, 0, 0.0
         self.redo = False   # the next step's sweeps failed: take it with the checked solver
@@ -236,8 +256,8 @@ class FrictionalRun:
         g, k, system = self.grid, self.k, self.system
         step = g.h if k < g.n_full else g.h_last
         c = self.contacts(step)
-        size = max(1, min(g.n_full - k, 20_000,
-                          _CHUNK_FLOATS // (2 * system.n_dof + 2 * c.r_size)))
+        size = 1 if self.inline is not None else max(
+            1, min(g.n_full - k, 20_000, _CHUNK_FLOATS // (2 * system.n_dof + 2 * c.r_size)))
         times: FloatArray = g.t0 + g.h * np.arange(k, k + size, dtype=np.float64)
         # u(t) of the chunk; when it raises, the steps before its first failing time
         fext, failed = _chunk_force(cast(Any, self), times)   # reads system, S, opts.u
@@ -245,6 +265,8 @@ class FrictionalRun:
             if fext.shape[0] == 0:
                 raise failed
             times = times[:fext.shape[0]]
+        if self.inline is not None:
+            fext, active = self._with_blocks(c, float(times[0]), fext[:1])
         pre = (self.q.copy(), self.v.copy(), self.r.copy(), self.proj["energy"])
         if self.redo:
             out, done, code = self._checked_step(c, fext[:1])
@@ -262,8 +284,22 @@ class FrictionalRun:
                 self._keep(c, out, times[:done - 1] + step, pre, step)   # the steps before
                 raise
         self._keep(c, out, times[:done] + step, pre, step)
+        if self.inline is not None and done:
+            self.active_prev = active
         if failed is not None and done == times.shape[0]:
             raise failed
+
+    def _with_blocks(self, c: _Contacts, t: float, fext: FloatArray
+                     ) -> tuple[FloatArray, np.ndarray]:
+        """The input force of step ``k`` with the blocks' (run once per step: a step taken
+        again by the checked solver keeps it) and the step's active set."""
+        k, dim, inline = self.k, c.dim, self.inline
+        assert inline is not None   # called under blocks only
+        if self.held is None or self.held[0] != k:
+            self.held = (k, inline(t, self.q, self.v, self.r[0::dim],
+                                   self.active_prev))
+        fe = fext + self.held[1]
+        return fe, self._problem(c, fe[0])[0]
 
     def _keep(self, c: _Contacts, out: tuple[np.ndarray, ...], times: FloatArray,
               pre: tuple[Any, ...], step: float) -> None:
@@ -276,7 +312,7 @@ class FrictionalRun:
         proj[-1] = self.proj["energy"]
         _record(self.rec, self.system, c, times, out[0][:done], out[1][:done], out[2][:done],
                 out[3][:done], out[4][:done], out[5][:done], proj, pre[0], pre[1], pre[2],
-                step)
+                step, self.listeners)
         self.k += done
 
     def _compiled(self, c: _Contacts, size: int, fext: FloatArray, given: bool
@@ -401,24 +437,15 @@ def _project(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, gap: Float
 def _record(rec: Recorder, system: Any, c: _Contacts, times: FloatArray, q: FloatArray,
             v: FloatArray, r: FloatArray, states: np.ndarray, work: FloatArray,
             residual: FloatArray, proj_energy: FloatArray, q_pre: FloatArray,
-            v_pre: FloatArray, r_pre: FloatArray, h: float) -> None:
+            v_pre: FloatArray, r_pre: FloatArray, h: float,
+            listeners: Sequence[Callable[..., None]]) -> None:
     """Write a chunk of steps, and an ``"impact"`` event for every contact whose normal
     impulse becomes positive while it approaches (its time where the gap extrapolated from
-    the step's start reaches zero, as plain Moreau–Jean)."""
+    the step's start reaches zero, as plain Moreau–Jean; the jump listeners called for it)."""
     rec.extend(times, (q, v), **_rows(system, c, q, v, r, states, work, residual,
                                       proj_energy, rec))
-    dim = c.dim
-    pn = r[:, 0::dim]
-    prev = np.vstack([r_pre[None, 0::dim], pn[:-1]])
-    for k in np.flatnonzero(((pn > 0.0) & (prev == 0.0)).any(axis=1)):
-        qb = q_pre if k == 0 else q[k - 1]
-        vb = v_pre if k == 0 else v[k - 1]
-        un = np.asarray(c.G @ vb).ravel()
-        gap = system.gaps(qb)
-        for j in np.flatnonzero((pn[k] > 0.0) & (prev[k] == 0.0) & (un < 0.0)):
-            tau = float(np.clip(gap[j] / -un[j], 0.0, h))
-            rec.event(times[k] - h + tau, "impact", int(j), np.concatenate([qb, vb]),
-                      np.concatenate([q[k], v[k]]))
+    record_impacts(rec, system, times, q, v, r[:, 0::c.dim], r_pre[0::c.dim], q_pre, v_pre,
+                   listeners, h)
 
 
 def _rows(system: Any, c: _Contacts, q: FloatArray, v: FloatArray, r: FloatArray,

@@ -139,9 +139,11 @@ def _is_block_runner(blocks: Any) -> bool:
 
 def check_input(system: Any, u: Any) -> None:
     """An :class:`Exosystem` input must have one output per actuator column."""
+    if u is None:
+        return
     from ...numerics.lti import Exosystem
 
-    if u is None or callable(u) and not isinstance(u, Exosystem):
+    if callable(u) and not isinstance(u, Exosystem):
         return
     if not isinstance(u, Exosystem):
         raise ModelError(f"u: expected an Exosystem or a callable t -> u, got "

@@ -13,7 +13,8 @@ from ..._validation import FloatArray
 from ..trajectory import ChunkProgress, Recorder
 from ._runners import RunState
 
-__all__ = ["signals_of", "sample_initial", "record_chunk", "record_finished", "impact"]
+__all__ = ["signals_of", "sample_initial", "record_chunk", "record_finished", "impact",
+           "record_impacts"]
 
 
 def signals_of(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
@@ -31,7 +32,8 @@ def signals_of(system: Any, q: FloatArray, v: FloatArray, p: FloatArray,
 
 
 def sample_initial(rec: Recorder, system: Any, t0: float, x0: FloatArray) -> None:
-    """The first sample (always kept)."""
+    """The first sample alone (always kept): a run that ends before its first chunk is
+    recorded (:func:`record_chunk` records it with that chunk otherwise)."""
     n = system.n_dof
     sig = signals_of(system, x0[None, :n], x0[None, n:], np.zeros((1, system.n_contacts)),
                      rec)
@@ -77,19 +79,46 @@ def record_finished(progress: ChunkProgress, *, rec: Recorder, system: Any,
                  listeners, h)
 
 
+#: ``(q, v, p, rec) -> signals or None``: a runner's own evaluation of rows' signals
+RowSignals = Callable[[FloatArray, FloatArray, FloatArray, Recorder],
+                      dict[str, FloatArray] | None]
+
+
 def record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
                  v: FloatArray, p: FloatArray, state: RunState, q_pre: FloatArray,
                  v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
-                 h: float, signals: dict[str, FloatArray] | None = None) -> None:
+                 h: float, signals: RowSignals | None = None) -> None:
     """Write a chunk of steps and its impact events; call the jump listeners. ``signals``:
-    the chunk's signals when the caller computed them (the compiled path)."""
-    rec.extend(times, (q, v), **(signals_of(system, q, v, p, rec) if signals is None
-                                 else signals))
-    positive = p > 0.0
-    if not positive.any():   # no impulse, no impact (most chunks of a flight)
-        state.p_prev = p[-1].copy()
+    the runner's evaluation of the rows' signals (the compiled path; when it gives ``None``,
+    or without it, :func:`signals_of`). While the run's first sample is held back
+    (``state.first``, the run's first time: the chunk starts from ``q_pre, v_pre`` without
+    impulse), it is written with the chunk: one evaluation of the signals and one write
+    for both (a run's fixed cost)."""
+    rows = (q, v, p)
+    if state.first is not None:
+        times = np.concatenate(((state.first,), times))
+        rows = (np.concatenate((q_pre[None], q)), np.concatenate((v_pre[None], v)),
+                np.concatenate((state.p_prev[None], p)))
+        state.first = None
+    sig = None if signals is None else signals(*rows, rec)
+    rec.extend(times, rows[:2], **(signals_of(system, *rows, rec) if sig is None else sig))
+    record_impacts(rec, system, times[-q.shape[0]:], q, v, p, state.p_prev, q_pre, v_pre,
+                   listeners, h)
+    state.p_prev = p[-1].copy()
+
+
+def record_impacts(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
+                   v: FloatArray, p: FloatArray, p_before: FloatArray, q_pre: FloatArray,
+                   v_pre: FloatArray, listeners: Sequence[Callable[..., None]],
+                   h: float) -> None:
+    """The ``"impact"`` events of a chunk of steps ending at ``times`` (states ``q``, ``v``
+    and normal impulses ``p`` per step, from ``q_pre``, ``v_pre`` and ``p_before`` before
+    it): a contact whose impulse becomes positive while it approaches; the jump listeners
+    called for each step that has one (plain and frictional Moreau–Jean alike)."""
+    if not p.any():   # no impulse, no impact (most chunks of a flight)
         return
-    prev = np.vstack([state.p_prev[None, :], p[:-1]])
+    positive = p > 0.0
+    prev = np.vstack([p_before[None, :], p[:-1]])
     rising = positive & (prev == 0.0)
     for k in np.flatnonzero(rising.any(axis=1)):
         qb = q_pre if k == 0 else q[k - 1]
@@ -106,4 +135,3 @@ def record_chunk(rec: Recorder, system: Any, times: FloatArray, q: FloatArray,
             rec.event(times[k] - h + tj, "impact", int(j), x_minus, x_plus)
         for listener in listeners:
             listener(float(times[k]), x_minus, x_plus, contacts, p[k].copy())
-    state.p_prev = p[-1].copy()

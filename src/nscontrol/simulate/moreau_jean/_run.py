@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, NoReturn
 
@@ -28,28 +27,20 @@ __all__ = ["Run"]
 _CHUNK_FLOATS = 2_000_000
 
 
-@dataclass(frozen=True)
 class Grid:
     """Whole steps of ``h`` from ``t0``, then one shorter step so that the run ends exactly
-    at ``tf``."""
+    at ``tf`` (read at every chunk: computed once; a plain class, built at every run)."""
 
-    t0: float
-    tf: float
-    h: float
+    __slots__ = ("t0", "tf", "h", "n_full", "h_last", "n_steps")
 
-    def __post_init__(self) -> None:   # read at every chunk: computed once
-        n_full = math.floor((self.tf - self.t0) / self.h + 1e-9)
-        h_last = (self.tf - self.t0) - n_full * self.h
-        object.__setattr__(self, "n_full", n_full)
-        object.__setattr__(self, "h_last", h_last)
-        object.__setattr__(self, "n_steps", n_full + (1 if h_last > 1e-9 * self.h else 0))
-
-    #: whole steps of ``h``
-    n_full: int = field(init=False)
-    #: the shortened last step's length
-    h_last: float = field(init=False)
-    #: steps in all
-    n_steps: int = field(init=False)
+    def __init__(self, t0: float, tf: float, h: float) -> None:
+        self.t0, self.tf, self.h = t0, tf, h
+        #: whole steps of ``h``
+        self.n_full = math.floor((tf - t0) / h + 1e-9)
+        #: the shortened last step's length
+        self.h_last = (tf - t0) - self.n_full * h
+        #: steps in all
+        self.n_steps = self.n_full + (1 if self.h_last > 1e-9 * h else 0)
 
 
 class Run:
@@ -78,9 +69,11 @@ class Run:
             self.state.after_step = jump_listener(system, feedback.listeners)
 
     def start(self, rec: Recorder) -> None:
-        """Record the initial state (and its signals) into the run's record."""
+        """Keep the run's record; the initial state is held back, to be recorded with the
+        first chunk (one evaluation of the signals and one write for both), or by
+        :meth:`settle` if the run ends before."""
         self.rec = rec
-        sample_initial(rec, self.system, self.grid.t0, self.x0)
+        self.state.first = self.grid.t0
 
     def advance(self) -> float | Stop:
         """Run and record the next chunk; the time reached, or the run's :class:`Stop`."""
@@ -104,7 +97,9 @@ class Run:
         else:
             chunk = max(1, min(g.n_full - k, 20_000,
                                _CHUNK_FLOATS // max(1, 2 * system.n_dof + system.n_contacts)))
-            times, step = g.t0 + g.h * np.arange(k, k + chunk), g.h
+            times, step = np.arange(k, k + chunk, dtype=np.float64), g.h
+            times *= g.h        # t0 + k h, in place (a run's fixed cost: no temporaries)
+            times += g.t0
         fext, failed = _chunk_force(self, times)
         if failed is not None:          # run the steps before u's first failing time
             if fext.shape[0] == 0:
@@ -113,9 +108,12 @@ class Run:
         q_pre, v_pre = st.q.copy(), st.v.copy()
         observers = () if st.after_step is not None else self.runner.observers(
             self.fb.listeners)
-        with self.rec.chunk(partial(record_finished, rec=self.rec, system=system,
-                                    times=times, state=st, q_pre=q_pre, v_pre=v_pre,
-                                    listeners=observers, h=step)) as st.progress:
+        if self.runner.python_steps(st):   # a failing step keeps the steps before it
+            with self.rec.chunk(partial(record_finished, rec=self.rec, system=system,
+                                        times=times, state=st, q_pre=q_pre, v_pre=v_pre,
+                                        listeners=observers, h=step)) as st.progress:
+                done, code, q_out, v_out, p_out = self.runner(st, fext, times)
+        else:                               # one compiled call: done or not
             done, code, q_out, v_out, p_out = self.runner(st, fext, times)
         if code and self.runner.path == "tridiagonal":
             # a singular Delassus matrix (redundant contacts): the tridiagonal solve has
@@ -125,8 +123,7 @@ class Run:
         if done:
             q_out, v_out, p_out = q_out[:done], v_out[:done], p_out[:done]
             record_chunk(self.rec, system, times[:done] + step, q_out, v_out, p_out, st,
-                         q_pre, v_pre, observers, step,
-                         self.runner.signals(q_out, v_out, p_out, self.rec))
+                         q_pre, v_pre, observers, step, self.runner.signals)
             st.last = (times[done - 1] + step, q_out[-1], v_out[-1], p_out[-1])
         st.k = k + done
         if failed is not None and done == times.size:   # the steps before it all ran
@@ -148,8 +145,12 @@ class Run:
         raise failed
 
     def settle(self) -> None:
-        """Record the last state when ``record_every`` dropped it."""
+        """Record the initial state if no chunk did, and the last state when
+        ``record_every`` dropped it."""
         rec, system, st = self.rec, self.system, self.state
+        if st.first is not None:
+            sample_initial(rec, system, st.first, self.x0)
+            st.first = None
         if st.last is not None and rec.last_time < st.last[0]:
             t_last, q_l, v_l, p_l = st.last
             sig = signals_of(system, q_l[None], v_l[None], p_l[None], rec)

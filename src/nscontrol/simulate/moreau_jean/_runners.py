@@ -34,7 +34,7 @@ LCP_STATUS = {1: "ray termination (no solution)", 2: "iteration limit",
 AfterStep = Callable[[float, FloatArray, FloatArray, FloatArray, FloatArray], None]
 
 
-@dataclass
+@dataclass(slots=True)
 class RunState:
     """What the run carries from chunk to chunk."""
 
@@ -56,6 +56,9 @@ class RunState:
     failure: str = ""
     #: ``(t, q, v, p)`` of the last step done
     last: tuple[float, FloatArray, FloatArray, FloatArray] | None = None
+    #: the run's first time while its first sample is held back (recorded with the first
+    #: chunk: :func:`~._recording.record_chunk`), then ``None``
+    first: float | None = None
 
 
 class StepFailure(Exception):
@@ -82,6 +85,11 @@ class Runner:
 
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
         return self.stepped(state, fext, times)
+
+    def python_steps(self, state: RunState) -> bool:
+        """Whether a chunk steps in Python (:meth:`stepped`, which counts the rows written
+        in ``state.progress``), rather than in one compiled call."""
+        return True
 
     def step(self, t: float, q: FloatArray, v: FloatArray, fext: FloatArray,
              outs: tuple[FloatArray, FloatArray, FloatArray], k: int) -> int:
@@ -174,6 +182,9 @@ def _outputs(system: Any, chunk: int) -> tuple[FloatArray, FloatArray, FloatArra
 class _KernelRunner(Runner):
     """A path whose steps are one compiled loop (:meth:`_kernel`): a chunk is one call, or
     one call a step under Python blocks."""
+
+    def python_steps(self, state: RunState) -> bool:
+        return state.inline is not None
 
     def __call__(self, state: RunState, fext: FloatArray, times: FloatArray) -> tuple:
         if state.inline is not None:   # the blocks' input before each step
