@@ -292,3 +292,19 @@ def test_fallbacks_after_the_first_lemke_run_in_the_buffer_match_the_solver(M, q
                                                               ).index(res.status)
     np.testing.assert_array_equal(z, res.z)
     np.testing.assert_array_equal(w, res.w)
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_a_reusable_solver_of_a_small_tridiagonal_matrix_keeps_writeable_bands(n):
+    # the bands of a 2 x 2 M have one entry each: numpy's diagonal view of one entry is
+    # contiguous and read-only, which the solver's exact-signature entry refuses (every
+    # solve then took the general path); the bands must be writeable copies, and the
+    # answers the same as solve_lcp's
+    M = 2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
+    q = -np.arange(1.0, n + 1.0)
+    solver = LCPSolver(M)
+    bands = solver._packed[1:4]
+    assert all(b.flags.writeable and b.flags.c_contiguous for b in bands)
+    assert all(not np.shares_memory(b, M) for b in bands)
+    assert_same(solver.solve(q), solve_lcp(M, q))
+    assert solver.solve(q).success
