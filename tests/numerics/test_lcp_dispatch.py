@@ -240,3 +240,71 @@ def test_lemke_on_the_full_tableau_and_on_the_basis_inverse_solves_to_round_off(
     res, bound = independent_residual(M, q, z)
     assert res <= bound and np.all(z >= 0.0)
     assert_same(solve_lcp(M, q, method="lemke"), LCPSolver(M, "lemke").solve(q))
+
+
+def _lemke_cases():
+    """Problems whose Lemke paths end every way: solved (P-matrix, with degenerate rows
+    q_i = 0), on a ray (the skew-symmetric infeasible LCP, the bimatrix game), out of
+    pivots (Murty's exponential family at n = 9 with a budget of 20), trivially (q >= 0)."""
+    rng = np.random.default_rng(77)
+    for n in (1, 3, 10, 48):
+        M = random_p_matrix(n, rng)
+        q = rng.standard_normal(n)
+        q[: n // 3] = 0.0
+        yield M, q, 0
+    yield INFEASIBLE[0], INFEASIBLE[1], 0
+    yield GAME, -np.ones(4), 0
+    murty = np.eye(9) + 2.0 * np.tril(np.ones((9, 9)), -1)
+    yield murty, -np.ones(9), 20
+    yield np.eye(3), np.ones(3), 0
+
+
+@pytest.mark.parametrize("case", list(range(8)))
+def test_lemke_in_a_given_workspace_is_lemke_kernel_bit_for_bit(case):
+    # the per-call path of a small LCP runs Lemke in the caller's buffer (no allocation, no
+    # reference counting); it must be the same pivots: status, count, z and w identical
+    from nscontrol.numerics import _lcp_kernels as kernels
+    M, q, limit = list(_lemke_cases())[case]
+    n = q.shape[0]
+    z1, w1, z2, w2 = (np.full(n, np.nan) for _ in range(4))
+    work = np.full(kernels.lemke_work_size(n), np.nan)     # no entry read before written
+    first = kernels.lemke_kernel(M, q, z1, w1, limit)
+    assert kernels.lemke_into(M, q, z2, w2, limit, work) == first
+    np.testing.assert_array_equal(z1, z2)
+    np.testing.assert_array_equal(w1, w2)
+    if first[0] == kernels.SOLVED:          # and it is a solution, to round-off
+        res, bound = independent_residual(M, q, z1)
+        assert res <= bound
+
+
+@pytest.mark.parametrize(("M", "q"), [(GAME, -np.ones(4)), INFEASIBLE])
+def test_fallbacks_after_the_first_lemke_run_in_the_buffer_match_the_solver(M, q):
+    # the first Lemke run in the buffer fails (a ray), the chain goes on from it: the same
+    # runs, the same log (message) and the same answer as the reusable solver and as the
+    # compiled entry, which report the ray of the infeasible LCP and the game's solution
+    res = solve_lcp(M, q)
+    assert_same(res, LCPSolver(M).solve(q))
+    assert res.message.startswith("lemke: ray_termination")
+    n = q.shape[0]
+    z, w = np.empty(n), np.empty(n)
+    code, run, _, _, _ = solve_lcp_kernel(M, q, z, w, 1e-12, 0)
+    assert dispatch.RUN_NAMES[run] == res.method and code == ("solved", "ray_termination",
+                                                              ).index(res.status)
+    np.testing.assert_array_equal(z, res.z)
+    np.testing.assert_array_equal(w, res.w)
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_a_reusable_solver_of_a_small_tridiagonal_matrix_keeps_writeable_bands(n):
+    # the bands of a 2 x 2 M have one entry each: numpy's diagonal view of one entry is
+    # contiguous and read-only, which the solver's exact-signature entry refuses (every
+    # solve then took the general path); the bands must be writeable copies, and the
+    # answers the same as solve_lcp's
+    M = 2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
+    q = -np.arange(1.0, n + 1.0)
+    solver = LCPSolver(M)
+    bands = solver._packed[1:4]
+    assert all(b.flags.writeable and b.flags.c_contiguous for b in bands)
+    assert all(not np.shares_memory(b, M) for b in bands)
+    assert_same(solver.solve(q), solve_lcp(M, q))
+    assert solver.solve(q).success

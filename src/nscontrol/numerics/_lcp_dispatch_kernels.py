@@ -26,7 +26,9 @@ import numpy as np
 from numba import njit, types
 
 from ._lcp_kernels import (
+    LEMKE_FULL_TABLEAU_MAX_SIZE,
     MAX_ITER,
+    NO_REFCOUNT,
     NUMERICAL_FAILURE,
     Q_NOT_FINITE,
     RAY_TERMINATION,
@@ -36,7 +38,9 @@ from ._lcp_kernels import (
     all_finite,
     half_bandwidth,
     is_symmetric,
+    lemke_into,
     lemke_verified,
+    lemke_work_size,
     pgs_verified,
     tridiagonal_verified,
     verified_status,
@@ -314,6 +318,57 @@ def needs_python(run, has_dense, has_bands, sparse_lu):
 
 
 @njit(cache=True, inline='always')
+def _log_run(work, n, nlog, run, code, its, res, tolerance, limit, z, w):
+    """Row ``nlog`` of the log in ``work[2 n:]`` (module docstring); a ray's ``(z, w)`` is
+    kept in ``work[:2 n]``."""
+    row = 2 * n + LOG_WIDTH * nlog
+    work[row] = run
+    work[row + 1] = code
+    work[row + 2] = its
+    work[row + 3] = res
+    work[row + 4] = tolerance
+    work[row + 5] = limit
+    if code == RAY_TERMINATION:
+        for i in range(n):
+            work[i] = z[i]
+            work[n + i] = w[i]
+
+
+@njit(cache=True, inline='always')
+def buffer_size(n):
+    """Floats of the buffer of the per-call entries (:func:`solve_dense_into`,
+    :func:`solve_packed`): ``z``, ``w``, the work array of :func:`run_chain` (``2 n`` and the
+    log), and up to ``n =`` :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE`
+    Lemke's workspace, where a first Lemke run (:func:`first_lemke`) needs no allocation."""
+    size = 4 * n + LOG_ROWS * LOG_WIDTH
+    if n <= LEMKE_FULL_TABLEAU_MAX_SIZE:
+        size += lemke_work_size(n)
+    return size
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def first_lemke(M, q, buf, tol, limit):
+    """A first run that is Lemke's, in a buffer of :func:`buffer_size` floats with its
+    workspace (``n <=`` :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE`),
+    without allocation or reference counting: what :func:`run_one` computes for
+    :data:`LEMKE`, bit for bit (:func:`~nscontrol.numerics._lcp_kernels.lemke_into` is
+    ``lemke_kernel`` in a given workspace), logged as :func:`run_chain` logs it, as row 0.
+    Returns ``(status_code, iterations, residual, tolerance)`` (the status reconciled with
+    the residual test), :data:`~nscontrol.numerics._lcp_kernels.Q_NOT_FINITE` for a ``q``
+    that is not finite (nothing logged)."""
+    n = q.shape[0]
+    if not all_finite(q):
+        return Q_NOT_FINITE, 0, np.nan, np.nan
+    z = buf[:n]
+    w = buf[n:2 * n]
+    code, its = lemke_into(M, q, z, w, limit, buf[4 * n + LOG_ROWS * LOG_WIDTH:])
+    res, tolerance, ok = verify_dense(M, q, z, w, tol)
+    code = verified_status(code, ok)
+    _log_run(buf[2 * n:], n, 0, LEMKE, code, its, res, tolerance, limit, z, w)
+    return code, its, res, tolerance
+
+
+@njit(cache=True, inline='always')
 def run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z, w, z0, warm,
               method, run, tried, structured, large_symmetric, positive_diagonal, tol,
               max_iter, omega, work, nlog, skip_python):
@@ -332,7 +387,6 @@ def run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z, w, z
         return Q_NOT_FINITE, run, 0, np.nan, np.nan, tried, nlog
     code, its, res, tolerance = NUMERICAL_FAILURE, 0, np.nan, np.nan
     last = NO_RUN
-    log = work[2 * n:]
     while run != NO_RUN:
         if needs_python(run, has_dense, has_bands, sparse_lu):
             if not skip_python:
@@ -342,43 +396,65 @@ def run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z, w, z
             limit = run_limit(run, n, max_iter)
             code, its, res, tolerance = run_one(run, M, lower, diag, upper, has_bands, q, z,
                                                 w, z0, warm, limit, tol, omega)
-            row = LOG_WIDTH * nlog
-            log[row] = run
-            log[row + 1] = code
-            log[row + 2] = its
-            log[row + 3] = res
-            log[row + 4] = tolerance
-            log[row + 5] = limit
+            _log_run(work, n, nlog, run, code, its, res, tolerance, limit, z, w)
             nlog += 1
             last = run
             tried |= family(run)
             if code == SOLVED:
                 return SOLVED, run, its, res, tolerance, tried, nlog
-            if code == RAY_TERMINATION:
-                for i in range(n):
-                    work[i] = z[i]
-                    work[n + i] = w[i]
         run = next_run(method, tried, n, structured, large_symmetric, positive_diagonal)
     return code, last, its, res, tolerance, tried, nlog
 
 
+@njit(cache=True, inline='always')
+def _chain_from_first(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, buf, method,
+                      run, structured, large_symmetric, positive_diagonal, tol, max_iter,
+                      omega, skip_python):
+    """:func:`run_chain` from the first run ``run``, the runs in ``buf`` (``z``, ``w``, the
+    work array; :func:`buffer_size`). A first Lemke run on a dense ``M`` up to
+    :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE` is made by
+    :func:`first_lemke` (the per-call path of a small LCP: no allocation, no reference
+    counting); the chain goes on from there if it is not verified."""
+    n = q.shape[0]
+    tried = 0
+    nlog = 0
+    if (run == LEMKE and has_dense and n <= LEMKE_FULL_TABLEAU_MAX_SIZE
+            and buf.shape[0] >= buffer_size(n)):
+        limit = run_limit(LEMKE, n, max_iter)
+        code, its, res, tolerance = first_lemke(M, q, buf, tol, limit)
+        if code == SOLVED:
+            return SOLVED, LEMKE, its, res, tolerance, 1, 1
+        if code == Q_NOT_FINITE:
+            return Q_NOT_FINITE, LEMKE, 0, np.nan, np.nan, 0, 0
+        tried = 1
+        nlog = 1
+        run = next_run(method, tried, n, structured, large_symmetric, positive_diagonal)
+        if run == NO_RUN:
+            return code, LEMKE, its, res, tolerance, tried, nlog
+    z = buf[:n]
+    return run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z,
+                     buf[n:2 * n], z, False, method, run, tried, structured, large_symmetric,
+                     positive_diagonal, tol, max_iter, omega, buf[2 * n:], nlog, skip_python)
+
+
 @njit(cache=True)
-def solve_dense(M, q, z, w, work, method, tol, max_iter, omega, skip_python):
+def solve_dense(M, q, buf, method, tol, max_iter, omega, skip_python):
     """:func:`analyse_dense` and :func:`run_chain` from the first run, in one call: what
     ``LCPSolver(M, method, ...).solve(q)`` computes for a dense ``M`` (the same analysis,
-    the same chain). Returns the chain's tuple; :data:`NUMERICAL_FAILURE` with ``run``
-    :data:`NO_RUN` and ``nlog = -1`` when ``M`` is not finite."""
+    the same chain), with ``z, w`` and the work array in one buffer of :func:`buffer_size`
+    floats: ``buf[:n]`` receives ``z``, ``buf[n:2 n]`` ``w``. Returns the chain's tuple;
+    :data:`NUMERICAL_FAILURE` with ``run`` :data:`NO_RUN` and ``nlog = -1`` when ``M`` is not
+    finite."""
     finite, tridiagonal, banded, large_symmetric, positive_diagonal = analyse_dense(M)
     if not finite:
         return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan, 0, -1
     n = q.shape[0]
     structured = n > 2 and (tridiagonal or banded)
     run = first_run(method, structured, large_symmetric)
-    lower = diag = upper = np.empty(0)   # read from M by run_one if banded runs
-    has_bands = tridiagonal
-    return run_chain(M, True, lower, diag, upper, has_bands, banded, q, z, w, z, False,
-                     method, run, 0, structured, large_symmetric, positive_diagonal, tol,
-                     max_iter, omega, work, 0, skip_python)
+    no_bands = q[:0]                     # read from M by run_one if banded runs
+    return _chain_from_first(M, True, no_bands, no_bands, no_bands, tridiagonal, banded, q,
+                             buf, method, run, structured, large_symmetric, positive_diagonal,
+                             tol, max_iter, omega, skip_python)
 
 
 def pack_state(method, run, has_dense, has_bands, sparse_lu, structured, large_symmetric,
@@ -395,25 +471,19 @@ def pack_state(method, run, has_dense, has_bands, sparse_lu, structured, large_s
 @njit(cache=True)
 def solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega):
     """:func:`run_chain` from a reusable solver's first run, without warm start, its state
-    packed by :func:`pack_state` and ``z, w``, the work array in one buffer of ``4 n + 24``
-    floats (as :func:`solve_dense_into`): ten arguments for a caller in Python instead of
-    twenty-four."""
-    n = q.shape[0]
-    z = buf[:n]
-    return run_chain(M, (bits >> 6) & 1 == 1, lower, diag, upper, (bits >> 7) & 1 == 1,
-                     (bits >> 8) & 1 == 1, q, z, buf[n:2 * n], z, False, bits & 7,
-                     (bits >> 3) & 7, 0, (bits >> 9) & 1 == 1, (bits >> 10) & 1 == 1,
-                     (bits >> 11) & 1 == 1, tol, max_iter, omega, buf[2 * n:], 0, False)
+    packed by :func:`pack_state` and ``z, w``, the work array in one buffer of
+    :func:`buffer_size` floats (as :func:`solve_dense_into`): ten arguments for a caller in
+    Python instead of twenty-four."""
+    return _chain_from_first(M, (bits >> 6) & 1 == 1, lower, diag, upper, (bits >> 7) & 1 == 1,
+                             (bits >> 8) & 1 == 1, q, buf, bits & 7, (bits >> 3) & 7,
+                             (bits >> 9) & 1 == 1, (bits >> 10) & 1 == 1,
+                             (bits >> 11) & 1 == 1, tol, max_iter, omega, False)
 
 
 @njit(cache=True)
 def solve_dense_into(M, q, buf, method, tol, max_iter, omega):
-    """:func:`solve_dense` with ``z, w`` and the work array in one buffer of ``4 n + 24``
-    floats: ``buf[:n]`` receives ``z``, ``buf[n:2 n]`` ``w`` (one allocation and four
-    arguments fewer for a caller in Python)."""
-    n = q.shape[0]
-    return solve_dense(M, q, buf[:n], buf[n:2 * n], buf[2 * n:], method, tol, max_iter,
-                       omega, False)
+    """:func:`solve_dense` for a caller in Python (no run is passed over)."""
+    return solve_dense(M, q, buf, method, tol, max_iter, omega, False)
 
 
 #: Status of the checked entries below when an argument fails a check that the caller in
@@ -433,7 +503,7 @@ def solve_dense_checked(M, q, buf, method, tol, max_iter, omega):
     (the compiled signature does, :func:`exact_entry`): the shapes and the options are
     checked here, :data:`UNCHECKED` (``nlog = -1``) when one fails."""
     n = q.shape[0]
-    if not (M.shape[0] == n and M.shape[1] == n and buf.shape[0] == 4 * n + LOG_ROWS * LOG_WIDTH
+    if not (M.shape[0] == n and M.shape[1] == n and buf.shape[0] == buffer_size(n)
             and 0 <= method <= AUTO and method != PGS_AUTO and method != PGS_FALLBACK
             and _options_ok(tol, max_iter, omega)):
         return UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1
@@ -442,9 +512,9 @@ def solve_dense_checked(M, q, buf, method, tol, max_iter, omega):
 
 @njit(cache=True)
 def solve_packed_checked(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega):
-    """:func:`solve_packed` with the length of ``q`` checked against the buffer's (``4 n +
-    24``): :data:`UNCHECKED` when it differs."""
-    if buf.shape[0] != 4 * q.shape[0] + LOG_ROWS * LOG_WIDTH:
+    """:func:`solve_packed` with the length of ``q`` checked against the buffer's
+    (:func:`buffer_size`): :data:`UNCHECKED` when it differs."""
+    if buf.shape[0] != buffer_size(q.shape[0]):
         return UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1
     return solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega)
 
@@ -508,14 +578,15 @@ def solve_lcp_kernel(M, q, z, w, tol, max_iter):
     (``auto``'s PGS with its definiteness test for symmetric ``M`` above ``n = 400``,
     Howard's iteration with sparse LU first for narrow-band ``M`` with ``n >= 64``) are
     passed over and the chain goes on with the next method; there is no rescaled retry
-    for extreme scales. Allocates ``2 n + 24`` floats of work per call.
+    for extreme scales. Allocates :func:`buffer_size` floats of work per call.
     """
     n = q.shape[0]
-    work = np.empty(2 * n + LOG_ROWS * LOG_WIDTH)
+    buf = np.empty(buffer_size(n))
     code, run, its, res, tolerance, tried, nlog = solve_dense(
-        M, q, z, w, work, AUTO, tol, max_iter, 1.0, True)
+        M, q, buf, AUTO, tol, max_iter, 1.0, True)
     if code == Q_NOT_FINITE or nlog < 0:
         return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan
+    work = buf[2 * n:]
     if code != SOLVED:
         # Lemke's ray, when there was one, is the answer (for copositive-plus M: infeasible)
         log = work[2 * n:]
@@ -527,4 +598,7 @@ def solve_lcp_kernel(M, q, z, w, tol, max_iter):
                     w[i] = work[n + i]
                 return (RAY_TERMINATION, int(log[row]), int(log[row + 2]), log[row + 3],
                         log[row + 4])
+    for i in range(n):
+        z[i] = buf[i]
+        w[i] = buf[n + i]
     return code, run, its, res, tolerance

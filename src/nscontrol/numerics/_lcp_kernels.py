@@ -29,6 +29,8 @@ reached; a compiled caller verifies with :func:`verify_dense` or :func:`verify_t
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 
@@ -42,6 +44,12 @@ _PIVOT_TOL = 1e-12
 #: Relative tolerance for ties in Lemke's ratio test (degenerate problems).
 _TIE_TOL = 1e-12
 _EPS = np.finfo(np.float64).eps
+
+#: numba's option that compiles a kernel without reference counting (a private option of
+#: ``njit``). The helpers of the Lemke path take it: they allocate nothing, and compiled with
+#: reference counting each of their array arguments cost an atomic ``NRT_incref`` and
+#: ``NRT_decref`` per call, which at n = 10 was 40 % of a solve (6 pivots, 2.3 µs -> 1.4 µs).
+NO_REFCOUNT: dict[str, Any] = {"_nrt": False}
 
 
 @njit(cache=True, inline='always')
@@ -115,7 +123,7 @@ def verified_status(code, certified):
     return code
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNT)
 def _row_dot(M, i, z, n):
     """``M[i, :] @ z`` with four independent accumulators: a single running sum is bound by
     the latency of one add per element (it cannot vectorise without reassociation)."""
@@ -134,14 +142,14 @@ def _row_dot(M, i, z, n):
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNT)
 def _matvec_plus(M, z, q, w_out):
     n = q.shape[0]
     for i in range(n):
         w_out[i] = q[i] + _row_dot(M, i, z, n)
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNT)
 def _matvec_plus_abs(M, z, q, w_out):
     """``w_out = M z + q`` and ``max_i (|M| |z|)_i`` (the cancellation of :func:`certify`)
     in one pass over ``M``, with the four accumulators of :func:`_row_dot`."""
@@ -187,10 +195,22 @@ def _matvec_plus_abs(M, z, q, w_out):
 #: contiguous rows; above it (memory), only ``B^{-1}`` is kept and an entering column
 #: ``-B^{-1} M[:, j]`` is computed when it enters (the same pivots, at O(n^2) each either way).
 LEMKE_FULL_TABLEAU_MAX_SIZE = 48
-@njit(cache=True)
+
+
+@njit(cache=True, inline='always')
+def _lemke_gemv_size(n):
+    """Whether an entering column ``-B^{-1} M[:, j]`` is computed by BLAS gemv: 2-3x faster
+    than the loop for mid-sized n; for tiny n its call overhead dominates, and for large n
+    OpenBLAS goes multithreaded, which on a shared machine was measured 6x slower than the
+    loop (n = 1000)."""
+    return 32 <= n <= 400
+
+
+@njit(cache=True, **NO_REFCOUNT)
 def _lemke_entering_column(M, binv, var, n, col, mcol):
     """Column of the current tableau for variable ``var`` (w_j: j, z_j: n + j, z0: 2n);
-    ``mcol`` is scratch of length n (a contiguous copy of ``M[:, j]``, for BLAS gemv).
+    ``mcol`` is scratch of length n (a contiguous copy of ``M[:, j]``). Not for a ``z_j``
+    with ``B^{-1}`` alone at :func:`_lemke_gemv_size` (the kernel calls BLAS there).
     ``binv`` is ``B^{-1}`` (``n`` columns), or the full tableau ``B^{-1} [I, -M, -1]``
     (``2 n + 1`` columns, :data:`LEMKE_FULL_TABLEAU_MAX_SIZE`) whose column ``var`` is the
     one asked for."""
@@ -204,16 +224,8 @@ def _lemke_entering_column(M, binv, var, n, col, mcol):
         j = var - n
         for k in range(n):
             mcol[k] = M[k, j]
-        # BLAS gemv is 2-3x faster than the loop for mid-sized n; for tiny n its call
-        # overhead dominates, and for large n OpenBLAS goes multithreaded, which on a shared
-        # machine was measured 6x slower than the loop (n = 1000).
-        if 32 <= n <= 400:
-            prod = np.dot(binv, mcol)
-            for i in range(n):
-                col[i] = -prod[i]
-        else:
-            for i in range(n):
-                col[i] = -_row_dot(binv, i, mcol, n)
+        for i in range(n):
+            col[i] = -_row_dot(binv, i, mcol, n)
     else:
         for i in range(n):
             s = 0.0
@@ -222,7 +234,7 @@ def _lemke_entering_column(M, binv, var, n, col, mcol):
             col[i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNT)
 def _lemke_ratio_test(binv, rhs, col, basis, n, cand, ratio):
     """Lexicographic minimum-ratio row, or -1 when the column has no positive entry (ray).
     ``ratio`` is scratch of length n (each ratio computed once).
@@ -275,7 +287,7 @@ def _lemke_ratio_test(binv, rhs, col, basis, n, cand, ratio):
     return cand[0]
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNT)
 def _lemke_pivot(binv, rhs, col, r, n, prow):
     """Gauss–Jordan pivot on row ``r`` of ``[B^{-1} | B^{-1} q]`` (or of the full tableau:
     every column of ``binv``) with column ``col``.
@@ -301,7 +313,7 @@ def _lemke_pivot(binv, rhs, col, r, n, prow):
     rhs[r] = prhs
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNT)
 def _lemke_refine(M, q, binv, rhs, basis, n, r):
     """Two steps of iterative refinement of the basic solution ``x = B^{-1} q``.
 
@@ -330,6 +342,143 @@ def _lemke_refine(M, q, binv, rhs, basis, n, r):
             for k in range(n):
                 s += binv[i, k] * r[k]
             rhs[i] += s
+
+
+@njit(cache=True, inline='always')
+def _lemke_width(n):
+    """Columns of Lemke's tableau: the full ``B^{-1} [I, -M, -1]`` up to
+    :data:`LEMKE_FULL_TABLEAU_MAX_SIZE`, else ``B^{-1}`` alone."""
+    return 2 * n + 1 if n <= LEMKE_FULL_TABLEAU_MAX_SIZE else n
+
+
+@njit(cache=True, inline='always')
+def lemke_work_size(n):
+    """Floats of Lemke's workspace: the tableau, ``B^{-1} q``, the entering column, ``M[:,
+    j]``, scratch, the pivot row, and ``2 n`` int64 (the basis, the ratio test's candidates)
+    stored in the same buffer."""
+    width = _lemke_width(n)
+    return n * width + 6 * n + width
+
+
+@njit(cache=True, inline='always')
+def _lemke_views(work, n):
+    """The pieces of Lemke's workspace (:func:`lemke_work_size`): ``binv`` (the tableau),
+    ``rhs``, ``col``, ``mcol``, ``scratch``, ``prow`` and the int64 ``basis``, ``cand`` (row
+    ``i`` of the tableau holds variable ``basis[i]``: ``w_i = i``, ``z_i = n + i``, ``z0 =
+    2n``)."""
+    width = _lemke_width(n)
+    size = n * width
+    binv = work[:size].reshape((n, width))
+    rhs = work[size:size + n]
+    col = work[size + n:size + 2 * n]
+    mcol = work[size + 2 * n:size + 3 * n]
+    scratch = work[size + 3 * n:size + 4 * n]
+    prow = work[size + 4 * n:size + 4 * n + width]
+    iwork = work[size + 4 * n + width:size + 6 * n + width].view(np.int64)
+    return binv, rhs, col, mcol, scratch, prow, iwork[:n], iwork[n:]
+
+
+#: Status of :func:`_lemke_start`: the path is to be followed (the first pivot is done).
+_PATH = -2
+#: Status of :func:`_lemke_path`: the next entering column is computed by BLAS gemv.
+_NEED_COLUMN = -1
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _lemke_start(M, q, z_out, w_out, work):
+    """``z_out = 0``, ``w_out = q``; ``(SOLVED, -1)`` when ``q >= 0`` (or ``n = 0``),
+    ``(NUMERICAL_FAILURE, -1)`` when ``q`` is not finite; else the tableau is set up in
+    ``work``, ``z0`` has entered by the first pivot and ``(_PATH, leaving)`` is returned."""
+    n = q.shape[0]
+    for i in range(n):
+        z_out[i] = 0.0
+        w_out[i] = q[i]
+    if n == 0:
+        return SOLVED, -1
+    qmin = np.inf
+    for i in range(n):
+        if not np.isfinite(q[i]):
+            return NUMERICAL_FAILURE, -1
+        qmin = min(qmin, q[i])
+    if qmin >= 0.0:
+        return SOLVED, -1
+    binv, rhs, col, mcol, scratch, prow, basis, cand = _lemke_views(work, n)
+    width = binv.shape[1]
+    for i in range(n):
+        rhs[i] = q[i]
+        for j in range(n):
+            binv[i, j] = 1.0 if i == j else 0.0
+        if width > n:
+            for j in range(n):
+                binv[i, n + j] = -M[i, j]
+            binv[i, 2 * n] = -1.0
+    for i in range(n):
+        basis[i] = i
+    # First pivot: z0 enters at the row of the most negative q (largest index among ties is
+    # the lexicographic choice for the column -d = -1).
+    tie = _TIE_TOL * (1.0 + abs(qmin))
+    r = 0
+    for i in range(n):
+        if q[i] <= qmin + tie:
+            r = i
+    for i in range(n):
+        col[i] = -1.0
+    leaving = basis[r]
+    _lemke_pivot(binv, rhs, col, r, n, prow)
+    basis[r] = 2 * n
+    return _PATH, leaving
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _lemke_path(M, work, it, leaving, max_iter, have_column):
+    """Lemke's pivots after the first (``it`` done, ``leaving`` the variable that left last),
+    until the path ends or ``max_iter`` pivots: ``(status_code, it, leaving)``. The entering
+    variable is the complement of ``leaving``; its column is computed here, or given in
+    ``col`` (``have_column``), except that a ``z_j`` column at :func:`_lemke_gemv_size`
+    with ``B^{-1}`` alone returns :data:`_NEED_COLUMN` for the kernel to compute by BLAS
+    (which allocates: this loop is compiled without reference counting)."""
+    n = M.shape[0]
+    binv, rhs, col, mcol, scratch, prow, basis, cand = _lemke_views(work, n)
+    gemv = binv.shape[1] == n and _lemke_gemv_size(n)
+    while it < max_iter:
+        entering = leaving + n if leaving < n else leaving - n
+        if not have_column:
+            if gemv and n <= entering < 2 * n:
+                return _NEED_COLUMN, it, leaving
+            _lemke_entering_column(M, binv, entering, n, col, mcol)
+        have_column = False
+        r = _lemke_ratio_test(binv, rhs, col, basis, n, cand, scratch)
+        if r < 0:
+            return RAY_TERMINATION, it, leaving
+        if not np.isfinite(col[r]) or col[r] == 0.0:
+            return NUMERICAL_FAILURE, it, leaving
+        leaving = basis[r]
+        _lemke_pivot(binv, rhs, col, r, n, prow)
+        basis[r] = entering
+        it += 1
+        if leaving == 2 * n:
+            return SOLVED, it, leaving
+    return MAX_ITER, it, leaving
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _lemke_end(M, q, z_out, w_out, work, status, it):
+    """The end of Lemke's path: the basis refined (when solved), ``z_out`` read off the
+    tableau, ``w_out = M z + q``; ``(status_code, it)``."""
+    n = q.shape[0]
+    binv, rhs, col, mcol, scratch, prow, basis, cand = _lemke_views(work, n)
+    if status == SOLVED:
+        _lemke_refine(M, q, binv, rhs, basis, n, scratch)
+    # Read the basic point off the tableau.
+    for i in range(n):
+        z_out[i] = 0.0
+    for i in range(n):
+        if n <= basis[i] < 2 * n:
+            z_out[basis[i] - n] = rhs[i]
+    _matvec_plus(M, z_out, q, w_out)
+    if status == SOLVED and not np.isfinite(natural_residual(z_out, w_out, q)):
+        return NUMERICAL_FAILURE, it
+    return status, it
 
 
 @njit(cache=True)
@@ -364,89 +513,39 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
     n = q.shape[0]
     if max_iter <= 0:
         max_iter = 50 * (n + 1)
-    for i in range(n):
-        z_out[i] = 0.0
-        w_out[i] = q[i]
-    if n == 0:
-        return SOLVED, 0
-    qmin = np.inf
-    for i in range(n):
-        if not np.isfinite(q[i]):
-            return NUMERICAL_FAILURE, 0
-        qmin = min(qmin, q[i])
-    if qmin >= 0.0:
-        return SOLVED, 0
+    # one allocation (on small problems the allocations cost more than the pivots)
+    work = np.empty(lemke_work_size(n))
+    status, leaving = _lemke_start(M, q, z_out, w_out, work)
+    if status != _PATH:
+        return status, 0
+    status, it, leaving = _lemke_path(M, work, 1, leaving, max_iter, False)
+    while status == _NEED_COLUMN:
+        # -B^{-1} M[:, j] by BLAS gemv (it allocates: here, not in the path, which is
+        # compiled without reference counting)
+        binv, rhs, col, mcol, scratch, prow, basis, cand = _lemke_views(work, n)
+        j = leaving          # w_j left: z_j enters
+        for k in range(n):
+            mcol[k] = M[k, j]
+        prod = np.dot(binv, mcol)
+        for i in range(n):
+            col[i] = -prod[i]
+        status, it, leaving = _lemke_path(M, work, it, leaving, max_iter, True)
+    return _lemke_end(M, q, z_out, w_out, work, status, it)
 
-    # one float and one integer allocation (on small problems the allocations cost more
-    # than the pivots): B^-1 (or the full tableau), B^-1 q, the entering column, the pivot
-    # row, M[:, j], scratch
-    width = 2 * n + 1 if n <= LEMKE_FULL_TABLEAU_MAX_SIZE else n
-    size = n * width
-    work = np.empty(size + 4 * n + width)
-    binv = work[:size].reshape((n, width))
-    rhs = work[size:size + n]
-    col = work[size + n:size + 2 * n]
-    mcol = work[size + 2 * n:size + 3 * n]
-    scratch = work[size + 3 * n:size + 4 * n]
-    prow = work[size + 4 * n:]
-    for i in range(n):
-        rhs[i] = q[i]
-        for j in range(n):
-            binv[i, j] = 1.0 if i == j else 0.0
-        if width > n:
-            for j in range(n):
-                binv[i, n + j] = -M[i, j]
-            binv[i, 2 * n] = -1.0
-    iwork = np.empty(2 * n, dtype=np.int64)
-    basis = iwork[:n]  # row i holds variable basis[i]; w_i = i, z_i = n + i, z0 = 2n
-    cand = iwork[n:]
-    for i in range(n):
-        basis[i] = i
 
-    # First pivot: z0 enters at the row of the most negative q (largest index among ties is
-    # the lexicographic choice for the column -d = -1).
-    tie = _TIE_TOL * (1.0 + abs(qmin))
-    r = 0
-    for i in range(n):
-        if q[i] <= qmin + tie:
-            r = i
-    for i in range(n):
-        col[i] = -1.0
-    leaving = basis[r]
-    _lemke_pivot(binv, rhs, col, r, n, prow)
-    basis[r] = 2 * n
-    it = 1
-    status = MAX_ITER
-    while it < max_iter:
-        entering = leaving + n if leaving < n else leaving - n
-        _lemke_entering_column(M, binv, entering, n, col, mcol)
-        r = _lemke_ratio_test(binv, rhs, col, basis, n, cand, scratch)
-        if r < 0:
-            status = RAY_TERMINATION
-            break
-        if not np.isfinite(col[r]) or col[r] == 0.0:
-            status = NUMERICAL_FAILURE
-            break
-        leaving = basis[r]
-        _lemke_pivot(binv, rhs, col, r, n, prow)
-        basis[r] = entering
-        it += 1
-        if leaving == 2 * n:
-            status = SOLVED
-            break
-
-    if status == SOLVED:
-        _lemke_refine(M, q, binv, rhs, basis, n, scratch)
-    # Read the basic point off the tableau.
-    for i in range(n):
-        z_out[i] = 0.0
-    for i in range(n):
-        if n <= basis[i] < 2 * n:
-            z_out[basis[i] - n] = rhs[i]
-    _matvec_plus(M, z_out, q, w_out)
-    if status == SOLVED and not np.isfinite(natural_residual(z_out, w_out, q)):
-        return NUMERICAL_FAILURE, it
-    return status, it
+@njit(cache=True, **NO_REFCOUNT)
+def lemke_into(M, q, z_out, w_out, max_iter, work):
+    """:func:`lemke_kernel` in a workspace ``work`` of :func:`lemke_work_size` floats given by
+    the caller, for ``n <=`` :data:`LEMKE_FULL_TABLEAU_MAX_SIZE` (no allocation, no reference
+    counting: the per-call path of a small LCP). The same pivots, bit for bit."""
+    n = q.shape[0]
+    if max_iter <= 0:
+        max_iter = 50 * (n + 1)
+    status, leaving = _lemke_start(M, q, z_out, w_out, work)
+    if status != _PATH:
+        return status, 0
+    status, it, leaving = _lemke_path(M, work, 1, leaving, max_iter, False)
+    return _lemke_end(M, q, z_out, w_out, work, status, it)
 
 
 # --------------------------------------------------------------------------------- PGS

@@ -81,6 +81,9 @@ AUTO_PGS_PROBE_SWEEPS = 100
 RESCALE_EXPONENT = 64
 
 _F64 = np.dtype(np.float64)
+#: Read once (the per-call paths below are a few hundred nanoseconds of Python).
+_empty = np.empty
+_METHOD_CODES = dispatch.METHOD_CODES
 _LOG_SIZE = dispatch.LOG_ROWS * dispatch.LOG_WIDTH
 _EMPTY_1D = np.empty(0)
 _EMPTY_1D.setflags(write=False)
@@ -287,12 +290,12 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
         # signature checks the types (a TypeError sends other kinds to the general path)
         # and whose first lines check the shapes and the options
         entry = _DENSE_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_dense()
-        code = dispatch.METHOD_CODES.get(method, -1)
+        code = _METHOD_CODES.get(method, -1)
         limit = (0 if max_iter is None else max_iter
                  if type(max_iter) is int and max_iter >= 1 else -1)
         if entry is not None and code >= 0 and limit != -1:
             n = q.size
-            buf = np.empty(4 * n + _LOG_SIZE)
+            buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
             try:
                 code, run, its, res, tolerance, tried, nlog = entry(M, q, buf, code, tol,
                                                                      limit, omega)
@@ -316,6 +319,17 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     return solver.solve(q, z0=z0)
 
 
+def _buffer_size(n: int) -> int:
+    """Floats of the buffer of the per-call entries (:func:`dispatch.buffer_size`)."""
+    return int(dispatch.buffer_size(n))
+
+
+#: :func:`_buffer_size` for ``n < _TABULATED`` (a list read costs less than the call),
+#: filled when the entries are loaded (:meth:`_Entries.load`, before any solve).
+_TABULATED = 2 * dispatch.LEMKE_FULL_TABLEAU_MAX_SIZE
+_BUFFER_SIZES: list[int] = []
+
+
 class _Entries:
     """The compiled entries of the per-call paths (:func:`dispatch.exact_entry`), made on
     first use (loaded from numba's cache, not at import): ``dense`` for :func:`solve_lcp`,
@@ -331,9 +345,11 @@ class _Entries:
                                          dispatch.SOLVE_DENSE_SIGNATURE)
         cls.packed = dispatch.exact_entry(dispatch.solve_packed_checked,
                                           dispatch.SOLVE_PACKED_SIGNATURE)
+        _BUFFER_SIZES[:] = [_buffer_size(n) for n in range(_TABULATED)]
         cls.loaded = True
         _DENSE_ENTRY[0] = cls.dense
         return cls
+
 
     @classmethod
     def load_dense(cls) -> Any:
@@ -508,7 +524,7 @@ class LCPSolver:
             # already reconciled with the residual test (kernels.certify); its signature
             # checks the type of q (TypeError otherwise) and its first line q's length
             M, lower, diag, upper, bits = self._packed
-            buf = np.empty(4 * n + _LOG_SIZE)
+            buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
             entry = self._entry
             try:
                 out = (entry(M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
@@ -895,7 +911,7 @@ def _logged_runs(work: NDArray[np.float64], n: int, start: int, end: int,
     """The runs the chain logged in rows ``start:end`` of ``work``, as outcomes. Only the
     last one's point (``z, w``) and a ray's (kept in ``work``) can be the answer: the
     others' are not kept."""
-    log = work[2 * n:].reshape(dispatch.LOG_ROWS, dispatch.LOG_WIDTH)
+    log = work[2 * n:2 * n + _LOG_SIZE].reshape(dispatch.LOG_ROWS, dispatch.LOG_WIDTH)
     out = []
     for k in range(start, end):
         run, code, its, res, tolerance, limit = log[k].tolist()
@@ -984,9 +1000,11 @@ def _tridiagonal_bands(M: Any) -> tuple[NDArray[np.float64], ...] | None:
 
 
 def _bands_of(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-    """``(lower, diag, upper)`` of a dense matrix, as contiguous copies."""
-    return (np.ascontiguousarray(np.diagonal(M, -1)), np.ascontiguousarray(np.diagonal(M)),
-            np.ascontiguousarray(np.diagonal(M, 1)))
+    """``(lower, diag, upper)`` of a dense matrix, as writeable contiguous copies (a band of
+    one entry is contiguous, so ``np.ascontiguousarray`` would return numpy's read-only
+    view: the solver's exact-signature entry refuses it, and every ``solve`` of a 2 x 2
+    ``M`` took the general path, ~200 µs)."""
+    return np.diagonal(M, -1).copy(), np.diagonal(M).copy(), np.diagonal(M, 1).copy()
 
 
 # ----------------------------------------------------------------------------- residual
