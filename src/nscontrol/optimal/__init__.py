@@ -21,8 +21,10 @@ require_casadi()
 from .contact import ContactProblem, Relaxation  # noqa: E402
 from .fesd import SwitchingPlan, SwitchingProblem  # noqa: E402
 from .mpc import ContactMPC  # noqa: E402
+from .periodic import JugglerPlan, JugglerProblem, VibratingTable  # noqa: E402
 from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
 from .problems import PushedBlock, SpeedUp  # noqa: E402
 
 __all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock",
-           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC"]
+           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC",
+           "VibratingTable", "JugglerProblem", "JugglerPlan"]
