@@ -228,8 +228,9 @@ class _SwitchingNLP:
 
     def guess(self, X: FloatArray | None = None) -> dict[str, Any]:
         """The states ``X`` (``(n, N + 1)``; default the straight line from ``x0`` to
-        ``x_final``) on a uniform grid, with everything else consistent with them: the modes of its end points (``θ``, ``λ``, ``μ``) and the
-        inputs that make each element's step (least squares). A guess whose algebraic
+        ``x_final``) on a uniform grid, with everything else consistent with them: the
+        modes of its end points (``θ``, ``λ``, ``μ``) and the inputs that make each
+        element's step (least squares, clipped to the bounds). A guess whose algebraic
         variables contradict its states starts the homotopy in a poor local optimum."""
         p, N = self.p, self.p.elements
         h = p.T / N
