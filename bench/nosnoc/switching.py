@@ -140,13 +140,13 @@ SIMULATIONS = ("oscillator", "relay")
 def simulate(case):
     """One run of a simulation example: the looper's end state and wall time."""
     model, _, opts, nsim = globals()[case["name"]](case)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     solver = nosnoc.NosnocSolver(opts, model)
     looper = nosnoc.NosnocSimLooper(solver, model.x0, nsim)
     looper.run()
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     res = looper.get_results()
-    return wall, np.asarray(res["X_sim"][-1], float).tolist(), len(res["switch_times"])
+    return wall, np.asarray(res["X_sim"][-1], float).tolist(), len(res["switch_times"]), cpu
 
 
 def sliding_mode_ocp(case):
@@ -182,17 +182,20 @@ def main():
         if case["name"] in SIMULATIONS:
             runs = [simulate(case) for _ in range(payload.get("repeats", 3))]
             print(json.dumps({"name": case["name"], "walls": [r[0] for r in runs],
-                              "x_end": runs[-1][1], "switches": runs[-1][2],
+                              "cpus": [r[3] for r in runs], "x_end": runs[-1][1],
+                              "switches": runs[-1][2],
                               "status": "simulated"}), flush=True)
             continue
-        walls, results = [], None
+        walls, cpus, results = [], [], None
         for _ in range(payload.get("repeats", 3)):
             model, ocp, opts = globals()[case["name"]](case)
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             solver = nosnoc.NosnocSolver(opts, model, ocp)
             results = solver.solve()
             walls.append(time.perf_counter() - start)
-        out = {"name": case["name"], "walls": walls, "status": str(results.get("status")),
+            cpus.append(time.process_time() - cpu)
+        out = {"name": case["name"], "walls": walls, "cpus": cpus,
+               "status": str(results.get("status")),
                "cost": float(results.get("cost_val", np.nan)) if "cost_val" in results
                else None, "keys": sorted(results)}
         if case["name"] in ("speedup", "motor_with_friction"):
