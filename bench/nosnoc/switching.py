@@ -202,6 +202,7 @@ def main():
             us = np.asarray(results["u_traj"], float).reshape(-1)
             h = np.diff(np.asarray(results["t_grid_u"], float))
             out["effort"] = float(np.sum(h * us ** 2))
+            out["x_traj"] = np.asarray(results["x_traj"], float).tolist()
         if case["name"] == "speedup":
             t = np.asarray(results["t_grid"], float)
             xs = np.asarray(results["x_traj"], float).reshape(-1)
