@@ -133,7 +133,7 @@ class VibratingTable:
                              f"{self.fold_amplitude:g}; no period-1 gait exists")
         return float(np.arccos(ratio))
 
-    def multipliers(self, amplitude: float) -> FloatArray:
+    def multipliers(self, amplitude: float) -> np.ndarray:
         """Floquet multipliers of the period-1 gait of the paddle of ``amplitude`` (branch of
         :meth:`impact_phase`), by decreasing modulus."""
         e = self.restitution
