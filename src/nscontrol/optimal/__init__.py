@@ -20,6 +20,7 @@ require_casadi()
 
 from .contact import ContactProblem, Relaxation  # noqa: E402
 from .fesd import SwitchingPlan, SwitchingProblem  # noqa: E402
+from .lure import LurePlan, LureProblem  # noqa: E402
 from .mpc import ContactMPC  # noqa: E402
 from .periodic import JugglerPlan, JugglerProblem, VibratingTable  # noqa: E402
 from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
@@ -27,4 +28,4 @@ from .problems import PushedBlock, SpeedUp  # noqa: E402
 
 __all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock",
            "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC",
-           "VibratingTable", "JugglerProblem", "JugglerPlan"]
+           "VibratingTable", "JugglerProblem", "JugglerPlan", "LureProblem", "LurePlan"]
