@@ -9,6 +9,17 @@ switching optimal control problems with nosnoc's FESD and prints one JSON line p
   elements; with ``equidistant: false`` the stage lengths are free too (nosnoc's
   ``equidistant_control_grid``), which makes it nscontrol.optimal's transcription: one
   input per element, element lengths free summing to ``T``.
+* ``motor_with_friction``: the model and problem of nosnoc's published example
+  ``examples/motor_with_friction/motor_with_friction_ocp.py`` (a linear motor with a spring
+  load and Coulomb friction on the slide, one switching surface ``v1 = 0``, least ``∫ u²``
+  to a target in 0.08 s, ``|u| <= 5``), discretised as nscontrol.optimal's transcription:
+  implicit Euler (Radau IIA, one stage), ``N`` stages of one element, free lengths.
+* ``oscillator`` and ``relay``: nosnoc's published simulation examples
+  ``examples/oscillator/oscillator_example.py`` (two linear spirals switching on the unit
+  circle, 29 steps to ``T = π/2``, closed-form end state) and
+  ``examples/relay/relay_feedback_system.py`` (Piiroinen and Kuznetsov's third-order relay
+  feedback system, 200 steps to ``T = 10``), with their default options: one
+  ``NosnocSolver`` stepped by ``NosnocSimLooper``; the end state is printed.
 * ``sliding_mode_ocp``: the problem of nosnoc's published example
   ``examples/sliding_mode_ocp/sliding_mode_ocp.py`` (two switching surfaces, a sliding
   mode), its default options, run for nosnoc's time alone (nscontrol.optimal's
@@ -46,6 +57,98 @@ def speedup(case):
     return model, ocp, opts
 
 
+def motor_with_friction(case):
+    m1, m2, k, c_damping, u_max, R, L, K_F, K_S, F_R = (1.03, 0.56, 2.4e3, 0.0, 5.0, 2.0,
+                                                        2e-3, 12.0, 12.0, 2.1)
+    x = ca.SX.sym("x", 5)
+    u = ca.SX.sym("u")
+    A = np.array([[0, 1, 0, 0, 0],
+                  [-k / m1, -c_damping / m1, k / m1, c_damping / m1, K_F / m1],
+                  [0, 0, 0, 1, 0],
+                  [k / m2, c_damping / m2, -k / m2, -c_damping / m2, 0],
+                  [0, -K_S / L, 0, 0, -R / L]])
+    B = np.zeros((5, 1))
+    B[-1, 0] = 1 / L
+    C1 = np.array([0, -F_R / m1, 0, 0, 0])
+    F = [ca.horzcat(A @ x + B @ u + C1, A @ x + B @ u - C1)]
+    model = nosnoc.NosnocModel(x=x, F=F, S=[np.array([[1], [-1]])], c=[x[1]],
+                               x0=np.zeros(5), u=u)
+    ocp = nosnoc.NosnocOcp(lbu=-u_max * np.ones(1), ubu=u_max * np.ones(1), f_q=u ** 2,
+                           g_terminal=x - np.array([0.01, 0, 0.01, 0, 0]))
+    opts = nosnoc.NosnocOpts()
+    opts.use_fesd = True
+    opts.irk_scheme = nosnoc.IrkSchemes.RADAU_IIA
+    opts.n_s = 1
+    opts.N_stages = case["N"]
+    opts.N_finite_elements = 1
+    opts.terminal_time = 0.08
+    opts.equidistant_control_grid = False
+    opts.gamma_h = case.get("gamma_h", 1.0)   # element lengths in [(1-γ) h̄, (1+γ) h̄]
+    opts.comp_tol = case.get("comp_tol", 1e-9)
+    opts.homotopy_update_slope = 0.1
+    opts.print_level = 0
+    return model, ocp, opts
+
+
+def oscillator(case):
+    omega = 2 * np.pi
+    A1 = np.array([[1, omega], [-omega, 1]])
+    A2 = np.array([[1, -omega], [omega, 1]])
+    x = ca.SX.sym("x", 2)
+    model = nosnoc.NosnocModel(x=x, F=[ca.horzcat(A1 @ x, A2 @ x)], S=[np.array([[1], [-1]])],
+                               c=[x[0] ** 2 + x[1] ** 2 - 1], x0=np.array([np.exp(-1), 0.0]))
+    opts = nosnoc.NosnocOpts()
+    opts.comp_tol = 1e-8
+    opts.homotopy_update_slope = 0.1
+    opts.N_finite_elements = 2
+    opts.n_s = 3
+    opts.step_equilibration = nosnoc.StepEquilibrationMode.DIRECT_COMPLEMENTARITY
+    opts.print_level = 0
+    opts.terminal_time = (np.pi / 2) / 29
+    return model, None, opts, 29
+
+
+def relay(case):
+    omega, xi, sigma = 25.0, 0.05, 1.0
+    A = np.array([[-(2 * xi * omega + 1), 1, 0], [-(2 * xi * omega + omega ** 2), 0, 1],
+                  [-omega ** 2, 0, 0]])
+    b = np.array([[1], [-2 * sigma], [1]])
+    x = ca.SX.sym("x", 3)
+    model = nosnoc.NosnocModel(x=x, F=[ca.horzcat(A @ x + b, A @ x - b)],
+                               S=[np.array([[-1], [1]])], c=[x[0]],
+                               x0=np.array([0, -0.001, -0.02]))
+    opts = nosnoc.NosnocOpts()
+    opts.use_fesd = True
+    opts.pss_mode = nosnoc.PssMode.STEWART
+    opts.irk_scheme = nosnoc.IrkSchemes.RADAU_IIA
+    opts.N_finite_elements = 2
+    opts.n_s = 2
+    opts.mpcc_mode = nosnoc.MpccMode.SCHOLTES_INEQ
+    opts.cross_comp_mode = nosnoc.CrossComplementarityMode.SUM_LAMBDAS_COMPLEMENT_WITH_EVERY_THETA
+    opts.step_equilibration = nosnoc.StepEquilibrationMode.HEURISTIC_MEAN
+    opts.comp_tol = 1e-6
+    opts.print_level = 0
+    opts.homotopy_update_rule = nosnoc.HomotopyUpdateRule.LINEAR
+    opts.irk_representation = nosnoc.IrkRepresentation.INTEGRAL
+    opts.terminal_time = 10.0 / 200
+    return model, None, opts, 200
+
+
+SIMULATIONS = ("oscillator", "relay")
+
+
+def simulate(case):
+    """One run of a simulation example: the looper's end state and wall time."""
+    model, _, opts, nsim = globals()[case["name"]](case)
+    start, cpu = time.perf_counter(), time.process_time()
+    solver = nosnoc.NosnocSolver(opts, model)
+    looper = nosnoc.NosnocSimLooper(solver, model.x0, nsim)
+    looper.run()
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    res = looper.get_results()
+    return wall, np.asarray(res["X_sim"][-1], float).tolist(), len(res["switch_times"]), cpu
+
+
 def sliding_mode_ocp(case):
     from casadi import SX, horzcat, vertcat
     x1, x2, v1, v2, u1, u2 = (SX.sym(n) for n in ("x1", "x2", "v1", "v2", "u1", "u2"))
@@ -76,16 +179,30 @@ def sliding_mode_ocp(case):
 def main():
     payload = json.load(sys.stdin)
     for case in payload["cases"]:
-        walls, results = [], None
+        if case["name"] in SIMULATIONS:
+            runs = [simulate(case) for _ in range(payload.get("repeats", 3))]
+            print(json.dumps({"name": case["name"], "walls": [r[0] for r in runs],
+                              "cpus": [r[3] for r in runs], "x_end": runs[-1][1],
+                              "switches": runs[-1][2],
+                              "status": "simulated"}), flush=True)
+            continue
+        walls, cpus, results = [], [], None
         for _ in range(payload.get("repeats", 3)):
             model, ocp, opts = globals()[case["name"]](case)
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             solver = nosnoc.NosnocSolver(opts, model, ocp)
             results = solver.solve()
             walls.append(time.perf_counter() - start)
-        out = {"name": case["name"], "walls": walls, "status": str(results.get("status")),
+            cpus.append(time.process_time() - cpu)
+        out = {"name": case["name"], "walls": walls, "cpus": cpus,
+               "status": str(results.get("status")),
                "cost": float(results.get("cost_val", np.nan)) if "cost_val" in results
                else None, "keys": sorted(results)}
+        if case["name"] in ("speedup", "motor_with_friction"):
+            us = np.asarray(results["u_traj"], float).reshape(-1)
+            h = np.diff(np.asarray(results["t_grid_u"], float))
+            out["effort"] = float(np.sum(h * us ** 2))
+            out["x_traj"] = np.asarray(results["x_traj"], float).tolist()
         if case["name"] == "speedup":
             t = np.asarray(results["t_grid"], float)
             xs = np.asarray(results["x_traj"], float).reshape(-1)

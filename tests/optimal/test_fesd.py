@@ -95,3 +95,24 @@ def test_bad_switching_problems_are_refused():
                          x_final=[1.0], T=1.0, elements=1)
     with pytest.raises(ModelError, match="^a2"):
         SpeedUp(a1=3.0, a2=1.0)
+
+
+def test_from_rest_bounded_inputs_and_element_bounds():
+    """The same closed-form switch from a start at rest (the problem has one optimum: J(s) is
+    convex), input bounds that bind (u <= 0.9 < 1, the free optimum's first input) held to
+    IPOPT's tolerance, element lengths inside the bounds asked."""
+    N2 = 10
+    plan = CASE.problem(N2).solve(guess=np.full((N2 + 1, 1), -CASE.L))
+    (ts,) = plan.switch_times([1.0], 0.0)
+    assert abs(ts - CASE.switch_time()) <= 1e-8
+    base = CASE.problem(N2)
+    bounded = replace(base, u_max=0.9, element_bounds=(0.5, 1.5)).solve()
+    # IPOPT relaxes every bound by its bound_relax_factor (1e-8, relative) and meets the
+    # constraints to tol (1e-10): 2e-8 allowed
+    assert 0.9 - 1e-6 <= np.max(bounded.u) <= 0.9 + 2e-8
+    h = np.diff(bounded.t)
+    hbar = CASE.T / N2
+    assert np.all(h >= 0.5 * hbar - 2e-8) and np.all(h <= 1.5 * hbar + 2e-8)
+    assert bounded.cost > plan.cost          # a binding bound costs
+    with pytest.raises(ModelError, match="^element_bounds"):
+        replace(base, element_bounds=(1.0, 2.0))

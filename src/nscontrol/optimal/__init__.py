@@ -21,9 +21,12 @@ require_casadi()
 from .cartpole import CartPole  # noqa: E402
 from .contact import ContactProblem, Relaxation  # noqa: E402
 from .fesd import SwitchingPlan, SwitchingProblem  # noqa: E402
+from .lure import LurePlan, LureProblem  # noqa: E402
 from .mpc import ContactMPC  # noqa: E402
+from .periodic import JugglerPlan, JugglerProblem, VibratingTable  # noqa: E402
 from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
 from .problems import PushedBlock, SpeedUp  # noqa: E402
 
 __all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "PushedBlock",
-           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC", "CartPole"]
+           "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC", "CartPole",
+           "VibratingTable", "JugglerProblem", "JugglerPlan", "LureProblem", "LurePlan"]

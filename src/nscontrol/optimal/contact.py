@@ -208,24 +208,35 @@ class ContactProblem:
         SolverError
             IPOPT failed on a relaxed problem (its status in the message).
         """
-        from .homotopy import solve_homotopy
-
         relaxation = Relaxation() if relaxation is None else check_type(
             "relaxation", relaxation, Relaxation)
         check_integer("max_rounds", max_rounds, minimum=1)
         guess = initial_guess(self, guess)
-        active = active_sets(self, guess["X"], self.h)
-        stages: list[dict[str, Any]] = []
-        rounds, consistent, polished = 0, False, False
-        while rounds < max_rounds and not consistent:
-            rounds += 1
-            guess, polished = solve_homotopy(_ContactNLP(self, active), guess, relaxation,
-                                             stages)
-            new = active_sets(self, guess["X"], guess["h"])
-            consistent = bool(np.array_equal(new, active))
-            if not consistent and rounds < max_rounds:
-                active = new
-        return _plan(self, guess, active, stages, polished, rounds, consistent)
+        sol, active, stages, polished, rounds, consistent = solve_rounds(
+            self, lambda active: _ContactNLP(self, active), guess, relaxation, max_rounds)
+        return _plan(self, sol, active, stages, polished, rounds, consistent)
+
+
+def solve_rounds(problem: ContactProblem, make_nlp: Any, guess: dict[str, Any],
+                 relaxation: Relaxation, max_rounds: int) -> tuple[Any, ...]:
+    """The active-set iteration of :meth:`ContactProblem.solve` for any transcription on
+    its grid (``make_nlp(active)`` builds the NLP of fixed active sets): solve, re-derive the
+    active sets from the plan, until they agree or ``max_rounds``. Returns the solution,
+    the last active sets, the stages, whether the polish was kept, the rounds and whether
+    the sets agree."""
+    from .homotopy import solve_homotopy
+
+    active = active_sets(problem, guess["X"], guess["h"])
+    stages: list[dict[str, Any]] = []
+    rounds, consistent, polished = 0, False, False
+    while rounds < max_rounds and not consistent:
+        rounds += 1
+        guess, polished = solve_homotopy(make_nlp(active), guess, relaxation, stages)
+        new = active_sets(problem, guess["X"], guess["h"])
+        consistent = bool(np.array_equal(new, active))
+        if not consistent and rounds < max_rounds:
+            active = new
+    return guess, active, stages, polished, rounds, consistent
 
 
 def _vector_with_nan(name: str, value: ArrayLike, size: int) -> FloatArray:

@@ -13,7 +13,7 @@ modes that are active, and ``θ`` selects among them.
 **Transcription.** The horizon ``T`` is cut into ``N`` finite elements, each with its own
 input ``u_n`` and its own length ``h_n``; implicit Euler on each element, the algebraic
 variables ``θ_n, λ_n, μ_n`` at the element's end. With ``switch_detection=True`` the
-lengths are unknowns (``Σ h_n = T``, each in ``[h̄/10, 10 h̄]``) and the *cross
+lengths are unknowns (``Σ h_n = T``, each in ``[h̄/10, 10 h̄]`` by default) and the *cross
 complementarity* ``θ_{n,i} λ_{n-1,i} = 0`` forbids a mode active at the end of element
 ``n - 1`` (``λ = 0``) to be left inside element ``n``: a switch can only happen at an
 element boundary, which the solver moves onto the switching instant. With
@@ -42,8 +42,8 @@ from .._validation import (
     check_positive,
     check_type,
 )
-from ..errors import DimensionError
-from .contact import Relaxation, _vector_with_nan
+from ..errors import DimensionError, ModelError
+from .contact import Relaxation, _bound, _vector_with_nan
 from .homotopy import residual, solve_homotopy, stage_stats
 
 __all__ = ["SwitchingProblem", "SwitchingPlan"]
@@ -126,6 +126,11 @@ class SwitchingProblem:
         Number of finite elements ``N``.
     switch_detection : bool
         FESD (free element lengths, cross complementarity), or a fixed grid.
+    u_min, u_max : array_like (p,), optional
+        Input bounds (a scalar applies to every input).
+    element_bounds : (float, float)
+        With switch detection, each element's length within these multiples of ``T / N``
+        (``0 < low < 1 < high``).
 
     Raises
     ------
@@ -145,6 +150,9 @@ class SwitchingProblem:
     T: float
     elements: int
     switch_detection: bool = True
+    u_min: Any = None
+    u_max: Any = None
+    element_bounds: tuple[float, float] = (0.1, 10.0)
     n: int = field(init=False)
 
     def __post_init__(self) -> None:
@@ -164,14 +172,26 @@ class SwitchingProblem:
         set_(self, "T", check_positive("T", self.T))
         set_(self, "elements", check_integer("elements", self.elements, minimum=2))
         set_(self, "switch_detection", check_bool("switch_detection", self.switch_detection))
+        for name in ("u_min", "u_max"):
+            set_(self, name, _bound(name, getattr(self, name), self.B.shape[1]))
+        lo, hi = (check_positive("element_bounds", v) for v in self.element_bounds)
+        if not lo < 1.0 < hi:
+            raise ModelError(f"element_bounds: ({lo:g}, {hi:g}) must hold the uniform length "
+                             "strictly inside (low < 1 < high)")
+        set_(self, "element_bounds", (lo, hi))
 
-    def solve(self, relaxation: Relaxation | None = None) -> SwitchingPlan:
+    def solve(self, relaxation: Relaxation | None = None, *,
+              guess: ArrayLike | None = None) -> SwitchingPlan:
         """Solve the Scholtes homotopy (and its polish) of the transcription.
 
         Parameters
         ----------
         relaxation : Relaxation, optional
             The homotopy (default :class:`Relaxation()`).
+        guess : array_like (N + 1, n), optional
+            States on the uniform grid to start from (e.g. ``x0`` repeated: at rest);
+            default the straight line from ``x0`` to ``x_final``. The modes, inputs and
+            multipliers of the start are made consistent with them.
 
         Returns
         -------
@@ -185,8 +205,10 @@ class SwitchingProblem:
         relaxation = Relaxation() if relaxation is None else check_type(
             "relaxation", relaxation, Relaxation)
         nlp = _SwitchingNLP(self)
+        states = None if guess is None else as_matrix("guess", guess, rows=self.elements + 1,
+                                                      cols=self.n).T
         stages: list[dict[str, Any]] = []
-        sol, polished = solve_homotopy(nlp, nlp.guess(), relaxation, stages)
+        sol, polished = solve_homotopy(nlp, nlp.guess(states), relaxation, stages)
         H = np.atleast_1d(sol["H"])
         return SwitchingPlan(t=np.concatenate([[0.0], np.cumsum(H)]), x=sol["X"].T.copy(),
                              u=sol["U"].T.copy(), theta=sol["TH"].T.copy(),
@@ -204,15 +226,17 @@ class _SwitchingNLP:
         g0 = np.array([1.0, -1.0]) * (problem.c @ problem.x0 + problem.d)
         self.lam_start = g0 - g0.min()     # λ at x0: zero on the modes active there
 
-    def guess(self) -> dict[str, Any]:
-        """The straight line from ``x0`` to ``x_final`` on a uniform grid, with everything
-        else consistent with it: the modes of its end points (``θ``, ``λ``, ``μ``) and the
-        inputs that make each element's step (least squares). A guess whose algebraic
+    def guess(self, X: FloatArray | None = None) -> dict[str, Any]:
+        """The states ``X`` (``(n, N + 1)``; default the straight line from ``x0`` to
+        ``x_final``) on a uniform grid, with everything else consistent with them: the
+        modes of its end points (``θ``, ``λ``, ``μ``) and the inputs that make each
+        element's step (least squares, clipped to the bounds). A guess whose algebraic
         variables contradict its states starts the homotopy in a poor local optimum."""
         p, N = self.p, self.p.elements
         h = p.T / N
-        xf = np.where(np.isnan(p.x_final), p.x0, p.x_final)
-        X = p.x0[:, None] + (xf - p.x0)[:, None] * np.linspace(0, 1, N + 1)[None, :]
+        if X is None:
+            xf = np.where(np.isnan(p.x_final), p.x0, p.x_final)
+            X = p.x0[:, None] + (xf - p.x0)[:, None] * np.linspace(0, 1, N + 1)[None, :]
         psi = p.c @ X[:, 1:] + p.d
         mode = (psi > 0).astype(int)
         g = np.vstack([psi, -psi])
@@ -221,6 +245,8 @@ class _SwitchingNLP:
             i = mode[k]
             rhs = (X[:, k + 1] - X[:, k]) / h - p.A[i] @ X[:, k + 1] - p.b[i]
             U[:, k] = np.linalg.lstsq(p.B, rhs, rcond=None)[0]
+        U = np.clip(U, -np.inf if p.u_min is None else p.u_min[:, None],
+                    np.inf if p.u_max is None else p.u_max[:, None])
         return {"X": X, "U": U, "TH": np.vstack([1.0 - mode, mode]).astype(float),
                 "LAM": g - g.min(axis=0), "MU": g.min(axis=0), "H": np.full(N, h)}
 
@@ -249,13 +275,17 @@ class _SwitchingNLP:
         opti.subject_to(X[:, 0] == p.x0)
         idx = np.flatnonzero(~np.isnan(p.x_final)).tolist()
         opti.subject_to(X[idx, N] == p.x_final[idx])
+        for bound, sign in ((p.u_min, 1.0), (p.u_max, -1.0)):
+            if bound is not None:
+                opti.subject_to(ca.vec(sign * (U - np.tile(bound[:, None], (1, N)))) >= 0)
         if p.switch_detection:
             hbar = p.T / N
             left = np.flatnonzero(self.lam_start > 0).tolist()
             if left:   # a mode inactive at x0 stays off on the first element
                 opti.subject_to(TH[left, 0] == 0)
             opti.subject_to(ca.sum1(H) == p.T)
-            opti.subject_to(opti.bounded(hbar / 10, H, 10 * hbar))
+            lo, hi = p.element_bounds
+            opti.subject_to(opti.bounded(lo * hbar, H, hi * hbar))
 
     def cost(self, var: dict[str, Any]) -> Any:
         from ._casadi import require_casadi

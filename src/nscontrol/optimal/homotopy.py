@@ -22,6 +22,16 @@ from ._casadi import require_casadi
 if TYPE_CHECKING:
     from .contact import Relaxation
 
+#: IPOPT's options of every solve (the adaptive barrier update takes a third of the monotone
+#: one's iterations on the FESD problems, whose relaxed complementarity makes the barrier
+#: problem hard to follow at a fixed μ).
+IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive"}
+
+#: Added when a solve starts from the previous one's primal and dual solution: a small
+#: barrier. (IPOPT's pushes of the start into the interior stay at their defaults: pushes of
+#: 1e-9 let a frictional plan creep along the relaxed stick branch, as the MPC found.)
+WARM_OPTIONS: dict[str, Any] = {"warm_start_init_point": "yes", "mu_init": 1e-6}
+
 #: IPOPT's statuses that count as a solution.
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -137,11 +147,9 @@ class _NLP:
         opti.set_value(self.sigma, sigma)
         if warm != self.warm:   # a new solver only when its options change (it costs)
             self.warm = warm
-            opti.solver("ipopt", {"print_time": False, "error_on_fail": False},
-                        {"print_level": 0, "sb": "yes", "tol": rel.tol,
-                         "acceptable_constr_viol_tol": rel.tol, "max_iter": int(rel.max_iter),
-                         **({"warm_start_init_point": "yes", "mu_init": 1e-6} if warm
-                            else {})})
+            opti.solver("ipopt", {"print_time": False, "error_on_fail": False, "expand": True},
+                        {**IPOPT_OPTIONS, "tol": rel.tol, "acceptable_constr_viol_tol": rel.tol,
+                         "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})})
         start = time.perf_counter()
         try:
             sol = opti.solve()
