@@ -20,13 +20,13 @@ import pytest
 import nscontrol as nsc
 from nscontrol.design import FirstOrderSMC
 from nscontrol.errors import ModelError
+from nscontrol.laws import Relay
 from nscontrol.simulate._block_runner import BlockRunner
 from nscontrol.simulate.driver import METHODS, check_run
 from nscontrol.systems import SlidingModePlant
 from nscontrol.systems.closed_loop import ClosedLoop
 from nscontrol.systems.feedback import StateFeedback
 from nscontrol.systems.lagrangian import LagrangianSystem
-from nscontrol.laws import Relay
 from nscontrol.systems.lure import LureSystem
 
 
