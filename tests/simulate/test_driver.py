@@ -146,7 +146,7 @@ def test_feedback_given_as_an_option_is_told_to_be_a_closed_loop():
 
 
 class WholeLoop(Integrator):
-    """A user's integrator that runs a closed loop as it is (no lowering)."""
+    """A user's integrator that says it runs a closed loop as it is."""
 
     name = "user_whole_loop"
     seen: list = []
@@ -165,14 +165,18 @@ class WholeLoop(Integrator):
         return rec.finish(method=self.name)
 
 
-def test_a_method_that_integrates_a_closed_loop_gets_it_unlowered(ball):
+def test_a_method_that_claims_a_closed_loop_is_handed_the_lowered_model_only(ball):
     from nscontrol.systems.feedback import StateFeedback
 
-    # the feedback folds into the ball's forces when lowered (a LagrangianSystem for the
-    # mechanics methods); a method that says it integrates the loop receives the loop
+    # feedback reaches an integrator one way: the loop is lowered whatever the method's
+    # supports() says (here the feedback folds into the ball's forces, a LagrangianSystem),
+    # so a method that takes closed loops only is never handed one: it is refused
     loop = nsc.closed_loop(ball, StateFeedback([[-1.0, -1.0]]))
-    tr = nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method=WholeLoop)
-    assert WholeLoop.seen == [loop] and tr.method == "user_whole_loop"
+    WholeLoop.seen.clear()
+    with pytest.raises(ModelError, match=r"^user_whole_loop: lowered by fold state feedback, "
+                                         r"this system is a LagrangianSystem"):
+        nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method=WholeLoop)
+    assert WholeLoop.seen == []
     lowered = nsc.simulate(loop, [1.0, 0.0], (0.0, 1.0), method="moreau_jean", h=1e-2)
     assert "u" in lowered.signals          # the lowering's own signals: it was lowered
 

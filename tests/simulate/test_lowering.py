@@ -1,5 +1,5 @@
-"""The lowerings: the registry, the rule that a method integrating a system as given sees it
-unlowered, chains of lowerings, and partial trajectories mapped back."""
+"""The lowerings: the registry, the rule that a closed loop is always lowered (whatever the
+method's ``supports`` says), chains of lowerings, and partial trajectories mapped back."""
 
 from __future__ import annotations
 
@@ -40,7 +40,9 @@ class Damper:
         return xc
 
 
-def test_a_method_that_integrates_loops_natively_sees_the_loop_unlowered():
+def test_a_closed_loop_is_lowered_even_for_a_method_that_claims_it():
+    """Feedback reaches an integrator one way: a method whose ``supports`` says yes to a
+    closed loop is still handed the lowered model (here the folded plant), never the loop."""
     seen = []
 
     class LoopRunner(Integrator):
@@ -48,7 +50,7 @@ def test_a_method_that_integrates_loops_natively_sees_the_loop_unlowered():
 
         @classmethod
         def supports(cls, system):
-            return isinstance(system, ClosedLoop)
+            return True
 
         def integrate(self, system, x0, t_span, **options):
             seen.append(system)
@@ -59,8 +61,10 @@ def test_a_method_that_integrates_loops_natively_sees_the_loop_unlowered():
                              constant_force=[-1.0])
     loop = nsc.closed_loop(plant, nsc.systems.StateFeedback([[-4.0, -1.0]], k=[5.0]))
     traj = nsc.simulate(loop, [0.2, 0.0], (0.0, 1.0), method=LoopRunner)
-    assert seen == [loop]                 # not the folded plant
-    assert "u" not in traj.signals        # and no lowering's invert ran
+    assert len(seen) == 1 and not isinstance(seen[0], ClosedLoop)
+    assert isinstance(seen[0], LagrangianSystem)       # the plant, the law folded in
+    np.testing.assert_array_equal(seen[0].stiffness, [[4.0]])   # - S K_q
+    assert "u" in traj.signals           # the fold's invert ran: the law's output added
 
 
 def test_python_blocks_around_impacting_bodies_chain_two_lowerings():

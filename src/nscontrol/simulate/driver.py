@@ -34,9 +34,9 @@ What the driver owns for every method:
   (:func:`check_run` makes the same checks ahead of a sweep);
 * composite systems (a :func:`nscontrol.closed_loop`, impacting bodies): lowered to what the
   method integrates by the registered lowerings (:mod:`nscontrol.simulate.lowering`), and
-  the result (a partial one too) mapped back, their named signals added — unless the method's
-  :meth:`Integrator.supports` accepts the composite itself (``sampled_zoh``), which then
-  integrates it as it is.
+  the result (a partial one too) mapped back, their named signals added. A closed loop is
+  always lowered: an integrator receives a model and, for blocks run as code, the loop's
+  block runner as the internal option ``blocks=`` (the one way feedback reaches it).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ import numpy as np
 from .._validation import check_bool
 from ..errors import ModelError, NscontrolError, NscontrolWarning, SolverError, ZenoError
 from ._run_context import RunContext, attach_partial, current_run, run_context
-from .lowering.base import Lowered, invert_all, lower, lowers
+from .lowering.base import Lowered, invert_all, lower, lowers, needs_lowering
 from .trajectory import Trajectory
 
 __all__ = ["Integrator", "METHODS", "CAPABILITIES", "COMMON_OPTIONS", "Lowered",
@@ -210,8 +210,9 @@ def run(system: Any, x0: Any, t_span: tuple[float, float], method: Any,
         options: dict[str, Any]) -> Trajectory:
     """The body of :func:`nscontrol.simulate` (validated ``t_span``)."""
     cls = integrator_for(system, method)
+    _refuse_blocks(options)
     applied: list[Any] = []
-    if not cls.supports(system):   # a closed loop, impacting bodies: lowered for the method
+    if needs_lowering(system, cls):   # a closed loop, impacting bodies: lowered for it
         if not lowers(system, cls):
             raise ModelError(_unsupported(cls, system))
         system, x0, options, applied = lower(system, cls, x0, options)
@@ -256,10 +257,21 @@ def check_run(system: Any, method: Any, options: Mapping[str, Any]) -> type[Inte
         option (``on_failure``, ``listeners``, ``progress``, ``sensitivity`` ...).
     """
     cls = integrator_for(system, method)
+    _refuse_blocks(options)
     if not lowers(system, cls):
         raise ModelError(_unsupported(cls, system))
     _split_options(cls, dict(options))
     return cls
+
+
+def _refuse_blocks(options: Mapping[str, Any]) -> None:
+    """``blocks=`` is set by the lowering of a closed loop, never by a caller: the one way
+    feedback reaches an integrator is ``simulate(closed_loop(plant, block), ...)``."""
+    if "blocks" in options:
+        raise ModelError(f"blocks: expected the BlockRunner of a closed loop (set by "
+                         f"simulate(closed_loop(plant, block), ...) when it lowers the loop), "
+                         f"got {type(options['blocks']).__name__} given to simulate; close "
+                         f"the loop with nscontrol.closed_loop instead")
 
 
 def _unsupported(cls: type[Integrator], system: Any) -> str:

@@ -2,7 +2,10 @@
 
 Each class declares its facts for the driver (:mod:`nscontrol.simulate.driver`); the work is
 the ``integrate`` function of the module named in ``module``, whose docstring holds the
-algorithm.
+algorithm. No method integrates a closed loop as given: :func:`nscontrol.simulate` lowers it
+first (:mod:`nscontrol.simulate.lowering`), and a loop's blocks reach the method as the
+internal option ``blocks=`` (``event_driven``, ``moreau_jean``, ``implicit_euler``,
+``sampled_zoh``).
 
 =================  ==========================================  ============================
 method             systems                                     capabilities
@@ -16,8 +19,8 @@ method             systems                                     capabilities
                                                                sensitivity (discrete map)
 ``switching``      PiecewiseAffineSystem, FilippovSystem,      events, exact flow,
                    SwitchedAffineSystem, NonlinearSystem       sensitivity, t_eval
-``sampled_zoh``    a closed loop of a SlidingModePlant and a   exact flow
-                   sampled controller (the loop itself)
+``sampled_zoh``    SlidingModePlant, with the sampled          exact flow
+                   controller of its closed loop (blocks=)
 =================  ==========================================  ============================
 """
 
@@ -134,16 +137,17 @@ class SampledZOH(_ModuleIntegrator):
     name = "sampled_zoh"
     module = "nscontrol.simulate.sampled_zoh"
     capabilities = frozenset({"exact_flow"})
-    options: ClassVar[frozenset[str]] = frozenset()
+    # blocks: the loop's sampled controller (its BlockRunner), set by the python_blocks
+    # lowering (internal)
+    options: ClassVar[frozenset[str]] = frozenset({"blocks"})
 
     @classmethod
     def supports(cls, system: Any) -> bool:
-        """A closed loop around a ``SlidingModePlant``: integrated as it is (its blocks are
-        checked when it runs)."""
+        """A ``SlidingModePlant`` (its loop's blocks come as ``blocks=``, from the lowering
+        of ``closed_loop(plant, controller)``)."""
         from ..systems.sliding_mode import SlidingModePlant
-        from .closed_loop import ClosedLoop
 
-        return isinstance(system, ClosedLoop) and isinstance(system.plant, SlidingModePlant)
+        return isinstance(system, SlidingModePlant)
 
     @classmethod
     def systems(cls) -> str:

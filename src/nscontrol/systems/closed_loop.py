@@ -35,8 +35,9 @@ continuous, with state) around a           (zero-order hold), fed the contact mu
 LagrangianSystem or ImpactingBodies        ``λ̂`` and reset at impacts
 the same around a LureSystem               ``"blocks"``: implicit Euler on the plant (its
                                            set-valued law solved every step)
-a sampled controller around a              ``"blocks"``: the method ``sampled_zoh`` runs
-SlidingModePlant                           the loop itself (exact zero-order hold)
+a sampled controller around a              ``"blocks"``: ``sampled_zoh`` on the plant, the
+SlidingModePlant                           controller stepped at its ticks (exact
+                                           zero-order hold between them)
 =========================================  ===============================================
 
 Any other combination is refused with a :class:`~nscontrol.errors.ModelError` that says what
@@ -214,7 +215,7 @@ class ClosedLoop:
         from .lure import LureSystem
         from .sliding_mode import SlidingModePlant
 
-        if isinstance(self.plant, SlidingModePlant):    # the loop is integrated as it is
+        if isinstance(self.plant, SlidingModePlant):    # exact between its ticks
             return "sampled_zoh"
         if self._composition == "blocks":
             return "implicit_euler" if isinstance(self.plant, LureSystem) else "moreau_jean"
@@ -370,7 +371,7 @@ def _composition(loop: ClosedLoop) -> str:
             isinstance(ctrl, StateFeedback) and ctrl.on == "state" and ctrl.period is None:
         return "folded"   # u = K x + k is a linear force: the plant's own model runs it
     if isinstance(plant, LagrangianSystem | ImpactingBodies | SlidingModePlant):
-        return "blocks"         # Python blocks beside the plant (or the loop itself: sampled_zoh)
+        return "blocks"         # blocks stepped beside the plant's integrator
     raise ModelError(f"plant: closed_loop composes LagrangianSystem, ImpactingBodies, "
                      f"LinearHybridSystem, LureSystem, PiecewiseAffineSystem and "
                      f"SlidingModePlant plants, got "

@@ -12,8 +12,9 @@ lowering (module)                              what it does
                                                as ONE model of the plant's family
 ``fold state feedback`` (:mod:`.fold`)         continuous state feedback folded into a
                                                Lagrangian plant's linear forces
-``run Python blocks`` (:mod:`.python_blocks`)  blocks stepped as code beside Moreau–Jean or
-                                               implicit Euler (the loop's block runner)
+``run Python blocks`` (:mod:`.python_blocks`)  blocks stepped as code beside the plant's
+                                               integrator (the loop's block runner, given
+                                               as ``blocks=``)
 ``Lagrangian form of impacting bodies``        :class:`ImpactingBodies` in the ``[q; v]``
 (:mod:`.impacting_bodies`)                     order of their Lagrangian form, and back
 ``state feedback on impacting bodies``         a state-feedback loop around impacting bodies
@@ -22,9 +23,9 @@ lowering (module)                              what it does
 =============================================  ===============================================
 
 Lowerings chain: a loop of Python blocks around impacting bodies is first the bodies with the
-loop's block runner (``blocks=``), then their Lagrangian form. A method whose
-``supports(system)`` is true for the system as given (a method that integrates closed loops
-natively) sees it unlowered.
+loop's block runner (``blocks=``), then their Lagrangian form. A closed loop is always
+lowered (:func:`needs_lowering`): no integrator is handed one, whatever its ``supports``
+says.
 """
 
 from __future__ import annotations
@@ -37,9 +38,10 @@ from .base import (
     lowerings,
     lowers,
     merge_options,
+    needs_lowering,
     register_lowering,
 )
 from .stack import stacked_model
 
 __all__ = ["Lowering", "Lowered", "register_lowering", "lowerings", "lower", "lowers",
-           "invert_all", "merge_options", "stacked_model"]
+           "needs_lowering", "invert_all", "merge_options", "stacked_model"]

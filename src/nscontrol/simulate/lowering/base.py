@@ -11,8 +11,10 @@ A lowering (CVXPY's reductions have the same shape) is three methods:
 
 :func:`lower` is what :func:`nscontrol.simulate` does before it runs: while the method does
 not integrate the system (``method.supports(system)`` is false), the first registered
-lowering that accepts it is applied, and the next one to its result, and so on; a method that
-integrates a system as given (a closed loop too) sees it unlowered. The registry is consulted
+lowering that accepts it is applied, and the next one to its result, and so on. A closed loop
+is always lowered, whatever the method's ``supports`` says (:func:`needs_lowering`): feedback
+reaches an integrator one way, as a model (the stack and fold lowerings) and, for blocks run
+as code, the loop's block runner in the internal option ``blocks=``. The registry is consulted
 in order; :func:`register_lowering` adds a user's lowering (at the end, or with
 ``first=True`` before the built-in ones).
 """
@@ -30,7 +32,7 @@ if TYPE_CHECKING:
     from ..trajectory import Trajectory
 
 __all__ = ["Lowering", "Lowered", "register_lowering", "lowerings", "lower", "lowers",
-           "invert_all", "merge_options"]
+           "needs_lowering", "invert_all", "merge_options"]
 
 #: Lowerings applied in a row to one system before the method can run it, at most (a chain
 #: longer than this is a pair of lowerings undoing each other).
@@ -167,6 +169,27 @@ def _accepting(system: Any, method: Any) -> Lowering | None:
     return None
 
 
+def needs_lowering(system: Any, method: Any) -> bool:
+    """Whether :func:`nscontrol.simulate` lowers ``system`` before ``method`` runs it: a
+    closed loop always (no integrator is handed one), any other system when the method
+    does not integrate it as given.
+
+    Parameters
+    ----------
+    system
+        The model.
+    method : Integrator subclass
+        The method.
+
+    Returns
+    -------
+    bool
+    """
+    from ...systems.closed_loop import ClosedLoop
+
+    return isinstance(system, ClosedLoop) or not method.supports(system)
+
+
 def lowers(system: Any, method: Any) -> bool:
     """Whether ``method`` runs ``system``, as given or through a lowering.
 
@@ -181,7 +204,7 @@ def lowers(system: Any, method: Any) -> bool:
     -------
     bool
     """
-    return bool(method.supports(system)) or _accepting(system, method) is not None
+    return not needs_lowering(system, method) or _accepting(system, method) is not None
 
 
 def lower(system: Any, method: Any, x0: Any, options: Mapping[str, Any]
@@ -212,7 +235,7 @@ def lower(system: Any, method: Any, x0: Any, options: Mapping[str, Any]
     """
     applied: list[tuple[Lowering, Lowered]] = []
     opts = dict(options)
-    while not method.supports(system):
+    while needs_lowering(system, method):
         lowering = _accepting(system, method)
         if lowering is None or len(applied) >= MAX_CHAIN:
             raise ModelError(_refusal(system, method, applied))

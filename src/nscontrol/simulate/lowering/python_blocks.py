@@ -6,10 +6,14 @@ controller and observer as code at the start of every step (zero-order hold over
 * around a :class:`LagrangianSystem` or :class:`ImpactingBodies`: Moreau–Jean on the plant,
   the blocks fed the contact multipliers ``λ̂`` and reset at impacts (a listener);
 * around a :class:`LureSystem`: implicit Euler on the plant, its set-valued law solved every
-  step (chapter 7's digital friction compensation), given the loop's
-  :class:`~nscontrol.simulate._block_runner.BlockRunner` as its internal option ``blocks=``;
-  the integrator runs the blocks' compiled forms inside its compiled loop when every block
-  has one (``CompiledBlocks.of(runner)``), else the runner's Python methods.
+  step (chapter 7's digital friction compensation);
+* around a :class:`SlidingModePlant`: ``sampled_zoh``, the plant stepped exactly between the
+  sampled controller's ticks.
+
+Each integrator is given the loop's
+:class:`~nscontrol.simulate._block_runner.BlockRunner` as its internal option ``blocks=``;
+it runs the blocks' compiled forms inside its compiled loop when every block has one
+(``CompiledBlocks.of(runner)``), else the runner's Python methods.
 
 Blocks that all offer a compiled form run inside the integrator's compiled loop.
 :meth:`PythonBlocks.invert` adds the blocks' signals (``u``, ``xo``, ``xc``, ``xhat``) to the
@@ -44,9 +48,11 @@ class PythonBlocks(Lowering):
     def apply(self, system: Any, method: Any, x0: Any, options: Mapping[str, Any]
               ) -> Lowered:
         from ...systems.lure import LureSystem
+        from ...systems.sliding_mode import SlidingModePlant
 
         lure = isinstance(system.plant, LureSystem)
-        runner, own = (_lure_options if lure else _event_driven_options
+        runner, own = (_zoh_options if isinstance(system.plant, SlidingModePlant) else
+                       _lure_options if lure else _event_driven_options
                        if method.name == "event_driven" else _mechanical_options)(system, method)
         return Lowered(system.plant, x0, merge_options(options, own), runner)
 
@@ -58,11 +64,6 @@ def _mechanical_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dic
     """Moreau–Jean with the loop's blocks (``blocks=``, stepped before each step; the
     integrator runs their compiled form when it can) and a listener that resets them at
     impacts."""
-    from ...systems.sliding_mode import SlidingModePlant
-
-    if isinstance(loop.plant, SlidingModePlant):
-        raise ModelError(f"{method.name}: a {type(loop.plant).__name__} plant runs with its "
-                         f"sampled controller by method='sampled_zoh'")
     if method.name != "moreau_jean":
         raise ModelError(f"{method.name}: this loop's blocks run as Python code stepped with "
                          f"the plant; use method='moreau_jean' (or give the blocks as "
@@ -101,5 +102,15 @@ def _lure_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str,
         raise ModelError("exosystem: a Lur'e plant with Python blocks takes its reference "
                          "through the blocks themselves (the plant's input is the controller's "
                          "output)")
+    runner = BlockRunner(loop)
+    return runner, {"blocks": runner}
+
+
+def _zoh_options(loop: ClosedLoop, method: Any) -> tuple[BlockRunner, dict[str, Any]]:
+    """``sampled_zoh`` with the loop's block runner (``blocks=``: the method checks that it
+    holds one sampled controller)."""
+    if method.name != "sampled_zoh":
+        raise ModelError(f"{method.name}: a {type(loop.plant).__name__} plant runs with its "
+                         f"sampled controller by method='sampled_zoh'")
     runner = BlockRunner(loop)
     return runner, {"blocks": runner}

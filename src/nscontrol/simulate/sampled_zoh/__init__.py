@@ -1,9 +1,12 @@
 """Sampled-data loops with exact zero-order-hold propagation: ``method="sampled_zoh"``.
 
-Integrates a closed loop (:func:`nscontrol.closed_loop`) of a
-:class:`~nscontrol.systems.SlidingModePlant` ``x' = A x + B (u + d(t))`` and a sampled
-controller of period ``T`` (a :class:`~nscontrol.systems.feedback.Controller` with
-``period = T``), the loop itself (no lowering): at each tick ``t_n = t0 + n T`` (``n`` an
+Integrates a :class:`~nscontrol.systems.SlidingModePlant` ``x' = A x + B (u + d(t))`` with
+the sampled controller of period ``T`` (a :class:`~nscontrol.systems.feedback.Controller`
+with ``period = T``) of a closed loop (:func:`nscontrol.closed_loop`). The loop reaches the
+method as every loop of blocks reaches its integrator: :func:`nscontrol.simulate` lowers it
+(:mod:`nscontrol.simulate.lowering.python_blocks`) to the plant and the loop's
+:class:`~nscontrol.simulate._block_runner.BlockRunner`, the internal option ``blocks=``;
+this module never sees the closed loop itself. At each tick ``t_n = t0 + n T`` (``n`` an
 integer count, the instant formed afresh, never accumulated) the controller reads the plant
 (``output``, then ``update``) and its output is held over ``[t_n, t_{n+1})``, over which the
 plant and its disturbance generator ``X = [x; w]`` move by their exact zero-order-hold step
@@ -29,7 +32,7 @@ multiple of ``T`` in decimal is one in binary too): the last sample is the one a
 state).
 
 Options: the common ones (``record_every``, ``signals``, ``progress``, ``on_failure``,
-``t_eval`` by interpolation); no method option.
+``t_eval`` by interpolation); ``blocks`` (internal, set by the lowering); no other.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from numpy.typing import ArrayLike
 from ..._validation import check_bool, check_integer
 from ..loop import drive
 from ..trajectory import Trajectory, _signal_names
-from ._stepper import CHUNK, MAX_TICKS, SIGNALS, ZOHStepper, check_loop
+from ._stepper import CHUNK, MAX_TICKS, SIGNALS, ZOHStepper, check_blocks
 
 __all__ = ["integrate", "SampledZOHOptions", "CHUNK", "SIGNALS", "MAX_TICKS"]
 
@@ -82,19 +85,22 @@ _DEFAULTS = SampledZOHOptions()
 
 
 def integrate(system: Any, x0: ArrayLike, t_span: tuple[float, float], *,
-              record_every: int = 1, signals: Any = None,
+              blocks: Any = None, record_every: int = 1, signals: Any = None,
               progress: bool | None = None) -> Trajectory:
-    """The sampled loop ``system`` from the plant state ``x0`` over ``t_span`` (see the
-    module docstring).
+    """The plant ``system`` with its sampled controller (``blocks``) from the plant state
+    ``x0`` over ``t_span`` (see the module docstring).
 
     Parameters
     ----------
-    system : ClosedLoop
-        ``closed_loop(plant, controller)``: a ``SlidingModePlant`` and a sampled controller.
+    system : SlidingModePlant
+        The plant of ``closed_loop(plant, controller)``.
     x0 : array_like
         The plant's initial state (the controller starts from its own ``x0``, if any).
     t_span : (float, float)
         ``(t0, tf)``, at least one period long.
+    blocks : BlockRunner
+        The loop's blocks, set by :func:`nscontrol.simulate` when it lowers the closed loop
+        (internal: write ``simulate(closed_loop(plant, controller), ...)``).
     record_every : int
         Keep every ``record_every``-th tick (the last one always).
     signals : sequence of str, optional
@@ -115,6 +121,7 @@ def integrate(system: Any, x0: ArrayLike, t_span: tuple[float, float], *,
         ``x0`` of the wrong length, a span shorter than one period.
     """
     opts = SampledZOHOptions.checked(record_every, signals, progress)
-    stepper = ZOHStepper(check_loop(system), x0, t_span, opts.record_every, opts.signals)
+    runner = check_blocks(system, blocks)
+    stepper = ZOHStepper(system, runner, x0, t_span, opts.record_every, opts.signals)
     return drive(stepper, (stepper.t0, float(t_span[1])), desc="sampled_zoh",
                  progress=opts.progress)

@@ -22,7 +22,7 @@ from .._block_runner import BlockRunner, CompiledBlocks
 from ..loop import END, Recording, Stop, tick_count
 from ..trajectory import Recorder
 
-__all__ = ["ZOHStepper", "check_loop", "zoh_setup", "CHUNK", "SIGNALS", "MAX_TICKS"]
+__all__ = ["ZOHStepper", "check_blocks", "zoh_setup", "CHUNK", "SIGNALS", "MAX_TICKS"]
 
 #: Ticks a compiled chunk runs between two looks from Python (progress, Ctrl-C): a few
 #: milliseconds at the loop's speed, so an interrupt is seen well within 0.2 s.
@@ -34,9 +34,23 @@ MAX_TICKS = 10**9
 _EMPTY = np.zeros(0)
 
 
-def check_loop(loop: Any) -> Any:
-    """The loop, refused with a message saying what runs when its parts do not fit."""
-    ctrl = loop.controller
+def check_blocks(plant: Any, blocks: Any) -> BlockRunner:
+    """The blocks a lowering handed the method (the ``blocks=`` of
+    :mod:`nscontrol.simulate.lowering.python_blocks`), refused with a message saying what
+    runs when the loop's parts do not fit."""
+    from ...systems.sliding_mode import SlidingModePlant
+
+    if not isinstance(plant, SlidingModePlant):
+        raise ModelError(f"sampled_zoh: integrates a SlidingModePlant with its sampled "
+                         f"controller, got {type(plant).__name__}")
+    if blocks is None:
+        raise ModelError("controller: sampled_zoh runs a sampled controller on the plant, got "
+                         "none; write simulate(closed_loop(plant, controller), ...)")
+    if not isinstance(blocks, BlockRunner):
+        raise ModelError(f"blocks: expected the BlockRunner of a closed loop (set by "
+                         f"simulate(closed_loop(plant, block), ...)), got "
+                         f"{type(blocks).__name__}")
+    ctrl, loop = blocks.ctrl, blocks.loop
     if ctrl is None or getattr(ctrl, "period", None) is None:
         raise ModelError("controller: sampled_zoh runs a sampled controller (period T > 0) on "
                          "the plant, got " + ("none" if ctrl is None else
@@ -48,7 +62,7 @@ def check_loop(loop: Any) -> Any:
             raise ModelError(f"{name}: sampled_zoh runs a plant and a sampled controller "
                              f"only (the disturbance is the plant's own, u enters through "
                              f"its B); build the loop without {name}=")
-    return loop
+    return blocks
 
 
 class _PlantSetup:
@@ -116,9 +130,10 @@ class ZOHStepper:
 
     rec: Recorder
 
-    def __init__(self, loop: Any, x0: ArrayLike, t_span: tuple[float, float], every: int,
+    def __init__(self, plant: Any, runner: BlockRunner, x0: ArrayLike,
+                 t_span: tuple[float, float], every: int,
                  signals: tuple[str, ...] | None) -> None:
-        plant, ctrl = loop.plant, loop.controller
+        ctrl = runner.ctrl
         self.plant, self.n, self.every = plant, int(plant.n_states), every
         self.t0, self.T = float(t_span[0]), float(ctrl.period)
         self.n_ticks = _ticks(self.t0, float(t_span[1]), self.T)
@@ -127,7 +142,7 @@ class ZOHStepper:
         self.X = np.concatenate([as_vector("x0", x0, self.n), w])
         self.Xn = np.empty_like(self.X)
         self.c = plant.c
-        self.runner = BlockRunner(loop)
+        self.runner = runner
         self.blocks = CompiledBlocks.of(self.runner)
         rows = min(CHUNK, self.n_ticks) // self.every + 2     # the kept rows of one chunk
         n_xc = int(ctrl.n_states)
@@ -195,16 +210,18 @@ class ZOHStepper:
         from ._zoh_kernels import keep, tick
 
         runner, m, n = self.runner, self.runner.n_inputs, self.n
-        for k in range(k0, k1):
-            t = self.t0 + k * self.T
-            xc = runner.xc
-            u = runner.step_state(t, self.X[:n].copy())
-            if u.size != m:
-                raise ModelError(f"controller: expected a finite input of length {m} at "
-                                 f"t = {t:.6g}, got {u.size} values")
-            tick(k, t, self.every, self.Phi, self.Gam, self.X, self.Xn, self.c, u, xc,
-                    *self.out, self.count)
-        runner.log.clear()          # the runner's own log is not used here
+        try:
+            for k in range(k0, k1):
+                t = self.t0 + k * self.T
+                xc = runner.xc
+                u = runner.step_state(t, self.X[:n].copy())
+                if u.size != m:
+                    raise ModelError(f"controller: expected a finite input of length {m} at "
+                                     f"t = {t:.6g}, got {u.size} values")
+                tick(k, t, self.every, self.Phi, self.Gam, self.X, self.Xn, self.c, u, xc,
+                     *self.out, self.count)
+        finally:    # the runner's own log is not used here (the ticks record u and xc)
+            runner.log.clear()
         if last:                    # the input held before the last tick, the block's state
             keep(k1, self.every, True, self.t0 + k1 * self.T, self.X, self.c,
                     runner.held["controller_out"], runner.xc, *self.out, self.count)
