@@ -94,3 +94,19 @@ def test_a_failed_background_compile_compiles_in_the_foreground(tmp_path):
     assert out.stdout.split("\n")[0] == ("(0, [-1.0, -1.0]) 1 [-1.0, -1.0] "
                                          "['numerics._lti_kernels._matvec']")
     assert "kernel numerics._lti_kernels._matvec is not compiled yet" in out.stderr
+
+
+def test_kernels_whose_source_cannot_run_as_python_compile_in_the_foreground():
+    """An intrinsic (compiled-only), a record read through ``view`` (fields as attributes:
+    numba's, not numpy's) or a structured argument make the source unusable as Python."""
+    from nscontrol.numerics import _lti_kernels
+    from nscontrol.simulate.sampled_zoh import _zoh_kernels
+    from nscontrol.systems import _foot_body_kernels
+
+    x = np.zeros(2)
+    assert background._interpretable(_lti_kernels._matvec, (np.eye(2), x, x))
+    assert not background._interpretable(_zoh_kernels.run_chunk, ())        # an intrinsic
+    assert not background._interpretable(_foot_body_kernels.support_abscissae, (x, x))
+    record = np.zeros(1, [("a", float)])
+    assert not background._interpretable(_lti_kernels._matvec, (record, x, x))
+    assert not background._interpretable(_lti_kernels._matvec, (record[0], x, x))

@@ -18,7 +18,8 @@ When the helper has exited and the cache still lacks it (an unwritable cache, a 
 compile), the call compiles in the foreground, as numba would: a run is never left
 interpreted for good. Specialisations whose argument types cannot be sent to another process
 (anything but arrays of numbers, numbers, booleans, strings, ``None`` and tuples of those)
-compile in the foreground too.
+compile in the foreground too, and so do kernels whose source cannot run as Python (they
+name a numba intrinsic, or read structured records: :func:`_interpretable`).
 
 Mode ``"wait"`` (``NSCONTROL_COMPILE=wait``; set by the command line, the test suite and the
 benches) is numba's own behaviour: compile in the foreground, then run. With
@@ -135,9 +136,10 @@ def _ours(disp: Any) -> bool:
 def _compile_for_args(self: Any, *args: Any, **kws: Any) -> Any:
     """numba's ``Dispatcher._compile_for_args`` (a call whose argument types have no compiled
     specialisation yet): load it from the cache, or run the kernel's source while the helper
-    compiles it, or compile it here. Returns the callable numba then calls with ``args``."""
+    compiles it, or compile it here (a kernel whose source cannot run as Python:
+    :func:`_interpretable`). Returns the callable numba then calls with ``args``."""
     depth = getattr(_local, "depth", 0)
-    if kws or not _ours(self):
+    if kws or not _ours(self) or not _interpretable(self, args):
         return _original(self, *args, **kws)
     if depth:                       # called by an interpreted kernel: its compile covers it
         return _Interpreted(self.py_func)
@@ -162,6 +164,37 @@ def _compile_for_args(self: Any, *args: Any, **kws: Any) -> Any:
                 return _original(self, *args)
             _pending[key] = now + RECHECK_S
     return _Interpreted(self.py_func)
+
+
+_source_ok: dict[int, bool] = {}     # id(dispatcher) -> its source can run as Python
+
+
+def _interpretable(disp: Any, args: tuple[Any, ...]) -> bool:
+    """Whether the kernel's source runs as Python on these arguments: it names no numba
+    intrinsic (compiled-only code, e.g. a first-class function table), takes no structured
+    record or array of them and makes no view (the kernels read a parameter record with
+    ``p.view(dtype)[0]`` and its fields as attributes, which numba allows and numpy does
+    not). Conservative: a kernel refused here compiles in the foreground, as numba does."""
+    import numpy as np
+
+    for a in args:
+        if isinstance(a, np.void) or (isinstance(a, np.ndarray) and a.dtype.fields is not None):
+            return False
+    key = id(disp)
+    ok = _source_ok.get(key)
+    if ok is None:
+        ok = _source_ok[key] = not _compiled_only(disp.py_func.__code__,
+                                                  disp.py_func.__globals__)
+    return ok
+
+
+def _compiled_only(code: Any, namespace: dict[str, Any]) -> bool:
+    from numba.core.extending import _Intrinsic
+
+    if "view" in code.co_names or any(isinstance(namespace.get(n), _Intrinsic)
+                                      for n in code.co_names):
+        return True
+    return any(_compiled_only(c, namespace) for c in code.co_consts if hasattr(c, "co_names"))
 
 
 class _Interpreted:
