@@ -1,7 +1,7 @@
 """A first run that does not wait for numba: the kernels it needs compile in the background.
 
 Compiling the kernels of one run takes 10-30 s of CPU (numba's typing and lowering, then
-LLVM); the same run, interpreted, takes about a second (the README's bouncing ball: 1.1 s).
+LLVM); the same run, interpreted, takes 1.2-1.5 s of CPU (the README's bouncing ball).
 So when a kernel of nscontrol is called with argument types that are neither compiled in this
 process nor in the on-disk cache, this module (mode ``"background"``, the default):
 

@@ -67,10 +67,10 @@ def test_a_new_user_is_told_the_run_is_interpreted_and_the_next_process_runs_com
 
     a, b = np.load(tmp_path / "interpreted.npz"), np.load(tmp_path / "compiled.npz")
     # The same kernels' source, run by Python (numpy scalars) and compiled: IEEE double
-    # arithmetic either way, but the order of a few sums and the libm of sqrt-free Taylor
-    # terms may differ by an ulp. The ball's impact map contracts (v -> 0.9 v), so an ulp
-    # lost at one impact does not grow: after n impacts the gap is at most n ulps of the
-    # largest time/state, with a factor 8 for the several roundings of one impact.
+    # arithmetic either way, but LLVM may reorder or fuse a few operations and its math
+    # functions may differ from numpy's by an ulp. The ball's impact map contracts
+    # (v -> 0.9 v), so an ulp lost at one impact does not grow: after n impacts the gap is at
+    # most n ulps of the largest time/state, with a factor 8 for the roundings of one impact.
     n = len(a["impacts"])
     eps = np.finfo(float).eps
     assert len(b["impacts"]) == n and a["t"].shape == b["t"].shape
