@@ -56,7 +56,7 @@ def run(quick: bool = False) -> Iterator[dict[str, Any]]:
             traj = ours()
             steps = traj.stats["steps"]
             seconds = time_per_call(ours, budget=1.0 if quick else 2.0)
-            e_ours = traj.signal("y")
+            e_ours = traj.signal("e")
             record: dict[str, Any] = {
                 "scenario": f"ch08 ObserverLCS plant + observer, theta = {theta:g}, h = {h:g}",
                 "size": steps, "ours_steps_per_s": steps / seconds, "reference": None,

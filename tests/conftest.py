@@ -1,8 +1,14 @@
 """Shared test configuration: a non-interactive matplotlib backend and seeded randomness."""
 
+import os
+
 import matplotlib
 
 matplotlib.use("Agg")
+# the tests compare compiled and Python paths and time Ctrl-C: kernels compile in the
+# foreground, as numba does (the background compile is tested in tests/trial/ and
+# tests/test_compile_background.py, which set it explicitly)
+os.environ.setdefault("NSCONTROL_COMPILE", "wait")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

@@ -3,10 +3,12 @@ changed must be recompiled, not loaded stale (``nscontrol._kernel_cache``)."""
 
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -163,3 +165,43 @@ def test_the_per_user_folder_follows_the_environment(monkeypatch, tmp_path):
     assert kc.user_cache_root() == tmp_path / "x"
     monkeypatch.setenv("NSCONTROL_CACHE_DIR", "")
     assert kc.user_cache_root() is None
+
+
+def _folder(root: Path, version: str, stem: str, k: int, idle_days: float, now: float) -> Path:
+    folder = root / f"numba-{version}" / f"{stem}-{k:020x}"
+    folder.mkdir(parents=True)
+    (folder / f"{stem}.f-1.py311.nbi").write_bytes(b"index")
+    os.utime(folder, (now - idle_days * 86400, now - idle_days * 86400))
+    return folder
+
+
+def test_old_per_user_folders_are_pruned_and_recent_or_used_ones_kept(tmp_path):
+    now = 2_000_000_000.0
+    root = tmp_path / "user"
+    mk = functools.partial(_folder, root, now=now)
+    current = mk("0.68.1", "_a_kernels", 1, idle_days=60.0)     # old, but in use here
+    recent = [mk("0.68.1", "_a_kernels", k, idle_days=0.1 * k) for k in (2, 3, 4)]
+    beyond_keep_fresh = mk("0.68.1", "_a_kernels", 5, idle_days=0.9)   # 4th newest, < 1 day
+    beyond_keep_old = mk("0.68.1", "_a_kernels", 6, idle_days=2.0)     # 6th, > 1 day idle
+    other_module = mk("0.68.1", "_b_kernels", 7, idle_days=20.0)       # its module's newest
+    old_numba = mk("0.60.0", "_b_kernels", 8, idle_days=31.0)          # past 30 days
+    strangers = [root / "numba-0.68.1" / "notes", root / "mine-0123"]   # not our pattern
+    for p in strangers:
+        p.mkdir(parents=True)
+        os.utime(p, (0, 0))
+    deleted = kc.prune(root, now=now, in_use=[current])
+    assert sorted(deleted) == sorted([beyond_keep_old, old_numba])
+    for kept in [current, *recent, beyond_keep_fresh, other_module, *strangers]:
+        assert kept.is_dir(), kept
+    assert not (root / "numba-0.60.0").exists()       # emptied version folder removed
+    assert kc.prune(root, now=now, in_use=[current]) == []   # nothing left to prune
+
+
+def test_a_folder_a_process_uses_is_touched_so_pruning_keeps_it(tmp_path):
+    folder = tmp_path / "numba-x" / f"_a_kernels-{1:020x}"
+    folder.mkdir(parents=True)
+    os.utime(folder, (0, 0))
+    kc._touched.discard(folder)
+    kc._touch(folder)
+    assert time.time() - folder.stat().st_mtime < 3600
+    assert kc.prune(tmp_path) == []                    # touched now: kept

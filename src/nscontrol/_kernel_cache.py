@@ -27,6 +27,16 @@ folder; a changed callee changes its callers' folders, so a stale caller can nev
 from there (the guarantee :func:`refresh` gives the path-keyed folders). numba itself keys each
 entry by the CPU and the Python version. An explicit ``NUMBA_CACHE_DIR`` is honoured (numba's
 own locator comes first); an unwritable per-user folder falls back to numba's locators.
+
+Old folders
+-----------
+Every edit of a kernel module (and every numba upgrade) starts new folders; the old ones are
+pruned (:func:`prune`, at most once a day, on ``import nscontrol``). A folder's time is its
+last use: the locator touches the folder of each kernel module a process imports. A folder not
+in use by this process is deleted when it has not been used for :data:`PRUNE_UNUSED_DAYS`
+days, or, beyond the :data:`PRUNE_KEEP` most recently used versions of its module, for a day:
+a process that may still read or write it (another environment with other sources) touches it
+when it starts, so only folders no process has started with for a day go.
 """
 
 from __future__ import annotations
@@ -35,13 +45,15 @@ import functools
 import hashlib
 import os
 import re
+import shutil
 import sys
+import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 __all__ = ["KERNEL_GLOBS", "kernel_modules", "reached_kernels", "dependency_digests", "refresh",
-           "cache_folder", "user_cache_root", "module_digests", "install"]
+           "cache_folder", "user_cache_root", "module_digests", "install", "prune"]
 
 #: The package folder of nscontrol's kernel modules.
 PACKAGE_ROOT = Path(__file__).resolve().parent
@@ -218,6 +230,102 @@ def refresh(root: Path | None = None) -> list[str]:
     return cleared
 
 
+#: A per-user folder unused for this many days is deleted (:func:`prune`).
+PRUNE_UNUSED_DAYS = 30.0
+#: Of one kernel module's folders, the most recently used this many stay up to
+#: :data:`PRUNE_UNUSED_DAYS`; the older ones go once a day has passed without use.
+PRUNE_KEEP = 3
+#: The file whose time says when the per-user cache was last pruned.
+PRUNE_STAMP = ".nscontrol-pruned"
+_DAY = 86400.0
+_VERSION_FOLDER = re.compile(r"^numba-[\w.+-]+$")
+_MODULE_FOLDER = re.compile(r"^(?P<stem>_\w+)-[0-9a-f]{20}$")
+_touched: set[Path] = set()
+
+
+def _touch(folder: Path) -> None:
+    """Mark ``folder`` as used now (once per process): :func:`prune` keeps what is used."""
+    if folder not in _touched:
+        _touched.add(folder)
+        try:
+            os.utime(folder)
+        except OSError:
+            pass
+
+
+def prune(root: Path | None = None, *, now: float | None = None,
+          in_use: Iterable[Path] = ()) -> list[Path]:
+    """Delete the per-user cache folders no process has used for a while; returns them.
+
+    A folder ``<root>/numba-<version>/<module>-<digest>`` (nothing else is ever touched) is
+    deleted when it is not in ``in_use`` (nor touched by this process) and was last used
+    more than :data:`PRUNE_UNUSED_DAYS` days ago, or more than a day ago while
+    :data:`PRUNE_KEEP` folders of the same module (any numba version) were used after it.
+    Emptied ``numba-<version>`` folders go too. A folder that cannot be deleted is left.
+
+    Parameters
+    ----------
+    root : Path, optional
+        The per-user cache root (default :func:`user_cache_root`; None there: nothing to do).
+    now : float, optional
+        The present, in seconds since the epoch (default: the clock).
+    in_use : iterable of Path
+        Folders to keep whatever their age.
+    """
+    root = user_cache_root() if root is None else root
+    if root is None or not root.is_dir():
+        return []
+    now = time.time() if now is None else now
+    keep = {p.resolve() for p in [*in_use, *_touched]}
+    by_module: dict[str, list[tuple[float, Path]]] = {}
+    for version in root.iterdir():
+        if not (_VERSION_FOLDER.match(version.name) and version.is_dir()):
+            continue
+        for folder in version.iterdir():
+            match = _MODULE_FOLDER.match(folder.name)
+            if match and folder.is_dir() and not folder.is_symlink():
+                used = folder.stat().st_mtime
+                by_module.setdefault(match["stem"], []).append((used, folder))
+    deleted = []
+    for folders in by_module.values():
+        folders.sort(reverse=True)                    # most recently used first
+        for rank, (used, folder) in enumerate(folders):
+            idle_days = (now - used) / _DAY
+            stale = idle_days > PRUNE_UNUSED_DAYS or (rank >= PRUNE_KEEP and idle_days > 1.0)
+            if stale and folder.resolve() not in keep:
+                shutil.rmtree(folder, ignore_errors=True)
+                if not folder.exists():
+                    deleted.append(folder)
+    for version in {f.parent for f in deleted}:
+        try:
+            version.rmdir()                           # only when emptied
+        except OSError:
+            pass
+    return deleted
+
+
+def _prune_daily() -> None:
+    """:func:`prune` the per-user cache if it was not pruned in the last day (one stat)."""
+    root = user_cache_root()
+    if root is None:
+        return
+    stamp = root / PRUNE_STAMP
+    try:
+        if time.time() - stamp.stat().st_mtime < _DAY:
+            return
+    except OSError:
+        pass                                          # never pruned (or no cache yet)
+    try:
+        if not root.is_dir():
+            return
+        stamp.touch()
+        in_use = [f for f in (_user_folder(m) for r in _ROOTS for m in module_digests(r))
+                  if f is not None]
+        prune(root, in_use=in_use)
+    except OSError:                                   # a read-only cache: nothing to prune
+        pass
+
+
 def _write_atomically(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text)
@@ -257,6 +365,7 @@ def _locator_class() -> Any:
                     return None
                 self = cls(py_func, folder, folder.name)
                 self.ensure_cache_path()
+                _touch(folder)            # used now: prune() keeps it
             except OSError:           # not writable: numba's next locator
                 return None
             return self
@@ -273,14 +382,25 @@ def _register_locator() -> None:
         classes.insert(1, _locator_class())   # after numba's NUMBA_CACHE_DIR locator
 
 
-class _AfterImport:
-    """A finder that registers the locator once ``numba.core.caching`` has been imported
-    (``import nscontrol`` must not import numba: it costs a second)."""
+def _install_compile_hook() -> None:
+    from ._compile_background import install_hook
 
-    NAME = "numba.core.caching"
+    install_hook()
+
+
+#: What to do once a numba module has been imported: register the locator; route the
+#: compile-on-first-call of our kernels through :mod:`nscontrol._compile_background`.
+_AFTER_IMPORT = {"numba.core.caching": _register_locator,
+                 "numba.core.dispatcher": _install_compile_hook}
+
+
+class _AfterImport:
+    """A finder that runs :data:`_AFTER_IMPORT`'s action once its numba module has been
+    imported (``import nscontrol`` must not import numba: it costs a second)."""
 
     def find_spec(self, name: str, path: Any, target: Any = None) -> Any:
-        if name != self.NAME:
+        action = _AFTER_IMPORT.get(name)
+        if action is None:
             return None
         from importlib.machinery import PathFinder
 
@@ -290,26 +410,31 @@ class _AfterImport:
         loader = spec.loader
         exec_module = loader.exec_module
 
-        def exec_then_register(module: Any) -> None:
+        def exec_then_act(module: Any) -> None:
             exec_module(module)
-            try:
-                sys.meta_path.remove(self)
-            except ValueError:
-                pass
-            _register_locator()
+            if all(n in sys.modules for n in _AFTER_IMPORT):
+                try:
+                    sys.meta_path.remove(self)
+                except ValueError:
+                    pass
+            action()
 
-        loader.exec_module = exec_then_register  # type: ignore[method-assign]
+        loader.exec_module = exec_then_act  # type: ignore[method-assign]
         return spec
 
 
 def install(root: Path | None = None) -> None:
     """Cache the kernel modules under the package folder ``root`` (default: nscontrol's)
-    in the per-user folder (:func:`user_cache_root`), by content. Registers the locator
-    with numba now if numba is imported, else when it is."""
+    in the per-user folder (:func:`user_cache_root`), by content, and compile a first call's
+    kernels in the background (:mod:`nscontrol._compile_background`). Registers both with
+    numba now if numba is imported, else when it is."""
     if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
         return
     _ROOTS.add(PACKAGE_ROOT if root is None else root.resolve())
-    if "numba.core.caching" in sys.modules:
-        _register_locator()
-    elif not any(isinstance(f, _AfterImport) for f in sys.meta_path):
+    _prune_daily()
+    for name, action in _AFTER_IMPORT.items():
+        if name in sys.modules:
+            action()
+    if not all(n in sys.modules for n in _AFTER_IMPORT) and \
+            not any(isinstance(f, _AfterImport) for f in sys.meta_path):
         sys.meta_path.insert(0, _AfterImport())

@@ -30,13 +30,22 @@ class TimeProgress:
         self._last = 0
         # wall time after which the bar appears; None: never
         self._due: float | None = None
+        self._start = time.perf_counter()
+        self._compiles = _compile_count()   # this run's compiles: those counted from here
+        self._note = ""
         if check_bool("progress", enable, allow_none=True) is not False:
-            self._start = time.perf_counter()
             self._due = self._start + delay
-            if _first_compile_expected():   # say why the bar will stand still, and show it
-                announce_compilation()
-                self._desc = f"{desc} (compiling kernels, first run only)"
-                self._open()
+        _running.append(self)
+
+    def compiling(self, note: str) -> None:
+        """Say in the bar's text why it stands still or runs slow (``note``: what this run
+        compiles), and show the bar now."""
+        self._note = note
+        if self._due is None and self._bar is None:
+            return                          # progress=False, or closed
+        if self._bar is None:
+            self._open()
+        self._bar.set_description_str(f"{self._desc} ({note})", refresh=True)
 
     def _open(self) -> None:
         if not _is_terminal(sys.stderr):
@@ -59,16 +68,21 @@ class TimeProgress:
             self._open()
         k = int(1000 * (t - self.t0) / (self.tf - self.t0))
         if k > self._last:
-            self._bar.set_description_str(f"{self._desc} t={t:.4g}", refresh=False)
+            note = f" ({self._note})" if self._note else ""
+            self._bar.set_description_str(f"{self._desc}{note} t={t:.4g}", refresh=False)
             self._bar.update(min(k, 1000) - self._last)
             self._last = min(k, 1000)
 
     def close(self) -> None:
-        """Remove the bar (idempotent)."""
+        """Remove the bar (idempotent); after the first run that had kernels compiled in the
+        background, say how many (once per process)."""
         self._due = None
         if self._bar is not None:
             self._bar.close()
             self._bar = None
+        if self in _running:
+            _running.remove(self)
+            _report_background(_compile_count() - self._compiles)
 
     def __enter__(self) -> TimeProgress:
         return self
@@ -200,17 +214,70 @@ def _labelled(bar: Any, desc: str, label: Any) -> Any:
 
 
 _announced = False
-#: Whether this process has yet to compile kernels (None: not looked yet).
-_compile_pending: bool | None = None
+#: The time-progress bars open (innermost last): the one a compile notice goes to.
+_running: list[TimeProgress] = []
+#: Kernels compiled in the foreground by this process (top-level compiles, in order).
+_compiled_here: list[str] = []
+_reported_background = False
 
 
-def _first_compile_expected() -> bool:
-    """True once per process, for the first run while some kernel module has no cache."""
-    global _compile_pending
-    if _compile_pending is None:
-        _compile_pending = bool(uncompiled_kernel_modules())
-    expected, _compile_pending = _compile_pending, False
-    return expected
+def _compile_count() -> int:
+    from . import _compile_background
+
+    return len(_compiled_here) + len(_compile_background.requested())
+
+
+def compiling_in_background(name: str, count: int) -> None:
+    """Called when kernel ``name`` (``module.kernel``) is sent to the background compiler,
+    the ``count``-th of this process: says so once per process on stderr, and in the
+    running bar's text."""
+    global _announced
+    if not _announced:
+        _announced = True
+        print(f"nscontrol: kernel {name} is not compiled yet: compiling it (and any other this "
+              f"run needs) in the background, once per install (numba, typically 10-30 s of "
+              f"CPU);\n           this run uses the interpreted path meanwhile (the same "
+              f"code, slower) and switches to the compiled kernels as they become ready. "
+              f"NSCONTROL_COMPILE=wait compiles in the foreground instead.",
+              file=sys.stderr, flush=True)
+    if _running:
+        verb = "compiles" if count == 1 else "compile"
+        _running[-1].compiling(f"interpreted while {_kernels(count)} {verb} in the "
+                               f"background")
+
+
+def compiling_now(name: str) -> None:
+    """Called when kernel ``name`` starts compiling in the foreground (``NSCONTROL_COMPILE=
+    wait``, or a kernel whose arguments the background compiler cannot take): says so once
+    per process on stderr, and in the running bar's text with this process's count."""
+    global _announced
+    _compiled_here.append(name)
+    if not _announced:
+        _announced = True
+        print(f"nscontrol: compiling kernel {name} (numba; typically 10-30 s for the kernels "
+              f"a run needs, once per install; later runs load them from the cache).",
+              file=sys.stderr, flush=True)
+    if _running:
+        _running[-1].compiling(f"compiling kernels, first run only: {len(_compiled_here)} "
+                               f"so far, now {name}")
+
+
+def _kernels(n: int) -> str:
+    return "1 kernel" if n == 1 else f"{n} kernels"
+
+
+def _report_background(n_run: int) -> None:
+    """At the end of the first run that sent kernels to the background compiler: how many."""
+    global _reported_background
+    from . import _compile_background
+
+    sent = len(_compile_background.requested())
+    if _reported_background or not sent or n_run <= 0:
+        return
+    _reported_background = True
+    print(f"nscontrol: this run needed {_kernels(n_run)} not yet compiled; the background "
+          f"compiler (pid {_compile_background.helper_pid()}) writes them to the cache, "
+          f"later runs use them compiled.", file=sys.stderr, flush=True)
 
 
 def uncompiled_kernel_modules() -> list[str]:

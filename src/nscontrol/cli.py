@@ -18,6 +18,9 @@ import click
 @click.version_option(package_name="nscontrol")
 def main() -> None:
     """Control and observer design for non-smooth systems."""
+    # a command runs many and long simulations, timed: its kernels compile in the foreground
+    # (a Python session's first run is interpreted while they compile in the background)
+    os.environ.setdefault("NSCONTROL_COMPILE", "wait")
 
 
 @main.command("list")

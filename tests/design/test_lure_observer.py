@@ -299,7 +299,7 @@ def test_default_design_error_stays_within_its_certificate():
     h = 1e-3
     traj = simulate(d.closed_loop(plant), [1.0, 0.0, 0.0, 0.0], (0.0, 5.0), h=h,
                     progress=False)
-    e = np.linalg.norm(traj.signal("y"), axis=1)
+    e = np.linalg.norm(traj.signal("e"), axis=1)
     # implicit Euler's discrete bound is V_k <= V_0/(1 + 2 alpha h)^k: compare with it
     bound = np.sqrt(d.certificate.P_cond) * e[0] * (1 + 2 * d.alpha * h) ** (
         -0.5 * np.arange(e.size))

@@ -11,6 +11,7 @@ from nscontrol import simulate
 from nscontrol.design.lure_observer import design_lure_observer, observer_from_gains
 from nscontrol.errors import ModelError
 from nscontrol.examples import ch08_lure_observer as ex
+from nscontrol.simulate.lowering import stacked_model
 
 
 def _violations(V, alpha, h):
@@ -46,10 +47,27 @@ def siconos():
 
 def test_closed_loop_is_one_stacked_lure_system(coulomb):
     s, plant, design, loop = coulomb
-    assert loop.n_states == 4 and loop.n_multipliers == 2
-    np.testing.assert_array_equal(loop.A[2:, :2], design.L @ s.C)
-    np.testing.assert_allclose(loop.H[1], np.hstack([design.K @ s.C, s.H - design.K @ s.C])[0])
-    np.testing.assert_array_equal(loop.C, np.hstack([np.eye(2), -np.eye(2)]))
+    model = stacked_model(loop)
+    assert model.n_states == 4 and model.n_multipliers == 2
+    np.testing.assert_array_equal(model.A[2:, :2], design.L @ s.C)
+    np.testing.assert_allclose(model.H[1], np.hstack([design.K @ s.C, s.H - design.K @ s.C])[0])
+    np.testing.assert_array_equal(model.C, np.hstack([np.eye(2), -np.eye(2)]))
+
+
+def test_closed_loop_names_the_error_e_and_y_the_measured_output(coulomb, coulomb_runs):
+    """Issue 32: the loop's trajectory names plant states and estimates, records the error
+    as ``e`` (= x - xhat, computed from the states: exact up to one subtraction's rounding)
+    and ``y`` as the plant's measured output ``C x`` (it was the error before)."""
+    s, plant, _, _ = coulomb
+    traj = coulomb_runs[1e-3]
+    x, xhat = traj.x[:, :2], traj.x[:, 2:]
+    assert traj.state_names == (*plant.state_names, *(f"{n}_hat" for n in plant.state_names))
+    np.testing.assert_array_equal(traj.signal("e"), x - xhat)
+    np.testing.assert_array_equal(traj.signal("xhat"), xhat)
+    # y = C x: two products summed, in whatever order the matrix product takes (2 eps)
+    scale = np.abs(x) @ np.abs(s.C.T)
+    assert np.all(np.abs(traj.signal("y") - x @ s.C.T) <= 2 * np.finfo(float).eps * scale)
+    assert not np.allclose(traj.signal("y"), traj.signal("e"))   # they are not the same
 
 
 def test_closed_loop_refuses_a_different_plant(coulomb):
@@ -62,7 +80,7 @@ def test_closed_loop_refuses_a_different_plant(coulomb):
 def test_check4_discrete_lyapunov_bound_coulomb(coulomb, coulomb_runs, h):
     _, _, design, _ = coulomb
     traj = coulomb_runs[h]
-    V = design.lyapunov(traj.signal("y"))  # the closed loop's output is e = x - xhat
+    V = design.lyapunov(traj.signal("e"))  # the closed loop's output is e = x - xhat
     assert len(V) == round(12.0 / h) + 1
     assert _violations(V, design.alpha, h) == 0
     # the bound is not vacuous: V really decays by many orders of magnitude
@@ -71,14 +89,14 @@ def test_check4_discrete_lyapunov_bound_coulomb(coulomb, coulomb_runs, h):
 
 def test_check4_discrete_lyapunov_bound_siconos(siconos):
     design, traj = siconos
-    V = design.lyapunov(traj.signal("y"))
+    V = design.lyapunov(traj.signal("e"))
     assert _violations(V, 1.0, 1e-3) == 0
 
 
 def test_check5_convergence_step_coulomb(coulomb, coulomb_runs):
     _, _, design, _ = coulomb
     for h in (1e-2, 1e-3):
-        V = design.lyapunov(coulomb_runs[h].signal("y"))
+        V = design.lyapunov(coulomb_runs[h].signal("e"))
         k_bound = math.ceil(math.log(1e6) / math.log(1 + 2 * design.alpha * h))
         k_hit = int(np.argmax(V <= 1e-6 * V[0]))
         assert V[k_hit] <= 1e-6 * V[0] and k_hit <= k_bound
@@ -86,7 +104,7 @@ def test_check5_convergence_step_coulomb(coulomb, coulomb_runs):
 
 def test_check5_siconos_error_at_T(siconos):
     _, traj = siconos
-    assert np.linalg.norm(traj.signal("y")[-1]) <= 10 * math.exp(-2.0)  # 1.3534
+    assert np.linalg.norm(traj.signal("e")[-1]) <= 10 * math.exp(-2.0)  # 1.3534
 
 
 def test_theta_half_runs_but_has_no_guarantee(siconos):
@@ -94,7 +112,7 @@ def test_theta_half_runs_but_has_no_guarantee(siconos):
     design, _ = siconos
     traj = simulate(design.closed_loop(s.plant()), np.r_[s.x0, s.xhat0], (0.0, 2.0), h=1e-3,
                     theta=0.5, progress=False)
-    assert np.linalg.norm(traj.signal("y")[-1]) <= 10 * math.exp(-2.0)
+    assert np.linalg.norm(traj.signal("e")[-1]) <= 10 * math.exp(-2.0)
 
 
 def test_check7_plant_solver_refuses_negative_step_matrix():
@@ -148,7 +166,8 @@ def test_check9_sticking_is_exact_and_step_independent(coulomb, coulomb_runs):
 def _regularised(loop, x0, eps, t_end):
     from scipy.integrate import solve_ivp
 
-    A, G, H, B = loop.A, loop.G, loop.H, loop.B[:, 0]
+    model = stacked_model(loop)
+    A, G, H, B = model.A, model.G, model.H, model.B[:, 0]
 
     def f(t, x):
         return A @ x - G @ np.tanh(H @ x / eps) + B * 2.0 * np.sin(t)
@@ -171,7 +190,7 @@ def test_check8_regularised_solutions_approach_time_stepping(coulomb, coulomb_ru
     # the error at t = 1 against h = 1e-5: at h = 1e-4 the O(h) error of the time-stepping
     # (about 2e-4) would hide the last decade of eps
     fine = simulate(loop, x0, (0.0, 1.0), h=1e-5, progress=False)
-    e1 = fine.signal("y")[-1]
+    e1 = fine.signal("e")[-1]
     d_plant, d_err = [], []
     for eps in (1e-2, 1e-3, 1e-4):
         sol = _regularised(loop, x0, eps, 5.0)
@@ -214,7 +233,7 @@ def test_extended_relay_observer_with_output_injection_into_the_map(relay_extend
     assert np.all(s.C @ s.G != 0)
     traj = simulate(d.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, 8.0), h=h,
                     progress=False)
-    V = d.lyapunov(traj.signal("y"))
+    V = d.lyapunov(traj.signal("e"))
     assert len(V) == round(8.0 / h) + 1
     assert _violations(V, d.alpha, h) == 0
     k_bound = math.ceil(math.log(1e6) / math.log(1 + 2 * d.alpha * h))
@@ -229,7 +248,7 @@ def test_rotor_extended_observer_at_a_large_step():
     h = 0.3
     traj = simulate(d.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, 9.0), h=h,
                     progress=False)
-    V = d.lyapunov(traj.signal("y"))
+    V = d.lyapunov(traj.signal("e"))
     assert _violations(V, d.alpha, h) == 0
     k_bound = math.ceil(math.log(1e6) / math.log(1 + 2 * d.alpha * h))
     assert np.any(V <= 1e-6 * V[0]) and int(np.argmax(V <= 1e-6 * V[0])) <= k_bound

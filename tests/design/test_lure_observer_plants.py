@@ -95,7 +95,7 @@ def test_rotor_observer_obeys_discrete_lyapunov_bound():
     h = 0.02
     traj = simulate(d.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, 4.0), h=h,
                     progress=False)
-    V = d.lyapunov(traj.signal("y"))
+    V = d.lyapunov(traj.signal("e"))
     bound = V[:-1] / (1 + 2 * d.alpha * h) * (1 + 1e-9) + 1e-14 * V[0]
     assert np.all(V[1:] <= bound)
     assert V[-1] < 1e-6 * V[0]

@@ -116,7 +116,6 @@ def test_progress_bar_is_built_only_once_due(monkeypatch) -> None:
     elapsed time; ``progress=False`` never shows one."""
     clock = [100.0]
     monkeypatch.setattr("nscontrol._progress.time.perf_counter", lambda: clock[0])
-    monkeypatch.setattr("nscontrol._progress._compile_pending", False)  # no first compile
     bar = TimeProgress(0.0, 1.0, delay=2.0)
     bar.update(0.5)
     assert bar._bar is None

@@ -32,6 +32,7 @@ from ..errors import DimensionError, InfeasibleDesignError, ModelError
 
 if TYPE_CHECKING:   # imported where used at run time
     from ..laws.base import SetValuedLaw
+    from ..systems.closed_loop import ClosedLoop
     from ..systems.feedback import LinearObserver
     from ..systems.lure import LureSystem
     from ..systems.protocols import InputFunction, InputSignal
@@ -387,20 +388,28 @@ class LureObserverDesign:
         return (np.sqrt(self.certificate.P_cond) * e0_norm
                 * np.exp(-self.alpha * np.asarray(t, dtype=np.float64)))
 
-    def closed_loop(self, plant: LureSystem) -> LureSystem:
-        """The plant and this observer as ONE :class:`~nscontrol.systems.lure.LureSystem`.
+    def closed_loop(self, plant: LureSystem) -> ClosedLoop:
+        """The plant and this observer as one loop, ready for :func:`nscontrol.simulate`.
 
-        The state is ``[x; xhat]`` (``2 n``), the law the product ``φ × φ`` of the plant's law
-        with itself, ``z_cl = [z; zhat]``, and the output is the estimation error
-        ``y_cl = x - xhat``. Implicit Euler on this system steps plant and observer on the same
-        grid with the same ``u(t_{k+1})``, ``g(t_{k+1})`` and ``y_{k+1} = C x_{k+1}``, and
-        solves both inclusions exactly.
+        The same as ``nscontrol.closed_loop(plant, observer=self.observer(plant))``: it runs as
+        ONE stacked :class:`~nscontrol.systems.lure.LureSystem` of state ``[x; xhat]``
+        (``2 n``) with the law ``φ × φ`` (``z_cl = [z; zhat]``), so implicit Euler steps plant
+        and observer on the same grid with the same ``u(t_{k+1})``, ``g(t_{k+1})`` and
+        ``y_{k+1} = C x_{k+1}``, and solves both inclusions exactly. The trajectory names the
+        states after the plant's (the estimates ``<name>_hat``) and records the estimation
+        error ``"e"`` ``= x - xhat`` (also kept as ``"error"``), the estimate ``"xhat"`` and
+        the plant's measured output ``"y" = C x``. The stacked model itself is
+        ``nscontrol.simulate.lowering.stacked_model(loop)``.
 
         Parameters
         ----------
         plant : LureSystem
             The plant the design was made for (same ``A, G, H, C, D``; for a non-monotone law
             the plant from :func:`loop_transformed_lure_system`).
+
+        Returns
+        -------
+        ClosedLoop
         """
         return _closed_loop(self, plant)
 
@@ -1111,11 +1120,10 @@ def _check_same_plant(design: LureObserverDesign, mat: _Matrices) -> None:
                              f"transformed plant)")
 
 
-def _closed_loop(design: LureObserverDesign, plant: LureSystem) -> LureSystem:
-    from ..simulate.lowering import stacked_model
+def _closed_loop(design: LureObserverDesign, plant: LureSystem) -> ClosedLoop:
     from ..systems.closed_loop import closed_loop
 
-    return stacked_model(closed_loop(plant, observer=design.observer(plant)))
+    return closed_loop(plant, observer=design.observer(plant))
 
 
 def _observer_block(design: LureObserverDesign, plant: LureSystem) -> LinearObserver:

@@ -328,7 +328,7 @@ def _simulate(s: Scenario, design: Any, h: float, T: float | None = None) -> _Ru
     plant = s.plant()
     traj = simulate(design.closed_loop(plant), np.r_[s.x0, s.xhat0], (0.0, T or s.T), h=h,
                     progress=False)
-    return _Run(s, design, traj, design.lyapunov(traj.signal("y")), h)
+    return _Run(s, design, traj, design.lyapunov(traj.signal("e")), h)
 
 
 def _infeasible(s: Scenario, variant: Literal["basic", "extended"],
@@ -353,7 +353,7 @@ def _run_siconos_lcs(ctx: dict[str, Any]) -> dict[str, Any]:
     best = max_observer_decay_rate(**s.matrices, variant="basic", kappa=100.0, tol=1e-2)
     ctx["siconos_lcs_lmi"] = best
     out = run.summary(best.alpha_max)
-    out["error_at_T"] = float(np.linalg.norm(run.traj.signal("y")[-1]))
+    out["error_at_T"] = float(np.linalg.norm(run.traj.signal("e")[-1]))
     out["certificate"] = "P = I, L = [1, 1]^T, K = 0 (public example), alpha = 1"
     out["alpha_max_extended_kappa100"] = max_observer_decay_rate(**s.matrices, kappa=100.0,
                                                         tol=1e-2).alpha_max
@@ -459,12 +459,14 @@ def _regularised_check(s: Scenario, design: Any, ts: _Run, out: dict[str, Any]) 
     from scipy.integrate import solve_ivp
 
     from ..simulate import simulate
+    from ..simulate.lowering import stacked_model
 
     loop = design.closed_loop(s.plant())
-    A, G, H, B = loop.A, loop.G, loop.H, loop.B[:, 0]
+    stacked = stacked_model(loop)            # the one Lur'e system of state [x; xhat]
+    A, G, H, B = stacked.A, stacked.G, stacked.H, stacked.B[:, 0]
     x0 = np.r_[s.x0, s.xhat0]
     x5 = ts.traj.x[np.argmin(np.abs(ts.traj.t - 5.0)), :2]
-    e1 = simulate(loop, x0, (0.0, 1.0), h=1e-5, progress=False).signal("y")[-1]
+    e1 = simulate(loop, x0, (0.0, 1.0), h=1e-5, progress=False).signal("e")[-1]
     u = s.u
     if u is None:   # the scenario's tanh model needs its input signal
         raise ModelError(f"u: scenario {s.name!r} has no input signal to regularise")
