@@ -735,14 +735,16 @@ _NO_BLOCKS = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)))
 
 def _columns(W: Any, dim: int) -> tuple[FloatArray, np.ndarray, np.ndarray, FloatArray]:
     """``W`` (checked by :func:`_delassus`) as the kernels read it: ``(WT, bptr, brow,
-    bdata)``, the dense C-contiguous ``W`` with empty block arrays, or an empty ``WT`` with
+    bdata)``, the dense C-contiguous transpose of ``W``
+    (:func:`~nscontrol.numerics._friction_kernels.dense_columns`: ``W`` itself when
+    symmetric) with empty block arrays, or an empty ``WT`` with
     ``W``'s ``dim x dim`` block columns
     (:func:`~nscontrol.numerics._friction_kernels.csc_to_blocks`, from CSC or CSR)."""
     if sparse.issparse(W):
         convert = kernels.csc_to_blocks if W.format == "csc" else kernels.csr_to_blocks
         return (_NO_DENSE, *convert(W.indptr, W.indices,
                                     np.ascontiguousarray(W.data, np.float64), W.shape[0], dim))
-    return (W if W.flags.writeable else W.copy(), *_NO_BLOCKS)
+    return (kernels.dense_columns(W if W.flags.writeable else W.copy()), *_NO_BLOCKS)
 
 
 def _friction_coefficients(mu: Any, m: int, checked_later: bool = False) -> FloatArray:
