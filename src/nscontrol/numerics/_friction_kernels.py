@@ -689,7 +689,8 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
 
     Stops when the relative natural-map error of the whole problem (:func:`relative_error`,
     checked on the running ``u`` after the sweeps :func:`_check_gap` picks: every sweep
-    until the error falls steadily) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
+    until the error falls steadily) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is
+    recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
     confirms the last on an exact product. Returns ``(code, sweeps, error)``: code
     :data:`CONVERGED` or :data:`SWEEP_LIMIT`.
     """
@@ -698,15 +699,15 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     # dense sweep's column update slow (a planar dense sweep measured 4x slower)
     if WT.shape[0] > 0:
         if dim == 2:
-            return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states, tol, max_sweeps,
-                                max_local_iter, True, True)
-        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states, tol, max_sweeps,
-                                max_local_iter, True, False)
+            return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, True, True)
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, True, False)
     if dim == 2:
-        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states, tol, max_sweeps,
-                                max_local_iter, False, True)
-    return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states, tol, max_sweeps,
-                                max_local_iter, False, False)
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, False, True)
+    return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, False, False)
 
 
 @njit(cache=True, inline="always")
