@@ -47,15 +47,16 @@ def one_step(sc):
         info = driver(pb, r, u, so)
         return info, r, so.iparam[sn.SICONOS_IPARAM_ITER_DONE], so.dparam[sn.SICONOS_DPARAM_RESIDU]
 
-    solve()
-    times, start = [], time.perf_counter()
-    while len(times) < 3 or (time.perf_counter() - start < sc["budget"] and len(times) < 2000):
-        t0 = time.perf_counter()
-        info, r, its, res = solve()
-        times.append(time.perf_counter() - t0)
-    times.sort()
-    return {"seconds": times[len(times) // 2], "info": int(info), "r": r.tolist(),
-            "iterations": int(its), "residual": float(res)}
+    info, r, its, res = solve()
+
+    def timed():
+        t0 = time.process_time()
+        solve()
+        return time.process_time() - t0
+
+    times = _cpu_runs(timed, sc.get("runs", 3), sc["budget"])
+    return {"seconds": float(np.median(times)), "times": times, "info": int(info),
+            "r": r.tolist(), "iterations": int(its), "residual": float(res)}
 
 
 def _cpu_runs(fn, runs, budget):

@@ -309,3 +309,75 @@ def test_the_short_path_hands_other_kinds_of_arrays_to_the_general_path():
         np.testing.assert_array_equal(solve_friction_contact(*args, dim=3, tol=1e-12).r, ref.r)
     zero_start = solve_friction_contact(W, q, mu, dim=3, tol=1e-12, r0=np.zeros(9, int))
     np.testing.assert_array_equal(zero_start.r, ref.r)
+
+
+# ------------------------------------------------------------------ the planar compiled path
+
+
+def _planar_lcp_impulses(W, q, mu):
+    """The planar problem solved independently: its LCP reformulation
+    (:func:`planar_friction_lcp`) by Lemke's method, ``r_T = r_T⁺ - r_T⁻``."""
+    from nscontrol.numerics import planar_friction_lcp
+
+    M, qq = planar_friction_lcp(W, q, mu)
+    res = solve_lcp(M, qq, method="lemke")
+    assert res.success
+    m = q.size // 2
+    r = np.empty(2 * m)
+    r[0::2] = res.z[:m]
+    r[1::2] = res.z[m:2 * m] - res.z[2 * m:3 * m]
+    return r
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_planar_compiled_paths_agree_with_the_lcp_reformulation(seed):
+    rng = np.random.default_rng(30 + seed)
+    m, mu, tol, cond = 15, 0.3, 1e-12, 50.0
+    W, q = _spd(rng, 2 * m, cond), rng.standard_normal(2 * m)
+    exact = _planar_lcp_impulses(W, q, mu)
+    # W positive definite: the solution is unique, and a point whose relative natural-map
+    # error is at most tol lies within about cond(W) x tol x scale of it (factor 4 for the
+    # scale's own spread between the two points and the round-off added to tol)
+    scale = max(np.linalg.norm(q), np.linalg.norm(exact))
+    bound = 4 * cond * tol * scale
+    results = {
+        "one call, dense": solve_friction_contact(W, q, mu, dim=2, method="nsgs", tol=tol),
+        "one call, CSR": solve_friction_contact(sp.csr_matrix(W), q, mu, dim=2,
+                                                method="nsgs", tol=tol),
+        "solver, dense": FrictionContactSolver(W, mu, dim=2).solve(q, tol=tol),
+        "solver, CSC": FrictionContactSolver(sp.csc_matrix(W), mu, dim=2).solve(q, tol=tol),
+    }
+    for name, res in results.items():
+        assert res.success, name
+        assert np.max(np.abs(res.r - exact)) <= bound, name
+
+
+def test_a_planar_dense_w_that_is_not_symmetric_is_read_by_its_columns():
+    # W block lower triangular: contact 0 does not feel contact 1, contact 1 feels contact
+    # 0's impulse through C. Gauss-Seidel in contact order then solves it exactly in its
+    # first sweep: contact 0 alone (diagonal block: the closed form of one contact), then
+    # contact 1 with q1 + C r0. Reading W's rows for its columns would couple them the
+    # other way and give another r.
+    wn, wt, mu = 2.0, 0.5, 0.4
+    C = np.array([[0.3, -0.2], [0.7, 0.1]])
+    W = np.zeros((4, 4))
+    W[0:2, 0:2] = np.diag([wn, wt])
+    W[2:4, 2:4] = np.diag([wn, wt])
+    W[2:4, 0:2] = C
+    q = np.array([-1.3, 3.0, -0.9, 0.2])
+
+    def one_contact(qn, qt):   # diagonal block: stick if |q_T| / wt <= mu r_N, else slip
+        rn = -qn / wn
+        rt = -qt / wt if abs(qt) / wt <= mu * rn else -mu * rn * np.sign(qt)
+        return np.array([rn, rt])
+
+    r0 = one_contact(q[0], q[1])
+    r1 = one_contact(*(q[2:4] + C @ r0))
+    expected = np.concatenate([r0, r1])
+    for res in (solve_friction_contact(W, q, mu, dim=2, method="nsgs", tol=1e-14),
+                FrictionContactSolver(W, mu, dim=2).solve(q, tol=1e-14),
+                FrictionContactSolver(sp.csr_matrix(W), mu, dim=2).solve(q, tol=1e-14)):
+        assert res.success
+        # a few operations on numbers of order 1: a few ulps of the largest impulse
+        np.testing.assert_allclose(res.r, expected, rtol=0, atol=8 * EPS * np.abs(expected).max())
+        np.testing.assert_allclose(res.u, W @ res.r + q, rtol=0, atol=8 * EPS * 4)

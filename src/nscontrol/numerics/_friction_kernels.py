@@ -61,13 +61,14 @@ def _error2(r0: float, r1: float, r2: float, u0: float, u1: float, u2: float, mu
     """``‖r - P_K(r - û)‖²`` of one contact from its entries (``r2 = u2 = 0`` when
     ``dim = 2``, ``r1 = u1 = 0`` too when ``dim = 1``): :func:`cone_projection` written on
     scalars, which the error of a whole problem evaluates once per contact and sweep."""
-    x0 = r0 - (u0 + mu * np.sqrt(u1 * u1 + u2 * u2))
+    # |(u1, 0)| is |u1| (sqrt(x²) = |x| in IEEE arithmetic, and no overflow this way)
+    x0 = r0 - (u0 + mu * (np.sqrt(u1 * u1 + u2 * u2) if dim > 2 else abs(u1)))
     if dim == 1:
         p0 = max(x0, 0.0)
         return (r0 - p0) * (r0 - p0)
     x1 = r1 - u1
     x2 = r2 - u2
-    s = np.sqrt(x1 * x1 + x2 * x2)
+    s = np.sqrt(x1 * x1 + x2 * x2) if dim > 2 else abs(x1)
     if s <= mu * x0:
         p0, p1, p2 = x0, x1, x2
     elif mu * s <= -x0:
@@ -120,46 +121,91 @@ def _norm(x: np.ndarray) -> float:
 @njit(cache=True, inline="always")
 def relative_error(q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
                    dim: int) -> float:
-    """The natural-map error over ``max(‖q‖, ‖r‖, ‖u‖)`` (1 when all three vanish)."""
-    scale = max(_norm(q), _norm(r), _norm(u))
-    err = natural_map_error(u, r, mu, dim)
+    """The natural-map error over ``max(‖q‖, ‖r‖, ‖u‖)`` (the error itself when all three
+    vanish)."""
+    return _relative_error(_norm(q), r, u, mu, dim)
+
+
+@njit(cache=True, inline="always")
+def _relative_error(q_norm: float, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
+                    dim: int) -> float:
+    """:func:`relative_error` with ``‖q‖`` given (a sweep's check computes it once), the
+    error and the norms of ``r`` and ``u`` summed in one pass over the contacts, in the
+    order of :func:`natural_map_error` and :func:`_norm` (the same figures)."""
+    total = 0.0
+    r_sq = 0.0
+    u_sq = 0.0
+    for i in range(mu.shape[0]):
+        b = i * dim
+        r0, u0 = r[b], u[b]
+        r1 = r[b + 1] if dim > 1 else 0.0
+        u1 = u[b + 1] if dim > 1 else 0.0
+        r2 = r[b + 2] if dim > 2 else 0.0
+        u2 = u[b + 2] if dim > 2 else 0.0
+        total += _error2(r0, r1, r2, u0, u1, u2, mu[i], dim)
+        r_sq += r0 * r0
+        u_sq += u0 * u0
+        if dim > 1:
+            r_sq += r1 * r1
+            u_sq += u1 * u1
+        if dim > 2:
+            r_sq += r2 * r2
+            u_sq += u2 * u2
+    scale = max(q_norm, np.sqrt(r_sq), np.sqrt(u_sq))
+    err = np.sqrt(total)
     return err / scale if scale > 0.0 else err
+
+
+@njit(cache=True, inline="always")
+def _local_1d_scalar(w: float, qn: float) -> tuple[int, float]:
+    """One frictionless contact on scalars: ``(state, r_N)``, ``r_N = max(-q_N / w, 0)``."""
+    rn = max(-qn / w, 0.0) if qn < 0.0 else 0.0
+    return (OPEN if rn == 0.0 else STICK), rn
 
 
 @njit(cache=True)
 def local_1d(w: float, qn: float, r: np.ndarray) -> int:
     """One frictionless contact: ``r = max(-q_N / w, 0)``."""
-    r[0] = max(-qn / w, 0.0) if qn < 0.0 else 0.0
-    return OPEN if r[0] == 0.0 else STICK
+    state, r[0] = _local_1d_scalar(w, qn)
+    return state
+
+
+@njit(cache=True, inline="always")
+def _local_2d_scalars(w00: float, w01: float, w10: float, w11: float, q0: float, q1: float,
+                      mu: float) -> tuple[int, float, float]:
+    """Exact solution of one planar contact of block ``[[w00, w01], [w10, w11]]`` and local
+    free velocity ``(q0, q1)``, on scalars: ``(state, r_N, r_T)``. Take-off, stick, or slip
+    forward or backward (the one whose slip velocity has the assumed sign; the least
+    violation when round-off leaves neither exact). Written on scalars, inlined into the
+    sweep: a call with arrays costs more than the contact's whole solve."""
+    if q0 >= 0.0:
+        return OPEN, 0.0, 0.0
+    det = w00 * w11 - w01 * w10
+    if det > 0.0:
+        rn = -(w11 * q0 - w01 * q1) / det
+        rt = -(-w10 * q0 + w00 * q1) / det
+        if rn >= 0.0 and abs(rt) <= mu * rn * (1.0 + 4.0 * _EPS):
+            return STICK, rn, rt
+    best, best_rn, best_rt = np.inf, 0.0, 0.0
+    for sgn in (1.0, -1.0):   # slip with u_T of sign sgn, r_T = -sgn μ r_N
+        den = w00 - sgn * mu * w01
+        if den <= 0.0:
+            continue
+        rn = -q0 / den
+        rt = -sgn * mu * rn
+        ut = w10 * rn + w11 * rt + q1
+        violation = max(-sgn * ut, 0.0)
+        if violation < best:
+            best, best_rn, best_rt = violation, rn, rt
+    return SLIP, best_rn, best_rt
 
 
 @njit(cache=True)
 def local_2d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
-    """Exact solution of one planar contact: take-off, stick, slip forward or backward."""
-    if q[0] >= 0.0:
-        r[0], r[1] = 0.0, 0.0
-        return OPEN
-    a, b, c = W[0, 0], W[0, 1], W[1, 1]
-    det = a * c - b * W[1, 0]
-    if det > 0.0:
-        rn = -(c * q[0] - W[0, 1] * q[1]) / det
-        rt = -(-W[1, 0] * q[0] + a * q[1]) / det
-        if rn >= 0.0 and abs(rt) <= mu * rn * (1.0 + 4.0 * _EPS):
-            r[0], r[1] = rn, rt
-            return STICK
-    best, best_rn, best_rt = np.inf, 0.0, 0.0
-    for sgn in (1.0, -1.0):   # slip with u_T of sign sgn, r_T = -sgn μ r_N
-        den = a - sgn * mu * b
-        if den <= 0.0:
-            continue
-        rn = -q[0] / den
-        rt = -sgn * mu * rn
-        ut = W[1, 0] * rn + c * rt + q[1]
-        violation = max(-sgn * ut, 0.0)
-        if violation < best:
-            best, best_rn, best_rt = violation, rn, rt
-    r[0], r[1] = best_rn, best_rt
-    return SLIP
+    """Exact solution of one planar contact: take-off, stick, slip forward or backward
+    (:func:`_local_2d_scalars` on ``W``'s entries), written into ``r``."""
+    state, r[0], r[1] = _local_2d_scalars(W[0, 0], W[0, 1], W[1, 0], W[1, 1], q[0], q[1], mu)
+    return state
 
 
 @njit(cache=True)
@@ -371,8 +417,9 @@ def diagonal_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, m
 
 # -- the Gauss–Seidel solver on W's columns ---------------------------------------------------
 # ``W`` reaches the solver by columns, dense or sparse, through one set of arguments: either
-# ``WT``, the dense (n, n) C-contiguous ``W`` itself (the name says how it is read: contact
-# ``i``'s columns are the entries ``i dim ... i dim + dim - 1`` of every row), with empty
+# ``WT``, the dense (n, n) C-contiguous transpose of ``W`` (:func:`dense_columns`: ``W``
+# itself when it is symmetric, as a Delassus matrix is), whose rows ``i dim ... i dim + dim
+# - 1`` are contact ``i``'s columns, contiguous in memory, with empty
 # block arrays, or an empty (0, 0) ``WT`` with W by block columns: contact ``i``'s
 # columns hold the ``dim x dim`` blocks ``bdata[p]`` at block rows ``brow[p]``,
 # ``bptr[i] <= p < bptr[i + 1]`` (:func:`csc_to_blocks`; one index per block instead of one
@@ -402,21 +449,36 @@ def _all_finite(x: np.ndarray) -> bool:
 def add_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                 i: int, dim: int, d0: float, d1: float, d2: float, u: np.ndarray) -> None:
     """``u += W[:, i dim:(i+1) dim] (d0, d1, d2)[:dim]``: contact ``i``'s columns (dense when
-    ``WT`` has rows, else its blocks). Inlined and indexed without views: a call or a view
-    with arrays costs reference counting per contact."""
-    b = i * dim
+    ``WT`` has rows, :func:`_add_dense`, else its blocks, :func:`_add_blocks`). Inlined and
+    indexed without views: a call or a view with arrays costs reference counting per
+    contact."""
     if WT.shape[0] > 0:
-        n = u.shape[0]
-        if dim == 3:
-            for k in range(n):
-                u[k] += WT[k, b] * d0 + WT[k, b + 1] * d1 + WT[k, b + 2] * d2
-        elif dim == 2:
-            for k in range(n):
-                u[k] += WT[k, b] * d0 + WT[k, b + 1] * d1
-        else:
-            for k in range(n):
-                u[k] += WT[k, b] * d0
-        return
+        _add_dense(WT, i, dim, d0, d1, d2, u)
+    else:
+        _add_blocks(bptr, brow, bdata, i, dim, d0, d1, d2, u)
+
+
+@njit(cache=True, inline="always")
+def _add_dense(WT: np.ndarray, i: int, dim: int, d0: float, d1: float, d2: float,
+               u: np.ndarray) -> None:
+    """:func:`add_columns` of a dense ``W`` (contact ``i``'s columns are rows of ``WT``)."""
+    b = i * dim
+    n = u.shape[0]
+    if dim == 3:
+        for k in range(n):
+            u[k] += WT[b, k] * d0 + WT[b + 1, k] * d1 + WT[b + 2, k] * d2
+    elif dim == 2:
+        for k in range(n):
+            u[k] += WT[b, k] * d0 + WT[b + 1, k] * d1
+    else:
+        for k in range(n):
+            u[k] += WT[b, k] * d0
+
+
+@njit(cache=True, inline="always")
+def _add_blocks(bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray, i: int, dim: int,
+                d0: float, d1: float, d2: float, u: np.ndarray) -> None:
+    """:func:`add_columns` of a ``W`` stored by block columns."""
     for p in range(bptr[i], bptr[i + 1]):
         j = brow[p] * dim
         if dim == 3:
@@ -500,7 +562,7 @@ def prepare_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
         for i in range(m):
             for k in range(dim):
                 for col in range(dim):
-                    blocks[i, k, col] = WT[i * dim + k, i * dim + col]
+                    blocks[i, k, col] = WT[i * dim + col, i * dim + k]
         terms = n + 1
     else:
         if not _all_finite(bdata):
@@ -550,6 +612,73 @@ def _inverse_3x3(blocks: np.ndarray, inverses: np.ndarray, i: int) -> None:
     inverses[i, 2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
 
 
+@njit(cache=True, inline="always")
+def _local_update(blocks: np.ndarray, inverses: np.ndarray, i: int, dim: int, u: np.ndarray,
+                  r: np.ndarray, mu: float, max_local_iter: int, qloc: np.ndarray,
+                  rloc: np.ndarray) -> tuple[int, float, float, float]:
+    """Contact ``i``'s exact local solve with the others' impulses frozen, on scalars: its
+    local free velocity ``u_i - W_ii r_i``, then :func:`_local_1d_scalar`,
+    :func:`_local_2d_scalars` or the quick cases of :func:`local_3d` (its slip case through
+    the work arrays ``qloc`` and ``rloc`` of length 3). Returns ``(state, r_i)`` (the new
+    impulse padded with zeros to three entries); ``r`` and ``u`` are not written."""
+    b = i * dim
+    if dim == 1:
+        state, n0 = _local_1d_scalar(blocks[i, 0, 0], u[b] - blocks[i, 0, 0] * r[b])
+        return state, n0, 0.0, 0.0
+    if dim == 2:
+        r0, r1 = r[b], r[b + 1]
+        w00, w01 = blocks[i, 0, 0], blocks[i, 0, 1]
+        w10, w11 = blocks[i, 1, 0], blocks[i, 1, 1]
+        state, n0, n1 = _local_2d_scalars(w00, w01, w10, w11, u[b] - (w00 * r0 + w01 * r1),
+                                          u[b + 1] - (w10 * r0 + w11 * r1), mu)
+        return state, n0, n1, 0.0
+    r0, r1, r2 = r[b], r[b + 1], r[b + 2]
+    q0 = u[b] - (blocks[i, 0, 0] * r0 + blocks[i, 0, 1] * r1 + blocks[i, 0, 2] * r2)
+    q1 = u[b + 1] - (blocks[i, 1, 0] * r0 + blocks[i, 1, 1] * r1 + blocks[i, 1, 2] * r2)
+    q2 = u[b + 2] - (blocks[i, 2, 0] * r0 + blocks[i, 2, 1] * r1 + blocks[i, 2, 2] * r2)
+    state, n0, n1, n2 = _quick_3d(inverses, i, q0, q1, q2, mu)
+    if state == SLIP:
+        return _slip_update(blocks, i, q0, q1, q2, r0, r1, r2, mu, n1, n2, max_local_iter,
+                            qloc, rloc)
+    return state, n0, n1, n2
+
+
+@njit(cache=True)
+def _slip_update(blocks: np.ndarray, i: int, q0: float, q1: float, q2: float, r0: float,
+                 r1: float, r2: float, mu: float, rs1: float, rs2: float, max_local_iter: int,
+                 qloc: np.ndarray, rloc: np.ndarray) -> tuple[int, float, float, float]:
+    """The slip case of spatial contact ``i`` in a sweep (:func:`_slip_3d` from its local
+    free velocity ``q`` and impulse ``r``, the stick guess's tangents ``rs``): ``(state,
+    r_i)``. A call of its own: written into the sweep's loop, its arrays keep the compiler
+    from optimising the column updates."""
+    # the local fallback starts from r_i, and the slip direction's guess is r_i's
+    qloc[0], qloc[1], qloc[2] = q0, q1, q2
+    rloc[0], rloc[1], rloc[2] = r0, r1, r2
+    state = _slip_3d(blocks[i], qloc, mu, rloc, rs1, rs2, max_local_iter)
+    return state, rloc[0], rloc[1], rloc[2]
+
+
+#: Largest number of sweeps between two checks of the error (:func:`_check_gap`).
+MAX_CHECK_GAP = 32
+
+
+@njit(cache=True, inline="always")
+def _check_gap(err: float, last_err: float, sweeps: int, tol: float) -> int:
+    """Sweeps until the next check of the error, from the last two checks: 1 unless the
+    error fell, else half the sweeps the observed linear rate needs to reach ``tol``
+    (at most :data:`MAX_CHECK_GAP`). A check costs about a third of a dense sweep; NSGS
+    converges linearly, so on a slow problem most checks only confirm the rate. The
+    sweeps spent past the one that reached ``tol`` are at most half the rate's estimate
+    (the answer is then more accurate, never less)."""
+    if not (err < last_err and err > 0.0):
+        return 1
+    rate = np.log(err / last_err) / sweeps          # < 0: log of the error per sweep
+    need = np.log(tol / err) / rate                 # > 0: sweeps to reach tol at that rate
+    if not (need >= 2.0):
+        return 1
+    return int(min(0.5 * need, MAX_CHECK_GAP))
+
+
 @njit(cache=True)
 def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                  blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
@@ -559,46 +688,72 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     (:func:`local_1d`, :func:`local_2d`, :func:`local_3d`), ``u = W r + q`` kept up to date.
 
     Stops when the relative natural-map error of the whole problem (:func:`relative_error`,
-    checked after every sweep on the running ``u``) is ``<= tol``, or after ``max_sweeps``
-    sweeps. ``u`` is recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
+    checked on the running ``u`` after the sweeps :func:`_check_gap` picks: every sweep
+    until the error falls steadily) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is
+    recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
     confirms the last on an exact product. Returns ``(code, sweeps, error)``: code
     :data:`CONVERGED` or :data:`SWEEP_LIMIT`.
     """
+    # the sweeps specialised on W's storage and planar or not: with the other kinds' code in
+    # its loop (the sparse update, the spatial slip search's call), the compiler keeps a
+    # dense sweep's column update slow (a planar dense sweep measured 4x slower)
+    if WT.shape[0] > 0:
+        if dim == 2:
+            return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, True, True)
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, True, False)
+    if dim == 2:
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, False, True)
+    return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
+                                tol, max_sweeps, max_local_iter, False, False)
+
+
+@njit(cache=True, inline="always")
+def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
+                 blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
+                 dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
+                 max_sweeps: int, max_local_iter: int, dense: bool, planar: bool
+                 ) -> tuple[int, int, float]:
+    """The sweeps of :func:`nsgs_columns`, ``dense`` and ``planar`` (``dim == 2``)
+    constants at each call."""
     m = mu.shape[0]
     column_product(WT, bptr, brow, bdata, q, r, dim, u)
-    qloc = np.empty(dim)
-    rloc = np.empty(dim)
+    q_norm = _norm(q)
+    next_check, last_check, last_err = 1, 0, np.inf
+    qloc = np.empty(3)
+    rloc = np.empty(3)
     err = np.inf
     for sweep in range(1, max_sweeps + 1):
         for i in range(m):
             b = i * dim
-            for k in range(dim):
-                s = u[b + k]
-                for col in range(dim):
-                    s -= blocks[i, k, col] * r[b + col]
-                qloc[k] = s
-                rloc[k] = r[b + k]   # the local fallback's start, the slip direction's guess
-            if dim == 1:
-                states[i] = local_1d(blocks[i, 0, 0], qloc[0], rloc)
-            elif dim == 2:
-                states[i] = local_2d(blocks[i], qloc, mu[i], rloc)
-            else:   # local_3d, its quick cases inlined (no call with arrays)
-                state, r0, r1, r2 = _quick_3d(inverses, i, qloc[0], qloc[1], qloc[2], mu[i])
-                if state == SLIP:
-                    state = _slip_3d(blocks[i], qloc, mu[i], rloc, r1, r2, max_local_iter)
-                else:
-                    rloc[0], rloc[1], rloc[2] = r0, r1, r2
-                states[i] = state
-            d0 = rloc[0] - r[b]
-            d1 = rloc[1] - r[b + 1] if dim > 1 else 0.0
-            d2 = rloc[2] - r[b + 2] if dim > 2 else 0.0
+            if planar:
+                state, n0, n1, n2 = _local_update(blocks, inverses, i, 2, u, r, mu[i],
+                                                  max_local_iter, qloc, rloc)
+            else:
+                state, n0, n1, n2 = _local_update(blocks, inverses, i, dim, u, r, mu[i],
+                                                  max_local_iter, qloc, rloc)
+            states[i] = state
+            d0 = n0 - r[b]
+            d1 = n1 - r[b + 1] if dim > 1 else 0.0
+            d2 = n2 - r[b + 2] if dim > 2 else 0.0
             if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
-                add_columns(WT, bptr, brow, bdata, i, dim, d0, d1, d2, u)
-                for k in range(dim):
-                    r[b + k] = rloc[k]
-        err = relative_error(q, r, u, mu, dim)
-        if err <= tol:
-            return CONVERGED, sweep, err
+                if dense:
+                    _add_dense(WT, i, dim, d0, d1, d2, u)
+                else:
+                    _add_blocks(bptr, brow, bdata, i, dim, d0, d1, d2, u)
+                r[b] = n0
+                if dim > 1:
+                    r[b + 1] = n1
+                if dim > 2:
+                    r[b + 2] = n2
+        if sweep == next_check or sweep == max_sweeps:
+            err = _relative_error(q_norm, r, u, mu, dim)
+            if err <= tol:
+                return CONVERGED, sweep, err
+            next_check = sweep + _check_gap(err, last_err, sweep - last_check, tol)
+            last_err, last_check = err, sweep
         if sweep % REFRESH_SWEEPS == 0:
             column_product(WT, bptr, brow, bdata, q, r, dim, u)
     return SWEEP_LIMIT, max_sweeps, err
@@ -627,9 +782,10 @@ def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
     for k in range(n):
         a[k] = abs(q[k])
     if WT.shape[0] > 0:
-        for k in range(n):
-            for c in range(n):
-                a[k] += abs(WT[k, c]) * abs(r[c])
+        for c in range(n):
+            rc = abs(r[c])
+            for k in range(n):
+                a[k] += abs(WT[c, k]) * rc
     for i in range(bptr.shape[0] - 1):    # no block column when W is dense
         for p in range(bptr[i], bptr[i + 1]):
             j = brow[p] * dim
@@ -688,6 +844,20 @@ def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.
 
 
 @njit(cache=True)
+def dense_columns(W: np.ndarray) -> np.ndarray:
+    """The dense ``WT`` the solver reads (see above): ``W`` itself when it is exactly
+    symmetric (a Delassus matrix), else a C-contiguous copy of its transpose; either way
+    contact ``i``'s columns are contiguous rows. NaN entries make it a copy (the copy's
+    values are checked where ``W``'s are)."""
+    n = W.shape[0]
+    for k in range(n):
+        for c in range(k):
+            if W[k, c] != W[c, k]:
+                return np.ascontiguousarray(W.T)
+    return W
+
+
+@njit(cache=True)
 def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
                      u: np.ndarray, states: np.ndarray, tol: float, max_sweeps: int,
                      max_local_iter: int) -> tuple[int, int, float, float, bool]:
@@ -700,7 +870,7 @@ def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray
     blocks = np.empty((m, dim, dim))
     inverses = np.empty((m, dim, dim))
     code, sweeps, err, tolerance, ok, _ = solve_columns(
-        W, np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
+        dense_columns(W), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
         inverses, 0, q, mu, r, u, states, tol, max_sweeps, max_local_iter)
     return code, sweeps, err, tolerance, ok
 

@@ -60,7 +60,6 @@ __all__ = ["FrictionContactResult", "FrictionContactSolver", "solve_friction_con
            "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
 _new = object.__new__
-_setattr = object.__setattr__
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
 CONTACT_STATES = ("open", "stick", "slip")
 #: ``auto`` solves planar problems up to this many contacts by the LCP (Lemke: O(m³)).
@@ -111,12 +110,12 @@ class FrictionContactResult:
               iterations: int, method: str, status: str, tolerance: float, message: str
               ) -> FrictionContactResult:
         """A result of fields already of their types, built without the frozen
-        ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve)."""
+        ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve): its
+        ``__dict__`` filled in place (faster than setting a new one)."""
         result = _new(cls)
-        _setattr(result, "__dict__", {"r": r, "u": u, "states": states, "residual": residual,
-                                      "iterations": iterations, "method": method,
-                                      "status": status, "tolerance": tolerance,
-                                      "message": message})
+        result.__dict__.update(r=r, u=u, states=states, residual=residual,
+                               iterations=iterations, method=method, status=status,
+                               tolerance=tolerance, message=message)
         return result
 
     @property
@@ -735,14 +734,16 @@ _NO_BLOCKS = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)))
 
 def _columns(W: Any, dim: int) -> tuple[FloatArray, np.ndarray, np.ndarray, FloatArray]:
     """``W`` (checked by :func:`_delassus`) as the kernels read it: ``(WT, bptr, brow,
-    bdata)``, the dense C-contiguous ``W`` with empty block arrays, or an empty ``WT`` with
+    bdata)``, the dense C-contiguous transpose of ``W``
+    (:func:`~nscontrol.numerics._friction_kernels.dense_columns`: ``W`` itself when
+    symmetric) with empty block arrays, or an empty ``WT`` with
     ``W``'s ``dim x dim`` block columns
     (:func:`~nscontrol.numerics._friction_kernels.csc_to_blocks`, from CSC or CSR)."""
     if sparse.issparse(W):
         convert = kernels.csc_to_blocks if W.format == "csc" else kernels.csr_to_blocks
         return (_NO_DENSE, *convert(W.indptr, W.indices,
                                     np.ascontiguousarray(W.data, np.float64), W.shape[0], dim))
-    return (W if W.flags.writeable else W.copy(), *_NO_BLOCKS)
+    return (kernels.dense_columns(W if W.flags.writeable else W.copy()), *_NO_BLOCKS)
 
 
 def _friction_coefficients(mu: Any, m: int, checked_later: bool = False) -> FloatArray:
