@@ -827,9 +827,10 @@ class Recorder:
             np.asarray(indices, dtype=np.int64).tolist(), pre, post, strict=True))
 
     def signal_min(self, name: str) -> float | None:
-        """The smallest value of signal ``name`` recorded so far (``None``: none recorded)."""
+        """The smallest value of signal ``name`` recorded so far (``None``: none recorded, or
+        the signal has no component — e.g. the gaps of a system without contacts)."""
         values = self._sig.get(name)
-        if values is None or not self._n:
+        if values is None or not self._n or values[:self._n].size == 0:
             return None
         return float(values[:self._n].min())
 
