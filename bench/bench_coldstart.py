@@ -28,6 +28,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from nscontrol._compile_background import wait_for_exit
+
 SCRIPT = Path(__file__).resolve().parent.parent / "tests" / "trial" / "new_user.py"
 GOAL_S = 5.0
 
@@ -41,21 +43,9 @@ def _trial(cache: str, mode: str) -> dict:
                          text=True, timeout=1800, check=True)
     record = json.loads(out.stdout.strip().splitlines()[-1])
     if record.get("helper_pid") is not None:
-        _wait_for_exit(record["helper_pid"])
+        wait_for_exit(record["helper_pid"], timeout=1800.0)
         record["compiled_after_s"] = time.perf_counter() - start
     return record
-
-
-def _wait_for_exit(pid: int, timeout: float = 1800.0) -> None:
-    stat = Path(f"/proc/{pid}/stat")
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            if stat.read_text().rsplit(")", 1)[1].split()[0] == "Z":
-                return
-        except OSError:
-            return
-        time.sleep(0.2)
 
 
 def run(quick: bool = False) -> Iterator[dict]:

@@ -45,7 +45,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MODES", "mode", "install_hook", "requested", "helper_pid"]
+__all__ = ["MODES", "mode", "install_hook", "requested", "helper_pid", "wait_for_exit"]
 
 #: The values of ``NSCONTROL_COMPILE``.
 MODES = ("background", "wait")
@@ -86,6 +86,22 @@ def requested() -> list[str]:
 def helper_pid() -> int | None:
     """The helper process's id (None before the first request)."""
     return None if _helper is None else _helper.pid
+
+
+def wait_for_exit(pid: int, timeout: float, poll: float = 0.2) -> bool:
+    """Wait until another process's helper ``pid`` has exited (a zombie counts: its parent
+    is gone); ``False`` if it still runs after ``timeout`` seconds. Linux only (reads
+    ``/proc``), for the new-user trial and the cold-start bench."""
+    stat = Path(f"/proc/{pid}/stat")
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if stat.read_text().rsplit(")", 1)[1].split()[0] == "Z":
+                return True
+        except OSError:
+            return True
+        time.sleep(poll)
+    return False
 
 
 def install_hook() -> None:

@@ -12,11 +12,12 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from nscontrol._compile_background import wait_for_exit
 
 SCRIPT = Path(__file__).with_name("new_user.py")
 
@@ -29,20 +30,6 @@ def run_trial(cache: Path, *args: str, mode: str = "background") -> tuple[dict, 
     out = subprocess.run([sys.executable, str(SCRIPT), *args], env=env, capture_output=True,
                          text=True, timeout=1500, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1]), out.stderr
-
-
-def wait_for_exit(pid: int, timeout: float = 1500.0) -> None:
-    """Wait until process ``pid`` has exited (a zombie counts: its parent is gone)."""
-    stat = Path(f"/proc/{pid}/stat")
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            if stat.read_text().rsplit(")", 1)[1].split()[0] == "Z":
-                return
-        except (FileNotFoundError, ProcessLookupError):
-            return
-        time.sleep(0.5)
-    raise AssertionError(f"the background compiler (pid {pid}) still runs after {timeout} s")
 
 
 @pytest.mark.slow   # the background compile takes 10-30 s of CPU
@@ -58,7 +45,8 @@ def test_a_new_user_is_told_the_run_is_interpreted_and_the_next_process_runs_com
     # rounding (its tolerance 1e-12 relative, lti.first_event), a factor 100 of margin
     assert cold["first_impact_error"] <= 1e-10
 
-    wait_for_exit(cold["helper_pid"])
+    assert wait_for_exit(cold["helper_pid"], timeout=1500.0, poll=0.5), \
+        f"the background compiler (pid {cold['helper_pid']}) still runs after 1500 s"
     log = (cache / "nscontrol-compile.log").read_text()
     assert "nscontrol._warm:" not in log               # no kernel failed to compile or cache
     warm, stderr = run_trial(cache, str(tmp_path / "compiled.npz"), mode="wait")
