@@ -146,9 +146,15 @@ def test_nonlinear_fields_replay_within_the_scheme_order():
     x0, T = np.array([-1.0]), 1.0
     errors = []
     for stages in (10, 20):
-        fesd = FesdProblem(layer, x0, T, stages, elements=2, inputs=1, x_final=[1.5],
-                           equilibration=1.0).solve()
+        problem = FesdProblem(layer, x0, T, stages, elements=2, inputs=1, x_final=[1.5],
+                              equilibration=1.0)
+        fesd = problem.solve()
         assert fesd.residual <= EXACT and len(fesd.crossings(lambda x: x[0])) == 1
+        # the plan's cost and objective, recomputed from its trajectory by cost_of
+        # (roundoff of a sum of 2 N terms of size 1)
+        assert problem.cost_of(fesd.t, fesd.x, fesd.u) == pytest.approx(fesd.cost, abs=1e-12)
+        assert problem.cost_of(fesd.t, fesd.x, fesd.u, penalty=True) == pytest.approx(
+            fesd.objective, abs=1e-9)
         err, x = 0.0, x0.copy()
         for s in range(stages):   # each stage's fields with its held input
             us = fesd.u[s]

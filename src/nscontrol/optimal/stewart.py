@@ -25,11 +25,12 @@ and the **cross complementarity** ``θ^l_{k,i} λ^l_{k-1,i} = 0`` (with ``λ`` a
 the first element) forbids an element to leave a region whose field was active at its
 start: a switch happens only at an element boundary, which the solver moves onto the
 switching instant. **Step equilibration** (``equilibration = ρ > 0``) adds
-``ρ Σ_k (h_k - h̄)²`` to the objective: without it the lengths of the elements that hold no
-switch are not determined by the problem (any split of an element with no switch is
-optimal), which leaves IPOPT a degenerate direction. The heuristic penalty is the only form
-offered (it biases the cost by at most ``ρ Σ (h_k - h̄)²``, reported apart in
-:attr:`FesdPlan.objective`).
+``ρ Σ_k (h_k - h̄)²`` (``equilibration_form="mean"``) or ``ρ Σ (h_k - h_{k-1})²`` over the
+consecutive elements of each stage (``"delta"``) to the objective: without it the lengths of
+the elements that hold no switch are not determined by the problem (any split of an element
+with no switch is optimal), which leaves IPOPT a degenerate direction. Only these heuristic
+penalties are offered (they bias the optimum by their own size; the plan reports the cost
+without them, :attr:`FesdPlan.cost`, and with them, :attr:`FesdPlan.objective`).
 
 The complementarity pairs (``θ ⟂ λ`` and the cross pairs) go through the Scholtes homotopy
 and polish of :mod:`.homotopy`; :attr:`FesdPlan.residual` is their largest
@@ -339,6 +340,9 @@ class FesdProblem:
         Each element's length within these multiples of ``h̄`` (``0 <= low < 1 < high``).
     equilibration : float
         Step equilibration weight ``ρ >= 0``.
+    equilibration_form : {"mean", "delta"}
+        The penalty: distance of each length to ``h̄``, or difference of consecutive lengths
+        within a stage.
 
     Raises
     ------
@@ -365,6 +369,7 @@ class FesdProblem:
     equidistant_control_grid: bool = True
     element_bounds: tuple[float, float] = (0.1, 10.0)
     equilibration: float = 0.0
+    equilibration_form: str = "mean"
     n: int = field(init=False)
     traced: _Traced = field(init=False, repr=False)
 
@@ -406,6 +411,9 @@ class FesdProblem:
         set_(self, "element_bounds", (lo, hi))
         set_(self, "equilibration", check_positive("equilibration", self.equilibration,
                                                    allow_zero=True))
+        if self.equilibration_form not in ("mean", "delta"):
+            raise ModelError(f"equilibration_form: expected 'mean' or 'delta', got "
+                             f"{self.equilibration_form!r}")
         set_(self, "traced", _Traced(layers, n, p, self.stage_cost, self.terminal_cost))
 
     @property
@@ -413,6 +421,42 @@ class FesdProblem:
         """Whether the element lengths are unknowns."""
         return self.switch_detection and (self.elements > 1
                                           or not self.equidistant_control_grid)
+
+    def cost_of(self, t: ArrayLike, x: ArrayLike, u: ArrayLike, *,
+                penalty: bool = False) -> float:
+        """The cost ``Σ_k h_k L(x_{k+1}, u_k) + L_T(x_K)`` of a trajectory on this problem's
+        element grid (e.g. another solver's plan, to compare optima by one formula), with
+        ``penalty`` plus the step equilibration's (the objective the solver minimises).
+
+        Parameters
+        ----------
+        t : array_like (K + 1,)
+            Element boundaries.
+        x : array_like (K + 1, n)
+            States at the boundaries.
+        u : array_like (N, p)
+            Input of each stage.
+        penalty : bool
+            Add the step equilibration penalty.
+
+        Returns
+        -------
+        float
+
+        Raises
+        ------
+        DimensionError
+            Shapes that disagree with the problem's grid.
+        """
+        K = self.stages * self.elements
+        tt = as_vector("t", t, K + 1)
+        X = as_matrix("x", x, rows=K + 1, cols=self.n)
+        U = as_matrix("u", np.reshape(u, (self.stages, self.inputs)) if np.size(u) ==
+                      self.stages * self.inputs else u, rows=self.stages, cols=self.inputs)
+        nlp = _FesdNLP(self)
+        if penalty:   # the transcription's own objective, on numbers
+            return float(nlp.cost({"X": X.T, "U": U.T, "H": np.diff(tt)}))
+        return nlp.plan_cost(X.T, U.T, np.diff(tt))
 
     def solve(self, relaxation: Relaxation | None = None, *,
               guess: ArrayLike | None = None) -> FesdPlan:
@@ -577,7 +621,13 @@ class _FesdNLP:
         J = sum(H[k] * self.tr.L(X[:, k + 1], U[:, k // p.elements]) for k in range(K))
         J = J + self.tr.Lt(X[:, K])
         if p.equilibration and p.free_lengths:
-            J = J + p.equilibration * ca.sumsqr(H - self.hbar)
+            if p.equilibration_form == "mean":
+                J = J + p.equilibration * ca.sumsqr(H - self.hbar)
+            else:
+                ne = p.elements
+                J = J + p.equilibration * sum(ca.sumsqr(H[s * ne + 1:(s + 1) * ne]
+                                                        - H[s * ne:(s + 1) * ne - 1])
+                                              for s in range(p.stages))
         return J
 
     def plan_cost(self, X: FloatArray, U: FloatArray, H: FloatArray) -> float:
