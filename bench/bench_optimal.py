@@ -251,7 +251,8 @@ def _peer(quick: bool) -> Iterator[dict]:
     """SpeedUp by both (25 elements, one input each, free lengths: nosnoc's FESD with one
     element per stage and a free control grid), nosnoc's published examples
     motor_with_friction (an optimal control problem), oscillator and relay (simulations),
-    and nosnoc's sliding_mode_ocp alone (two switching surfaces)."""
+    sliding_mode_ocp and cart_pole_with_friction by both as the same discrete problem
+    (FesdProblem), and nosnoc's sliding_mode_ocp with its own options alone."""
     py, why = nosnoc_python()
     repeats = 1 if quick else 3
     case = SpeedUp()
