@@ -84,6 +84,29 @@ def test_fesd_finds_both_switching_times_and_the_cost(plan):
         assert np.allclose(plan.u[~before, k], case.x_T / (1 - ts) - case.a2, atol=1e-6)
 
 
+def test_two_layers_summed_find_the_same_switches():
+    """The same system as two layers, one per surface, their fields summed (nosnoc's
+    subsystems): ``x₁`` driven by layer 1 across ``x₁ = 0``, ``x₂`` by layer 2 across the
+    nonlinear ``x₂ + x₂³ = 0``. Constant fields again: both switches exact."""
+    def first(side):
+        return lambda x, u: [u[0] + (FIRST.a1 if side < 0 else FIRST.a2), 0.0]
+
+    def second(side):
+        return lambda x, u: [0.0, u[1] + (SECOND.a1 if side < 0 else SECOND.a2)]
+
+    layers = [StewartSystem([first(-1), first(1)], lambda x: x[0], signs=[[-1.0], [1.0]]),
+              StewartSystem([second(-1), second(1)], [lambda x: x[1] + x[1] ** 3],
+                            signs=[[-1.0], [1.0]])]
+    two = FesdProblem(layers, X0, 1.0, N, elements=1, inputs=2, x_final=XF,
+                      equidistant_control_grid=False).solve()
+    assert two.theta.shape == (N, 4)
+    (t1,) = two.crossings(lambda x: x[0])
+    (t2,) = two.crossings(lambda x: x[1])
+    assert abs(t1 - FIRST.switch_time()) <= EXACT
+    assert abs(t2 - SECOND.switch_time()) <= EXACT
+    assert abs(two.cost - (FIRST.cost() + SECOND.cost())) <= EXACT
+
+
 def test_a_fixed_grid_misses_the_switches_by_the_grid():
     """Without switch detection the crossing falls inside an element (an O(h) error: the
     step landing on a surface may use either field); h = 1/16 puts neither switch (1/4 and
