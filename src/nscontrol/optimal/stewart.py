@@ -572,17 +572,19 @@ class _FesdNLP:
     def constraints(self, opti: Any, var: dict[str, Any]) -> None:
         ca, p, tr, K = require_casadi(), self.p, self.tr, self.K
         X, U, TH, H = var["X"], var["U"], var["TH"], var["H"]
+        steps, algebraic = [], []   # one subject_to per family (each call costs)
         for k in range(K):
             xn, uk = X[:, k + 1], U[:, k // p.elements]
             f = sum(ca.mtimes(F(xn, uk), TH[tr.rows[i]:tr.rows[i + 1], k])
                     for i, F in enumerate(tr.F))
-            opti.subject_to(xn - X[:, k] - H[k] * f == 0)
-            g = ca.vertcat(*[G(xn) for G in tr.G])
+            steps.append(xn - X[:, k] - H[k] * f)
             mu = ca.vertcat(*[ca.repmat(var["MU"][i, k], tr.sizes[i], 1)
                               for i in range(len(tr.sizes))])
-            opti.subject_to(g - var["LAM"][:, k] - mu == 0)
-            opti.subject_to(ca.vertcat(*[ca.sum1(TH[tr.rows[i]:tr.rows[i + 1], k])
-                                         for i in range(len(tr.sizes))]) == 1)
+            algebraic.append(ca.vertcat(*[G(xn) for G in tr.G]) - var["LAM"][:, k] - mu)
+        opti.subject_to(ca.vertcat(*steps) == 0)
+        opti.subject_to(ca.vertcat(*algebraic) == 0)
+        opti.subject_to(ca.vec(ca.vertcat(*[ca.sum1(TH[tr.rows[i]:tr.rows[i + 1], :])
+                                            for i in range(len(tr.sizes))])) == 1)
         opti.subject_to(X[:, 0] == p.x0)
         if p.x_final is not None:
             idx = np.flatnonzero(~np.isnan(p.x_final)).tolist()
