@@ -217,6 +217,12 @@ def test_bad_inputs_are_refused_with_specific_errors():
                                   signs=[[-1.0], [1.0]]), X0, 1.0, 4, inputs=2)
     with pytest.raises(DimensionError, match="^x_final"):
         problem(x_final=[1.0])
+    with pytest.raises(DimensionError, match="^x_max"):
+        problem(x_max=[1.0, 2.0, 3.0])
+    with pytest.raises(ModelError, match="^x_min"):
+        problem(x_min=[np.nan, 0.0])
+    with pytest.raises(ModelError, match="^equilibration_form"):
+        problem(equilibration_form="exact")
     with pytest.raises(ModelError, match="^element_bounds"):
         problem(element_bounds=(1.0, 2.0))
     with pytest.raises(ModelError, match="^systems"):

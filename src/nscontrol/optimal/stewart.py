@@ -297,9 +297,11 @@ def _x_bound(name: str, value: Any, n: int) -> FloatArray | None:
         return None
     arr = as_float_array(name, np.broadcast_to(np.asarray(value, float), (n,))
                          if np.ndim(value) == 0 else value, finite=False).reshape(-1)
-    if arr.shape != (n,) or np.isnan(arr).any():
+    if arr.shape != (n,):
         raise DimensionError(f"{name}: expected {n} bounds (±inf for none), got shape "
                              f"{np.shape(value)}")
+    if np.isnan(arr).any():
+        raise ModelError(f"{name}: NaN entries; use ±inf for an unbounded component")
     return arr
 
 
