@@ -24,6 +24,10 @@ switching optimal control problems with nosnoc's FESD and prints one JSON line p
   ``examples/sliding_mode_ocp/sliding_mode_ocp.py`` (two switching surfaces, a sliding
   mode), its default options, run for nosnoc's time alone (nscontrol.optimal's
   SwitchingProblem has one switching hyperplane).
+* ``sliding_mode_ocp_as_ours`` and ``cart_pole_with_friction``: nosnoc's published
+  ``sliding_mode_ocp`` and ``cart_pole_with_friction`` problems, discretised as
+  nscontrol.optimal.FesdProblem (implicit Euler, the case's stages, elements and step
+  equilibration); their trajectories are printed, the caller recomputes the cost.
 """
 
 import json
@@ -176,6 +180,66 @@ def sliding_mode_ocp(case):
     return model, ocp, opts
 
 
+def _as_ours(opts, case):
+    """nosnoc's options set to nscontrol.optimal's scheme: implicit Euler (Radau IIA, one
+    stage), the case's stages, elements per stage and step equilibration. The differential
+    representation: with one stage its cost weight is 1 (``h L(x_{k+1}, u)``, ours), where
+    the integral one weighs the stage cost by 1/2 (a quadrature over the element's two
+    end points that drops the left one)."""
+    opts.irk_scheme = nosnoc.IrkSchemes.RADAU_IIA
+    opts.irk_representation = nosnoc.IrkRepresentation.DIFFERENTIAL
+    opts.n_s = 1
+    opts.N_stages = case["N"]
+    opts.N_finite_elements = case["Nfe"]
+    opts.rho_h = case["rho_h"]
+    opts.step_equilibration = getattr(nosnoc.StepEquilibrationMode, case["equilibration"])
+    opts.comp_tol = case.get("comp_tol", 1e-9)
+    opts.homotopy_update_slope = 0.1
+    opts.print_level = 0
+    return opts
+
+
+def sliding_mode_ocp_as_ours(case):
+    """nosnoc's sliding_mode_ocp (its problem and options) with one Radau stage, as ours."""
+    model, ocp, opts = sliding_mode_ocp(case)
+    return model, ocp, _as_ours(opts, case)
+
+
+def cart_pole_with_friction(case):
+    """The problem of nosnoc's published example
+    ``examples/cart_pole_with_friction/cart_pole_with_friction.py``: a cart-pole swung up
+    from hanging to upright against Coulomb friction on the cart (one switching surface,
+    the cart's speed; nonlinear fields), tracking cost, T = 5, 20 stages of 2 elements, with
+    one Radau stage (as ours)."""
+    F_fric, m1, m2, l, g = case["friction"], 1.0, 0.1, 1.0, 9.81
+    px, th, v, om, u = (ca.SX.sym(n) for n in ("px", "theta", "v", "theta_dot", "u"))
+    q_dot = ca.vertcat(v, om)
+    x = ca.vertcat(px, th, v, om)
+    M = ca.vertcat(ca.horzcat(m1 + m2, m2 * l * ca.cos(th)),
+                   ca.horzcat(m2 * l * ca.cos(th), m2 * l ** 2))
+    C = ca.SX.zeros(2, 2)
+    C[0, 1] = -m2 * l * om * ca.sin(th)
+    f_all = ca.vertcat(u, -m2 * g * l * ca.sin(th)) - C @ q_dot
+    f_1 = ca.vertcat(q_dot, ca.inv(M) @ (f_all - ca.vertcat(F_fric, 0)))
+    f_2 = ca.vertcat(q_dot, ca.inv(M) @ (f_all + ca.vertcat(F_fric, 0)))
+    model = nosnoc.NosnocModel(x=x, F=[ca.horzcat(f_1, f_2)], c=[v],
+                               S=[np.array([[1], [-1]])], x0=np.array(case["x0"]), u=u)
+    x_ref = np.array(case["x_ref"])
+    Q, Qt, R = np.diag(case["Q"]), np.diag(case["Q_terminal"]), case["R"]
+    f_q = (x - x_ref).T @ Q @ (x - x_ref) + R * u ** 2
+    f_terminal = (x - x_ref).T @ Qt @ (x - x_ref)
+    ubx = np.array([case["x_max"], np.inf, np.inf, np.inf])
+    ocp = nosnoc.NosnocOcp(lbu=-np.array([case["u_max"]]), ubu=np.array([case["u_max"]]),
+                           f_q=f_q, f_terminal=f_terminal, lbx=-ubx, ubx=ubx)
+    opts = nosnoc.NosnocOpts()
+    opts.terminal_time = case["T"]
+    return model, ocp, _as_ours(opts, case)
+
+
+#: Cases whose trajectories are printed (the cost is recomputed by the caller).
+TRAJECTORIES = ("sliding_mode_ocp_as_ours", "cart_pole_with_friction")
+
+
 def main():
     payload = json.load(sys.stdin)
     for case in payload["cases"]:
@@ -203,6 +267,9 @@ def main():
             h = np.diff(np.asarray(results["t_grid_u"], float))
             out["effort"] = float(np.sum(h * us ** 2))
             out["x_traj"] = np.asarray(results["x_traj"], float).tolist()
+        if case["name"] in TRAJECTORIES:
+            out.update({key: np.asarray(results[key], float).tolist()
+                        for key in ("x_traj", "u_traj", "t_grid", "t_grid_u")})
         if case["name"] == "speedup":
             t = np.asarray(results["t_grid"], float)
             xs = np.asarray(results["x_traj"], float).reshape(-1)

@@ -10,15 +10,16 @@ The model (Filippov's convention on the surface, written in Stewart's form)::
 ``ψ(x) = cᵀ x + d`` (mode 1 where ``ψ < 0``): ``λ_i = g_i - min g`` is zero exactly on the
 modes that are active, and ``θ`` selects among them.
 
-**Transcription.** The horizon ``T`` is cut into ``N`` finite elements, each with its own
-input ``u_n`` and its own length ``h_n``; implicit Euler on each element, the algebraic
-variables ``θ_n, λ_n, μ_n`` at the element's end. With ``switch_detection=True`` the
-lengths are unknowns (``Σ h_n = T``, each in ``[h̄/10, 10 h̄]`` by default) and the *cross
-complementarity* ``θ_{n,i} λ_{n-1,i} = 0`` forbids a mode active at the end of element
-``n - 1`` (``λ = 0``) to be left inside element ``n``: a switch can only happen at an
-element boundary, which the solver moves onto the switching instant. With
-``switch_detection=False`` the grid is fixed (``h_n = T / N``), the switch falls inside an
-element and its time is only known to ``O(h)``.
+**Transcription.** This is one case of the general FESD transcription of :mod:`.stewart`
+(:meth:`SwitchingProblem.engine`; one source, no second transcription): ``N`` finite
+elements, each with its own input and its own length ``h_n``; implicit Euler on each
+element, the algebraic variables ``θ_n, λ_n, μ_n`` at the element's end. With
+``switch_detection=True`` the lengths are unknowns (``Σ h_n = T``, each in
+``[h̄/10, 10 h̄]`` by default) and the *cross complementarity* ``θ_{n,i} λ_{n-1,i} = 0``
+forbids a mode active at the end of element ``n - 1`` (``λ = 0``) to be left inside element
+``n``: a switch can only happen at an element boundary, which the solver moves onto the
+switching instant. With ``switch_detection=False`` the grid is fixed (``h_n = T / N``), the
+switch falls inside an element and its time is only known to ``O(h)``.
 
 Implicit Euler is exact on an element where the field is constant (``A_i = 0``), so there
 FESD's plan is the continuous one up to the solver's tolerance.
@@ -26,6 +27,7 @@ FESD's plan is the continuous one up to the solver's tolerance.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,11 +42,11 @@ from .._validation import (
     check_bool,
     check_integer,
     check_positive,
-    check_type,
 )
 from ..errors import DimensionError, ModelError
+from ._casadi import require_casadi
 from .contact import Relaxation, _bound, _vector_with_nan
-from .homotopy import residual, solve_homotopy, stage_stats
+from .stewart import FesdProblem, StewartSystem, _sign_changes
 
 __all__ = ["SwitchingProblem", "SwitchingPlan"]
 
@@ -94,11 +96,7 @@ class SwitchingPlan:
         -------
         ndarray
         """
-        psi = self.x @ np.asarray(c, float) + float(d)
-        k = np.flatnonzero(np.sign(psi[:-1]) * np.sign(psi[1:]) < 0)
-        out = self.t[k] + (self.t[k + 1] - self.t[k]) * psi[k] / (psi[k] - psi[k + 1])
-        zero = np.flatnonzero((psi == 0.0)[1:-1]) + 1
-        return np.sort(np.concatenate([out, self.t[zero]]))
+        return _sign_changes(self.t, self.x @ np.asarray(c, float) + float(d))
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,6 +178,30 @@ class SwitchingProblem:
                              "strictly inside (low < 1 < high)")
         set_(self, "element_bounds", (lo, hi))
 
+    def engine(self) -> FesdProblem:
+        """The general FESD problem this one is (:mod:`.stewart`): one layer of two affine
+        fields split by ``ψ`` (``signs = ((-1,), (1,))``: field 1 where ``ψ < 0``), one
+        element per input, the lengths free summing to ``T``.
+
+        Returns
+        -------
+        FesdProblem
+        """
+        ca = require_casadi()
+        B = ca.DM(self.B)
+
+        def affine(i: int) -> Callable[[Any, Any], Any]:
+            A, b = ca.DM(self.A[i]), ca.DM(self.b[i])
+            return lambda x, u: ca.mtimes(A, x) + b + ca.mtimes(B, u)
+
+        c, d = ca.DM(self.c[None, :]), self.d
+        layer = StewartSystem(fields=(affine(0), affine(1)),
+                              switching=lambda x: ca.mtimes(c, x) + d, signs=((-1.0,), (1.0,)))
+        return FesdProblem(layer, self.x0, self.T, self.elements, elements=1,
+                           inputs=self.B.shape[1], x_final=self.x_final, u_min=self.u_min,
+                           u_max=self.u_max, switch_detection=self.switch_detection,
+                           equidistant_control_grid=False, element_bounds=self.element_bounds)
+
     def solve(self, relaxation: Relaxation | None = None, *,
               guess: ArrayLike | None = None) -> SwitchingPlan:
         """Solve the Scholtes homotopy (and its polish) of the transcription.
@@ -202,116 +224,6 @@ class SwitchingProblem:
         SolverError
             IPOPT failed on a relaxed problem.
         """
-        relaxation = Relaxation() if relaxation is None else check_type(
-            "relaxation", relaxation, Relaxation)
-        nlp = _SwitchingNLP(self)
-        states = None if guess is None else as_matrix("guess", guess, rows=self.elements + 1,
-                                                      cols=self.n).T
-        stages: list[dict[str, Any]] = []
-        sol, polished = solve_homotopy(nlp, nlp.guess(states), relaxation, stages)
-        H = np.atleast_1d(sol["H"])
-        return SwitchingPlan(t=np.concatenate([[0.0], np.cumsum(H)]), x=sol["X"].T.copy(),
-                             u=sol["U"].T.copy(), theta=sol["TH"].T.copy(),
-                             cost=float(sol["cost"]), residual=residual(nlp, sol),
-                             stats={**stage_stats(stages, polished),
-                                    "switch_detection": self.switch_detection})
-
-
-class _SwitchingNLP:
-    """The NLP of a :class:`SwitchingProblem` (a
-    :class:`~nscontrol.optimal.homotopy.Builder`)."""
-
-    def __init__(self, problem: SwitchingProblem) -> None:
-        self.p = problem
-        g0 = np.array([1.0, -1.0]) * (problem.c @ problem.x0 + problem.d)
-        self.lam_start = g0 - g0.min()     # λ at x0: zero on the modes active there
-
-    def guess(self, X: FloatArray | None = None) -> dict[str, Any]:
-        """The states ``X`` (``(n, N + 1)``; default the straight line from ``x0`` to
-        ``x_final``) on a uniform grid, with everything else consistent with them: the
-        modes of its end points (``θ``, ``λ``, ``μ``) and the inputs that make each
-        element's step (least squares, clipped to the bounds). A guess whose algebraic
-        variables contradict its states starts the homotopy in a poor local optimum."""
-        p, N = self.p, self.p.elements
-        h = p.T / N
-        if X is None:
-            xf = np.where(np.isnan(p.x_final), p.x0, p.x_final)
-            X = p.x0[:, None] + (xf - p.x0)[:, None] * np.linspace(0, 1, N + 1)[None, :]
-        psi = p.c @ X[:, 1:] + p.d
-        mode = (psi > 0).astype(int)
-        g = np.vstack([psi, -psi])
-        U = np.empty((p.B.shape[1], N))
-        for k in range(N):
-            i = mode[k]
-            rhs = (X[:, k + 1] - X[:, k]) / h - p.A[i] @ X[:, k + 1] - p.b[i]
-            U[:, k] = np.linalg.lstsq(p.B, rhs, rcond=None)[0]
-        U = np.clip(U, -np.inf if p.u_min is None else p.u_min[:, None],
-                    np.inf if p.u_max is None else p.u_max[:, None])
-        return {"X": X, "U": U, "TH": np.vstack([1.0 - mode, mode]).astype(float),
-                "LAM": g - g.min(axis=0), "MU": g.min(axis=0), "H": np.full(N, h)}
-
-    def variables(self, opti: Any) -> dict[str, Any]:
-        p, N = self.p, self.p.elements
-        var = {"X": opti.variable(p.n, N + 1), "U": opti.variable(p.B.shape[1], N),
-               "TH": opti.variable(2, N), "LAM": opti.variable(2, N), "MU": opti.variable(N)}
-        var["H"] = opti.variable(N) if p.switch_detection else np.full(N, p.T / N)
-        return var
-
-    def constraints(self, opti: Any, var: dict[str, Any]) -> None:
-        from ._casadi import require_casadi
-
-        ca, p, N = require_casadi(), self.p, self.p.elements
-        X, U, TH, H = var["X"], var["U"], var["TH"], var["H"]
-        Xn = X[:, 1:]
-        for k in range(N):
-            f = [ca.mtimes(ca.DM(p.A[i]), Xn[:, k]) + p.b[i] + ca.mtimes(ca.DM(p.B), U[:, k])
-                 for i in range(2)]
-            opti.subject_to(Xn[:, k] - X[:, k] - H[k] * (TH[0, k] * f[0] + TH[1, k] * f[1])
-                            == 0)
-        psi = ca.mtimes(ca.DM(p.c[None, :]), Xn) + p.d
-        opti.subject_to(ca.vec(ca.vertcat(psi, -psi) - var["LAM"]
-                               - ca.repmat(ca.transpose(var["MU"]), 2, 1)) == 0)
-        opti.subject_to(ca.vec(TH[0, :] + TH[1, :]) == 1)
-        opti.subject_to(X[:, 0] == p.x0)
-        idx = np.flatnonzero(~np.isnan(p.x_final)).tolist()
-        opti.subject_to(X[idx, N] == p.x_final[idx])
-        for bound, sign in ((p.u_min, 1.0), (p.u_max, -1.0)):
-            if bound is not None:
-                opti.subject_to(ca.vec(sign * (U - np.tile(bound[:, None], (1, N)))) >= 0)
-        if p.switch_detection:
-            hbar = p.T / N
-            left = np.flatnonzero(self.lam_start > 0).tolist()
-            if left:   # a mode inactive at x0 stays off on the first element
-                opti.subject_to(TH[left, 0] == 0)
-            opti.subject_to(ca.sum1(H) == p.T)
-            lo, hi = p.element_bounds
-            opti.subject_to(opti.bounded(lo * hbar, H, hi * hbar))
-
-    def cost(self, var: dict[str, Any]) -> Any:
-        from ._casadi import require_casadi
-
-        ca = require_casadi()
-        U, H = var["U"], var["H"]
-        return ca.mtimes(ca.sum1(U * U), ca.DM(H) if isinstance(H, np.ndarray) else H)
-
-    def pair_keys(self) -> list[tuple[Any, Any]]:
-        """Which ``θ`` and ``λ`` entries (column-major) each pair holds."""
-        N = self.p.elements
-        keys = [([("TH", j) for j in range(2 * N)], [("LAM", j) for j in range(2 * N)])]
-        if self.p.switch_detection:
-            keys.append(([("TH", j + 2) for j in range(2 * (N - 1))],
-                         [("LAM", j) for j in range(2 * (N - 1))]))
-        return keys
-
-    def pairs(self, var: dict[str, Any], ops: Any) -> list[tuple[Any, Any]]:
-        """``θ ⟂ λ`` on every element; with switch detection also the cross pairs
-        ``θ_n ⟂ λ_{n-1}`` (those of the first element, against the known ``λ`` at ``x0``,
-        are constraints: :meth:`constraints`)."""
-        N = self.p.elements
-        every = list(range(2 * N))
-        TH, LAM = var["TH"], var["LAM"]
-        out = [(ops.select(TH, every), ops.select(LAM, every))]
-        if self.p.switch_detection:
-            out.append((ops.select(TH[:, 1:], list(range(2 * (N - 1)))),
-                        ops.select(LAM[:, :-1], list(range(2 * (N - 1))))))
-        return out
+        plan = self.engine().solve(relaxation, guess=guess)
+        return SwitchingPlan(t=plan.t, x=plan.x, u=plan.u, theta=plan.theta, cost=plan.cost,
+                             residual=plan.residual, stats=plan.stats)
