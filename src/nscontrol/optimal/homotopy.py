@@ -188,12 +188,18 @@ class _NLP:
         return lbg, ubg
 
     def solver(self, warm: bool) -> Any:
-        """IPOPT on the NLP, cold or warm-started (its options differ; built once each)."""
+        """IPOPT on the NLP, cold or warm-started (its options differ; built once each, the
+        second on the first's derivatives: CasADi's cache takes its functions, so the
+        Jacobian and the Hessian of the Lagrangian are generated once)."""
         if warm not in self._solvers:
             rel = self.relaxation
+            built = next(iter(self._solvers.values()), None)
+            cache = {} if built is None else {name: built.get_function(name)
+                                               for name in built.get_function()}
             self._solvers[warm] = require_casadi().nlpsol(
                 "homotopy", "ipopt", self.problem,
-                {"print_time": False, "error_on_fail": False, **NLPSOL_OPTIONS,
+                {"print_time": False, "error_on_fail": False, "cache": cache,
+                 **NLPSOL_OPTIONS,
                  "ipopt": {**IPOPT_OPTIONS, "tol": rel.tol,
                            "acceptable_constr_viol_tol": rel.tol,
                            "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})}})
