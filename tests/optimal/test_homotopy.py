@@ -132,3 +132,17 @@ def test_the_first_solve_starts_off_the_corner(fesd):
     contact = _ContactNLP(problem, active_sets(problem, start["X"], start["h"]))
     lifted = homotopy.off_the_corner(contact, start, sigma0)
     assert all(lifted[name] is start[name] for name in start)
+
+
+def test_the_warm_solver_reuses_the_cold_ones_derivatives():
+    """The second IPOPT instance (warm-start options) takes the first one's generated
+    functions (the same objects: CasADi's cache), so the Jacobian and the Hessian of the
+    Lagrangian are generated once per homotopy."""
+    nlp = homotopy._NLP(_SwitchingNLP(SpeedUp().problem(N)), Relaxation())
+    cold, warm = nlp.solver(False), nlp.solver(True)
+    assert cold is not warm
+    for name in ("nlp_jac_g", "nlp_hess_l", "nlp_grad_f"):
+        assert hash(cold.get_function(name)) == hash(warm.get_function(name))
+    # a solver built apart generates its own
+    other = homotopy._NLP(_SwitchingNLP(SpeedUp().problem(N)), Relaxation()).solver(False)
+    assert hash(other.get_function("nlp_hess_l")) != hash(cold.get_function("nlp_hess_l"))
