@@ -214,7 +214,7 @@ class _NLP:
         for name, index in zip(self.names, self.index, strict=True):
             x0[index] = np.asarray(guess[name], float).reshape(index.shape)
         lbg, ubg = self.bounds(sigma, branches)
-        args = {"x0": x0, "lbg": lbg, "ubg": ubg}
+        args: dict[str, Any] = {"x0": x0, "lbg": lbg, "ubg": ubg}
         lam_g = guess.get("lam_g")
         warm = lam_g is not None and lam_g.size == self.ng
         if warm:
