@@ -1,7 +1,9 @@
 """The Scholtes homotopy, for any transcription that declares its NLP as a :class:`Builder`
-(the contact problem of :mod:`.contact`, the switching problem of :mod:`.fesd`): the NLPs
-are built with CasADi's ``Opti`` (the Jacobians and Hessians are CasADi's sparse algorithmic
-derivatives) and solved by IPOPT.
+(the contact problem of :mod:`.contact`, the switching problem of :mod:`.fesd`): a builder
+declares its unknowns and constraints on CasADi's ``Opti``; the homotopy turns them, with the
+pairs, into one NLP expanded to SX (the Jacobians and Hessians are CasADi's sparse
+algorithmic derivatives, generated once) whose relaxed stages and polish differ only in
+their bounds, solved by IPOPT through ``nlpsol``.
 
 A builder writes its complementarity pairs once, over array operations (:class:`Ops`),
 evaluated on CasADi's symbols for the constraints and on numpy arrays for the residual and
