@@ -1,7 +1,9 @@
 """The Scholtes homotopy, for any transcription that declares its NLP as a :class:`Builder`
-(the contact problem of :mod:`.contact`, the switching problem of :mod:`.fesd`): the NLPs
-are built with CasADi's ``Opti`` (the Jacobians and Hessians are CasADi's sparse algorithmic
-derivatives) and solved by IPOPT.
+(the contact problem of :mod:`.contact`, the switching problem of :mod:`.fesd`): a builder
+declares its unknowns and constraints on CasADi's ``Opti``; the homotopy turns them, with the
+pairs, into one NLP expanded to SX (the Jacobians and Hessians are CasADi's sparse
+algorithmic derivatives, generated once) whose relaxed stages and polish differ only in
+their bounds, solved by IPOPT through ``nlpsol``.
 
 A builder writes its complementarity pairs once, over array operations (:class:`Ops`),
 evaluated on CasADi's symbols for the constraints and on numpy arrays for the residual and
@@ -31,6 +33,9 @@ IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "sb": "yes", "mu_strategy": "
 #: barrier. (IPOPT's pushes of the start into the interior stay at their defaults: pushes of
 #: 1e-9 let a frictional plan creep along the relaxed stick branch, as the MPC found.)
 WARM_OPTIONS: dict[str, Any] = {"warm_start_init_point": "yes", "mu_init": 1e-6}
+
+#: Options of CasADi's nlpsol around IPOPT (none beyond its defaults).
+NLPSOL_OPTIONS: dict[str, Any] = {}
 
 #: IPOPT's statuses that count as a solution.
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -117,66 +122,154 @@ def pair_keys(builder: Any, pairs: list[tuple[Any, Any]]) -> list[tuple[Any, Any
 
 
 class _NLP:
-    """One NLP of a builder (relaxed with a parameter ``σ``, or the polish of fixed
-    branches)."""
+    """The NLP of a builder, built once for the whole homotopy: the builder's constraints,
+    then for each complementarity pair three rows ``a``, ``b`` and ``a b``. A relaxed solve
+    bounds them by ``a, b >= 0, a b <= σ``; the polish, by ``a = 0 <= b`` where the branch is
+    true and ``b = 0 <= a`` elsewhere, the products free. So ``σ`` and the branches are
+    bounds, never a new NLP: CasADi differentiates and expands (to SX) once, and the polish
+    starts from the last relaxed solve's primal and dual solution."""
 
-    def __init__(self, builder: Builder, relaxation: Relaxation,
-                 branches: list[np.ndarray] | None = None) -> None:
+    def __init__(self, builder: Builder, relaxation: Relaxation) -> None:
         ca = require_casadi()
         self.relaxation = relaxation
-        self.opti = opti = ca.Opti()
+        opti = ca.Opti()      # a container of the builder's declarations only
         self.var = builder.variables(opti)
-        self.sigma = opti.parameter()
         builder.constraints(opti, self.var)
-        pairs = builder.pairs(self.var, casadi_ops())
-        _pair_constraints(opti, pairs, self.sigma, branches, pair_keys(builder, pairs))
         self.cost = builder.cost(self.var)
-        opti.minimize(self.cost)
-        self.warm: bool | None = None
+        pairs = [(a, b) for a, b in builder.pairs(self.var, casadi_ops())]
+        self.keys = pair_keys(builder, pairs)
+        bounds = ca.Function("bounds", [opti.p], [opti.lbg, opti.ubg])
+        lbg, ubg = (np.asarray(v, float).reshape(-1) for v in bounds(np.zeros(opti.np)))
+        rows, self.layout, start = [opti.g], [], opti.ng
+        for a, b in pairs:
+            size = int(a.numel())
+            rows += [a, b, a * b]
+            self.layout.append((start, size))
+            start += 3 * size
+        self.lbg = np.concatenate([lbg, *(np.r_[np.zeros(2 * n), np.full(n, -np.inf)]
+                                          for _, n in self.layout)])
+        self.ubg = np.concatenate([ubg, np.full(start - opti.ng, np.inf)])
+        self.names = [name for name, sym in self.var.items() if _symbolic(sym)]
+        symbols = [self.var[name] for name in self.names]
+        x_mx = ca.veccat(*symbols)   # every unknown, even one only the pairs hold
+        nlp = ca.Function("nlp", [x_mx], [self.cost, ca.vertcat(*rows)]).expand()
+        x = ca.SX.sym("x", x_mx.numel())
+        f, g = nlp(x)
+        self.problem = {"x": x, "f": f, "g": g}
+        self.index, first = [], 0     # each unknown's entries in x, in its shape
+        for sym in symbols:
+            shape = (int(sym.size1()), int(sym.size2()))
+            self.index.append(first + np.arange(sym.numel()).reshape(shape, order="F"))
+            first += int(sym.numel())
+        self.nx, self.ng = first, start
+        self._solvers: dict[bool, Any] = {}
 
-    def solve(self, guess: dict[str, Any], sigma: float) -> tuple[dict[str, Any], dict]:
-        """Solve from ``guess`` (primal, and dual when it has ``lam_g`` of this NLP's size);
-        returns the solution and the stage's record."""
-        opti, rel = self.opti, self.relaxation
-        for name, sym in self.var.items():
-            if _symbolic(sym):
-                opti.set_initial(sym, guess[name])
-        warm = guess.get("lam_g") is not None and guess["lam_g"].size == opti.ng
-        if warm:
-            opti.set_initial(opti.lam_g, guess["lam_g"])
-        opti.set_value(self.sigma, sigma)
-        if warm != self.warm:   # a new solver only when its options change (it costs)
-            self.warm = warm
-            opti.solver("ipopt", {"print_time": False, "error_on_fail": False, "expand": True},
-                        {**IPOPT_OPTIONS, "tol": rel.tol, "acceptable_constr_viol_tol": rel.tol,
-                         "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})})
-        start = time.perf_counter()
-        try:
-            sol = opti.solve()
-        except RuntimeError:   # IPOPT gave up; its status says why, the caller decides
-            sol = opti.debug
-        elapsed = time.perf_counter() - start
-        stats = opti.stats()
-        record = {"sigma": sigma, "iterations": int(stats.get("iter_count", 0)),
-                  "status": str(stats.get("return_status", "")), "solve_time": elapsed}
-        return self._values(sol, guess), record
-
-    def _values(self, sol: Any, guess: dict[str, Any]) -> dict[str, Any]:
-        out = dict(guess)
-        for name, sym in self.var.items():
-            if not _symbolic(sym):
+    def bounds(self, sigma: float | None, branches: list[np.ndarray] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The rows' bounds of the relaxation ``σ``, or of the polish of ``branches``
+        (``a = 0 <= b`` where true, ``b = 0 <= a`` elsewhere; an unknown that several pairs
+        set to zero — the same key — is fixed by one row only, the others left free: a
+        repeated equality would leave IPOPT too few degrees of freedom)."""
+        lbg, ubg = self.lbg.copy(), self.ubg.copy()
+        fixed: set[Any] = set()
+        for i, (start, n) in enumerate(self.layout):
+            if branches is None:
+                ubg[start + 2 * n: start + 3 * n] = sigma
                 continue
-            value = np.asarray(sol.value(sym), float)
-            out[name] = (float(value) if np.ndim(guess[name]) == 0
+            lbg[start + 2 * n: start + 3 * n] = -np.inf     # the products free
+            for side, keys, mask in ((0, self.keys[i][0], branches[i]),
+                                     (1, self.keys[i][1], ~branches[i])):
+                for j in np.flatnonzero(mask):
+                    row = start + side * n + int(j)
+                    if keys is None or keys[j] not in fixed:
+                        ubg[row] = 0.0
+                    else:
+                        lbg[row] = -np.inf
+                    if keys is not None:
+                        fixed.add(keys[j])
+        return lbg, ubg
+
+    def solver(self, warm: bool) -> Any:
+        """IPOPT on the NLP, cold or warm-started (its options differ; built once each, the
+        second on the first's derivatives: CasADi's cache takes its functions, so the
+        Jacobian and the Hessian of the Lagrangian are generated once)."""
+        if warm not in self._solvers:
+            rel = self.relaxation
+            built = next(iter(self._solvers.values()), None)
+            cache = {} if built is None else {name: built.get_function(name)
+                                               for name in built.get_function()}
+            self._solvers[warm] = require_casadi().nlpsol(
+                "homotopy", "ipopt", self.problem,
+                {"print_time": False, "error_on_fail": False, "cache": cache,
+                 **NLPSOL_OPTIONS,
+                 "ipopt": {**IPOPT_OPTIONS, "tol": rel.tol,
+                           "acceptable_constr_viol_tol": rel.tol,
+                           "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})}})
+        return self._solvers[warm]
+
+    def solve(self, guess: dict[str, Any], sigma: float | None,
+              branches: list[np.ndarray] | None = None) -> tuple[dict[str, Any], dict]:
+        """Solve the relaxation ``σ`` (or the polish of ``branches``) from ``guess`` (primal,
+        and dual when it has ``lam_g`` and ``lam_x`` of this NLP); returns the solution and
+        the stage's record."""
+        x0 = np.zeros(self.nx)
+        for name, index in zip(self.names, self.index, strict=True):
+            x0[index] = np.asarray(guess[name], float).reshape(index.shape)
+        lbg, ubg = self.bounds(sigma, branches)
+        args: dict[str, Any] = {"x0": x0, "lbg": lbg, "ubg": ubg}
+        lam_g = guess.get("lam_g")
+        warm = lam_g is not None and lam_g.size == self.ng
+        if warm:
+            args.update(lam_g0=lam_g, lam_x0=guess["lam_x"])
+        solver = self.solver(warm)
+        start = time.perf_counter()
+        out = solver(**args)
+        elapsed = time.perf_counter() - start
+        stats = solver.stats()
+        record = {"sigma": "polish" if branches is not None else sigma,
+                  "iterations": int(stats.get("iter_count", 0)),
+                  "status": str(stats.get("return_status", "")), "solve_time": elapsed}
+        return self._values(out, guess), record
+
+    def _values(self, out: dict[str, Any], guess: dict[str, Any]) -> dict[str, Any]:
+        sol = dict(guess)
+        x = np.asarray(out["x"], float).reshape(-1)
+        for name, index in zip(self.names, self.index, strict=True):
+            value = x[index]
+            sol[name] = (float(value.reshape(-1)[0]) if np.ndim(guess[name]) == 0
                          else value.reshape(np.shape(guess[name])))
-        out["cost"] = float(sol.value(self.cost))
-        out["lam_g"] = np.asarray(sol.value(self.opti.lam_g), float).reshape(-1)
-        return out
+        sol["cost"] = float(out["f"])
+        sol["lam_g"] = np.asarray(out["lam_g"], float).reshape(-1)
+        sol["lam_x"] = np.asarray(out["lam_x"], float).reshape(-1)
+        return sol
 
 
 def _symbolic(value: Any) -> bool:
     """An unknown of the NLP (a builder may give a constant, a float or an array, instead)."""
     return isinstance(value, require_casadi().MX)
+
+
+def off_the_corner(builder: Builder, guess: dict[str, Any], sigma: float) -> dict[str, Any]:
+    """``guess`` with the pairs whose two sides are unknowns (the builder's ``pair_keys``:
+    FESD's ``θ ⟂ λ``) lifted to at least ``√σ / 2`` on both sides, so that the first
+    relaxed solve starts inside its region ``a, b >= 0, a b <= σ`` rather than at the corner
+    ``a = b = 0``, where the product's gradient vanishes (a degenerate start): from the
+    corner IPOPT took 176 iterations on nosnoc's motor at σ = 1, from inside 25, to the same
+    point. A pair with an expression side (a contact's velocity, a Lur'e law's output) is
+    left as given: lifting the block's forces alone (a force with no motion) started its
+    homotopy in a worse local optimum."""
+    floor = 0.5 * float(np.sqrt(sigma))
+    out = dict(guess)
+    pairs = builder.pairs(guess, numpy_ops())
+    for keys in pair_keys(builder, pairs):
+        if keys[0] is None or keys[1] is None:
+            continue
+        for name, j in (*keys[0], *keys[1]):
+            if out[name] is guess[name]:
+                out[name] = np.array(guess[name], dtype=float)
+            at = np.unravel_index(int(j), out[name].shape, order="F")
+            out[name][at] = max(out[name][at], floor)
+    return out
 
 
 def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxation,
@@ -190,7 +283,7 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
         IPOPT failed on a relaxed problem.
     """
     nlp = _NLP(builder, relaxation)
-    guess = {**guess, "lam_g": None}
+    guess = off_the_corner(builder, {**guess, "lam_g": None}, relaxation.sigma0)
     for sigma in relaxation.sigmas():
         sol, record = nlp.solve(guess, sigma)
         stages.append(record)
@@ -202,9 +295,7 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     pairs = builder.pairs(guess, numpy_ops())
     if not relaxation.polish or not sum(a.size for a, _ in pairs):
         return guess, False
-    polish = _NLP(builder, relaxation, [a <= b for a, b in pairs])
-    sol, record = polish.solve({**guess, "lam_g": None}, 0.0)
-    record["sigma"] = "polish"
+    sol, record = nlp.solve(guess, None, [a <= b for a, b in pairs])
     stages.append(record)
     if record["status"] in SOLVED and sol["cost"] <= guess["cost"] + 1e-6 * (
             1.0 + abs(guess["cost"])):

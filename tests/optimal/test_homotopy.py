@@ -1,0 +1,148 @@
+"""The homotopy's one NLP (nscontrol.optimal.homotopy): the complementarity pairs are rows
+whose bounds say the relaxation σ or the polish's branches, so one NLP serves every stage;
+the rows evaluate the builder's pairs (the CasADi and numpy forms of one declaration); the
+polish fixes every unknown once; the first relaxed solve starts off the pairs' corner."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("casadi")
+
+import casadi as ca  # noqa: E402
+
+from nscontrol.optimal import (  # noqa: E402
+    ContactProblem,
+    PushedBlock,
+    Relaxation,
+    SpeedUp,
+    homotopy,
+)
+from nscontrol.optimal.contact import _ContactNLP, active_sets, initial_guess  # noqa: E402
+from nscontrol.optimal.fesd import _SwitchingNLP  # noqa: E402
+
+N = 12
+
+
+@pytest.fixture(scope="module")
+def fesd():
+    builder = _SwitchingNLP(SpeedUp().problem(N))
+    return builder, homotopy._NLP(builder, Relaxation())
+
+
+def _pair_rows(nlp):
+    """Per pair: the rows of a, of b, of a b."""
+    out = []
+    for start, n in nlp.layout:
+        out.append([start + k * n + np.arange(n) for k in range(3)])
+    return out
+
+
+def test_the_rows_evaluate_the_builders_pairs(fesd):
+    """At a random point, the NLP's pair rows are the pairs the builder evaluates on numpy
+    arrays, and their products (the same arithmetic: equal to a few ulps)."""
+    builder, nlp = fesd
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal(nlp.nx)
+    g = np.asarray(ca.Function("g", [nlp.problem["x"]], [nlp.problem["g"]])(x)).ravel()
+    values = {name: x[index] for name, index in zip(nlp.names, nlp.index, strict=True)}
+    values["H"] = values["H"].ravel()
+    pairs = builder.pairs(values, homotopy.numpy_ops())
+    assert len(pairs) == len(nlp.layout) == 2
+    for (a, b), (ra, rb, rab) in zip(pairs, _pair_rows(nlp), strict=True):
+        assert np.array_equal(g[ra], a) and np.array_equal(g[rb], b)
+        assert np.allclose(g[rab], a * b, rtol=4 * np.finfo(float).eps, atol=0.0)
+
+
+def test_relaxed_bounds_are_scholtes(fesd):
+    _, nlp = fesd
+    lbg, ubg = nlp.bounds(1e-4)
+    for ra, rb, rab in _pair_rows(nlp):
+        assert np.all(lbg[ra] == 0) and np.all(ubg[ra] == np.inf)
+        assert np.all(lbg[rb] == 0) and np.all(ubg[rb] == np.inf)
+        assert np.all(lbg[rab] == -np.inf) and np.all(ubg[rab] == 1e-4)
+
+
+def test_the_polish_fixes_every_unknown_once(fesd):
+    """Random branches: the products are free, each pair's kept side stays >= 0, and each
+    unknown the branches set to zero has exactly one equality row (θ and λ are in two pairs
+    each, the element's and the cross one: a second equality on the same unknown would be a
+    dependent constraint), its other zero-side rows free."""
+    builder, nlp = fesd
+    rng = np.random.default_rng(7)
+    branches = [rng.random(n) < 0.5 for _, n in nlp.layout]
+    lbg, ubg = nlp.bounds(None, branches)
+    equalities: dict = {}
+    for i, (ra, rb, rab) in enumerate(_pair_rows(nlp)):
+        assert np.all(lbg[rab] == -np.inf) and np.all(ubg[rab] == np.inf)
+        for rows, keys, zero in ((ra, nlp.keys[i][0], branches[i]),
+                                 (rb, nlp.keys[i][1], ~branches[i])):
+            kept = rows[~zero]
+            assert np.all(lbg[kept] == 0) and np.all(ubg[kept] == np.inf)
+            for j in np.flatnonzero(zero):
+                if lbg[rows[j]] == 0 and ubg[rows[j]] == 0:
+                    equalities[keys[j]] = equalities.get(keys[j], 0) + 1
+                else:
+                    assert lbg[rows[j]] == -np.inf and ubg[rows[j]] == np.inf
+    zeroed = {keys[j] for i, (k0, k1) in enumerate(nlp.keys)
+              for keys, zero in ((k0, branches[i]), (k1, ~branches[i]))
+              for j in np.flatnonzero(zero)}
+    assert set(equalities) == zeroed and set(equalities.values()) == {1}
+
+
+def test_one_nlp_serves_the_whole_homotopy(monkeypatch):
+    """The relaxed stages and the polish are solved on one NLP (σ and the branches are
+    bounds), and the polish starts from the last relaxed solve's multipliers."""
+    built, starts = [], []
+    init, solve = homotopy._NLP.__init__, homotopy._NLP.solve
+
+    def spy_init(self, *args, **kwargs):
+        built.append(self)
+        init(self, *args, **kwargs)
+
+    def spy_solve(self, guess, sigma, branches=None):
+        starts.append(guess.get("lam_g") is not None)
+        return solve(self, guess, sigma, branches)
+
+    monkeypatch.setattr(homotopy._NLP, "__init__", spy_init)
+    monkeypatch.setattr(homotopy._NLP, "solve", spy_solve)
+    plan = SpeedUp().problem(N).solve()
+    stages = plan.stats["stages"]
+    assert len(built) == 1 and stages[-1]["sigma"] == "polish" and plan.stats["polished"]
+    assert starts == [False] + [True] * (len(stages) - 1)
+
+
+def test_the_first_solve_starts_off_the_corner(fesd):
+    """θ ⟂ λ (both unknowns) lifted to √σ0/2 where below, nothing else moved; a contact's
+    pairs (a velocity on one side) left as given."""
+    builder, _ = fesd
+    guess = builder.guess()
+    sigma0 = 1e-2
+    out = homotopy.off_the_corner(builder, guess, sigma0)
+    floor = 0.5 * np.sqrt(sigma0)
+    for name in ("TH", "LAM"):
+        assert np.array_equal(out[name], np.maximum(guess[name], floor))
+        assert out[name] is not guess[name]
+    for name in set(guess) - {"TH", "LAM"}:
+        assert out[name] is guess[name]
+    block = PushedBlock()
+    problem = ContactProblem(block.system(), block.x0, 10, 0.1, x_final=block.x_final)
+    start = initial_guess(problem)
+    contact = _ContactNLP(problem, active_sets(problem, start["X"], start["h"]))
+    lifted = homotopy.off_the_corner(contact, start, sigma0)
+    assert all(lifted[name] is start[name] for name in start)
+
+
+def test_the_warm_solver_reuses_the_cold_ones_derivatives():
+    """The second IPOPT instance (warm-start options) takes the first one's generated
+    functions (the same objects: CasADi's cache), so the Jacobian and the Hessian of the
+    Lagrangian are generated once per homotopy."""
+    nlp = homotopy._NLP(_SwitchingNLP(SpeedUp().problem(N)), Relaxation())
+    cold, warm = nlp.solver(False), nlp.solver(True)
+    assert cold is not warm
+    for name in ("nlp_jac_g", "nlp_hess_l", "nlp_grad_f"):
+        assert hash(cold.get_function(name)) == hash(warm.get_function(name))
+    # a solver built apart generates its own
+    other = homotopy._NLP(_SwitchingNLP(SpeedUp().problem(N)), Relaxation()).solver(False)
+    assert hash(other.get_function("nlp_hess_l")) != hash(cold.get_function("nlp_hess_l"))
