@@ -20,14 +20,14 @@ from nscontrol.optimal import (  # noqa: E402
     homotopy,
 )
 from nscontrol.optimal.contact import _ContactNLP, active_sets, initial_guess  # noqa: E402
-from nscontrol.optimal.fesd import _SwitchingNLP  # noqa: E402
+from nscontrol.optimal.stewart import _FesdNLP  # noqa: E402
 
 N = 12
 
 
 @pytest.fixture(scope="module")
 def fesd():
-    builder = _SwitchingNLP(SpeedUp().problem(N))
+    builder = _FesdNLP(SpeedUp().problem(N).engine())
     return builder, homotopy._NLP(builder, Relaxation())
 
 
@@ -138,11 +138,11 @@ def test_the_warm_solver_reuses_the_cold_ones_derivatives():
     """The second IPOPT instance (warm-start options) takes the first one's generated
     functions (the same objects: CasADi's cache), so the Jacobian and the Hessian of the
     Lagrangian are generated once per homotopy."""
-    nlp = homotopy._NLP(_SwitchingNLP(SpeedUp().problem(N)), Relaxation())
+    nlp = homotopy._NLP(_FesdNLP(SpeedUp().problem(N).engine()), Relaxation())
     cold, warm = nlp.solver(False), nlp.solver(True)
     assert cold is not warm
     for name in ("nlp_jac_g", "nlp_hess_l", "nlp_grad_f"):
         assert hash(cold.get_function(name)) == hash(warm.get_function(name))
     # a solver built apart generates its own
-    other = homotopy._NLP(_SwitchingNLP(SpeedUp().problem(N)), Relaxation()).solver(False)
+    other = homotopy._NLP(_FesdNLP(SpeedUp().problem(N).engine()), Relaxation()).solver(False)
     assert hash(other.get_function("nlp_hess_l")) != hash(cold.get_function("nlp_hess_l"))
