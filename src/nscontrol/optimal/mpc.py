@@ -543,6 +543,11 @@ class _ModeQP:
         ca = require_casadi()
         opti = ca.Opti()
         s, N = mpc.system, mpc.steps
+        if s.friction_dim:
+            # sticking holds both friction rows and the slip speed at zero: the rows held are
+            # dependent and the KKT matrix singular at every sample (measured on the pushed
+            # block: every sample fell back to IPOPT)
+            raise ModelError("system: the mode iteration covers frictionless contacts")
         builder = _TrackingNLP(mpc, np.ones((s.n_contacts, N), bool),
                                opti.parameter(s.n_states))
         var = builder.variables(opti)
