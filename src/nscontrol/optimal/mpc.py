@@ -11,12 +11,33 @@ relaxation ``σ`` are CasADi parameters and the active sets (the contacts each s
 are constraint bounds — on an inactive entry the forces are fixed at zero and the velocity
 condition is free, Moreau–Jean's ``λ = 0`` — so that a sample costs the IPOPT iterations
 alone, whatever contacts it closes. The first sample runs the whole Scholtes homotopy of
-the block's :class:`~nscontrol.optimal.Relaxation` from a cold start; each later sample solves
-**one** relaxed problem at ``σ = relaxation.sigma_min``, warm-started from the shifted plan
-(primal and dual), and no polish. The block's internal state is the record of its last
-solve — wall and CPU time, IPOPT iterations, complementarity residual, active-set rounds,
-cost — so that a closed-loop run keeps it per sample in the trajectory's signal ``xc``
-(:meth:`ContactMPC.signals` names its columns).
+the block's :class:`~nscontrol.optimal.Relaxation` from a cold start.
+
+**The later samples (frictionless contacts): a QP with complementarity.** The model being
+linear, with the active sets fixed a sample's problem is a convex QP (the tracking cost, the
+steps, the input bounds) with the pairs ``0 <= λ ⟂ b >= 0`` (``b`` Newton's velocity
+condition, a linear row). Choosing for each pair the side held at zero — the contact's
+*mode*: ``b = 0 <= λ`` (the impact) or ``λ = 0 <= b`` (no force) — leaves an ordinary QP.
+The mode iteration solves it by an active-set iteration over the modes and the input bounds
+together (:class:`_ModeQP`): start from the modes and bounds of the shifted plan, solve the
+equality-constrained QP of the sides and bounds held (one dense KKT solve, the states
+eliminated by the steps), then hold what the solution violates, release a bound whose
+multiplier has the wrong sign, and hand a pair's zero to its other side when the held
+side's multiplier asks to leave zero (the mode changes); the first few iterations change
+every status found wrong at once (a primal-dual active set), the later ones the worst one
+only. When nothing changes, every pair holds one side exactly at zero, the bounds and the
+other sides hold, and the multipliers of the held sides have their signs: a strongly
+stationary point of the problem with exact complementarity, the QP's optimum for those
+modes. The active sets are then re-derived from the plan and the iteration repeated until
+they agree (``max_rounds``). When it does not settle within ``max_mode_iterations`` KKT
+solves, or a KKT matrix is singular, the sample falls back to IPOPT (one relaxed solve at
+``σ = relaxation.sigma_min`` from the shifted plan); so does every sample of a model with
+friction (sticking holds dependent rows). ``solver="ipopt"`` solves every sample by IPOPT.
+
+The block's internal state is the record of its last solve — wall and CPU time, IPOPT
+iterations, complementarity residual, active-set rounds, cost, the mode iteration's KKT
+solves and whether IPOPT solved the sample — so that a closed-loop run keeps it per sample
+in the trajectory's signal ``xc`` (:meth:`ContactMPC.signals` names its columns).
 """
 
 from __future__ import annotations
@@ -95,6 +116,11 @@ class ContactMPC:
     max_rounds : int
         Solves per sample while the active sets of the plan differ from those it was solved
         with.
+    solver : {"auto", "ipopt"}
+        ``"auto"``: the warm samples of a frictionless model by the mode iteration (the
+        module docstring), IPOPT when it does not settle; ``"ipopt"``: every sample by IPOPT.
+    max_mode_iterations : int
+        KKT solves of the mode iteration per round before the sample falls back to IPOPT.
 
     Raises
     ------
@@ -245,9 +271,11 @@ class ContactMPC:
         Returns
         -------
         ndarray
-            The record (:data:`RECORD`): wall time [s], IPOPT iterations, complementarity
-            residual, active-set rounds, cost, the process's CPU time [s] (on a loaded
-            machine the wall time counts the waits for a core; the CPU time does not).
+            The record (:data:`RECORD`): wall time [s], IPOPT iterations (0 when the mode
+            iteration solved the sample), complementarity residual, active-set rounds, cost,
+            the process's CPU time [s] (on a loaded machine the wall time counts the waits
+            for a core; the CPU time does not), the mode iteration's KKT solves, 1 when IPOPT
+            solved the sample (the first one, a fallback, ``solver="ipopt"``) else 0.
         """
         x = as_vector("x", x, self.system.n_states)   # a measured state may penetrate by roundoff
         start, cpu = time.perf_counter(), time.process_time()
@@ -310,7 +338,7 @@ class ContactMPC:
                 self._qp_built = _ModeQP(self)
             except ModelError:
                 self._qp_built = False
-        return self._qp_built or None
+        return self._qp_built if isinstance(self._qp_built, _ModeQP) else None
 
     @property
     def plan(self) -> dict[str, Any] | None:
@@ -670,7 +698,9 @@ class _ModeQP:
             solved = self._kkt(g, lo, hi, clo, chi, sv, sr)
             if solved is None and last is not None and not last[-1]:
                 # too many rows held at once: back to the last iterate, one change only
-                sv, sr = _one_change(*last[:-1], lo, hi, clo, chi, pa, pb)
+                p_sv, p_sr, p_nv, p_nr, p_y, p_cy, p_mu, p_nu, _ = last
+                sv, sr = _one_change(p_sv, p_sr, p_nv, p_nr, p_y, p_cy, p_mu, p_nu, lo, hi,
+                                     clo, chi, pa, pb)
                 solved = self._kkt(g, lo, hi, clo, chi, sv, sr)
             if solved is None:
                 return None, it
