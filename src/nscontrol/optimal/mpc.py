@@ -184,6 +184,7 @@ class ContactMPC:
         if self.solver not in ("auto", "ipopt"):
             raise ModelError(f"solver: expected 'auto' or 'ipopt', got {self.solver!r}")
         self._qp_built: _ModeQP | bool | None = None
+        self._duals: tuple[FloatArray, FloatArray] | None = None
         self._nlp_built: _ParametricNLP | None = None
         self._guess: dict[str, Any] | None = None
         self._record = np.zeros(len(RECORD))
@@ -297,8 +298,17 @@ class ContactMPC:
         while True:
             rounds += 1
             for sigma in rel.sigmas() if cold else [rel.sigma_min]:
-                guess, its, status = nlp.solve(guess, x, sigma, active)
+                start_from, stale = guess, guess.get("lam_g") is None and \
+                    self._duals is not None
+                if stale:
+                    # a fallback after mode-iteration samples: the last IPOPT multipliers
+                    start_from = {**guess, "lam_g": self._duals[0], "lam_x": self._duals[1]}
+                guess, its, status = nlp.solve(start_from, x, sigma, active)
                 iterations += its
+                if status not in SOLVED and stale:      # again without them
+                    guess, its, status = nlp.solve({**start_from, "lam_g": None}, x, sigma,
+                                                   active)
+                    iterations += its
                 if status not in SOLVED:
                     raise SolverError(f"ContactMPC: IPOPT failed at t = {t:.6g} (σ = "
                                       f"{sigma:.3g}, {status}); try a longer horizon, other "
@@ -308,6 +318,7 @@ class ContactMPC:
                 break
             active = new
         self._guess = guess
+        self._duals = (guess["lam_g"], guess["lam_x"])
         if self.solver == "auto":
             self._mode_qp()                     # built at the first sample, not the second
         res = nlp.residual(guess, active)
