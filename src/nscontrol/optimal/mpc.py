@@ -298,11 +298,11 @@ class ContactMPC:
         while True:
             rounds += 1
             for sigma in rel.sigmas() if cold else [rel.sigma_min]:
-                start_from, stale = guess, guess.get("lam_g") is None and \
-                    self._duals is not None
-                if stale:
+                start_from, duals = guess, self._duals
+                stale = guess.get("lam_g") is None and duals is not None
+                if stale and duals is not None:
                     # a fallback after mode-iteration samples: the last IPOPT multipliers
-                    start_from = {**guess, "lam_g": self._duals[0], "lam_x": self._duals[1]}
+                    start_from = {**guess, "lam_g": duals[0], "lam_x": duals[1]}
                 guess, its, status = nlp.solve(start_from, x, sigma, active)
                 iterations += its
                 if status not in SOLVED and stale:      # again without them
