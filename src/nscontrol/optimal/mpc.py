@@ -579,31 +579,39 @@ class _ModeQP:
     held at a bound (a few dozen unknowns)."""
 
     def __init__(self, mpc: ContactMPC) -> None:
-        ca = require_casadi()
-        opti = ca.Opti()
-        s, N = mpc.system, mpc.steps
-        if s.friction_dim:
+        if mpc.system.friction_dim:
             # sticking holds both friction rows and the slip speed at zero: the rows held are
             # dependent and the KKT matrix singular at every sample (measured on the pushed
             # block: every sample fell back to IPOPT)
             raise ModelError("system: the mode iteration covers frictionless contacts")
-        builder = _TrackingNLP(mpc, np.ones((s.n_contacts, N), bool),
-                               opti.parameter(s.n_states))
-        var = builder.variables(opti)
-        builder.constraints(opti, var)
-        pairs = builder.pairs(var, casadi_ops())
-        keys = pair_keys(builder, pairs)
-        pair_rows, pair_vars = [], []
-        for (a, b), (a_keys, _) in zip(pairs, keys[:len(pairs)], strict=True):
-            if a.numel() and a_keys is None:
-                raise ModelError("system: a pair's first side is not an unknown")
-            first = opti.ng
-            if a.numel():
-                opti.subject_to(b >= 0)
-            pair_rows.append(first + np.arange(b.numel()))
-            pair_vars.append(a_keys or [])
-        opti.minimize(builder.cost(var))
+        opti, var, pair_rows, pair_vars = _qp_transcription(mpc)
         self.names, self.index, self.shapes = _layout(opti, var)
+        A, H, c = self._read(opti, mpc.system.n_states)
+        lb1, ub1 = self._bounds(np.random.default_rng(0).normal(size=mpc.system.n_states))
+        b_rows = np.concatenate(pair_rows) if pair_rows else np.zeros(0, int)
+        eq = (lb1 == ub1) & (self.lb0 == self.ub0)
+        eq[b_rows] = False
+        self._eliminate(A, np.flatnonzero(eq))
+        self.Hy = self.T.T @ H @ self.T
+        self.HT, self.cT = self.T.T @ H, self.T.T @ c
+        self.H, self.c = H, c
+        other = np.setdiff1d(np.arange(A.shape[0]), np.r_[self.rows_D, b_rows])
+        pos, general = self._split_rows(A, other, lb1, ub1)
+        self.n_general = int(general.size)
+        self.rows = np.r_[general, b_rows]
+        self.A_rows = A[self.rows]
+        self.C = self.A_rows @ self.T
+        # the pairs: y index of a, row (in self.rows) of b, per entry in the NLP's order
+        self.pair_a = np.array([pos[self.index[self.names.index(name)][j]]
+                                for keys_ in pair_vars for name, j in keys_], int)
+        self.pair_b = self.n_general + np.arange(b_rows.size)
+
+    def _read(self, opti: Any, n_states: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The rows' Jacobian ``A``, the cost's Hessian ``H`` and gradient at zero ``c``
+        (constant: the model is linear), the cost at zero, and the rows' bounds
+        ``lb(x0) <= A z <= ub(x0)``, affine in the initial state: read off at ``x0 = 0`` and
+        at the unit vectors (an infinite bound stays so)."""
+        ca = require_casadi()
         nx, ng, zero = opti.nx, opti.ng, np.zeros(opti.nx)
         A = np.asarray(ca.Function("A", [opti.x], [ca.jacobian(opti.g, opti.x)])(zero),
                        float).reshape(ng, nx)
@@ -612,64 +620,57 @@ class _ModeQP:
         c = np.asarray(ca.Function("c", [opti.x], [ca.gradient(opti.f, opti.x)])(zero),
                        float).ravel()
         self.f0 = float(ca.Function("f0", [opti.x], [opti.f])(zero))
-        # the rows' bounds lb(x0) <= A z <= ub(x0), affine in the initial state: read off at
-        # x0 = 0 and the unit vectors (an infinite bound stays so)
         bounds = ca.Function("bounds", [opti.x, opti.p], [opti.lbg - opti.g, opti.ubg - opti.g])
 
         def at(x0: FloatArray) -> tuple[FloatArray, FloatArray]:
             lb, ub = bounds(zero, x0)
             return np.asarray(lb, float).ravel(), np.asarray(ub, float).ravel()
 
-        lb0, ub0 = at(np.zeros(s.n_states))
+        self.lb0, self.ub0 = at(np.zeros(n_states))
         with np.errstate(invalid="ignore"):
-            units = [at(e) for e in np.eye(s.n_states)]
-            self.lb_x = np.nan_to_num(np.column_stack([lb - lb0 for lb, _ in units]))
-            self.ub_x = np.nan_to_num(np.column_stack([ub - ub0 for _, ub in units]))
-        self.lb0, self.ub0 = lb0, ub0
-        lb1, ub1 = self._bounds(np.random.default_rng(0).normal(size=s.n_states))
-        b_rows = np.concatenate(pair_rows) if pair_rows else np.zeros(0, int)
-        eq = (lb1 == ub1) & (lb0 == ub0)
-        eq[b_rows] = False
-        # the eliminated unknowns D (the states) and the rows that give them
-        D = self.index[self.names.index("X")]
-        Y = np.setdiff1d(np.arange(nx), D)
-        eq_rows = np.flatnonzero(eq)
+            units = [at(e) for e in np.eye(n_states)]
+            self.lb_x = np.nan_to_num(np.column_stack([lb - self.lb0 for lb, _ in units]))
+            self.ub_x = np.nan_to_num(np.column_stack([ub - self.ub0 for _, ub in units]))
+        return A, H, c
+
+    def _eliminate(self, A: FloatArray, eq_rows: np.ndarray) -> None:
+        """The states ``D`` from the equality rows that determine them (chosen by a pivoted
+        QR): ``z = T y + t(x0)``, ``y`` the other unknowns ``Y``."""
         from scipy.linalg import qr
 
+        D = self.index[self.names.index("X")]
+        Y = np.setdiff1d(np.arange(A.shape[1]), D)
+        if D.size > eq_rows.size:
+            raise ModelError("system: the steps do not determine the states")
         _, R, piv = qr(A[eq_rows][:, D].T, pivoting=True)
-        if D.size > eq_rows.size or np.abs(R[D.size - 1, D.size - 1]) <= 1e-10 * np.abs(R[0, 0]):
+        if np.abs(R[D.size - 1, D.size - 1]) <= 1e-10 * np.abs(R[0, 0]):
             raise ModelError("system: the steps do not determine the states")
         rows_D = eq_rows[np.sort(piv[:D.size])]
         Einv = np.linalg.inv(A[rows_D][:, D])
-        T = np.zeros((nx, Y.size))
+        T = np.zeros((A.shape[1], Y.size))
         T[D] = -Einv @ A[rows_D][:, Y]
         T[Y, np.arange(Y.size)] = 1.0
         self.D, self.Y, self.rows_D, self.Einv, self.T = D, Y, rows_D, Einv, T
-        self.Hy = T.T @ H @ T
-        self.HT, self.cT = T.T @ H, T.T @ c
-        self.H, self.c = H, c
-        # rows on one y alone and constant bounds are bounds of y; the others are rows of y
-        other = np.setdiff1d(np.arange(ng), np.r_[rows_D, b_rows])
+
+    def _split_rows(self, A: FloatArray, other: np.ndarray, lb1: FloatArray,
+                    ub1: FloatArray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows on one ``y`` alone with constant bounds become bounds of ``y`` (``lo``,
+        ``hi``); the others stay rows. Returns each unknown's position in ``y`` (-1 for a
+        state) and the rows that stay."""
+        lb0, ub0 = self.lb0, self.ub0
         nnz = A[other] != 0.0
-        single = (nnz.sum(axis=1) == 1) & ~nnz[:, D].any(axis=1) & (lb0[other] == lb1[other]) \
-            & (ub0[other] == ub1[other]) & (lb0[other] < ub0[other])
-        self.lo, self.hi = np.full(Y.size, -np.inf), np.full(Y.size, np.inf)
-        pos = np.full(nx, -1)
-        pos[Y] = np.arange(Y.size)
+        single = (nnz.sum(axis=1) == 1) & ~nnz[:, self.D].any(axis=1) \
+            & (lb0[other] == lb1[other]) & (ub0[other] == ub1[other]) \
+            & (lb0[other] < ub0[other])
+        self.lo, self.hi = np.full(self.Y.size, -np.inf), np.full(self.Y.size, np.inf)
+        pos = np.full(A.shape[1], -1)
+        pos[self.Y] = np.arange(self.Y.size)
         for r in other[single]:
             j = int(np.flatnonzero(A[r])[0])
             lo, hi = lb0[r] / A[r, j], ub0[r] / A[r, j]
             lo, hi = (hi, lo) if A[r, j] < 0 else (lo, hi)
             self.lo[pos[j]], self.hi[pos[j]] = max(self.lo[pos[j]], lo), min(self.hi[pos[j]], hi)
-        self.rows = np.r_[other[~single], b_rows]
-        self.n_general = int((~single).sum())
-        self.A_rows = A[self.rows]
-        self.C = self.A_rows @ T
-        # the pairs: y index of a, row (in self.rows) of b, per entry in the NLP's order
-        self.pair_a = np.array([pos[self.index[self.names.index(name)][j]]
-                                for keys_ in pair_vars for name, j in keys_], int)
-        self.pair_b = self.n_general + np.arange(b_rows.size)
-        self.n_contacts = s.n_contacts
+        return pos, other[~single]
 
     def _bounds(self, x0: FloatArray) -> tuple[FloatArray, FloatArray]:
         return self.lb0 + self.lb_x @ x0, self.ub0 + self.ub_x @ x0
@@ -828,3 +829,29 @@ def _one_change(sv: np.ndarray, sr: np.ndarray, new_v: np.ndarray, new_r: np.nda
         out_r[ir] = new_r[ir]
     out_v[pa[k]], out_r[pb[k]] = new_v[pa[k]], new_r[pb[k]]    # a mode changes both sides
     return out_v, out_r
+
+
+def _qp_transcription(mpc: ContactMPC) -> tuple[Any, dict[str, Any], list[np.ndarray],
+                                                list[list[Any]]]:
+    """The tracking transcription with every contact of every step, each pair's second side
+    a row ``b >= 0`` and no product: the Opti problem, its unknowns, the rows of the second
+    sides and the unknowns of the first, per pair."""
+    ca = require_casadi()
+    opti = ca.Opti()
+    s, N = mpc.system, mpc.steps
+    builder = _TrackingNLP(mpc, np.ones((s.n_contacts, N), bool), opti.parameter(s.n_states))
+    var = builder.variables(opti)
+    builder.constraints(opti, var)
+    pairs = builder.pairs(var, casadi_ops())
+    keys = pair_keys(builder, pairs)
+    pair_rows, pair_vars = [], []
+    for (a, b), (a_keys, _) in zip(pairs, keys[:len(pairs)], strict=True):
+        if a.numel() and a_keys is None:
+            raise ModelError("system: a pair's first side is not an unknown")
+        first = opti.ng
+        if a.numel():
+            opti.subject_to(b >= 0)
+        pair_rows.append(first + np.arange(b.numel()))
+        pair_vars.append(a_keys or [])
+    opti.minimize(builder.cost(var))
+    return opti, var, pair_rows, pair_vars
