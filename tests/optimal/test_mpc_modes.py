@@ -113,3 +113,32 @@ def test_solver_refusals_name_the_argument():
         block(CART.system(), solver="qp")
     with pytest.raises(ModelError, match="max_mode_iterations"):
         block(CART.system(), max_mode_iterations=0)
+
+
+def test_dependent_rows_held_are_solved_without_ipopt():
+    """The frictionless block resting on its floor with the terminal equality x_N = x*: the
+    floor's velocity rows held at zero already imply the terminal y and y', so the KKT
+    matrix has dependent rows. They are consistent; the least-norm solve keeps the sample
+    in the mode iteration, and the plan matches the IPOPT block's within cond(H_uu) × (1e-6
+    + pairs × σ) × (1 + |u|), as above."""
+    from nscontrol.optimal import PushedBlock
+    from nscontrol.systems import LagrangianSystem
+
+    pushed = PushedBlock(mass=1.0, mu=0.5, distance=1.0)
+    plant = LagrangianSystem(np.eye(2), constant_force=[0.0, -9.81], gap_matrix=[[0.0, 1.0]],
+                             gap_offset=[0.0], actuation=[[1.0], [0.0]], names=("x", "y"))
+    kw = dict(state_weight=[10.0, 0.0, 1.0, 0.0], effort=1e-2, u_min=-15.0, u_max=15.0)
+    mpc = ContactMPC(plant, pushed.x_final, 25, 0.04, **kw)
+    ip = ContactMPC(plant, pushed.x_final, 25, 0.04, solver="ipopt",
+                    relaxation=Relaxation(sigma_min=1e-8, tol=1e-10), **kw)
+    traj = nsc.simulate(nsc.closed_loop(plant, ip), pushed.x0, (0.0, 0.4), method="moreau_jean",
+                        h=0.04, progress=False)
+    got, records = [], []
+    for x in traj.x[:-1]:
+        records.append(mpc.solve(x))
+        got.append(mpc.plan["U"][0, 0])
+    warm = np.array(records)[1:]
+    assert np.all(warm[:, COL["ipopt"]] == 0.0) and warm[:, COL["residual"]].max() <= 1e-9
+    bound = input_condition(mpc) * (1e-6 + 25 * 1e-8) * (1.0 + 15.0)
+    assert np.abs(np.array(got) - traj.signals["u"][1:, 0]).max() <= bound
+    assert bound < 1.0                                       # against 15 N

@@ -43,6 +43,7 @@ in the trajectory's signal ``xc`` (:meth:`ContactMPC.signals` names its columns)
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -770,10 +771,7 @@ class _ModeQP:
         K[nf:, :nf] = CW[:, F]
         fixed = ~F
         rhs = np.r_[-(g[F] + self.Hy[np.ix_(F, fixed)] @ y[fixed]), cw - CW[:, fixed] @ y[fixed]]
-        try:
-            sol = np.linalg.solve(K, rhs)
-        except np.linalg.LinAlgError:
-            return None
+        sol = _kkt_solve(K, rhs)
         if not np.all(np.isfinite(sol)) or np.abs(K @ sol - rhs).max(initial=0.0) > 1e-9 * (
                 1.0 + np.abs(rhs).max(initial=0.0)
                 + np.abs(K).max(initial=0.0) * np.abs(sol).max(initial=0.0)):
@@ -784,6 +782,24 @@ class _ModeQP:
         mu = self.Hy @ y + g - CW.T @ nu[W]
         mu[F] = 0.0
         return y, mu, nu
+
+
+def _kkt_solve(K: FloatArray, rhs: FloatArray) -> FloatArray:
+    """``K s = rhs`` by LU; when a pivot is below ``1e-11`` of the largest (rows held that
+    are dependent, e.g. a terminal equality the contact rows already imply), the least-norm
+    solution of a pivoted QR instead (a consistent system keeps a small residual, which the
+    caller checks)."""
+    from scipy.linalg import LinAlgWarning, lstsq, lu_factor, lu_solve
+
+    if K.size == 0:
+        return np.zeros(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LinAlgWarning)      # a zero pivot: handled below
+        lu, piv = lu_factor(K, check_finite=False)
+    d = np.abs(np.diag(lu))
+    if np.all(np.isfinite(d)) and d.min() > 1e-11 * d.max():
+        return np.asarray(lu_solve((lu, piv), rhs, check_finite=False))
+    return np.asarray(lstsq(K, rhs, cond=1e-11, lapack_driver="gelsy", check_finite=False)[0])
 
 
 def _update(status: np.ndarray, value: FloatArray, mult: FloatArray, lo: FloatArray,
