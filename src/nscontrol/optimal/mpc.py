@@ -30,9 +30,11 @@ other sides hold, and the multipliers of the held sides have their signs: a stro
 stationary point of the problem with exact complementarity, the QP's optimum for those
 modes. The active sets are then re-derived from the plan and the iteration repeated until
 they agree (``max_rounds``). When it does not settle within ``max_mode_iterations`` KKT
-solves, or a KKT matrix is singular, the sample falls back to IPOPT (one relaxed solve at
-``σ = relaxation.sigma_min`` from the shifted plan); so does every sample of a model with
-friction (sticking holds dependent rows). ``solver="ipopt"`` solves every sample by IPOPT.
+solves, or a KKT system has no solution (held rows that contradict each other; dependent
+but consistent ones are solved by least norm), the sample falls back to IPOPT (one relaxed
+solve at ``σ = relaxation.sigma_min`` from the shifted plan and the last IPOPT multipliers);
+so does every sample of a model with friction (the iteration did not settle on the
+sticking of the pushed block). ``solver="ipopt"`` solves every sample by IPOPT.
 
 The block's internal state is the record of its last solve — wall and CPU time, IPOPT
 iterations, complementarity residual, active-set rounds, cost, the mode iteration's KKT
@@ -581,9 +583,8 @@ class _ModeQP:
 
     def __init__(self, mpc: ContactMPC) -> None:
         if mpc.system.friction_dim:
-            # sticking holds both friction rows and the slip speed at zero: the rows held are
-            # dependent and the KKT matrix singular at every sample (measured on the pushed
-            # block: every sample fell back to IPOPT)
+            # sticking holds both friction rows and the slip speed at zero together; measured
+            # on the pushed block, every sample fell back to IPOPT, after up to 36 KKT solves
             raise ModelError("system: the mode iteration covers frictionless contacts")
         opti, var, pair_rows, pair_vars = _qp_transcription(mpc)
         self.names, self.index, self.shapes = _layout(opti, var)
@@ -680,7 +681,7 @@ class _ModeQP:
               max_iter: int) -> tuple[dict[str, Any] | None, int]:
         """The plan from ``x0`` with the active sets ``active``, the modes and bounds held
         first where ``guess`` has them; ``(None, iterations)`` when the iteration does not
-        settle within ``max_iter`` KKT solves or a KKT matrix is singular."""
+        settle within ``max_iter`` KKT solves or a KKT system has no solution."""
         lb, ub = self._bounds(x0)
         t = np.zeros(self.T.shape[0])
         t[self.D] = self.Einv @ lb[self.rows_D]
@@ -758,7 +759,7 @@ class _ModeQP:
              ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """The equality-constrained QP of the statuses: ``y`` and the multipliers of the
         bounds (``mu``) and rows (``nu``) held, ``H y + g = mu + Cᵀ nu`` (zero where not
-        held); ``None`` when its KKT matrix is singular."""
+        held); ``None`` when the KKT system has no solution (its residual not small)."""
         F = sv == 0
         y = np.where(sv < 0, lo, np.where(sv > 0, hi, 0.0))
         W = np.flatnonzero(sr != 0)
