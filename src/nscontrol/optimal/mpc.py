@@ -694,7 +694,9 @@ class _ModeQP:
         pa, pb = self.pair_a, self.pair_b
         lo[pa], hi[pa] = 0.0, np.where(on, np.inf, 0.0)
         clo[pb], chi[pb] = np.where(on, clo[pb], -np.inf), np.inf
-        # the first statuses (-1 at the lower bound, +1 at the upper, 0 free) from the guess
+        # the first statuses (-1 at the lower bound, +1 at the upper, 0 free) from the guess;
+        # they only choose where the iteration starts (a wrong one is corrected by it), so
+        # the margin 1e-6 only needs to exceed IPOPT's distance to a bound it reached
         y = _pack(self.names, self.index, self.T.shape[0], guess)[self.Y]
         scale_y = 1.0 + np.abs(np.where(np.isfinite(lo), lo, 0.0)) \
             + np.abs(np.where(np.isfinite(hi), hi, 0.0))
