@@ -169,5 +169,6 @@ def test_contact_implicit_mpc_settles_where_linear_mpc_loses_the_pole():
     assert PARAMETERS["fallen_angle"] >= np.pi / 2           # past the horizontal
     sig = mpc.signals(traj)
     assert sig["t"].size == round(PARAMETERS["T"] / PARAMETERS["h"])
-    assert np.all(sig["cpu_time"] > 0) and np.all(sig["iterations"] >= 1)
+    assert np.all(sig["cpu_time"] > 0)
+    assert np.all(sig["iterations"] + sig["mode_iterations"] >= 1)
     assert sig["residual"].max() <= 1e-3      # relaxed at σ = 1e-6: √σ at most
