@@ -305,6 +305,14 @@ def _x_bound(name: str, value: Any, n: int) -> FloatArray | None:
     return arr
 
 
+def _check_equilibration(weight: Any, form: Any) -> float:
+    """The step equilibration weight ``ρ >= 0``, once ``form`` is checked to be ``"mean"``
+    or ``"delta"`` (:class:`FesdProblem` and the fronts over it)."""
+    if form not in ("mean", "delta"):
+        raise ModelError(f"equilibration_form: expected 'mean' or 'delta', got {form!r}")
+    return check_positive("equilibration", weight, allow_zero=True)
+
+
 @dataclass(frozen=True, eq=False)
 class FesdProblem:
     """Optimal control of a piecewise-smooth system in Stewart's form by FESD (the module
@@ -411,11 +419,8 @@ class FesdProblem:
             raise ModelError(f"element_bounds: ({lo:g}, {hi:g}) must hold the uniform length "
                              "strictly inside (low < 1 < high)")
         set_(self, "element_bounds", (lo, hi))
-        set_(self, "equilibration", check_positive("equilibration", self.equilibration,
-                                                   allow_zero=True))
-        if self.equilibration_form not in ("mean", "delta"):
-            raise ModelError(f"equilibration_form: expected 'mean' or 'delta', got "
-                             f"{self.equilibration_form!r}")
+        set_(self, "equilibration", _check_equilibration(self.equilibration,
+                                                        self.equilibration_form))
         set_(self, "traced", _Traced(layers, n, p, self.stage_cost, self.terminal_cost))
 
     @property
