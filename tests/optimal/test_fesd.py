@@ -142,3 +142,19 @@ def test_step_equilibration_is_the_engines_option():
         replace(base, equilibration_form="exact")
     with pytest.raises(ModelError, match="^equilibration"):
         replace(base, equilibration=-1.0)
+
+
+def test_cold_homotopy_reaches_the_closed_form():
+    """``warm_homotopy=False`` (each relaxed solve from the previous primal point only) is
+    the same transcription solved along another path: SpeedUp's optimum is unique (J(s) is
+    convex), so it ends on the closed-form switch, to the solver's tolerance as the warm
+    path does (1e-8)."""
+    base = CASE.problem(10)
+    cold = replace(base, warm_homotopy=False)
+    assert cold.engine().warm_homotopy is False
+    plan = cold.solve()
+    (ts,) = plan.switch_times([1.0], 0.0)
+    assert abs(ts - CASE.switch_time()) <= 1e-8
+    assert plan.cost == pytest.approx(base.solve().cost, rel=1e-8)
+    with pytest.raises(ModelError, match="^warm_homotopy"):
+        replace(base, warm_homotopy="no")

@@ -136,6 +136,9 @@ class SwitchingProblem:
         As :class:`~.stewart.FesdProblem`'s; ``"delta"`` penalises the differences of
         the lengths *within* a stage, so with this problem's one element per input it adds
         nothing (as nosnoc's ``HEURISTIC_DELTA`` with one finite element per stage).
+    warm_homotopy : bool
+        As :class:`~.stewart.FesdProblem`'s (``False``: each relaxed solve cold from the
+        previous primal solution).
 
     Raises
     ------
@@ -160,6 +163,7 @@ class SwitchingProblem:
     element_bounds: tuple[float, float] = (0.1, 10.0)
     equilibration: float = 0.0
     equilibration_form: str = "mean"
+    warm_homotopy: bool = True
     n: int = field(init=False)
 
     def __post_init__(self) -> None:
@@ -188,6 +192,7 @@ class SwitchingProblem:
         set_(self, "element_bounds", (lo, hi))
         set_(self, "equilibration", _check_equilibration(self.equilibration,
                                                         self.equilibration_form))
+        set_(self, "warm_homotopy", check_bool("warm_homotopy", self.warm_homotopy))
 
     def engine(self) -> FesdProblem:
         """The general FESD problem this one is (:mod:`.stewart`): one layer of two affine
@@ -213,7 +218,8 @@ class SwitchingProblem:
                            u_max=self.u_max, switch_detection=self.switch_detection,
                            equidistant_control_grid=False, element_bounds=self.element_bounds,
                            equilibration=self.equilibration,
-                           equilibration_form=self.equilibration_form)
+                           equilibration_form=self.equilibration_form,
+                           warm_homotopy=self.warm_homotopy)
 
     def solve(self, relaxation: Relaxation | None = None, *,
               guess: ArrayLike | None = None) -> SwitchingPlan:
