@@ -230,7 +230,8 @@ def _published(got: dict, ours: dict) -> Iterator[dict]:
         "same_problem": rel_from_ref <= 1e-6},
         "nosnoc's example discretised as ours (implicit Euler, one element per input, free "
         "lengths within nosnoc's gamma_h bounds), both from nosnoc's start (at rest) and "
-        "homotopy (sigma from 1); equal optimum: costs within 1e-6 relative (both solved to "
+        "homotopy (sigma from 1, each relaxation cold from the previous primal point); equal "
+        "optimum: costs within 1e-6 relative (both solved to "
         "complementarity <= 1e-8); a non-convex problem: the two may stop in different local "
         "optima, and ours started from nosnoc's plan tells whether the problems are the same")
     osc, ref = ours["oscillator"], got["oscillator"]
