@@ -116,3 +116,45 @@ def test_from_rest_bounded_inputs_and_element_bounds():
     assert bounded.cost > plan.cost          # a binding bound costs
     with pytest.raises(ModelError, match="^element_bounds"):
         replace(base, element_bounds=(1.0, 2.0))
+
+
+def test_step_equilibration_is_the_engines_option():
+    """SwitchingProblem passes its step equilibration to the engine. ``"mean"`` can only
+    draw the lengths toward ``T/N`` (an optimum of ``J + ρP`` has ``P`` no larger than at
+    the optimum of ``J``, SpeedUp's being unique); ``"delta"`` penalises differences within
+    a stage, and each input here has one element: the plan is the unpenalised one, to the
+    solver's tolerance (1e-8 on the lengths: IPOPT's tol 1e-10 on a problem whose lengths
+    condition the switch time by O(N))."""
+    N2 = 10
+    base = CASE.problem(N2)
+    mean = replace(base, equilibration=1.0)
+    assert mean.engine().equilibration == 1.0
+    assert mean.engine().equilibration_form == "mean"
+    hbar = CASE.T / N2
+    spread = [float(np.sum((np.diff(p.solve().t) - hbar) ** 2))
+              for p in (base, mean)]
+    assert spread[1] <= spread[0] + 1e-12
+    assert spread[1] < spread[0]           # the penalty binds: lengths move
+    plain, delta = (p.solve() for p in (base, replace(base, equilibration=1.0,
+                                                       equilibration_form="delta")))
+    assert np.max(np.abs(plain.t - delta.t)) <= 1e-8
+    with pytest.raises(ModelError, match="^equilibration_form"):
+        replace(base, equilibration_form="exact")
+    with pytest.raises(ModelError, match="^equilibration"):
+        replace(base, equilibration=-1.0)
+
+
+def test_cold_homotopy_reaches_the_closed_form():
+    """``warm_homotopy=False`` (each relaxed solve from the previous primal point only) is
+    the same transcription solved along another path: SpeedUp's optimum is unique (J(s) is
+    convex), so it ends on the closed-form switch, to the solver's tolerance as the warm
+    path does (1e-8)."""
+    base = CASE.problem(10)
+    cold = replace(base, warm_homotopy=False)
+    assert cold.engine().warm_homotopy is False
+    plan = cold.solve()
+    (ts,) = plan.switch_times([1.0], 0.0)
+    assert abs(ts - CASE.switch_time()) <= 1e-8
+    assert plan.cost == pytest.approx(base.solve().cost, rel=1e-8)
+    with pytest.raises(ModelError, match="^warm_homotopy"):
+        replace(base, warm_homotopy="no")

@@ -46,7 +46,7 @@ from .._validation import (
 from ..errors import DimensionError, ModelError
 from ._casadi import require_casadi
 from .contact import Relaxation, _bound, _vector_with_nan
-from .stewart import FesdProblem, StewartSystem, _sign_changes
+from .stewart import FesdProblem, StewartSystem, _check_equilibration, _sign_changes
 
 __all__ = ["SwitchingProblem", "SwitchingPlan"]
 
@@ -129,6 +129,16 @@ class SwitchingProblem:
     element_bounds : (float, float)
         With switch detection, each element's length within these multiples of ``T / N``
         (``0 < low < 1 < high``).
+    equilibration : float
+        Step equilibration weight ``ρ >= 0`` (:class:`~.stewart.FesdProblem`'s): with
+        ``equilibration_form="mean"`` the objective gains ``ρ Σ_k (h_k - T/N)²``.
+    equilibration_form : {"mean", "delta"}
+        As :class:`~.stewart.FesdProblem`'s; ``"delta"`` penalises the differences of
+        the lengths *within* a stage, so with this problem's one element per input it adds
+        nothing (as nosnoc's ``HEURISTIC_DELTA`` with one finite element per stage).
+    warm_homotopy : bool
+        As :class:`~.stewart.FesdProblem`'s (``False``: each relaxed solve cold from the
+        previous primal solution).
 
     Raises
     ------
@@ -151,6 +161,9 @@ class SwitchingProblem:
     u_min: Any = None
     u_max: Any = None
     element_bounds: tuple[float, float] = (0.1, 10.0)
+    equilibration: float = 0.0
+    equilibration_form: str = "mean"
+    warm_homotopy: bool = True
     n: int = field(init=False)
 
     def __post_init__(self) -> None:
@@ -177,6 +190,9 @@ class SwitchingProblem:
             raise ModelError(f"element_bounds: ({lo:g}, {hi:g}) must hold the uniform length "
                              "strictly inside (low < 1 < high)")
         set_(self, "element_bounds", (lo, hi))
+        set_(self, "equilibration", _check_equilibration(self.equilibration,
+                                                        self.equilibration_form))
+        set_(self, "warm_homotopy", check_bool("warm_homotopy", self.warm_homotopy))
 
     def engine(self) -> FesdProblem:
         """The general FESD problem this one is (:mod:`.stewart`): one layer of two affine
@@ -200,7 +216,10 @@ class SwitchingProblem:
         return FesdProblem(layer, self.x0, self.T, self.elements, elements=1,
                            inputs=self.B.shape[1], x_final=self.x_final, u_min=self.u_min,
                            u_max=self.u_max, switch_detection=self.switch_detection,
-                           equidistant_control_grid=False, element_bounds=self.element_bounds)
+                           equidistant_control_grid=False, element_bounds=self.element_bounds,
+                           equilibration=self.equilibration,
+                           equilibration_form=self.equilibration_form,
+                           warm_homotopy=self.warm_homotopy)
 
     def solve(self, relaxation: Relaxation | None = None, *,
               guess: ArrayLike | None = None) -> SwitchingPlan:

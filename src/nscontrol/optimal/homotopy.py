@@ -273,9 +273,15 @@ def off_the_corner(builder: Builder, guess: dict[str, Any], sigma: float) -> dic
 
 
 def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxation,
-                   stages: list[dict[str, Any]]) -> tuple[dict[str, Any], bool]:
+                   stages: list[dict[str, Any]], *, warm: bool = True
+                   ) -> tuple[dict[str, Any], bool]:
     """The relaxed solves along ``relaxation.sigmas()`` then the polish; the records are
     appended to ``stages``. Returns the solution and whether the polish was kept.
+
+    With ``warm`` each relaxed solve starts from the previous one's primal and dual
+    solution at a small barrier (:data:`WARM_OPTIONS`); without, from its primal solution
+    alone at IPOPT's default barrier, which lets the iterate leave the branch the first
+    relaxations chose (more iterations; the polish is warm either way).
 
     Raises
     ------
@@ -285,7 +291,7 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     nlp = _NLP(builder, relaxation)
     guess = off_the_corner(builder, {**guess, "lam_g": None}, relaxation.sigma0)
     for sigma in relaxation.sigmas():
-        sol, record = nlp.solve(guess, sigma)
+        sol, record = nlp.solve(guess if warm else {**guess, "lam_g": None}, sigma)
         stages.append(record)
         if record["status"] not in SOLVED:
             raise SolverError(f"optimal: IPOPT failed on the relaxation σ = {sigma:.3g} "
