@@ -172,7 +172,7 @@ class LCPResult(tuple):
         fields = ", ".join(f"{name}={getattr(self, name)!r}" for name in _RESULT_FIELDS)
         return f"LCPResult({fields})"
 
-    def __getnewargs__(self) -> tuple[Any, ...]:  # type: ignore[override]
+    def __getnewargs__(self) -> tuple[Any, ...]:
         return tuple(getattr(self, name) for name in _RESULT_FIELDS)
 
     # a record, not a sequence: its fields are read by name
@@ -380,17 +380,16 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
-    if (z0 is None and type(M) is np.ndarray and type(q) is np.ndarray and type(tol) is float
-            and type(omega) is float and (strict is False or strict is True)
-            and type(method) is str):
+    if (z0 is None and type(q) is np.ndarray and type(tol) is float and type(omega) is float
+            and (strict is False or strict is True) and type(method) is str):
         # the per-call path: LCPSolver's analysis and chain, in one compiled call whose
-        # signature checks the types (a TypeError sends other kinds to the general path)
-        # and whose first lines check the shapes and the options
+        # signature checks the types of M and q (a TypeError sends other kinds to the
+        # general path) and whose first lines check the shapes and the options
         entry = _DENSE_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_dense()
         code = _METHOD_CODES.get(method, -1)
-        limit = (0 if max_iter is None else max_iter
-                 if type(max_iter) is int and max_iter >= 1 else -1)
-        if entry is not None and code >= 0 and limit != -1:
+        limit = 0 if max_iter is None else (
+            max_iter if type(max_iter) is int and max_iter >= 1 else -1)
+        if entry is not None and code >= 0 and limit >= 0:
             n = q.size
             buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
             try:
