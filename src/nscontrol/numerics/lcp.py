@@ -196,7 +196,7 @@ def _log_result(buf: NDArray[np.float64], n: int, code: int, nlog: int, its: int
     termination if there was one (for copositive-plus ``M`` a certificate that the LCP is
     infeasible), else the last run (what :func:`_choose` picks). Its message is formatted
     from the log when read."""
-    buf.setflags(write=False)
+    buf.setflags(False)
     if code != kernels.SOLVED:
         log = buf[2 * n + 2 * n:2 * n + 2 * n + _LOG_SIZE]
         for k in range(nlog - 1):
@@ -399,7 +399,7 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
             first = _FIRST_SOLVED.get(state)
             if first is not None:
                 # the first run was verified: the buffer is the result's (z, w and the log)
-                buf.setflags(write=False)
+                buf.setflags(False)        # read-only (write=False; positional: cheaper)
                 return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
                                               first, 1, tolerance, buf))
             code, run, tried, nlog, extreme = dispatch.unpack_state(state)
@@ -627,7 +627,7 @@ class LCPSolver:
             state, its, res, tolerance = out
             first = _FIRST_SOLVED.get(state)
             if first is not None:
-                buf.setflags(write=False)          # z, w and the log are the result's
+                buf.setflags(False)          # z, w and the log are the result's
                 return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
                                               first, 1, tolerance, buf))
             if state == _UNCHECKED_STATE:
