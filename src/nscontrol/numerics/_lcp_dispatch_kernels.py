@@ -499,6 +499,9 @@ RESCALE_EXPONENT = 64
 #: Bit of a checked entry's state (:func:`pack_out`): the rescaled retry may apply (extreme
 #: scales, or a matrix the entry could not look at).
 EXTREME = 1 << 16
+#: Bit of a checked entry's state (:func:`pack_out`): the answer is Lemke's ray, an earlier
+#: run than the last.
+RAY_CHOSEN = 1 << 17
 
 
 @njit(cache=True)
@@ -520,18 +523,50 @@ def scale_exponents(values, q):
 
 
 @njit(cache=True, inline='always')
-def pack_out(out, M, q, has_dense):
+def ray_row(work, n, nlog, code):
+    """The log row of the run that is the answer of a chain that verified none (``code``
+    not :data:`SOLVED`) when it is Lemke's ray (for copositive-plus ``M`` a certificate that
+    the LCP is infeasible; its point is kept in ``work[:2 n]``), else -1: the answer is
+    then the last run's."""
+    if code != SOLVED:
+        for k in range(nlog):
+            if work[2 * n + LOG_WIDTH * k + 1] == RAY_TERMINATION:
+                return k
+    return -1
+
+
+@njit(cache=True, inline='always')
+def pack_out(out, M, q, has_dense, buf):
     """A chain's tuple ``(code, run, iterations, residual, tolerance, tried, nlog)`` as the
     four numbers a caller in Python reads back, ``(state, iterations, residual,
     tolerance)``: ``state`` packs ``code + 8`` (bits 0-3), ``run + 1`` (4-7), ``nlog + 1``
     (8-11), ``tried`` (12-15) and :data:`EXTREME` when no run was verified and the rescaled
     retry may apply (:func:`scale_exponents`; always without a dense ``M`` to look at).
-    Four boxed numbers instead of seven, and one comparison for the common outcome."""
+    Four boxed numbers instead of seven, and one comparison for the common outcome.
+
+    When the chain ended without a verified run and the answer is Lemke's ray rather than
+    the last run (:func:`ray_row`; the point in ``buf[2 n:4 n]``), ``state`` has
+    :data:`RAY_CHOSEN`, and ``run``, ``iterations``, ``residual`` and ``tolerance`` are the
+    ray's (unless :data:`EXTREME`: the caller in Python then reads the whole log)."""
     code, run, its, res, tolerance, tried, nlog = out
-    state = (code + 8) | (run + 1) << 4 | (nlog + 1) << 8 | tried << 12
+    extreme = False
+    ray = -1
     if code != SOLVED and nlog > 0:
-        if not has_dense or scale_exponents(M, q)[2]:
-            state |= EXTREME
+        extreme = not has_dense or scale_exponents(M, q)[2]
+        if not extreme:
+            n = q.shape[0]
+            ray = ray_row(buf[2 * n:], n, nlog, code)
+            if ray >= 0 and ray < nlog - 1:
+                row = 4 * n + LOG_WIDTH * ray
+                run, its, res, tolerance = int(buf[row]), int(buf[row + 2]), buf[row + 3], \
+                    buf[row + 4]
+            else:
+                ray = -1
+    state = (code + 8) | (run + 1) << 4 | (nlog + 1) << 8 | tried << 12
+    if extreme:
+        state |= EXTREME
+    if ray >= 0:
+        state |= RAY_CHOSEN
     return state, its, res, tolerance
 
 
@@ -562,8 +597,9 @@ def solve_dense_checked(M, q, buf, method, tol, max_iter, omega):
     if not (M.shape[0] == n and M.shape[1] == n and buf.shape[0] == buffer_size(n)
             and 0 <= method <= AUTO and method != PGS_AUTO and method != PGS_FALLBACK
             and _options_ok(tol, max_iter, omega)):
-        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), M, q, True)
-    return pack_out(solve_dense_into(M, q, buf, method, tol, max_iter, omega), M, q, True)
+        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), M, q, True, buf)
+    return pack_out(solve_dense_into(M, q, buf, method, tol, max_iter, omega), M, q, True,
+                    buf)
 
 
 @njit(cache=True)
@@ -572,9 +608,9 @@ def solve_packed_checked(M, lower, diag, upper, q, buf, bits, tol, max_iter, ome
     (:func:`buffer_size`): :data:`UNCHECKED` when it differs; the outcome packed by
     :func:`pack_out`."""
     if buf.shape[0] != buffer_size(q.shape[0]):
-        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), M, q, True)
+        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), M, q, True, buf)
     return pack_out(solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega),
-                    M, q, (bits >> 6) & 1 == 1)
+                    M, q, (bits >> 6) & 1 == 1, buf)
 
 
 _F64_2D = types.Array(types.float64, 2, "C")
@@ -645,17 +681,16 @@ def solve_lcp_kernel(M, q, z, w, tol, max_iter):
     if code == Q_NOT_FINITE or nlog < 0:
         return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan
     work = buf[2 * n:]
-    if code != SOLVED:
-        # Lemke's ray, when there was one, is the answer (for copositive-plus M: infeasible)
+    ray = ray_row(work, n, nlog, code)
+    if ray >= 0:
+        # Lemke's ray is the answer (for copositive-plus M: infeasible)
         log = work[2 * n:]
-        for k in range(nlog):
-            if log[LOG_WIDTH * k + 1] == RAY_TERMINATION:
-                row = LOG_WIDTH * k
-                for i in range(n):
-                    z[i] = work[i]
-                    w[i] = work[n + i]
-                return (RAY_TERMINATION, int(log[row]), int(log[row + 2]), log[row + 3],
-                        log[row + 4])
+        row = LOG_WIDTH * ray
+        for i in range(n):
+            z[i] = work[i]
+            w[i] = work[n + i]
+        return (RAY_TERMINATION, int(log[row]), int(log[row + 2]), log[row + 3],
+                log[row + 4])
     for i in range(n):
         z[i] = buf[i]
         w[i] = buf[n + i]

@@ -188,30 +188,37 @@ _RESULT_FIELDS = ("z", "w", "status", "iterations", "residual", "method", "messa
                   "tolerance")
 
 
-def _log_result(buf: NDArray[np.float64], n: int, code: int, nlog: int, its: int,
-                res: float, tolerance: float) -> LCPResult:
+def _log_result(buf: NDArray[np.float64], n: int, state: int, its: int, res: float,
+                tolerance: float) -> LCPResult:
     """The result of a compiled chain that needs nothing more from Python (no hand-off, no
-    rescaled retry), read from its buffer ``buf`` (:func:`dispatch.buffer_size`), which
-    becomes the result's, read-only: the last run if verified; otherwise Lemke's ray
-    termination if there was one (for copositive-plus ``M`` a certificate that the LCP is
-    infeasible), else the last run (what :func:`_choose` picks). Its message is formatted
-    from the log when read."""
+    rescaled retry), from the entry's packed ``state`` (:func:`dispatch.pack_out`) and its
+    buffer ``buf`` (:func:`dispatch.buffer_size`), which becomes the result's, read-only:
+    the last run if verified; otherwise Lemke's ray termination if there was one (for
+    copositive-plus ``M`` a certificate that the LCP is infeasible: the entry has chosen it,
+    :data:`dispatch.RAY_CHOSEN`), else the last run (what :func:`_choose` picks). Its message
+    is formatted from the log when read."""
     buf.setflags(False)
-    if code != kernels.SOLVED:
-        log = buf[2 * n + 2 * n:2 * n + 2 * n + _LOG_SIZE]
-        for k in range(nlog - 1):
-            row = dispatch.LOG_WIDTH * k
-            if log[row + 1] == kernels.RAY_TERMINATION:
-                return _tuple_new(LCPResult, (
-                    buf[2 * n:3 * n], buf[3 * n:4 * n], "ray_termination", int(log[row + 2]),
-                    float(log[row + 3]), _RUN_METHOD[int(log[row])], nlog,
-                    float(log[row + 4]), buf))
-        row = dispatch.LOG_WIDTH * (nlog - 1)
-        run = int(log[row])
-    else:
-        run = int(buf[4 * n + dispatch.LOG_WIDTH * (nlog - 1)])
-    return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], STATUSES[code], its, res,
-                                  _RUN_METHOD[run], nlog, tolerance, buf))
+    method = _RUN_METHOD[((state >> 4) & 15) - 1]
+    nlog = ((state >> 8) & 15) - 1
+    if state & _RAY_CHOSEN:
+        return _tuple_new(LCPResult, (buf[2 * n:3 * n], buf[3 * n:4 * n], "ray_termination",
+                                      its, res, method, nlog, tolerance, buf))
+    return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], STATUSES[(state & 15) - 8], its, res,
+                                  method, nlog, tolerance, buf))
+
+
+def _ended(state: int, strict: bool) -> bool:
+    """Whether a checked entry's chain (its packed ``state``) ended with nothing left for
+    Python: at least one run, no hand-off, and either verified or neither ``strict`` (which
+    raises, with the runs as :func:`_choose` describes them) nor extreme scales (the
+    rescaled retry)."""
+    code = (state & 15) - 8
+    return (state >> 8) & 15 > 1 and code >= 0 and (
+        code == 0 or not (strict or state & _EXTREME))
+
+
+_EXTREME = dispatch.EXTREME
+_RAY_CHOSEN = dispatch.RAY_CHOSEN
 
 
 def _log_message(buf: NDArray[np.float64], n: int, nlog: int) -> str:
@@ -402,11 +409,11 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
                 buf.setflags(False)        # read-only (write=False; positional: cheaper)
                 return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
                                               first, 1, tolerance, buf))
-            code, run, tried, nlog, extreme = dispatch.unpack_state(state)
-            if nlog > 0 and code >= 0 and not (code != 0 and (extreme or strict)):
+            if _ended(state, strict):
                 # the chain ended (verified after fallbacks, or every run failed and no
                 # rescaled retry applies): the log has every run, nothing is left to do
-                return _log_result(buf, n, code, nlog, its, res, tolerance)
+                return _log_result(buf, n, state, its, res, tolerance)
+            code, run, tried, nlog, extreme = dispatch.unpack_state(state)
             if nlog >= 0 and code != kernels.Q_NOT_FINITE and code != dispatch.UNCHECKED:
                 # the runs done are kept: the solver goes on from where the chain stopped
                 solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict,
@@ -635,9 +642,9 @@ class LCPSolver:
                 state, its, res, tolerance = dispatch.solve_packed_checked(
                     M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
                     self.omega)
+            if _ended(state, self.strict):
+                return _log_result(buf, n, state, its, res, tolerance)
             code, run, tried, nlog, extreme = dispatch.unpack_state(state)
-            if nlog > 0 and code >= 0 and not (code != 0 and (extreme or self.strict)):
-                return _log_result(buf, n, code, nlog, its, res, tolerance)
             z, w, work = buf[:n], buf[n:2 * n], buf[2 * n:]
             z0v = None
         else:
