@@ -184,6 +184,9 @@ class LCPResult(tuple):
 
 
 _tuple_new = tuple.__new__
+#: ``ndarray.setflags`` called as ``_read_only(a, False)`` (``write=False`` given by position:
+#: no keyword parsing, ~0.1 µs less per call; numpy's stubs declare it keyword-only).
+_read_only: Any = np.ndarray.setflags
 _RESULT_FIELDS = ("z", "w", "status", "iterations", "residual", "method", "message",
                   "tolerance")
 
@@ -197,7 +200,7 @@ def _log_result(buf: NDArray[np.float64], n: int, state: int, its: int, res: flo
     copositive-plus ``M`` a certificate that the LCP is infeasible: the entry has chosen it,
     :data:`dispatch.RAY_CHOSEN`), else the last run (what :func:`_choose` picks). Its message
     is formatted from the log when read."""
-    buf.setflags(False)
+    _read_only(buf, False)
     method = _RUN_METHOD[((state >> 4) & 15) - 1]
     nlog = ((state >> 8) & 15) - 1
     if state & _RAY_CHOSEN:
@@ -406,7 +409,7 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
             first = _FIRST_SOLVED.get(state)
             if first is not None:
                 # the first run was verified: the buffer is the result's (z, w and the log)
-                buf.setflags(False)        # read-only (write=False; positional: cheaper)
+                _read_only(buf, False)
                 return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
                                               first, 1, tolerance, buf))
             if _ended(state, strict):
@@ -634,7 +637,7 @@ class LCPSolver:
             state, its, res, tolerance = out
             first = _FIRST_SOLVED.get(state)
             if first is not None:
-                buf.setflags(False)          # z, w and the log are the result's
+                _read_only(buf, False)           # z, w and the log are the result's
                 return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
                                               first, 1, tolerance, buf))
             if state == _UNCHECKED_STATE:
