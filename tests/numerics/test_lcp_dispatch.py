@@ -3,12 +3,14 @@ entry ``solve_lcp_kernel`` give the same answers from the same analysis and chai
 fallbacks run in compiled code; the order of the fallbacks is decided in one place; bad
 input is refused with the argument named."""
 
+import pickle
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from numba import njit
 
-from nscontrol.errors import DimensionError, ModelError
+from nscontrol.errors import DimensionError, ModelError, SolverError
 from nscontrol.numerics import _lcp_dispatch_kernels as dispatch
 from nscontrol.numerics.lcp import LCPResult, LCPSolver, solve_lcp, solve_lcp_kernel
 from nscontrol.testing.lcp_problems import random_p_matrix
@@ -308,3 +310,45 @@ def test_a_reusable_solver_of_a_small_tridiagonal_matrix_keeps_writeable_bands(n
     assert all(not np.shares_memory(b, M) for b in bands)
     assert_same(solver.solve(q), solve_lcp(M, q))
     assert solver.solve(q).success
+
+
+#: Siconos's ``lcp_Pang_isolated_sol_perturbed`` (no solution: Lemke's ray, then Howard's
+#: iteration cycles) and ``lcp_CPS_3`` (a bimatrix game: Lemke's ray, then Howard's
+#: iteration solves it), the two problems of its suite where ``auto`` falls back.
+PANG_PERTURBED = (np.array([[0.0, -1.0, -1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]),
+                  np.array([-1e-4, -1.0, 1.0]))
+CPS_3 = (np.array([[0.0, 0.0, 10.0, 20.0], [0.0, 0.0, 30.0, 15.0], [10.0, 20.0, 0.0, 0.0],
+                   [30.0, 15.0, 0.0, 0.0]]), -np.ones(4))
+
+
+@pytest.mark.parametrize(("M", "q"), [(GAME, -np.ones(4)), INFEASIBLE, PANG_PERTURBED, CPS_3])
+def test_a_chain_read_from_the_compiled_log_is_the_result_assembled_run_by_run(M, q):
+    # solve_lcp and LCPSolver.solve read a chain that needs nothing more from Python from
+    # its buffer (the result chosen as _choose does, the message formatted when read); a
+    # warm start from z0 = 0 (the same runs: Lemke ignores z0, dense Howard starts from it)
+    # goes through the Python assembly of the runs (_finish, _choose): the same result
+    n = q.shape[0]
+    assembled = LCPSolver(M).solve(q, z0=np.zeros(n))
+    for res in (solve_lcp(M, q), LCPSolver(M).solve(q)):
+        assert_same(res, assembled)
+        assert not res.z.flags.writeable and not res.w.flags.writeable
+    assert solve_lcp(M, q).message.count(";") == 1      # Lemke, then Howard's iteration
+    if M is PANG_PERTURBED[0] or M is INFEASIBLE[0]:
+        with pytest.raises(SolverError, match="ray_termination") as err:
+            solve_lcp(M, q, strict=True)
+        assert assembled.message in str(err.value)
+
+
+def test_a_result_is_an_immutable_record_read_by_name():
+    res = solve_lcp(*INFEASIBLE)
+    with pytest.raises(AttributeError):
+        res.status = "solved"                            # type: ignore[misc]
+    with pytest.raises(TypeError, match="by name"):
+        _ = list(res)                                    # not a sequence of its fields
+    back = pickle.loads(pickle.dumps(res))
+    assert_same(back, res)
+    assert back.success is False and repr(back).startswith("LCPResult(z=array(")
+    # the public constructor, as the Python paths call it
+    made = LCPResult(res.z, res.w, res.status, res.iterations, res.residual, res.method,
+                     res.message, res.tolerance)
+    assert_same(made, res)

@@ -22,6 +22,8 @@ certificate of infeasibility when every method fails).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, types
 
@@ -489,6 +491,94 @@ def solve_dense_into(M, q, buf, method, tol, max_iter, omega):
 #: Status of the checked entries below when an argument fails a check that the caller in
 #: Python then makes again, with the error it raises.
 UNCHECKED = -4
+#: Exponent bounds of the rescaled retry: a failed solve is retried on the problem rescaled
+#: by powers of two (exact) when ``max|M|``, ``max|q|`` or their ratio lies outside
+#: ``2^(+-this)``, the scales at which the float64 arithmetic of a solver can overflow or
+#: underflow (:func:`scale_exponents`).
+RESCALE_EXPONENT = 64
+#: Bit of a checked entry's state (:func:`pack_out`): the rescaled retry may apply (extreme
+#: scales, or a matrix the entry could not look at).
+EXTREME = 1 << 16
+#: Bit of a checked entry's state (:func:`pack_out`): the answer is Lemke's ray, an earlier
+#: run than the last.
+RAY_CHOSEN = 1 << 17
+
+
+@njit(cache=True)
+def scale_exponents(values, q):
+    """``(a, b, extreme)``: the binary exponents of ``max|values|`` (the entries of ``M``, any
+    shape) and ``max|q|`` (``math.frexp``), and whether either, or ``b - a``, exceeds
+    :data:`RESCALE_EXPONENT` in magnitude (never when one of them is zero)."""
+    m_max = 0.0
+    for v in values.flat:
+        m_max = max(m_max, abs(v))
+    q_max = 0.0
+    for i in range(q.shape[0]):
+        q_max = max(q_max, abs(q[i]))
+    if m_max == 0.0 or q_max == 0.0:
+        return 0, 0, False
+    a = math.frexp(m_max)[1]
+    b = math.frexp(q_max)[1]
+    return a, b, max(abs(a), abs(b), abs(b - a)) > RESCALE_EXPONENT
+
+
+@njit(cache=True, inline='always')
+def ray_row(work, n, nlog, code):
+    """The log row of the run that is the answer of a chain that verified none (``code``
+    not :data:`SOLVED`) when it is Lemke's ray (for copositive-plus ``M`` a certificate that
+    the LCP is infeasible; its point is kept in ``work[:2 n]``), else -1: the answer is
+    then the last run's."""
+    if code != SOLVED:
+        for k in range(nlog):
+            if work[2 * n + LOG_WIDTH * k + 1] == RAY_TERMINATION:
+                return k
+    return -1
+
+
+@njit(cache=True, inline='always')
+def pack_out(out, M, q, has_dense, buf):
+    """A chain's tuple ``(code, run, iterations, residual, tolerance, tried, nlog)`` as the
+    four numbers a caller in Python reads back, ``(state, iterations, residual,
+    tolerance)``: ``state`` packs ``code + 8`` (bits 0-3), ``run + 1`` (4-7), ``nlog + 1``
+    (8-11), ``tried`` (12-15) and :data:`EXTREME` when no run was verified and the rescaled
+    retry may apply (:func:`scale_exponents`; always without a dense ``M`` to look at).
+    Four boxed numbers instead of seven, and one comparison for the common outcome.
+
+    When the chain ended without a verified run and the answer is Lemke's ray rather than
+    the last run (:func:`ray_row`; the point in ``buf[2 n:4 n]``), ``state`` has
+    :data:`RAY_CHOSEN`, and ``run``, ``iterations``, ``residual`` and ``tolerance`` are the
+    ray's (unless :data:`EXTREME`: the caller in Python then reads the whole log)."""
+    code, run, its, res, tolerance, tried, nlog = out
+    extreme = False
+    ray = -1
+    if code != SOLVED and nlog > 0:
+        extreme = not has_dense or scale_exponents(M, q)[2]
+        if not extreme:
+            n = q.shape[0]
+            ray = ray_row(buf[2 * n:], n, nlog, code)
+            if ray >= 0 and ray < nlog - 1:
+                row = 4 * n + LOG_WIDTH * ray
+                run, its, res, tolerance = int(buf[row]), int(buf[row + 2]), buf[row + 3], \
+                    buf[row + 4]
+            else:
+                ray = -1
+    state = (code + 8) | (run + 1) << 4 | (nlog + 1) << 8 | tried << 12
+    if extreme:
+        state |= EXTREME
+    if ray >= 0:
+        state |= RAY_CHOSEN
+    return state, its, res, tolerance
+
+
+def unpack_state(state):
+    """``(code, run, tried, nlog, extreme)`` of a :func:`pack_out` state."""
+    return ((state & 15) - 8, ((state >> 4) & 15) - 1, (state >> 12) & 15,
+            ((state >> 8) & 15) - 1, bool(state & EXTREME))
+
+
+def first_run_solved_state(run):
+    """The state of a call whose first run ``run`` was verified (one log row)."""
+    return (SOLVED + 8) | (run + 1) << 4 | 2 << 8 | getattr(family, "py_func", family)(run) << 12
 
 
 @njit(cache=True)
@@ -500,23 +590,27 @@ def _options_ok(tol, max_iter, omega):
 @njit(cache=True)
 def solve_dense_checked(M, q, buf, method, tol, max_iter, omega):
     """:func:`solve_dense_into` for a caller in Python that has checked only the types
-    (the compiled signature does, :func:`exact_entry`): the shapes and the options are
-    checked here, :data:`UNCHECKED` (``nlog = -1``) when one fails."""
+    (the compiled signature does, :func:`exact_entry`), its outcome packed by
+    :func:`pack_out`: the shapes and the options are checked here, :data:`UNCHECKED`
+    (``nlog = -1``) when one fails."""
     n = q.shape[0]
     if not (M.shape[0] == n and M.shape[1] == n and buf.shape[0] == buffer_size(n)
             and 0 <= method <= AUTO and method != PGS_AUTO and method != PGS_FALLBACK
             and _options_ok(tol, max_iter, omega)):
-        return UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1
-    return solve_dense_into(M, q, buf, method, tol, max_iter, omega)
+        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), M, q, True, buf)
+    return pack_out(solve_dense_into(M, q, buf, method, tol, max_iter, omega), M, q, True,
+                    buf)
 
 
 @njit(cache=True)
 def solve_packed_checked(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega):
     """:func:`solve_packed` with the length of ``q`` checked against the buffer's
-    (:func:`buffer_size`): :data:`UNCHECKED` when it differs."""
+    (:func:`buffer_size`): :data:`UNCHECKED` when it differs; the outcome packed by
+    :func:`pack_out`."""
     if buf.shape[0] != buffer_size(q.shape[0]):
-        return UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1
-    return solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega)
+        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), M, q, True, buf)
+    return pack_out(solve_packed(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega),
+                    M, q, (bits >> 6) & 1 == 1, buf)
 
 
 _F64_2D = types.Array(types.float64, 2, "C")
@@ -587,17 +681,16 @@ def solve_lcp_kernel(M, q, z, w, tol, max_iter):
     if code == Q_NOT_FINITE or nlog < 0:
         return NUMERICAL_FAILURE, NO_RUN, 0, np.nan, np.nan
     work = buf[2 * n:]
-    if code != SOLVED:
-        # Lemke's ray, when there was one, is the answer (for copositive-plus M: infeasible)
+    ray = ray_row(work, n, nlog, code)
+    if ray >= 0:
+        # Lemke's ray is the answer (for copositive-plus M: infeasible)
         log = work[2 * n:]
-        for k in range(nlog):
-            if log[LOG_WIDTH * k + 1] == RAY_TERMINATION:
-                row = LOG_WIDTH * k
-                for i in range(n):
-                    z[i] = work[i]
-                    w[i] = work[n + i]
-                return (RAY_TERMINATION, int(log[row]), int(log[row + 2]), log[row + 3],
-                        log[row + 4])
+        row = LOG_WIDTH * ray
+        for i in range(n):
+            z[i] = work[i]
+            w[i] = work[n + i]
+        return (RAY_TERMINATION, int(log[row]), int(log[row + 2]), log[row + 3],
+                log[row + 4])
     for i in range(n):
         z[i] = buf[i]
         w[i] = buf[n + i]

@@ -39,8 +39,8 @@ entry and the figures.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from functools import cached_property
+from operator import itemgetter
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
@@ -78,7 +78,7 @@ AUTO_PGS_PROBE_SWEEPS = 100
 #: A failed solve is retried on the problem rescaled by powers of two (exact) when
 #: ``max|M|``, ``max|q|`` or their ratio lies outside ``2^(+-this)``: the scales at which
 #: the float64 arithmetic of a solver can overflow or underflow.
-RESCALE_EXPONENT = 64
+RESCALE_EXPONENT = dispatch.RESCALE_EXPONENT
 
 _F64 = np.dtype(np.float64)
 #: Read once (the per-call paths below are a few hundred nanoseconds of Python).
@@ -93,16 +93,18 @@ _NO_BANDS = (np.empty(0), np.empty(0), np.empty(0))
 _RUN_METHOD = ("lemke", "pgs", "banded", "pgs", "pgs")
 
 
-@dataclass(frozen=True)
-class LCPResult:
+class LCPResult(tuple):
     """Outcome of :func:`solve_lcp` and :meth:`LCPSolver.solve`.
 
-    Attributes
+    An immutable record (built in a few tens of nanoseconds: it is what a small LCP's call
+    returns); its fields are read by name.
+
+    Parameters
     ----------
     z, w : ndarray, shape (n,)
         The computed point and ``w = M z + q`` (recomputed from ``z``, never taken on trust).
         On failure: the last iterate of the method that ran last; on ``"overflow"``: ``inf``
-        where the solution exceeds the float64 range.
+        where the solution exceeds the float64 range. Read-only.
     status : {"solved", "ray_termination", "max_iter", "numerical_failure", "overflow"}
         ``"solved"`` exactly when ``residual <= tolerance`` (on every path: the method's
         own claim does not count). ``"ray_termination"``: Lemke found no solution (for
@@ -120,27 +122,132 @@ class LCPResult:
         The method that produced ``z`` (for ``"auto"``: the one finally used).
     message : str
         Why it stopped, and which methods were tried (``"name: status (residual r, ...)"``
-        joined by ``"; "``, in the order they ran).
+        joined by ``"; "``, in the order they ran); formatted when first read from the
+        compiled chain's log.
     tolerance : float
         The acceptance threshold :attr:`residual` was tested against: ``tol`` plus the
         round-off bound of evaluating ``M z + q`` (see :func:`solve_lcp`); ``-inf`` when
         ``z`` is so large that ``M z + q`` cancels beyond half the float64 digits, where
         no residual certifies anything (a near-ray of a nearly singular ``M``).
+
+    Attributes
+    ----------
+    z, w, status, iterations, residual, method, message, tolerance
+        The parameters, read-only.
+    success : bool
+        True when ``status == "solved"``.
     """
 
-    z: NDArray[np.float64]
-    w: NDArray[np.float64]
-    status: str
-    iterations: int
-    residual: float
-    method: str
-    message: str = field(default="")
-    tolerance: float = field(default=math.nan)
+    __slots__ = ()
+
+    def __new__(cls, z: NDArray[np.float64], w: NDArray[np.float64], status: str,
+                iterations: int, residual: float, method: str, message: str = "",
+                tolerance: float = math.nan) -> LCPResult:
+        return _tuple_new(cls, (z, w, status, iterations, residual, method, message,
+                                tolerance, None))
+
+    z = property(itemgetter(0), doc="The computed point (read-only).")
+    w = property(itemgetter(1), doc="``M z + q``, recomputed from ``z`` (read-only).")
+    status = property(itemgetter(2), doc="How the solve ended (see the class docstring).")
+    iterations = property(itemgetter(3), doc="Pivots, sweeps or iterations of the last run.")
+    residual = property(itemgetter(4), doc="``max |min(z, w)| / (1 + max|q|)``.")
+    method = property(itemgetter(5), doc="The method that produced ``z``.")
+    tolerance = property(itemgetter(7), doc="The threshold the residual was tested against.")
+
+    @property
+    def message(self) -> str:
+        """Why it stopped, and which methods were tried, in the order they ran."""
+        message = tuple.__getitem__(self, 6)
+        if type(message) is str:
+            return message
+        return _log_message(tuple.__getitem__(self, 8), len(tuple.__getitem__(self, 0)),
+                            message)
 
     @property
     def success(self) -> bool:
         """True when ``status == "solved"``."""
-        return self.status == "solved"
+        return tuple.__getitem__(self, 2) == "solved"
+
+    def __repr__(self) -> str:
+        fields = ", ".join(f"{name}={getattr(self, name)!r}" for name in _RESULT_FIELDS)
+        return f"LCPResult({fields})"
+
+    def __getnewargs__(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, name) for name in _RESULT_FIELDS)
+
+    # a record, not a sequence: its fields are read by name
+    def __iter__(self) -> Any:
+        raise TypeError("LCPResult: read its fields by name (res.z, res.status, ...)")
+
+    def __len__(self) -> int:
+        raise TypeError("LCPResult: read its fields by name (res.z, res.status, ...)")
+
+
+_tuple_new = tuple.__new__
+#: ``ndarray.setflags`` called as ``_read_only(a, False)`` (``write=False`` given by position:
+#: no keyword parsing, ~0.1 µs less per call; numpy's stubs declare it keyword-only).
+_read_only: Any = np.ndarray.setflags
+_RESULT_FIELDS = ("z", "w", "status", "iterations", "residual", "method", "message",
+                  "tolerance")
+
+
+def _log_result(buf: NDArray[np.float64], n: int, state: int, its: int, res: float,
+                tolerance: float) -> LCPResult:
+    """The result of a compiled chain that needs nothing more from Python (no hand-off, no
+    rescaled retry), from the entry's packed ``state`` (:func:`dispatch.pack_out`) and its
+    buffer ``buf`` (:func:`dispatch.buffer_size`), which becomes the result's, read-only:
+    the last run if verified; otherwise Lemke's ray termination if there was one (for
+    copositive-plus ``M`` a certificate that the LCP is infeasible: the entry has chosen it,
+    :data:`dispatch.RAY_CHOSEN`), else the last run (what :func:`_choose` picks). Its message
+    is formatted from the log when read."""
+    _read_only(buf, False)
+    method = _RUN_METHOD[((state >> 4) & 15) - 1]
+    nlog = ((state >> 8) & 15) - 1
+    if state & _RAY_CHOSEN:
+        return _tuple_new(LCPResult, (buf[2 * n:3 * n], buf[3 * n:4 * n], "ray_termination",
+                                      its, res, method, nlog, tolerance, buf))
+    return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], STATUSES[(state & 15) - 8], its, res,
+                                  method, nlog, tolerance, buf))
+
+
+def _ended(state: int, strict: bool) -> bool:
+    """Whether a checked entry's chain (its packed ``state``) ended with nothing left for
+    Python: at least one run, no hand-off, and either verified or neither ``strict`` (which
+    raises, with the runs as :func:`_choose` describes them) nor extreme scales (the
+    rescaled retry)."""
+    code = (state & 15) - 8
+    return (state >> 8) & 15 > 1 and code >= 0 and (
+        code == 0 or not (strict or state & _EXTREME))
+
+
+_EXTREME = dispatch.EXTREME
+_RAY_CHOSEN = dispatch.RAY_CHOSEN
+
+
+def _log_message(buf: NDArray[np.float64], n: int, nlog: int) -> str:
+    """The message of the ``nlog`` runs logged in ``buf`` (:func:`_log_result`)."""
+    log = buf[4 * n:4 * n + _LOG_SIZE].reshape(dispatch.LOG_ROWS, dispatch.LOG_WIDTH)
+    parts = []
+    for run, code, _, res, tolerance, limit in log[:nlog].tolist():
+        parts.append(_describe(_RUN_METHOD[int(run)], STATUSES[int(code)], res, tolerance,
+                               int(limit)))
+    return "; ".join(parts)
+
+
+def _describe(method: str, status: str, res: float, tolerance: float, limit: int,
+              note: str = "") -> str:
+    """``"name: status (residual r, ...)"``: why a run stopped, the budget if spent."""
+    text = f"{method}: {status} (residual {res:.3g}"
+    if status == "max_iter":
+        unit = _UNITS.get(method, "iterations")
+        text += note or f", budget max_iter = {limit} {unit} spent"
+    elif status != "solved" and not math.isfinite(res):
+        text += ", the iterate is not finite"
+    elif status != "solved" and tolerance == -math.inf:
+        text += ", not certifiable: M z + q cancels beyond half the float64 digits"
+    elif status == "numerical_failure" and res > tolerance:
+        text += f" above the tolerance {tolerance:.3g}"
+    return text + ")"
 
 
 def residual(M: Any, z: Any, q: Any) -> float:
@@ -283,33 +390,34 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
-    if (z0 is None and type(M) is np.ndarray and type(q) is np.ndarray and type(tol) is float
-            and type(omega) is float and (strict is False or strict is True)
-            and type(method) is str):
+    if (z0 is None and type(q) is np.ndarray and type(tol) is float and type(omega) is float
+            and (strict is False or strict is True) and type(method) is str):
         # the per-call path: LCPSolver's analysis and chain, in one compiled call whose
-        # signature checks the types (a TypeError sends other kinds to the general path)
-        # and whose first lines check the shapes and the options
+        # signature checks the types of M and q (a TypeError sends other kinds to the
+        # general path) and whose first lines check the shapes and the options
         entry = _DENSE_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_dense()
         code = _METHOD_CODES.get(method, -1)
-        limit = (0 if max_iter is None else max_iter
-                 if type(max_iter) is int and max_iter >= 1 else -1)
-        if entry is not None and code >= 0 and limit != -1:
+        limit = 0 if max_iter is None else (
+            max_iter if type(max_iter) is int and max_iter >= 1 else -1)
+        if entry is not None and code >= 0 and limit >= 0:
             n = q.size
             buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
             try:
-                code, run, its, res, tolerance, tried, nlog = entry(M, q, buf, code, tol,
-                                                                     limit, omega)
+                state, its, res, tolerance = entry(M, q, buf, code, tol, limit, omega)
             except TypeError:
-                nlog = -1
-            if code == 0 and nlog == 1:
-                buf.setflags(write=False)          # z and w, its views, are read-only
-                return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
-                               False)
-            if code == 0 and nlog > 0:
-                # verified after fallbacks: the log has every run, nothing is left to do
-                return _choose(_logged_runs(buf[2 * n:], n, 0, nlog, buf[:n],
-                                            buf[n:2 * n]))[0]
-            if nlog >= 0 and code != kernels.Q_NOT_FINITE:
+                state = _UNCHECKED_STATE
+            first = _FIRST_SOLVED.get(state)
+            if first is not None:
+                # the first run was verified: the buffer is the result's (z, w and the log)
+                _read_only(buf, False)
+                return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
+                                              first, 1, tolerance, buf))
+            if _ended(state, strict):
+                # the chain ended (verified after fallbacks, or every run failed and no
+                # rescaled retry applies): the log has every run, nothing is left to do
+                return _log_result(buf, n, state, its, res, tolerance)
+            code, run, tried, nlog, extreme = dispatch.unpack_state(state)
+            if nlog >= 0 and code != kernels.Q_NOT_FINITE and code != dispatch.UNCHECKED:
                 # the runs done are kept: the solver goes on from where the chain stopped
                 solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict,
                                    omega=omega)
@@ -362,8 +470,12 @@ _DENSE_ENTRY: list[Any] = [None]
 
 
 _ENTRIES = _Entries
-#: What a checked entry returns when an argument fails its checks.
-_UNCHECKED = (dispatch.UNCHECKED, dispatch.NO_RUN, 0, math.nan, math.nan, 0, -1)
+#: The state (:func:`dispatch.pack_out`) of a call whose arguments fail the entry's checks.
+_UNCHECKED_STATE = (dispatch.UNCHECKED + 8) | (dispatch.NO_RUN + 1) << 4
+_UNCHECKED = (_UNCHECKED_STATE, 0, math.nan, math.nan)
+#: The method name by the state of a call whose first run was verified.
+_FIRST_SOLVED = {dispatch.first_run_solved_state(run): _RUN_METHOD[run]
+                 for run in range(len(_RUN_METHOD))}
 
 
 # ----------------------------------------------------------------------------- the solver
@@ -383,17 +495,8 @@ class _Outcome(NamedTuple):
 
     def describe(self) -> str:
         """``"name: status (residual r, ...)"``: why it stopped, the budget if spent."""
-        text = f"{self.method}: {self.status} (residual {self.residual:.3g}"
-        if self.status == "max_iter":
-            unit = _UNITS.get(self.method, "iterations")
-            text += self.note or f", budget max_iter = {self.limit} {unit} spent"
-        elif self.status != "solved" and not math.isfinite(self.residual):
-            text += ", the iterate is not finite"
-        elif self.status != "solved" and self.tolerance == -math.inf:
-            text += ", not certifiable: M z + q cancels beyond half the float64 digits"
-        elif self.status == "numerical_failure" and self.residual > self.tolerance:
-            text += f" above the tolerance {self.tolerance:.3g}"
-        return text + ")"
+        return _describe(self.method, self.status, self.residual, self.tolerance, self.limit,
+                         self.note)
 
 
 _UNITS = {"lemke": "pivots", "pgs": "sweeps", "banded": "iterations"}
@@ -531,15 +634,20 @@ class LCPSolver:
                              self.omega) if entry is not None else _UNCHECKED)
             except TypeError:
                 out = _UNCHECKED
-            if out[0] == dispatch.UNCHECKED:
+            state, its, res, tolerance = out
+            first = _FIRST_SOLVED.get(state)
+            if first is not None:
+                _read_only(buf, False)           # z, w and the log are the result's
+                return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
+                                              first, 1, tolerance, buf))
+            if state == _UNCHECKED_STATE:
                 q = self._check_q(q)               # raises, or a clean copy of q
-                out = dispatch.solve_packed(M, lower, diag, upper, q, buf, bits, self.tol,
-                                            self._max_iter0, self.omega)
-            code, run, its, res, tolerance, tried, nlog = out
-            if code == 0 and nlog == 1:
-                buf.setflags(write=False)          # z and w, its views, are read-only
-                return _solved(buf[:n], buf[n:2 * n], its, res, _RUN_METHOD[run], tolerance,
-                               False)
+                state, its, res, tolerance = dispatch.solve_packed_checked(
+                    M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
+                    self.omega)
+            if _ended(state, self.strict):
+                return _log_result(buf, n, state, its, res, tolerance)
+            code, run, tried, nlog, extreme = dispatch.unpack_state(state)
             z, w, work = buf[:n], buf[n:2 * n], buf[2 * n:]
             z0v = None
         else:
@@ -816,13 +924,9 @@ class LCPSolver:
         """Retry a failed solve on ``LCP(M / 2^a, q / 2^b)`` when the scales are extreme
         (see :data:`RESCALE_EXPONENT`); its solution times ``2^(b - a)`` solves the
         original LCP. Report ``"overflow"`` when that product exceeds float64."""
-        m_max = float(np.max(np.abs(self._dense if not self._sparse else self._M.data),
-                             initial=0.0))
-        q_max = float(np.max(np.abs(q), initial=0.0))
-        if m_max == 0.0 or q_max == 0.0:
-            return failed
-        a, b = math.frexp(m_max)[1], math.frexp(q_max)[1]
-        if max(abs(a), abs(b), abs(b - a)) <= RESCALE_EXPONENT:
+        a, b, extreme = dispatch.scale_exponents(
+            self._dense if not self._sparse else np.ascontiguousarray(self._M.data), q)
+        if not extreme:
             return failed
         scaled = self._rescaled_solvers.get(a)
         if scaled is None:
@@ -838,7 +942,10 @@ class LCPSolver:
             z = np.ldexp(r.z, b - a)
             w, res, tolerance, ok = self._verify(z, q)
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(w))):
-            return self._overflow(z, w, r, (a, b), q_max, m_max, note)
+            m_max = float(np.max(np.abs(self._dense if not self._sparse else self._M.data),
+                                 initial=0.0))
+            q_max = float(np.max(np.abs(q), initial=0.0))
+            return self._overflow(z, w, r, (int(a), int(b)), q_max, m_max, note)
         z.setflags(write=False)
         w.setflags(write=False)
         return LCPResult(z, w, "solved" if ok else failed.status, r.iterations, res, r.method,
@@ -864,36 +971,6 @@ class LCPSolver:
         w.setflags(write=False)
         return LCPResult(z, w, "overflow", scaled.iterations, math.inf, scaled.method,
                          message, -math.inf)
-
-
-def _solved(z: NDArray[np.float64], w: NDArray[np.float64], iterations: int, res: float,
-            method: str, tolerance: float, writeable: bool = True) -> LCPResult:
-    """The result of a first run that was verified (the per-call path, kept short: the
-    frozen dataclass filled directly, its message formatted once per method and residual).
-    ``z`` and ``w`` are made read-only (``writeable=False``: they already are)."""
-    if writeable:
-        z.setflags(write=False)
-        w.setflags(write=False)
-    key = (method, res)
-    message = _SOLVED_MESSAGES.get(key)
-    if message is None:
-        if len(_SOLVED_MESSAGES) > 4096:
-            _SOLVED_MESSAGES.clear()
-        message = _SOLVED_MESSAGES[key] = f"{method}: solved (residual {res:.3g})"
-    result = _new(LCPResult)
-    _setattr(result, "__dict__", {"z": z, "w": w, "status": "solved", "iterations": iterations,
-                                  "residual": res, "method": method, "message": message,
-                                  "tolerance": tolerance})
-    return result
-
-
-_new = object.__new__
-_setattr = object.__setattr__
-
-
-#: The messages of verified first runs, by (method, residual): formatting a float costs
-#: as much as the rest of building a result.
-_SOLVED_MESSAGES: dict[tuple[str, float], str] = {}
 
 
 def _make_outcome(z: NDArray[np.float64], w: NDArray[np.float64], code: int,
