@@ -37,7 +37,8 @@ __all__ = ["Outcome", "default_jobs", "check_jobs", "run_each"]
 class Outcome:
     """What one task gave: its ``value`` (None when it failed), the ``error`` text (empty on
     success), its wall ``seconds``, the ``output`` it printed (stdout and stderr) and the
-    ``cpu`` seconds its process used (NaN when it died)."""
+    ``cpu`` seconds used by its process and the processes it started and saw end (NaN when it
+    died)."""
 
     value: Any
     error: str
@@ -81,20 +82,31 @@ def _child(fn: Callable[..., Any], args: tuple[Any, ...], conn: Connection) -> N
     with contextlib.suppress(OSError):
         os.setpgid(0, 0)
     output = io.StringIO()
-    start, cpu = time.perf_counter(), time.process_time()
+    start, cpu = time.perf_counter(), _cpu_seconds()
     value, error = None, ""
     with contextlib.redirect_stdout(output), contextlib.redirect_stderr(output):
         try:
             value = fn(*args)
         except Exception:  # noqa: BLE001 - sent back as text, the other tasks go on
             error = traceback.format_exc()
-    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
+    seconds, cpu = time.perf_counter() - start, _cpu_seconds() - cpu
     try:
         conn.send((value, error, seconds, output.getvalue(), cpu))
     except Exception:  # noqa: BLE001 - a value that cannot be pickled: say so instead
         conn.send((None, f"the task's result cannot be sent back from its process:\n"
                          f"{traceback.format_exc()}", seconds, output.getvalue(), cpu))
     conn.close()
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its children that have ended (a task's pool)."""
+    try:
+        import resource
+    except ImportError:                 # not on Windows
+        return time.process_time()
+    own, ended = (resource.getrusage(who) for who in (resource.RUSAGE_SELF,
+                                                       resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
 
 
 def run_each(tasks: Sequence[tuple[Callable[..., Any], tuple[Any, ...]]], jobs: int, *,

@@ -98,8 +98,9 @@ def write_report(out: Path, names: list[str] | None = None, *, progress: bool | 
         runs = _run_here(examples, out, progress)
     else:
         runs = _run_in_processes(examples, out, min(n_jobs, len(examples)), progress)
-    rows = [{"example": ex, "result": result, "error": error, "seconds": seconds}
-            for ex, (result, error, seconds) in zip(examples, runs, strict=True)]
+    rows: list[dict[str, Any]] = [
+        {"example": ex, "result": result, "error": error, "seconds": seconds}
+        for ex, (result, error, seconds) in zip(examples, runs, strict=True)]
     summary: dict[str, Any] = {
         "examples": [
             {**(r["result"].to_json() if r["result"] else {"example": r["example"].name}),
@@ -129,7 +130,7 @@ def _run_here(examples: list[Example], out: Path, progress: bool | None) -> list
 def _run_in_processes(examples: list[Example], out: Path, jobs: int,
                       progress: bool | None) -> list[_Run]:
     """The examples ``jobs`` at a time, each in its own process (:mod:`nscontrol._processes`);
-    the bar counts those finished and names the last one with its verdict and time."""
+    the bar counts those finished and names the last one with its verdict, wall and CPU time."""
     from ._processes import Outcome, run_each
     from ._progress import ITER_DELAY, LineBar, count_bar
     from ._validation import check_bool
@@ -140,7 +141,8 @@ def _run_in_processes(examples: list[Example], out: Path, jobs: int,
     def done(index: int, outcome: Outcome) -> None:
         result = outcome.value[0] if outcome.value is not None else None
         verdict = "failed to run" if result is None else "pass" if result.passed else "FAIL"
-        text = f"examples (finished {examples[index].name}: {verdict}, {outcome.seconds:.0f} s)"
+        text = (f"examples (finished {examples[index].name}: {verdict}, {outcome.seconds:.0f} s, "
+                f"CPU {outcome.cpu:.0f} s)")
         if isinstance(bar, LineBar):        # a log: one line per finished example
             bar.n += 1
             bar.set_description_str(text, refresh=True)

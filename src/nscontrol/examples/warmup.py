@@ -166,15 +166,18 @@ def _block_stepper() -> None:
         reset_blocks(0.0, e, e, e, False, rs, e, e, False, rs, e, e)
 
 
-#: (what, how): one step of the warm-up each.
+#: (what, how): one step of the warm-up each. In this order: run side by side, the LCP solvers
+#: (the longest, and called by the contact steps) go first, beside the steps that need no
+#: LCP kernel; the steps that call them come after, so that they mostly find them cached
+#: rather than compile them a second time in another process.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
-    ("event-driven and Moreau-Jean mechanics", _mechanics),
+    ("ZAD-controlled buck converter", _zad_buck),
+    ("sampled sliding-mode control", _sliding_mode),
     ("impacting bodies with an observer", _impacting_bodies),
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
-    ("ZAD-controlled buck converter", _zad_buck),
+    ("event-driven and Moreau-Jean mechanics", _mechanics),
     ("frictional contacts", _frictional_contacts),
-    ("sampled sliding-mode control", _sliding_mode),
     ("compiled controllers, observers and models", _compiled_blocks),
 ]
 
