@@ -214,3 +214,30 @@ def test_warm_up_steps_run_side_by_side_write_the_index_under_the_lock_and_repor
     if jobs > 1:
         assert any(re.fullmatch(r"broken: FAILED in \d+ s \(CPU \d+ s\)", line)
                    for line in lines)
+
+
+def test_the_longest_examples_of_the_previous_report_start_first(tmp_path):
+    names = ["a", "b", "c", "d"]
+    examples = [Example(n, n, "test", _also_good) for n in names]
+    assert report_mod._longest_first(examples, tmp_path) == [0, 1, 2, 3]   # no report yet
+    previous = {"examples": [{"example": "a", "seconds": 1.0}, {"example": "b", "seconds": 9.0},
+                             {"example": "d", "seconds": 3.0}]}
+    (tmp_path / "report.json").write_text(json.dumps(previous))
+    # c has no previous time: it goes first (it may be long), then b, d, a
+    assert report_mod._longest_first(examples, tmp_path) == [2, 1, 3, 0]
+    (tmp_path / "report.json").write_text("{not json")
+    assert report_mod._longest_first(examples, tmp_path) == [0, 1, 2, 3]
+
+
+def test_rows_keep_the_catalogue_order_when_started_longest_first(tmp_path, monkeypatch):
+    fake = [Example("good", "", "test", _good), Example("also-good", "", "test", _also_good),
+            Example("broken", "", "test", _broken)]
+    monkeypatch.setattr(report_mod, "all_examples", lambda: fake)
+    previous = {"examples": [{"example": "good", "seconds": 1.0},
+                             {"example": "also-good", "seconds": 2.0},
+                             {"example": "broken", "seconds": 5.0}]}
+    (tmp_path / "report.json").write_text(json.dumps(previous))
+    summary = report_mod.write_report(tmp_path, progress=False, jobs=2)
+    assert [r["example"] for r in summary["examples"]] == ["good", "also-good", "broken"]
+    assert [r["passed"] for r in summary["examples"]] == [True, True, False]
+    assert "deliberately broken" in summary["examples"][2]["error"]

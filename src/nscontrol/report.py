@@ -150,12 +150,15 @@ def _run_in_processes(examples: list[Example], out: Path, jobs: int,
             bar.set_description_str(text, refresh=False)
             bar.update(1)
 
+    order = _longest_first(examples, out)
     try:
-        outcomes = run_each([(_run_named, (ex.name, out / ex.name)) for ex in examples], jobs,
-                            on_done=done)
+        done_in_order = run_each([(_run_named, (examples[i].name, out / examples[i].name))
+                                  for i in order], jobs,
+                                 on_done=lambda k, outcome: done(order[k], outcome))
     finally:
         if bar is not None:
             bar.close()
+    outcomes = [done_in_order[order.index(i)] for i in range(len(examples))]
     runs: list[_Run] = []
     for ex, o in zip(examples, outcomes, strict=True):
         if o.output.strip():
@@ -164,6 +167,19 @@ def _run_in_processes(examples: list[Example], out: Path, jobs: int,
             (folder / "output.txt").write_text(o.output)
         runs.append(o.value if o.value is not None else (None, o.error, o.seconds))
     return runs
+
+
+def _longest_first(examples: list[Example], out: Path) -> list[int]:
+    """The order to start the examples in: the longest first by the previous report's times
+    in ``out`` (the pool then ends with short ones, not one long example on one core);
+    examples without a previous time first, in the catalogue's order."""
+    try:
+        previous = {r["example"]: float(r["seconds"])
+                    for r in json.loads((out / "report.json").read_text())["examples"]}
+    except (OSError, ValueError, KeyError, TypeError):
+        previous = {}
+    return sorted(range(len(examples)),
+                  key=lambda i: -previous.get(examples[i].name, float("inf")))
 
 
 def _run_named(name: str, out_dir: Path) -> _Run:
