@@ -100,7 +100,8 @@ def warmup(jobs: int | None) -> None:
         return
     n_jobs = min(jobs if jobs is not None else default_jobs(), len(STEPS))
     click.echo(f"compiling {len(missing)} kernel modules in {len(STEPS)} groups, {n_jobs} at a "
-               f"time (once per install, about a minute)...", err=True)
+               f"time (once per install; about 5 min of CPU in all); a line per group as it "
+               f"ends...", err=True)
     start = time.perf_counter()
     try:
         failed = warm_up(lambda what: click.echo(f"  {what}", err=True), jobs=n_jobs)
