@@ -8,16 +8,22 @@ OUT    ?= out
 
 .PHONY: demo warmup test test-sensitive test-all bench lint docs clean
 
+# pip says what it does (no --quiet): a line per package it collects, a bar per download.
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	@echo "installing nscontrol and its dependencies (pip's own lines follow; about a minute)"
+	@echo "updating pip in $(VENV)"
+	$(PY) -m pip install --upgrade --progress-bar on pip
+	@echo "installing nscontrol (editable, from this folder) into $(VENV) with the extras dev, cluster, control and scs: numpy, scipy, numba, cvxpy, casadi, matplotlib, dask, python-control and about 50 more packages (1-2 min; more with an empty pip cache)"
 	$(PY) -m pip install --progress-bar on -e ".[dev,cluster,control,scs]"
 	touch $(STAMP)
 
+# JOBS: processes side by side for the warm-up and the report (default: one per core).
+JOBS ?=
+JOBS_OPT := $(if $(JOBS),--jobs $(JOBS),)
+
 demo: $(STAMP)
-	$(VENV)/bin/nscontrol warmup   # compiles the numba kernels once, saying so
-	$(VENV)/bin/nscontrol report --out $(OUT)
+	$(VENV)/bin/nscontrol warmup $(JOBS_OPT)   # compiles the numba kernels once, saying so
+	$(VENV)/bin/nscontrol report --out $(OUT) $(JOBS_OPT)
 
 test: $(STAMP)
 	$(PY) -m pytest -m "not slow" -n 2 --dist loadfile
@@ -42,7 +48,7 @@ test-all: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile
 
 warmup: $(STAMP)
-	$(VENV)/bin/nscontrol warmup
+	$(VENV)/bin/nscontrol warmup $(JOBS_OPT)
 
 bench: $(STAMP)
 	$(VENV)/bin/nscontrol bench

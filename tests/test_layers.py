@@ -31,7 +31,7 @@ ROOT = Path(nscontrol.__file__).resolve().parent
 #: Layer of each top-level unit of the package (a subpackage or a top-level module).
 LAYERS: dict[str, int] = {
     "errors": 0, "_validation": 0, "_progress": 0, "_lazy": 0, "_files": 0, "_kernel_cache": 0,
-    "_compile_background": 0,
+    "_compile_background": 0, "_processes": 0,
     "sweep": 0,
     "numerics": 1,
     "laws": 2,

@@ -35,6 +35,7 @@ waits for.
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import os
 import pickle
@@ -42,10 +43,12 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MODES", "mode", "install_hook", "requested", "helper_pid", "wait_for_exit"]
+__all__ = ["MODES", "mode", "install_hook", "requested", "helper_pid", "wait_for_exit",
+           "cache_lock"]
 
 #: The values of ``NSCONTROL_COMPILE``.
 MODES = ("background", "wait")
@@ -330,6 +333,25 @@ def lock_path() -> Path | None:
     except OSError:
         return None
     return root / "nscontrol-compile.lock"
+
+
+@contextlib.contextmanager
+def cache_lock() -> Iterator[None]:
+    """Hold the cache's lock (:func:`lock_path`; an exclusive ``flock``, released when the
+    block ends or the process dies): the helper holds it while it compiles, and
+    ``nscontrol warmup``'s processes while they write numba's cache index."""
+    path = lock_path()
+    if path is None:
+        yield
+        return
+    import fcntl
+
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def _log_path() -> Path | None:

@@ -13,43 +13,25 @@ not compile or cache, so that the requesting process compiles it itself.
 from __future__ import annotations
 
 import base64
-import contextlib
 import importlib
 import json
 import os
 import pickle
 import sys
-from collections.abc import Iterator
 from typing import Any
-
-
-@contextlib.contextmanager
-def _exclusive() -> Iterator[None]:
-    from ._compile_background import lock_path
-
-    path = lock_path()
-    if path is None:
-        yield
-        return
-    import fcntl
-
-    with open(path, "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)      # released when the file closes (or we die)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def compile_one(request: dict[str, Any]) -> bool:
     """Compile one requested specialisation; whether the cache now holds it."""
     from numba.core.compiler_lock import global_compiler_lock
 
+    from ._compile_background import cache_lock
+
     disp: Any = importlib.import_module(request["module"])
     for part in request["kernel"].split("."):
         disp = getattr(disp, part)
     argtypes = pickle.loads(base64.b64decode(request["types"]))
-    with _exclusive():
+    with cache_lock():
         disp.compile(argtypes)
     with global_compiler_lock:
         return disp._cache.load_overload(argtypes, disp.targetctx) is not None

@@ -85,21 +85,32 @@ def _run_summary(example: Any, result: Any, seconds: float) -> str:
 
 
 @main.command()
-def warmup() -> None:
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Groups of kernels compiled side by side, each in its own process "
+                   "(default: one per core).")
+def warmup(jobs: int | None) -> None:
     """Compile the numerical kernels now (once per install) so that later runs start fast."""
+    from ._processes import default_jobs
     from ._progress import uncompiled_kernel_modules
-    from .examples.warmup import warm_up
+    from .examples.warmup import STEPS, warm_up
 
     missing = uncompiled_kernel_modules()
     if not missing:
         click.echo("kernels already compiled (numba cache is up to date); nothing to do")
         return
-    click.echo(f"compiling {len(missing)} kernel modules (once per install, tens of seconds)...",
-               err=True)
+    n_jobs = min(jobs if jobs is not None else default_jobs(), len(STEPS))
+    click.echo(f"compiling {len(missing)} kernel modules in {len(STEPS)} groups, {n_jobs} at a "
+               f"time (once per install; about 5 min of CPU in all); a line per group as it "
+               f"ends...", err=True)
     start = time.perf_counter()
-    failed = warm_up(lambda what: click.echo(f"  {what}", err=True))
+    try:
+        failed = warm_up(lambda what: click.echo(f"  {what}", err=True), jobs=n_jobs)
+    except KeyboardInterrupt:
+        click.echo("warmup: interrupted; kernels not compiled yet compile on first use",
+                   err=True)
+        sys.exit(130)
     for line in failed:
-        click.echo(f"  skipped: {line}", err=True)
+        click.echo(f"  failed (its kernels compile on first use): {line}", err=True)
     left = uncompiled_kernel_modules()
     click.echo(f"warmup: compiled in {time.perf_counter() - start:.0f} s"
                + (f"; still compiled on first use: {', '.join(left)}" if left else ""))
@@ -109,8 +120,12 @@ def warmup() -> None:
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out"),
               show_default=True, help="Folder for index.html, report.json and figures.")
 @click.option("--only", multiple=True, help="Run only these examples (repeatable).")
-def report(out: Path, only: tuple[str, ...]) -> None:
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Examples run side by side, each in its own process (default: one per "
+                   "core; 1: one after another in this process).")
+def report(out: Path, only: tuple[str, ...], jobs: int | None) -> None:
     """Run every example and write OUT/index.html with figures, metrics and checks."""
+    from ._processes import default_jobs
     from .errors import ModelError
     from .report import check_output_folder, select_examples, write_report
 
@@ -122,14 +137,22 @@ def report(out: Path, only: tuple[str, ...]) -> None:
     from ._progress import announce_compilation
 
     announce_compilation()
-    summary = write_report(out, list(only) or None)
+    n_jobs = jobs if jobs is not None else default_jobs()
+    start = time.perf_counter()
+    try:
+        summary = write_report(out, list(only) or None, jobs=n_jobs)
+    except KeyboardInterrupt:
+        click.echo("report: interrupted; the examples' processes are stopped and no report "
+                   "was written (a previous one is left as it was)", err=True)
+        sys.exit(130)
     for ex in summary["examples"]:
         mark = "pass" if ex["passed"] else "FAIL"
         click.echo(f"[{mark}] {ex['example']} ({ex['seconds']:.1f} s)")
     n_ok = sum(ex["passed"] for ex in summary["examples"])
     total = sum(ex["seconds"] for ex in summary["examples"])
-    click.echo(f"{n_ok}/{len(summary['examples'])} examples reproduced in {total:.0f} s; "
-               f"report: {out / 'index.html'}")
+    click.echo(f"{n_ok}/{len(summary['examples'])} examples reproduced in "
+               f"{time.perf_counter() - start:.0f} s ({total:.0f} s of examples, "
+               f"{n_jobs} at a time); report: {out / 'index.html'}")
     sys.exit(0 if summary["passed"] else 1)
 
 

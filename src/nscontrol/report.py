@@ -75,24 +75,32 @@ def run_example(example: Example, out_dir: Path | None) -> tuple[ExampleResult |
         return None, traceback.format_exc(), time.perf_counter() - start
 
 
-def write_report(out: Path, names: list[str] | None = None, *, progress: bool | None = None
-                 ) -> dict[str, Any]:
+def write_report(out: Path, names: list[str] | None = None, *, progress: bool | None = None,
+                 jobs: int | None = None) -> dict[str, Any]:
     """Run the examples (all, or ``names``) into ``out``; write ``index.html`` and
     ``report.json``. Returns the JSON summary.
 
-    The names and the folder are checked before anything runs: an unknown name or an
-    unwritable folder raises :class:`~nscontrol.errors.ModelError` and leaves a previous
-    report untouched. Both files are replaced atomically.
+    ``jobs`` examples run side by side, each in its own process (default: one per core;
+    ``1`` runs them one after another in this process). The rows, their order and the
+    pages are the same either way; a failing example is reported and the others kept.
+    With several jobs, what an example prints goes to ``out/NAME/output.txt``.
+
+    The names, ``jobs`` and the folder are checked before anything runs: an unknown name,
+    a bad ``jobs`` or an unwritable folder raises :class:`~nscontrol.errors.ModelError` and
+    leaves a previous report untouched. Both files are replaced atomically.
     """
-    from ._progress import progress_iter
+    from ._processes import check_jobs
 
     examples = select_examples(names)
+    n_jobs = check_jobs(jobs)
     out = check_output_folder(out)
-    rows: list[dict[str, Any]] = []
-    for ex in progress_iter(examples, total=len(examples), desc="examples", enable=progress,
-                          label=lambda e: e.name):
-        result, error, seconds = run_example(ex, out / ex.name)
-        rows.append({"example": ex, "result": result, "error": error, "seconds": seconds})
+    if n_jobs == 1 or len(examples) == 1:
+        runs = _run_here(examples, out, progress)
+    else:
+        runs = _run_in_processes(examples, out, min(n_jobs, len(examples)), progress)
+    rows: list[dict[str, Any]] = [
+        {"example": ex, "result": result, "error": error, "seconds": seconds}
+        for ex, (result, error, seconds) in zip(examples, runs, strict=True)]
     summary: dict[str, Any] = {
         "examples": [
             {**(r["result"].to_json() if r["result"] else {"example": r["example"].name}),
@@ -105,6 +113,78 @@ def write_report(out: Path, names: list[str] | None = None, *, progress: bool | 
     _write_atomically(out / "report.json", json.dumps(summary, indent=2))
     _write_atomically(out / "index.html", _html(rows, out))
     return summary
+
+
+_Run = tuple[ExampleResult | None, str, float]
+
+
+def _run_here(examples: list[Example], out: Path, progress: bool | None) -> list[_Run]:
+    """The examples one after another in this process (``jobs=1``)."""
+    from ._progress import progress_iter
+
+    return [run_example(ex, out / ex.name)
+            for ex in progress_iter(examples, total=len(examples), desc="examples",
+                                    enable=progress, label=lambda e: e.name)]
+
+
+def _run_in_processes(examples: list[Example], out: Path, jobs: int,
+                      progress: bool | None) -> list[_Run]:
+    """The examples ``jobs`` at a time, each in its own process (:mod:`nscontrol._processes`);
+    the bar counts those finished and names the last one with its verdict, wall and CPU time."""
+    from ._processes import Outcome, run_each
+    from ._progress import ITER_DELAY, LineBar, count_bar
+    from ._validation import check_bool
+
+    shown = check_bool("progress", progress, allow_none=True) is not False
+    bar = count_bar(len(examples), desc="examples", delay=ITER_DELAY) if shown else None
+
+    def done(index: int, outcome: Outcome) -> None:
+        result = outcome.value[0] if outcome.value is not None else None
+        verdict = "failed to run" if result is None else "pass" if result.passed else "FAIL"
+        text = (f"examples (finished {examples[index].name}: {verdict}, {outcome.seconds:.0f} s, "
+                f"CPU {outcome.cpu:.0f} s)")
+        if isinstance(bar, LineBar):        # a log: one line per finished example
+            bar.n += 1
+            bar.set_description_str(text, refresh=True)
+        elif bar is not None:
+            bar.set_description_str(text, refresh=False)
+            bar.update(1)
+
+    order = _longest_first(examples, out)
+    try:
+        done_in_order = run_each([(_run_named, (examples[i].name, out / examples[i].name))
+                                  for i in order], jobs,
+                                 on_done=lambda k, outcome: done(order[k], outcome))
+    finally:
+        if bar is not None:
+            bar.close()
+    outcomes = [done_in_order[order.index(i)] for i in range(len(examples))]
+    runs: list[_Run] = []
+    for ex, o in zip(examples, outcomes, strict=True):
+        if o.output.strip():
+            folder = out / ex.name
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / "output.txt").write_text(o.output)
+        runs.append(o.value if o.value is not None else (None, o.error, o.seconds))
+    return runs
+
+
+def _longest_first(examples: list[Example], out: Path) -> list[int]:
+    """The order to start the examples in: the longest first by the previous report's times
+    in ``out`` (the pool then ends with short ones, not one long example on one core);
+    examples without a previous time first, in the catalogue's order."""
+    try:
+        previous = {r["example"]: float(r["seconds"])
+                    for r in json.loads((out / "report.json").read_text())["examples"]}
+    except (OSError, ValueError, KeyError, TypeError):
+        previous = {}
+    return sorted(range(len(examples)),
+                  key=lambda i: -previous.get(examples[i].name, float("inf")))
+
+
+def _run_named(name: str, out_dir: Path) -> _Run:
+    """:func:`run_example` of the example called ``name`` (in a child process)."""
+    return run_example(select_examples([name])[0], out_dir)
 
 
 _STYLE = """

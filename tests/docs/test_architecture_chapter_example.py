@@ -4,27 +4,11 @@ geometric series) and says its verdict."""
 
 from __future__ import annotations
 
-import contextlib
-import io
-import re
-from pathlib import Path
-
 import numpy as np
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
 
-
-def _worked_example() -> str:
-    text = DOC.read_text()
-    section = text[text.index("### Worked example: a chapter of your own"):]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
-
-
-def test_a_chapter_of_ones_own_measures_its_claim_and_says_its_verdict():
-    scope: dict = {}
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        exec(compile(_worked_example(), str(DOC), "exec"), scope)   # noqa: S102
+def test_a_chapter_of_ones_own_measures_its_claim_and_says_its_verdict(doc_block):
+    scope, printed = doc_block("### Worked example: a chapter of your own")
     result, example = scope["result"], scope["EXAMPLES"][0]
     assert result.passed and len(result.checks) == 2
     # impact n (from 0) is at t_inf - 4 t1 2^-(n+1) (e = 1/2): before 0.999 t_inf = t_inf -
@@ -32,5 +16,5 @@ def test_a_chapter_of_ones_own_measures_its_claim_and_says_its_verdict():
     assert result.metrics["impacts"] == 10
     # the first impact against sqrt(2H/g) computed here, independently of the example
     assert result.checks[0].value <= 10 * np.finfo(float).eps
-    assert out.getvalue().startswith("Reproduced: impact times exact to")
-    assert example.verdict_line(result) == out.getvalue().strip()
+    assert printed.startswith("Reproduced: impact times exact to")
+    assert example.verdict_line(result) == printed.strip()

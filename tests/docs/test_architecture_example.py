@@ -3,26 +3,11 @@ sampled controller on a Moreau–Jean plant, reading the contact multiplier."""
 
 from __future__ import annotations
 
-import contextlib
-import io
-import re
-from pathlib import Path
-
 import numpy as np
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
 
-
-def _worked_example() -> str:
-    text = DOC.read_text()
-    section = text[text.index("### Worked example: a sampled force controller"):]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
-
-
-def test_the_sampled_force_controller_of_the_architecture_page():
-    scope: dict = {}
-    with contextlib.redirect_stdout(io.StringIO()):
-        exec(compile(_worked_example(), str(DOC), "exec"), scope)   # noqa: S102
+def test_the_sampled_force_controller_of_the_architecture_page(doc_block):
+    scope, _ = doc_block("### Worked example: a sampled force controller")
     traj = scope["traj"]
     u = traj.signal("u")[:, 0]
     lam_hat = traj.signal("impulse")[:, 0] / 1e-3

@@ -3,11 +3,6 @@ says: a registered user method, called by name through ``simulate``, of second o
 
 from __future__ import annotations
 
-import contextlib
-import io
-import re
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -15,21 +10,11 @@ import nscontrol as nsc
 from nscontrol.errors import ModelError
 from nscontrol.simulate import METHODS
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
-
-
-def _worked_example() -> str:
-    text = DOC.read_text()
-    section = text[text.index("### Worked example: an integrator of your own"):]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
-
 
 @pytest.fixture
-def scope():
+def scope(doc_block):
     names = set(METHODS)
-    scope: dict = {}
-    with contextlib.redirect_stdout(io.StringIO()):
-        exec(compile(_worked_example(), str(DOC), "exec"), scope)   # noqa: S102
+    scope, _ = doc_block("### Worked example: an integrator of your own")
     yield scope
     METHODS._paths.pop("heun", None)           # leave the registry as the suite found it
     METHODS._classes.pop("heun", None)

@@ -3,11 +3,6 @@ the user's own, lowered to a LagrangianSystem, simulated in its own state order.
 
 from __future__ import annotations
 
-import contextlib
-import io
-import re
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -16,14 +11,7 @@ from nscontrol.errors import ModelError
 from nscontrol.simulate import register_lowering
 from nscontrol.simulate.lowering import base
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
 EPS = float(np.finfo(float).eps)
-
-
-def _worked_example() -> str:
-    text = DOC.read_text()
-    section = text[text.index("### Worked example: a lowering of your own"):]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
 @pytest.fixture
@@ -34,10 +22,8 @@ def registry():
     base._REGISTRY._entries[:] = saved
 
 
-def test_a_user_lowering_runs_a_model_of_their_own(registry):
-    scope: dict = {}
-    with contextlib.redirect_stdout(io.StringIO()):
-        exec(compile(_worked_example(), str(DOC), "exec"), scope)   # noqa: S102
+def test_a_user_lowering_runs_a_model_of_their_own(registry, doc_block):
+    scope, _ = doc_block("### Worked example: a lowering of your own")
     traj = scope["traj"]
     v, x = traj.x.T
     # invert gave the trajectory back in the user's order, starting at the x0 given
@@ -57,10 +43,11 @@ def test_a_user_lowering_runs_a_model_of_their_own(registry):
     assert mj.state_names == ("v", "x") and np.max(np.abs(mj.x[:, 1])) <= 1.0 + 3.0 * 1e-3
 
 
-def test_without_a_lowering_the_model_is_refused_by_name(registry):
+def test_without_a_lowering_the_model_is_refused_by_name(registry, doc_source):
     scope: dict = {}
-    code = _worked_example().split("register_lowering(RattleAsLagrangian())")[0]
-    exec(compile(code, str(DOC), "exec"), scope)   # noqa: S102  the classes, not registered
+    source = doc_source("### Worked example: a lowering of your own")
+    code = source.split("register_lowering(RattleAsLagrangian())")[0]
+    exec(compile(code, "docs/architecture.md", "exec"), scope)   # noqa: S102  the classes, not registered
     rattle = scope["Rattle"](stiffness=1.0, width=1.0)
     with pytest.raises(ModelError, match=r"^event_driven: integrates .*got Rattle.*lowering"):
         nsc.simulate(rattle, [3.0, 0.0], (0.0, 1.0))

@@ -166,15 +166,18 @@ def _block_stepper() -> None:
         reset_blocks(0.0, e, e, e, False, rs, e, e, False, rs, e, e)
 
 
-#: (what, how): one step of the warm-up each.
+#: (what, how): one step of the warm-up each. In this order: run side by side, the LCP solvers
+#: (the longest, and called by the contact steps) go first, beside the steps that need no
+#: LCP kernel; the steps that call them come after, so that they mostly find them cached
+#: rather than compile them a second time in another process.
 STEPS: list[tuple[str, Callable[[], Any]]] = [
     ("LCP solvers", _lcp),
-    ("event-driven and Moreau-Jean mechanics", _mechanics),
+    ("ZAD-controlled buck converter", _zad_buck),
+    ("sampled sliding-mode control", _sliding_mode),
     ("impacting bodies with an observer", _impacting_bodies),
     ("Lur'e systems (implicit Euler) and switching", _setvalued),
-    ("ZAD-controlled buck converter", _zad_buck),
+    ("event-driven and Moreau-Jean mechanics", _mechanics),
     ("frictional contacts", _frictional_contacts),
-    ("sampled sliding-mode control", _sliding_mode),
     ("compiled controllers, observers and models", _compiled_blocks),
 ]
 
@@ -206,14 +209,74 @@ COMPILES: dict[str, tuple[str, ...]] = {
 }
 
 
-def warm_up(report: Callable[[str], None] = lambda _: None) -> list[str]:
-    """Run every step (``report(what)`` before each); returns the steps that failed, as
-    ``"what: error"`` (a failing step only leaves its kernels to compile on first use)."""
+def warm_up(report: Callable[[str], None] = lambda _: None, jobs: int | None = 1) -> list[str]:
+    """Run every step; returns the steps that failed, as ``"what: error"`` (a failing step
+    only leaves its kernels to compile on first use).
+
+    ``jobs=1`` runs the steps one after another here (``report(what)`` before each);
+    more run them side by side, each in its own process (``None``: one per core), and
+    ``report`` gets a line as each step finishes (``"what: done in 12 s (CPU 10 s)"``).
+    The processes share the one kernel cache: each writes numba's cache index under the
+    cache's lock (:func:`run_step`).
+    """
+    from .._processes import Outcome, check_jobs, run_each
+
+    n_jobs = check_jobs(jobs)
     failed = []
-    for what, step in STEPS:
-        report(what)
-        try:
-            step()
-        except Exception as exc:  # noqa: BLE001 - warm-up is best effort, said in the output
-            failed.append(f"{what}: {type(exc).__name__}: {exc}")
+    if n_jobs == 1:
+        for what, _ in STEPS:
+            report(what)
+            error = _run_step_here(what)
+            if error:
+                failed.append(f"{what}: {error}")
+        return failed
+    names = [what for what, _ in STEPS]
+
+    def done(index: int, outcome: Outcome) -> None:
+        error = outcome.value if outcome.value is not None else _last_line(outcome.error)
+        if error:
+            failed.append(f"{names[index]}: {error}")
+        report(f"{names[index]}: {'FAILED' if error else 'done'} in {outcome.seconds:.0f} s "
+               f"(CPU {outcome.cpu:.0f} s)")
+
+    run_each([(_run_step_here, (what,)) for what in names], n_jobs, on_done=done)
     return failed
+
+
+def run_step(what: str) -> None:
+    """Run the step called ``what`` (a name of :data:`STEPS`), writing numba's cache index
+    under the cache's lock (:func:`nscontrol._compile_background.cache_lock`, the one the
+    background compiler takes): numba reads, extends and rewrites a module's index when it
+    saves a kernel, so two processes saving kernels of one module at once could otherwise
+    drop an entry, or give two kernels one data file. Compiling itself is not locked.
+    """
+    import numba.core.caching as caching
+
+    from .._compile_background import cache_lock
+
+    step = dict(STEPS)[what]
+    save = caching.IndexDataCacheFile.save
+
+    def locked_save(self: Any, key: Any, data: Any) -> None:
+        with cache_lock():
+            save(self, key, data)
+
+    caching.IndexDataCacheFile.save = locked_save   # type: ignore[method-assign]
+    try:
+        step()
+    finally:
+        caching.IndexDataCacheFile.save = save      # type: ignore[method-assign]
+
+
+def _run_step_here(what: str) -> str:
+    """:func:`run_step`; the error as ``"Type: message"``, empty when it ran."""
+    try:
+        run_step(what)
+    except Exception as exc:  # noqa: BLE001 - warm-up is best effort, said in the output
+        return f"{type(exc).__name__}: {exc}"
+    return ""
+
+
+def _last_line(text: str) -> str:
+    lines = [line for line in text.strip().splitlines() if line.strip()]
+    return lines[-1].strip() if lines else "failed"

@@ -1,0 +1,176 @@
+"""Run independent tasks side by side, each in its own child process (``nscontrol report``
+and ``nscontrol warmup`` on every core).
+
+A task is a module-level function and its arguments. At most ``jobs`` children run at once;
+each runs one task and sends back its value (pickled), or the traceback of the exception it
+raised, with the seconds it took and whatever it printed. One child per task, rather than a
+pool of long-lived workers, keeps the tasks apart: a task that raises, or whose process
+dies, costs only its own result, and memory is returned after each task. (A child loads the
+compiled kernels it uses from numba's on-disk cache: milliseconds per kernel.)
+
+Children are forked where the platform allows it (they start in a few milliseconds and see
+the parent's modules as imported); elsewhere the platform's default start method is used, so
+the task must then be importable by name. Each child leads its own process group and
+ignores Ctrl-C: on Ctrl-C (or any exception) in the parent, every running child is
+terminated with the processes it started (a sweep's pool inside an example), and the
+exception goes on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import multiprocessing
+import os
+import signal
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+__all__ = ["Outcome", "default_jobs", "check_jobs", "run_each"]
+
+
+@dataclass
+class Outcome:
+    """What one task gave: its ``value`` (None when it failed), the ``error`` text (empty on
+    success), its wall ``seconds``, the ``output`` it printed (stdout and stderr) and the
+    ``cpu`` seconds used by its process and the processes it started and saw end (NaN when it
+    died)."""
+
+    value: Any
+    error: str
+    seconds: float
+    output: str = ""
+    cpu: float = float("nan")
+
+
+def default_jobs() -> int:
+    """The cores this process may run on (its CPU affinity where the platform says it)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:              # no sched_getaffinity (macOS, Windows)
+        return max(1, os.cpu_count() or 1)
+
+
+def check_jobs(jobs: Any, name: str = "jobs") -> int:
+    """``jobs`` as a positive number of processes; ``None`` gives :func:`default_jobs`.
+
+    Raises
+    ------
+    ModelError
+        Not an integer, or below 1.
+    """
+    from ._validation import check_integer
+
+    if jobs is None:
+        return default_jobs()
+    return int(check_integer(name, jobs, minimum=1))
+
+
+def _context() -> Any:
+    if "fork" in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("fork")
+    return multiprocessing.get_context()
+
+
+def _child(fn: Callable[..., Any], args: tuple[Any, ...], conn: Connection) -> None:
+    """Run ``fn(*args)`` and send ``(value, error, seconds, output)`` to the parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)    # the parent decides what Ctrl-C stops
+    with contextlib.suppress(OSError):
+        os.setpgid(0, 0)
+    output = io.StringIO()
+    start, cpu = time.perf_counter(), _cpu_seconds()
+    value, error = None, ""
+    with contextlib.redirect_stdout(output), contextlib.redirect_stderr(output):
+        try:
+            value = fn(*args)
+        except Exception:  # noqa: BLE001 - sent back as text, the other tasks go on
+            error = traceback.format_exc()
+    seconds, cpu = time.perf_counter() - start, _cpu_seconds() - cpu
+    try:
+        conn.send((value, error, seconds, output.getvalue(), cpu))
+    except Exception:  # noqa: BLE001 - a value that cannot be pickled: say so instead
+        conn.send((None, f"the task's result cannot be sent back from its process:\n"
+                         f"{traceback.format_exc()}", seconds, output.getvalue(), cpu))
+    conn.close()
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its children that have ended (a task's pool)."""
+    try:
+        import resource
+    except ImportError:                 # not on Windows
+        return time.process_time()
+    own, ended = (resource.getrusage(who) for who in (resource.RUSAGE_SELF,
+                                                       resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
+
+
+def run_each(tasks: Sequence[tuple[Callable[..., Any], tuple[Any, ...]]], jobs: int, *,
+             on_done: Callable[[int, Outcome], None] | None = None) -> list[Outcome]:
+    """Run ``fn(*args)`` for every ``(fn, args)`` of ``tasks``, at most ``jobs`` at a time,
+    in the order given; returns one :class:`Outcome` per task, in the order of ``tasks``.
+
+    ``on_done(index, outcome)`` is called in this process as each task finishes. A task that
+    raises, returns a value that cannot be pickled, or whose process dies gives an outcome
+    with ``value=None`` and the reason in ``error``; the other tasks run on.
+    """
+    ctx = _context()
+    queue = list(enumerate(tasks))
+    queue.reverse()                     # pop() from the end: the first task starts first
+    outcomes: list[Outcome | None] = [None] * len(tasks)
+    running: dict[Connection, tuple[int, Any, float]] = {}
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                index, (fn, args) = queue.pop()
+                recv, send = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_child, args=(fn, args, send))
+                proc.start()
+                with contextlib.suppress(OSError):      # the child does it too (no race)
+                    os.setpgid(proc.pid, proc.pid)
+                send.close()                            # EOF here when the child ends
+                running[recv] = (index, proc, time.perf_counter())
+            for conn in wait(list(running)):
+                assert isinstance(conn, Connection)
+                index, proc, start = running.pop(conn)
+                outcome = _receive(conn, proc, start)
+                outcomes[index] = outcome
+                if on_done is not None:
+                    on_done(index, outcome)
+    finally:
+        for conn, (_, proc, _) in running.items():     # Ctrl-C or an error: stop them all
+            _stop(proc)
+            conn.close()
+    assert all(o is not None for o in outcomes)
+    return [o for o in outcomes if o is not None]
+
+
+def _receive(conn: Connection, proc: Any, start: float) -> Outcome:
+    try:
+        value, error, seconds, output, cpu = conn.recv()
+    except (EOFError, OSError):
+        value, error, seconds, output, cpu = (None, None, time.perf_counter() - start, "",
+                                              float("nan"))
+    finally:
+        conn.close()
+    proc.join()
+    if error is None:
+        error = (f"the task's process died before it finished (exit code {proc.exitcode}"
+                 f"{': killed by signal ' + str(-proc.exitcode) if proc.exitcode < 0 else ''})")
+    return Outcome(value, error, seconds, output, cpu)
+
+
+def _stop(proc: Any) -> None:
+    """Terminate a child and every process of its group, then reap it."""
+    for sig, grace in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        with contextlib.suppress(OSError):
+            os.killpg(proc.pid, sig)
+        with contextlib.suppress(OSError):
+            os.kill(proc.pid, sig)
+        proc.join(grace)
+        if not proc.is_alive():
+            return
