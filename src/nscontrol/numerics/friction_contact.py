@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, NoReturn
 
 import numpy as np
 from scipy import sparse
@@ -457,7 +457,7 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     order = [method] if method != "auto" else (
         ["lcp", "nsgs"] if dim == 2 and m <= AUTO_LCP_MAX_CONTACTS
         else ["nsgs", "lcp"] if dim == 2 and m <= 5 * AUTO_LCP_MAX_CONTACTS else ["nsgs"])
-    attempts = []
+    results = []
     for name in order:
         if name == "lcp":
             check_finite("W", Wc.data if sparse.issparse(Wc) else Wc)
@@ -475,14 +475,25 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
             result = solver.solve(qv, r_start, tol=tol, max_sweeps=max_sweeps)
         if result.success:
             return result
-        attempts.append(f"{name}: {result.status}, residual {result.residual:.3g} "
-                        f"(tolerance {result.tolerance:.3g}) after {result.iterations} "
-                        f"iterations" + (f": {result.message}" if result.message else ""))
+        results.append(result)
+    _raise_unsolved(results, tol, max_sweeps, max_pivots)
+
+
+def _raise_unsolved(results: list[FrictionContactResult], tol: float, max_sweeps: int,
+                    max_pivots: int | None) -> NoReturn:
+    """The error of :func:`solve_friction_contact` when no method (``results``, in the
+    order tried) reached ``tol``: :class:`BudgetExceededError` when the last one spent its
+    budget, else :class:`SolverError`."""
+    attempts = [f"{res.method}: {res.status}, residual {res.residual:.3g} "
+                f"(tolerance {res.tolerance:.3g}) after {res.iterations} "
+                f"iterations" + (f": {res.message}" if res.message else "")
+                for res in results]
+    result = results[-1]
     text = (f"solve_friction_contact: no method reached tol = {tol:.3g} "
             f"({'; '.join(attempts)})")
     if result.status == "max_iter":
         budget, limit = (("max_sweeps", max_sweeps) if result.method == "nsgs"
-                         else ("max_pivots", _pivot_limit(m, max_pivots)))
+                         else ("max_pivots", _pivot_limit(result.states.shape[0], max_pivots)))
         raise BudgetExceededError(
             f"{budget}: {text}; raise {budget} or tol; the last result is in err.partial",
             budget=budget, limit=limit, used=result.iterations, partial=result)
@@ -502,8 +513,10 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
     :data:`AUTO_LCP_MAX_CONTACTS` contacts, from zero (beyond, the general path starts from
     the frictionless impulses), in one compiled call
     (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once` or ``solve_sparse_once``,
-    which check the values). None when the arguments are of another kind, refused, or the
-    solve does not reach ``tol``: the general path then runs, and raises what it must."""
+    which check the values). None when the arguments are of another kind or refused: the
+    general path then runs, and raises what it must. A solve that does not reach ``tol``
+    raises here, as the general path would after the same sweeps
+    (:func:`_raise_unsolved`)."""
     n = q.shape[0] if q.ndim == 1 else 0
     if not (type(dim) is int and 1 <= dim <= 3 and n and n % dim == 0
             and (method == "nsgs" or (method == "auto" and dim != 2))
@@ -541,10 +554,20 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
                 max_sweeps, max_local_iter)
     except TypeError:
         return None
-    if not ok:
+    if ok:
+        return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved",
+                                           tolerance, "")
+    if code > kernels.SWEEP_LIMIT:     # refused (a value of W, q, mu or r0): the general path
         return None
-    return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved", tolerance,
-                                       "")
+    # the general path would run the same sweeps from the same start (nsgs is the only method
+    # here): say what they gave instead of spending them twice
+    if code == kernels.CONVERGED:
+        status, message = "numerical_failure", ""
+    else:
+        status, message = "max_iter", f"budget max_sweeps = {max_sweeps} sweeps spent"
+    _raise_unsolved([FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", status,
+                                                 tolerance, message)],
+                    tol, max_sweeps, None)
 
 
 #: The compiled entries of :func:`_once` (dense, sparse), made on first use.
