@@ -60,6 +60,8 @@ __all__ = ["FrictionContactResult", "FrictionContactSolver", "solve_friction_con
            "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
 _new = object.__new__
+#: The states' dtype (a dtype object: a type to convert on every call costs more).
+_INT64 = np.dtype(np.int64)
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
 CONTACT_STATES = ("open", "stick", "slip")
 #: ``auto`` solves planar problems up to this many contacts by the LCP (Lemke: O(m³)).
@@ -111,11 +113,19 @@ class FrictionContactResult:
               ) -> FrictionContactResult:
         """A result of fields already of their types, built without the frozen
         ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve): its
-        ``__dict__`` filled in place (faster than setting a new one)."""
+        ``__dict__`` filled in place, one item at a time (faster than setting a new dict, or
+        ``update`` with keywords, which builds one first)."""
         result = _new(cls)
-        result.__dict__.update(r=r, u=u, states=states, residual=residual,
-                               iterations=iterations, method=method, status=status,
-                               tolerance=tolerance, message=message)
+        d = result.__dict__
+        d["r"] = r
+        d["u"] = u
+        d["states"] = states
+        d["residual"] = residual
+        d["iterations"] = iterations
+        d["method"] = method
+        d["status"] = status
+        d["tolerance"] = tolerance
+        d["message"] = message
         return result
 
     @property
@@ -338,7 +348,7 @@ class FrictionContactSolver:
         else:
             r = np.array(as_vector("r0", r0, n))
         u = np.empty(n)
-        states = np.zeros(self.m, np.int64)
+        states = np.zeros(self.m, _INT64)
         code, sweeps, err, tolerance, ok, terms = kernels.solve_columns(
             *self._columns, self._blocks, self._inverses, self._terms, q, self.mu, r, u,
             states, tol, max_sweeps, self._max_local_iter)
@@ -539,7 +549,7 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
     else:
         return None
     u = np.empty(n)
-    states = np.empty(m, np.int64)
+    states = np.empty(m, _INT64)
     dense = type(W) is np.ndarray
     entry = _ONCE_ENTRIES[0 if dense else 1] if _ONCE_ENTRIES else _load_once_entries(dense)
     # the entries' signatures check the types (float64 C-contiguous writeable arrays, int32
