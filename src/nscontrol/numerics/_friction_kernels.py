@@ -701,7 +701,7 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     # the sweeps specialised on W's storage and on dim (a constant in each body): with the
     # other kinds' code in its loop (the sparse update, another dim's local solve), the
     # compiler keeps a dense sweep's column update slow (a planar dense sweep measured 4x
-    # slower, a spatial one 1.3-1.9x)
+    # slower, a spatial one up to 1.3x)
     if WT.shape[0] > 0:
         if dim == 3:
             return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u,
