@@ -412,3 +412,20 @@ def test_a_whole_call_that_spends_its_sweeps_raises_without_solving_again(kind, 
     assert short.value.budget == "max_sweeps" and short.value.used == 2
     np.testing.assert_array_equal(short.value.partial.r, general.value.partial.r)
     assert short.value.partial.status == "max_iter"
+
+
+# ------------------------------------------------------------------ checks of the error
+@pytest.mark.parametrize("seed", range(4))
+def test_the_sweeps_run_past_the_first_that_reaches_tol_are_at_most_an_eighth(seed):
+    """The checks of the error are spaced so that a solve stops at most ``max(1, k // 8)``
+    sweeps after the first sweep ``k`` whose error is ``<= tol`` (found by solving with
+    ``max_sweeps`` 1, 2, ...: the last sweep is always checked)."""
+    rng = np.random.default_rng(seed)
+    W, q = _chain(rng, 30, 3)
+    solver = FrictionContactSolver(sp.csr_matrix(W), 0.5, dim=3)
+    tol = 1e-10
+    done = solver.solve(q, tol=tol, max_sweeps=20_000)
+    assert done.success
+    first = next(k for k in range(1, done.iterations + 1)
+                 if solver.solve(q, tol=tol, max_sweeps=k).residual <= tol)
+    assert done.iterations - first <= max(1, first // 8)
