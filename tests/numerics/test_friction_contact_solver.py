@@ -381,3 +381,51 @@ def test_a_planar_dense_w_that_is_not_symmetric_is_read_by_its_columns():
         # a few operations on numbers of order 1: a few ulps of the largest impulse
         np.testing.assert_allclose(res.r, expected, rtol=0, atol=8 * EPS * np.abs(expected).max())
         np.testing.assert_allclose(res.u, W @ res.r + q, rtol=0, atol=8 * EPS * 4)
+
+
+# ------------------------------------------------------------------ a whole call at its budget
+@pytest.mark.parametrize("kind", ["dense", "csr", "csc"])
+def test_a_whole_call_that_spends_its_sweeps_raises_without_solving_again(kind, monkeypatch):
+    """The short path's sweeps ran out: the error is the one the general path raises (same
+    message, same partial result), and the general path, which would run the same sweeps
+    from the same start again, is not entered."""
+    from nscontrol.errors import BudgetExceededError
+    from nscontrol.numerics import friction_contact as fc
+
+    rng = np.random.default_rng(7)
+    m = 5
+    W = _spd(rng, 3 * m)
+    q = rng.standard_normal(3 * m)
+    mu = np.full(m, 0.5)
+    Wk = W if kind == "dense" else (sp.csr_matrix(W) if kind == "csr" else sp.csc_matrix(W))
+    # the general path's error, reached with q given as a list (not the short path's kind)
+    with pytest.raises(BudgetExceededError) as general:
+        solve_friction_contact(Wk, q.tolist(), mu, dim=3, method="nsgs", max_sweeps=2)
+
+    def general_path(*args, **kwargs):
+        raise AssertionError("the general path ran")
+
+    monkeypatch.setattr(fc.FrictionContactSolver, "_checked", general_path)
+    with pytest.raises(BudgetExceededError) as short:
+        solve_friction_contact(Wk, q, mu, dim=3, method="nsgs", max_sweeps=2)
+    assert str(short.value) == str(general.value)
+    assert short.value.budget == "max_sweeps" and short.value.used == 2
+    np.testing.assert_array_equal(short.value.partial.r, general.value.partial.r)
+    assert short.value.partial.status == "max_iter"
+
+
+# ------------------------------------------------------------------ checks of the error
+@pytest.mark.parametrize("seed", range(4))
+def test_the_sweeps_run_past_the_first_that_reaches_tol_are_at_most_an_eighth(seed):
+    """The checks of the error are spaced so that a solve stops at most ``max(1, k // 8)``
+    sweeps after the first sweep ``k`` whose error is ``<= tol`` (found by solving with
+    ``max_sweeps`` 1, 2, ...: the last sweep is always checked)."""
+    rng = np.random.default_rng(seed)
+    W, q = _chain(rng, 30, 3)
+    solver = FrictionContactSolver(sp.csr_matrix(W), 0.5, dim=3)
+    tol = 1e-10
+    done = solver.solve(q, tol=tol, max_sweeps=20_000)
+    assert done.success
+    first = next(k for k in range(1, done.iterations + 1)
+                 if solver.solve(q, tol=tol, max_sweeps=k).residual <= tol)
+    assert done.iterations - first <= max(1, first // 8)

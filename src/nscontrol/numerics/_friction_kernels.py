@@ -663,20 +663,24 @@ MAX_CHECK_GAP = 32
 
 
 @njit(cache=True, inline="always")
-def _check_gap(err: float, last_err: float, sweeps: int, tol: float) -> int:
-    """Sweeps until the next check of the error, from the last two checks: 1 unless the
-    error fell, else half the sweeps the observed linear rate needs to reach ``tol``
-    (at most :data:`MAX_CHECK_GAP`). A check costs about a third of a dense sweep; NSGS
-    converges linearly, so on a slow problem most checks only confirm the rate. The
-    sweeps spent past the one that reached ``tol`` are at most half the rate's estimate
-    (the answer is then more accurate, never less)."""
+def _check_gap(err: float, last_err: float, sweeps: int, tol: float, done: int) -> int:
+    """Sweeps until the next check of the error, from the last two checks and the ``done``
+    sweeps so far: at most an eighth of ``done`` (at least 1, at most
+    :data:`MAX_CHECK_GAP`), and while the error falls, at most half the sweeps the observed
+    linear rate needs to reach ``tol``. A check costs about a third of a dense sweep; NSGS
+    converges linearly once the contact states settle, so on a slow problem most checks
+    only confirm the rate; before they settle the error can stall, then drop by decades in
+    a few sweeps, which no rate foresees. The sweeps spent past the one that reached
+    ``tol`` are therefore at most an eighth of those done (the answer is then more
+    accurate, never less), and the checks at most about ``8 log(sweeps)``."""
+    gap = min(max(1, done // 8), MAX_CHECK_GAP)
     if not (err < last_err and err > 0.0):
-        return 1
+        return gap
     rate = np.log(err / last_err) / sweeps          # < 0: log of the error per sweep
     need = np.log(tol / err) / rate                 # > 0: sweeps to reach tol at that rate
     if not (need >= 2.0):
         return 1
-    return int(min(0.5 * need, MAX_CHECK_GAP))
+    return int(min(0.5 * need, gap))
 
 
 @njit(cache=True)
@@ -689,35 +693,41 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
 
     Stops when the relative natural-map error of the whole problem (:func:`relative_error`,
     checked on the running ``u`` after the sweeps :func:`_check_gap` picks: every sweep
-    until the error falls steadily) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is
+    for the first 16) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is
     recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
     confirms the last on an exact product. Returns ``(code, sweeps, error)``: code
     :data:`CONVERGED` or :data:`SWEEP_LIMIT`.
     """
-    # the sweeps specialised on W's storage and planar or not: with the other kinds' code in
-    # its loop (the sparse update, the spatial slip search's call), the compiler keeps a
-    # dense sweep's column update slow (a planar dense sweep measured 4x slower)
+    # the sweeps specialised on W's storage and on dim (a constant in each body): with the
+    # other kinds' code in its loop (the sparse update, another dim's local solve), the
+    # compiler keeps a dense sweep's column update slow (a planar dense sweep measured 4x
+    # slower, a spatial one up to 1.3x)
     if WT.shape[0] > 0:
+        if dim == 3:
+            return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u,
+                                states, tol, max_sweeps, max_local_iter, True)
         if dim == 2:
-            return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
-                                tol, max_sweeps, max_local_iter, True, True)
-        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
-                                tol, max_sweeps, max_local_iter, True, False)
+            return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 2, r, u,
+                                states, tol, max_sweeps, max_local_iter, True)
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 1, r, u, states,
+                            tol, max_sweeps, max_local_iter, True)
+    if dim == 3:
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u, states,
+                            tol, max_sweeps, max_local_iter, False)
     if dim == 2:
-        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
-                                tol, max_sweeps, max_local_iter, False, True)
-    return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, dim, r, u, states,
-                                tol, max_sweeps, max_local_iter, False, False)
+        return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 2, r, u, states,
+                            tol, max_sweeps, max_local_iter, False)
+    return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 1, r, u, states, tol,
+                        max_sweeps, max_local_iter, False)
 
 
 @njit(cache=True, inline="always")
 def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                  blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
                  dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
-                 max_sweeps: int, max_local_iter: int, dense: bool, planar: bool
+                 max_sweeps: int, max_local_iter: int, dense: bool
                  ) -> tuple[int, int, float]:
-    """The sweeps of :func:`nsgs_columns`, ``dense`` and ``planar`` (``dim == 2``)
-    constants at each call."""
+    """The sweeps of :func:`nsgs_columns`, ``dense`` and ``dim`` constants at each call."""
     m = mu.shape[0]
     column_product(WT, bptr, brow, bdata, q, r, dim, u)
     q_norm = _norm(q)
@@ -728,12 +738,8 @@ def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     for sweep in range(1, max_sweeps + 1):
         for i in range(m):
             b = i * dim
-            if planar:
-                state, n0, n1, n2 = _local_update(blocks, inverses, i, 2, u, r, mu[i],
-                                                  max_local_iter, qloc, rloc)
-            else:
-                state, n0, n1, n2 = _local_update(blocks, inverses, i, dim, u, r, mu[i],
-                                                  max_local_iter, qloc, rloc)
+            state, n0, n1, n2 = _local_update(blocks, inverses, i, dim, u, r, mu[i],
+                                              max_local_iter, qloc, rloc)
             states[i] = state
             d0 = n0 - r[b]
             d1 = n1 - r[b + 1] if dim > 1 else 0.0
@@ -752,7 +758,7 @@ def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
             err = _relative_error(q_norm, r, u, mu, dim)
             if err <= tol:
                 return CONVERGED, sweep, err
-            next_check = sweep + _check_gap(err, last_err, sweep - last_check, tol)
+            next_check = sweep + _check_gap(err, last_err, sweep - last_check, tol, sweep)
             last_err, last_check = err, sweep
         if sweep % REFRESH_SWEEPS == 0:
             column_product(WT, bptr, brow, bdata, q, r, dim, u)

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, NoReturn
 
 import numpy as np
 from scipy import sparse
@@ -60,6 +60,8 @@ __all__ = ["FrictionContactResult", "FrictionContactSolver", "solve_friction_con
            "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
 _new = object.__new__
+#: The states' dtype (a dtype object: a type to convert on every call costs more).
+_INT64 = np.dtype(np.int64)
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
 CONTACT_STATES = ("open", "stick", "slip")
 #: ``auto`` solves planar problems up to this many contacts by the LCP (Lemke: O(m³)).
@@ -111,11 +113,19 @@ class FrictionContactResult:
               ) -> FrictionContactResult:
         """A result of fields already of their types, built without the frozen
         ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve): its
-        ``__dict__`` filled in place (faster than setting a new one)."""
+        ``__dict__`` filled in place, one item at a time (faster than setting a new dict, or
+        ``update`` with keywords, which builds one first)."""
         result = _new(cls)
-        result.__dict__.update(r=r, u=u, states=states, residual=residual,
-                               iterations=iterations, method=method, status=status,
-                               tolerance=tolerance, message=message)
+        d = result.__dict__
+        d["r"] = r
+        d["u"] = u
+        d["states"] = states
+        d["residual"] = residual
+        d["iterations"] = iterations
+        d["method"] = method
+        d["status"] = status
+        d["tolerance"] = tolerance
+        d["message"] = message
         return result
 
     @property
@@ -338,7 +348,7 @@ class FrictionContactSolver:
         else:
             r = np.array(as_vector("r0", r0, n))
         u = np.empty(n)
-        states = np.zeros(self.m, np.int64)
+        states = np.zeros(self.m, _INT64)
         code, sweeps, err, tolerance, ok, terms = kernels.solve_columns(
             *self._columns, self._blocks, self._inverses, self._terms, q, self.mu, r, u,
             states, tol, max_sweeps, self._max_local_iter)
@@ -457,7 +467,7 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
     order = [method] if method != "auto" else (
         ["lcp", "nsgs"] if dim == 2 and m <= AUTO_LCP_MAX_CONTACTS
         else ["nsgs", "lcp"] if dim == 2 and m <= 5 * AUTO_LCP_MAX_CONTACTS else ["nsgs"])
-    attempts = []
+    results = []
     for name in order:
         if name == "lcp":
             check_finite("W", Wc.data if sparse.issparse(Wc) else Wc)
@@ -475,14 +485,25 @@ def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
             result = solver.solve(qv, r_start, tol=tol, max_sweeps=max_sweeps)
         if result.success:
             return result
-        attempts.append(f"{name}: {result.status}, residual {result.residual:.3g} "
-                        f"(tolerance {result.tolerance:.3g}) after {result.iterations} "
-                        f"iterations" + (f": {result.message}" if result.message else ""))
+        results.append(result)
+    _raise_unsolved(results, tol, max_sweeps, max_pivots)
+
+
+def _raise_unsolved(results: list[FrictionContactResult], tol: float, max_sweeps: int,
+                    max_pivots: int | None) -> NoReturn:
+    """The error of :func:`solve_friction_contact` when no method (``results``, in the
+    order tried) reached ``tol``: :class:`BudgetExceededError` when the last one spent its
+    budget, else :class:`SolverError`."""
+    attempts = [f"{res.method}: {res.status}, residual {res.residual:.3g} "
+                f"(tolerance {res.tolerance:.3g}) after {res.iterations} "
+                f"iterations" + (f": {res.message}" if res.message else "")
+                for res in results]
+    result = results[-1]
     text = (f"solve_friction_contact: no method reached tol = {tol:.3g} "
             f"({'; '.join(attempts)})")
     if result.status == "max_iter":
         budget, limit = (("max_sweeps", max_sweeps) if result.method == "nsgs"
-                         else ("max_pivots", _pivot_limit(m, max_pivots)))
+                         else ("max_pivots", _pivot_limit(result.states.shape[0], max_pivots)))
         raise BudgetExceededError(
             f"{budget}: {text}; raise {budget} or tol; the last result is in err.partial",
             budget=budget, limit=limit, used=result.iterations, partial=result)
@@ -502,8 +523,10 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
     :data:`AUTO_LCP_MAX_CONTACTS` contacts, from zero (beyond, the general path starts from
     the frictionless impulses), in one compiled call
     (:func:`~nscontrol.numerics._friction_kernels.solve_dense_once` or ``solve_sparse_once``,
-    which check the values). None when the arguments are of another kind, refused, or the
-    solve does not reach ``tol``: the general path then runs, and raises what it must."""
+    which check the values). None when the arguments are of another kind or refused: the
+    general path then runs, and raises what it must. A solve that does not reach ``tol``
+    raises here, as the general path would after the same sweeps
+    (:func:`_raise_unsolved`)."""
     n = q.shape[0] if q.ndim == 1 else 0
     if not (type(dim) is int and 1 <= dim <= 3 and n and n % dim == 0
             and (method == "nsgs" or (method == "auto" and dim != 2))
@@ -526,7 +549,7 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
     else:
         return None
     u = np.empty(n)
-    states = np.empty(m, np.int64)
+    states = np.empty(m, _INT64)
     dense = type(W) is np.ndarray
     entry = _ONCE_ENTRIES[0 if dense else 1] if _ONCE_ENTRIES else _load_once_entries(dense)
     # the entries' signatures check the types (float64 C-contiguous writeable arrays, int32
@@ -541,10 +564,20 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
                 max_sweeps, max_local_iter)
     except TypeError:
         return None
-    if not ok:
+    if ok:
+        return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved",
+                                           tolerance, "")
+    if code > kernels.SWEEP_LIMIT:     # refused (a value of W, q, mu or r0): the general path
         return None
-    return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved", tolerance,
-                                       "")
+    # the general path would run the same sweeps from the same start (nsgs is the only method
+    # here): say what they gave instead of spending them twice
+    if code == kernels.CONVERGED:
+        status, message = "numerical_failure", ""
+    else:
+        status, message = "max_iter", f"budget max_sweeps = {max_sweeps} sweeps spent"
+    _raise_unsolved([FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", status,
+                                                 tolerance, message)],
+                    tol, max_sweeps, None)
 
 
 #: The compiled entries of :func:`_once` (dense, sparse), made on first use.
