@@ -316,5 +316,5 @@ def announce_compilation(stream: Any = None) -> bool:
     print(f"nscontrol: compiling numerical kernels (numba; {len(missing)} modules not yet in "
           f"the cache) - a run compiles those it uses, typically 10-30 s, once per install;\n"
           f"           later runs load them from the cache (`nscontrol warmup` compiles all "
-          f"ahead, about 2 min).", file=stream or sys.stderr, flush=True)
+          f"ahead, 2-4 min on two cores).", file=stream or sys.stderr, flush=True)
     return True
