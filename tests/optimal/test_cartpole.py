@@ -13,14 +13,15 @@ pytest.importorskip("casadi")
 
 import nscontrol as nsc  # noqa: E402
 from nscontrol.errors import DimensionError, ModelError  # noqa: E402
+from nscontrol.examples.optimal_cartpole import PARAMETERS, controllers  # noqa: E402
 from nscontrol.optimal import CartPole, ContactMPC  # noqa: E402
 from nscontrol.optimal.plan import ZeroOrderHold  # noqa: E402
 
 EPS = np.finfo(float).eps
 CART = CartPole()
-H = 0.01
-W = np.array([10.0, 10.0, 1.0, 1.0])
-EFFORT = 1e-2
+H = PARAMETERS["h"]
+W = np.array(PARAMETERS["state_weight"])
+EFFORT = PARAMETERS["effort"]
 
 
 def _mhat_condition() -> float:
@@ -113,9 +114,7 @@ def test_a_plan_through_an_impact_replays_through_simulate():
     normal velocity up to r short of Newton's law (velocities off by r / min_j ‖G_j‖); over
     N steps the difference is amplified by at most ‖A‖^N (the unstable pole). The bound below
     is 10 × N × that (r floored at IPOPT's 1e-8 on the dynamics)."""
-    mpc = ContactMPC(CART.system(), np.zeros(4), 25, H, state_weight=W, effort=EFFORT,
-                     u_min=-5.0, u_max=5.0, terminal=False,
-                     terminal_weight=CART.lqr(H, W, EFFORT)[1])
+    mpc = controllers(CART)["contact"]
     x0 = np.array([0.0, 0.0, 0.0, 3.0])
     record = mpc.solve(x0)
     plan = mpc.plan

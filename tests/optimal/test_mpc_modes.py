@@ -12,22 +12,21 @@ pytest.importorskip("casadi")
 
 import nscontrol as nsc  # noqa: E402
 from nscontrol.errors import ModelError  # noqa: E402
+from nscontrol.examples.optimal_cartpole import PARAMETERS, controllers  # noqa: E402
 from nscontrol.optimal import CartPole, ContactMPC, Relaxation  # noqa: E402
 from nscontrol.optimal.mpc import RECORD  # noqa: E402
 
 EPS = np.finfo(float).eps
 CART = CartPole()
-H = 0.01
-W = np.array([10.0, 10.0, 1.0, 1.0])
-EFFORT = 1e-2
+H = PARAMETERS["h"]
+W = np.array(PARAMETERS["state_weight"])
+EFFORT = PARAMETERS["effort"]
 COL = {name: i for i, name in enumerate(RECORD)}
 
 
-def block(system, **kw):
+def block(**kw):
     """The example's contact-implicit MPC (25 steps, |u| <= 5 N, the LQR terminal cost)."""
-    return ContactMPC(system, np.zeros(4), 25, H, state_weight=W, effort=EFFORT, u_min=-5.0,
-                      u_max=5.0, terminal=False, terminal_weight=CART.lqr(H, W, EFFORT)[1],
-                      **kw)
+    return controllers(CART, **kw)["contact"]
 
 
 def input_condition(mpc: ContactMPC) -> float:
@@ -45,13 +44,13 @@ def test_the_mode_iteration_gives_the_ipopt_input_along_the_closed_loop():
     level (1e-6 on the scaled optimality conditions) and the relaxation moves the solution
     by about σ per pair; an error e in the optimality conditions moves the inputs by at most
     cond(H_uu) e: the bound is cond × (1e-6 + 50 σ) × (1 + |u|)."""
-    ip = block(CART.system(), solver="ipopt",
+    ip = block(solver="ipopt",
                relaxation=Relaxation(sigma_min=1e-8, tol=1e-10))
     traj = nsc.simulate(nsc.closed_loop(CART.system(), ip), [0.0, 0.0, 0.0, 3.0], (0.0, 0.6),
                         method="moreau_jean", h=H, progress=False)
     assert np.count_nonzero(np.abs(traj.signals["impulse"]).sum(axis=1)) >= 1   # the impact
     us = traj.signals["u"][1:, 0]
-    qp = block(CART.system())
+    qp = block()
     got, records = [], []
     for x in traj.x[:-1]:
         records.append(qp.solve(x))
@@ -67,7 +66,7 @@ def test_a_mode_plan_is_complementary_to_roundoff():
     """A sample solved by the mode iteration holds one side of every pair at zero exactly
     (a force fixed at 0) or to the KKT solve's roundoff (a velocity row held at 0):
     cond(H) × eps × scale, with scale the largest force (~1e3 N) — 1e-9 covers it."""
-    mpc = block(CART.system())
+    mpc = block()
     traj = nsc.simulate(nsc.closed_loop(CART.system(), mpc), [0.0, 0.0, 0.0, 3.0], (0.0, 0.4),
                         method="moreau_jean", h=H, progress=False)
     sig = mpc.signals(traj)
@@ -100,7 +99,7 @@ def test_a_sample_the_iteration_does_not_settle_falls_back_to_ipopt():
     """The plan shifted from a sample at the same state is a poor start at the wall; with
     one KKT solve allowed the iteration cannot settle, and IPOPT solves the sample (its
     residual within √σ)."""
-    mpc = block(CART.system(), max_mode_iterations=1)
+    mpc = block(max_mode_iterations=1)
     x = np.array([0.0, 0.0, 0.0, 3.0])
     mpc.solve(x)
     record = mpc.solve(x)
@@ -110,9 +109,9 @@ def test_a_sample_the_iteration_does_not_settle_falls_back_to_ipopt():
 
 def test_solver_refusals_name_the_argument():
     with pytest.raises(ModelError, match="solver"):
-        block(CART.system(), solver="qp")
+        block(solver="qp")
     with pytest.raises(ModelError, match="max_mode_iterations"):
-        block(CART.system(), max_mode_iterations=0)
+        block(max_mode_iterations=0)
 
 
 def test_dependent_rows_held_are_solved_without_ipopt():

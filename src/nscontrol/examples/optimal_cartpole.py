@@ -38,7 +38,8 @@ PARAMETERS: dict[str, Any] = {
 }
 
 
-def controllers(cart: Any = None, *, steps: int | None = None) -> dict[str, Any]:
+def controllers(cart: Any = None, *, steps: int | None = None,
+                **options: Any) -> dict[str, Any]:
     """The contact-implicit and the linear MPC of the example (fresh blocks).
 
     Parameters
@@ -47,6 +48,9 @@ def controllers(cart: Any = None, *, steps: int | None = None) -> dict[str, Any]
         Default ``CartPole()``.
     steps : int, optional
         The horizon (default ``PARAMETERS["steps"]``).
+    **options
+        Further keywords of :class:`~nscontrol.optimal.ContactMPC` for both blocks
+        (``solver=``, ``max_mode_iterations=``, ...).
 
     Returns
     -------
@@ -61,7 +65,7 @@ def controllers(cart: Any = None, *, steps: int | None = None) -> dict[str, Any]
     W = np.array(p["state_weight"])
     _, P = cart.lqr(p["h"], W, p["effort"])
     kw = {"state_weight": W, "effort": p["effort"], "u_min": -p["u_max"],
-          "u_max": p["u_max"], "terminal": False, "terminal_weight": P}
+          "u_max": p["u_max"], "terminal": False, "terminal_weight": P, **options}
     n = p["steps"] if steps is None else steps
     return {"contact": ContactMPC(cart.system(), np.zeros(4), n, p["h"], **kw),
             "linear": ContactMPC(cart.free_system(), np.zeros(4), n, p["h"], **kw)}
