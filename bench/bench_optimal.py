@@ -485,9 +485,20 @@ def _general(name: str, build: Callable[[], Any], repeats: int) -> tuple[dict, d
                             "x": plan.x, "theta": plan.theta}
 
 
-#: IPOPT's tolerances: ours (Relaxation.tol), nosnoc's (its comp_tol × 1e-2, comp_tol 1e-9)
-#: and IPOPT's acceptable level (its default), where nosnoc's last solve may stop.
-TOL_OURS, TOL_NOSNOC, TOL_ACCEPTABLE = 1e-10, 1e-11, 1e-6
+#: IPOPT's tolerances: nosnoc's (its comp_tol × 1e-2, comp_tol 1e-9) and IPOPT's acceptable
+#: level (its default), where nosnoc's last solve may stop.
+TOL_NOSNOC, TOL_ACCEPTABLE = 1e-11, 1e-6
+
+
+def _our_accuracy() -> float:
+    """How far our solve may miss: IPOPT's tolerance (Relaxation.tol), or its relaxation of
+    constraint bounds (``bound_relax_factor``, IPOPT's default 1e-8 unless our options set
+    it), which our plans keep (our bounds are constraint rows: an element may end 1e-8
+    long below its lower bound 0; nosnoc's are variable bounds with the factor 0)."""
+    from nscontrol.optimal import Relaxation
+    from nscontrol.optimal.homotopy import IPOPT_OPTIONS
+
+    return max(Relaxation().tol, float(IPOPT_OPTIONS.get("bound_relax_factor", 1e-8)))
 
 
 def _objective_tolerance(ref: dict, ref_obj: float) -> dict:
@@ -496,13 +507,14 @@ def _objective_tolerance(ref: dict, ref_obj: float) -> dict:
     ``σ_N Σν`` above the limit's (``dJ/dσ = -Σν``, the multipliers of the products),
     estimated from its last two relaxed objectives as ``|J_N - J_{N-1}| σ_N / (σ_{N-1} -
     σ_N)``; ours is polished (the pairs exact). Each side's IPOPT solve is accurate to its
-    tolerance ``ε`` times ``1 + |J|`` (IPOPT's scaled KKT error; ``ε`` the acceptable level,
-    1e-6, when nosnoc's last solve stopped there). The tolerance is 10 times their sum."""
+    ``ε`` times ``1 + |J|`` (a constraint missed by ``ε`` moves ``J`` by its multiplier
+    times ``ε``; nosnoc's ``ε`` its tolerance, or the acceptable level, 1e-6, when its last
+    solve stopped there; ours :func:`_our_accuracy`). The tolerance is 10 times their sum."""
     sig, obj = ref["sigmas"], ref["objectives"]
     bias = abs(obj[-1] - obj[-2]) * sig[-1] / (sig[-2] - sig[-1])
     eps_ref = TOL_ACCEPTABLE if ref["last_status"] == "Solved_To_Acceptable_Level" \
         else TOL_NOSNOC
-    solve = (eps_ref + TOL_OURS) * (1.0 + abs(ref_obj))
+    solve = (eps_ref + _our_accuracy()) * (1.0 + abs(ref_obj))
     return {"objective_tolerance": 10.0 * (bias + solve),
             "reference_relaxation_bias": bias, "solver_accuracy": solve,
             "reference_last_status": ref["last_status"]}
