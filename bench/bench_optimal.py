@@ -493,8 +493,8 @@ TOL_NOSNOC, TOL_ACCEPTABLE = 1e-11, 1e-6
 def _our_accuracy() -> float:
     """How far our solve may miss: IPOPT's tolerance (Relaxation.tol), or its relaxation of
     constraint bounds (``bound_relax_factor``, IPOPT's default 1e-8 unless our options set
-    it), which our plans keep (our bounds are constraint rows: an element may end 1e-8
-    long below its lower bound 0; nosnoc's are variable bounds with the factor 0)."""
+    it), which our plans keep (our bounds are constraint rows: an element may be -1e-8 long
+    below its lower bound 0; nosnoc's are variable bounds with the factor 0)."""
     from nscontrol.optimal import Relaxation
     from nscontrol.optimal.homotopy import IPOPT_OPTIONS
 
