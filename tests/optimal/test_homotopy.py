@@ -146,3 +146,35 @@ def test_the_warm_solver_reuses_the_cold_ones_derivatives():
     # a solver built apart generates its own
     other = homotopy._NLP(_FesdNLP(SpeedUp().problem(N).engine()), Relaxation()).solver(False)
     assert hash(other.get_function("nlp_hess_l")) != hash(cold.get_function("nlp_hess_l"))
+
+
+def test_the_early_polish_ends_at_the_homotopys_point():
+    """Once the branches settle, the polish is tried and kept when it continues the relaxed
+    path: the same branches as the full homotopy's last solve, so the same smooth NLP and
+    the same optimum (costs equal to IPOPT's tolerance 1e-10 on a cost of order 1, times a
+    factor 100 for the two solves' different starts), with fewer relaxed solves."""
+    early = SpeedUp().problem(N).solve(Relaxation())
+    full = SpeedUp().problem(N).solve(Relaxation(early_polish=False))
+    assert early.stats["polished"] and full.stats["polished"]
+    assert abs(early.cost - full.cost) <= 100 * 1e-10 * (1.0 + abs(full.cost))
+    # the lengths of the elements without a switch are free (no equilibration): compare
+    # the switch, which FESD places exactly (constant fields) up to the solver's tolerance
+    assert np.allclose(early.switch_times([1.0], 0.0), full.switch_times([1.0], 0.0),
+                       rtol=0.0, atol=1e-6 * SpeedUp().T)
+    relaxed = [len([s for s in plan.stats["stages"] if s["sigma"] != "polish"])
+               for plan in (early, full)]
+    assert relaxed[0] < relaxed[1] == len(Relaxation().sigmas())
+
+
+def test_a_polish_off_the_path_is_not_kept():
+    """The first-order continuation of the relaxed path, ``J + σ Σ ν``, decides: a polished
+    cost within a tenth of the rise ``σ Σ ν`` is kept, one beyond it is not."""
+
+    class Rows:
+        layout = [(0, 2)]   # one pair of two entries: rows 0-1 a, 2-3 b, 4-5 a b
+
+    sigma, relaxed = 1e-3, {"cost": 1.0, "lam_g": np.array([0, 0, 0, 0, 1.0, 1.0])}
+    rise = sigma * 2.0
+    keep = homotopy._continues_path(Rows(), relaxed, {"cost": 1.0 + 1.05 * rise}, sigma)
+    drop = homotopy._continues_path(Rows(), relaxed, {"cost": 1.0 + 1.5 * rise}, sigma)
+    assert keep and not drop

@@ -72,6 +72,12 @@ class Relaxation:
         IPOPT's tolerance, ``> 0``.
     max_iter : int
         IPOPT's iteration limit per solve.
+    early_polish : bool
+        With ``polish``: as soon as two successive relaxed solves choose the same branch
+        of every pair, try the polish, and stop the homotopy there when its cost is the
+        limit of the relaxed path (the relaxed cost plus ``σ`` times the multipliers of
+        the products, within a tenth of that rise); otherwise go on. Skips the last
+        relaxations, which lead to the same point.
     """
 
     sigma0: float = 1e-3
@@ -80,6 +86,7 @@ class Relaxation:
     polish: bool = True
     tol: float = 1e-10
     max_iter: int = 3000
+    early_polish: bool = True
 
     def __post_init__(self) -> None:
         check_positive("sigma0", self.sigma0)
@@ -88,6 +95,7 @@ class Relaxation:
         check_bool("polish", self.polish)
         check_positive("tol", self.tol)
         check_integer("max_iter", self.max_iter, minimum=1)
+        check_bool("early_polish", self.early_polish)
 
     def sigmas(self) -> list[float]:
         """The sequence ``sigma0, sigma0 factor, ...``, ending at ``sigma_min``."""
