@@ -178,3 +178,25 @@ def test_a_polish_off_the_path_is_not_kept():
     keep = homotopy._continues_path(Rows(), relaxed, {"cost": 1.0 + 1.05 * rise}, sigma)
     drop = homotopy._continues_path(Rows(), relaxed, {"cost": 1.0 + 1.5 * rise}, sigma)
     assert keep and not drop
+
+
+def test_a_problem_builds_its_nlp_once(monkeypatch):
+    """A second solve of the same problem (another relaxation, another start) reuses the
+    first one's NLP and IPOPT instance, and gives the plan a fresh problem gives: the
+    same NLP from the same start (equal to IPOPT's tolerance on a cost of order 1, times 100
+    for the rounding of two runs)."""
+    built = []
+    init = homotopy._NLP.__init__
+
+    def spy_init(self, *args, **kwargs):
+        built.append(self)
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(homotopy._NLP, "__init__", spy_init)
+    problem = SpeedUp().problem(N)
+    problem.solve(Relaxation(sigma0=1e-2))
+    again = problem.solve(Relaxation(tol=1e-9))
+    assert len(built) == 1 and problem.engine() is problem.engine()
+    fresh = SpeedUp().problem(N).solve(Relaxation(tol=1e-9))
+    assert len(built) == 2
+    assert abs(again.cost - fresh.cost) <= 100 * 1e-9 * (1.0 + abs(fresh.cost))

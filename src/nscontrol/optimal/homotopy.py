@@ -131,7 +131,8 @@ class _NLP:
 
     def __init__(self, builder: Builder, relaxation: Relaxation) -> None:
         ca = require_casadi()
-        self.relaxation = relaxation
+        self.relaxation = relaxation   # IPOPT's options of the next solves
+        self.builder = builder
         opti = ca.Opti()      # a container of the builder's declarations only
         self.var = builder.variables(opti)
         builder.constraints(opti, self.var)
@@ -162,7 +163,7 @@ class _NLP:
             self.index.append(first + np.arange(sym.numel()).reshape(shape, order="F"))
             first += int(sym.numel())
         self.nx, self.ng = first, start
-        self._solvers: dict[bool, Any] = {}
+        self._solvers: dict[tuple[bool, float, int], Any] = {}
 
     def bounds(self, sigma: float | None, branches: list[np.ndarray] | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -190,22 +191,24 @@ class _NLP:
         return lbg, ubg
 
     def solver(self, warm: bool) -> Any:
-        """IPOPT on the NLP, cold or warm-started (its options differ; built once each, the
-        second on the first's derivatives: CasADi's cache takes its functions, so the
-        Jacobian and the Hessian of the Lagrangian are generated once)."""
-        if warm not in self._solvers:
-            rel = self.relaxation
+        """IPOPT on the NLP, cold or warm-started, with the relaxation's tolerance and
+        iteration limit (the options differ; built once each, every one after the first on
+        the first's derivatives: CasADi's cache takes its functions, so the Jacobian and
+        the Hessian of the Lagrangian are generated once)."""
+        rel = self.relaxation
+        key = (warm, float(rel.tol), int(rel.max_iter))
+        if key not in self._solvers:
             built = next(iter(self._solvers.values()), None)
             cache = {} if built is None else {name: built.get_function(name)
                                                for name in built.get_function()}
-            self._solvers[warm] = require_casadi().nlpsol(
+            self._solvers[key] = require_casadi().nlpsol(
                 "homotopy", "ipopt", self.problem,
                 {"print_time": False, "error_on_fail": False, "cache": cache,
                  **NLPSOL_OPTIONS,
                  "ipopt": {**IPOPT_OPTIONS, "tol": rel.tol,
                            "acceptable_constr_viol_tol": rel.tol,
                            "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})}})
-        return self._solvers[warm]
+        return self._solvers[key]
 
     def solve(self, guess: dict[str, Any], sigma: float | None,
               branches: list[np.ndarray] | None = None) -> tuple[dict[str, Any], dict]:
@@ -273,8 +276,8 @@ def off_the_corner(builder: Builder, guess: dict[str, Any], sigma: float) -> dic
 
 
 def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxation,
-                   stages: list[dict[str, Any]], *, warm: bool = True
-                   ) -> tuple[dict[str, Any], bool]:
+                   stages: list[dict[str, Any]], *, warm: bool = True,
+                   built: dict[str, Any] | None = None) -> tuple[dict[str, Any], bool]:
     """The relaxed solves along ``relaxation.sigmas()`` then the polish; the records are
     appended to ``stages``. Returns the solution and whether the polish was kept.
 
@@ -283,6 +286,11 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     when its cost continues the relaxed path to ``σ = 0`` (:func:`_continues_path`): the
     remaining relaxations would lead to that point, and are skipped. A polish that does not
     continue the path (another local optimum) is discarded and the homotopy goes on.
+
+    ``built``, a dict the caller keeps with the builder (its problem's), holds the NLP and
+    its IPOPT instances after the first homotopy: a later one of the same builder neither
+    rebuilds, differentiates nor expands it (the builder's NLP does not depend on the
+    guess or the relaxation, only its bounds and IPOPT's options do).
 
     With ``warm`` each relaxed solve starts from the previous one's primal and dual
     solution at a small barrier (:data:`WARM_OPTIONS`); without, from its primal solution
@@ -294,7 +302,12 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     SolverError
         IPOPT failed on a relaxed problem.
     """
-    nlp = _NLP(builder, relaxation)
+    nlp = None if built is None else built.get("nlp")
+    if nlp is None or nlp.builder is not builder:
+        nlp = _NLP(builder, relaxation)
+        if built is not None:
+            built["nlp"] = nlp
+    nlp.relaxation = relaxation
     guess = off_the_corner(builder, {**guess, "lam_g": None}, relaxation.sigma0)
     sigmas, previous = relaxation.sigmas(), None
     for sigma in sigmas:
