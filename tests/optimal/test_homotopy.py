@@ -101,9 +101,9 @@ def test_one_nlp_serves_the_whole_homotopy(monkeypatch):
         built.append(self)
         init(self, *args, **kwargs)
 
-    def spy_solve(self, guess, sigma, branches=None):
+    def spy_solve(self, guess, sigma, branches=None, tol=None):
         starts.append(guess.get("lam_g") is not None)
-        return solve(self, guess, sigma, branches)
+        return solve(self, guess, sigma, branches, tol)
 
     monkeypatch.setattr(homotopy._NLP, "__init__", spy_init)
     monkeypatch.setattr(homotopy._NLP, "solve", spy_solve)
@@ -200,3 +200,26 @@ def test_a_problem_builds_its_nlp_once(monkeypatch):
     fresh = SpeedUp().problem(N).solve(Relaxation(tol=1e-9))
     assert len(built) == 2
     assert abs(again.cost - fresh.cost) <= 100 * 1e-9 * (1.0 + abs(fresh.cost))
+
+
+def test_relaxations_before_the_last_are_waypoints(monkeypatch):
+    """Each relaxed solve but the last stops at max(tol, stage_tol σ); the last one and the
+    polish at tol; the plan is the one every solve to tol gives (the same branches, so the
+    same polished NLP: costs equal to tol on a cost of order 1, times 100)."""
+    calls = []
+    solve = homotopy._NLP.solve
+
+    def spy_solve(self, guess, sigma, branches=None, tol=None):
+        calls.append((sigma, tol))
+        return solve(self, guess, sigma, branches, tol)
+
+    monkeypatch.setattr(homotopy._NLP, "solve", spy_solve)
+    rel = Relaxation(early_polish=False)
+    plan = SpeedUp().problem(N).solve(rel)
+    sigmas = rel.sigmas()
+    assert [s for s, _ in calls] == [*sigmas, None]
+    assert [t for _, t in calls[:-2]] == [max(rel.tol, rel.stage_tol * s) for s in sigmas[:-1]]
+    assert calls[-2][1] == rel.tol and calls[-1][1] is None
+    exact = SpeedUp().problem(N).solve(Relaxation(early_polish=False, stage_tol=0.0))
+    assert plan.stats["polished"] and exact.stats["polished"]
+    assert abs(plan.cost - exact.cost) <= 100 * rel.tol * (1.0 + abs(exact.cost))

@@ -78,6 +78,10 @@ class Relaxation:
         limit of the relaxed path (the relaxed cost plus ``σ`` times the multipliers of
         the products, within a tenth of that rise); otherwise go on. Skips the last
         relaxations, which lead to the same point.
+    stage_tol : float
+        IPOPT's tolerance on a relaxed solve before the last is ``max(tol, stage_tol σ)``:
+        such a solve is a waypoint, whose point the next relaxation moves by ``O(σ)``
+        (``0``: ``tol`` on every solve). The last relaxation and the polish use ``tol``.
     """
 
     sigma0: float = 1e-3
@@ -87,6 +91,7 @@ class Relaxation:
     tol: float = 1e-10
     max_iter: int = 3000
     early_polish: bool = True
+    stage_tol: float = 1e-2
 
     def __post_init__(self) -> None:
         check_positive("sigma0", self.sigma0)
@@ -96,6 +101,7 @@ class Relaxation:
         check_positive("tol", self.tol)
         check_integer("max_iter", self.max_iter, minimum=1)
         check_bool("early_polish", self.early_polish)
+        check_positive("stage_tol", self.stage_tol, allow_zero=True)
 
     def sigmas(self) -> list[float]:
         """The sequence ``sigma0, sigma0 factor, ...``, ending at ``sigma_min``."""

@@ -190,13 +190,14 @@ class _NLP:
                         fixed.add(keys[j])
         return lbg, ubg
 
-    def solver(self, warm: bool) -> Any:
-        """IPOPT on the NLP, cold or warm-started, with the relaxation's tolerance and
-        iteration limit (the options differ; built once each, every one after the first on
-        the first's derivatives: CasADi's cache takes its functions, so the Jacobian and
-        the Hessian of the Lagrangian are generated once)."""
+    def solver(self, warm: bool, tol: float | None = None) -> Any:
+        """IPOPT on the NLP, cold or warm-started, with the tolerance ``tol`` (default the
+        relaxation's) and the relaxation's iteration limit (the options differ; built once
+        each, every one after the first on the first's derivatives: CasADi's cache takes its
+        functions, so the Jacobian and the Hessian of the Lagrangian are generated once)."""
         rel = self.relaxation
-        key = (warm, float(rel.tol), int(rel.max_iter))
+        tol = float(rel.tol if tol is None else tol)
+        key = (warm, tol, int(rel.max_iter))
         if key not in self._solvers:
             built = next(iter(self._solvers.values()), None)
             cache = {} if built is None else {name: built.get_function(name)
@@ -205,16 +206,17 @@ class _NLP:
                 "homotopy", "ipopt", self.problem,
                 {"print_time": False, "error_on_fail": False, "cache": cache,
                  **NLPSOL_OPTIONS,
-                 "ipopt": {**IPOPT_OPTIONS, "tol": rel.tol,
-                           "acceptable_constr_viol_tol": rel.tol,
+                 "ipopt": {**IPOPT_OPTIONS, "tol": tol,
+                           "acceptable_constr_viol_tol": tol,
                            "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})}})
         return self._solvers[key]
 
     def solve(self, guess: dict[str, Any], sigma: float | None,
-              branches: list[np.ndarray] | None = None) -> tuple[dict[str, Any], dict]:
+              branches: list[np.ndarray] | None = None, tol: float | None = None
+              ) -> tuple[dict[str, Any], dict]:
         """Solve the relaxation ``σ`` (or the polish of ``branches``) from ``guess`` (primal,
-        and dual when it has ``lam_g`` and ``lam_x`` of this NLP); returns the solution and
-        the stage's record."""
+        and dual when it has ``lam_g`` and ``lam_x`` of this NLP) to ``tol`` (default the
+        relaxation's); returns the solution and the stage's record."""
         x0 = np.zeros(self.nx)
         for name, index in zip(self.names, self.index, strict=True):
             x0[index] = np.asarray(guess[name], float).reshape(index.shape)
@@ -224,7 +226,7 @@ class _NLP:
         warm = lam_g is not None and lam_g.size == self.ng
         if warm:
             args.update(lam_g0=lam_g, lam_x0=guess["lam_x"])
-        solver = self.solver(warm)
+        solver = self.solver(warm, tol)
         start = time.perf_counter()
         out = solver(**args)
         elapsed = time.perf_counter() - start
@@ -281,6 +283,9 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     """The relaxed solves along ``relaxation.sigmas()`` then the polish; the records are
     appended to ``stages``. Returns the solution and whether the polish was kept.
 
+    Each relaxed solve but the last stops at IPOPT's tolerance ``max(tol, stage_tol σ)``
+    (:class:`Relaxation`): the next relaxation moves its point by ``O(σ)`` anyway.
+
     With ``relaxation.early_polish``, once a relaxed solve leaves every pair on the branch
     the previous one chose (the active set settled), its polish is tried at once and kept
     when its cost continues the relaxed path to ``σ = 0`` (:func:`_continues_path`): the
@@ -311,8 +316,18 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     guess = off_the_corner(builder, {**guess, "lam_g": None}, relaxation.sigma0)
     sigmas, previous = relaxation.sigmas(), None
     for sigma in sigmas:
-        sol, record = nlp.solve(guess if warm else {**guess, "lam_g": None}, sigma)
+        # a relaxation before the last is a waypoint: solved to a hundredth of its σ
+        # (stage_tol), not to the final tolerance, its point moves by O(σ) at the next
+        tol = relaxation.tol if sigma == sigmas[-1] else max(relaxation.tol,
+                                                             relaxation.stage_tol * sigma)
+        start = guess if warm else {**guess, "lam_g": None}
+        sol, record = nlp.solve(start, sigma, tol=tol)
         stages.append(record)
+        if record["status"] not in SOLVED and tol > relaxation.tol:
+            # IPOPT's infeasibility test follows its tolerance: a loose one can give up on
+            # a hard start that the final tolerance solves (SpeedUp from rest, σ = 1e-3)
+            sol, record = nlp.solve(start, sigma)
+            stages.append(record)
         if record["status"] not in SOLVED:
             raise SolverError(f"optimal: IPOPT failed on the relaxation σ = {sigma:.3g} "
                               f"({record['status']}); try another sigma0, more steps or a "
