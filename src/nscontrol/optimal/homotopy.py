@@ -34,6 +34,9 @@ IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "sb": "yes", "mu_strategy": "
 #: 1e-9 let a frictional plan creep along the relaxed stick branch, as the MPC found.)
 WARM_OPTIONS: dict[str, Any] = {"warm_start_init_point": "yes", "mu_init": 1e-6}
 
+#: Added on the polish: IPOPT's bounds unrelaxed.
+EXACT_OPTIONS: dict[str, Any] = {"bound_relax_factor": 0.0}
+
 #: Options of CasADi's nlpsol around IPOPT (none beyond its defaults).
 NLPSOL_OPTIONS: dict[str, Any] = {}
 
@@ -163,7 +166,7 @@ class _NLP:
             self.index.append(first + np.arange(sym.numel()).reshape(shape, order="F"))
             first += int(sym.numel())
         self.nx, self.ng = first, start
-        self._solvers: dict[tuple[bool, float, int], Any] = {}
+        self._solvers: dict[tuple[bool, float, int, bool], Any] = {}
 
     def bounds(self, sigma: float | None, branches: list[np.ndarray] | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -190,14 +193,14 @@ class _NLP:
                         fixed.add(keys[j])
         return lbg, ubg
 
-    def solver(self, warm: bool, tol: float | None = None) -> Any:
+    def solver(self, warm: bool, tol: float | None = None, exact: bool = False) -> Any:
         """IPOPT on the NLP, cold or warm-started, with the tolerance ``tol`` (default the
         relaxation's) and the relaxation's iteration limit (the options differ; built once
         each, every one after the first on the first's derivatives: CasADi's cache takes its
         functions, so the Jacobian and the Hessian of the Lagrangian are generated once)."""
         rel = self.relaxation
         tol = float(rel.tol if tol is None else tol)
-        key = (warm, tol, int(rel.max_iter))
+        key = (warm, tol, int(rel.max_iter), exact)
         if key not in self._solvers:
             built = next(iter(self._solvers.values()), None)
             cache = {} if built is None else {name: built.get_function(name)
@@ -208,7 +211,8 @@ class _NLP:
                  **NLPSOL_OPTIONS,
                  "ipopt": {**IPOPT_OPTIONS, "tol": tol,
                            "acceptable_constr_viol_tol": tol,
-                           "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})}})
+                           "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {}),
+                           **(EXACT_OPTIONS if exact else {})}})
         return self._solvers[key]
 
     def solve(self, guess: dict[str, Any], sigma: float | None,
@@ -226,7 +230,7 @@ class _NLP:
         warm = lam_g is not None and lam_g.size == self.ng
         if warm:
             args.update(lam_g0=lam_g, lam_x0=guess["lam_x"])
-        solver = self.solver(warm, tol)
+        solver = self.solver(warm, tol, exact=branches is not None)
         start = time.perf_counter()
         out = solver(**args)
         elapsed = time.perf_counter() - start
