@@ -107,8 +107,8 @@ def test_from_rest_bounded_inputs_and_element_bounds():
     assert abs(ts - CASE.switch_time()) <= 1e-8
     base = CASE.problem(N2)
     bounded = replace(base, u_max=0.9, element_bounds=(0.5, 1.5)).solve()
-    # IPOPT relaxes every bound by its bound_relax_factor (1e-8, relative) and meets the
-    # constraints to tol (1e-10): 2e-8 allowed
+    # a relaxed solve's IPOPT relaxes every bound by its bound_relax_factor (1e-8,
+    # relative; the polish's 1e-10) and meets the constraints to tol (1e-10): 2e-8 allowed
     assert 0.9 - 1e-6 <= np.max(bounded.u) <= 0.9 + 2e-8
     h = np.diff(bounded.t)
     hbar = CASE.T / N2

@@ -101,9 +101,9 @@ def test_one_nlp_serves_the_whole_homotopy(monkeypatch):
         built.append(self)
         init(self, *args, **kwargs)
 
-    def spy_solve(self, guess, sigma, branches=None):
+    def spy_solve(self, guess, sigma, branches=None, tol=None):
         starts.append(guess.get("lam_g") is not None)
-        return solve(self, guess, sigma, branches)
+        return solve(self, guess, sigma, branches, tol)
 
     monkeypatch.setattr(homotopy._NLP, "__init__", spy_init)
     monkeypatch.setattr(homotopy._NLP, "solve", spy_solve)
@@ -146,3 +146,80 @@ def test_the_warm_solver_reuses_the_cold_ones_derivatives():
     # a solver built apart generates its own
     other = homotopy._NLP(_FesdNLP(SpeedUp().problem(N).engine()), Relaxation()).solver(False)
     assert hash(other.get_function("nlp_hess_l")) != hash(cold.get_function("nlp_hess_l"))
+
+
+def test_the_early_polish_ends_at_the_homotopys_point():
+    """Once the branches settle, the polish is tried and kept when it continues the relaxed
+    path: the same branches as the full homotopy's last solve, so the same smooth NLP and
+    the same optimum (costs equal to IPOPT's tolerance 1e-10 on a cost of order 1, times a
+    factor 100 for the two solves' different starts), with fewer relaxed solves."""
+    early = SpeedUp().problem(N).solve(Relaxation())
+    full = SpeedUp().problem(N).solve(Relaxation(early_polish=False))
+    assert early.stats["polished"] and full.stats["polished"]
+    assert abs(early.cost - full.cost) <= 100 * 1e-10 * (1.0 + abs(full.cost))
+    # the lengths of the elements without a switch are free (no equilibration): compare
+    # the switch, which FESD places exactly (constant fields) up to the solver's tolerance
+    assert np.allclose(early.switch_times([1.0], 0.0), full.switch_times([1.0], 0.0),
+                       rtol=0.0, atol=1e-6 * SpeedUp().T)
+    relaxed = [len([s for s in plan.stats["stages"] if s["sigma"] != "polish"])
+               for plan in (early, full)]
+    assert relaxed[0] < relaxed[1] == len(Relaxation().sigmas())
+
+
+def test_a_polish_off_the_path_is_not_kept():
+    """The first-order continuation of the relaxed path, ``J + σ Σ ν``, decides: a polished
+    cost within a tenth of the rise ``σ Σ ν`` is kept, one beyond it is not."""
+
+    class Rows:
+        layout = [(0, 2)]   # one pair of two entries: rows 0-1 a, 2-3 b, 4-5 a b
+
+    sigma, relaxed = 1e-3, {"cost": 1.0, "lam_g": np.array([0, 0, 0, 0, 1.0, 1.0])}
+    rise = sigma * 2.0
+    keep = homotopy._continues_path(Rows(), relaxed, {"cost": 1.0 + 1.05 * rise}, sigma)
+    drop = homotopy._continues_path(Rows(), relaxed, {"cost": 1.0 + 1.5 * rise}, sigma)
+    assert keep and not drop
+
+
+def test_a_problem_builds_its_nlp_once(monkeypatch):
+    """A second solve of the same problem (another relaxation, another start) reuses the
+    first one's NLP and IPOPT instance, and gives the plan a fresh problem gives: the
+    same NLP from the same start (equal to IPOPT's tolerance on a cost of order 1, times 100
+    for the rounding of two runs)."""
+    built = []
+    init = homotopy._NLP.__init__
+
+    def spy_init(self, *args, **kwargs):
+        built.append(self)
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(homotopy._NLP, "__init__", spy_init)
+    problem = SpeedUp().problem(N)
+    problem.solve(Relaxation(sigma0=1e-2))
+    again = problem.solve(Relaxation(tol=1e-9))
+    assert len(built) == 1 and problem.engine() is problem.engine()
+    fresh = SpeedUp().problem(N).solve(Relaxation(tol=1e-9))
+    assert len(built) == 2
+    assert abs(again.cost - fresh.cost) <= 100 * 1e-9 * (1.0 + abs(fresh.cost))
+
+
+def test_relaxations_before_the_last_are_waypoints(monkeypatch):
+    """Each relaxed solve but the last stops at max(tol, stage_tol σ); the last one and the
+    polish at tol; the plan is the one every solve to tol gives (the same branches, so the
+    same polished NLP: costs equal to tol on a cost of order 1, times 100)."""
+    calls = []
+    solve = homotopy._NLP.solve
+
+    def spy_solve(self, guess, sigma, branches=None, tol=None):
+        calls.append((sigma, tol))
+        return solve(self, guess, sigma, branches, tol)
+
+    monkeypatch.setattr(homotopy._NLP, "solve", spy_solve)
+    rel = Relaxation(early_polish=False)
+    plan = SpeedUp().problem(N).solve(rel)
+    sigmas = rel.sigmas()
+    assert [s for s, _ in calls] == [*sigmas, None]
+    assert [t for _, t in calls[:-2]] == [max(rel.tol, rel.stage_tol * s) for s in sigmas[:-1]]
+    assert calls[-2][1] == rel.tol and calls[-1][1] is None
+    exact = SpeedUp().problem(N).solve(Relaxation(early_polish=False, stage_tol=0.0))
+    assert plan.stats["polished"] and exact.stats["polished"]
+    assert abs(plan.cost - exact.cost) <= 100 * rel.tol * (1.0 + abs(exact.cost))

@@ -72,6 +72,16 @@ class Relaxation:
         IPOPT's tolerance, ``> 0``.
     max_iter : int
         IPOPT's iteration limit per solve.
+    early_polish : bool
+        With ``polish``: as soon as two successive relaxed solves choose the same branch
+        of every pair, try the polish, and stop the homotopy there when its cost is the
+        limit of the relaxed path (the relaxed cost plus ``σ`` times the multipliers of
+        the products, within a tenth of that rise); otherwise go on. Skips the last
+        relaxations, which lead to the same point.
+    stage_tol : float
+        IPOPT's tolerance on a relaxed solve before the last is ``max(tol, stage_tol σ)``:
+        such a solve is a waypoint, whose point the next relaxation moves by ``O(σ)``
+        (``0``: ``tol`` on every solve). The last relaxation and the polish use ``tol``.
     """
 
     sigma0: float = 1e-3
@@ -80,6 +90,8 @@ class Relaxation:
     polish: bool = True
     tol: float = 1e-10
     max_iter: int = 3000
+    early_polish: bool = True
+    stage_tol: float = 1e-2
 
     def __post_init__(self) -> None:
         check_positive("sigma0", self.sigma0)
@@ -88,6 +100,8 @@ class Relaxation:
         check_bool("polish", self.polish)
         check_positive("tol", self.tol)
         check_integer("max_iter", self.max_iter, minimum=1)
+        check_bool("early_polish", self.early_polish)
+        check_positive("stage_tol", self.stage_tol, allow_zero=True)
 
     def sigmas(self) -> list[float]:
         """The sequence ``sigma0, sigma0 factor, ...``, ending at ``sigma_min``."""

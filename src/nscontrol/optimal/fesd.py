@@ -165,6 +165,7 @@ class SwitchingProblem:
     equilibration_form: str = "mean"
     warm_homotopy: bool = True
     n: int = field(init=False)
+    _engine: list[FesdProblem] = field(init=False, repr=False, default_factory=list)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -197,12 +198,19 @@ class SwitchingProblem:
     def engine(self) -> FesdProblem:
         """The general FESD problem this one is (:mod:`.stewart`): one layer of two affine
         fields split by ``ψ`` (``signs = ((-1,), (1,))``: field 1 where ``ψ < 0``), one
-        element per input, the lengths free summing to ``T``.
+        element per input, the lengths free summing to ``T``. Built once: the same
+        object every call, so that its transcription, built by its first solve, serves the
+        next ones.
 
         Returns
         -------
         FesdProblem
         """
+        if not self._engine:
+            self._engine.append(self._build_engine())
+        return self._engine[0]
+
+    def _build_engine(self) -> FesdProblem:
         ca = require_casadi()
         B = ca.DM(self.B)
 

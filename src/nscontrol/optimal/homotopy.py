@@ -34,6 +34,12 @@ IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "sb": "yes", "mu_strategy": "
 #: 1e-9 let a frictional plan creep along the relaxed stick branch, as the MPC found.)
 WARM_OPTIONS: dict[str, Any] = {"warm_start_init_point": "yes", "mu_init": 1e-6}
 
+#: Added on the polish: IPOPT's bounds relaxed by 1e-10 (relative) instead of its default
+#: 1e-8, which moved nosnoc's motor optimum by 5e-7 relative (inputs on their bounds; 4e-9
+#: at 1e-10). Not 0: with no interior left around an active bound the cart-pole's polish
+#: took 143 iterations and was rejected (13 at 1e-10).
+EXACT_OPTIONS: dict[str, Any] = {"bound_relax_factor": 1e-10}
+
 #: Options of CasADi's nlpsol around IPOPT (none beyond its defaults).
 NLPSOL_OPTIONS: dict[str, Any] = {}
 
@@ -131,7 +137,8 @@ class _NLP:
 
     def __init__(self, builder: Builder, relaxation: Relaxation) -> None:
         ca = require_casadi()
-        self.relaxation = relaxation
+        self.relaxation = relaxation   # IPOPT's options of the next solves
+        self.builder = builder
         opti = ca.Opti()      # a container of the builder's declarations only
         self.var = builder.variables(opti)
         builder.constraints(opti, self.var)
@@ -162,7 +169,7 @@ class _NLP:
             self.index.append(first + np.arange(sym.numel()).reshape(shape, order="F"))
             first += int(sym.numel())
         self.nx, self.ng = first, start
-        self._solvers: dict[bool, Any] = {}
+        self._solvers: dict[tuple[bool, float, int, bool], Any] = {}
 
     def bounds(self, sigma: float | None, branches: list[np.ndarray] | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -189,29 +196,34 @@ class _NLP:
                         fixed.add(keys[j])
         return lbg, ubg
 
-    def solver(self, warm: bool) -> Any:
-        """IPOPT on the NLP, cold or warm-started (its options differ; built once each, the
-        second on the first's derivatives: CasADi's cache takes its functions, so the
-        Jacobian and the Hessian of the Lagrangian are generated once)."""
-        if warm not in self._solvers:
-            rel = self.relaxation
+    def solver(self, warm: bool, tol: float | None = None, exact: bool = False) -> Any:
+        """IPOPT on the NLP, cold or warm-started, with the tolerance ``tol`` (default the
+        relaxation's) and the relaxation's iteration limit (the options differ; built once
+        each, every one after the first on the first's derivatives: CasADi's cache takes its
+        functions, so the Jacobian and the Hessian of the Lagrangian are generated once)."""
+        rel = self.relaxation
+        tol = float(rel.tol if tol is None else tol)
+        key = (warm, tol, int(rel.max_iter), exact)
+        if key not in self._solvers:
             built = next(iter(self._solvers.values()), None)
             cache = {} if built is None else {name: built.get_function(name)
                                                for name in built.get_function()}
-            self._solvers[warm] = require_casadi().nlpsol(
+            self._solvers[key] = require_casadi().nlpsol(
                 "homotopy", "ipopt", self.problem,
                 {"print_time": False, "error_on_fail": False, "cache": cache,
                  **NLPSOL_OPTIONS,
-                 "ipopt": {**IPOPT_OPTIONS, "tol": rel.tol,
-                           "acceptable_constr_viol_tol": rel.tol,
-                           "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {})}})
-        return self._solvers[warm]
+                 "ipopt": {**IPOPT_OPTIONS, "tol": tol,
+                           "acceptable_constr_viol_tol": tol,
+                           "max_iter": int(rel.max_iter), **(WARM_OPTIONS if warm else {}),
+                           **(EXACT_OPTIONS if exact else {})}})
+        return self._solvers[key]
 
     def solve(self, guess: dict[str, Any], sigma: float | None,
-              branches: list[np.ndarray] | None = None) -> tuple[dict[str, Any], dict]:
+              branches: list[np.ndarray] | None = None, tol: float | None = None
+              ) -> tuple[dict[str, Any], dict]:
         """Solve the relaxation ``σ`` (or the polish of ``branches``) from ``guess`` (primal,
-        and dual when it has ``lam_g`` and ``lam_x`` of this NLP); returns the solution and
-        the stage's record."""
+        and dual when it has ``lam_g`` and ``lam_x`` of this NLP) to ``tol`` (default the
+        relaxation's); returns the solution and the stage's record."""
         x0 = np.zeros(self.nx)
         for name, index in zip(self.names, self.index, strict=True):
             x0[index] = np.asarray(guess[name], float).reshape(index.shape)
@@ -221,7 +233,7 @@ class _NLP:
         warm = lam_g is not None and lam_g.size == self.ng
         if warm:
             args.update(lam_g0=lam_g, lam_x0=guess["lam_x"])
-        solver = self.solver(warm)
+        solver = self.solver(warm, tol, exact=branches is not None)
         start = time.perf_counter()
         out = solver(**args)
         elapsed = time.perf_counter() - start
@@ -273,10 +285,24 @@ def off_the_corner(builder: Builder, guess: dict[str, Any], sigma: float) -> dic
 
 
 def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxation,
-                   stages: list[dict[str, Any]], *, warm: bool = True
-                   ) -> tuple[dict[str, Any], bool]:
+                   stages: list[dict[str, Any]], *, warm: bool = True,
+                   built: dict[str, Any] | None = None) -> tuple[dict[str, Any], bool]:
     """The relaxed solves along ``relaxation.sigmas()`` then the polish; the records are
     appended to ``stages``. Returns the solution and whether the polish was kept.
+
+    Each relaxed solve but the last stops at IPOPT's tolerance ``max(tol, stage_tol σ)``
+    (:class:`Relaxation`): the next relaxation moves its point by ``O(σ)`` anyway.
+
+    With ``relaxation.early_polish``, once a relaxed solve leaves every pair on the branch
+    the previous one chose (the active set settled), its polish is tried at once and kept
+    when its cost continues the relaxed path to ``σ = 0`` (:func:`_continues_path`): the
+    remaining relaxations would lead to that point, and are skipped. A polish that does not
+    continue the path (another local optimum) is discarded and the homotopy goes on.
+
+    ``built``, a dict the caller keeps with the builder (its problem's), holds the NLP and
+    its IPOPT instances after the first homotopy: a later one of the same builder neither
+    rebuilds, differentiates nor expands it (the builder's NLP does not depend on the
+    guess or the relaxation, only its bounds and IPOPT's options do).
 
     With ``warm`` each relaxed solve starts from the previous one's primal and dual
     solution at a small barrier (:data:`WARM_OPTIONS`); without, from its primal solution
@@ -288,16 +314,43 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     SolverError
         IPOPT failed on a relaxed problem.
     """
-    nlp = _NLP(builder, relaxation)
+    nlp = None if built is None else built.get("nlp")
+    if nlp is None or nlp.builder is not builder:
+        nlp = _NLP(builder, relaxation)
+        if built is not None:
+            built["nlp"] = nlp
+    nlp.relaxation = relaxation
     guess = off_the_corner(builder, {**guess, "lam_g": None}, relaxation.sigma0)
-    for sigma in relaxation.sigmas():
-        sol, record = nlp.solve(guess if warm else {**guess, "lam_g": None}, sigma)
+    sigmas, previous = relaxation.sigmas(), None
+    for sigma in sigmas:
+        # a relaxation before the last is a waypoint: solved to a hundredth of its σ
+        # (stage_tol), not to the final tolerance, its point moves by O(σ) at the next
+        tol = relaxation.tol if sigma == sigmas[-1] else max(relaxation.tol,
+                                                             relaxation.stage_tol * sigma)
+        start = guess if warm else {**guess, "lam_g": None}
+        sol, record = nlp.solve(start, sigma, tol=tol)
         stages.append(record)
+        if record["status"] not in SOLVED and tol > relaxation.tol:
+            # IPOPT's infeasibility test follows its tolerance: a loose one can give up on
+            # a hard start that the final tolerance solves (SpeedUp from rest, σ = 1e-3)
+            sol, record = nlp.solve(start, sigma)
+            stages.append(record)
         if record["status"] not in SOLVED:
             raise SolverError(f"optimal: IPOPT failed on the relaxation σ = {sigma:.3g} "
                               f"({record['status']}); try another sigma0, more steps or a "
                               "better initial guess", status=record["status"])
         guess = sol
+        if not (relaxation.polish and relaxation.early_polish) or sigma == sigmas[-1]:
+            continue
+        branches = [a <= b for a, b in builder.pairs(sol, numpy_ops())]
+        settled = previous is not None and all(
+            np.array_equal(x, y) for x, y in zip(branches, previous, strict=True))
+        previous = branches
+        if settled and sum(b.size for b in branches):
+            polished, record = nlp.solve(sol, None, branches)
+            stages.append(record)
+            if record["status"] in SOLVED and _continues_path(nlp, sol, polished, sigma):
+                return polished, True
     pairs = builder.pairs(guess, numpy_ops())
     if not relaxation.polish or not sum(a.size for a, _ in pairs):
         return guess, False
@@ -307,6 +360,29 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
             1.0 + abs(guess["cost"])):
         return sol, True
     return guess, False
+
+
+#: How far the polished cost may lie from the relaxed path's first-order continuation to
+#: ``σ = 0``, as a fraction of the predicted rise ``σ Σ ν``: the remainder is ``O(σ²)``, so
+#: a polish onto the path's limit lands well within a tenth of the rise (measured with a
+#: polish after every relaxation, cold path: nosnoc's motor 1 % at σ = 1e-3 and 0.1 % at
+#: 1e-4, its sliding-mode problem 8 % at 1e-3, the cart-pole 0.04 % at 1e-4), one onto
+#: another local optimum far outside (61 % on the motor at σ = 1e-2, branches unsettled).
+PATH_FRACTION = 0.1
+
+
+def _continues_path(nlp: _NLP, relaxed: dict[str, Any], polished: dict[str, Any],
+                    sigma: float) -> bool:
+    """Whether a polish of a relaxed solution is the limit of the relaxed path: along it
+    the cost rises as ``dJ/dσ = -Σ ν`` (the envelope theorem; ``ν`` the multipliers of the
+    rows ``a b <= σ``), so the limit's cost is ``J(σ) + σ Σ ν + O(σ²)``. The polished cost
+    must match that within :data:`PATH_FRACTION` of the rise (and IPOPT's tolerance)."""
+    nu = sum(float(np.sum(relaxed["lam_g"][start + 2 * n: start + 3 * n]))
+             for start, n in nlp.layout)
+    rise = sigma * max(nu, 0.0)
+    predicted = relaxed["cost"] + rise
+    slack = PATH_FRACTION * rise + 1e-6 * (1.0 + abs(predicted))
+    return abs(polished["cost"] - predicted) <= slack
 
 
 def stage_stats(stages: list[dict[str, Any]], polished: bool) -> dict[str, Any]:

@@ -389,6 +389,7 @@ class FesdProblem:
     warm_homotopy: bool = True
     n: int = field(init=False)
     traced: _Traced = field(init=False, repr=False)
+    _built: dict[str, Any] = field(init=False, repr=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -536,10 +537,13 @@ class FesdProblem:
         K = self.stages * self.elements
         states = None if guess is None else as_matrix("guess", guess, rows=K + 1,
                                                       cols=self.n).T
-        nlp = _FesdNLP(self)
+        built = self._built   # the transcription, built by the first solve for the next
+        if "builder" not in built:
+            built["builder"] = _FesdNLP(self)
+        nlp = built["builder"]
         stages: list[dict[str, Any]] = []
         sol, polished = solve_homotopy(nlp, nlp.guess(states), relaxation, stages,
-                                       warm=self.warm_homotopy)
+                                       warm=self.warm_homotopy, built=built)
         H = np.atleast_1d(np.asarray(sol["H"], float))
         t = np.concatenate([[0.0], np.cumsum(H)])
         cost = nlp.plan_cost(sol["X"], sol["U"], H)
