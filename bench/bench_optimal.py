@@ -536,10 +536,11 @@ def _simple_car_problem() -> Any:
     ``c = v - v_switch < 0``, nosnoc's ``S = [[-1], [1]]``. nosnoc's switching function is
     an algebraic variable ``z`` with ``z = v - v_switch`` imposed at every stage point; ours
     is ``c = v - v_switch`` itself (the same values at the same points: the same discrete
-    problem)."""
+    problem). The algebraic variables start centred, as nosnoc's (``θ = λ = 1/2``,
+    ``μ = 1``)."""
     from nscontrol.optimal import SimpleCar
 
-    return SimpleCar().problem(CAR["N"], CAR["Nfe"], CAR["rho_h"], "delta")
+    return SimpleCar().problem(CAR["N"], CAR["Nfe"], CAR["rho_h"], "delta", start="centred")
 
 
 #: Equal optimum: both sides end with complementarity <= 1e-9 (nosnoc's comp_tol; ours
@@ -580,7 +581,8 @@ def _simple_car_peer(py: str, repeats: int) -> Iterator[dict]:
         "Radau IIA with one stage; 30 stages of 2 elements, lengths within (0, 2) h, step "
         "equilibration HEURISTIC_DELTA with rho 1 on both in place of the example's "
         "L2_RELAXED_SCALED, which ours has not), nosnoc's algebraic z = v - 15 being our "
-        "switching function c = v - 15; both from nosnoc's start (at rest) and homotopy "
+        "switching function c = v - 15; both from nosnoc's start (at rest, the algebraic "
+        "variables centred: start='centred') and homotopy "
         "(sigma from 1, times 0.1); objective = sum h_k u_k^2 + step equilibration "
         "penalty, recomputed by one formula on each side's trajectory; equal optimum: "
         "within 1e-6 relative; a non-convex problem: ours restarted from nosnoc's plan "

@@ -131,8 +131,24 @@ def test_plan_input_has_the_discrete_pontryagin_structure(plan):
     assert np.mean(steps[0]) / np.mean(steps[1]) == pytest.approx(CAR.k1 / CAR.k2, rel=1e-6)
 
 
+def test_centred_start_reaches_the_same_plan(plan):
+    """nosnoc's centred start of the algebraic variables (``start="centred"``) leaves the
+    first relaxation to choose the regions; on the car it ends on the same optimum (each
+    plan's objective to the polish's stationarity, 1e-10 on an objective of 6, times 100)
+    and the same crossings (on the same element boundaries)."""
+    problem = CAR.problem(N, NFE, start="centred")
+    centred = problem.solve(Relaxation(sigma0=1.0),
+                            guess=np.tile(problem.x0, (N * NFE + 1, 1)))
+    assert centred.objective == pytest.approx(plan.objective, abs=1e-8)
+    assert np.allclose(centred.crossings(lambda x: x[1] - CAR.v_switch),
+                       plan.crossings(lambda x: x[1] - CAR.v_switch), atol=1e-6)
+    assert centred.residual <= 1e-8
+
+
 def test_bad_cars_are_refused_with_specific_errors():
     with pytest.raises(ModelError, match="^distance"):
         SimpleCar(distance=400.0)
     with pytest.raises(ModelError, match="^u_max"):
         SimpleCar(u_max=0.5).switch_times()
+    with pytest.raises(ModelError, match="^start"):
+        CAR.problem(start="middle")

@@ -299,7 +299,7 @@ class SimpleCar:
                              signs=[[-1.0], [1.0]])
 
     def problem(self, stages: int = 30, elements: int = 2, equilibration: float = 1.0,
-                equilibration_form: str = "delta") -> FesdProblem:
+                equilibration_form: str = "delta", start: str = "consistent") -> FesdProblem:
         """The FESD transcription (nosnoc's grid by default: 30 stages of 2 elements, each
         element within ``(0, 2) h̄``, nosnoc's default step equilibration).
 
@@ -311,6 +311,8 @@ class SimpleCar:
             Step equilibration weight.
         equilibration_form : {"mean", "delta"}
             Its form.
+        start : {"consistent", "centred"}
+            The algebraic variables' start (:class:`FesdProblem`).
 
         Returns
         -------
@@ -320,7 +322,7 @@ class SimpleCar:
                            inputs=1, stage_cost=lambda x, u: u[0] ** 2,
                            x_final=[self.distance, 0.0], u_min=-self.u_max, u_max=self.u_max,
                            element_bounds=(0.0, 2.0), equilibration=equilibration,
-                           equilibration_form=equilibration_form)
+                           equilibration_form=equilibration_form, start=start)
 
     def _slope(self, tau: float) -> float:
         """``c`` of the module docstring for the crossing at ``tau``."""
