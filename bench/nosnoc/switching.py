@@ -27,7 +27,9 @@ switching optimal control problems with nosnoc's FESD and prints one JSON line p
 * ``sliding_mode_ocp_as_ours`` and ``cart_pole_with_friction``: nosnoc's published
   ``sliding_mode_ocp`` and ``cart_pole_with_friction`` problems, discretised as
   nscontrol.optimal.FesdProblem (implicit Euler, the case's stages, elements and step
-  equilibration); their trajectories are printed, the caller recomputes the cost.
+  equilibration, its cross complementarity pairs and IPOPT iteration limit); their
+  trajectories, algebraic variables and objective after each relaxed solve are printed,
+  the caller recomputes the cost and the complementarity residual.
 * ``simple_car``: the problem of nosnoc's published example
   ``examples/simple_car_algebraics/simple_car_algebraic.py`` (a car whose input gains 5
   below 15 m/s and 3 above, the switching function an algebraic ``z = v - 15``, least
@@ -191,9 +193,23 @@ def _as_ours(opts, case):
     stage), the case's stages, elements per stage and step equilibration. The differential
     representation: with one stage its cost weight is 1 (``h L(x_{k+1}, u)``, ours), where
     the integral one weighs the stage cost by 1/2 (a quadrature over the element's two
-    end points that drops the left one)."""
+    end points that drops the left one).
+
+    Two more settings make the relaxed problems ours, not only their limit:
+
+    * the cross complementarity as ours, one pair per product (``θ_k ∘ λ_k <= σ`` and
+      ``θ_k ∘ λ_{k-1} <= σ``: ``COMPLEMENT_ALL_STAGE_VALUES_WITH_EACH_OTHER``); nosnoc's
+      default relaxes their sum, ``θ_k ∘ (λ_{k-1} + λ_k) <= σ``, the same complementarity
+      at ``σ = 0`` but another path of relaxed optima, which ends in another local optimum
+      (sliding_mode_ocp: 5.58964 against 5.56875);
+    * IPOPT's iteration limit per solve as ours (``case["max_iter"]``, nscontrol's
+      ``Relaxation.max_iter``): nosnoc's 500 stops the first relaxed solve of the cart-pole
+      (657 iterations) unconverged, and the homotopy continues from that point."""
     opts.irk_scheme = nosnoc.IrkSchemes.RADAU_IIA
     opts.irk_representation = nosnoc.IrkRepresentation.DIFFERENTIAL
+    cross = nosnoc.CrossComplementarityMode
+    opts.cross_comp_mode = cross.COMPLEMENT_ALL_STAGE_VALUES_WITH_EACH_OTHER
+    opts.nlp_max_iter = case["max_iter"]
     opts.n_s = 1
     opts.N_stages = case["N"]
     opts.N_finite_elements = case["Nfe"]
@@ -263,6 +279,27 @@ def simple_car(case):
     return model, ocp, _as_ours(opts, case)
 
 
+def _homotopy_record(solver, results):
+    """The algebraic variables of each element (``θ``, ``λ``: the caller computes the
+    complementarity residual by its own formula), nosnoc's own residual (largest product),
+    the objective after each relaxed solve with its ``σ`` (the caller estimates from the
+    last two how far the last relaxation's optimum is from the limit's), and the status of
+    the last solve."""
+    prob, opts = solver.problem, solver.opts
+    theta, lam = (np.asarray(results[key], float).reshape(len(results[key]), -1).tolist()
+                  for key in ("theta_list", "lambda_list"))
+    sigmas, objectives, sigma = [], [], opts.sigma_0
+    for w in results["w_all"][1:]:
+        solver.setup_p_val(sigma, 0.0)
+        sigmas.append(sigma)
+        objectives.append(float(prob.cost_fun(w, solver.p_val)))
+        sigma = solver.homotopy_sigma_update(sigma)
+    solver.setup_p_val(sigmas[-1], 0.0)
+    return {"theta": theta, "lambda": lam, "sigmas": sigmas, "objectives": objectives,
+            "comp_res": float(prob.comp_res(results["w_sol"], solver.p_val)),
+            "last_status": str(solver.solver.stats()["return_status"])}
+
+
 #: Cases whose trajectories are printed (the cost is recomputed by the caller).
 TRAJECTORIES = ("sliding_mode_ocp_as_ours", "cart_pole_with_friction", "simple_car")
 
@@ -297,6 +334,7 @@ def main():
         if case["name"] in TRAJECTORIES:
             out.update({key: np.asarray(results[key], float).tolist()
                         for key in ("x_traj", "u_traj", "t_grid", "t_grid_u")})
+            out.update(_homotopy_record(solver, results))
             out["iterations"] = [int(i) for i in results.get("nlp_iter", [])]  # per solve
         if case["name"] == "speedup":
             t = np.asarray(results["t_grid"], float)

@@ -231,3 +231,20 @@ def test_bad_inputs_are_refused_with_specific_errors():
         problem(stage_cost=1.0)
     with pytest.raises(ModelError, match="^inputs"):
         pwa_problem(quadrants(), X0, 1.0, 4, inputs=2)
+
+
+def test_residual_of_a_plan_from_its_states_and_weights(plan):
+    """``residual_of`` recomputes ``λ`` from the states: on the polished plan it meets the
+    plan's own residual bound; weights on the wrong regions (columns reversed: field 4 where
+    field 1 rules) are caught at the size of the switching functions, and bad shapes are
+    refused."""
+    problem_ = problem()
+    assert problem_.residual_of(plan.x, plan.theta) <= EXACT
+    # the reversed weights put θ = 1 on the opposite quadrant, whose λ = g - min g is
+    # 2 (|c₁| + |c₂|): above 1 wherever the states are 1/2 from both surfaces (the first
+    # elements, near x₀ = (-1, -1)), so the largest min(θ, λ) is θ = 1
+    assert problem_.residual_of(plan.x, plan.theta[:, ::-1]) == pytest.approx(1.0, abs=EXACT)
+    with pytest.raises(DimensionError, match="^theta"):
+        problem_.residual_of(plan.x, plan.theta[:-1])
+    with pytest.raises(DimensionError, match="^x"):
+        problem_.residual_of(plan.x[:-1], plan.theta)

@@ -483,6 +483,41 @@ class FesdProblem:
             return float(nlp.cost({"X": X.T, "U": U.T, "H": np.diff(tt)}))
         return nlp.plan_cost(X.T, U.T, np.diff(tt))
 
+    def residual_of(self, x: ArrayLike, theta: ArrayLike) -> float:
+        """The complementarity residual of a plan given by its states and its fields'
+        weights (e.g. another solver's, to compare plans by one formula): the largest
+        ``|min(θ, λ)|`` over the pairs ``θ_k ⟂ λ_k`` and, with switch detection, the cross
+        pairs ``θ_k ⟂ λ_{k-1}`` (the first element's against ``λ`` at ``x0``), ``λ``
+        recomputed from the states (``λ = g(x) - min g`` per layer, its value wherever
+        the pairs hold), so that no solver's own multipliers enter.
+
+        Parameters
+        ----------
+        x : array_like (K + 1, n)
+            States at the element boundaries.
+        theta : array_like (K, n_θ)
+            The fields' weights on each element (the layers' rows stacked, as
+            :attr:`FesdPlan.theta`).
+
+        Returns
+        -------
+        float
+
+        Raises
+        ------
+        DimensionError
+            Shapes that disagree with the problem's grid.
+        """
+        K = self.stages * self.elements
+        X = as_matrix("x", x, rows=K + 1, cols=self.n)
+        nlp = _FesdNLP(self)
+        TH = as_matrix("theta", theta, rows=K, cols=nlp.nth).T
+        G = np.column_stack([nlp._g(xk) for xk in X])
+        LAM = G - np.column_stack([nlp._per_layer_min(G[:, k]) for k in range(K + 1)])
+        first = np.abs(np.minimum(TH[:, 0], LAM[:, 0])).max() if self.switch_detection \
+            else 0.0
+        return max(residual(nlp, {"TH": TH, "LAM": LAM[:, 1:]}), float(first))
+
     def solve(self, relaxation: Relaxation | None = None, *,
               guess: ArrayLike | None = None) -> FesdPlan:
         """Solve the Scholtes homotopy (and its polish) of the transcription.
