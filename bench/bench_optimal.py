@@ -12,7 +12,8 @@ install nosnoc``), skipped otherwise: the same switching problem (SpeedUp) solve
 optimum against the closed form and wall time side by side, and nosnoc's published
 ``sliding_mode_ocp`` example with its own options (nosnoc's time alone), and two published
 examples solved by both as the same discrete problem (FesdProblem: several and nonlinear
-switching surfaces, nonlinear fields): ``sliding_mode_ocp`` and ``cart_pole_with_friction``.
+switching surfaces, nonlinear fields): ``sliding_mode_ocp`` and ``cart_pole_with_friction``,
+and ``simple_car_algebraic`` (fields depending on the input per mode).
 
 Run: ``nscontrol bench optimal --json`` (``--quick``: one solve each).
 """
@@ -25,6 +26,7 @@ import statistics
 import subprocess
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -298,6 +300,7 @@ def _peer(quick: bool) -> Iterator[dict]:
         "transcription on both sides")
     yield from _published(got, ours)
     yield from _general_peer(py, repeats)
+    yield from _simple_car_peer(py, repeats)
     slide = got["sliding_mode_ocp"]
     yield {"scenario": "optimal/nosnoc_sliding_mode_ocp", "size": 36, "ours_s_per_solve": None,
            "reference": "nosnoc-0.2", "reference_s_per_solve": statistics.median(slide["walls"]),
@@ -598,3 +601,74 @@ def _general_peer(py: str, repeats: int) -> Iterator[dict]:
              for name, _, spec in specs]
     got = {r["name"]: r for r in run_nosnoc(py, cases, repeats)}
     yield from _published_general(got, ours)
+
+
+#: nosnoc's simple car (examples/simple_car_algebraics/simple_car_algebraic.py;
+#: nscontrol.optimal.SimpleCar, its closed form): 30 stages of 2 elements. The example's step
+#: equilibration (L2_RELAXED_SCALED) is not one of ours: both sides use nosnoc's default
+#: HEURISTIC_DELTA with ρ = 1; the example's two Radau stages become one (implicit Euler).
+CAR = {"N": 30, "Nfe": 2, "rho_h": 1.0, "equilibration": "HEURISTIC_DELTA"}
+
+
+def _simple_car_problem() -> Any:
+    """SimpleCar's FesdProblem on CAR's grid: field 1 (``v' = k1 u``) where
+    ``c = v - v_switch < 0``, nosnoc's ``S = [[-1], [1]]``. nosnoc's switching function is
+    an algebraic variable ``z`` with ``z = v - v_switch`` imposed at every stage point; ours
+    is ``c = v - v_switch`` itself (the same values at the same points: the same discrete
+    problem). nosnoc's start and homotopy: the algebraic variables centred (``θ = λ = 1/2``,
+    ``μ = 1``), each relaxed solve cold from the previous primal point."""
+    from nscontrol.optimal import SimpleCar
+
+    return replace(SimpleCar().problem(CAR["N"], CAR["Nfe"], CAR["rho_h"], "delta",
+                                       start="centred"), warm_homotopy=False)
+
+
+def _simple_car_peer(py: str, repeats: int) -> Iterator[dict]:
+    """nosnoc's simple car by both sides as the same discrete problem (FesdProblem: one
+    switching surface, a field per mode that depends on the input), the optimum of each
+    side recomputed by FesdProblem.cost_of on its own trajectory and its residual by
+    FesdProblem.residual_of; equal optimum within the sliding-mode and cart-pole rows'
+    derived tolerance (:func:`_objective_tolerance`)."""
+    from nscontrol.optimal import Relaxation, SimpleCar
+
+    name, car = "simple_car_algebraic", SimpleCar()
+    _, mine = _general(name, _simple_car_problem, repeats)
+    (ref,) = run_nosnoc(py, [{"name": "simple_car", **CAR, "max_iter": Relaxation().max_iter,
+                              "k1": car.k1, "k2": car.k2, "v_switch": car.v_switch,
+                              "x0": [0.0, 0.0], "x_final": [car.distance, 0.0], "T": car.T,
+                              "u_max": car.u_max}], repeats)
+    problem = _simple_car_problem()
+    ref_cost = problem.cost_of(ref["t_grid"], ref["x_traj"], ref["u_traj"])
+    ref_obj = problem.cost_of(ref["t_grid"], ref["x_traj"], ref["u_traj"], penalty=True)
+    diff = mine["objective"] - ref_obj
+    tol = _objective_tolerance(ref, ref_obj)
+    # from nosnoc's states, the algebraic variables consistent with them (not centred)
+    from_ref = replace(problem, start="consistent").solve(guess=np.asarray(ref["x_traj"]))
+    yield _versus(f"optimal/nosnoc_{name}", CAR["N"] * CAR["Nfe"], mine, ref, {
+        "cost": mine["cost"], "reference_cost": ref_cost, "objective": mine["objective"],
+        "reference_objective": ref_obj, "reference_objective_reported": ref["cost"],
+        "objective_difference": diff, "objective_relative_difference": abs(diff) / abs(
+            ref_obj), **tol, "equal_optimum": abs(diff) <= tol["objective_tolerance"],
+        "ours_lower": mine["objective"] < ref_obj,
+        "state_max_difference": float(np.max(np.abs(mine["x"] - np.asarray(
+            ref["x_traj"])))),
+        "residual": problem.residual_of(mine["x"], mine["theta"]),
+        "reference_residual": problem.residual_of(ref["x_traj"], ref["theta"]),
+        "iterations": mine["iterations"],
+        "reference_iterations": sum(ref.get("iterations", [])),
+        "reference_status": ref["status"], "continuous_cost": car.cost(),
+        "objective_from_reference_plan": from_ref.objective,
+        "objective_from_reference_plan_relative_difference":
+            abs(from_ref.objective - ref_obj) / abs(ref_obj)},
+        "nosnoc's published simple car discretised as ours on both sides (implicit Euler: "
+        "Radau IIA with one stage; 30 stages of 2 elements, lengths within (0, 2) h, step "
+        "equilibration HEURISTIC_DELTA with rho 1 on both in place of the example's "
+        "L2_RELAXED_SCALED, which ours has not; cross complementarity pairs and IPOPT "
+        "iteration limit as ours), nosnoc's algebraic z = v - 15 being our switching "
+        "function c = v - 15; both from nosnoc's start (at rest, the algebraic variables "
+        "centred: start='centred') and homotopy (sigma from 1 by 0.1, each solve cold from "
+        "the previous primal point); objective = sum h_k u_k^2 + step equilibration "
+        "penalty, recomputed by one formula on each side's trajectory; equal optimum: "
+        "within objective_tolerance (as the sliding-mode and cart-pole rows); a non-convex "
+        "problem: ours restarted from nosnoc's states (uniform lengths, default homotopy) "
+        "may end in another local optimum")

@@ -30,6 +30,12 @@ switching optimal control problems with nosnoc's FESD and prints one JSON line p
   equilibration, its cross complementarity pairs and IPOPT iteration limit); their
   trajectories, algebraic variables and objective after each relaxed solve are printed,
   the caller recomputes the cost and the complementarity residual.
+* ``simple_car``: the problem of nosnoc's published example
+  ``examples/simple_car_algebraics/simple_car_algebraic.py`` (a car whose input gains 5
+  below 15 m/s and 3 above, the switching function an algebraic ``z = v - 15``, least
+  ``∫ u²`` to ``(500, 0)`` in 30 s), discretised as nscontrol.optimal.FesdProblem (implicit
+  Euler, the case's step equilibration in place of the example's ``L2_RELAXED_SCALED``);
+  its trajectory is printed.
 """
 
 import json
@@ -252,6 +258,27 @@ def cart_pole_with_friction(case):
     return model, ocp, _as_ours(opts, case)
 
 
+def simple_car(case):
+    """nosnoc's simple car (its model, the algebraic ``z`` included, and problem) with
+    one Radau stage and the case's step equilibration, as ours."""
+    q, v, z, u = (ca.SX.sym(n) for n in ("q", "v", "z", "u"))
+    x = ca.vertcat(q, v)
+    A = np.array([[0, 1], [0, 0]])
+    F = [ca.horzcat(A @ x + np.array([[0], [case["k1"]]]) @ u,
+                    A @ x + np.array([[0], [case["k2"]]]) @ u)]
+    model = nosnoc.NosnocModel(x=x, F=F, S=[np.array([[-1], [1]])], c=[z],
+                               x0=np.array(case["x0"]), u=u, z=z,
+                               g_z=z - (v - case["v_switch"]),
+                               z0=[case["x0"][1] - case["v_switch"]])
+    ocp = nosnoc.NosnocOcp(lbu=-case["u_max"] * np.ones(1), ubu=case["u_max"] * np.ones(1),
+                           f_q=u ** 2, g_terminal=x - np.array(case["x_final"]))
+    opts = nosnoc.NosnocOpts()
+    opts.use_fesd = True
+    opts.rootfinder_for_initial_z = True
+    opts.terminal_time = case["T"]
+    return model, ocp, _as_ours(opts, case)
+
+
 def _homotopy_record(solver, results):
     """The algebraic variables of each element (``θ``, ``λ``: the caller computes the
     complementarity residual by its own formula), nosnoc's own residual (largest product),
@@ -274,7 +301,7 @@ def _homotopy_record(solver, results):
 
 
 #: Cases whose trajectories are printed (the cost is recomputed by the caller).
-TRAJECTORIES = ("sliding_mode_ocp_as_ours", "cart_pole_with_friction")
+TRAJECTORIES = ("sliding_mode_ocp_as_ours", "cart_pole_with_friction", "simple_car")
 
 
 def main():
@@ -308,6 +335,7 @@ def main():
             out.update({key: np.asarray(results[key], float).tolist()
                         for key in ("x_traj", "u_traj", "t_grid", "t_grid_u")})
             out.update(_homotopy_record(solver, results))
+            out["iterations"] = [int(i) for i in results.get("nlp_iter", [])]  # per solve
         if case["name"] == "speedup":
             t = np.asarray(results["t_grid"], float)
             xs = np.asarray(results["x_traj"], float).reshape(-1)

@@ -28,7 +28,7 @@ from .lure import LurePlan, LureProblem  # noqa: E402
 from .mpc import ContactMPC  # noqa: E402
 from .periodic import JugglerPlan, JugglerProblem, VibratingTable  # noqa: E402
 from .plan import ContactPlan, ZeroOrderHold  # noqa: E402
-from .problems import PushedBlock, SpeedUp  # noqa: E402
+from .problems import PushedBlock, SimpleCar, SpeedUp  # noqa: E402
 from .pwa import pwa_problem, stewart_form  # noqa: E402
 from .stewart import FesdPlan, FesdProblem, HeldInput, StewartSystem  # noqa: E402
 
@@ -36,4 +36,4 @@ __all__ = ["ContactProblem", "Relaxation", "ContactPlan", "ZeroOrderHold", "Push
            "SwitchingProblem", "SwitchingPlan", "SpeedUp", "ContactMPC", "CartPole",
            "VibratingTable", "JugglerProblem", "JugglerPlan", "LureProblem", "LurePlan",
            "StewartSystem", "FesdProblem", "FesdPlan", "HeldInput", "stewart_form",
-           "pwa_problem"]
+           "pwa_problem", "SimpleCar"]

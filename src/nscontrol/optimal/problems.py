@@ -48,11 +48,43 @@ whose root is the optimal switching time: ``x_T² / r² - L² / s² = a₂² - a
 speed squared jumps by the fields' difference). With ``a₁ = 1``, ``a₂ = 3``, ``L = 1``,
 ``T = 1`` and ``x_T = √3``: ``s = 1/2``, ``u₁ = 1``, ``u₂ = 2√3 - 3``,
 ``J* = 1/2 + 2 (√3 - 3/2)²``.
+
+**A car whose engine weakens above a speed** (:class:`SimpleCar`, the problem of nosnoc's
+``simple_car_algebraic`` example): ``q' = v``, ``v' = k(v) u`` with ``k = k₁`` below the
+speed ``v_s`` and ``k₂`` above it, from rest at ``0`` to rest at ``d`` in time ``T``, least
+``∫ u² dt`` with ``|u| <= U`` (not binding at the optimum), ``d / T > v_s`` (it must exceed
+``v_s``). Between crossings the costates obey ``p_q' = 0``, ``p_v' = -p_q`` and
+``u = -k p_v / 2``, so ``u`` is affine in time with the slope ``k p_q / 2``: the slopes of
+the two modes are in the ratio ``k₁ : k₂``. At a crossing of ``v = v_s`` (transversal,
+``v' = k u ≠ 0``) the Hamiltonian ``min_u H = p_q v - u²`` is continuous and so is ``p_q``
+(the surface does not depend on ``q``): ``|u|`` is continuous. The problem is mapped onto
+itself by ``t → T - t``, ``q → d - q``, ``u → -u``, so the optimum crosses up at ``τ`` and
+down at ``T - τ`` with ``u(T/2) = 0``. With ``m = T / 2`` and ``r = k₁ / k₂``,
+``u = c (m - t)`` on ``[τ, m]`` and ``u = c (m - τ) + r c (τ - t)`` on ``[0, τ]``;
+``v(τ) = v_s`` and ``q(m) = d / 2`` give
+
+    c = v_s / (k₁ ((m - τ) τ + r τ² / 2)),
+    k₁ c ((m - τ) τ² / 2 + r τ³ / 3) + v_s (m - τ) + k₂ c (m - τ)³ / 3 = d / 2,
+
+one equation in ``τ`` whose left side falls from ``+∞`` at ``τ → 0`` to
+``2 v_s m / 3 < d / 2`` at ``τ = m``: its root in ``(0, m)`` is the switching time. The cost is
+``J* = 2 ((u₀³ - u_τ³) / (3 r c) + c² (m - τ)³ / 3)`` (``u₀ = u(0)``, ``u_τ = u(τ)``).
+nosnoc's numbers ``k₁ = 5``, ``k₂ = 3``, ``v_s = 15``, ``d = 500``, ``T = 30``, ``U = 1``:
+``τ = 4.4511``, ``u(0) = 0.849``, ``J* = 5.8838``.
+
+On the FESD grid (implicit Euler, one input per control stage) the same structure holds
+exactly away from the crossings: the discrete costate of ``v`` changes by ``h_k p_q`` over
+element ``k`` and ``u_s`` is ``k`` times the mean costate over stage ``s``, so on stages of
+equal elements wholly in one mode the input steps by ``k p_q (T / N) / 2`` from stage to
+stage. Implicit Euler is exact on ``v`` (constant acceleration per element) and errs on
+``q`` by ``h_k Δv_k / 2`` per element.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -60,8 +92,9 @@ from .._validation import check_positive
 from ..errors import ModelError
 from ..systems.lagrangian import LagrangianSystem
 from .fesd import SwitchingProblem
+from .stewart import FesdProblem, StewartSystem
 
-__all__ = ["PushedBlock", "SpeedUp"]
+__all__ = ["PushedBlock", "SpeedUp", "SimpleCar"]
 
 
 @dataclass(frozen=True)
@@ -215,3 +248,123 @@ class SpeedUp:
         s = self.switch_time()
         r = self.T - s
         return s * (self.L / s - self.a1) ** 2 + r * (self.x_T / r - self.a2) ** 2
+
+
+@dataclass(frozen=True)
+class SimpleCar:
+    """``q' = v``, ``v' = k₁ u`` below the speed ``v_s`` and ``k₂ u`` above it, from rest to
+    rest at ``d`` in time ``T`` at least effort (the module docstring); the defaults are
+    nosnoc's ``simple_car_algebraic`` example.
+
+    Parameters
+    ----------
+    k1, k2 : float
+        The input gains below and above ``v_s`` (``> 0``).
+    v_switch : float
+        ``v_s > 0``.
+    distance : float
+        ``d``, with ``d / T > v_s``.
+    T : float
+        Horizon.
+    u_max : float
+        ``U``: ``|u| <= U``.
+
+    Raises
+    ------
+    ModelError
+        ``d / T <= v_s`` (the car need not pass ``v_s``: no switch).
+    """
+
+    k1: float = 5.0
+    k2: float = 3.0
+    v_switch: float = 15.0
+    distance: float = 500.0
+    T: float = 30.0
+    u_max: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("k1", "k2", "v_switch", "distance", "T", "u_max"):
+            check_positive(name, getattr(self, name))
+        if not self.distance / self.T > self.v_switch:
+            raise ModelError(f"distance: the mean speed d / T = {self.distance / self.T:g} "
+                             f"must exceed v_switch = {self.v_switch:g} (else no switch); "
+                             "raise distance or shorten T")
+
+    def system(self) -> StewartSystem:
+        """The car in Stewart's form: field 1 (``k₁``) where ``c = v - v_s < 0``."""
+        def field(k: float) -> Callable[[Any, Any], list[Any]]:
+            return lambda x, u: [x[1], k * u[0]]
+
+        return StewartSystem([field(self.k1), field(self.k2)], lambda x: x[1] - self.v_switch,
+                             signs=[[-1.0], [1.0]])
+
+    def problem(self, stages: int = 30, elements: int = 2, equilibration: float = 1.0,
+                equilibration_form: str = "delta", start: str = "consistent") -> FesdProblem:
+        """The FESD transcription (nosnoc's grid by default: 30 stages of 2 elements, each
+        element within ``(0, 2) h̄``, nosnoc's default step equilibration).
+
+        Parameters
+        ----------
+        stages, elements : int
+            Control stages and finite elements per stage.
+        equilibration : float
+            Step equilibration weight.
+        equilibration_form : {"mean", "delta"}
+            Its form.
+        start : {"consistent", "centred"}
+            The algebraic variables' start (:class:`FesdProblem`).
+
+        Returns
+        -------
+        FesdProblem
+        """
+        return FesdProblem(self.system(), [0.0, 0.0], self.T, stages, elements=elements,
+                           inputs=1, stage_cost=lambda x, u: u[0] ** 2,
+                           x_final=[self.distance, 0.0], u_min=-self.u_max, u_max=self.u_max,
+                           element_bounds=(0.0, 2.0), equilibration=equilibration,
+                           equilibration_form=equilibration_form, start=start)
+
+    def _slope(self, tau: float) -> float:
+        """``c`` of the module docstring for the crossing at ``tau``."""
+        m, r = 0.5 * self.T, self.k1 / self.k2
+        return self.v_switch / (self.k1 * ((m - tau) * tau + r * tau ** 2 / 2))
+
+    def switch_times(self) -> tuple[float, float]:
+        """``(τ, T - τ)``: the crossings of ``v_s`` up and down.
+
+        Raises
+        ------
+        ModelError
+            The optimum's input reaches ``u_max`` (the closed form assumes it does not).
+        """
+        from scipy.optimize import brentq
+
+        m, r, vs = 0.5 * self.T, self.k1 / self.k2, self.v_switch
+
+        def excess(tau: float) -> float:
+            c = self._slope(tau)
+            return (self.k1 * c * ((m - tau) * tau ** 2 / 2 + r * tau ** 3 / 3)
+                    + vs * (m - tau) + self.k2 * c * (m - tau) ** 3 / 3 - self.distance / 2)
+
+        tau = float(brentq(excess, 1e-9 * m, m, xtol=1e-14))
+        if self.input(0.0, tau) >= self.u_max:
+            raise ModelError(f"u_max: the least-effort input starts at "
+                             f"{self.input(0.0, tau):g} >= u_max = {self.u_max:g}; the "
+                             "closed form needs the bound inactive (raise u_max or T)")
+        return tau, self.T - tau
+
+    def input(self, t: Any, tau: float | None = None) -> Any:
+        """``u*(t)`` (odd about ``T / 2``)."""
+        tau = self.switch_times()[0] if tau is None else tau
+        m, c = 0.5 * self.T, self._slope(tau)
+        t = np.asarray(t, float)
+        s = np.minimum(t, self.T - t)   # the time to the nearer end
+        up = np.where(s < tau, c * (m - tau) + self.k1 / self.k2 * c * (tau - s), c * (m - s))
+        return np.where(t <= m, up, -up)
+
+    def cost(self) -> float:
+        """``J*``."""
+        tau, _ = self.switch_times()
+        m, c, r = 0.5 * self.T, self._slope(tau), self.k1 / self.k2
+        u0, ut = float(self.input(0.0, tau)), c * (m - tau)
+        return 2.0 * ((u0 ** 3 - ut ** 3) / (3 * r * c) + c ** 2 * (m - tau) ** 3 / 3)

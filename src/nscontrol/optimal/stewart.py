@@ -359,6 +359,13 @@ class FesdProblem:
         (as nosnoc does), more iterations, and the iterate may leave the branch the first
         relaxations chose — on nosnoc's ``motor_with_friction`` this reaches nosnoc's
         optimum, 0.06 % below the warm homotopy's. Both are local optima.
+    start : {"consistent", "centred"}
+        The algebraic variables of the first solve: consistent with the guess's states (on
+        each element the field of its end's region, ``λ`` and ``μ`` from the switching
+        functions), or centred as nosnoc starts them (``θ = λ = 1 / n_f`` in each layer,
+        ``μ = 1``; nosnoc's start when ``σ0 = 1``), which leaves the first relaxed solve
+        to choose the regions — on SimpleCar from rest with ``σ0 = 1``, 115 IPOPT
+        iterations in that solve instead of 207, to the same optimum.
 
     Raises
     ------
@@ -387,6 +394,7 @@ class FesdProblem:
     equilibration: float = 0.0
     equilibration_form: str = "mean"
     warm_homotopy: bool = True
+    start: str = "consistent"
     n: int = field(init=False)
     traced: _Traced = field(init=False, repr=False)
     _built: dict[str, Any] = field(init=False, repr=False, default_factory=dict)
@@ -430,6 +438,8 @@ class FesdProblem:
         set_(self, "equilibration", _check_equilibration(self.equilibration,
                                                         self.equilibration_form))
         set_(self, "warm_homotopy", check_bool("warm_homotopy", self.warm_homotopy))
+        if self.start not in ("consistent", "centred"):
+            raise ModelError(f"start: expected 'consistent' or 'centred', got {self.start!r}")
         set_(self, "traced", _Traced(layers, n, p, self.stage_cost, self.terminal_cost))
 
     @property
@@ -579,7 +589,8 @@ class _FesdNLP:
         consistent with them: the regions of each element's end (``θ``, ``λ``, ``μ``) and
         the inputs that best make each stage's steps (least squares on the fields
         linearised about ``u = 0``, clipped to the bounds). A guess whose algebraic
-        variables contradict its states starts the homotopy in a poor local optimum."""
+        variables contradict its states starts the homotopy in a poor local optimum. With
+        ``start="centred"`` the algebraic variables are nosnoc's centred start instead."""
         p, K, h, r = self.p, self.K, self.hbar, self.tr.rows
         if X is None:
             xf = p.x0 if p.x_final is None else np.where(np.isnan(p.x_final), p.x0, p.x_final)
@@ -591,8 +602,12 @@ class _FesdNLP:
             TH[r[li] + np.argmin(block, axis=0), np.arange(K)] = 1.0
             MU[li] = block.min(axis=0)
             LAM[r[li]:r[li + 1]] = block - MU[li]
-        return {"X": X, "U": self._inputs(X, TH), "TH": TH, "LAM": LAM, "MU": MU,
-                "H": np.full(K, h)}
+        U = self._inputs(X, TH)
+        if p.start == "centred":   # after the inputs, which take the regions of the states
+            for li in range(len(r) - 1):
+                TH[r[li]:r[li + 1]] = LAM[r[li]:r[li + 1]] = 1.0 / (r[li + 1] - r[li])
+            MU[:] = 1.0
+        return {"X": X, "U": U, "TH": TH, "LAM": LAM, "MU": MU, "H": np.full(K, h)}
 
     def _inputs(self, X: FloatArray, TH: FloatArray) -> FloatArray:
         p, tr, h, ne = self.p, self.tr, self.hbar, self.p.elements
