@@ -182,6 +182,29 @@ def test_shared_modules_are_imported_once_here_and_inherited_by_every_child(
     assert _processes.preload(["nsc_no_such_module", name]) == [name]
 
 
+def _blas_setting():
+    import numpy  # noqa: F401 - loads numpy's BLAS
+    import scipy.linalg  # noqa: F401 - and scipy's
+
+    return os.environ.get("OPENBLAS_NUM_THREADS"), _processes.blas_threads()
+
+
+def test_side_by_side_tasks_do_their_linear_algebra_on_one_thread(monkeypatch):
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    # the parent has loaded numpy's and scipy's BLAS (as the report's parent does) before
+    # the children fork: they are set to one thread through OpenBLAS's own setter, and the
+    # processes they start through the environment
+    _blas_setting()
+    outcomes = _processes.run_each([(_blas_setting, ())] * 2, 2)
+    for o in outcomes:
+        variable, threads = o.value
+        assert variable == "1" and all(t == 1 for t in threads)
+    # one at a time (the only task on the machine) keeps the library's default
+    (variable, _), = (o.value for o in _processes.run_each([(_blas_setting, ())], 1))
+    assert variable is None
+    assert os.environ.get("OPENBLAS_NUM_THREADS") is None      # this process is left alone
+
+
 def test_the_reports_shared_modules_exist():
     import importlib.util
 
