@@ -10,10 +10,10 @@ compiled kernels it uses from numba's on-disk cache: milliseconds per kernel.)
 
 Children are forked where the platform allows it (they start in a few milliseconds and see
 the parent's modules as imported); elsewhere the platform's default start method is used, so
-the task must then be importable by name. With fork, ``preload`` names modules the tasks
-share, imported once here before the first child starts: every child inherits them instead
-of importing them again (numpy, scipy, matplotlib, numba and cvxpy take about 2 s of CPU to
-import, per process). Each child leads its own process group and
+the task must then be importable by name. With fork, the modules the tasks share
+(``shared``) are imported once here before the first child starts (:func:`preload`): every
+child inherits them instead of importing them again (numpy, scipy, matplotlib, numba and
+cvxpy take about 1.5 s of CPU to import, per process). Each child leads its own process group and
 ignores Ctrl-C: on Ctrl-C (or any exception) in the parent, every running child is
 terminated with the processes it started (a sweep's pool inside an example), and the
 exception goes on.
