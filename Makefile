@@ -3,25 +3,39 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.nscontrol-installed
+DEMO_STAMP := $(VENV)/.nscontrol-demo-installed
 DOCS_STAMP := $(VENV)/.nscontrol-docs-installed
 OUT    ?= out
 
 .PHONY: demo warmup test test-sensitive test-all bench lint docs clean
 
 # pip says what it does (no --quiet): a line per package it collects, a bar per download.
-$(STAMP): pyproject.toml
+# Two stamps: the demo installs what the examples import (the extras optimal and scs); the
+# test, lint and bench targets add the test tools, Dask and python-control on top. The full
+# install stamps both, so `make demo` after `make test` installs nothing.
+define make_venv
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@echo "updating pip in $(VENV)"
 	$(PY) -m pip install --upgrade --progress-bar on pip
+endef
+
+$(DEMO_STAMP): pyproject.toml
+	$(make_venv)
+	@echo "installing nscontrol (editable, from this folder) into $(VENV) with what the examples need (the extras optimal and scs): numpy, scipy, numba, cvxpy, casadi, matplotlib and about 20 more packages (about 1 min; more with an empty pip cache)"
+	$(PY) -m pip install --progress-bar on -e ".[optimal,scs]"
+	touch $(DEMO_STAMP)
+
+$(STAMP): pyproject.toml
+	$(make_venv)
 	@echo "installing nscontrol (editable, from this folder) into $(VENV) with the extras dev, cluster, control and scs: numpy, scipy, numba, cvxpy, casadi, matplotlib, dask, python-control and about 50 more packages (1-2 min; more with an empty pip cache)"
 	$(PY) -m pip install --progress-bar on -e ".[dev,cluster,control,scs]"
-	touch $(STAMP)
+	touch $(STAMP) $(DEMO_STAMP)
 
 # JOBS: processes side by side for the warm-up and the report (default: one per core).
 JOBS ?=
 JOBS_OPT := $(if $(JOBS),--jobs $(JOBS),)
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	$(VENV)/bin/nscontrol warmup $(JOBS_OPT)   # compiles the numba kernels once, saying so
 	$(VENV)/bin/nscontrol report --out $(OUT) $(JOBS_OPT)
 
@@ -47,7 +61,7 @@ test-sensitive: $(STAMP)
 test-all: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile
 
-warmup: $(STAMP)
+warmup: $(DEMO_STAMP)
 	$(VENV)/bin/nscontrol warmup $(JOBS_OPT)
 
 bench: $(STAMP)

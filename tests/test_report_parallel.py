@@ -5,6 +5,7 @@ one is reported and the others kept; ``--jobs`` is checked; Ctrl-C stops every p
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import re
 import subprocess
@@ -157,6 +158,57 @@ def test_ctrl_c_stops_every_running_process_and_their_children(tmp_path):
 def test_run_each_keeps_the_order_of_the_tasks_and_runs_no_more_than_jobs_at_once(tmp_path):
     outcomes = _processes.run_each([(_quick, ())] * 5, 2)
     assert [o.value for o in outcomes] == ["quick"] * 5 and not any(o.error for o in outcomes)
+
+
+def _imported_before_running(name):
+    import sys
+
+    return name in sys.modules
+
+
+@pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
+                    reason="children inherit the parent's modules only when forked")
+def test_shared_modules_are_imported_once_here_and_inherited_by_every_child(
+        tmp_path, monkeypatch):
+    name = f"nsc_shared_probe_{os.getpid()}"
+    (tmp_path / f"{name}.py").write_text("VALUE = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    tasks = [(_imported_before_running, (name,))] * 3
+    # without shared the children start without it (and the parent never imports it)
+    assert [o.value for o in _processes.run_each(tasks, 2)] == [False] * 3
+    outcomes = _processes.run_each(tasks, 2, shared=[name, "nsc_no_such_module"])
+    assert [o.value for o in outcomes] == [True] * 3 and not any(o.error for o in outcomes)
+    # a module that is not installed is skipped, not an error: the task that needs it says so
+    assert _processes.preload(["nsc_no_such_module", name]) == [name]
+
+
+def _blas_setting():
+    import numpy  # noqa: F401 - loads numpy's BLAS
+    import scipy.linalg  # noqa: F401 - and scipy's
+
+    return os.environ.get("OPENBLAS_NUM_THREADS"), _processes.blas_threads()
+
+
+def test_side_by_side_tasks_do_their_linear_algebra_on_one_thread(monkeypatch):
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    # the parent has loaded numpy's and scipy's BLAS (as the report's parent does) before
+    # the children fork: they are set to one thread through OpenBLAS's own setter, and the
+    # processes they start through the environment
+    _blas_setting()
+    outcomes = _processes.run_each([(_blas_setting, ())] * 2, 2)
+    for o in outcomes:
+        variable, threads = o.value
+        assert variable == "1" and all(t == 1 for t in threads)
+    # one at a time (the only task on the machine) keeps the library's default
+    (variable, _), = (o.value for o in _processes.run_each([(_blas_setting, ())], 1))
+    assert variable is None
+    assert os.environ.get("OPENBLAS_NUM_THREADS") is None      # this process is left alone
+
+
+def test_the_reports_shared_modules_exist():
+    import importlib.util
+
+    assert all(importlib.util.find_spec(m) is not None for m in report_mod.SHARED_IMPORTS)
 
 
 def _step_ok():

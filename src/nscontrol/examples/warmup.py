@@ -239,7 +239,8 @@ def warm_up(report: Callable[[str], None] = lambda _: None, jobs: int | None = 1
         report(f"{names[index]}: {'FAILED' if error else 'done'} in {outcome.seconds:.0f} s "
                f"(CPU {outcome.cpu:.0f} s)")
 
-    run_each([(_run_step_here, (what,)) for what in names], n_jobs, on_done=done)
+    run_each([(_run_step_here, (what,)) for what in names], n_jobs, on_done=done,
+             shared=("numpy", "numba", "scipy.linalg", "nscontrol.simulate"))
     return failed
 
 
