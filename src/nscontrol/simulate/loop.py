@@ -222,8 +222,8 @@ def _keep_partial(err: BaseException, stepper: Any, rec: Recorder, recording: Re
         stats = dict(stepper.end(Stop(-1, message)))
     except Exception:  # noqa: BLE001 - a stepper stopped mid-piece may hold no statistics
         stats = {}
-    traj = rec.snapshot(status=-1, message=message, method=desc,
-                        state_names=recording.state_names, stats=stats)
+    traj = rec.snapshot(status=-1, message=message, method=desc,  # the run is over
+                        state_names=recording.state_names, stats=stats, last=True)
     attach_partial(err, traj, note=not library)
 
 
