@@ -687,7 +687,8 @@ def _check_gap(err: float, last_err: float, sweeps: int, tol: float, done: int) 
 def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                  blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
                  dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
-                 max_sweeps: int, max_local_iter: int) -> tuple[int, int, float]:
+                 max_sweeps: int, max_local_iter: int, work: np.ndarray
+                 ) -> tuple[int, int, float]:
     """Non-smooth Gauss–Seidel over contacts from the impulses in ``r``, exact local solves
     (:func:`local_1d`, :func:`local_2d`, :func:`local_3d`), ``u = W r + q`` kept up to date.
 
@@ -696,7 +697,9 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     for the first 16) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is
     recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
     confirms the last on an exact product. Returns ``(code, sweeps, error)``: code
-    :data:`CONVERGED` or :data:`SWEEP_LIMIT`.
+    :data:`CONVERGED` or :data:`SWEEP_LIMIT`. ``work``: at least 6 floats of scratch (a
+    spatial contact's local slip solve), owned by the caller so that a solve allocates
+    nothing.
     """
     # the sweeps specialised on W's storage and on dim (a constant in each body): with the
     # other kinds' code in its loop (the sparse update, another dim's local solve), the
@@ -705,35 +708,35 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     if WT.shape[0] > 0:
         if dim == 3:
             return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u,
-                                states, tol, max_sweeps, max_local_iter, True)
+                                states, tol, max_sweeps, max_local_iter, True, work)
         if dim == 2:
             return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 2, r, u,
-                                states, tol, max_sweeps, max_local_iter, True)
+                                states, tol, max_sweeps, max_local_iter, True, work)
         return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 1, r, u, states,
-                            tol, max_sweeps, max_local_iter, True)
+                            tol, max_sweeps, max_local_iter, True, work)
     if dim == 3:
         return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u, states,
-                            tol, max_sweeps, max_local_iter, False)
+                            tol, max_sweeps, max_local_iter, False, work)
     if dim == 2:
         return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 2, r, u, states,
-                            tol, max_sweeps, max_local_iter, False)
+                            tol, max_sweeps, max_local_iter, False, work)
     return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 1, r, u, states, tol,
-                        max_sweeps, max_local_iter, False)
+                        max_sweeps, max_local_iter, False, work)
 
 
 @njit(cache=True, inline="always")
 def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                  blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
                  dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
-                 max_sweeps: int, max_local_iter: int, dense: bool
+                 max_sweeps: int, max_local_iter: int, dense: bool, work: np.ndarray
                  ) -> tuple[int, int, float]:
     """The sweeps of :func:`nsgs_columns`, ``dense`` and ``dim`` constants at each call."""
     m = mu.shape[0]
     column_product(WT, bptr, brow, bdata, q, r, dim, u)
     q_norm = _norm(q)
     next_check, last_check, last_err = 1, 0, np.inf
-    qloc = np.empty(3)
-    rloc = np.empty(3)
+    qloc = work[0:3]
+    rloc = work[3:6]
     err = np.inf
     for sweep in range(1, max_sweeps + 1):
         for i in range(m):
@@ -768,7 +771,7 @@ def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
 @njit(cache=True)
 def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                     terms: int, q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
-                    dim: int, tol: float) -> tuple[float, float, bool]:
+                    dim: int, tol: float, work: np.ndarray) -> tuple[float, float, bool]:
     """The acceptance test of every frictional-contact path: ``u = W r + q`` recomputed
     from ``r``, then ``(error, tolerance, certified)`` with the relative natural-map
     :func:`relative_error` and the tolerance ``tol`` plus the round-off bound of ``u``.
@@ -780,11 +783,12 @@ def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
     :data:`~nscontrol.numerics._lcp_kernels.ROUNDOFF_FACTOR`: ``2 k eps (1 + max μ) sqrt(n)
     max_i (|W||r| + |q|)_i / max(|q|, |r|, |u|)``. As for the LCP, the tolerance is ``-inf``
     (nothing certified) when ``|W||r|`` exceeds the scale by
-    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`.
+    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`. ``work``: at least ``n``
+    floats of scratch, owned by the caller.
     """
     n = q.shape[0]
     column_product(WT, bptr, brow, bdata, q, r, dim, u)
-    a = np.empty(n)
+    a = work
     for k in range(n):
         a[k] = abs(q[k])
     if WT.shape[0] > 0:
@@ -814,18 +818,26 @@ def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
     return err, tolerance, bool(err <= tolerance)
 
 
+@njit(cache=True)
+def work_size(n: int) -> int:
+    """Floats of scratch :func:`solve_columns` needs for ``n`` unknowns (the sweeps' local
+    slip solve: 6; the certification: ``n``; one after the other)."""
+    return max(n, 6)
+
+
 @njit(cache=True, inline="always")
 def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                   blocks: np.ndarray, inverses: np.ndarray, terms: int, q: np.ndarray,
                   mu: np.ndarray, r: np.ndarray, u: np.ndarray, states: np.ndarray,
-                  tol: float, max_sweeps: int, max_local_iter: int
+                  tol: float, max_sweeps: int, max_local_iter: int, work: np.ndarray
                   ) -> tuple[int, int, float, float, bool, int]:
     """One solve of :class:`~nscontrol.numerics.friction_contact.FrictionContactSolver`:
     ``W`` prepared first when ``terms`` is 0 (``μ`` checked, code :data:`MU_INVALID`, then
     :func:`prepare_columns`, whose codes it returns), ``q`` and the start ``r`` checked
     finite (code :data:`NOT_FINITE`), then :func:`nsgs_columns` and
     :func:`certify_columns`, sweeping on from the exact ``u`` when the running one passed
-    ``tol`` and the exact one does not. Returns ``(code, sweeps,
+    ``tol`` and the exact one does not. ``work``: at least ``max(n, 6)`` floats of scratch
+    (:func:`work_size`), owned by the caller. Returns ``(code, sweeps,
     error, tolerance, certified, terms)``."""
     dim = blocks.shape[1]
     if terms == 0:
@@ -841,10 +853,10 @@ def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.
     while True:
         code, sweeps, err = nsgs_columns(WT, bptr, brow, bdata, blocks, inverses, q, mu,
                                          dim, r, u, states, tol, max_sweeps - done,
-                                         max_local_iter)
+                                         max_local_iter, work)
         done += sweeps
         err, tolerance, ok = certify_columns(WT, bptr, brow, bdata, terms, q, r, u, mu, dim,
-                                             tol)
+                                             tol, work)
         if ok or code != CONVERGED or err <= tol or done >= max_sweeps:
             return code, done, err, tolerance, ok, terms
 
@@ -868,16 +880,19 @@ def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray
                      u: np.ndarray, states: np.ndarray, tol: float, max_sweeps: int,
                      max_local_iter: int) -> tuple[int, int, float, float, bool]:
     """:func:`solve_columns` on a dense ``W`` used once (``dim = len(q) / len(states)``),
-    the blocks prepared in this call. The one
+    the blocks prepared in this call, all its scratch in one allocation. The one
     compiled call of :func:`~nscontrol.numerics.friction_contact.solve_friction_contact` on
     a small dense problem. Returns ``(code, sweeps, error, tolerance, certified)``."""
+    n = q.shape[0]
     m = states.shape[0]
-    dim = q.shape[0] // m
-    blocks = np.empty((m, dim, dim))
-    inverses = np.empty((m, dim, dim))
+    dim = n // m
+    k = m * dim * dim
+    buf = np.empty(2 * k + work_size(n))
+    bptr = np.zeros(1, np.int64)        # no block column: W is dense
     code, sweeps, err, tolerance, ok, _ = solve_columns(
-        dense_columns(W), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
-        inverses, 0, q, mu, r, u, states, tol, max_sweeps, max_local_iter)
+        dense_columns(W), bptr, bptr[:0], buf[:0].reshape((0, 1, 1)),
+        buf[:k].reshape((m, dim, dim)), buf[k:2 * k].reshape((m, dim, dim)), 0, q, mu, r, u,
+        states, tol, max_sweeps, max_local_iter, buf[2 * k:])
     return code, sweeps, err, tolerance, ok
 
 
@@ -908,11 +923,12 @@ def solve_sparse_once(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
         bptr, brow, bdata = csr_to_blocks(indptr, indices, data, n, dim)
     else:
         bptr, brow, bdata = csc_to_blocks(indptr, indices, data, n, dim)
-    blocks = np.empty((m, dim, dim))
-    inverses = np.empty((m, dim, dim))
+    k = m * dim * dim
+    buf = np.empty(2 * k + work_size(n))
     code, sweeps, err, tolerance, ok, _ = solve_columns(
-        np.zeros((0, 0)), bptr, brow, bdata, blocks, inverses, 0, q, mu, r, u, states, tol,
-        max_sweeps, max_local_iter)
+        np.zeros((0, 0)), bptr, brow, bdata, buf[:k].reshape((m, dim, dim)),
+        buf[k:2 * k].reshape((m, dim, dim)), 0, q, mu, r, u, states, tol, max_sweeps,
+        max_local_iter, buf[2 * k:])
     return code, sweeps, err, tolerance, ok
 
 
