@@ -210,35 +210,37 @@ def local_2d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
 
 @njit(cache=True)
 def _slip_residual(W: np.ndarray, q: np.ndarray, mu: float, phi: float
-                   ) -> tuple[float, float, float, float]:
+                   ) -> tuple[float, float, float, float, float, float]:
     """For slip along ``t = (cos φ, sin φ)`` (``r_T = -μ r_N t``, ``u_N = 0``): ``(u_T × t,
-    u_T · t, r_N, den)``; a root with ``u_T · t > 0`` and ``den > 0`` is a slip solution."""
+    u_T · t, r_N, den, r_T)``; a root with ``u_T · t > 0`` and ``den > 0`` is a slip
+    solution (``r_T`` returned with it: the caller needs no cosine and sine again)."""
     c, s = np.cos(phi), np.sin(phi)
     den = W[0, 0] - mu * (W[0, 1] * c + W[0, 2] * s)
     if den <= 0.0:
-        return 0.0, -1.0, 0.0, den
+        return 0.0, -1.0, 0.0, den, 0.0, 0.0
     rn = -q[0] / den
     r1, r2 = -mu * rn * c, -mu * rn * s
     u1 = W[1, 0] * rn + W[1, 1] * r1 + W[1, 2] * r2 + q[1]
     u2 = W[2, 0] * rn + W[2, 1] * r1 + W[2, 2] * r2 + q[2]
-    return u1 * s - u2 * c, u1 * c + u2 * s, rn, den
+    return u1 * s - u2 * c, u1 * c + u2 * s, rn, den, r1, r2
 
 
 @njit(cache=True)
 def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: float
-                    ) -> tuple[bool, float, float]:
+                    ) -> tuple[bool, float, float, float, float]:
     """A slip root in ``[lo, hi]`` by the Illinois variant of regula falsi (superlinear,
-    never leaves the bracket), to the bracket's machine resolution: ``(found, φ, r_N)``."""
-    fa, pa, _, da = _slip_residual(W, q, mu, lo)
-    fb, pb, _, db = _slip_residual(W, q, mu, hi)
+    never leaves the bracket), to the bracket's machine resolution: ``(found, φ, r_N,
+    r_T)``."""
+    fa, pa, _, da, _, _ = _slip_residual(W, q, mu, lo)
+    fb, pb, _, db, _, _ = _slip_residual(W, q, mu, hi)
     if not (da > 0.0 and db > 0.0 and (pa > 0.0 or pb > 0.0)):
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     if fa == 0.0:
         phi = lo
     elif fb == 0.0:
         phi = hi
     elif fa * fb > 0.0:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     else:
         a, b, side = lo, hi, 0
         phi = lo
@@ -246,7 +248,7 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
             phi = (a * fb - b * fa) / (fb - fa)
             if phi == a or phi == b or abs(b - a) <= 4.0 * _EPS * (1.0 + abs(phi)):
                 break
-            fm, _, _, _ = _slip_residual(W, q, mu, phi)
+            fm, _, _, _, _, _ = _slip_residual(W, q, mu, phi)
             if fm == 0.0:
                 break
             if fm * fb > 0.0:      # phi replaces b; halve fa if b moved twice in a row
@@ -259,22 +261,22 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
                 if side == 1:
                     fb *= 0.5
                 side = 1
-    _, p, rn, den = _slip_residual(W, q, mu, phi)
-    return (p > 0.0 and den > 0.0), phi, rn
+    _, p, rn, den, r1, r2 = _slip_residual(W, q, mu, phi)
+    return (p > 0.0 and den > 0.0), phi, rn, r1, r2
 
 
 @njit(cache=True)
 def _newton_slip(W: np.ndarray, q: np.ndarray, mu: float, phi: float
-                 ) -> tuple[bool, float, float]:
+                 ) -> tuple[bool, float, float, float, float]:
     """A slip root (:func:`_slip_residual`) by Newton's method on the slip angle from
-    ``phi``, to machine resolution: ``(found, φ, r_N)``; not found when a step leaves the
+    ``phi``, to machine resolution: ``(found, φ, r_N, r_T)``; not found when a step leaves the
     slip conditions (``den > 0``, ``u_T · t > 0``), the derivative vanishes or
     :data:`_NEWTON_STEPS` steps do not settle."""
     for _ in range(_NEWTON_STEPS):
         c, s = np.cos(phi), np.sin(phi)
         den = W[0, 0] - mu * (W[0, 1] * c + W[0, 2] * s)
         if not (den > 0.0):
-            return False, phi, 0.0
+            return False, phi, 0.0, 0.0, 0.0
         rn = -q[0] / den
         r1, r2 = -mu * rn * c, -mu * rn * s
         u1 = W[1, 0] * rn + W[1, 1] * r1 + W[1, 2] * r2 + q[1]
@@ -291,15 +293,15 @@ def _newton_slip(W: np.ndarray, q: np.ndarray, mu: float, phi: float
         du2 = W[2, 0] * drn + W[2, 1] * dr1 + W[2, 2] * dr2
         df = du1 * s - du2 * c + along
         if f == 0.0:
-            return along > 0.0, phi, rn
+            return along > 0.0, phi, rn, r1, r2
         if not (df != 0.0 and np.isfinite(df)):
-            return False, phi, 0.0
+            return False, phi, 0.0, 0.0, 0.0
         step = f / df
         phi -= step
         if abs(step) <= 4.0 * _EPS * (1.0 + abs(phi)):
-            _, p, rn, den = _slip_residual(W, q, mu, phi)
-            return (p > 0.0 and den > 0.0), phi, rn
-    return False, phi, 0.0
+            _, p, rn, den, r1, r2 = _slip_residual(W, q, mu, phi)
+            return (p > 0.0 and den > 0.0), phi, rn, r1, r2
+    return False, phi, 0.0, 0.0, 0.0
 
 
 @njit(cache=True)
@@ -371,12 +373,12 @@ def _slip_3d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray, rs1: float,
     # Newton from the previous sweep's slip direction, else from the stick guess's (the
     # slip direction when W is isotropic); the brackets below when it does not converge
     phi_w = np.arctan2(-r[2], -r[1]) if warm else np.arctan2(-rs2, -rs1)
-    found, best_phi, best_rn = _newton_slip(W, q, mu, phi_w)
+    found, best_phi, best_rn, best_r1, best_r2 = _newton_slip(W, q, mu, phi_w)
     if not found and warm:
         # the root is usually within a narrow bracket around the previous direction
         for width in (1e-6, 1e-3, 0.1):
-            found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi_w - width,
-                                                       phi_w + width)
+            found, best_phi, best_rn, best_r1, best_r2 = _bracketed_slip(
+                W, q, mu, phi_w - width, phi_w + width)
             if found:
                 break
     if not found:
@@ -385,16 +387,16 @@ def _slip_3d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray, rs1: float,
         # direction when W is isotropic): that root is then inside it, never at a node
         phi0 = np.arctan2(-rs2, -rs1) - 0.5 * step
         for g in range(_ANGLE_GRID):
-            found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi0 + g * step,
-                                                       phi0 + (g + 1) * step)
+            found, best_phi, best_rn, best_r1, best_r2 = _bracketed_slip(
+                W, q, mu, phi0 + g * step, phi0 + (g + 1) * step)
             if found:
                 break
     if not found:   # no bracketed slip root (strong normal-tangent coupling, large μ)
         state, _ = _local_fixed_point(W, q, mu, r, max_local_iter)
         return state
-    r[0] = best_rn
-    r[1] = -mu * best_rn * np.cos(best_phi)
-    r[2] = -mu * best_rn * np.sin(best_phi)
+    r[0] = best_rn        # the tangents as the root's last evaluation computed them
+    r[1] = best_r1
+    r[2] = best_r2
     return SLIP
 
 
