@@ -1,19 +1,22 @@
 """The one-step frictional contact problem: known answers, the two planar methods agree,
 and every solution satisfies Coulomb's law (cone, maximal dissipation)."""
 
+import pickle
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
 from nscontrol.errors import BudgetExceededError, DimensionError, ModelError
-from nscontrol.numerics import _friction_kernels as kernels
 from nscontrol.numerics import (
+    FrictionContactResult,
     contact_states,
     friction_residual,
     frictionless_impulses,
     planar_friction_lcp,
     solve_friction_contact,
 )
+from nscontrol.numerics import _friction_kernels as kernels
 
 pytestmark = pytest.mark.sensitive   # rerun under other rounding (tests/README.md)
 
@@ -248,3 +251,22 @@ def test_lemke_pivot_budget_of_the_planar_lcp():
         solve_friction_contact(W, q, 0.3, dim=2, method="lcp", max_pivots=1)
     assert (err.value.budget, err.value.limit, err.value.used) == ("max_pivots", 1, 1)
     assert solve_friction_contact(W, q, 0.3, dim=2, method="lcp").success
+
+
+def test_a_result_is_an_immutable_record_read_by_name():
+    res = solve_friction_contact(np.eye(3), np.array([-1.0, 1.0, 0.0]), 0.5, dim=3,
+                                 method="nsgs")
+    with pytest.raises(AttributeError):
+        res.status = "max_iter"                          # type: ignore[misc]
+    with pytest.raises(TypeError, match="by name"):
+        _ = list(res)                                    # not a sequence of its fields
+    back = pickle.loads(pickle.dumps(res))
+    assert back.success and repr(back).startswith("FrictionContactResult(r=array(")
+    for name in ("r", "u", "states"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(res, name))
+    assert ((back.residual, back.iterations, back.method, back.status, back.tolerance,
+             back.message) == (res.residual, res.iterations, res.method, res.status,
+                               res.tolerance, res.message))
+    made = FrictionContactResult(res.r, res.u, res.states, res.residual, res.iterations,
+                                 res.method, res.status)     # the public constructor
+    assert made.status == "solved" and np.isnan(made.tolerance) and made.message == ""

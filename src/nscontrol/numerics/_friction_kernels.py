@@ -210,35 +210,37 @@ def local_2d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray) -> int:
 
 @njit(cache=True)
 def _slip_residual(W: np.ndarray, q: np.ndarray, mu: float, phi: float
-                   ) -> tuple[float, float, float, float]:
+                   ) -> tuple[float, float, float, float, float, float]:
     """For slip along ``t = (cos φ, sin φ)`` (``r_T = -μ r_N t``, ``u_N = 0``): ``(u_T × t,
-    u_T · t, r_N, den)``; a root with ``u_T · t > 0`` and ``den > 0`` is a slip solution."""
+    u_T · t, r_N, den, r_T)``; a root with ``u_T · t > 0`` and ``den > 0`` is a slip
+    solution (``r_T`` returned with it: the caller needs no cosine and sine again)."""
     c, s = np.cos(phi), np.sin(phi)
     den = W[0, 0] - mu * (W[0, 1] * c + W[0, 2] * s)
     if den <= 0.0:
-        return 0.0, -1.0, 0.0, den
+        return 0.0, -1.0, 0.0, den, 0.0, 0.0
     rn = -q[0] / den
     r1, r2 = -mu * rn * c, -mu * rn * s
     u1 = W[1, 0] * rn + W[1, 1] * r1 + W[1, 2] * r2 + q[1]
     u2 = W[2, 0] * rn + W[2, 1] * r1 + W[2, 2] * r2 + q[2]
-    return u1 * s - u2 * c, u1 * c + u2 * s, rn, den
+    return u1 * s - u2 * c, u1 * c + u2 * s, rn, den, r1, r2
 
 
 @njit(cache=True)
 def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: float
-                    ) -> tuple[bool, float, float]:
+                    ) -> tuple[bool, float, float, float, float]:
     """A slip root in ``[lo, hi]`` by the Illinois variant of regula falsi (superlinear,
-    never leaves the bracket), to the bracket's machine resolution: ``(found, φ, r_N)``."""
-    fa, pa, _, da = _slip_residual(W, q, mu, lo)
-    fb, pb, _, db = _slip_residual(W, q, mu, hi)
+    never leaves the bracket), to the bracket's machine resolution: ``(found, φ, r_N,
+    r_T)``."""
+    fa, pa, _, da, _, _ = _slip_residual(W, q, mu, lo)
+    fb, pb, _, db, _, _ = _slip_residual(W, q, mu, hi)
     if not (da > 0.0 and db > 0.0 and (pa > 0.0 or pb > 0.0)):
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     if fa == 0.0:
         phi = lo
     elif fb == 0.0:
         phi = hi
     elif fa * fb > 0.0:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
     else:
         a, b, side = lo, hi, 0
         phi = lo
@@ -246,7 +248,7 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
             phi = (a * fb - b * fa) / (fb - fa)
             if phi == a or phi == b or abs(b - a) <= 4.0 * _EPS * (1.0 + abs(phi)):
                 break
-            fm, _, _, _ = _slip_residual(W, q, mu, phi)
+            fm, _, _, _, _, _ = _slip_residual(W, q, mu, phi)
             if fm == 0.0:
                 break
             if fm * fb > 0.0:      # phi replaces b; halve fa if b moved twice in a row
@@ -259,22 +261,22 @@ def _bracketed_slip(W: np.ndarray, q: np.ndarray, mu: float, lo: float, hi: floa
                 if side == 1:
                     fb *= 0.5
                 side = 1
-    _, p, rn, den = _slip_residual(W, q, mu, phi)
-    return (p > 0.0 and den > 0.0), phi, rn
+    _, p, rn, den, r1, r2 = _slip_residual(W, q, mu, phi)
+    return (p > 0.0 and den > 0.0), phi, rn, r1, r2
 
 
 @njit(cache=True)
 def _newton_slip(W: np.ndarray, q: np.ndarray, mu: float, phi: float
-                 ) -> tuple[bool, float, float]:
+                 ) -> tuple[bool, float, float, float, float]:
     """A slip root (:func:`_slip_residual`) by Newton's method on the slip angle from
-    ``phi``, to machine resolution: ``(found, φ, r_N)``; not found when a step leaves the
+    ``phi``, to machine resolution: ``(found, φ, r_N, r_T)``; not found when a step leaves the
     slip conditions (``den > 0``, ``u_T · t > 0``), the derivative vanishes or
     :data:`_NEWTON_STEPS` steps do not settle."""
     for _ in range(_NEWTON_STEPS):
         c, s = np.cos(phi), np.sin(phi)
         den = W[0, 0] - mu * (W[0, 1] * c + W[0, 2] * s)
         if not (den > 0.0):
-            return False, phi, 0.0
+            return False, phi, 0.0, 0.0, 0.0
         rn = -q[0] / den
         r1, r2 = -mu * rn * c, -mu * rn * s
         u1 = W[1, 0] * rn + W[1, 1] * r1 + W[1, 2] * r2 + q[1]
@@ -291,15 +293,15 @@ def _newton_slip(W: np.ndarray, q: np.ndarray, mu: float, phi: float
         du2 = W[2, 0] * drn + W[2, 1] * dr1 + W[2, 2] * dr2
         df = du1 * s - du2 * c + along
         if f == 0.0:
-            return along > 0.0, phi, rn
+            return along > 0.0, phi, rn, r1, r2
         if not (df != 0.0 and np.isfinite(df)):
-            return False, phi, 0.0
+            return False, phi, 0.0, 0.0, 0.0
         step = f / df
         phi -= step
         if abs(step) <= 4.0 * _EPS * (1.0 + abs(phi)):
-            _, p, rn, den = _slip_residual(W, q, mu, phi)
-            return (p > 0.0 and den > 0.0), phi, rn
-    return False, phi, 0.0
+            _, p, rn, den, r1, r2 = _slip_residual(W, q, mu, phi)
+            return (p > 0.0 and den > 0.0), phi, rn, r1, r2
+    return False, phi, 0.0, 0.0, 0.0
 
 
 @njit(cache=True)
@@ -371,12 +373,12 @@ def _slip_3d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray, rs1: float,
     # Newton from the previous sweep's slip direction, else from the stick guess's (the
     # slip direction when W is isotropic); the brackets below when it does not converge
     phi_w = np.arctan2(-r[2], -r[1]) if warm else np.arctan2(-rs2, -rs1)
-    found, best_phi, best_rn = _newton_slip(W, q, mu, phi_w)
+    found, best_phi, best_rn, best_r1, best_r2 = _newton_slip(W, q, mu, phi_w)
     if not found and warm:
         # the root is usually within a narrow bracket around the previous direction
         for width in (1e-6, 1e-3, 0.1):
-            found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi_w - width,
-                                                       phi_w + width)
+            found, best_phi, best_rn, best_r1, best_r2 = _bracketed_slip(
+                W, q, mu, phi_w - width, phi_w + width)
             if found:
                 break
     if not found:
@@ -385,16 +387,16 @@ def _slip_3d(W: np.ndarray, q: np.ndarray, mu: float, r: np.ndarray, rs1: float,
         # direction when W is isotropic): that root is then inside it, never at a node
         phi0 = np.arctan2(-rs2, -rs1) - 0.5 * step
         for g in range(_ANGLE_GRID):
-            found, best_phi, best_rn = _bracketed_slip(W, q, mu, phi0 + g * step,
-                                                       phi0 + (g + 1) * step)
+            found, best_phi, best_rn, best_r1, best_r2 = _bracketed_slip(
+                W, q, mu, phi0 + g * step, phi0 + (g + 1) * step)
             if found:
                 break
     if not found:   # no bracketed slip root (strong normal-tangent coupling, large μ)
         state, _ = _local_fixed_point(W, q, mu, r, max_local_iter)
         return state
-    r[0] = best_rn
-    r[1] = -mu * best_rn * np.cos(best_phi)
-    r[2] = -mu * best_rn * np.sin(best_phi)
+    r[0] = best_rn        # the tangents as the root's last evaluation computed them
+    r[1] = best_r1
+    r[2] = best_r2
     return SLIP
 
 
@@ -687,7 +689,8 @@ def _check_gap(err: float, last_err: float, sweeps: int, tol: float, done: int) 
 def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                  blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
                  dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
-                 max_sweeps: int, max_local_iter: int) -> tuple[int, int, float]:
+                 max_sweeps: int, max_local_iter: int, work: np.ndarray
+                 ) -> tuple[int, int, float]:
     """Non-smooth Gauss–Seidel over contacts from the impulses in ``r``, exact local solves
     (:func:`local_1d`, :func:`local_2d`, :func:`local_3d`), ``u = W r + q`` kept up to date.
 
@@ -696,7 +699,9 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     for the first 16) is ``<= tol``, or after ``max_sweeps`` sweeps. ``u`` is
     recomputed exactly every :data:`REFRESH_SWEEPS` sweeps; the caller
     confirms the last on an exact product. Returns ``(code, sweeps, error)``: code
-    :data:`CONVERGED` or :data:`SWEEP_LIMIT`.
+    :data:`CONVERGED` or :data:`SWEEP_LIMIT`. ``work``: at least 6 floats of scratch (a
+    spatial contact's local slip solve), owned by the caller so that a solve allocates
+    nothing.
     """
     # the sweeps specialised on W's storage and on dim (a constant in each body): with the
     # other kinds' code in its loop (the sparse update, another dim's local solve), the
@@ -705,35 +710,35 @@ def nsgs_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
     if WT.shape[0] > 0:
         if dim == 3:
             return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u,
-                                states, tol, max_sweeps, max_local_iter, True)
+                                states, tol, max_sweeps, max_local_iter, True, work)
         if dim == 2:
             return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 2, r, u,
-                                states, tol, max_sweeps, max_local_iter, True)
+                                states, tol, max_sweeps, max_local_iter, True, work)
         return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 1, r, u, states,
-                            tol, max_sweeps, max_local_iter, True)
+                            tol, max_sweeps, max_local_iter, True, work)
     if dim == 3:
         return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 3, r, u, states,
-                            tol, max_sweeps, max_local_iter, False)
+                            tol, max_sweeps, max_local_iter, False, work)
     if dim == 2:
         return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 2, r, u, states,
-                            tol, max_sweeps, max_local_iter, False)
+                            tol, max_sweeps, max_local_iter, False, work)
     return _nsgs_sweeps(WT, bptr, brow, bdata, blocks, inverses, q, mu, 1, r, u, states, tol,
-                        max_sweeps, max_local_iter, False)
+                        max_sweeps, max_local_iter, False, work)
 
 
 @njit(cache=True, inline="always")
 def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                  blocks: np.ndarray, inverses: np.ndarray, q: np.ndarray, mu: np.ndarray,
                  dim: int, r: np.ndarray, u: np.ndarray, states: np.ndarray, tol: float,
-                 max_sweeps: int, max_local_iter: int, dense: bool
+                 max_sweeps: int, max_local_iter: int, dense: bool, work: np.ndarray
                  ) -> tuple[int, int, float]:
     """The sweeps of :func:`nsgs_columns`, ``dense`` and ``dim`` constants at each call."""
     m = mu.shape[0]
     column_product(WT, bptr, brow, bdata, q, r, dim, u)
     q_norm = _norm(q)
     next_check, last_check, last_err = 1, 0, np.inf
-    qloc = np.empty(3)
-    rloc = np.empty(3)
+    qloc = work[0:3]
+    rloc = work[3:6]
     err = np.inf
     for sweep in range(1, max_sweeps + 1):
         for i in range(m):
@@ -768,7 +773,7 @@ def _nsgs_sweeps(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.n
 @njit(cache=True)
 def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                     terms: int, q: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
-                    dim: int, tol: float) -> tuple[float, float, bool]:
+                    dim: int, tol: float, work: np.ndarray) -> tuple[float, float, bool]:
     """The acceptance test of every frictional-contact path: ``u = W r + q`` recomputed
     from ``r``, then ``(error, tolerance, certified)`` with the relative natural-map
     :func:`relative_error` and the tolerance ``tol`` plus the round-off bound of ``u``.
@@ -780,11 +785,12 @@ def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
     :data:`~nscontrol.numerics._lcp_kernels.ROUNDOFF_FACTOR`: ``2 k eps (1 + max μ) sqrt(n)
     max_i (|W||r| + |q|)_i / max(|q|, |r|, |u|)``. As for the LCP, the tolerance is ``-inf``
     (nothing certified) when ``|W||r|`` exceeds the scale by
-    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`.
+    :data:`~nscontrol.numerics._lcp_kernels.MAX_CANCELLATION`. ``work``: at least ``n``
+    floats of scratch, owned by the caller.
     """
     n = q.shape[0]
     column_product(WT, bptr, brow, bdata, q, r, dim, u)
-    a = np.empty(n)
+    a = work
     for k in range(n):
         a[k] = abs(q[k])
     if WT.shape[0] > 0:
@@ -814,18 +820,26 @@ def certify_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: n
     return err, tolerance, bool(err <= tolerance)
 
 
+@njit(cache=True)
+def work_size(n: int) -> int:
+    """Floats of scratch :func:`solve_columns` needs for ``n`` unknowns (the sweeps' local
+    slip solve: 6; the certification: ``n``; one after the other)."""
+    return max(n, 6)
+
+
 @njit(cache=True, inline="always")
 def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.ndarray,
                   blocks: np.ndarray, inverses: np.ndarray, terms: int, q: np.ndarray,
                   mu: np.ndarray, r: np.ndarray, u: np.ndarray, states: np.ndarray,
-                  tol: float, max_sweeps: int, max_local_iter: int
+                  tol: float, max_sweeps: int, max_local_iter: int, work: np.ndarray
                   ) -> tuple[int, int, float, float, bool, int]:
     """One solve of :class:`~nscontrol.numerics.friction_contact.FrictionContactSolver`:
     ``W`` prepared first when ``terms`` is 0 (``μ`` checked, code :data:`MU_INVALID`, then
     :func:`prepare_columns`, whose codes it returns), ``q`` and the start ``r`` checked
     finite (code :data:`NOT_FINITE`), then :func:`nsgs_columns` and
     :func:`certify_columns`, sweeping on from the exact ``u`` when the running one passed
-    ``tol`` and the exact one does not. Returns ``(code, sweeps,
+    ``tol`` and the exact one does not. ``work``: at least ``max(n, 6)`` floats of scratch
+    (:func:`work_size`), owned by the caller. Returns ``(code, sweeps,
     error, tolerance, certified, terms)``."""
     dim = blocks.shape[1]
     if terms == 0:
@@ -841,10 +855,10 @@ def solve_columns(WT: np.ndarray, bptr: np.ndarray, brow: np.ndarray, bdata: np.
     while True:
         code, sweeps, err = nsgs_columns(WT, bptr, brow, bdata, blocks, inverses, q, mu,
                                          dim, r, u, states, tol, max_sweeps - done,
-                                         max_local_iter)
+                                         max_local_iter, work)
         done += sweeps
         err, tolerance, ok = certify_columns(WT, bptr, brow, bdata, terms, q, r, u, mu, dim,
-                                             tol)
+                                             tol, work)
         if ok or code != CONVERGED or err <= tol or done >= max_sweeps:
             return code, done, err, tolerance, ok, terms
 
@@ -868,16 +882,19 @@ def solve_dense_once(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray
                      u: np.ndarray, states: np.ndarray, tol: float, max_sweeps: int,
                      max_local_iter: int) -> tuple[int, int, float, float, bool]:
     """:func:`solve_columns` on a dense ``W`` used once (``dim = len(q) / len(states)``),
-    the blocks prepared in this call. The one
+    the blocks prepared in this call, all its scratch in one allocation. The one
     compiled call of :func:`~nscontrol.numerics.friction_contact.solve_friction_contact` on
     a small dense problem. Returns ``(code, sweeps, error, tolerance, certified)``."""
+    n = q.shape[0]
     m = states.shape[0]
-    dim = q.shape[0] // m
-    blocks = np.empty((m, dim, dim))
-    inverses = np.empty((m, dim, dim))
+    dim = n // m
+    k = m * dim * dim
+    buf = np.empty(2 * k + work_size(n))
+    bptr = np.zeros(1, np.int64)        # no block column: W is dense
     code, sweeps, err, tolerance, ok, _ = solve_columns(
-        dense_columns(W), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 1, 1)), blocks,
-        inverses, 0, q, mu, r, u, states, tol, max_sweeps, max_local_iter)
+        dense_columns(W), bptr, bptr[:0], buf[:0].reshape((0, 1, 1)),
+        buf[:k].reshape((m, dim, dim)), buf[k:2 * k].reshape((m, dim, dim)), 0, q, mu, r, u,
+        states, tol, max_sweeps, max_local_iter, buf[2 * k:])
     return code, sweeps, err, tolerance, ok
 
 
@@ -908,11 +925,12 @@ def solve_sparse_once(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
         bptr, brow, bdata = csr_to_blocks(indptr, indices, data, n, dim)
     else:
         bptr, brow, bdata = csc_to_blocks(indptr, indices, data, n, dim)
-    blocks = np.empty((m, dim, dim))
-    inverses = np.empty((m, dim, dim))
+    k = m * dim * dim
+    buf = np.empty(2 * k + work_size(n))
     code, sweeps, err, tolerance, ok, _ = solve_columns(
-        np.zeros((0, 0)), bptr, brow, bdata, blocks, inverses, 0, q, mu, r, u, states, tol,
-        max_sweeps, max_local_iter)
+        np.zeros((0, 0)), bptr, brow, bdata, buf[:k].reshape((m, dim, dim)),
+        buf[k:2 * k].reshape((m, dim, dim)), 0, q, mu, r, u, states, tol, max_sweeps,
+        max_local_iter, buf[2 * k:])
     return code, sweeps, err, tolerance, ok
 
 

@@ -38,7 +38,7 @@ bound of evaluating ``W r + q``
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from operator import itemgetter
 from typing import Any, Literal, NoReturn
 
 import numpy as np
@@ -59,7 +59,10 @@ __all__ = ["FrictionContactResult", "FrictionContactSolver", "solve_friction_con
            "friction_residual",
            "contact_states", "planar_friction_lcp", "frictionless_impulses", "CONTACT_STATES"]
 
-_new = object.__new__
+_tuple_new = tuple.__new__
+#: :class:`FrictionContactResult`'s fields, in order.
+_RESULT_FIELDS = ("r", "u", "states", "residual", "iterations", "method", "status",
+                  "tolerance", "message")
 #: The states' dtype (a dtype object: a type to convert on every call costs more).
 _INT64 = np.dtype(np.int64)
 #: Names of the contact states: index 0 open (take-off), 1 stick, 2 slip.
@@ -68,11 +71,13 @@ CONTACT_STATES = ("open", "stick", "slip")
 AUTO_LCP_MAX_CONTACTS = 40
 
 
-@dataclass(frozen=True)
-class FrictionContactResult:
+class FrictionContactResult(tuple):
     """Solution of one frictional contact problem.
 
-    Attributes
+    An immutable record (built in a few tens of nanoseconds: it is what a one-contact
+    call returns); its fields are read by name.
+
+    Parameters
     ----------
     r : ndarray (m dim,)
         Impulses, per contact (normal, tangents).
@@ -95,38 +100,48 @@ class FrictionContactResult:
         certified: ``|W||r|`` beyond ``1 / sqrt(eps)`` times the problem's scale).
     message : str
         Why the method stopped: the budget spent, or the LCP's message.
+
+    Attributes
+    ----------
+    r, u, states, residual, iterations, method, status, tolerance, message
+        The parameters, read-only.
+    success : bool
+        True when ``status == "solved"``.
     """
 
-    r: FloatArray
-    u: FloatArray
-    states: np.ndarray
-    residual: float
-    iterations: int
-    method: str
-    status: str
-    tolerance: float = field(default=math.nan)
-    message: str = field(default="")
+    __slots__ = ()
 
-    @classmethod
-    def _make(cls, r: FloatArray, u: FloatArray, states: np.ndarray, residual: float,
-              iterations: int, method: str, status: str, tolerance: float, message: str
-              ) -> FrictionContactResult:
-        """A result of fields already of their types, built without the frozen
-        ``__init__``'s per-field ``object.__setattr__`` (a microsecond per solve): its
-        ``__dict__`` filled in place, one item at a time (faster than setting a new dict, or
-        ``update`` with keywords, which builds one first)."""
-        result = _new(cls)
-        d = result.__dict__
-        d["r"] = r
-        d["u"] = u
-        d["states"] = states
-        d["residual"] = residual
-        d["iterations"] = iterations
-        d["method"] = method
-        d["status"] = status
-        d["tolerance"] = tolerance
-        d["message"] = message
-        return result
+    def __new__(cls, r: FloatArray, u: FloatArray, states: np.ndarray, residual: float,
+                iterations: int, method: str, status: str, tolerance: float = math.nan,
+                message: str = "") -> FrictionContactResult:
+        return _tuple_new(cls, (r, u, states, residual, iterations, method, status,
+                                tolerance, message))
+
+    r = property(itemgetter(0), doc="Impulses, per contact (normal, tangents).")
+    u = property(itemgetter(1), doc="Local velocities ``W r + q``.")
+    states = property(itemgetter(2), doc="0 open, 1 stick, 2 slip, per contact.")
+    residual = property(itemgetter(3), doc="Relative natural-map error, recomputed from r.")
+    iterations = property(itemgetter(4), doc="NSGS sweeps, or Lemke pivots.")
+    method = property(itemgetter(5), doc="``\"lcp\"`` or ``\"nsgs\"``.")
+    status = property(itemgetter(6), doc="How the solve ended (see the class docstring).")
+    tolerance = property(itemgetter(7), doc="The threshold the residual was tested against.")
+    message = property(itemgetter(8), doc="Why the method stopped.")
+
+    def __repr__(self) -> str:
+        fields = ", ".join(f"{name}={getattr(self, name)!r}" for name in _RESULT_FIELDS)
+        return f"FrictionContactResult({fields})"
+
+    def __getnewargs__(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, name) for name in _RESULT_FIELDS)
+
+    # a record, not a sequence (as LCPResult): its fields are read by name
+    def __iter__(self) -> Any:
+        raise TypeError("FrictionContactResult: read its fields by name (res.r, res.status, "
+                        "...)")
+
+    def __len__(self) -> int:
+        raise TypeError("FrictionContactResult: read its fields by name (res.r, res.status, "
+                        "...)")
 
     @property
     def success(self) -> bool:
@@ -280,6 +295,7 @@ class FrictionContactSolver:
         self._columns = _columns(W, dim)
         self._blocks = np.empty((self.m, dim, dim))
         self._inverses = np.empty((self.m, dim, dim))
+        self._work = np.empty(kernels.work_size(self.n))   # the solves' scratch, reused
         self._terms = 0            # W not prepared yet: the next solve does it
 
     def _raise_for(self, code: int, q: Any = None, r: Any = None) -> None:
@@ -351,20 +367,19 @@ class FrictionContactSolver:
         states = np.zeros(self.m, _INT64)
         code, sweeps, err, tolerance, ok, terms = kernels.solve_columns(
             *self._columns, self._blocks, self._inverses, self._terms, q, self.mu, r, u,
-            states, tol, max_sweeps, self._max_local_iter)
+            states, tol, max_sweeps, self._max_local_iter, self._work)
         if ok:
             self._terms = terms
-            return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved",
-                                               tolerance, "")
+            return _tuple_new(FrictionContactResult, (r, u, states, err, sweeps, "nsgs",
+                                                      "solved", tolerance, ""))
         if code > kernels.SWEEP_LIMIT:
             self._raise_for(code, q, r)
         self._terms = terms
         if code == kernels.CONVERGED:
-            return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs",
-                                               "numerical_failure", tolerance, "")
-        return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "max_iter",
-                                           tolerance,
-                                           f"budget max_sweeps = {max_sweeps} sweeps spent")
+            return FrictionContactResult(r, u, states, err, sweeps, "nsgs",
+                                         "numerical_failure", tolerance, "")
+        return FrictionContactResult(r, u, states, err, sweeps, "nsgs", "max_iter", tolerance,
+                                     f"budget max_sweeps = {max_sweeps} sweeps spent")
 
 
 def solve_friction_contact(W: Any, q: Any, mu: Any, *, dim: int,
@@ -553,7 +568,9 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
     dense = type(W) is np.ndarray
     entry = _ONCE_ENTRIES[0 if dense else 1] if _ONCE_ENTRIES else _load_once_entries(dense)
     # the entries' signatures check the types (float64 C-contiguous writeable arrays, int32
-    # indices); any other kind raises TypeError and takes the general path
+    # indices); any other kind raises TypeError and takes the general path. The arrays are
+    # allocated here: returned from the entry, each would cost more than it does here
+    # (numba wraps an array it returns in two Python objects, one built from an args tuple)
     try:
         if dense:
             code, sweeps, err, tolerance, ok = entry(W, q, muv, r, u, states, tol, max_sweeps,
@@ -565,8 +582,8 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
     except TypeError:
         return None
     if ok:
-        return FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", "solved",
-                                           tolerance, "")
+        return _tuple_new(FrictionContactResult, (r, u, states, err, sweeps, "nsgs", "solved",
+                                                  tolerance, ""))
     if code > kernels.SWEEP_LIMIT:     # refused (a value of W, q, mu or r0): the general path
         return None
     # the general path would run the same sweeps from the same start (nsgs is the only method
@@ -575,9 +592,8 @@ def _once(W: Any, q: np.ndarray, mu: Any, dim: Any, method: str, tol: Any,
         status, message = "numerical_failure", ""
     else:
         status, message = "max_iter", f"budget max_sweeps = {max_sweeps} sweeps spent"
-    _raise_unsolved([FrictionContactResult._make(r, u, states, err, sweeps, "nsgs", status,
-                                                 tolerance, message)],
-                    tol, max_sweeps, None)
+    _raise_unsolved([FrictionContactResult(r, u, states, err, sweeps, "nsgs", status,
+                                           tolerance, message)], tol, max_sweeps, None)
 
 
 #: The compiled entries of :func:`_once` (dense, sparse), made on first use.
@@ -648,7 +664,8 @@ def _certified(W: Any, q: FloatArray, mu: FloatArray, dim: int, r: FloatArray, t
     m = mu.shape[0]
     _, terms = kernels.prepare_columns(*columns, dim, np.empty((m, dim, dim)),
                                        np.empty((m, dim, dim)))
-    err, tolerance, ok = kernels.certify_columns(*columns, terms, q, r, u, mu, dim, tol)
+    err, tolerance, ok = kernels.certify_columns(*columns, terms, q, r, u, mu, dim, tol,
+                                                 np.empty(kernels.work_size(q.shape[0])))
     return u, float(err), float(tolerance), bool(ok)
 
 
