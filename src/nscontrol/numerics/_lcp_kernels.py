@@ -338,10 +338,7 @@ def _lemke_refine(M, q, binv, rhs, basis, n, r):
                 for i in range(n):
                     r[i] += x
         for i in range(n):
-            s = 0.0
-            for k in range(n):
-                s += binv[i, k] * r[k]
-            rhs[i] += s
+            rhs[i] += _row_dot(binv, i, r, n)   # B^{-1} is binv[:, :n]
 
 
 @njit(cache=True, inline='always')
@@ -462,9 +459,11 @@ def _lemke_path(M, work, it, leaving, max_iter, have_column):
 
 
 @njit(cache=True, **NO_REFCOUNT)
-def _lemke_end(M, q, z_out, w_out, work, status, it):
+def _lemke_end(M, q, z_out, w_out, work, status, it, with_w):
     """The end of Lemke's path: the basis refined (when solved), ``z_out`` read off the
-    tableau, ``w_out = M z + q``; ``(status_code, it)``."""
+    tableau, ``w_out = M z + q`` unless not ``with_w`` (a verified caller recomputes it with
+    ``|M| |z|`` in one pass, :func:`verify_dense`, whose test also fails a non-finite
+    residual); ``(status_code, it)``."""
     n = q.shape[0]
     binv, rhs, col, mcol, scratch, prow, basis, cand = _lemke_views(work, n)
     if status == SOLVED:
@@ -475,6 +474,8 @@ def _lemke_end(M, q, z_out, w_out, work, status, it):
     for i in range(n):
         if n <= basis[i] < 2 * n:
             z_out[basis[i] - n] = rhs[i]
+    if not with_w:
+        return status, it
     _matvec_plus(M, z_out, q, w_out)
     if status == SOLVED and not np.isfinite(natural_residual(z_out, w_out, q)):
         return NUMERICAL_FAILURE, it
@@ -510,6 +511,12 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
     copositive-plus ``M`` a ray certifies that the LCP has no solution. The final basis is
     refined by iterative refinement against the exact basis to remove accumulated round-off.
     """
+    return _lemke_solve(M, q, z_out, w_out, max_iter, True)
+
+
+@njit(cache=True)
+def _lemke_solve(M, q, z_out, w_out, max_iter, with_w):
+    """:func:`lemke_kernel`, ``w_out`` computed only ``with_w`` (:func:`_lemke_end`)."""
     n = q.shape[0]
     if max_iter <= 0:
         max_iter = 50 * (n + 1)
@@ -530,7 +537,7 @@ def lemke_kernel(M, q, z_out, w_out, max_iter):
         for i in range(n):
             col[i] = -prod[i]
         status, it, leaving = _lemke_path(M, work, it, leaving, max_iter, True)
-    return _lemke_end(M, q, z_out, w_out, work, status, it)
+    return _lemke_end(M, q, z_out, w_out, work, status, it, with_w)
 
 
 @njit(cache=True, **NO_REFCOUNT)
@@ -538,6 +545,12 @@ def lemke_into(M, q, z_out, w_out, max_iter, work):
     """:func:`lemke_kernel` in a workspace ``work`` of :func:`lemke_work_size` floats given by
     the caller, for ``n <=`` :data:`LEMKE_FULL_TABLEAU_MAX_SIZE` (no allocation, no reference
     counting: the per-call path of a small LCP). The same pivots, bit for bit."""
+    return _lemke_into(M, q, z_out, w_out, max_iter, work, True)
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _lemke_into(M, q, z_out, w_out, max_iter, work, with_w):
+    """:func:`lemke_into`, ``w_out`` computed only ``with_w`` (:func:`_lemke_end`)."""
     n = q.shape[0]
     if max_iter <= 0:
         max_iter = 50 * (n + 1)
@@ -545,7 +558,7 @@ def lemke_into(M, q, z_out, w_out, max_iter, work):
     if status != _PATH:
         return status, 0
     status, it, leaving = _lemke_path(M, work, 1, leaving, max_iter, False)
-    return _lemke_end(M, q, z_out, w_out, work, status, it)
+    return _lemke_end(M, q, z_out, w_out, work, status, it, with_w)
 
 
 # --------------------------------------------------------------------------------- PGS
@@ -944,7 +957,7 @@ def lemke_verified(M, q, z_out, w_out, max_iter, tol):
     """
     if not all_finite(q):
         return Q_NOT_FINITE, 0, np.nan, np.nan
-    code, its = lemke_kernel(M, q, z_out, w_out, max_iter)
+    code, its = _lemke_solve(M, q, z_out, w_out, max_iter, False)
     res, tolerance, ok = verify_dense(M, q, z_out, w_out, tol)
     return verified_status(code, ok), its, res, tolerance
 

@@ -449,9 +449,9 @@ class _Entries:
 
     @classmethod
     def load(cls) -> type[_Entries]:
-        cls.dense = dispatch.exact_entry(dispatch.solve_dense_checked,
+        cls.dense = dispatch.exact_entry(dispatch.solve_dense_entry,
                                          dispatch.SOLVE_DENSE_SIGNATURE)
-        cls.packed = dispatch.exact_entry(dispatch.solve_packed_checked,
+        cls.packed = dispatch.exact_entry(dispatch.solve_packed_entry,
                                           dispatch.SOLVE_PACKED_SIGNATURE)
         _BUFFER_SIZES[:] = [_buffer_size(n) for n in range(_TABULATED)]
         cls.loaded = True
