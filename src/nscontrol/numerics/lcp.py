@@ -399,7 +399,9 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
         code = _METHOD_CODES.get(method, -1)
         limit = 0 if max_iter is None else (
             max_iter if type(max_iter) is int and max_iter >= 1 else -1)
-        if entry is not None and code >= 0 and limit >= 0:
+        # only an array M reaches the compiled call: anything else (a sparse M, lists) fails
+        # its signature, and numba's search for a conversion before the TypeError costs ~70 µs
+        if entry is not None and code >= 0 and limit >= 0 and type(M) is np.ndarray:
             n = q.size
             buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
             try:
@@ -629,9 +631,10 @@ class LCPSolver:
             M, lower, diag, upper, bits = self._packed
             buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
             entry = self._entry
-            try:
+            try:     # only an array q reaches the compiled call (see solve_lcp)
                 out = (entry(M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
-                             self.omega) if entry is not None else _UNCHECKED)
+                             self.omega) if entry is not None and type(q) is np.ndarray
+                       else _UNCHECKED)
             except TypeError:
                 out = _UNCHECKED
             state, its, res, tolerance = out
