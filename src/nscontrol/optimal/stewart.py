@@ -474,12 +474,11 @@ class FesdProblem:
         DimensionError
             Shapes that disagree with the problem's grid.
         """
-        K = self.stages * self.elements
-        tt = as_vector("t", t, K + 1)
-        X = as_matrix("x", x, rows=K + 1, cols=self.n)
+        tt = as_vector("t", t, self.stages * self.elements + 1)
+        X = self._states("x", x)
         U = as_matrix("u", np.reshape(u, (self.stages, self.inputs)) if np.size(u) ==
                       self.stages * self.inputs else u, rows=self.stages, cols=self.inputs)
-        nlp = _FesdNLP(self)
+        nlp = self._transcription()
         if penalty:   # the transcription's own objective, on numbers
             return float(nlp.cost({"X": X.T, "U": U.T, "H": np.diff(tt)}))
         return nlp.plan_cost(X.T, U.T, np.diff(tt))
@@ -510,14 +509,24 @@ class FesdProblem:
             Shapes that disagree with the problem's grid.
         """
         K = self.stages * self.elements
-        X = as_matrix("x", x, rows=K + 1, cols=self.n)
-        nlp = _FesdNLP(self)
+        X = self._states("x", x)
+        nlp = self._transcription()
         TH = as_matrix("theta", theta, rows=K, cols=nlp.nth).T
         G = np.column_stack([nlp._g(xk) for xk in X])
         LAM = G - np.column_stack([nlp._per_layer_min(G[:, k]) for k in range(K + 1)])
         first = np.abs(np.minimum(TH[:, 0], LAM[:, 0])).max() if self.switch_detection \
             else 0.0
         return max(residual(nlp, {"TH": TH, "LAM": LAM[:, 1:]}), float(first))
+
+    def _states(self, name: str, x: ArrayLike) -> FloatArray:
+        """``x`` checked as the states at the K + 1 element boundaries."""
+        return as_matrix(name, x, rows=self.stages * self.elements + 1, cols=self.n)
+
+    def _transcription(self) -> _FesdNLP:
+        """The transcription, built once per problem (solves and evaluations share it)."""
+        if "builder" not in self._built:
+            self._built["builder"] = _FesdNLP(self)
+        return self._built["builder"]
 
     def solve(self, relaxation: Relaxation | None = None, *,
               guess: ArrayLike | None = None) -> FesdPlan:
@@ -544,13 +553,9 @@ class FesdProblem:
         """
         relaxation = Relaxation() if relaxation is None else check_type(
             "relaxation", relaxation, Relaxation)
-        K = self.stages * self.elements
-        states = None if guess is None else as_matrix("guess", guess, rows=K + 1,
-                                                      cols=self.n).T
-        built = self._built   # the transcription, built by the first solve for the next
-        if "builder" not in built:
-            built["builder"] = _FesdNLP(self)
-        nlp = built["builder"]
+        states = None if guess is None else self._states("guess", guess).T
+        nlp = self._transcription()
+        built = self._built
         stages: list[dict[str, Any]] = []
         sol, polished = solve_homotopy(nlp, nlp.guess(states), relaxation, stages,
                                        warm=self.warm_homotopy, built=built)
