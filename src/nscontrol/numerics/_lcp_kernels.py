@@ -586,6 +586,37 @@ def _lemke_into(M, q, z_out, w_out, max_iter, work, with_w):
 
 
 # --------------------------------------------------------------------------------- PGS
+@njit(cache=True, **NO_REFCOUNT)
+def _pgs_sweep(M, q, z, step, inv_omega):
+    """One Gauss–Seidel sweep ``z_i <- max(0, z_i - step_i (M z + q)_i)`` (``step_i = omega /
+    M_ii``); returns the proxy of the residual, the largest ``|min(z_i / step_i, s_i)|`` met
+    during the sweep (the caller computes the exact residual, one more matvec, only once the
+    proxy is small).
+
+    Each new ``z_i`` is stored one row late: row ``i``'s dot product reads the old
+    ``z_{i-1}`` and adds ``M[i, i-1] (z_{i-1}^new - z_{i-1}^old)``, which is the same sum.
+    The dot product then no longer waits for the previous row's update, which is the
+    latency chain of a sweep: one multiply-add and the update per row, instead of the whole
+    dot product (about 3x fewer cycles per row at n = 10)."""
+    n = q.shape[0]
+    proxy = 0.0
+    new_prev = 0.0
+    old_prev = 0.0
+    for i in range(n):
+        s = q[i] + _row_dot(M, i, z, n)
+        if i > 0:
+            s += M[i, i - 1] * (new_prev - old_prev)
+            z[i - 1] = new_prev
+        zi = z[i]
+        proxy = max(proxy, abs(min(zi * M[i, i] * inv_omega, s)))
+        new = zi - step[i] * s
+        old_prev = zi
+        new_prev = new if new > 0.0 else 0.0
+    if n > 0:
+        z[n - 1] = new_prev
+    return proxy
+
+
 @njit(cache=True)
 def pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega):
     """Projected Gauss–Seidel with over-relaxation (PSOR), warm-started from ``z_inout``.
@@ -614,15 +645,11 @@ def pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega):
     qscale = 1.0
     for i in range(n):
         qscale = max(qscale, 1.0 + abs(q[i]))
+    step = np.empty(n)          # omega / M_ii: a product per row instead of a division
+    for i in range(n):
+        step[i] = omega / M[i, i]
     for sweep in range(1, max_iter + 1):
-        # proxy: the largest row residual |min(z_i M_ii / omega, s_i)| met during the sweep;
-        # the exact residual (one more matvec) is computed only once the proxy is small.
-        proxy = 0.0
-        for i in range(n):
-            s = q[i] + _row_dot(M, i, z_inout, n)
-            zi = z_inout[i] - omega * s / M[i, i]
-            proxy = max(proxy, abs(min(z_inout[i] * M[i, i] / omega, s)))
-            z_inout[i] = zi if zi > 0.0 else 0.0
+        proxy = _pgs_sweep(M, q, z_inout, step, 1.0 / omega)
         if not np.isfinite(proxy):
             _matvec_plus(M, z_inout, q, w_out)
             return NUMERICAL_FAILURE, sweep
