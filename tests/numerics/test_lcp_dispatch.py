@@ -12,6 +12,7 @@ from numba import njit
 
 from nscontrol.errors import DimensionError, ModelError, SolverError
 from nscontrol.numerics import _lcp_dispatch_kernels as dispatch
+from nscontrol.numerics import lcp
 from nscontrol.numerics.lcp import LCPResult, LCPSolver, solve_lcp, solve_lcp_kernel
 from nscontrol.testing.lcp_problems import random_p_matrix
 
@@ -354,3 +355,75 @@ def test_a_result_is_an_immutable_record_read_by_name():
     made = LCPResult(res.z, res.w, res.status, res.iterations, res.residual, res.method,
                      res.message, res.tolerance)
     assert_same(made, res)
+
+
+def _tridiagonal_m_matrix(n: int, rng: np.random.Generator) -> np.ndarray:
+    """A random tridiagonal M-matrix (positive diagonal dominating non-positive
+    off-diagonals): Howard's iteration solves its LCP exactly in at most n iterations."""
+    off = -rng.uniform(0.1, 1.0, n - 1)
+    M = np.diag(2.5 + rng.uniform(0.0, 1.0, n)) + np.diag(off, -1) + np.diag(off[::-1], 1)
+    return M
+
+
+@pytest.mark.parametrize("kind", [sp.csr_matrix, sp.csr_array])
+@pytest.mark.parametrize("n", [3, 10, 57])
+def test_a_tridiagonal_csr_matrix_is_solved_by_one_compiled_call_as_by_the_solver(kind, n):
+    """solve_lcp's compiled CSR path (bands read, Howard's tridiagonal iteration, its
+    verification) gives LCPSolver's answer bit for bit (the same bands, the same run), and
+    a solution to round-off of the dense matrix's LCP."""
+    rng = np.random.default_rng(n)
+    dense = _tridiagonal_m_matrix(n, rng)
+    q = rng.standard_normal(n)
+    M = kind(dense)
+    solve_lcp(M, q)                                  # the general path records the CSR type
+    res = solve_lcp(M, q)
+    assert res.status == "solved" and res.method == "banded"
+    assert_same(res, lcp._solve_csr(M, q, 1e-12, 0))   # the compiled path took it
+    assert_same(res, LCPSolver(M).solve(q))
+    got, bound = independent_residual(dense, q, res.z)
+    assert got <= bound
+    assert not res.z.flags.writeable and not np.shares_memory(res.z, res.w)
+
+
+def test_csr_matrices_the_compiled_path_does_not_take_get_the_general_answer():
+    """A CSR ``M`` that is not tridiagonal, has int64 indices, duplicate entries, a NaN,
+    or is not square: the general path's answer or error, named."""
+    rng = np.random.default_rng(7)
+    n = 8
+    dense = _tridiagonal_m_matrix(n, rng)
+    q = rng.standard_normal(n)
+    wide = dense.copy()
+    wide[0, 3] = -0.1                                 # beyond the first off-diagonals
+    M = sp.csr_matrix(wide)
+    assert_same(solve_lcp(M, q), LCPSolver(M).solve(q))
+    M64 = sp.csr_matrix(dense)
+    M64.indices, M64.indptr = M64.indices.astype(np.int64), M64.indptr.astype(np.int64)
+    assert_same(solve_lcp(M64, q), LCPSolver(M64).solve(q))
+    # duplicates are summed, as scipy reads them: the answer of the summed matrix
+    rows, cols = np.nonzero(dense)
+    vals = dense[rows, cols]
+    twice = sp.csr_matrix((np.r_[vals / 2, vals / 2], (np.r_[rows, rows], np.r_[cols, cols])),
+                          shape=(n, n))
+    twice.has_canonical_format = False
+    np.testing.assert_allclose(solve_lcp(twice, q).z, solve_lcp(dense, q).z, rtol=0,
+                               atol=64 * n * EPS * np.abs(solve_lcp(dense, q).z).max())
+    bad = sp.csr_matrix(dense)
+    bad.data[2] = np.nan
+    with pytest.raises(ModelError, match="M"):
+        solve_lcp(bad, q)
+    with pytest.raises(DimensionError, match="M"):
+        solve_lcp(sp.csr_matrix(np.hstack([dense, np.zeros((n, 1))])), q)
+
+
+def test_a_csr_matrix_whose_banded_run_fails_gets_autos_fallbacks():
+    """A tridiagonal CSR ``M`` that is no M-matrix (a positive off-diagonal), where Howard's
+    iteration fails: the compiled path hands the problem to the general one, whose
+    fallbacks solve it (Lemke; the result is the solver's, bit for bit)."""
+    M = sp.csr_matrix(np.array([[1.39, -1.83, 0.0], [-0.37, 1.77, 1.29], [0.0, 1.64, 0.72]]))
+    q = np.array([-0.36, -1.9, -0.11])
+    res = solve_lcp(M, q)
+    assert_same(res, LCPSolver(M).solve(q))
+    assert res.status == "solved" and res.message.startswith("banded: numerical_failure")
+    assert res.method == "lemke"
+    got, bound = independent_residual(M.toarray(), q, res.z)
+    assert got <= bound

@@ -40,6 +40,7 @@ from ._lcp_kernels import (
     _matvec_plus,
     _solve_principal_block,
     all_finite,
+    csr_tridiagonal_bands,
     half_bandwidth,
     is_symmetric,
     lemke_verified,
@@ -651,12 +652,57 @@ def solve_packed_entry(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega
     return solve_packed_checked(M, lower, diag, upper, q, buf, bits, tol, max_iter, omega)
 
 
+@njit(cache=True, inline='always')
+def csr_buffer_size(n):
+    """Floats of the buffer of :func:`solve_csr_entry`: ``z``, ``w``, the work array of
+    :func:`run_chain` (``2 n`` and the log), then the three bands of ``M``."""
+    return 4 * n + LOG_ROWS * LOG_WIDTH + 3 * n
+
+
+@njit(cache=True, **WITH_REFCOUNT)
+def solve_csr_checked(indptr, indices, data, q, buf, tol, max_iter):
+    """The per-call path of :func:`~nscontrol.numerics.lcp.solve_lcp` for a tridiagonal
+    square CSR ``M`` (``n > 2``, where ``auto`` runs ``banded`` first): the bands read into
+    the tail of ``buf`` (:func:`csr_buffer_size`), then Howard's tridiagonal iteration and
+    its verification, the run that :class:`~nscontrol.numerics.lcp.LCPSolver` makes first
+    for that ``M``, packed by :func:`pack_out`. :data:`UNCHECKED` when the caller in Python
+    must take the general path instead: a length, a non-finite entry of ``M``, an entry
+    beyond the first off-diagonals, or options out of range (it raises there). The caller
+    has checked that ``M`` is ``n x n``."""
+    n = q.shape[0]
+    none = buf[:0].reshape((0, 0))          # no dense M
+    head = 4 * n + LOG_ROWS * LOG_WIDTH
+    if not (n > 2 and indptr.shape[0] == n + 1 and buf.shape[0] == csr_buffer_size(n)
+            and indptr[n] <= indices.shape[0] and indptr[n] <= data.shape[0]
+            and _options_ok(tol, max_iter, 1.0) and all_finite(data)):
+        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), none, q, False, buf)
+    lower = buf[head:head + n - 1]
+    diag = buf[head + n - 1:head + 2 * n - 1]
+    upper = buf[head + 2 * n - 1:head + 3 * n - 2]
+    if not csr_tridiagonal_bands(indptr, indices, data, lower, diag, upper):
+        return pack_out((UNCHECKED, NO_RUN, 0, np.nan, np.nan, 0, -1), none, q, False, buf)
+    return pack_out(_chain_from_first(none, False, lower, diag, upper, True, True, q, buf,
+                                      BANDED, BANDED, True, False, False, tol, max_iter, 1.0,
+                                      False), none, q, False, buf)
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def solve_csr_entry(indptr, indices, data, q, buf, tol, max_iter):
+    """:func:`solve_csr_checked` behind a wrapper without reference counting (as
+    :func:`solve_dense_entry`)."""
+    return solve_csr_checked(indptr, indices, data, q, buf, tol, max_iter)
+
+
 _F64_2D = types.Array(types.float64, 2, "C")
 _F64_1D = types.Array(types.float64, 1, "C")
 #: The argument types of :func:`solve_dense_entry` for :func:`exact_entry`: writeable
 #: C-contiguous float64 arrays and the options as Python ints and floats.
 SOLVE_DENSE_SIGNATURE = (_F64_2D, _F64_1D, _F64_1D, types.int64, types.float64, types.int64,
                          types.float64)
+#: The argument types of :func:`solve_csr_entry` for :func:`exact_entry`: scipy's int32
+#: index arrays (a matrix with int64 indices takes the general path).
+SOLVE_CSR_SIGNATURE = (types.Array(types.int32, 1, "C"), types.Array(types.int32, 1, "C"),
+                       _F64_1D, _F64_1D, _F64_1D, types.float64, types.int64)
 #: The argument types of :func:`solve_packed_entry` for :func:`exact_entry`.
 SOLVE_PACKED_SIGNATURE = (_F64_2D, _F64_1D, _F64_1D, _F64_1D, _F64_1D, _F64_1D, types.int64,
                           types.float64, types.int64, types.float64)

@@ -945,7 +945,7 @@ def csr_tridiagonal_bands(indptr, indices, data, lower, diag, upper):
             v = data[k]
             if j == i:
                 diag[i] += v
-            elif j == i + 1:
+            elif j == i + 1 and j < n:
                 upper[i] += v
             elif j == i - 1:
                 lower[j] += v

@@ -425,8 +425,41 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
                                    omega=omega)
                 return solver._finish(q, None, buf[:n], buf[n:2 * n], buf[2 * n:],
                                       (code, run, tried, nlog))
+        elif type(M) in _CSR_TYPES and (code == dispatch.AUTO or code == dispatch.BANDED):
+            result = _solve_csr(M, q, tol, limit)
+            if result is not None:
+                return result
     solver = LCPSolver(M, method, tol=tol, max_iter=max_iter, strict=strict, omega=omega)
     return solver.solve(q, z0=z0)
+
+
+#: scipy's CSR classes (``csr_matrix``, ``csr_array``), recorded when the general path first
+#: meets a scipy.sparse ``M`` (:func:`_as_lcp_matrix`; nscontrol does not import scipy.sparse
+#: itself): the types that :func:`solve_lcp` tries on its compiled CSR path.
+_CSR_TYPES: set[type] = set()
+#: The state of a CSR call whose banded run was verified (:func:`_solve_csr`).
+_BANDED_SOLVED = dispatch.first_run_solved_state(dispatch.BANDED)
+
+
+def _solve_csr(M: Any, q: NDArray[np.float64], tol: float, limit: int) -> LCPResult | None:
+    """:func:`solve_lcp` of a tridiagonal ``n x n`` CSR ``M`` (``n > 2``) as one compiled
+    call (:func:`dispatch.solve_csr_entry`: the bands read, Howard's tridiagonal iteration,
+    its verification), or None for the general path: any other ``M``, int64 indices, a
+    banded run that was not verified (the general path then runs ``auto``'s fallbacks)."""
+    n = q.size
+    entry = _CSR_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_csr()
+    if entry is None or n <= 2 or M.shape != (n, n):
+        return None
+    buf = _empty(_CSR_BUFFER_SIZES[n] if n < _TABULATED else int(dispatch.csr_buffer_size(n)))
+    try:
+        state, its, res, tolerance = entry(M.indptr, M.indices, M.data, q, buf, tol, limit)
+    except TypeError:
+        return None
+    if state != _BANDED_SOLVED:
+        return None
+    _read_only(buf, False)
+    return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res, "banded", 1,
+                                  tolerance, buf))
 
 
 def _buffer_size(n: int) -> int:
@@ -438,6 +471,8 @@ def _buffer_size(n: int) -> int:
 #: filled when the entries are loaded (:meth:`_Entries.load`, before any solve).
 _TABULATED = 2 * dispatch.LEMKE_FULL_TABLEAU_MAX_SIZE
 _BUFFER_SIZES: list[int] = []
+#: ``dispatch.csr_buffer_size(n)`` for ``n < _TABULATED``, filled with :data:`_BUFFER_SIZES`.
+_CSR_BUFFER_SIZES: list[int] = []
 
 
 class _Entries:
@@ -448,6 +483,7 @@ class _Entries:
     loaded = False
     dense: Any = None
     packed: Any = None
+    csr: Any = None
 
     @classmethod
     def load(cls) -> type[_Entries]:
@@ -455,9 +491,12 @@ class _Entries:
                                          dispatch.SOLVE_DENSE_SIGNATURE)
         cls.packed = dispatch.exact_entry(dispatch.solve_packed_entry,
                                           dispatch.SOLVE_PACKED_SIGNATURE)
+        cls.csr = dispatch.exact_entry(dispatch.solve_csr_entry, dispatch.SOLVE_CSR_SIGNATURE)
         _BUFFER_SIZES[:] = [_buffer_size(n) for n in range(_TABULATED)]
+        _CSR_BUFFER_SIZES[:] = [int(dispatch.csr_buffer_size(n)) for n in range(_TABULATED)]
         cls.loaded = True
         _DENSE_ENTRY[0] = cls.dense
+        _CSR_ENTRY[0] = cls.csr
         return cls
 
 
@@ -465,10 +504,15 @@ class _Entries:
     def load_dense(cls) -> Any:
         return cls.load().dense
 
+    @classmethod
+    def load_csr(cls) -> Any:
+        return cls.load().csr
+
 
 #: ``_Entries.dense`` (read from a list: a class attribute holding a dispatcher is a
 #: descriptor, bound on every read)
 _DENSE_ENTRY: list[Any] = [None]
+_CSR_ENTRY: list[Any] = [None]
 
 
 _ENTRIES = _Entries
@@ -1041,6 +1085,9 @@ def _as_lcp_matrix(M: Any) -> Any:
     if _clean(M, 2) and M.shape[0] == M.shape[1]:
         return M
     if hasattr(M, "tocsr") and not isinstance(M, np.ndarray):
+        if not _CSR_TYPES:
+            import scipy.sparse as sp
+            _CSR_TYPES.update((sp.csr_matrix, sp.csr_array))
         csr = M.tocsr()
         if csr.dtype != np.float64:
             if csr.dtype.kind not in "fiub":
