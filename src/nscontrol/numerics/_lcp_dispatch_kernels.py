@@ -271,6 +271,7 @@ def dense_howard(M, q, z, w, limit):
     seen = np.empty((min(limit + 1, 16), n), dtype=np.bool_)
     idx = np.empty(n, dtype=np.int64)
     x = np.empty(n)
+    block = np.empty(n * (n + 1))       # every iteration's elimination, allocated once
     nseen = 0
     for it in range(limit + 1):
         if howard_converged(z, w, eps):
@@ -289,7 +290,7 @@ def dense_howard(M, q, z, w, limit):
                 idx[k] = i
                 k += 1
         if k > 0:
-            if not _solve_principal_block(M, q, idx, k, x):
+            if not _solve_principal_block(M, q, idx, k, x, block):
                 _matvec_plus(M, z, q, w)
                 return NUMERICAL_FAILURE, it + 1
             for r in range(k):

@@ -1058,11 +1058,13 @@ def tridiagonal_inf_norm(lower, diag, upper):
 
 # --------------------------------------------------------------------------------- PGS polish
 @njit(cache=True)
-def _solve_principal_block(M, q, idx, k, x):
+def _solve_principal_block(M, q, idx, k, x, scratch):
     """Solve ``M[a, a] x = -q[a]`` (``a = idx[:k]``) by Gaussian elimination with partial
-    pivoting (backward stable, as LAPACK's ``gesv``). False on a zero or non-finite pivot."""
-    A = np.empty((k, k))
-    b = np.empty(k)
+    pivoting (backward stable, as LAPACK's ``gesv``), in ``scratch`` (at least ``k (k + 1)``
+    floats: the caller's, allocated once for all the blocks it solves). False on a zero or
+    non-finite pivot."""
+    A = scratch[:k * k].reshape((k, k))
+    b = scratch[k * k:k * (k + 1)]
     for r in range(k):
         i = idx[r]
         b[r] = -q[i]
@@ -1116,7 +1118,7 @@ def pgs_polish(M, q, z, w):
     p = np.zeros(n)
     if k > 0:
         x = np.empty(k)
-        if not _solve_principal_block(M, q, idx, k, x):
+        if not _solve_principal_block(M, q, idx, k, x, np.empty(k * (k + 1))):
             return False
         for r in range(k):
             p[idx[r]] = x[r]

@@ -192,32 +192,48 @@ _RESULT_FIELDS = ("z", "w", "status", "iterations", "residual", "method", "messa
 
 
 def _log_result(buf: NDArray[np.float64], n: int, state: int, its: int, res: float,
-                tolerance: float) -> LCPResult:
-    """The result of a compiled chain that needs nothing more from Python (no hand-off, no
-    rescaled retry), from the entry's packed ``state`` (:func:`dispatch.pack_out`) and its
-    buffer ``buf`` (:func:`dispatch.buffer_size`), which becomes the result's, read-only:
-    the last run if verified; otherwise Lemke's ray termination if there was one (for
-    copositive-plus ``M`` a certificate that the LCP is infeasible: the entry has chosen it,
+                tolerance: float, strict: bool) -> LCPResult | None:
+    """The result of a compiled chain that needs nothing more from Python, or None when it
+    does (a hand-off, the rescaled retry, ``strict`` on a failure): read from the entry's
+    packed ``state`` (:func:`dispatch.pack_out`) and its buffer ``buf``
+    (:func:`dispatch.buffer_size`), which becomes the result's, read-only: the last run if
+    verified; otherwise Lemke's ray termination if there was one (for copositive-plus ``M``
+    a certificate that the LCP is infeasible: the entry has chosen it,
     :data:`dispatch.RAY_CHOSEN`), else the last run (what :func:`_choose` picks). Its message
-    is formatted from the log when read."""
+    is formatted from the log when read. What a state means is decoded once
+    (:data:`_ENDINGS`)."""
+    ending = _ENDINGS.get(state)
+    if ending is None:
+        if not _ended(state):
+            return None
+        ending = _ENDINGS[state] = _ending(state)
+    ray, status, method, nlog = ending
+    if strict and status != "solved":
+        return None                      # the caller goes on in Python, which raises
     _read_only(buf, False)
-    method = _RUN_METHOD[((state >> 4) & 15) - 1]
-    nlog = ((state >> 8) & 15) - 1
-    if state & _RAY_CHOSEN:
-        return _tuple_new(LCPResult, (buf[2 * n:3 * n], buf[3 * n:4 * n], "ray_termination",
-                                      its, res, method, nlog, tolerance, buf))
-    return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], STATUSES[(state & 15) - 8], its, res,
-                                  method, nlog, tolerance, buf))
+    k = 2 * n if ray else 0
+    return _tuple_new(LCPResult, (buf[k:k + n], buf[k + n:k + 2 * n], status, its, res, method,
+                                  nlog, tolerance, buf))
 
 
-def _ended(state: int, strict: bool) -> bool:
+#: What an entry's state that ends the call means: ``(ray, status, method, nlog)``, decoded
+#: by :func:`_ending` the first time the state is met (a call then reads it with one lookup).
+_ENDINGS: dict[int, tuple[bool, str, str, int]] = {}
+
+
+def _ending(state: int) -> tuple[bool, str, str, int]:
+    """``(ray, status, method, nlog)`` of a state that ends the call (:func:`_ended`)."""
+    ray = bool(state & _RAY_CHOSEN)
+    status = "ray_termination" if ray else STATUSES[(state & 15) - 8]
+    return ray, status, _RUN_METHOD[((state >> 4) & 15) - 1], ((state >> 8) & 15) - 1
+
+
+def _ended(state: int) -> bool:
     """Whether a checked entry's chain (its packed ``state``) ended with nothing left for
-    Python: at least one run, no hand-off, and either verified or neither ``strict`` (which
-    raises, with the runs as :func:`_choose` describes them) nor extreme scales (the
-    rescaled retry)."""
+    Python but ``strict``: at least one run, no hand-off, and either verified or not at
+    extreme scales (the rescaled retry)."""
     code = (state & 15) - 8
-    return (state >> 8) & 15 > 1 and code >= 0 and (
-        code == 0 or not (strict or state & _EXTREME))
+    return (state >> 8) & 15 > 1 and code >= 0 and (code == 0 or not state & _EXTREME)
 
 
 _EXTREME = dispatch.EXTREME
@@ -407,17 +423,18 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
             try:
                 state, its, res, tolerance = entry(M, q, buf, code, tol, limit, omega)
             except TypeError:
-                state = _UNCHECKED_STATE
+                state, its, res, tolerance = _UNCHECKED
             first = _FIRST_SOLVED.get(state)
             if first is not None:
                 # the first run was verified: the buffer is the result's (z, w and the log)
                 _read_only(buf, False)
                 return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res,
                                               first, 1, tolerance, buf))
-            if _ended(state, strict):
-                # the chain ended (verified after fallbacks, or every run failed and no
-                # rescaled retry applies): the log has every run, nothing is left to do
-                return _log_result(buf, n, state, its, res, tolerance)
+            # the chain ended (verified after fallbacks, or every run failed and no
+            # rescaled retry applies): the log has every run, nothing is left to do
+            result = _log_result(buf, n, state, its, res, tolerance, strict)
+            if result is not None:
+                return result
             code, run, tried, nlog, extreme = dispatch.unpack_state(state)
             if nlog >= 0 and code != kernels.Q_NOT_FINITE and code != dispatch.UNCHECKED:
                 # the runs done are kept: the solver goes on from where the chain stopped
@@ -692,8 +709,9 @@ class LCPSolver:
                 state, its, res, tolerance = dispatch.solve_packed_checked(
                     M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
                     self.omega)
-            if _ended(state, self.strict):
-                return _log_result(buf, n, state, its, res, tolerance)
+            result = _log_result(buf, n, state, its, res, tolerance, self.strict)
+            if result is not None:
+                return result
             code, run, tried, nlog, extreme = dispatch.unpack_state(state)
             z, w, work = buf[:n], buf[n:2 * n], buf[2 * n:]
             z0v = None
