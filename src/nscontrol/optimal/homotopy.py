@@ -218,19 +218,22 @@ class _NLP:
         others, equalities included: an equality bound would fix the unknown, which IPOPT
         removes from the problem, and with it the multipliers of a warm start)."""
         ca = require_casadi()
+        simple = np.zeros(lbg.size, dtype=bool)
+        rows = np.flatnonzero(lbg != ubg)        # the inequalities
+        if not rows.size:
+            return np.arange(lbg.size)
+        g = g[rows.tolist()]
         J = ca.jacobian(g, x)
-        rows, cols = J.sparsity().get_triplet()
-        count = np.bincount(np.asarray(rows, dtype=int), minlength=lbg.size)
+        at, cols = (np.asarray(v, dtype=int) for v in J.sparsity().get_triplet())
+        count = np.bincount(at, minlength=rows.size)
         at_zero = np.asarray(ca.Function("g0", [x], [g])(np.zeros(x.numel())),
                              float).reshape(-1)
-        simple = np.zeros(lbg.size, dtype=bool)
-        for k, (i, j) in enumerate(zip(rows, cols, strict=True)):
-            c = J.nz[k]
-            if (count[i] != 1 or lbg[i] == ubg[i] or not c.is_constant() or float(c) == 0.0
-                    or not np.isfinite(at_zero[i])):
-                continue
-            c = float(c)
-            lo, hi = sorted(((lbg[i] - at_zero[i]) / c, (ubg[i] - at_zero[i]) / c))
+        for k in np.flatnonzero(count[at] == 1):    # the rows on one unknown
+            c, i, j = J.nz[int(k)], rows[at[k]], cols[k]
+            if not c.is_constant() or float(c) == 0.0 or not np.isfinite(at_zero[at[k]]):
+                continue     # nonlinear in its unknown, or not finite at 0: a row
+            lo, hi = sorted(((lbg[i] - at_zero[at[k]]) / float(c),
+                             (ubg[i] - at_zero[at[k]]) / float(c)))
             self.lbx[j], self.ubx[j] = max(self.lbx[j], lo), min(self.ubx[j], hi)
             simple[i] = True
         return np.flatnonzero(~simple)
