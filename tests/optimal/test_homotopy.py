@@ -1,7 +1,9 @@
-"""The homotopy's one NLP (nscontrol.optimal.homotopy): the complementarity pairs are rows
-whose bounds say the relaxation σ or the polish's branches, so one NLP serves every stage;
-the rows evaluate the builder's pairs (the CasADi and numpy forms of one declaration); the
-polish fixes every unknown once; the first relaxed solve starts off the pairs' corner."""
+"""The homotopy's one NLP (nscontrol.optimal.homotopy): the complementarity pairs are
+bounds (a side on unknowns) and rows (an expression side, the products) whose bounds say the
+relaxation σ or the polish's branches, so one NLP serves every stage; they evaluate the
+builder's pairs (the CasADi and numpy forms of one declaration); a builder's inequality on
+one unknown is a bound; the polish fixes every unknown once; the first relaxed solve starts
+off the pairs' corner."""
 
 from __future__ import annotations
 
@@ -31,64 +33,148 @@ def fesd():
     return builder, homotopy._NLP(builder, Relaxation())
 
 
-def _pair_rows(nlp):
-    """Per pair: the rows of a, of b, of a b."""
+def _sides(nlp, x):
+    """Per pair: the values of a and of b at ``x`` (from the unknowns a side is bounded as,
+    or from its rows) and of the product rows."""
+    g = np.asarray(ca.Function("g", [nlp.problem["x"]], [nlp.problem["g"]])(x)).ravel()
     out = []
-    for start, n in nlp.layout:
-        out.append([start + k * n + np.arange(n) for k in range(3)])
+    for sides, product, n in nlp.layout:
+        values = [x[side] if isinstance(side, np.ndarray) else g[side: side + n]
+                  for side in sides]
+        out.append((*values, g[product: product + n]))
     return out
 
 
-def test_the_rows_evaluate_the_builders_pairs(fesd):
-    """At a random point, the NLP's pair rows are the pairs the builder evaluates on numpy
-    arrays, and their products (the same arithmetic: equal to a few ulps)."""
+def test_the_rows_and_bounds_evaluate_the_builders_pairs(fesd):
+    """At a random point, the NLP's pair sides (unknowns or rows) are the pairs the builder
+    evaluates on numpy arrays, and the product rows their products (the same arithmetic:
+    equal to a few ulps)."""
     builder, nlp = fesd
     rng = np.random.default_rng(3)
     x = rng.standard_normal(nlp.nx)
-    g = np.asarray(ca.Function("g", [nlp.problem["x"]], [nlp.problem["g"]])(x)).ravel()
     values = {name: x[index] for name, index in zip(nlp.names, nlp.index, strict=True)}
     values["H"] = values["H"].ravel()
     pairs = builder.pairs(values, homotopy.numpy_ops())
     assert len(pairs) == len(nlp.layout) == 2
-    for (a, b), (ra, rb, rab) in zip(pairs, _pair_rows(nlp), strict=True):
-        assert np.array_equal(g[ra], a) and np.array_equal(g[rb], b)
-        assert np.allclose(g[rab], a * b, rtol=4 * np.finfo(float).eps, atol=0.0)
+    for (a, b), (va, vb, vab) in zip(pairs, _sides(nlp, x), strict=True):
+        assert np.array_equal(va, a) and np.array_equal(vb, b)
+        assert np.allclose(vab, a * b, rtol=4 * np.finfo(float).eps, atol=0.0)
+
+
+def test_sides_on_unknowns_are_bounds_not_rows(fesd):
+    """FESD's θ ⟂ λ: both sides are unknowns, so the pairs add only their product rows (a
+    λ in two pairs, the element's and the cross one, bounded once); the builder's
+    inequalities on one unknown (the input bounds, the lengths' bounds) are bounds too,
+    its equalities and every other row stay. A contact's pair (a force ⟂ a velocity
+    expression) keeps a row for the expression side only."""
+    builder, nlp = fesd
+    opti = ca.Opti()
+    var = builder.variables(opti)
+    builder.constraints(opti, var)
+    p = builder.p
+    lengths = 1 if p.free_lengths else 0
+    simple = (p.u_min is not None) * p.inputs * p.stages + (
+        p.u_max is not None) * p.inputs * p.stages + lengths * builder.K
+    assert simple > 0
+    products = sum(n for _, _, n in nlp.layout)
+    assert nlp.ng == opti.ng - simple + products
+    index = dict(zip(nlp.names, nlp.index, strict=True))
+    for name in ("TH", "LAM"):
+        assert np.all(nlp.lbx[index[name]] == 0) and np.all(nlp.ubx[index[name]] == np.inf)
+    U = index["U"]
+    u_min = np.full(p.inputs, -np.inf) if p.u_min is None else p.u_min
+    u_max = np.full(p.inputs, np.inf) if p.u_max is None else p.u_max
+    assert np.all(nlp.lbx[U] == u_min[:, None]) and np.all(nlp.ubx[U] == u_max[:, None])
+    lo, hi = p.element_bounds
+    assert np.allclose(nlp.lbx[index["H"]], lo * builder.hbar, rtol=4 * np.finfo(float).eps)
+    assert np.allclose(nlp.ubx[index["H"]], hi * builder.hbar, rtol=4 * np.finfo(float).eps)
+    block = PushedBlock()
+    problem = ContactProblem(block.system(), block.x0, 10, 0.1, x_final=block.x_final)
+    start = initial_guess(problem)
+    contact = homotopy._NLP(_ContactNLP(problem, active_sets(problem, start["X"],
+                                                             start["h"])), Relaxation())
+    for sides, _, _ in contact.layout:
+        assert isinstance(sides[0], np.ndarray) and not isinstance(sides[1], np.ndarray)
+
+
+class _Toy:
+    """min (x0 - 2)^2 + (x1 - 2)^2 + x2^2 with 2 x0 - 1 >= 0 and -x1 >= -3 (bounds on one
+    unknown each), x2^2 <= 4 and x0 + x1 >= 0 (rows), x2 == 1 (an equality: a row), and
+    0 <= x0 ⟂ x1 + x2 >= 0 (an unknown against an expression)."""
+
+    def variables(self, opti):
+        return {"x": opti.variable(3)}
+
+    def constraints(self, opti, var):
+        x = var["x"]
+        opti.subject_to(2 * x[0] - 1 >= 0)
+        opti.subject_to(-x[1] >= -3)
+        opti.subject_to(x[2] ** 2 <= 4)
+        opti.subject_to(x[0] + x[1] >= 0)
+        opti.subject_to(x[2] == 1)
+
+    def cost(self, var):
+        x = var["x"]
+        return (x[0] - 2) ** 2 + (x[1] - 2) ** 2 + x[2] ** 2
+
+    def pair_keys(self):
+        return [([("x", 0)], None)]
+
+    def pairs(self, var, ops):
+        x = var["x"]
+        return [(ops.select(x, [0]), ops.select(x, [1]) + ops.select(x, [2]))]
+
+
+def test_simple_bounds_are_found_by_structure():
+    """Only an inequality affine in one unknown becomes a bound, intersected with the
+    pair's ``>= 0``: x0 >= max(1/2, 0), x1 <= 3; the rows left are x2^2 <= 4,
+    x0 + x1 >= 0, x2 == 1, the pair's expression side and its product."""
+    nlp = homotopy._NLP(_Toy(), Relaxation())
+    assert np.array_equal(nlp.lbx, [0.5, -np.inf, -np.inf])
+    assert np.array_equal(nlp.ubx, [np.inf, 3.0, np.inf])
+    assert nlp.ng == 3 + 2
+    assert np.array_equal(nlp.lbg[:3], [-np.inf, 0.0, 1.0])
+    (sides, product, n), = nlp.layout
+    assert np.array_equal(sides[0], [0]) and sides[1] == 3 and product == 4 and n == 1
 
 
 def test_relaxed_bounds_are_scholtes(fesd):
     _, nlp = fesd
-    lbg, ubg = nlp.bounds(1e-4)
-    for ra, rb, rab in _pair_rows(nlp):
-        assert np.all(lbg[ra] == 0) and np.all(ubg[ra] == np.inf)
-        assert np.all(lbg[rb] == 0) and np.all(ubg[rb] == np.inf)
-        assert np.all(lbg[rab] == -np.inf) and np.all(ubg[rab] == 1e-4)
+    lbx, ubx, lbg, ubg = nlp.bounds(1e-4)
+    assert np.array_equal(lbx, nlp.lbx) and np.array_equal(ubx, nlp.ubx)
+    for sides, product, n in nlp.layout:
+        for side in sides:
+            assert np.all(lbx[side] == 0) and np.all(ubx[side] == np.inf)
+        assert np.all(lbg[product: product + n] == -np.inf)
+        assert np.all(ubg[product: product + n] == 1e-4)
 
 
-def test_the_polish_fixes_every_unknown_once(fesd):
-    """Random branches: the products are free, each pair's kept side stays >= 0, and each
-    unknown the branches set to zero has exactly one equality row (θ and λ are in two pairs
-    each, the element's and the cross one: a second equality on the same unknown would be a
-    dependent constraint), its other zero-side rows free."""
+def test_the_polish_fixes_the_zero_sides_unknowns(fesd):
+    """Random branches: the products are free; each unknown some pair's branch sets to zero
+    is fixed by its bounds (lbx = ubx = 0: once, whatever the number of pairs that set it:
+    θ and λ are in two pairs each, the element's and the cross one), every other pair
+    unknown stays ``>= 0``; no row's bounds but the products' change."""
     builder, nlp = fesd
     rng = np.random.default_rng(7)
-    branches = [rng.random(n) < 0.5 for _, n in nlp.layout]
-    lbg, ubg = nlp.bounds(None, branches)
-    equalities: dict = {}
-    for i, (ra, rb, rab) in enumerate(_pair_rows(nlp)):
-        assert np.all(lbg[rab] == -np.inf) and np.all(ubg[rab] == np.inf)
-        for rows, keys, zero in ((ra, nlp.keys[i][0], branches[i]),
-                                 (rb, nlp.keys[i][1], ~branches[i])):
-            kept = rows[~zero]
-            assert np.all(lbg[kept] == 0) and np.all(ubg[kept] == np.inf)
-            for j in np.flatnonzero(zero):
-                if lbg[rows[j]] == 0 and ubg[rows[j]] == 0:
-                    equalities[keys[j]] = equalities.get(keys[j], 0) + 1
-                else:
-                    assert lbg[rows[j]] == -np.inf and ubg[rows[j]] == np.inf
-    zeroed = {keys[j] for i, (k0, k1) in enumerate(nlp.keys)
-              for keys, zero in ((k0, branches[i]), (k1, ~branches[i]))
-              for j in np.flatnonzero(zero)}
-    assert set(equalities) == zeroed and set(equalities.values()) == {1}
+    branches = [rng.random(n) < 0.5 for _, _, n in nlp.layout]
+    lbx, ubx, lbg, ubg = nlp.bounds(None, branches)
+    zeroed, kept = set(), set()
+    for i, (sides, product, n) in enumerate(nlp.layout):
+        assert np.all(lbg[product: product + n] == -np.inf)
+        assert np.all(ubg[product: product + n] == np.inf)
+        for side, zero in ((sides[0], branches[i]), (sides[1], ~branches[i])):
+            zeroed.update(side[zero].tolist())
+            kept.update(side[~zero].tolist())
+    zeroed_ = np.array(sorted(zeroed))
+    free = np.array(sorted(kept - zeroed))
+    assert np.all(lbx[zeroed_] == 0) and np.all(ubx[zeroed_] == 0)
+    assert np.all(lbx[free] == 0) and np.all(ubx[free] == np.inf)
+    others = np.setdiff1d(np.arange(nlp.nx), np.r_[zeroed_, free])
+    assert np.array_equal(lbx[others], nlp.lbx[others])
+    assert np.array_equal(ubx[others], nlp.ubx[others])
+    products = np.concatenate([np.arange(p, p + n) for _, p, n in nlp.layout])
+    rest = np.setdiff1d(np.arange(nlp.ng), products)
+    assert np.array_equal(lbg[rest], nlp.lbg[rest]) and np.array_equal(ubg[rest], nlp.ubg[rest])
 
 
 def test_one_nlp_serves_the_whole_homotopy(monkeypatch):
@@ -171,7 +257,7 @@ def test_a_polish_off_the_path_is_not_kept():
     cost within a tenth of the rise ``σ Σ ν`` is kept, one beyond it is not."""
 
     class Rows:
-        layout = [(0, 2)]   # one pair of two entries: rows 0-1 a, 2-3 b, 4-5 a b
+        layout = [([0, 2], 4, 2)]   # one pair of two entries: rows 0-1 a, 2-3 b, 4-5 a b
 
     sigma, relaxed = 1e-3, {"cost": 1.0, "lam_g": np.array([0, 0, 0, 0, 1.0, 1.0])}
     rise = sigma * 2.0

@@ -26,8 +26,13 @@ if TYPE_CHECKING:
 
 #: IPOPT's options of every solve (the adaptive barrier update takes a third of the monotone
 #: one's iterations on the FESD problems, whose relaxed complementarity makes the barrier
-#: problem hard to follow at a fixed μ).
-IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive"}
+#: problem hard to follow at a fixed μ). A cold solve starts the rows' multipliers at zero
+#: (``constr_mult_init_max = 0``), not at IPOPT's least-squares estimate, which depends on
+#: whether a bound is a row or a variable bound (its bound multipliers start at 1 in the
+#: estimate): with the pairs' unknown sides as variable bounds the estimate led nosnoc's
+#: motor to another local optimum (1.002427 instead of nosnoc's 0.999900), zero to nosnoc's.
+IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive",
+                                 "constr_mult_init_max": 0.0}
 
 #: Added when a solve starts from the previous one's primal and dual solution: a small
 #: barrier. (IPOPT's pushes of the start into the interior stay at their defaults: pushes of
@@ -129,11 +134,19 @@ def pair_keys(builder: Any, pairs: list[tuple[Any, Any]]) -> list[tuple[Any, Any
 
 class _NLP:
     """The NLP of a builder, built once for the whole homotopy: the builder's constraints,
-    then for each complementarity pair three rows ``a``, ``b`` and ``a b``. A relaxed solve
-    bounds them by ``a, b >= 0, a b <= σ``; the polish, by ``a = 0 <= b`` where the branch is
-    true and ``b = 0 <= a`` elsewhere, the products free. So ``σ`` and the branches are
-    bounds, never a new NLP: CasADi differentiates and expands (to SX) once, and the polish
-    starts from the last relaxed solve's primal and dual solution."""
+    then for each complementarity pair the sides ``a``, ``b`` and a row ``a b``. A side
+    whose entries are unknowns (the builder's ``pair_keys``) is bounded as those unknowns
+    (``lbx, ubx``), an expression side is a row; so is a builder's inequality on one
+    unknown a bound (:meth:`_simple_bounds`): IPOPT adds a slack per inequality row, and a
+    bound needs none. A relaxed solve bounds them by ``a, b >= 0, a b <= σ``; the polish,
+    by ``a = 0 <= b`` where the branch is true and ``b = 0 <= a`` elsewhere, the products
+    free. So ``σ`` and the branches are bounds, never a new NLP: CasADi differentiates and
+    expands (to SX) once, and the polish starts from the last relaxed solve's primal and
+    dual solution.
+
+    ``layout`` has per pair ``(sides, product, n)``: each side either the unknowns' indices
+    in ``x`` (an int array) or its first row (an int), then the first of the ``n`` product
+    rows."""
 
     def __init__(self, builder: Builder, relaxation: Relaxation) -> None:
         ca = require_casadi()
@@ -147,54 +160,104 @@ class _NLP:
         self.keys = pair_keys(builder, pairs)
         bounds = ca.Function("bounds", [opti.p], [opti.lbg, opti.ubg])
         lbg, ubg = (np.asarray(v, float).reshape(-1) for v in bounds(np.zeros(opti.np)))
-        rows, self.layout, start = [opti.g], [], opti.ng
-        for a, b in pairs:
-            size = int(a.numel())
-            rows += [a, b, a * b]
-            self.layout.append((start, size))
-            start += 3 * size
-        self.lbg = np.concatenate([lbg, *(np.r_[np.zeros(2 * n), np.full(n, -np.inf)]
-                                          for _, n in self.layout)])
-        self.ubg = np.concatenate([ubg, np.full(start - opti.ng, np.inf)])
         self.names = [name for name, sym in self.var.items() if _symbolic(sym)]
         symbols = [self.var[name] for name in self.names]
-        x_mx = ca.veccat(*symbols)   # every unknown, even one only the pairs hold
-        nlp = ca.Function("nlp", [x_mx], [self.cost, ca.vertcat(*rows)]).expand()
-        x = ca.SX.sym("x", x_mx.numel())
-        f, g = nlp(x)
-        self.problem = {"x": x, "f": f, "g": g}
         self.index, first = [], 0     # each unknown's entries in x, in its shape
         for sym in symbols:
             shape = (int(sym.size1()), int(sym.size2()))
             self.index.append(first + np.arange(sym.numel()).reshape(shape, order="F"))
             first += int(sym.numel())
-        self.nx, self.ng = first, start
+        self.nx = first
+        at = dict(zip(self.names, (i.ravel(order="F") for i in self.index), strict=True))
+        # a side whose entries are unknowns (pair_keys) is bounded as those unknowns (lbx),
+        # not as rows: IPOPT then needs no slack for it and no row for an unknown that
+        # several pairs share (FESD's λ_k in θ_k ⟂ λ_k and θ_{k+1} ⟂ λ_k)
+        self.lbx, self.ubx = np.full(first, -np.inf), np.full(first, np.inf)
+        rows: list[Any] = []
+        lower: list[np.ndarray] = []
+        upper: list[np.ndarray] = []
+        self.layout: list[tuple[list[np.ndarray | int], int, int]] = []
+        start = 0    # the pair rows' offsets after the builder's rows that stay rows
+        for (a, b), keys in zip(pairs, self.keys, strict=True):
+            size, sides = int(a.numel()), list[np.ndarray | int]()
+            for side, side_keys in ((a, keys[0]), (b, keys[1])):
+                if side_keys is not None and all(name in at for name, _ in side_keys):
+                    x_of = np.array([at[name][int(j)] for name, j in side_keys], dtype=int)
+                    self.lbx[x_of] = 0.0
+                    sides.append(x_of)
+                    continue
+                rows.append(side)
+                lower.append(np.zeros(size))
+                upper.append(np.full(size, np.inf))
+                sides.append(start)
+                start += size
+            rows.append(a * b)
+            lower.append(np.full(size, -np.inf))
+            upper.append(np.full(size, np.inf))
+            self.layout.append((sides, start, size))
+            start += size
+        x_mx = ca.veccat(*symbols)   # every unknown, even one only the pairs hold
+        nlp = ca.Function("nlp", [x_mx], [self.cost, opti.g, ca.vertcat(*rows)]).expand()
+        x = ca.SX.sym("x", x_mx.numel())
+        f, g_builder, g_pairs = nlp(x)
+        kept = self._simple_bounds(g_builder, x, lbg, ubg)
+        self.layout = [([side + kept.size if isinstance(side, int) else side
+                         for side in sides], product + kept.size, n)
+                       for sides, product, n in self.layout]
+        self.lbg = np.concatenate([lbg[kept], *lower])
+        self.ubg = np.concatenate([ubg[kept], *upper])
+        self.problem = {"x": x, "f": f, "g": ca.vertcat(g_builder[kept.tolist()], g_pairs)}
+        self.ng = kept.size + start
         self._solvers: dict[tuple[bool, float, int, bool], Any] = {}
 
+    def _simple_bounds(self, g: Any, x: Any, lbg: np.ndarray, ubg: np.ndarray
+                       ) -> np.ndarray:
+        """Move the builder's inequality rows that bound one unknown (``l <= c x_j + d <=
+        u``, an input's, a state's or an element length's bound) onto ``lbx, ubx``: IPOPT
+        then needs no slack and no row for them. Returns the rows that stay rows (the
+        others, equalities included: an equality bound would fix the unknown, which IPOPT
+        removes from the problem, and with it the multipliers of a warm start)."""
+        ca = require_casadi()
+        simple = np.zeros(lbg.size, dtype=bool)
+        rows = np.flatnonzero(lbg != ubg)        # the inequalities
+        if not rows.size:
+            return np.arange(lbg.size)
+        g = g[rows.tolist()]
+        J = ca.jacobian(g, x)
+        at, cols = (np.asarray(v, dtype=int) for v in J.sparsity().get_triplet())
+        count = np.bincount(at, minlength=rows.size)
+        at_zero = np.asarray(ca.Function("g0", [x], [g])(np.zeros(x.numel())),
+                             float).reshape(-1)
+        for k in np.flatnonzero(count[at] == 1):    # the rows on one unknown
+            c, i, j = J.nz[int(k)], rows[at[k]], cols[k]
+            if not c.is_constant() or float(c) == 0.0 or not np.isfinite(at_zero[at[k]]):
+                continue     # nonlinear in its unknown, or not finite at 0: a row
+            lo, hi = sorted(((lbg[i] - at_zero[at[k]]) / float(c),
+                             (ubg[i] - at_zero[at[k]]) / float(c)))
+            self.lbx[j], self.ubx[j] = max(self.lbx[j], lo), min(self.ubx[j], hi)
+            simple[i] = True
+        return np.flatnonzero(~simple)
+
     def bounds(self, sigma: float | None, branches: list[np.ndarray] | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """The rows' bounds of the relaxation ``σ``, or of the polish of ``branches``
-        (``a = 0 <= b`` where true, ``b = 0 <= a`` elsewhere; an unknown that several pairs
-        set to zero — the same key — is fixed by one row only, the others left free: a
-        repeated equality would leave IPOPT too few degrees of freedom)."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The bounds ``lbx, ubx, lbg, ubg`` of the relaxation ``σ``, or of the polish of
+        ``branches`` (``a = 0 <= b`` where true, ``b = 0 <= a`` elsewhere, the products
+        free). A side on unknowns is set to zero by its unknowns' bounds, so an unknown that
+        several pairs set to zero is fixed once whatever the pairs (a repeated equality row
+        would leave IPOPT too few degrees of freedom); an expression side by its rows."""
+        lbx, ubx = self.lbx.copy(), self.ubx.copy()
         lbg, ubg = self.lbg.copy(), self.ubg.copy()
-        fixed: set[Any] = set()
-        for i, (start, n) in enumerate(self.layout):
+        for i, (sides, product, n) in enumerate(self.layout):
             if branches is None:
-                ubg[start + 2 * n: start + 3 * n] = sigma
+                ubg[product: product + n] = sigma
                 continue
-            lbg[start + 2 * n: start + 3 * n] = -np.inf     # the products free
-            for side, keys, mask in ((0, self.keys[i][0], branches[i]),
-                                     (1, self.keys[i][1], ~branches[i])):
-                for j in np.flatnonzero(mask):
-                    row = start + side * n + int(j)
-                    if keys is None or keys[j] not in fixed:
-                        ubg[row] = 0.0
-                    else:
-                        lbg[row] = -np.inf
-                    if keys is not None:
-                        fixed.add(keys[j])
-        return lbg, ubg
+            for side, zero in ((sides[0], branches[i]), (sides[1], ~branches[i])):
+                idx = np.flatnonzero(zero)
+                if isinstance(side, np.ndarray):
+                    ubx[side[idx]] = 0.0
+                else:
+                    ubg[side + idx] = 0.0
+        return lbx, ubx, lbg, ubg
 
     def solver(self, warm: bool, tol: float | None = None, exact: bool = False) -> Any:
         """IPOPT on the NLP, cold or warm-started, with the tolerance ``tol`` (default the
@@ -227,8 +290,8 @@ class _NLP:
         x0 = np.zeros(self.nx)
         for name, index in zip(self.names, self.index, strict=True):
             x0[index] = np.asarray(guess[name], float).reshape(index.shape)
-        lbg, ubg = self.bounds(sigma, branches)
-        args: dict[str, Any] = {"x0": x0, "lbg": lbg, "ubg": ubg}
+        lbx, ubx, lbg, ubg = self.bounds(sigma, branches)
+        args: dict[str, Any] = {"x0": x0, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
         lam_g = guess.get("lam_g")
         warm = lam_g is not None and lam_g.size == self.ng
         if warm:
@@ -377,8 +440,8 @@ def _continues_path(nlp: _NLP, relaxed: dict[str, Any], polished: dict[str, Any]
     the cost rises as ``dJ/dσ = -Σ ν`` (the envelope theorem; ``ν`` the multipliers of the
     rows ``a b <= σ``), so the limit's cost is ``J(σ) + σ Σ ν + O(σ²)``. The polished cost
     must match that within :data:`PATH_FRACTION` of the rise (and IPOPT's tolerance)."""
-    nu = sum(float(np.sum(relaxed["lam_g"][start + 2 * n: start + 3 * n]))
-             for start, n in nlp.layout)
+    nu = sum(float(np.sum(relaxed["lam_g"][product: product + n]))
+             for _, product, n in nlp.layout)
     rise = sigma * max(nu, 0.0)
     predicted = relaxed["cost"] + rise
     slack = PATH_FRACTION * rise + 1e-6 * (1.0 + abs(predicted))
