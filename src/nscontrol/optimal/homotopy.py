@@ -414,10 +414,12 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
         if not (relaxation.polish and relaxation.early_polish) or sigma == sigmas[-1]:
             continue
         branches = [a <= b for a, b in builder.pairs(sol, numpy_ops())]
-        settled = previous is not None and all(
-            np.array_equal(x, y) for x, y in zip(branches, previous, strict=True))
+        total = sum(b.size for b in branches)
+        settled = previous is not None and sum(
+            int(np.count_nonzero(x != y)) for x, y in zip(branches, previous, strict=True)
+        ) <= relaxation.settle_fraction * total
         previous = branches
-        if settled and sum(b.size for b in branches):
+        if settled and total:
             polished, record = nlp.solve(sol, None, branches)
             stages.append(record)
             if record["status"] in SOLVED and _continues_path(nlp, sol, polished, sigma):
