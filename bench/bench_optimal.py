@@ -103,10 +103,13 @@ def _timed(solve: Callable[[], Any], repeats: int) -> tuple[float, float, Any]:
     return statistics.median(walls), statistics.median(cpus), out
 
 
-#: nosnoc's homotopy on our side: σ from 1, times 0.1, every relaxed problem solved to the
-#: full tolerance as nosnoc solves them (``stage_tol=0``; our default's looser waypoints can
-#: lead a non-convex problem to another local optimum: nosnoc's sliding-mode problem ends at
-#: 5.5896 with them, at nosnoc's 5.5687 without).
+#: Our side's homotopy on nosnoc's examples: nosnoc's schedule (σ from 1, times 0.1, every
+#: relaxed problem solved to the full tolerance, ``stage_tol=0``) with our early polish
+#: (``settle_fraction``), which ends it sooner. Fair because the record checks the optimum
+#: (``equal_optimum``), not the path; the schedule stays nosnoc's because the optimum of these
+#: non-convex problems follows it: our default's ``sigma0=1e-3`` ends the cart-pole and the
+#: simple car elsewhere, ``stage_tol=1e-2`` the sliding mode (5.5896 against 5.5687),
+#: ``factor=0.01`` the cart-pole and the sliding mode (docs/optimal.md).
 PEER_HOMOTOPY = {"sigma0": 1.0, "stage_tol": 0.0}
 
 
