@@ -364,8 +364,9 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     Each relaxed solve but the last stops at IPOPT's tolerance ``max(tol, stage_tol σ)``
     (:class:`Relaxation`): the next relaxation moves its point by ``O(σ)`` anyway.
 
-    With ``relaxation.early_polish``, once a relaxed solve leaves every pair on the branch
-    the previous one chose (the active set settled), its polish is tried at once and kept
+    With ``relaxation.early_polish``, once a relaxed solve leaves all but a
+    ``settle_fraction`` of the pairs on the branch the previous one chose (the active set
+    settled, but for pairs at their corner), its polish is tried at once and kept
     when its cost continues the relaxed path to ``σ = 0`` (:func:`_continues_path`): the
     remaining relaxations would lead to that point, and are skipped. A polish that does not
     continue the path (another local optimum) is discarded and the homotopy goes on.
