@@ -103,10 +103,13 @@ def _timed(solve: Callable[[], Any], repeats: int) -> tuple[float, float, Any]:
     return statistics.median(walls), statistics.median(cpus), out
 
 
-#: nosnoc's homotopy on our side: σ from 1, times 0.1, every relaxed problem solved to the
-#: full tolerance as nosnoc solves them (``stage_tol=0``; our default's looser waypoints can
-#: lead a non-convex problem to another local optimum: nosnoc's sliding-mode problem ends at
-#: 5.5896 with them, at nosnoc's 5.5687 without).
+#: Our side's homotopy on nosnoc's examples: nosnoc's schedule (σ from 1, times 0.1, every
+#: relaxed problem solved to the full tolerance, ``stage_tol=0``) with our early polish
+#: (``settle_fraction``), which ends it sooner. Fair because the record checks the optimum
+#: (``equal_optimum``), not the path; the schedule stays nosnoc's because the optimum of these
+#: non-convex problems follows it: our default's ``sigma0=1e-3`` ends the cart-pole and the
+#: simple car elsewhere, ``stage_tol=1e-2`` the sliding mode (5.5896 against 5.5687),
+#: ``factor=0.01`` the cart-pole and the sliding mode (docs/optimal.md).
 PEER_HOMOTOPY = {"sigma0": 1.0, "stage_tol": 0.0}
 
 
@@ -245,7 +248,8 @@ def _published(got: dict, ours: dict) -> Iterator[dict]:
         "same_problem": rel_from_ref <= 1e-6},
         "nosnoc's example discretised as ours (implicit Euler, one element per input, free "
         "lengths within nosnoc's gamma_h bounds), both from nosnoc's start (at rest) and "
-        "homotopy (sigma from 1, each relaxation cold from the previous primal point); equal "
+        "homotopy (sigma from 1, each relaxation cold from the previous primal point; ours "
+        "ends at its early polish, the optimum checked, not the path); equal "
         "optimum: costs within 1e-6 relative (both solved to "
         "complementarity <= 1e-8); a non-convex problem: the two may stop in different local "
         "optima, and ours started from nosnoc's plan tells whether the problems are the same; "
@@ -584,7 +588,8 @@ def _published_general(got: dict, ours: dict) -> Iterator[dict]:
             "Radau IIA with one stage; the same stages, elements per stage, element bounds, "
             "step equilibration, cross complementarity pairs and IPOPT iteration limit), "
             "both from nosnoc's start (at rest) and homotopy (sigma from 1 by 0.1, each "
-            "solve cold from the previous primal point); objective = sum h_k L(x_k+1, u) + "
+            "solve cold from the previous primal point; ours ends at its early polish, the "
+            "optimum checked, not the path); objective = sum h_k L(x_k+1, u) + "
             "terminal + step equilibration penalty, recomputed by one formula on each "
             "side's trajectory (nosnoc's own report alongside), residual max |min(theta, "
             "lambda)| with lambda from the states on each side; equal optimum: objectives "
@@ -674,7 +679,8 @@ def _simple_car_peer(py: str, repeats: int) -> Iterator[dict]:
         "iteration limit as ours), nosnoc's algebraic z = v - 15 being our switching "
         "function c = v - 15; both from nosnoc's start (at rest, the algebraic variables "
         "centred: start='centred') and homotopy (sigma from 1 by 0.1, each solve cold from "
-        "the previous primal point); objective = sum h_k u_k^2 + step equilibration "
+        "the previous primal point; ours ends at its early polish, the optimum checked, "
+        "not the path); objective = sum h_k u_k^2 + step equilibration "
         "penalty, recomputed by one formula on each side's trajectory; equal optimum: "
         "within objective_tolerance (as the sliding-mode and cart-pole rows); a non-convex "
         "problem: ours restarted from nosnoc's states (uniform lengths, default homotopy) "

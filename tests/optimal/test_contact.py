@@ -158,6 +158,8 @@ def test_bad_problems_are_refused_naming_the_argument():
         ContactProblem(s, BLOCK.x0, 10, 0.1, x_final=["1.0", 0.0, 0.0, 0.0])
     with pytest.raises(ModelError, match="^factor"):
         Relaxation(factor=1.5)
+    with pytest.raises(ModelError, match="^settle_fraction"):
+        Relaxation(settle_fraction=1.5)
     with pytest.raises(ModelError, match="^relaxation"):
         ContactProblem(s, BLOCK.x0, 10, 0.1).solve(relaxation=1e-3)
 

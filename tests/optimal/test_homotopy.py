@@ -252,6 +252,32 @@ def test_the_early_polish_ends_at_the_homotopys_point():
     assert relaxed[0] < relaxed[1] == len(Relaxation().sigmas())
 
 
+@pytest.mark.parametrize("fraction", [0.0, 0.03, 0.05, 1.0])
+def test_the_polish_is_tried_once_few_branches_change(monkeypatch, fraction):
+    """The first polish follows the first relaxed solve after which at most
+    ``settle_fraction`` of the pairs changed branch (``0``: none; ``1``: the second solve).
+    From σ = 1 the speed-up's 46 pairs change by 3, 2, 1, 1, 0 between solves, so the
+    four fractions try it at four different solves."""
+    calls = []
+    solve = homotopy._NLP.solve
+
+    def spy_solve(self, guess, sigma, branches=None, tol=None):
+        sol, record = solve(self, guess, sigma, branches, tol)
+        calls.append(None if sigma is None else
+                     [a <= b for a, b in self.builder.pairs(sol, homotopy.numpy_ops())])
+        return sol, record
+
+    monkeypatch.setattr(homotopy._NLP, "solve", spy_solve)
+    SpeedUp().problem(N).solve(Relaxation(sigma0=1.0, settle_fraction=fraction))
+    first = calls.index(None)
+    relaxed = calls[:first]
+    total = sum(b.size for b in relaxed[0])
+    changed = [sum(int(np.count_nonzero(x != y)) for x, y in zip(now, before, strict=True))
+               for before, now in zip(relaxed[:-1], relaxed[1:], strict=True)]
+    assert first >= 2 and changed[-1] <= fraction * total
+    assert all(c > fraction * total for c in changed[:-1])
+
+
 def test_a_polish_off_the_path_is_not_kept():
     """The first-order continuation of the relaxed path, ``J + σ Σ ν``, decides: a polished
     cost within a tenth of the rise ``σ Σ ν`` is kept, one beyond it is not."""

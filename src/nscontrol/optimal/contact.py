@@ -78,6 +78,12 @@ class Relaxation:
         limit of the relaxed path (the relaxed cost plus ``σ`` times the multipliers of
         the products, within a tenth of that rise); otherwise go on. Skips the last
         relaxations, which lead to the same point.
+    settle_fraction : float
+        With ``early_polish``: the polish is tried once at most this fraction of the pairs
+        changed branch between two successive relaxed solves, in ``[0, 1]`` (``0``: none).
+        A pair near its corner (both sides ``O(√σ)``) can swap branch with no change of the
+        solution, so waiting for no change at all costs a relaxation; a polish costs a few
+        iterations, a relaxed solve tens, and a polish off the path is discarded anyway.
     stage_tol : float
         IPOPT's tolerance on a relaxed solve before the last is ``max(tol, stage_tol σ)``:
         such a solve is a waypoint, whose point the next relaxation moves by ``O(σ)``
@@ -92,6 +98,7 @@ class Relaxation:
     max_iter: int = 3000
     early_polish: bool = True
     stage_tol: float = 1e-2
+    settle_fraction: float = 0.03
 
     def __post_init__(self) -> None:
         check_positive("sigma0", self.sigma0)
@@ -102,6 +109,7 @@ class Relaxation:
         check_integer("max_iter", self.max_iter, minimum=1)
         check_bool("early_polish", self.early_polish)
         check_positive("stage_tol", self.stage_tol, allow_zero=True)
+        check_in_interval("settle_fraction", self.settle_fraction, 0.0, 1.0)
 
     def sigmas(self) -> list[float]:
         """The sequence ``sigma0, sigma0 factor, ...``, ending at ``sigma_min``."""

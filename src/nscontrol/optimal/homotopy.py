@@ -364,8 +364,9 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
     Each relaxed solve but the last stops at IPOPT's tolerance ``max(tol, stage_tol σ)``
     (:class:`Relaxation`): the next relaxation moves its point by ``O(σ)`` anyway.
 
-    With ``relaxation.early_polish``, once a relaxed solve leaves every pair on the branch
-    the previous one chose (the active set settled), its polish is tried at once and kept
+    With ``relaxation.early_polish``, once a relaxed solve leaves all but a
+    ``settle_fraction`` of the pairs on the branch the previous one chose (the active set
+    settled, but for pairs at their corner), its polish is tried at once and kept
     when its cost continues the relaxed path to ``σ = 0`` (:func:`_continues_path`): the
     remaining relaxations would lead to that point, and are skipped. A polish that does not
     continue the path (another local optimum) is discarded and the homotopy goes on.
@@ -414,10 +415,12 @@ def solve_homotopy(builder: Builder, guess: dict[str, Any], relaxation: Relaxati
         if not (relaxation.polish and relaxation.early_polish) or sigma == sigmas[-1]:
             continue
         branches = [a <= b for a, b in builder.pairs(sol, numpy_ops())]
-        settled = previous is not None and all(
-            np.array_equal(x, y) for x, y in zip(branches, previous, strict=True))
+        total = sum(b.size for b in branches)
+        settled = previous is not None and sum(
+            int(np.count_nonzero(x != y)) for x, y in zip(branches, previous, strict=True)
+        ) <= relaxation.settle_fraction * total
         previous = branches
-        if settled and sum(b.size for b in branches):
+        if settled and total:
             polished, record = nlp.solve(sol, None, branches)
             stages.append(record)
             if record["status"] in SOLVED and _continues_path(nlp, sol, polished, sigma):
