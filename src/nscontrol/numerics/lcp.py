@@ -472,11 +472,9 @@ def _solve_csr(M: Any, q: NDArray[np.float64], tol: float, limit: int) -> LCPRes
         state, its, res, tolerance = entry(M.indptr, M.indices, M.data, q, buf, tol, limit)
     except TypeError:
         return None
-    if state != _BANDED_SOLVED:
-        return None
-    _read_only(buf, False)
-    return _tuple_new(LCPResult, (buf[:n], buf[n:2 * n], "solved", its, res, "banded", 1,
-                                  tolerance, buf))
+    # only a verified banded run is an answer here (any other end: the general path)
+    return (_log_result(buf, n, state, its, res, tolerance, False)
+            if state == _BANDED_SOLVED else None)
 
 
 def _buffer_size(n: int) -> int:
