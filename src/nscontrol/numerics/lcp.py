@@ -406,20 +406,25 @@ def solve_lcp(M: Any, q: Any, *, method: Method = "auto", tol: float = 1e-12,
     >>> res.status, np.round(res.z, 12).tolist()
     ('solved', [1.333333333333, 2.333333333333])
     """
-    if (z0 is None and type(q) is np.ndarray and type(tol) is float and type(omega) is float
+    if (z0 is None and type(q) is _ndarray and type(tol) is float and type(omega) is float
             and (strict is False or strict is True) and type(method) is str):
         # the per-call path: LCPSolver's analysis and chain, in one compiled call whose
         # signature checks the types of M and q (a TypeError sends other kinds to the
         # general path) and whose first lines check the shapes and the options
-        entry = _DENSE_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_dense()
+        entry = _dense_entry
+        if entry is _UNLOADED:
+            entry = _ENTRIES.load().dense
         code = _METHOD_CODES.get(method, -1)
         limit = 0 if max_iter is None else (
             max_iter if type(max_iter) is int and max_iter >= 1 else -1)
         # only an array M reaches the compiled call: anything else (a sparse M, lists) fails
         # its signature, and numba's search for a conversion before the TypeError costs ~70 µs
-        if entry is not None and code >= 0 and limit >= 0 and type(M) is np.ndarray:
+        if entry is not None and code >= 0 and limit >= 0 and type(M) is _ndarray:
             n = q.size
-            buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
+            try:
+                buf = _empty(_BUFFER_SIZES[n])
+            except IndexError:
+                buf = _empty(_buffer_size(n))
             try:
                 state, its, res, tolerance = entry(M, q, buf, code, tol, limit, omega)
             except TypeError:
@@ -464,10 +469,15 @@ def _solve_csr(M: Any, q: NDArray[np.float64], tol: float, limit: int) -> LCPRes
     its verification), or None for the general path: any other ``M``, int64 indices, a
     banded run that was not verified (the general path then runs ``auto``'s fallbacks)."""
     n = q.size
-    entry = _CSR_ENTRY[0] if _ENTRIES.loaded else _ENTRIES.load_csr()
+    entry = _csr_entry
+    if entry is _UNLOADED:
+        entry = _ENTRIES.load().csr
     if entry is None or n <= 2 or M.shape != (n, n):
         return None
-    buf = _empty(_CSR_BUFFER_SIZES[n] if n < _TABULATED else int(dispatch.csr_buffer_size(n)))
+    try:
+        buf = _empty(_CSR_BUFFER_SIZES[n])
+    except IndexError:
+        buf = _empty(int(dispatch.csr_buffer_size(n)))
     try:
         state, its, res, tolerance = entry(M.indptr, M.indices, M.data, q, buf, tol, limit)
     except TypeError:
@@ -482,8 +492,9 @@ def _buffer_size(n: int) -> int:
     return int(dispatch.buffer_size(n))
 
 
-#: :func:`_buffer_size` for ``n < _TABULATED`` (a list read costs less than the call),
-#: filled when the entries are loaded (:meth:`_Entries.load`, before any solve).
+#: :func:`_buffer_size` for ``n < _TABULATED`` (a list read costs less than the call;
+#: read in ``try``, an ``IndexError`` for larger ``n``), filled when the entries are loaded
+#: (:meth:`_Entries.load`, before any solve).
 _TABULATED = 2 * dispatch.LEMKE_FULL_TABLEAU_MAX_SIZE
 _BUFFER_SIZES: list[int] = []
 #: ``dispatch.csr_buffer_size(n)`` for ``n < _TABULATED``, filled with :data:`_BUFFER_SIZES`.
@@ -510,24 +521,19 @@ class _Entries:
         _BUFFER_SIZES[:] = [_buffer_size(n) for n in range(_TABULATED)]
         _CSR_BUFFER_SIZES[:] = [int(dispatch.csr_buffer_size(n)) for n in range(_TABULATED)]
         cls.loaded = True
-        _DENSE_ENTRY[0] = cls.dense
-        _CSR_ENTRY[0] = cls.csr
+        global _dense_entry, _csr_entry
+        _dense_entry, _csr_entry = cls.dense, cls.csr
         return cls
 
 
-    @classmethod
-    def load_dense(cls) -> Any:
-        return cls.load().dense
-
-    @classmethod
-    def load_csr(cls) -> Any:
-        return cls.load().csr
-
-
-#: ``_Entries.dense`` (read from a list: a class attribute holding a dispatcher is a
-#: descriptor, bound on every read)
-_DENSE_ENTRY: list[Any] = [None]
-_CSR_ENTRY: list[Any] = [None]
+#: ``_Entries.dense`` and ``_Entries.csr`` as module globals, :data:`_UNLOADED` until
+#: :meth:`_Entries.load` (one global read per call; a class attribute holding a dispatcher
+#: is a descriptor, bound on every read).
+_UNLOADED: Any = object()
+_dense_entry: Any = _UNLOADED
+_csr_entry: Any = _UNLOADED
+#: ``np.ndarray`` (one global read in the per-call type checks instead of two lookups).
+_ndarray = np.ndarray
 
 
 _ENTRIES = _Entries
@@ -688,11 +694,14 @@ class LCPSolver:
             # already reconciled with the residual test (kernels.certify); its signature
             # checks the type of q (TypeError otherwise) and its first line q's length
             M, lower, diag, upper, bits = self._packed
-            buf = _empty(_BUFFER_SIZES[n] if n < _TABULATED else _buffer_size(n))
+            try:
+                buf = _empty(_BUFFER_SIZES[n])
+            except IndexError:
+                buf = _empty(_buffer_size(n))
             entry = self._entry
             try:     # only an array q reaches the compiled call (see solve_lcp)
                 out = (entry(M, lower, diag, upper, q, buf, bits, self.tol, self._max_iter0,
-                             self.omega) if entry is not None and type(q) is np.ndarray
+                             self.omega) if entry is not None and type(q) is _ndarray
                        else _UNCHECKED)
             except TypeError:
                 out = _UNCHECKED
