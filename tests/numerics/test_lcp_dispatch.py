@@ -282,6 +282,47 @@ def test_lemke_in_a_given_workspace_is_lemke_kernel_bit_for_bit(case):
         assert res <= bound
 
 
+def _pgs_cases():
+    """Problems whose PGS runs end every way: solved (random SPD, its active set polished),
+    out of sweeps (a tiny budget; a PSD LCP without solution, ``M = a a^T``, ``q = (-1,
+    1)``), a zero diagonal (numerical failure), trivially (q >= 0), with ``omega`` 1 and
+    1.5."""
+    rng = np.random.default_rng(78)
+    for n in (1, 4, 10, 48):
+        A = rng.standard_normal((n, n))
+        yield A @ A.T / n + np.eye(n), rng.standard_normal(n) - 1.0, 0, 1.0
+    A = rng.standard_normal((10, 10))
+    yield A @ A.T / 10 + 0.01 * np.eye(10), rng.standard_normal(10), 3, 1.5
+    yield np.array([[1.0, -1.0], [-1.0, 1.0]]), np.array([-1.0, -1.0]), 50, 1.0
+    yield GAME, -np.ones(4), 0, 1.0
+    yield np.eye(3), np.ones(3), 0, 1.0
+
+
+@pytest.mark.parametrize("case", list(range(8)))
+def test_pgs_in_the_buffer_is_the_allocating_pgs_bit_for_bit(case):
+    # a first PGS run (method="pgs") runs in the per-call buffer with its scratch there (no
+    # allocation); it must be the same sweeps and the same polish as pgs_verified, which
+    # allocates: status, count, residual, z and w identical, through solve_lcp and a
+    # reusable solver alike
+    from nscontrol.numerics import _lcp_kernels as kernels
+    M, q, limit, omega = list(_pgs_cases())[case]
+    n = q.shape[0]
+    z, w = np.full(n, np.nan), np.full(n, np.nan)
+    code, its, res, tolerance = kernels.pgs_verified(M, q, z, w, 1e-12, limit or 10_000,
+                                                     omega, True)
+    ours = solve_lcp(M, q, method="pgs", max_iter=limit or None, omega=omega)
+    assert_same(ours, LCPSolver(M, "pgs", max_iter=limit or None, omega=omega).solve(q))
+    assert (ours.status, ours.iterations) == (lcp.STATUSES[code], its)
+    assert ours.residual == res and ours.tolerance == tolerance
+    np.testing.assert_array_equal(ours.z, z)
+    np.testing.assert_array_equal(ours.w, w)
+    work = np.full(kernels.pgs_work_size(n), np.nan)    # no entry read before written
+    z2, w2 = np.full(n, np.nan), np.full(n, np.nan)
+    assert kernels._pgs_verified_in(M, q, z2, w2, 1e-12, limit or 10_000, omega, True,
+                                    work)[:2] == (code, its)
+    np.testing.assert_array_equal(z2, z)
+
+
 @pytest.mark.parametrize(("M", "q"), [(GAME, -np.ones(4)), INFEASIBLE])
 def test_fallbacks_after_the_first_lemke_run_in_the_buffer_match_the_solver(M, q):
     # the first Lemke run in the buffer fails (a ray), the chain goes on from it: the same

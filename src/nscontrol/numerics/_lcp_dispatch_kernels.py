@@ -38,6 +38,7 @@ from ._lcp_kernels import (
     SOLVED,
     _lemke_into,
     _matvec_plus,
+    _pgs_verified_in,
     _solve_principal_block,
     all_finite,
     csr_tridiagonal_bands,
@@ -46,6 +47,7 @@ from ._lcp_kernels import (
     lemke_verified,
     lemke_work_size,
     pgs_verified,
+    pgs_work_size,
     tridiagonal_verified,
     verified_status,
     verify_dense,
@@ -362,32 +364,40 @@ def buffer_size(n):
     """Floats of the buffer of the per-call entries (:func:`solve_dense_into`,
     :func:`solve_packed`): ``z``, ``w``, the work array of :func:`run_chain` (``2 n`` and the
     log), and up to ``n =`` :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE`
-    Lemke's workspace, where a first Lemke run (:func:`first_lemke`) needs no allocation."""
+    the workspace of Lemke's or PGS's (the larger), where a first run of either
+    (:func:`first_in_buffer`) needs no allocation."""
     size = 4 * n + LOG_ROWS * LOG_WIDTH
     if n <= LEMKE_FULL_TABLEAU_MAX_SIZE:
-        size += lemke_work_size(n)
+        size += max(lemke_work_size(n), pgs_work_size(n))
     return size
 
 
 @njit(cache=True, **NO_REFCOUNT)
-def first_lemke(M, q, buf, tol, limit):
-    """A first run that is Lemke's, in a buffer of :func:`buffer_size` floats with its
-    workspace (``n <=`` :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE`),
-    without allocation or reference counting: what :func:`run_one` computes for
-    :data:`LEMKE`, bit for bit (:func:`~nscontrol.numerics._lcp_kernels.lemke_into` is
-    ``lemke_kernel`` in a given workspace), logged as :func:`run_chain` logs it, as row 0.
-    Returns ``(status_code, iterations, residual, tolerance)`` (the status reconciled with
-    the residual test), :data:`~nscontrol.numerics._lcp_kernels.Q_NOT_FINITE` for a ``q``
-    that is not finite (nothing logged)."""
+def first_in_buffer(run, M, q, buf, tol, limit, omega):
+    """A first run that is Lemke's or PGS's (cold) on a dense ``M``, in a buffer of
+    :func:`buffer_size` floats with its workspace (``n <=``
+    :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE`), without
+    allocation: what :func:`run_one` computes for ``run``, bit for bit
+    (:func:`~nscontrol.numerics._lcp_kernels.lemke_into` is ``lemke_kernel``, and
+    ``_pgs_verified_in`` is ``pgs_verified``, in a given workspace; Lemke's also without
+    reference counting), logged as :func:`run_chain` logs it, as row 0. Returns
+    ``(status_code, iterations, residual, tolerance)`` (the status reconciled with the
+    residual test), :data:`~nscontrol.numerics._lcp_kernels.Q_NOT_FINITE` for a ``q`` that
+    is not finite (nothing logged)."""
     n = q.shape[0]
     if not all_finite(q):
         return Q_NOT_FINITE, 0, np.nan, np.nan
     z = buf[:n]
     w = buf[n:2 * n]
-    code, its = _lemke_into(M, q, z, w, limit, buf[4 * n + LOG_ROWS * LOG_WIDTH:], False)
-    res, tolerance, ok = verify_dense(M, q, z, w, tol)
-    code = verified_status(code, ok)
-    _log_run(buf[2 * n:], n, 0, LEMKE, code, its, res, tolerance, limit, z, w)
+    work = buf[4 * n + LOG_ROWS * LOG_WIDTH:]
+    if run == LEMKE:
+        code, its = _lemke_into(M, q, z, w, limit, work, False)
+        res, tolerance, ok = verify_dense(M, q, z, w, tol)
+        code = verified_status(code, ok)
+    else:
+        code, its, res, tolerance = _pgs_verified_in(M, q, z, w, tol, limit, omega, True,
+                                                     work)
+    _log_run(buf[2 * n:], n, 0, run, code, its, res, tolerance, limit, z, w)
     return code, its, res, tolerance
 
 
@@ -434,26 +444,27 @@ def _chain_from_first(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q,
                       run, structured, large_symmetric, positive_diagonal, tol, max_iter,
                       omega, skip_python):
     """:func:`run_chain` from the first run ``run``, the runs in ``buf`` (``z``, ``w``, the
-    work array; :func:`buffer_size`). A first Lemke run on a dense ``M`` up to
+    work array; :func:`buffer_size`). A first Lemke or PGS run on a dense ``M`` up to
     :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE` is made by
-    :func:`first_lemke` (the per-call path of a small LCP: no allocation, no reference
-    counting); the chain goes on from there if it is not verified."""
+    :func:`first_in_buffer` (the per-call path of a small LCP: no allocation); the chain goes
+    on from there if it is not verified."""
     n = q.shape[0]
     tried = 0
     nlog = 0
-    if (run == LEMKE and has_dense and n <= LEMKE_FULL_TABLEAU_MAX_SIZE
+    if ((run == LEMKE or run == PGS) and has_dense and n <= LEMKE_FULL_TABLEAU_MAX_SIZE
             and buf.shape[0] >= buffer_size(n)):
-        limit = run_limit(LEMKE, n, max_iter)
-        code, its, res, tolerance = first_lemke(M, q, buf, tol, limit)
+        limit = run_limit(run, n, max_iter)
+        code, its, res, tolerance = first_in_buffer(run, M, q, buf, tol, limit, omega)
         if code == SOLVED:
-            return SOLVED, LEMKE, its, res, tolerance, 1, 1
+            return SOLVED, run, its, res, tolerance, family(run), 1
         if code == Q_NOT_FINITE:
-            return Q_NOT_FINITE, LEMKE, 0, np.nan, np.nan, 0, 0
-        tried = 1
+            return Q_NOT_FINITE, run, 0, np.nan, np.nan, 0, 0
+        first = run
+        tried = family(run)
         nlog = 1
         run = next_run(method, tried, n, structured, large_symmetric, positive_diagonal)
         if run == NO_RUN:
-            return code, LEMKE, its, res, tolerance, tried, nlog
+            return code, first, its, res, tolerance, tried, nlog
     z = buf[:n]
     return run_chain(M, has_dense, lower, diag, upper, has_bands, sparse_lu, q, z,
                      buf[n:2 * n], z, False, method, run, tried, structured, large_symmetric,

@@ -646,6 +646,12 @@ def pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega):
     Returns ``(status_code, sweeps)``; code 3 for a non-positive diagonal or a non-finite
     iterate.
     """
+    return _pgs_run(M, q, z_inout, w_out, tol, max_iter, omega, np.empty(q.shape[0]))
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _pgs_run(M, q, z_inout, w_out, tol, max_iter, omega, step):
+    """:func:`pgs_kernel` with its scratch ``step`` (length n) given by the caller."""
     n = q.shape[0]
     for i in range(n):
         if not (M[i, i] > 0.0):
@@ -660,8 +666,7 @@ def pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega):
     qscale = 1.0
     for i in range(n):
         qscale = max(qscale, 1.0 + abs(q[i]))
-    step = np.empty(n)          # omega / M_ii: a product per row instead of a division
-    for i in range(n):
+    for i in range(n):          # omega / M_ii: a product per row instead of a division
         step[i] = omega / M[i, i]
     for sweep in range(1, max_iter + 1):
         proxy = _pgs_sweep(M, q, z_inout, step, 1.0 / omega)
@@ -1123,21 +1128,36 @@ def pgs_polish(M, q, z, w):
     polished point has a smaller natural residual that :func:`certify` can trust (its
     cancellation below :data:`MAX_CANCELLATION`). Returns whether it did.
     """
+    return _pgs_polish_in(M, q, z, w, np.empty(pgs_work_size(q.shape[0])))
+
+
+@njit(cache=True, inline='always')
+def pgs_work_size(n):
+    """Floats of the scratch of :func:`_pgs_verified_in`: ``step``, the active indices (int64),
+    the polished point, its ``w``, the block's solution and its elimination (``n (n + 1)``)."""
+    return 5 * n + n * (n + 1)
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _pgs_polish_in(M, q, z, w, work):
+    """:func:`pgs_polish` in the caller's scratch ``work`` (at least ``4 n + n (n + 1)``
+    floats)."""
     n = q.shape[0]
-    idx = np.empty(n, dtype=np.int64)
+    idx = work[:n].view(np.int64)
+    p = work[n:2 * n]
+    wp = work[2 * n:3 * n]
     k = 0
     for i in range(n):
+        p[i] = 0.0
         if z[i] > w[i]:
             idx[k] = i
             k += 1
-    p = np.zeros(n)
     if k > 0:
-        x = np.empty(k)
-        if not _solve_principal_block(M, q, idx, k, x, np.empty(k * (k + 1))):
+        x = work[3 * n:3 * n + k]
+        if not _solve_principal_block(M, q, idx, k, x, work[4 * n:]):
             return False
         for r in range(k):
             p[idx[r]] = x[r]
-    wp = np.empty(n)
     mz = _matvec_plus_abs(M, p, q, wp)
     qmax = 0.0
     for i in range(n):
@@ -1161,13 +1181,22 @@ def pgs_verified(M, q, z_inout, w_out, tol, max_iter, omega, cold_start):
     active-set polish of :func:`pgs_polish` and the verification of :func:`verify_dense`,
     in one compiled call. Returns ``(status_code, sweeps, residual, tolerance)`` as
     :func:`lemke_verified`."""
+    return _pgs_verified_in(M, q, z_inout, w_out, tol, max_iter, omega, cold_start,
+                            np.empty(pgs_work_size(q.shape[0])))
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def _pgs_verified_in(M, q, z_inout, w_out, tol, max_iter, omega, cold_start, work):
+    """:func:`pgs_verified` in the caller's scratch ``work`` of :func:`pgs_work_size` floats
+    (the per-call path of a small LCP: no allocation)."""
     if not all_finite(q):
         return Q_NOT_FINITE, 0, np.nan, np.nan
     if cold_start:
         z_inout[:] = 0.0
-    code, its = pgs_kernel(M, q, z_inout, w_out, tol, max_iter, omega)
+    n = q.shape[0]
+    code, its = _pgs_run(M, q, z_inout, w_out, tol, max_iter, omega, work[:n])
     if code == SOLVED or code == MAX_ITER:
         _matvec_plus(M, z_inout, q, w_out)
-        pgs_polish(M, q, z_inout, w_out)
+        _pgs_polish_in(M, q, z_inout, w_out, work[n:])
     res, tolerance, ok = verify_dense(M, q, z_inout, w_out, tol)
     return verified_status(code, ok), its, res, tolerance
