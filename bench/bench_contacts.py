@@ -67,6 +67,12 @@ RUNS = 3
 MAX_SWEEPS = 20000
 #: The goal of issue 31 for the whole call on one contact.
 ONE_CONTACT_GOAL = 10e-6
+#: Problems whose whole call takes less than this are measured twice on each side,
+#: interleaved (ours, Siconos, ours, Siconos), each side keeping its faster measurement: the
+#: speed of this shared machine moved by up to 1.7x within seconds, and a one-contact file
+#: read 1.02x in one run and 1.29x in the previous one (our whole call 5.3 us against
+#: 3.2-3.4 us in the runs before and after).
+INTERLEAVE_BELOW_S = 1e-4
 
 
 def _stack_problem(n: int, angle: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -175,11 +181,17 @@ def _compare(scenario: str, W: Any, q: np.ndarray, mu: np.ndarray, tol: float,
     solver = FrictionContactSolver(W, mu, dim=3)
     res = solver.solve(q, tol=tol, max_sweeps=MAX_SWEEPS)
     warm = solver.solve(q, res.r, tol=tol, max_sweeps=MAX_SWEEPS)
-    times = {"ours_whole": _cpu_runs(whole, budget=budget),
-             "ours_alone": _cpu_runs(lambda: solver.solve(q, tol=tol, max_sweeps=MAX_SWEEPS),
-                                     budget=budget),
-             "ours_warm": _cpu_runs(lambda: solver.solve(q, res.r, tol=tol,
-                                                         max_sweeps=MAX_SWEEPS), budget=budget)}
+
+    def ours() -> dict[str, list[float]]:
+        return {"ours_whole": _cpu_runs(whole, budget=budget),
+                "ours_alone": _cpu_runs(lambda: solver.solve(q, tol=tol,
+                                                             max_sweeps=MAX_SWEEPS),
+                                        budget=budget),
+                "ours_warm": _cpu_runs(lambda: solver.solve(q, res.r, tol=tol,
+                                                            max_sweeps=MAX_SWEEPS),
+                                       budget=budget)}
+
+    times = ours()
     record: dict[str, Any] = {
         "scenario": scenario, "size": m, "ours_s_per_solve": float(np.median(times["ours_whole"])),
         "reference": None, "reference_s_per_solve": None, "ratio": None,
@@ -200,9 +212,22 @@ def _compare(scenario: str, W: Any, q: np.ndarray, mu: np.ndarray, tol: float,
                      q=q, mu=mu)
         else:
             np.savez(npz, W=W, q=q, mu=mu)
-        out = run_siconos("contacts.py", {
-            "kind": "fc3d", "npz": npz, "path": str(path) if path else None, "tol": tol,
-            "max_iter": MAX_SWEEPS, "runs": RUNS, "budget": budget}, timeout=1800)[-1]
+        spec = {"kind": "fc3d", "npz": npz, "path": str(path) if path else None, "tol": tol,
+                "max_iter": MAX_SWEEPS, "runs": RUNS, "budget": budget}
+        out = run_siconos("contacts.py", spec, timeout=1800)[-1]
+        if np.median(times["ours_whole"]) < INTERLEAVE_BELOW_S:
+            # ours, Siconos, ours, Siconos: each side's figure is its faster measurement
+            again, theirs = ours(), run_siconos("contacts.py", spec, timeout=1800)[-1]
+            for mode in ("whole", "alone", "warm"):
+                if np.median(again[f"ours_{mode}"]) < np.median(times[f"ours_{mode}"]):
+                    times[f"ours_{mode}"] = again[f"ours_{mode}"]
+                if np.median(theirs[mode]) < np.median(out[mode]):
+                    out[mode] = theirs[mode]
+            record["timing"] = ("the faster of two interleaved measurements per side (ours, "
+                                "Siconos, ours, Siconos)")
+            record["ours_s_per_solve"] = float(np.median(times["ours_whole"]))
+            if m == 1:
+                record["meets_goal"] = record["ours_s_per_solve"] <= ONE_CONTACT_GOAL
     for mode in ("whole", "alone", "warm"):
         times[f"siconos_{mode}"] = out[mode]
         record["ratios"][mode] = float(np.median(out[mode]) / np.median(times[f"ours_{mode}"]))
