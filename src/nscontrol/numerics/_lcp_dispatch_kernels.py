@@ -377,10 +377,10 @@ def first_in_buffer(run, M, q, buf, tol, limit, omega):
     """A first run that is Lemke's or PGS's (cold) on a dense ``M``, in a buffer of
     :func:`buffer_size` floats with its workspace (``n <=``
     :data:`~nscontrol.numerics._lcp_kernels.LEMKE_FULL_TABLEAU_MAX_SIZE`), without
-    allocation: what :func:`run_one` computes for ``run``, bit for bit
+    allocation or reference counting: what :func:`run_one` computes for ``run``, bit for bit
     (:func:`~nscontrol.numerics._lcp_kernels.lemke_into` is ``lemke_kernel``, and
-    ``_pgs_verified_in`` is ``pgs_verified``, in a given workspace; Lemke's also without
-    reference counting), logged as :func:`run_chain` logs it, as row 0. Returns
+    ``_pgs_verified_in`` is ``pgs_verified``, in a given workspace), logged as
+    :func:`run_chain` logs it, as row 0. Returns
     ``(status_code, iterations, residual, tolerance)`` (the status reconciled with the
     residual test), :data:`~nscontrol.numerics._lcp_kernels.Q_NOT_FINITE` for a ``q`` that
     is not finite (nothing logged)."""
