@@ -248,3 +248,42 @@ def test_residual_of_a_plan_from_its_states_and_weights(plan):
         problem_.residual_of(plan.x, plan.theta[:-1])
     with pytest.raises(DimensionError, match="^x"):
         problem_.residual_of(plan.x[:-1], plan.theta)
+
+
+def test_transcription_rows_are_implicit_euler_on_every_element():
+    """The transcription's rows (one element's function mapped over the K elements) at a
+    random point are the implicit Euler step ``x_{k+1} - x_k - h_k Σ θ_i f_i(x_{k+1},
+    u_s)`` and the algebraic rows ``g(x_{k+1}) - λ_k - μ_k`` (``g = -S c``) written out
+    element by element from the fields themselves, each element on its stage's input (3
+    elements per stage); the cost is ``Σ h_k |u_s|²``. Both sides are a few flops on entries
+    of size <= 10: equal to 1e-12 (about 50 ulps of 10)."""
+    import casadi as ca
+
+    stages, elements = 4, 3
+    prob = problem(stages=stages, elements=elements)
+    nlp = prob._transcription()
+    opti = ca.Opti()
+    var = nlp.variables(opti)
+    nlp.constraints(opti, var)
+    names = ["X", "U", "TH", "LAM", "MU", "H"]
+    rng = np.random.default_rng(3)
+    K = stages * elements
+    shapes = {"X": (2, K + 1), "U": (2, stages), "TH": (4, K), "LAM": (4, K), "MU": (1, K),
+              "H": (K, 1)}
+    vals = {k: rng.uniform(-2.0, 2.0, shapes[k]) for k in names}
+    rows = ca.Function("rows", [var[k] for k in names], [opti.g, nlp.cost(var)])
+    g, cost = (np.asarray(v, float).ravel() for v in rows(*[vals[k] for k in names]))
+    X, U, TH, H = vals["X"], vals["U"], vals["TH"], vals["H"].ravel()
+    signs = [(-1, -1), (-1, 1), (1, -1), (1, 1)]
+    steps, algebraic = [], []
+    for k in range(K):
+        xn, u = X[:, k + 1], U[:, k // elements]
+        f = sum(TH[i, k] * np.array(drift(xn, u, *s)) for i, s in enumerate(signs))
+        steps.append(xn - X[:, k] - H[k] * f)
+        c = np.array([xn[0], xn[1] * (1 + xn[1] ** 2)])
+        algebraic.append(-np.array(signs, float) @ c - vals["LAM"][:, k] - vals["MU"][0, k])
+    expected = np.concatenate([np.concatenate(steps), np.concatenate(algebraic)])
+    np.testing.assert_allclose(g[:expected.size], expected, rtol=0, atol=1e-12)
+    effort = sum(H[k] * np.sum(U[:, k // elements] ** 2) for k in range(K))
+    assert cost[0] == pytest.approx(effort, rel=1e-12)
+    assert nlp.plan_cost(X, U, H) == pytest.approx(effort, rel=1e-12)

@@ -512,7 +512,7 @@ class FesdProblem:
         X = self._states("x", x)
         nlp = self._transcription()
         TH = as_matrix("theta", theta, rows=K, cols=nlp.nth).T
-        G = np.column_stack([nlp._g(xk) for xk in X])
+        G = nlp._g_columns(X.T)
         LAM = G - np.column_stack([nlp._per_layer_min(G[:, k]) for k in range(K + 1)])
         first = np.abs(np.minimum(TH[:, 0], LAM[:, 0])).max() if self.switch_detection \
             else 0.0
@@ -569,6 +569,14 @@ class FesdProblem:
                                "switch_detection": self.switch_detection})
 
 
+def _row(h: Any) -> Any:
+    """Element lengths as a 1 × K row: CasADi symbols reshaped, numbers as a ``DM``."""
+    ca = require_casadi()
+    if isinstance(h, (ca.MX, ca.SX)):
+        return ca.reshape(h, 1, h.numel())
+    return ca.DM(np.asarray(h, float).reshape(1, -1))
+
+
 class _FesdNLP:
     """The NLP of a :class:`FesdProblem` (a :class:`~nscontrol.optimal.homotopy.Builder`)."""
 
@@ -580,6 +588,8 @@ class _FesdNLP:
         self.nth = int(self.tr.rows[-1])
         g0 = self._g(problem.x0)
         self.lam_start = g0 - self._per_layer_min(g0)
+        self._element_fn: Any = None      # the mapped functions, built on first use
+        self._stage_cost_fn: Any = None
 
     def _g(self, x: FloatArray) -> FloatArray:
         return np.concatenate([np.asarray(G(x), float).reshape(-1) for G in self.tr.G])
@@ -600,7 +610,7 @@ class _FesdNLP:
         if X is None:
             xf = p.x0 if p.x_final is None else np.where(np.isnan(p.x_final), p.x0, p.x_final)
             X = p.x0[:, None] + (xf - p.x0)[:, None] * np.linspace(0, 1, K + 1)[None, :]
-        G = np.column_stack([self._g(X[:, k + 1]) for k in range(K)])
+        G = self._g_columns(X[:, 1:])
         TH, LAM, MU = np.zeros_like(G), np.empty_like(G), np.empty((len(r) - 1, K))
         for li in range(len(r) - 1):
             block = G[r[li]:r[li + 1]]
@@ -614,25 +624,40 @@ class _FesdNLP:
             MU[:] = 1.0
         return {"X": X, "U": U, "TH": TH, "LAM": LAM, "MU": MU, "H": np.full(K, h)}
 
+    def _g_columns(self, X: FloatArray) -> FloatArray:
+        """``g(x)`` of every column of ``X`` (the layers' rows stacked), one mapped call
+        per layer."""
+        cols = X.shape[1]
+        return np.vstack([np.asarray(G.map(cols)(X), float).reshape(-1, cols)
+                          for G in self.tr.G])
+
+    def _linearised(self, X: FloatArray, TH: FloatArray) -> tuple[FloatArray, list[Any]]:
+        """At each element end ``x_{k+1}`` (the columns of ``X``) and ``u = 0``: the field
+        ``Σ_i F_i θ_i`` (an ``n × K`` array) and its derivative in ``u`` (K ``n × q``
+        arrays), the fields' weights ``TH``; one mapped call per layer."""
+        p, tr, K = self.p, self.tr, X.shape[1]
+        n, q, zero = p.n, p.inputs, np.zeros((p.inputs, X.shape[1]))
+        f, J = np.zeros((n, K)), np.zeros((K, n, q))
+        for i, (F, Ju) in enumerate(zip(tr.F, tr.Ju, strict=True)):
+            m, th = tr.sizes[i], TH[tr.rows[i]:tr.rows[i + 1]]
+            values = np.asarray(F.map(K)(X, zero), float).reshape(n, K, m)
+            f += np.einsum("nkj,jk->nk", values, th)
+            # jacobian(vec(F), u): row j n + r is field j's entry r
+            du = np.asarray(Ju.map(K)(X, zero), float).reshape(m, n, K, q)
+            J += np.einsum("jnkq,jk->knq", du, th)
+        return f, list(J)
+
     def _inputs(self, X: FloatArray, TH: FloatArray) -> FloatArray:
-        p, tr, h, ne = self.p, self.tr, self.hbar, self.p.elements
-        q, n = p.inputs, p.n
+        p, h, ne = self.p, self.hbar, self.p.elements
+        q = p.inputs
         U = np.zeros((q, p.stages))
         if q == 0:
             return U
-        zero = np.zeros(q)
+        f, J = self._linearised(X[:, 1:], TH)
         for s in range(p.stages):
-            rows, rhs = [], []
-            for k in range(s * ne, (s + 1) * ne):
-                xk = X[:, k + 1]
-                f = sum(np.asarray(F(xk, zero), float) @ TH[tr.rows[i]:tr.rows[i + 1], k]
-                        for i, F in enumerate(tr.F))
-                J = sum(np.einsum("ijq,j->iq", np.asarray(Ju(xk, zero), float).reshape(
-                    tr.sizes[i], n, q).transpose(1, 0, 2), TH[tr.rows[i]:tr.rows[i + 1], k])
-                    for i, Ju in enumerate(tr.Ju))
-                rows.append(J)
-                rhs.append((X[:, k + 1] - X[:, k]) / h - f)
-            U[:, s] = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+            ks = range(s * ne, (s + 1) * ne)
+            rhs = np.concatenate([(X[:, k + 1] - X[:, k]) / h - f[:, k] for k in ks])
+            U[:, s] = np.linalg.lstsq(np.vstack([J[k] for k in ks]), rhs, rcond=None)[0]
         return np.clip(U, -np.inf if p.u_min is None else p.u_min[:, None],
                        np.inf if p.u_max is None else p.u_max[:, None])
 
@@ -644,20 +669,38 @@ class _FesdNLP:
         var["H"] = opti.variable(K) if p.free_lengths else np.full(K, self.hbar)
         return var
 
+    def _element(self) -> Any:
+        """One element's rows as a CasADi function of ``(x_k, x_{k+1}, u, θ, λ, μ, h)``:
+        the implicit Euler step and the algebraic rows ``g(x_{k+1}) - λ - μ``. Built once and
+        mapped over the K elements (one call node instead of K copies written out in
+        Python: the transcription is built several times faster)."""
+        if self._element_fn is None:
+            ca, p, tr = require_casadi(), self.p, self.tr
+            xk, xn = ca.SX.sym("xk", p.n), ca.SX.sym("xn", p.n)
+            u, h = ca.SX.sym("u", p.inputs), ca.SX.sym("h")
+            th, lam = ca.SX.sym("th", self.nth), ca.SX.sym("lam", self.nth)
+            mu = ca.SX.sym("mu", len(tr.sizes))
+            f = sum(ca.mtimes(F(xn, u), th[tr.rows[i]:tr.rows[i + 1]])
+                    for i, F in enumerate(tr.F))
+            mu_rows = ca.vertcat(*[ca.repmat(mu[i], tr.sizes[i], 1)
+                                   for i in range(len(tr.sizes))])
+            algebraic = ca.vertcat(*[G(xn) for G in tr.G]) - lam - mu_rows
+            self._element_fn = ca.Function("element", [xk, xn, u, th, lam, mu, h],
+                                           [xn - xk - h * f, algebraic]).map(self.K)
+        return self._element_fn
+
+    def _stage_of_element(self) -> list[int]:
+        """The control stage of each element (the column of ``U`` it holds)."""
+        return [k // self.p.elements for k in range(self.K)]
+
     def constraints(self, opti: Any, var: dict[str, Any]) -> None:
         ca, p, tr, K = require_casadi(), self.p, self.tr, self.K
         X, U, TH, H = var["X"], var["U"], var["TH"], var["H"]
-        steps, algebraic = [], []   # one subject_to per family (each call costs)
-        for k in range(K):
-            xn, uk = X[:, k + 1], U[:, k // p.elements]
-            f = sum(ca.mtimes(F(xn, uk), TH[tr.rows[i]:tr.rows[i + 1], k])
-                    for i, F in enumerate(tr.F))
-            steps.append(xn - X[:, k] - H[k] * f)
-            mu = ca.vertcat(*[ca.repmat(var["MU"][i, k], tr.sizes[i], 1)
-                              for i in range(len(tr.sizes))])
-            algebraic.append(ca.vertcat(*[G(xn) for G in tr.G]) - var["LAM"][:, k] - mu)
-        opti.subject_to(ca.vertcat(*steps) == 0)
-        opti.subject_to(ca.vertcat(*algebraic) == 0)
+        steps, algebraic = self._element()(X[:, :K], X[:, 1:], U[:, self._stage_of_element()],
+                                           TH, var["LAM"], var["MU"], _row(H))
+        # one subject_to per family (each call costs); column-major: element by element
+        opti.subject_to(ca.vec(steps) == 0)
+        opti.subject_to(ca.vec(algebraic) == 0)
         opti.subject_to(ca.vec(ca.vertcat(*[ca.sum1(TH[tr.rows[i]:tr.rows[i + 1], :])
                                             for i in range(len(tr.sizes))])) == 1)
         opti.subject_to(X[:, 0] == p.x0)
@@ -695,7 +738,7 @@ class _FesdNLP:
     def cost(self, var: dict[str, Any]) -> Any:
         ca, p, K = require_casadi(), self.p, self.K
         X, U, H = var["X"], var["U"], var["H"]
-        J = sum(H[k] * self.tr.L(X[:, k + 1], U[:, k // p.elements]) for k in range(K))
+        J = ca.mtimes(self._stage_costs(X, U), ca.vec(_row(H)))
         J = J + self.tr.Lt(X[:, K])
         if p.equilibration and p.free_lengths:
             if p.equilibration_form == "mean":
@@ -707,13 +750,19 @@ class _FesdNLP:
                                               for s in range(p.stages))
         return J
 
+    def _stage_costs(self, X: Any, U: Any) -> Any:
+        """``L(x_{k+1}, u_k)`` of every element, a 1 × K row (symbols or numbers): the
+        stage cost mapped over the elements."""
+        if self._stage_cost_fn is None:
+            self._stage_cost_fn = self.tr.L.map(self.K)
+        return self._stage_cost_fn(X[:, 1:], U[:, self._stage_of_element()])
+
     def plan_cost(self, X: FloatArray, U: FloatArray, H: FloatArray) -> float:
         """``Σ h_k L(x_{k+1}, u_k) + L_T(x_K)`` of a numeric solution."""
-        ne = self.p.elements
         X, U = np.asarray(X, float).reshape(self.p.n, -1), np.asarray(U, float).reshape(
             self.p.inputs, -1)
-        return float(sum(H[k] * float(self.tr.L(X[:, k + 1], U[:, k // ne]))
-                         for k in range(self.K)) + float(self.tr.Lt(X[:, self.K])))
+        L = np.asarray(self._stage_costs(X, U), float).reshape(-1)
+        return float(L @ np.asarray(H, float).reshape(-1) + float(self.tr.Lt(X[:, self.K])))
 
     def pair_keys(self) -> list[tuple[Any, Any]]:
         """Which ``θ`` and ``λ`` entries (column-major) each pair holds."""
