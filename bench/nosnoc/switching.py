@@ -1,7 +1,8 @@
 """Run under the nosnoc venv (``.venv-nosnoc``, nosnoc 0.2 from PyPI, not committed): solves
 switching optimal control problems with nosnoc's FESD and prints one JSON line per problem
-(its optimum, switching time, wall time of ``solver.solve()``). Payload on stdin:
-``{"cases": [...], "repeats": int}``.
+(its optimum, switching time, wall time of ``solver.solve()``). Payloads on stdin, one per
+line: ``{"cases": [...], "repeats": int}``, each answered by its records then
+``{"done": true}``.
 
 * ``speedup``: ``x' = u + a1`` for ``x < 0``, ``u + a2`` for ``x > 0`` from ``-L`` to
   ``x_T`` in ``T``, least ``∫ u²`` (nscontrol.optimal.SpeedUp, closed form ``s* = 1/2``),
@@ -305,7 +306,23 @@ TRAJECTORIES = ("sliding_mode_ocp_as_ours", "cart_pole_with_friction", "simple_c
 
 
 def main():
-    payload = json.load(sys.stdin)
+    """One payload per stdin line (or one JSON document), each answered by its records
+    then ``{"done": true}``: the caller may keep this process and send a case at a time,
+    alternating with its own solves (the two sides timed in the same minute)."""
+    text = sys.stdin.readline()
+    while text:
+        if text.strip():
+            try:
+                payload = json.loads(text)
+            except json.JSONDecodeError:   # a document over several lines
+                payload = json.loads(text + sys.stdin.read())
+            answer(payload)
+            print(json.dumps({"done": True}), flush=True)
+        text = sys.stdin.readline()
+
+
+def answer(payload):
+    """The records of one payload's cases, one JSON line each."""
     for case in payload["cases"]:
         if case["name"] in SIMULATIONS:
             runs = [simulate(case) for _ in range(payload.get("repeats", 3))]
