@@ -19,6 +19,9 @@ variables ``θ_k, λ_k, μ_k`` at its end::
 
     x_{k+1} = x_k + h_k Σ_l F^l(x_{k+1}, u_s) θ^l_k,     g^l(x_{k+1}) = λ^l_k + μ^l_k 1.
 
+(One element's rows and stage cost are CasADi functions mapped over the K elements, not K
+copies written out in Python: the NLP is declared several times faster.)
+
 With ``switch_detection`` the lengths are unknowns (``Σ h_k = T``, and per stage ``T / N``
 with ``equidistant_control_grid``; each within ``element_bounds`` times ``h̄ = T / (N N_fe)``)
 and the **cross complementarity** ``θ^l_{k,i} λ^l_{k-1,i} = 0`` (with ``λ`` at ``x0`` before
