@@ -181,7 +181,7 @@ class _Traced:
                  terminal_cost: Callable[..., Any] | None) -> None:
         ca = require_casadi()
         x, u = ca.SX.sym("x", n), ca.SX.sym("u", p)
-        self.F, self.G, self.Ju, self.sizes = [], [], [], []
+        fields, switching, self.sizes = [], [], []
         for li, layer in enumerate(layers):
             where = f"layer {li}: " if len(layers) > 1 else ""
             cols = [_trace(f"fields ({where}field {i})", f, (x, u), n)
@@ -195,17 +195,22 @@ class _Traced:
                                          f"{len(layer.switching)} switching functions")
                 c = ca.vertcat(*[_trace(f"switching ({where}function {j})", cj, (x,), 1)
                                  for j, cj in enumerate(layer.switching)])
-            Fl = ca.horzcat(*cols)
-            self.F.append(ca.Function(f"F{li}", [x, u], [Fl]))
-            self.G.append(ca.Function(f"g{li}", [x], [-ca.mtimes(ca.DM(layer.signs), c)]))
-            self.Ju.append(ca.Function(f"Ju{li}", [x, u], [ca.jacobian(ca.vec(Fl), u)]))
+            fields.append(ca.horzcat(*cols))
+            switching.append(-ca.mtimes(ca.DM(layer.signs), c))
             self.sizes.append(len(cols))
+        self.rows = np.cumsum([0, *self.sizes])
+        # the field Σ_l F^l θ^l of one element (and its derivative in u, for the guess's
+        # inputs) and the layers' g stacked: the transcription's one declaration of each
+        th = ca.SX.sym("th", int(self.rows[-1]))
+        f = sum(ca.mtimes(Fl, th[self.rows[i]:self.rows[i + 1]])
+                for i, Fl in enumerate(fields))
+        self.field = ca.Function("field", [x, u, th], [f, ca.jacobian(f, u)])
+        self.g = ca.Function("g", [x], [ca.vertcat(*switching)])
         L = ca.sumsqr(u) if stage_cost is None else _trace("stage_cost", stage_cost, (x, u), 1)
         self.L = ca.Function("L", [x, u], [L])
         Lt = ca.SX(0) if terminal_cost is None else _trace("terminal_cost", terminal_cost,
                                                            (x,), 1)
         self.Lt = ca.Function("Lt", [x], [Lt])
-        self.rows = np.cumsum([0, *self.sizes])
 
 
 @dataclass(frozen=True)
@@ -595,7 +600,7 @@ class _FesdNLP:
         self._stage_cost_fn: Any = None
 
     def _g(self, x: FloatArray) -> FloatArray:
-        return np.concatenate([np.asarray(G(x), float).reshape(-1) for G in self.tr.G])
+        return np.asarray(self.tr.g(x), float).reshape(-1)
 
     def _per_layer_min(self, g: FloatArray) -> FloatArray:
         r = self.tr.rows
@@ -628,27 +633,17 @@ class _FesdNLP:
         return {"X": X, "U": U, "TH": TH, "LAM": LAM, "MU": MU, "H": np.full(K, h)}
 
     def _g_columns(self, X: FloatArray) -> FloatArray:
-        """``g(x)`` of every column of ``X`` (the layers' rows stacked), one mapped call
-        per layer."""
-        cols = X.shape[1]
-        return np.vstack([np.asarray(G.map(cols)(X), float).reshape(-1, cols)
-                          for G in self.tr.G])
+        """``g(x)`` of every column of ``X`` (the layers' rows stacked), one mapped call."""
+        return np.asarray(self.tr.g.map(X.shape[1])(X), float).reshape(self.nth, -1)
 
-    def _linearised(self, X: FloatArray, TH: FloatArray) -> tuple[FloatArray, list[Any]]:
+    def _linearised(self, X: FloatArray, TH: FloatArray) -> tuple[FloatArray, FloatArray]:
         """At each element end ``x_{k+1}`` (the columns of ``X``) and ``u = 0``: the field
-        ``Σ_i F_i θ_i`` (an ``n × K`` array) and its derivative in ``u`` (K ``n × q``
-        arrays), the fields' weights ``TH``; one mapped call per layer."""
-        p, tr, K = self.p, self.tr, X.shape[1]
-        n, q, zero = p.n, p.inputs, np.zeros((p.inputs, X.shape[1]))
-        f, J = np.zeros((n, K)), np.zeros((K, n, q))
-        for i, (F, Ju) in enumerate(zip(tr.F, tr.Ju, strict=True)):
-            m, th = tr.sizes[i], TH[tr.rows[i]:tr.rows[i + 1]]
-            values = np.asarray(F.map(K)(X, zero), float).reshape(n, K, m)
-            f += np.einsum("nkj,jk->nk", values, th)
-            # jacobian(vec(F), u): row j n + r is field j's entry r
-            du = np.asarray(Ju.map(K)(X, zero), float).reshape(m, n, K, q)
-            J += np.einsum("jnkq,jk->knq", du, th)
-        return f, list(J)
+        ``Σ_i F_i θ_i`` (an ``n × K`` array) and its derivative in ``u`` (``K × n × q``),
+        the fields' weights ``TH``; one mapped call."""
+        n, q, K = self.p.n, self.p.inputs, X.shape[1]
+        f, du = self.tr.field.map(K)(X, np.zeros((q, K)), TH)
+        return (np.asarray(f, float).reshape(n, K),
+                np.asarray(du, float).reshape(n, K, q).transpose(1, 0, 2))
 
     def _inputs(self, X: FloatArray, TH: FloatArray) -> FloatArray:
         p, h, ne = self.p, self.hbar, self.p.elements
@@ -683,13 +678,12 @@ class _FesdNLP:
             u, h = ca.SX.sym("u", p.inputs), ca.SX.sym("h")
             th, lam = ca.SX.sym("th", self.nth), ca.SX.sym("lam", self.nth)
             mu = ca.SX.sym("mu", len(tr.sizes))
-            f = sum(ca.mtimes(F(xn, u), th[tr.rows[i]:tr.rows[i + 1]])
-                    for i, F in enumerate(tr.F))
             mu_rows = ca.vertcat(*[ca.repmat(mu[i], tr.sizes[i], 1)
                                    for i in range(len(tr.sizes))])
-            algebraic = ca.vertcat(*[G(xn) for G in tr.G]) - lam - mu_rows
+            f = tr.field(xn, u, th)[0]
             self._element_fn = ca.Function("element", [xk, xn, u, th, lam, mu, h],
-                                           [xn - xk - h * f, algebraic]).map(self.K)
+                                           [xn - xk - h * f, tr.g(xn) - lam - mu_rows]
+                                           ).map(self.K)
         return self._element_fn
 
     def _stage_of_element(self) -> list[int]:
