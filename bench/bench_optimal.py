@@ -8,7 +8,9 @@ example's contact-implicit MPC: 25 steps of 10 ms, 100 Hz sampling);
 and the peer, nosnoc 0.2 (FESD, CasADi/IPOPT), run in its own virtual
 environment when it exists (``.venv-nosnoc`` at the repository's root, or the interpreter
 named by ``NSC_NOSNOC_PYTHON``; ``python3 -m venv .venv-nosnoc && .venv-nosnoc/bin/pip
-install nosnoc``), skipped otherwise: the same switching problem (SpeedUp) solved by both,
+install nosnoc``), skipped otherwise, each case timed in alternated rounds (one solve by
+ours, then one by nosnoc kept running; medians and each side's fastest solve): the same
+switching problem (SpeedUp) solved by both,
 optimum against the closed form and wall time side by side, and nosnoc's published
 ``sliding_mode_ocp`` example with its own options (nosnoc's time alone), and two published
 examples solved by both as the same discrete problem (FesdProblem: several and nonlinear
