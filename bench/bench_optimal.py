@@ -24,9 +24,11 @@ Run: ``nscontrol bench optimal --json`` (``--quick``: one solve each).
 # sys.modules.
 import json
 import os
+import queue
 import statistics
 import subprocess
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -91,10 +93,22 @@ class NosnocProcess:
     over minutes (nosnoc's motor took 0.34 s in one whole-bench run and 0.49 s in the next),
     and two sides timed minutes apart see different machines."""
 
+    #: Seconds one case may take (five cart-pole solves take about 15 s).
+    BUDGET_S = 1800.0
+
     def __init__(self, py: str) -> None:
         self._err = tempfile.TemporaryFile(mode="w+")
         self._proc = subprocess.Popen([py, str(NOSNOC_SCRIPT)], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, stderr=self._err, text=True)
+        # the script's lines through a thread, so that a wait for one has a budget
+        self._lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self._proc.stdout is not None
+        for line in self._proc.stdout:
+            self._lines.put(line)
+        self._lines.put("")     # end of output: the process ended
 
     def __enter__(self) -> "NosnocProcess":
         return self
@@ -104,26 +118,37 @@ class NosnocProcess:
 
     def solve(self, case: dict, repeats: int = 1) -> dict:
         """nosnoc's record of ``case`` (``repeats`` timed solves)."""
-        stdin, stdout = self._proc.stdin, self._proc.stdout
-        assert stdin is not None and stdout is not None
+        stdin = self._proc.stdin
+        assert stdin is not None
         stdin.write(json.dumps({"cases": [case], "repeats": repeats}) + "\n")
         stdin.flush()
+        deadline = time.monotonic() + self.BUDGET_S
         records: list[dict] = []
-        line = stdout.readline()
-        while line:
+        while True:
+            try:
+                line = self._lines.get(timeout=max(deadline - time.monotonic(), 0.0))
+            except queue.Empty:
+                self._proc.kill()
+                raise RuntimeError(f"nosnoc script: {case['name']} took more than "
+                                   f"{self.BUDGET_S:g} s; stopped") from None
+            if not line:
+                break
             if line.startswith("{"):
                 record = json.loads(line)
-                if record.get("done"):
+                if record.get("done") and records:
                     return records[-1]
                 records.append(record)
-            line = stdout.readline()
         self._err.seek(0)
         raise RuntimeError(f"nosnoc script failed on {case['name']}:\n{self._err.read()[-2000:]}")
 
     def close(self) -> None:
         if self._proc.stdin is not None:
             self._proc.stdin.close()
-        self._proc.wait(timeout=60)
+        try:
+            self._proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
         self._err.close()
 
 

@@ -306,19 +306,13 @@ TRAJECTORIES = ("sliding_mode_ocp_as_ours", "cart_pole_with_friction", "simple_c
 
 
 def main():
-    """One payload per stdin line (or one JSON document), each answered by its records
-    then ``{"done": true}``: the caller may keep this process and send a case at a time,
-    alternating with its own solves (the two sides timed in the same minute)."""
-    text = sys.stdin.readline()
-    while text:
+    """One payload per stdin line, each answered by its records then ``{"done": true}``:
+    the caller keeps this process and sends a case at a time, alternating with its own
+    solves (the two sides timed in the same minute)."""
+    for text in sys.stdin:
         if text.strip():
-            try:
-                payload = json.loads(text)
-            except json.JSONDecodeError:   # a document over several lines
-                payload = json.loads(text + sys.stdin.read())
-            answer(payload)
+            answer(json.loads(text))
             print(json.dumps({"done": True}), flush=True)
-        text = sys.stdin.readline()
 
 
 def answer(payload):
